@@ -1,0 +1,427 @@
+"""The emulator's SNMP agent: a live controller's NTCIP 1202 objects over SNMPv1 and v2c on UDP.
+
+Rules of this file
+------------------
+- pysnmp is the SNMP implementation: messages are decoded and built with its
+  protocol API (``pysnmp.proto.api``) and pyasn1's BER codec. Nothing here
+  writes BER by hand.
+- The agent is a plain asyncio datagram endpoint rather than a pysnmp
+  ``SnmpEngine`` with MIB instrumentation: that keeps the error mapping per
+  version, the dropping of foreign datagrams and the per-request latency in
+  this file, exact and testable.
+- :meth:`SnmpAgent.respond` turns one datagram into one answer (or None for a
+  dropped datagram) synchronously and without I/O; it applies a SET to the MIB
+  view at once. Only the endpoint sends, after the modeled latency, so a slow
+  answer never holds up the next request.
+
+Theory of operation
+-------------------
+A datagram that is not a well-formed SNMPv1/v2c message (garbage, truncated,
+trailing bytes, SNMPv3), that names neither community, or that carries no
+request PDU (a response, trap or report) is dropped and counted per
+:class:`DropReason`, as RFC 3416 and RFC 1157 ask for authentication failures
+and parse errors. Everything else gets exactly one response.
+
+The MIB view (:class:`emulator.mib.MibView`) refuses with four statuses; the
+agent refines them into SNMPv2 terms (RFC 3416 section 4.2.5), then maps them
+to SNMPv1 with RFC 3584 section 4.4 for v1 requests:
+
+=====================================  =============================  ===========
+case                                   SNMPv2c                        SNMPv1
+=====================================  =============================  ===========
+SET with the read-only community       noAccess, index 1              noSuchName
+SET of a read-only object              notWritable                    noSuchName
+SET of an unknown name                 notWritable                    noSuchName
+SET of a missing row of a writable     noCreation                     noSuchName
+column (e.g. a phase group past max)
+SET value of a non-INTEGER type        wrongType                      badValue
+SET value out of the object's range    wrongValue                     badValue
+GET of an unknown object               noSuchObject varbind           noSuchName
+GET of a missing instance              noSuchInstance varbind         noSuchName
+GETNEXT/GETBULK past the last object   endOfMibView varbind           noSuchName
+answer larger than max_message_size    tooBig, no varbinds            tooBig
+=====================================  =============================  ===========
+
+These are the answers net-snmp's own snmpd gives in the same cases. A refused
+SET changes nothing: the view validates every varbind before applying any.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import random
+from collections import Counter
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from enum import Enum
+from types import ModuleType
+from typing import Any
+
+from pyasn1.codec.ber import decoder, encoder
+from pyasn1.type import univ
+from pysnmp.proto import api, rfc1905
+
+from emulator.mib import MibView, Value
+from hils.ntcip import Access, ErrorStatus, Oid, SnmpError, object_for, oid_str
+from hils.transport import Latency
+
+log = logging.getLogger(__name__)
+
+#: Largest answer sent: one Ethernet frame of UDP payload, so answers are never fragmented.
+DEFAULT_MAX_MESSAGE_SIZE = 1472
+
+# RFC 3584 section 4.4: how an SNMPv2 error status reads to an SNMPv1 manager.
+_V1_STATUS: dict[ErrorStatus, ErrorStatus] = {
+    ErrorStatus.NO_ERROR: ErrorStatus.NO_ERROR,
+    ErrorStatus.TOO_BIG: ErrorStatus.TOO_BIG,
+    ErrorStatus.NO_SUCH_NAME: ErrorStatus.NO_SUCH_NAME,
+    ErrorStatus.BAD_VALUE: ErrorStatus.BAD_VALUE,
+    ErrorStatus.READ_ONLY: ErrorStatus.READ_ONLY,
+    ErrorStatus.GEN_ERR: ErrorStatus.GEN_ERR,
+    ErrorStatus.WRONG_VALUE: ErrorStatus.BAD_VALUE,
+    ErrorStatus.WRONG_ENCODING: ErrorStatus.BAD_VALUE,
+    ErrorStatus.WRONG_TYPE: ErrorStatus.BAD_VALUE,
+    ErrorStatus.WRONG_LENGTH: ErrorStatus.BAD_VALUE,
+    ErrorStatus.INCONSISTENT_VALUE: ErrorStatus.BAD_VALUE,
+    ErrorStatus.NO_ACCESS: ErrorStatus.NO_SUCH_NAME,
+    ErrorStatus.NOT_WRITABLE: ErrorStatus.NO_SUCH_NAME,
+    ErrorStatus.NO_CREATION: ErrorStatus.NO_SUCH_NAME,
+    ErrorStatus.INCONSISTENT_NAME: ErrorStatus.NO_SUCH_NAME,
+    ErrorStatus.RESOURCE_UNAVAILABLE: ErrorStatus.GEN_ERR,
+    ErrorStatus.COMMIT_FAILED: ErrorStatus.GEN_ERR,
+    ErrorStatus.UNDO_FAILED: ErrorStatus.GEN_ERR,
+    ErrorStatus.AUTHORIZATION_ERROR: ErrorStatus.NO_SUCH_NAME,
+}
+
+
+class DropReason(Enum):
+    """Why a datagram got no answer."""
+
+    MALFORMED = "malformed"  # not a complete BER-encoded SNMP message
+    VERSION = "unsupported version"  # SNMPv3 or an unknown version number
+    COMMUNITY = "unknown community"
+    NOT_A_REQUEST = "not a request"  # a response, trap, inform or report PDU
+
+
+class RequestKind(Enum):
+    GET = "get"
+    GET_NEXT = "getnext"
+    GET_BULK = "getbulk"
+    SET = "set"
+
+
+class Missing(Enum):
+    """SNMPv2 exception values of a varbind; each one is a noSuchName error in SNMPv1."""
+
+    NO_SUCH_OBJECT = "noSuchObject"
+    NO_SUCH_INSTANCE = "noSuchInstance"
+    END_OF_MIB_VIEW = "endOfMibView"
+
+
+_MISSING_VALUES = {
+    Missing.NO_SUCH_OBJECT: rfc1905.noSuchObject,
+    Missing.NO_SUCH_INSTANCE: rfc1905.noSuchInstance,
+    Missing.END_OF_MIB_VIEW: rfc1905.endOfMibView,
+}
+
+
+@dataclass(slots=True)
+class AgentStats:
+    """Traffic counters of one agent (mutable: updated as datagrams arrive)."""
+
+    requests: Counter[RequestKind] = field(default_factory=Counter)
+    errors: int = 0  # answers with a non-zero error status
+    dropped: Counter[DropReason] = field(default_factory=Counter)
+
+    @property
+    def answered(self) -> int:
+        return sum(self.requests.values())
+
+    @property
+    def total_dropped(self) -> int:
+        return sum(self.dropped.values())
+
+
+class _Drop(Exception):
+    def __init__(self, reason: DropReason, detail: str) -> None:
+        super().__init__(detail)
+        self.reason = reason
+
+
+@dataclass(frozen=True, slots=True)
+class _Request:
+    version: int
+    module: ModuleType  # pysnmp.proto.api.v1 or v2c
+    message: Any
+    pdu: Any
+    oids: tuple[Oid, ...]
+    values: tuple[Any, ...]  # the request's varbind values, pyasn1 objects
+    writable: bool  # came with the read-write community
+
+
+# One varbind of an answer: a value of the view, or an SNMPv2 exception value.
+_Result = tuple[Oid, Value | Missing]
+
+
+class SnmpAgent:
+    """SNMPv1/v2c command responder over one MIB view, on the running asyncio loop."""
+
+    def __init__(self, view: MibView, *, ro_community: str = "public", rw_community: str = "private",
+                 latency: Latency | None = None, seed: int | None = None,
+                 max_message_size: int = DEFAULT_MAX_MESSAGE_SIZE) -> None:
+        if ro_community == rw_community:
+            raise ValueError("the read-only and read-write communities must differ")
+        self.view = view
+        self.communities = {ro_community.encode(): False, rw_community.encode(): True}
+        self.latency = latency or Latency(0.0)
+        self.max_message_size = max_message_size
+        self.stats = AgentStats()
+        self._rng = random.Random(seed)
+        self._transport: asyncio.DatagramTransport | None = None
+        v1, v2c = api.v1, api.v2c
+        self._handlers: dict[int, dict[Any, Callable[[_Request, str], bytes]]] = {
+            api.SNMP_VERSION_1: {v1.GetRequestPDU.tagSet: self._get, v1.GetNextRequestPDU.tagSet: self._get_next,
+                                 v1.SetRequestPDU.tagSet: self._set},
+            api.SNMP_VERSION_2C: {v2c.GetRequestPDU.tagSet: self._get, v2c.GetNextRequestPDU.tagSet: self._get_next,
+                                  v2c.GetBulkRequestPDU.tagSet: self._get_bulk, v2c.SetRequestPDU.tagSet: self._set},
+        }
+
+    # --- serving ----------------------------------------------------------------------------
+
+    async def start(self, host: str = "127.0.0.1", port: int = 1161) -> tuple[str, int]:
+        """Bind the UDP socket (port 0 picks a free one) and answer from now on; returns the bound address."""
+        loop = asyncio.get_running_loop()
+        self._transport, _ = await loop.create_datagram_endpoint(lambda: _Endpoint(self), local_addr=(host, port))
+        return self.address
+
+    @property
+    def address(self) -> tuple[str, int]:
+        if self._transport is None:
+            raise RuntimeError("the agent is not started")
+        host, port = self._transport.get_extra_info("sockname")[:2]
+        return host, port
+
+    def close(self) -> None:
+        """Stop answering; answers still waiting out their latency are not sent."""
+        if self._transport is not None:
+            self._transport.close()
+
+    def _send_later(self, answer: bytes, addr: tuple[str, int]) -> None:
+        delay = self.latency.draw(self._rng)
+        if delay <= 0.0:
+            self._sendto(answer, addr)
+        else:
+            asyncio.get_running_loop().call_later(delay, self._sendto, answer, addr)
+
+    def _sendto(self, answer: bytes, addr: tuple[str, int]) -> None:
+        if self._transport is not None and not self._transport.is_closing():
+            self._transport.sendto(answer, addr)
+
+    # --- one datagram -------------------------------------------------------------------------
+
+    def respond(self, datagram: bytes, source: str = "") -> bytes | None:
+        """The encoded answer to one datagram, or None when it is dropped (and counted)."""
+        try:
+            request = self._decode(datagram)
+        except _Drop as drop:
+            self.stats.dropped[drop.reason] += 1
+            log.debug("dropped a %d-byte datagram from %s: %s (%s)", len(datagram), source or "?",
+                      drop.reason.value, str(drop)[:200])
+            return None
+        handler = self._handlers[request.version].get(request.pdu.tagSet)
+        if handler is None:
+            self.stats.dropped[DropReason.NOT_A_REQUEST] += 1
+            log.debug("dropped a %s PDU from %s", type(request.pdu).__name__, source or "?")
+            return None
+        return handler(request, source)
+
+    def _decode(self, datagram: bytes) -> _Request:
+        # pyasn1 fails on hostile input with more than its own exception types (a TypeError
+        # for some garbage), and any failure here only means "not a message we can read".
+        try:
+            version = int(api.decodeMessageVersion(datagram))
+        except Exception as exc:
+            raise _Drop(DropReason.MALFORMED, f"no SNMP version: {exc}") from None
+        module = api.PROTOCOL_MODULES.get(version)
+        if module is None:
+            raise _Drop(DropReason.VERSION, f"SNMP version number {version}")
+        try:
+            message, rest = decoder.decode(datagram, asn1Spec=module.Message())
+            community = bytes(module.apiMessage.get_community(message))
+            pdu = module.apiMessage.get_pdu(message)
+            varbinds = module.apiPDU.get_varbinds(pdu)
+            oids = tuple(tuple(oid) for oid, _ in varbinds)
+        except Exception as exc:
+            raise _Drop(DropReason.MALFORMED, str(exc)) from None
+        if rest:
+            raise _Drop(DropReason.MALFORMED, f"{len(rest)} bytes after the message")
+        writable = self.communities.get(community)
+        if writable is None:
+            raise _Drop(DropReason.COMMUNITY, f"community {community!r}")
+        return _Request(version, module, message, pdu, oids, tuple(v for _, v in varbinds), writable)
+
+    # --- the requests -------------------------------------------------------------------------
+
+    def _get(self, req: _Request, source: str) -> bytes:
+        self.stats.requests[RequestKind.GET] += 1
+        return self._read_answer(req, [(oid, self._read(oid)) for oid in req.oids])
+
+    def _get_next(self, req: _Request, source: str) -> bytes:
+        self.stats.requests[RequestKind.GET_NEXT] += 1
+        return self._read_answer(req, [self._next(oid) for oid in req.oids])
+
+    def _get_bulk(self, req: _Request, source: str) -> bytes:
+        self.stats.requests[RequestKind.GET_BULK] += 1
+        module = req.module
+        n = min(int(module.apiBulkPDU.get_non_repeaters(req.pdu)), len(req.oids))
+        repetitions = int(module.apiBulkPDU.get_max_repetitions(req.pdu))
+        results = [self._next(oid) for oid in req.oids[:n]]
+        cursor = list(req.oids[n:])
+        # Rows stop once every column is past the end or once more varbinds than could ever
+        # fit are collected (each encodes to 8 bytes or more): an answer is bounded whatever
+        # max-repetitions asks for.
+        for _ in range(repetitions):
+            if not cursor or len(results) * 8 > self.max_message_size:
+                break
+            row = [self._next(oid) for oid in cursor]
+            results += row
+            if all(value is Missing.END_OF_MIB_VIEW for _, value in row):
+                break
+            cursor = [oid for oid, _ in row]
+        # RFC 3416 4.2.3: a GETBULK answer too large is cut short rather than refused.
+        varbinds = [(oid, _asn1(module, value)) for oid, value in results]
+        answer = self._encode(req, ErrorStatus.NO_ERROR, 0, varbinds)
+        while len(answer) > self.max_message_size:
+            varbinds = varbinds[:min(len(varbinds) - 1, len(varbinds) * self.max_message_size // len(answer))]
+            answer = self._encode(req, ErrorStatus.NO_ERROR, 0, varbinds)
+        return answer
+
+    def _set(self, req: _Request, source: str) -> bytes:
+        self.stats.requests[RequestKind.SET] += 1
+        varbinds = [(oid, _python_value(value)) for oid, value in zip(req.oids, req.values, strict=True)]
+        status, index = ErrorStatus.NO_ERROR, 0
+        if not req.writable:
+            # RFC 3416 4.2.5 (1): no name is in the read-only community's write view.
+            if varbinds:
+                status, index = ErrorStatus.NO_ACCESS, 1
+        else:
+            try:
+                self.view.set_many(varbinds)
+            except SnmpError as exc:
+                status, index = self._set_status(exc, req.oids), exc.index
+        log.info("SET from %s: %s -> %s", source or "?",
+                 ", ".join(f"{_name(oid)} = {_show(value)}" for oid, value in zip(req.oids, req.values, strict=True)),
+                 _outcome(status, req))
+        return self._answer(req, status, index, list(zip(req.oids, req.values, strict=True)))
+
+    # --- the view -----------------------------------------------------------------------------
+
+    def _read(self, oid: Oid) -> Value | Missing:
+        if oid in self.view:
+            return self.view.get(oid)
+        return Missing.NO_SUCH_INSTANCE if object_for(oid) is not None else Missing.NO_SUCH_OBJECT
+
+    def _next(self, oid: Oid) -> _Result:
+        following = self.view.next_oid(oid)
+        if following is None:
+            return oid, Missing.END_OF_MIB_VIEW
+        return following, self.view.get(following)
+
+    @staticmethod
+    def _set_status(exc: SnmpError, oids: Sequence[Oid]) -> ErrorStatus:
+        """The SNMPv2 status of a refused SET (RFC 3416 4.2.5)."""
+        if exc.status is not ErrorStatus.NO_SUCH_NAME:
+            return exc.status
+        obj = object_for(oids[exc.index - 1])
+        # A missing row of a writable column "could not ever be created" (noCreation); any other
+        # unknown name has nothing writable under it (notWritable).
+        return ErrorStatus.NO_CREATION if obj is not None and obj.access is Access.READ_WRITE \
+            else ErrorStatus.NOT_WRITABLE
+
+    # --- answers ------------------------------------------------------------------------------
+
+    def _read_answer(self, req: _Request, results: list[_Result]) -> bytes:
+        if req.version == api.SNMP_VERSION_1:
+            missing = [i for i, (_, value) in enumerate(results, start=1) if isinstance(value, Missing)]
+            if missing:
+                return self._answer(req, ErrorStatus.NO_SUCH_NAME, missing[0],
+                                    list(zip(req.oids, req.values, strict=True)))
+        return self._answer(req, ErrorStatus.NO_ERROR, 0, [(oid, _asn1(req.module, v)) for oid, v in results])
+
+    def _answer(self, req: _Request, status: ErrorStatus, index: int, varbinds: list[tuple[Oid, Any]]) -> bytes:
+        if req.version == api.SNMP_VERSION_1:
+            status = _V1_STATUS[status]
+        answer = self._encode(req, status, index, varbinds)
+        if len(answer) > self.max_message_size:
+            # RFC 3416 4.2.1 answers tooBig without varbinds; RFC 1157 4.1.2 echoes the request's.
+            echo = list(zip(req.oids, req.values, strict=True)) if req.version == api.SNMP_VERSION_1 else []
+            status, index = ErrorStatus.TOO_BIG, 0
+            answer = self._encode(req, status, index, echo)
+        if status is not ErrorStatus.NO_ERROR:
+            self.stats.errors += 1
+        return answer
+
+    @staticmethod
+    def _encode(req: _Request, status: ErrorStatus, index: int, varbinds: list[tuple[Oid, Any]]) -> bytes:
+        module = req.module
+        message = module.apiMessage.get_response(req.message)
+        pdu = module.apiMessage.get_pdu(message)
+        module.apiPDU.set_error_status(pdu, int(status))
+        module.apiPDU.set_error_index(pdu, index)
+        module.apiPDU.set_varbinds(pdu, varbinds)
+        return encoder.encode(message)
+
+
+class _Endpoint(asyncio.DatagramProtocol):
+    def __init__(self, agent: SnmpAgent) -> None:
+        self.agent = agent
+
+    def datagram_received(self, data: bytes, addr: tuple[str, int]) -> None:
+        answer = self.agent.respond(data, f"{addr[0]}:{addr[1]}")
+        if answer is not None:
+            self.agent._send_later(answer, addr)
+
+    def error_received(self, exc: Exception) -> None:
+        # An ICMP error for an earlier answer (the manager went away): nothing to do for us.
+        log.debug("UDP error: %s", exc)
+
+
+def _asn1(module: ModuleType, value: Value | Missing) -> Any:
+    if isinstance(value, Missing):
+        return _MISSING_VALUES[value]
+    return module.OctetString(value) if isinstance(value, bytes) else module.Integer(value)
+
+
+def _python_value(value: Any) -> Value:
+    """A SET value as the view takes it: int for an SNMP INTEGER, bytes for anything else.
+
+    Gauge32, Counter32, TimeTicks and the like are integers in pyasn1 but not
+    INTEGERs in SNMP: only the tag tells. Every non-INTEGER reaches the view as
+    bytes so the view refuses it as WRONG_TYPE in its own validation order.
+    """
+    if value.tagSet == univ.Integer.tagSet:
+        return int(value)
+    if value.tagSet == univ.OctetString.tagSet:
+        return value.asOctets()
+    return encoder.encode(value)
+
+
+def _name(oid: Oid) -> str:
+    obj = object_for(oid)
+    if obj is None:
+        return oid_str(oid)
+    return f"{obj.name}.{oid_str(oid[len(obj.prefix):])}"
+
+
+def _show(value: Any) -> str:
+    shown = value.prettyPrint()
+    return shown if value.tagSet == univ.Integer.tagSet else f"{type(value).__name__}({shown})"
+
+
+def _outcome(status: ErrorStatus, req: _Request) -> str:
+    if status is ErrorStatus.NO_ERROR:
+        return "applied"
+    v1 = _V1_STATUS[status]
+    as_v1 = f", {v1.name.lower()} in SNMPv1" if req.version == api.SNMP_VERSION_1 and v1 is not status else ""
+    return f"refused ({status.name.lower()}{as_v1})"

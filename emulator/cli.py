@@ -1,0 +1,80 @@
+"""`hils emulator ...`: commands of the NTCIP 1202 controller emulator."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from hils import config as config_mod
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    parser = sub.add_parser("emulator", help="the NTCIP 1202 controller emulator",
+                            description="The NTCIP 1202 controller emulator: a dual-ring NEMA controller model.")
+    commands = parser.add_subparsers(dest="emulator_command", metavar="COMMAND", required=True)
+    _register_demo(commands)
+    _register_serve(commands)
+
+
+def _register_demo(commands: argparse._SubParsersAction) -> None:
+    demo = commands.add_parser(
+        "demo", help="run the controller model in virtual time and print its interval timeline",
+        description="Run the controller model for a minute of virtual time, place vehicle calls on "
+                    "[3,7], [4,8], [1,5] and [1,6], and print every change of the signal display.")
+    demo.add_argument("--config", metavar="FILE", help="intersection config (TOML); default: the shipped four-leg")
+    demo.add_argument("--duration", type=float, default=60.0, metavar="S", help="virtual seconds to run (60)")
+    demo.set_defaults(func=_demo)
+
+
+def _demo(args: argparse.Namespace) -> int:
+    from emulator import demo
+
+    cfg = config_mod.load(args.config)
+    print(f"{cfg.name}: calls at " + ", ".join(f"{t:g} s {list(p)}" for t, p in demo.DEFAULT_CALLS))
+    print(demo.render(demo.run(cfg, duration=args.duration), cfg))
+    return 0
+
+
+def _register_serve(commands: argparse._SubParsersAction) -> None:
+    serve = commands.add_parser(
+        "serve", help="serve the controller model as an SNMP agent at wall-clock time",
+        description="Run the controller model at wall-clock time (one tick per 0.1 s) behind an SNMPv1/v2c "
+                    "agent on UDP until Ctrl-C or SIGTERM. Every SET is logged; on exit the counts of "
+                    "requests answered and datagrams dropped are printed.")
+    serve.add_argument("--config", metavar="FILE", help="intersection config (TOML); default: the shipped four-leg")
+    serve.add_argument("--host", default="127.0.0.1", help="address to bind (127.0.0.1)")
+    serve.add_argument("--port", type=int, default=1161, help="UDP port; 0 picks a free one (1161)")
+    serve.add_argument("--ro-community", default="public", metavar="NAME", help="read-only community (public)")
+    serve.add_argument("--rw-community", default="private", metavar="NAME", help="read-write community (private)")
+    serve.add_argument("--latency-ms", type=float, default=0.0, metavar="MS", help="mean response delay (0)")
+    serve.add_argument("--jitter-ms", type=float, default=0.0, metavar="MS",
+                       help="uniform jitter of the response delay, +/- MS (0)")
+    serve.set_defaults(func=_serve)
+
+
+def _serve(args: argparse.Namespace) -> int:
+    import asyncio
+
+    from emulator.serve import ServeOptions, serve_until_signalled
+    from hils.transport import Latency
+
+    if args.ro_community == args.rw_community:
+        raise SystemExit("hils emulator serve: --ro-community and --rw-community must differ")
+    if args.latency_ms < 0 or args.jitter_ms < 0:
+        raise SystemExit("hils emulator serve: --latency-ms and --jitter-ms must not be negative")
+    cfg = config_mod.load(args.config)
+    options = ServeOptions(host=args.host, port=args.port, ro_community=args.ro_community,
+                           rw_community=args.rw_community, latency=Latency(args.latency_ms / 1e3, args.jitter_ms / 1e3))
+
+    def ready(address: tuple[str, int]) -> None:
+        # Scripts and tests wait for this line: it is printed only once requests are answered.
+        print(f"serving {cfg.name} on udp:{address[0]}:{address[1]} "
+              f"(ro={options.ro_community} rw={options.rw_community})", flush=True)
+
+    try:
+        summary = asyncio.run(serve_until_signalled(cfg, options, ready))
+    except OSError as exc:  # the only I/O before serving is binding the socket
+        print(f"hils emulator serve: cannot bind udp:{args.host}:{args.port}: {exc.strerror or exc}", file=sys.stderr)
+        return 1
+    print(summary.describe(), flush=True)
+    return 0

@@ -1,0 +1,30 @@
+"""The emulator reached in process, for virtual-time runs.
+
+:class:`VirtualTarget` puts a controller model on the run's SimPy environment
+(ticking every 0.1 s) and hands the middleware a :class:`hils.transport.LocalTransport`
+to its MIB view. It is what `hils run` uses when no --target is given (found
+through the ``hils.targets`` entry point, so the middleware never imports it).
+"""
+
+from __future__ import annotations
+
+import simpy
+
+from emulator.controller import Controller
+from emulator.mib import MibView
+from hils.config import IntersectionConfig
+from hils.transport import Latency, LocalTransport
+
+
+class VirtualTarget:
+    """Controller model + MIB view + in-process transport on one environment."""
+
+    def __init__(self, env: simpy.Environment, config: IntersectionConfig, *, seed: int = 0,
+                 get_latency: Latency | None = None, set_latency: Latency | None = None,
+                 loss: float = 0.0) -> None:
+        self.env = env
+        self.controller = Controller(config)
+        self.mib = MibView(self.controller)
+        self.transport = LocalTransport(env, self.mib, tau_udp=config.middleware.tau_udp,
+                                        get_latency=get_latency, set_latency=set_latency, loss=loss, seed=seed)
+        self.process = env.process(self.controller.process(env))

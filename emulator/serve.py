@@ -1,0 +1,172 @@
+"""Serving the emulator at wall-clock time: the controller ticks every 0.1 s while the SNMP agent answers.
+
+Both run on one asyncio loop and no thread: the ticker sleeps until each
+tick's deadline and steps the controller, the agent answers datagrams between
+ticks. A request therefore always sees the controller between two whole ticks,
+and a SET takes effect at the next tick, as in a real controller.
+
+Deadlines are computed from the start time (``start + k * period``), never by
+adding periods up, so they do not drift. When the loop was held up past one or
+more deadlines the missed ticks are all run at once (the model stays in step
+with the wall clock), and a tick run more than ``late_after`` past its
+deadline is counted as late.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import signal
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from emulator.agent import DropReason, RequestKind, SnmpAgent
+from emulator.controller import TICK, Change, Controller
+from emulator.mib import MibView
+from hils.config import IntersectionConfig
+from hils.transport import Latency
+
+log = logging.getLogger(__name__)
+
+NO_LATENCY = Latency(0.0)
+
+
+@dataclass(slots=True)
+class TickStats:
+    """Counters of a ticker (mutable: updated every tick)."""
+
+    ticks: int = 0
+    late: int = 0
+    max_lateness: float = 0.0  # seconds
+
+
+class WallClockTicker:
+    """Steps a controller at the wall-clock deadlines of its 0.1 s tick, on the running loop."""
+
+    def __init__(self, controller: Controller, *, period: float = TICK, late_after: float = TICK / 2) -> None:
+        self.controller = controller
+        self.period = period
+        self.late_after = late_after
+        self.stats = TickStats()
+
+    async def run(self) -> None:
+        """Tick until cancelled."""
+        loop = asyncio.get_running_loop()
+        start = loop.time()
+        k = 1
+        while True:
+            await asyncio.sleep(max(0.0, start + k * self.period - loop.time()))
+            now = loop.time()
+            while start + k * self.period <= now:
+                lateness = now - (start + k * self.period)
+                self.controller.step()
+                self.stats.ticks += 1
+                self.stats.max_lateness = max(self.stats.max_lateness, lateness)
+                if lateness > self.late_after:
+                    self.stats.late += 1
+                    log.debug("tick %d ran %.1f ms late", self.controller.tick, lateness * 1e3)
+                k += 1
+
+
+@dataclass(frozen=True, slots=True)
+class ServeOptions:
+    host: str = "127.0.0.1"
+    port: int = 1161
+    ro_community: str = "public"
+    rw_community: str = "private"
+    latency: Latency = NO_LATENCY
+    seed: int | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class ServeSummary:
+    """What one serving session did, for the closing line."""
+
+    requests: dict[RequestKind, int]
+    errors: int
+    dropped: dict[DropReason, int]
+    ticks: int
+    late_ticks: int
+    max_lateness: float
+
+    @property
+    def answered(self) -> int:
+        return sum(self.requests.values())
+
+    @property
+    def total_dropped(self) -> int:
+        return sum(self.dropped.values())
+
+    def describe(self) -> str:
+        def parts(counts: dict) -> str:
+            return ", ".join(f"{k.value} {n}" for k, n in counts.items() if n) or "none"
+
+        return (f"served {self.answered} requests ({parts(self.requests)}), {self.errors} answered with an error; "
+                f"dropped {self.total_dropped} datagrams ({parts(self.dropped)}); "
+                f"{self.ticks} ticks, {self.late_ticks} late (max {self.max_lateness * 1e3:.1f} ms)")
+
+
+class EmulatorServer:
+    """A controller model, its MIB view, the SNMP agent over it and the wall-clock ticker."""
+
+    def __init__(self, config: IntersectionConfig, options: ServeOptions | None = None) -> None:
+        self.config = config
+        self.options = options or ServeOptions()
+        self.controller = Controller(config, on_change=_log_change)
+        self.view = MibView(self.controller)
+        self.agent = SnmpAgent(self.view, ro_community=self.options.ro_community,
+                               rw_community=self.options.rw_community, latency=self.options.latency,
+                               seed=self.options.seed)
+        self.ticker = WallClockTicker(self.controller)
+        self._ticking: asyncio.Task[None] | None = None
+
+    async def start(self) -> tuple[str, int]:
+        """Bind the agent and start ticking; returns the bound address."""
+        address = await self.agent.start(self.options.host, self.options.port)
+        self._ticking = asyncio.create_task(self.ticker.run(), name="controller-tick")
+        return address
+
+    @property
+    def ticking(self) -> asyncio.Task[None]:
+        if self._ticking is None:
+            raise RuntimeError("the server is not started")
+        return self._ticking
+
+    async def stop(self) -> ServeSummary:
+        """Stop answering and ticking; raises what ended the ticker if it failed."""
+        self.agent.close()
+        if self._ticking is not None:
+            self._ticking.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._ticking
+        return self.summary()
+
+    def summary(self) -> ServeSummary:
+        stats, ticks = self.agent.stats, self.ticker.stats
+        return ServeSummary({k: stats.requests[k] for k in RequestKind}, stats.errors,
+                            {r: stats.dropped[r] for r in DropReason}, ticks.ticks, ticks.late, ticks.max_lateness)
+
+
+async def serve_until_signalled(config: IntersectionConfig, options: ServeOptions,
+                                on_ready: Callable[[tuple[str, int]], None]) -> ServeSummary:
+    """Serve until SIGINT or SIGTERM; ``on_ready`` gets the bound address once requests are answered."""
+    loop = asyncio.get_running_loop()
+    stop = asyncio.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, stop.set)
+    server = EmulatorServer(config, options)
+    try:
+        on_ready(await server.start())
+        stopping = asyncio.create_task(stop.wait())
+        await asyncio.wait({stopping, server.ticking}, return_when=asyncio.FIRST_COMPLETED)
+        stopping.cancel()
+    finally:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.remove_signal_handler(sig)
+    # The ticker ends on its own only when the model fails; stop() then raises that failure.
+    return await server.stop()
+
+
+def _log_change(change: Change) -> None:
+    log.debug("tick %d: ring %d phase %s %s", change.tick, change.ring, change.phase, change.interval.value)

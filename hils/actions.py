@@ -1,0 +1,162 @@
+"""Agent actions, their conversion to one unified phase command, and conflict detection.
+
+The three action designs of the paper all become a :class:`Command`: the phase
+of each ring, plus a green time for phase duration. Anything that cannot be
+served safely is refused here with a typed :class:`ActionError` whose message
+says what was wrong and what is allowed; a refused action never reaches the
+manager, so nothing is sent for it.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+from dataclasses import dataclass
+from enum import StrEnum
+
+from hils.config import IntersectionConfig, Pair
+
+
+class ActionType(StrEnum):
+    SELECTION = "selection"  # a compatible pair from the configured set (acyclic)
+    SWITCH = "switch"  # 0 keep the current pair, 1 advance in the cyclic sequence
+    DURATION = "duration"  # x in [0, 1]: green time of the next pair in the sequence
+
+
+@dataclass(frozen=True, slots=True)
+class Command:
+    """The unified phase command sent to the controller."""
+
+    phases: Pair  # (ring 1 phase, ring 2 phase)
+    green: float | None = None  # seconds of green to serve (duration actions only)
+    keep: bool = False  # the agent asked to stay: completes without a transition
+
+
+class ActionError(ValueError):
+    """An action that cannot be converted; nothing is sent for it."""
+
+    reason = "invalid"
+
+
+class ActionTypeError(ActionError, TypeError):
+    reason = "wrong_type"
+
+
+class UnknownPhaseError(ActionError):
+    reason = "unknown_phase"
+
+
+class ConflictError(ActionError):
+    reason = "conflict"
+
+
+class NotInActionSetError(ActionError):
+    reason = "not_in_action_set"
+
+
+class DurationRangeError(ActionError):
+    reason = "duration_out_of_range"
+
+
+class ConflictMatrix:
+    """Which phases may show green together: the config's matrix, derived from
+    the ring-and-barrier structure unless the config overrides it."""
+
+    def __init__(self, config: IntersectionConfig) -> None:
+        self.phases = config.phase_numbers
+        self._compatible = config.compatibility
+
+    def conflict(self, a: int, b: int) -> bool:
+        return frozenset((a, b)) not in self._compatible
+
+    def as_rows(self) -> list[list[int]]:
+        """The conflict matrix (1 = conflict) over the phases in number order, diagonal 0."""
+        return [[int(a != b and self.conflict(a, b)) for b in self.phases] for a in self.phases]
+
+
+def _is_int(value: object) -> bool:
+    return isinstance(value, numbers.Integral) and not isinstance(value, bool)
+
+
+class ActionConverter:
+    """Converts one action type to commands; keeps the position in the cyclic sequence."""
+
+    def __init__(self, config: IntersectionConfig, action_type: ActionType) -> None:
+        self.config = config
+        self.action_type = ActionType(action_type)
+        self.matrix = ConflictMatrix(config)
+        self.sequence = config.sequence
+        self.position = -1  # index in the sequence of the pair last commanded; -1 before the first
+        self._pairs = frozenset(config.pairs)
+        self._convert = {
+            ActionType.SELECTION: self._selection,
+            ActionType.SWITCH: self._switch,
+            ActionType.DURATION: self._duration,
+        }[self.action_type]
+
+    def sync(self, greens: frozenset[int]) -> None:
+        """Align the sequence position with the pair the controller shows (start-up, recovery)."""
+        for i, pair in enumerate(self.sequence):
+            if set(pair) <= greens:
+                self.position = i
+                return
+
+    def convert(self, value: object) -> Command:
+        """The command for an action value, or an :class:`ActionError`."""
+        return self._convert(value)
+
+    def commit(self, command: Command) -> None:
+        """Record that a command was accepted, so the cyclic position follows it."""
+        if command.phases in self.sequence:
+            self.position = self.sequence.index(command.phases)
+
+    @property
+    def next_pair(self) -> Pair:
+        return self.sequence[(self.position + 1) % len(self.sequence)]
+
+    @property
+    def current_pair(self) -> Pair | None:
+        return self.sequence[self.position] if self.position >= 0 else None
+
+    def _selection(self, value: object) -> Command:
+        if isinstance(value, (str, bytes)) or not hasattr(value, "__len__") or len(value) != 2 or not all(
+                _is_int(p) for p in value):
+            raise ActionTypeError(f"phase selection takes a pair of phase numbers, got {value!r}; "
+                                  f"allowed: one of {list(self.config.pairs)}")
+        a, b = (int(p) for p in value)
+        for p in (a, b):
+            if p not in self.config.phases:
+                raise UnknownPhaseError(f"unknown phase {p} in {[a, b]}; allowed phases: {list(self.matrix.phases)}")
+        if a == b or self.matrix.conflict(a, b):
+            raise ConflictError(f"phases {a} and {b} conflict and are never commanded together; "
+                                f"allowed: one of {list(self.config.pairs)}")
+        pair = (a, b) if self.config.ring_of(a) == 1 else (b, a)
+        if pair not in self._pairs:
+            raise NotInActionSetError(f"pair {list(pair)} is not in the configured set of pairs; "
+                                      f"allowed: one of {list(self.config.pairs)}")
+        return Command(pair)
+
+    def _switch(self, value: object) -> Command:
+        if not _is_int(value) or int(value) not in (0, 1):
+            raise ActionTypeError(f"phase switch takes 0 (keep) or 1 (advance), got {value!r}")
+        if int(value) == 0:
+            return Command(self.current_pair or self.next_pair, keep=self.current_pair is not None)
+        return Command(self.next_pair)
+
+    def _duration(self, value: object) -> Command:
+        if isinstance(value, bool) or not isinstance(value, numbers.Real):
+            raise ActionTypeError(f"phase duration takes a number x in [0, 1], got {value!r}")
+        x = float(value)
+        if math.isnan(x) or not 0.0 <= x <= 1.0:
+            raise DurationRangeError(f"phase duration x = {x} is outside [0, 1]; allowed: 0 <= x <= 1 "
+                                     "(0 = minimum green, 1 = maximum green)")
+        pair = self.next_pair
+        g_min, g_max = self.green_range(pair)
+        return Command(pair, green=g_min + x * (g_max - g_min))
+
+    def green_range(self, pair: Pair) -> tuple[float, float]:
+        """Green-time bounds of a pair: the larger minimum and the smaller maximum of its phases
+        (never below that minimum), so the green is valid for both."""
+        g_min = max(self.config.phases[p].min_green for p in pair)
+        g_max = max(g_min, min(self.config.phases[p].max_green for p in pair))
+        return g_min, g_max

@@ -1,0 +1,153 @@
+"""Control agents behind one small protocol: observe, then return an action value.
+
+An agent has an ``action_type`` (selection, switch or duration) and an ``act``
+method that takes an :class:`Observation` and returns the action value for its
+type: a pair of phases, 0 or 1, or x in [0, 1]. A user's own agent class is
+loaded with :func:`load_agent` from ``package.module:Class``.
+"""
+
+from __future__ import annotations
+
+import importlib
+import inspect
+import random
+from dataclasses import dataclass
+from typing import Any, Protocol, runtime_checkable
+
+from hils.actions import ActionType
+from hils.config import IntersectionConfig, Pair
+from hils.ntcip import SignalState
+
+
+@dataclass(frozen=True, slots=True)
+class Observation:
+    """What an agent sees at a decision point."""
+
+    t: float
+    signal: SignalState | None
+    traffic: Any = None  # the simulation's traffic state (hils.sumo.TrafficState), when a simulation runs
+    next_pair: Pair | None = None  # the pair a switch or duration action would serve next
+
+
+@runtime_checkable
+class Agent(Protocol):
+    action_type: ActionType
+
+    def act(self, observation: Observation) -> Any: ...
+
+
+class AgentError(TypeError):
+    """A class that cannot serve as an agent, or an agent spec that does not load."""
+
+
+class RandomAgent:
+    """Uniformly random actions of one type (a baseline, and a fuzzer of the middleware)."""
+
+    def __init__(self, config: IntersectionConfig, action_type: ActionType | str, seed: int = 0) -> None:
+        self.config = config
+        self.action_type = ActionType(action_type)
+        self.rng = random.Random(seed)
+
+    def act(self, observation: Observation) -> Any:
+        if self.action_type is ActionType.SELECTION:
+            return self.rng.choice(self.config.pairs)
+        if self.action_type is ActionType.SWITCH:
+            return self.rng.randint(0, 1)
+        return self.rng.random()
+
+
+class FixedCycleAgent:
+    """Advance at every decision (switch 1): a fixed-time cycle through the configured sequence."""
+
+    action_type = ActionType.SWITCH
+
+    def __init__(self, config: IntersectionConfig, action_type: ActionType | str = ActionType.SWITCH,
+                 seed: int = 0) -> None:
+        if ActionType(action_type) is not ActionType.SWITCH:
+            raise AgentError("the fixed-cycle agent issues phase switch actions only (--action-type switch)")
+
+    def act(self, observation: Observation) -> int:
+        return 1
+
+
+class MaxPressureAgent:
+    """Max-pressure phase selection (Varaiya 2013): the compatible pair whose movements have the
+    largest summed pressure, upstream queue minus downstream queue. Ties keep the pair shown, then
+    go to the first pair in the configured order."""
+
+    action_type = ActionType.SELECTION
+
+    def __init__(self, config: IntersectionConfig, action_type: ActionType | str = ActionType.SELECTION,
+                 seed: int = 0) -> None:
+        if ActionType(action_type) is not ActionType.SELECTION:
+            raise AgentError("the max-pressure agent issues phase selection actions only (--action-type selection)")
+        self.pairs = config.pairs
+
+    def act(self, observation: Observation) -> Pair:
+        if observation.traffic is None:
+            raise AgentError("the max-pressure agent needs the traffic state: run it with SUMO (without --no-sumo)")
+        movements = observation.traffic.movements
+        greens = observation.signal.greens if observation.signal else frozenset()
+
+        def score(pair: Pair) -> tuple[int, bool]:
+            return sum(movements[p].pressure for p in pair), set(pair) <= greens
+
+        return max(self.pairs, key=score)
+
+
+class QueueProportionalAgent:
+    """Phase duration in proportion to the queue waiting for the next pair: x = queue / saturation,
+    capped at 1 (saturation: the queue that deserves the maximum green)."""
+
+    action_type = ActionType.DURATION
+
+    def __init__(self, config: IntersectionConfig, action_type: ActionType | str = ActionType.DURATION,
+                 seed: int = 0, saturation: int = 20) -> None:
+        if ActionType(action_type) is not ActionType.DURATION:
+            raise AgentError("the queue-proportional agent issues phase duration actions only (--action-type duration)")
+        self.saturation = saturation
+
+    def act(self, observation: Observation) -> float:
+        if observation.traffic is None or observation.next_pair is None:
+            raise AgentError("the queue-proportional agent needs the traffic state: run it with SUMO")
+        queue = sum(observation.traffic.movements[p].upstream_queue for p in observation.next_pair)
+        return min(1.0, queue / self.saturation)
+
+
+BUILTIN: dict[str, type] = {"random": RandomAgent, "fixed-cycle": FixedCycleAgent, "max-pressure": MaxPressureAgent,
+                            "queue-proportional": QueueProportionalAgent}
+
+
+def load_agent(spec: str, config: IntersectionConfig, action_type: ActionType | str, seed: int = 0) -> Agent:
+    """An agent from a built-in name or ``package.module:Class``; refused with a clear message if it
+    does not fit the protocol."""
+    if spec in BUILTIN:
+        cls = BUILTIN[spec]
+    else:
+        module_name, sep, class_name = spec.partition(":")
+        if not sep or not module_name or not class_name:
+            raise AgentError(f"agent {spec!r}: expected a built-in agent ({', '.join(BUILTIN)}) "
+                             "or package.module:Class")
+        try:
+            cls = getattr(importlib.import_module(module_name), class_name)
+        except (ImportError, AttributeError) as exc:
+            raise AgentError(f"agent {spec!r} cannot be loaded: {exc}") from None
+    if not inspect.isclass(cls):
+        raise AgentError(f"agent {spec!r} is not a class")
+    if not callable(getattr(cls, "act", None)):
+        raise AgentError(f"agent {spec!r} does not fit the agent protocol: it has no act(observation) method")
+    try:
+        agent = cls(config, action_type, seed)
+    except TypeError as exc:
+        raise AgentError(f"agent {spec!r} does not fit the agent protocol: its constructor must take "
+                         f"(config, action_type, seed): {exc}") from None
+    declared = getattr(agent, "action_type", None)
+    try:
+        declared = ActionType(declared)
+    except ValueError:
+        raise AgentError(f"agent {spec!r} does not fit the agent protocol: action_type must be one of "
+                         f"{[t.value for t in ActionType]}, got {declared!r}") from None
+    if declared is not ActionType(action_type):
+        raise AgentError(f"agent {spec!r} issues {declared.value} actions, but the run uses "
+                         f"{ActionType(action_type).value}")
+    return agent

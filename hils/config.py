@@ -1,0 +1,375 @@
+"""Intersection configuration: phases, ring-and-barrier structure, middleware parameters.
+
+Loaded from TOML and validated as a whole; every error names the file, the
+field and what is allowed. The paper's four-leg intersection ships as package
+data (``hils/data/four_leg.toml``) and is the default everywhere.
+
+Times are given in seconds. Minimum and maximum green are whole seconds and
+clearance times are tenths of a second, as NTCIP 1202 stores them; the
+controller counts integer tenths internally.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from hils.ntcip import PhaseStartup, group_count
+
+Pair = tuple[int, int]
+
+DEFAULT_CONFIG_NAME = "four_leg.toml"
+
+_STARTUP_NAMES = {
+    "off": PhaseStartup.PHASE_NOT_ON,
+    "green": PhaseStartup.GREEN_NO_WALK,
+    "yellow": PhaseStartup.YELLOW_CHANGE,
+    "red_clear": PhaseStartup.RED_CLEAR,
+}
+APPROACHES = ("north", "south", "east", "west")
+TURNS = ("left", "through")
+
+
+class ConfigError(ValueError):
+    """A configuration that cannot be used; says where and what is allowed."""
+
+    def __init__(self, source: str, field_name: str, message: str) -> None:
+        super().__init__(f"{source}: {field_name}: {message}")
+        self.source = source
+        self.field = field_name
+        self.message = message
+
+
+@dataclass(frozen=True, slots=True)
+class Phase:
+    number: int
+    ring: int
+    min_green: float
+    max_green: float
+    yellow: float
+    red_clear: float
+    startup: PhaseStartup = PhaseStartup.PHASE_NOT_ON
+    approach: str | None = None
+    turn: str | None = None
+
+    @property
+    def clearance(self) -> float:
+        """Yellow change plus red clearance, in seconds."""
+        return self.yellow + self.red_clear
+
+
+@dataclass(frozen=True, slots=True)
+class MiddlewareParams:
+    """The paper's middleware parameters (section "HILS Setup")."""
+
+    poll_hz: float = 10.0
+    sumo_step: float = 0.25
+    tau_udp: float = 1.0
+    tau_trans: float = 10.0
+    n_timeout: int = 5
+    n_drift: int = 5
+    control_interval: float = 10.0
+    backup_time: int = 30
+
+    @property
+    def poll_period(self) -> float:
+        return 1.0 / self.poll_hz
+
+    @property
+    def keepalive_period(self) -> float:
+        """How often the current call is SET again: well inside the backup time."""
+        return self.backup_time / 3.0
+
+
+@dataclass(frozen=True)
+class IntersectionConfig:
+    name: str
+    phases: Mapping[int, Phase]
+    rings: tuple[tuple[int, ...], ...]
+    barriers: tuple[frozenset[int], ...]
+    sequence: tuple[Pair, ...]
+    pairs: tuple[Pair, ...]
+    compatibility: frozenset[frozenset[int]]
+    middleware: MiddlewareParams = field(default_factory=MiddlewareParams)
+    source: str = "<memory>"
+
+    @property
+    def groups(self) -> int:
+        """Number of NTCIP phase groups (8 phases each) this intersection needs."""
+        return group_count(max(self.phases))
+
+    @property
+    def phase_numbers(self) -> tuple[int, ...]:
+        return tuple(sorted(self.phases))
+
+    def compatible(self, a: int, b: int) -> bool:
+        """True when phases a and b may show green together."""
+        return frozenset((a, b)) in self.compatibility
+
+    def ring_of(self, phase: int) -> int:
+        return self.phases[phase].ring
+
+    def barrier_of(self, phase: int) -> int:
+        """Index (0-based) of the barrier group holding the phase."""
+        return next(i for i, group in enumerate(self.barriers) if phase in group)
+
+    def with_middleware(self, **changes: Any) -> IntersectionConfig:
+        """A copy with some middleware parameters replaced (validated)."""
+        raw = {f: getattr(self.middleware, f) for f in MiddlewareParams.__dataclass_fields__} | changes
+        params = _middleware(raw, self.source)
+        return IntersectionConfig(self.name, self.phases, self.rings, self.barriers, self.sequence,
+                                  self.pairs, self.compatibility, params, self.source)
+
+
+def load(path: str | Path | None = None) -> IntersectionConfig:
+    """Load and validate a TOML config; the shipped four-leg intersection when path is None."""
+    if path is None:
+        ref = resources.files("hils.data") / DEFAULT_CONFIG_NAME
+        return parse(ref.read_text(encoding="utf-8"), f"hils/data/{DEFAULT_CONFIG_NAME}")
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ConfigError(str(p), "<file>", f"cannot be read ({exc.strerror})") from None
+    return parse(text, str(p))
+
+
+def parse(text: str, source: str = "<memory>") -> IntersectionConfig:
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(source, "<file>", f"is not valid TOML ({exc})") from None
+    return from_dict(raw, source)
+
+
+# --- validation helpers -------------------------------------------------------------
+
+
+def _unknown(raw: Mapping[str, Any], allowed: tuple[str, ...], where: str, source: str) -> None:
+    for key in raw:
+        if key not in allowed:
+            raise ConfigError(source, f"{where}{key}", f"unknown field; allowed: {', '.join(allowed)}")
+
+
+def _number(raw: Mapping[str, Any], key: str, where: str, source: str, default: Any = None, *,
+            integer: bool = False, low: float | None = None, low_open: bool = False,
+            high: float | None = None, step: float | None = None) -> Any:
+    name = f"{where}{key}"
+    value = raw.get(key, default)
+    if value is None:
+        raise ConfigError(source, name, "is required")
+    kinds = (int,) if integer else (int, float)
+    bad_type = isinstance(value, bool) or not isinstance(value, kinds)
+    if bad_type or (isinstance(value, float) and not math.isfinite(value)):
+        raise ConfigError(source, name, f"must be {'an integer' if integer else 'a finite number'}, got {value!r}")
+    too_low = low is not None and (value <= low if low_open else value < low)
+    if too_low or (high is not None and value > high):
+        lo = "" if low is None else f"{'>' if low_open else '>='} {low}"
+        hi = "" if high is None else f"<= {high}"
+        raise ConfigError(source, name, f"is {value}; allowed: {' and '.join(x for x in (lo, hi) if x)}")
+    if step is not None and abs(round(value / step) * step - value) > 1e-9:
+        raise ConfigError(source, name, f"is {value}; allowed: multiples of {step} s")
+    return value
+
+
+def _int_list(value: Any, name: str, source: str) -> list[int]:
+    if not isinstance(value, list) or not all(isinstance(v, int) and not isinstance(v, bool) for v in value):
+        raise ConfigError(source, name, f"must be a list of phase numbers, got {value!r}")
+    return value
+
+
+def _middleware(raw: Mapping[str, Any], source: str) -> MiddlewareParams:
+    d = MiddlewareParams()
+    w = "middleware."
+    _unknown(raw, tuple(MiddlewareParams.__dataclass_fields__), w, source)
+    return MiddlewareParams(
+        poll_hz=float(_number(raw, "poll_hz", w, source, d.poll_hz, low=0, low_open=True, high=1000)),
+        sumo_step=float(_number(raw, "sumo_step", w, source, d.sumo_step, low=0, low_open=True, high=10)),
+        tau_udp=float(_number(raw, "tau_udp", w, source, d.tau_udp, low=0, low_open=True, high=60)),
+        tau_trans=float(_number(raw, "tau_trans", w, source, d.tau_trans, low=0, low_open=True, high=600)),
+        n_timeout=_number(raw, "n_timeout", w, source, d.n_timeout, integer=True, low=1, high=1000),
+        n_drift=_number(raw, "n_drift", w, source, d.n_drift, integer=True, low=1, high=1000),
+        control_interval=float(_number(raw, "control_interval", w, source, d.control_interval,
+                                       low=0, low_open=True, high=3600)),
+        backup_time=_number(raw, "backup_time", w, source, d.backup_time, integer=True, low=0, high=65535),
+    )
+
+
+def _phase(number: int, raw: Any, defaults: Mapping[str, Any], ring: int, source: str) -> Phase:
+    w = f"phases.{number}."
+    if not isinstance(raw, dict):
+        raise ConfigError(source, f"phases.{number}", "must be a table of phase settings")
+    _unknown(raw, ("min_green", "max_green", "yellow", "red_clear", "startup", "approach", "turn"), w, source)
+    merged = {**defaults, **raw}
+
+    def where(key: str) -> str:
+        # A bad value inherited from [timing] is reported where the user wrote it.
+        return w if key in raw or key not in defaults else "timing."
+
+    min_green = _number(merged, "min_green", where("min_green"), source, integer=True, low=1, high=255)
+    max_green = _number(merged, "max_green", where("max_green"), source, integer=True, low=1, high=255)
+    if max_green < min_green:
+        blame = w if "min_green" in raw else where("max_green")
+        raise ConfigError(source, f"{blame}max_green",
+                          f"is {max_green} s, below min_green {min_green} s; allowed: max_green >= min_green")
+    yellow = _number(merged, "yellow", where("yellow"), source, low=0, low_open=True, high=25.5, step=0.1)
+    red_clear = _number(merged, "red_clear", where("red_clear"), source, low=0, low_open=True, high=25.5, step=0.1)
+    startup = merged.get("startup", "off")
+    if startup not in _STARTUP_NAMES:
+        raise ConfigError(source, f"{w}startup", f"is {startup!r}; allowed: {', '.join(_STARTUP_NAMES)}")
+    approach, turn = raw.get("approach"), raw.get("turn")
+    if approach is not None and approach not in APPROACHES:
+        raise ConfigError(source, f"{w}approach", f"is {approach!r}; allowed: {', '.join(APPROACHES)}")
+    if turn is not None and turn not in TURNS:
+        raise ConfigError(source, f"{w}turn", f"is {turn!r}; allowed: {', '.join(TURNS)}")
+    return Phase(number, ring, float(min_green), float(max_green), float(yellow), float(red_clear),
+                 _STARTUP_NAMES[startup], approach, turn)
+
+
+def _pairs(raw: Any, name: str, phases: Mapping[int, Phase], compatible: frozenset[frozenset[int]],
+           source: str) -> tuple[Pair, ...]:
+    if not isinstance(raw, list) or not raw:
+        raise ConfigError(source, name, "must be a non-empty list of [ring 1 phase, ring 2 phase] pairs")
+    out = []
+    for i, item in enumerate(raw):
+        pair = _int_list(item, f"{name}[{i}]", source)
+        if len(pair) != 2:
+            raise ConfigError(source, f"{name}[{i}]", f"is {pair}; allowed: exactly two phases, one per ring")
+        for p in pair:
+            if p not in phases:
+                raise ConfigError(source, f"{name}[{i}]", f"unknown phase {p}; allowed: {sorted(phases)}")
+        a, b = pair
+        if phases[a].ring != 1 or phases[b].ring != 2:
+            raise ConfigError(source, f"{name}[{i}]",
+                              f"is {pair}; allowed: a ring 1 phase first, then a ring 2 phase")
+        if frozenset(pair) not in compatible:
+            raise ConfigError(source, f"{name}[{i}]", f"phases {a} and {b} conflict; allowed: compatible pairs")
+        out.append((a, b))
+    return tuple(out)
+
+
+def _matrix(raw: Mapping[str, Any], numbers: list[int], source: str) -> frozenset[frozenset[int]] | None:
+    given = [k for k in ("compatibility", "conflict") if k in raw]
+    if not given:
+        return None
+    if len(given) == 2:
+        raise ConfigError(source, "structure.conflict", "give either compatibility or conflict, not both")
+    key = given[0]
+    rows = raw[key]
+    n = len(numbers)
+    if (not isinstance(rows, list) or len(rows) != n
+            or not all(isinstance(r, list) and len(r) == n and all(v in (0, 1) and not isinstance(v, bool)
+                                                                   for v in r) for r in rows)):
+        raise ConfigError(source, f"structure.{key}", f"must be a {n}x{n} matrix of 0 and 1 over phases {numbers}")
+    for i in range(n):
+        for j in range(i + 1, n):
+            if rows[i][j] != rows[j][i]:
+                raise ConfigError(source, f"structure.{key}",
+                                  f"is not symmetric: [{numbers[i]}][{numbers[j]}] = {rows[i][j]} but "
+                                  f"[{numbers[j]}][{numbers[i]}] = {rows[j][i]}; allowed: symmetric matrices")
+    mark = 1 if key == "compatibility" else 0
+    return frozenset(frozenset((numbers[i], numbers[j])) for i in range(n) for j in range(i + 1, n)
+                     if rows[i][j] == mark)
+
+
+def from_dict(raw: Mapping[str, Any], source: str = "<memory>") -> IntersectionConfig:
+    _unknown(raw, ("name", "timing", "phases", "structure", "middleware"), "", source)
+    name = raw.get("name", Path(source).stem)
+    if not isinstance(name, str):
+        raise ConfigError(source, "name", "must be a string")
+    structure = raw.get("structure")
+    if not isinstance(structure, dict):
+        raise ConfigError(source, "structure", "is required: rings, barriers, sequence and pairs")
+    _unknown(structure, ("rings", "barriers", "sequence", "pairs", "compatibility", "conflict"), "structure.", source)
+
+    raw_phases = raw.get("phases")
+    if not isinstance(raw_phases, dict) or not raw_phases:
+        raise ConfigError(source, "phases", "is required: a table of phases keyed by phase number")
+    numbers = []
+    for key in raw_phases:
+        if not key.isdigit() or not 1 <= int(key) <= 255:
+            raise ConfigError(source, f"phases.{key}", "is not a phase number; allowed: 1..255")
+        numbers.append(int(key))
+    numbers.sort()
+
+    rings_raw = structure.get("rings")
+    if not isinstance(rings_raw, list) or len(rings_raw) != 2:
+        raise ConfigError(source, "structure.rings", "must list exactly two rings (dual-ring controller)")
+    ring_of: dict[int, int] = {}
+    rings = []
+    for r, members in enumerate(rings_raw, start=1):
+        members = _int_list(members, f"structure.rings[{r - 1}]", source)
+        for p in members:
+            if p not in raw_phases and str(p) not in raw_phases:
+                raise ConfigError(source, f"structure.rings[{r - 1}]", f"unknown phase {p}; allowed: {numbers}")
+            if p in ring_of:
+                raise ConfigError(source, f"structure.rings[{r - 1}]",
+                                  f"phase {p} is in rings {ring_of[p]} and {r}; allowed: one ring per phase")
+            ring_of[p] = r
+        rings.append(tuple(members))
+    for p in numbers:
+        if p not in ring_of:
+            raise ConfigError(source, f"phases.{p}", "is in no ring; every phase belongs to exactly one ring")
+
+    timing = raw.get("timing", {})
+    if not isinstance(timing, dict):
+        raise ConfigError(source, "timing", "must be a table of default phase timings")
+    _unknown(timing, ("min_green", "max_green", "yellow", "red_clear"), "timing.", source)
+    phases = {p: _phase(p, raw_phases[str(p)], timing, ring_of[p], source) for p in numbers}
+
+    barriers_raw = structure.get("barriers")
+    if not isinstance(barriers_raw, list) or not barriers_raw:
+        raise ConfigError(source, "structure.barriers", "must list the phases of each barrier group")
+    barrier_of: dict[int, int] = {}
+    for b, members in enumerate(barriers_raw):
+        for p in _int_list(members, f"structure.barriers[{b}]", source):
+            if p not in phases:
+                raise ConfigError(source, f"structure.barriers[{b}]", f"unknown phase {p}; allowed: {numbers}")
+            if p in barrier_of:
+                raise ConfigError(source, f"structure.barriers[{b}]",
+                                  f"phase {p} is in barrier groups {barrier_of[p]} and {b}")
+            barrier_of[p] = b
+    for p in numbers:
+        if p not in barrier_of:
+            raise ConfigError(source, "structure.barriers", f"phase {p} is in no barrier group")
+    for r, ring in enumerate(rings):
+        seen = [barrier_of[p] for p in ring]
+        if seen != sorted(seen):
+            raise ConfigError(source, f"structure.rings[{r}]",
+                              "must list its phases barrier group by barrier group, in barrier order")
+
+    derived = frozenset(frozenset((a, b)) for a in numbers for b in numbers
+                        if a < b and ring_of[a] != ring_of[b] and barrier_of[a] == barrier_of[b])
+    explicit = _matrix(structure, numbers, source)
+    # An explicit matrix wins even when it allows nothing at all.
+    compatibility = derived if explicit is None else explicit
+
+    startups = [p for p in numbers if phases[p].startup != PhaseStartup.PHASE_NOT_ON]
+    for i, a in enumerate(startups):
+        for b in startups[i + 1:]:
+            if frozenset((a, b)) not in derived or frozenset((a, b)) not in compatibility:
+                raise ConfigError(source, f"phases.{b}.startup",
+                                  f"phase {b} cannot start together with phase {a}; allowed: one phase per ring, "
+                                  "all in one barrier group")
+
+    pairs = _pairs(structure.get("pairs"), "structure.pairs", phases, compatibility, source)
+    sequence = _pairs(structure.get("sequence"), "structure.sequence", phases, compatibility, source)
+    middleware = raw.get("middleware", {})
+    if not isinstance(middleware, dict):
+        raise ConfigError(source, "middleware", "must be a table of middleware parameters")
+    return IntersectionConfig(
+        name=name,
+        phases=phases,
+        rings=tuple(rings),
+        barriers=tuple(frozenset(b) for b in barriers_raw),
+        sequence=sequence,
+        pairs=pairs,
+        compatibility=compatibility,
+        middleware=_middleware(middleware, source),
+        source=source,
+    )

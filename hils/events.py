@@ -1,0 +1,106 @@
+"""The structured event log: one JSON Lines record per step of the data flow.
+
+Schema of a record (every key always present, extra keys by kind)::
+
+    {"seq": 17, "t": 12.3456, "wall_ns": 123456789, "kind": "command_dispatched", ...}
+
+- ``seq``: 0-based position in the log, so a gap shows a lost record;
+- ``t``: simulation time in seconds (the SimPy clock, virtual or wall-mapped);
+- ``wall_ns``: ``time.monotonic_ns()`` when the record was made; the only field
+  that differs between two runs of the same seed;
+- ``kind``: one of :class:`Kind`; the other keys are documented there.
+
+Records are written through (flushed) as they are made, so a run that dies
+keeps every event logged before it.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Iterator
+from enum import StrEnum
+from pathlib import Path
+from typing import IO, Any
+
+
+class Kind(StrEnum):
+    """Event kinds and the keys each one adds."""
+
+    RUN_STARTED = "run_started"                # config, seed, mode, action_type, agent
+    ACTION_RECEIVED = "action_received"        # action_id, action_type, value
+    ACTION_CONVERTED = "action_converted"      # action_id, command [p1, p2], green (s or null), keep
+    ACTION_REFUSED = "action_refused"          # action_id, error, reason
+    ACTION_DROPPED = "action_dropped"          # action_id, state
+    COMMAND_DISPATCHED = "command_dispatched"  # action_id, command_id, command, green
+    SET_SENT = "set_sent"                      # command_id, phases, purpose (command|keepalive|clear)
+    SET_ANSWERED = "set_answered"              # command_id, purpose
+    SET_FAILED = "set_failed"                  # command_id, purpose, error
+    POLL = "poll"                              # poll_id, greens, yellows, reds (on change only), changed
+    POLL_FAILED = "poll_failed"                # poll_id, error, consecutive
+    TRANSITION_VERIFIED = "transition_verified"  # command_id, command, poll_id, hold_s
+    HOLD_RELEASED = "hold_released"            # command_id, reason (verified|keep|duration_served)
+    DRIFT = "drift"                            # step_s, took_s, consecutive
+    TIMEOUT_ENTERED = "timeout_entered"        # reason (communication|transition|drift), command_id, detail
+    RECOVERY_STARTED = "recovery_started"      # -
+    RECOVERED = "recovered"                    # greens
+    STATE = "state"                            # from, to (manager state changes)
+    RUN_ENDED = "run_ended"                    # reason, t_end
+    NOTE = "note"                              # free text for harness faults and components
+
+
+class EventLog:
+    """Write-through JSON Lines log; also keeps the records in memory when asked."""
+
+    def __init__(self, path: str | Path | None = None, *, keep: bool = True, clock=None) -> None:
+        self.path = Path(path) if path is not None else None
+        self._file: IO[str] | None = None
+        if self.path is not None:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._file = self.path.open("w", encoding="utf-8")
+        self.records: list[dict[str, Any]] = []
+        self.keep = keep
+        self._seq = 0
+        self._clock = clock
+
+    def bind(self, clock) -> None:
+        """Give the log the simulation clock: a callable returning the current sim time."""
+        self._clock = clock
+
+    def emit(self, kind: Kind, **fields: Any) -> dict[str, Any]:
+        rec = {"seq": self._seq, "t": self._clock() if self._clock else 0.0, "wall_ns": time.monotonic_ns(),
+               "kind": kind.value, **fields}
+        self._seq += 1
+        if self.keep:
+            self.records.append(rec)
+        if self._file is not None:
+            self._file.write(json.dumps(rec, separators=(",", ":"), default=_jsonable) + "\n")
+            self._file.flush()
+        return rec
+
+    def of(self, *kinds: Kind) -> list[dict[str, Any]]:
+        names = {k.value for k in kinds}
+        return [r for r in self.records if r["kind"] in names]
+
+    def close(self) -> None:
+        if self._file is not None:
+            self._file.close()
+            self._file = None
+
+
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, (set, frozenset)):
+        return sorted(value)
+    if isinstance(value, tuple):
+        return list(value)
+    raise TypeError(f"not JSON serialisable: {type(value).__name__}")
+
+
+def read(path: str | Path) -> Iterator[dict[str, Any]]:
+    """Records of a JSON Lines event log; a torn last line (a crash mid-write) is ignored."""
+    with Path(path).open(encoding="utf-8") as f:
+        for line in f:
+            try:
+                yield json.loads(line)
+            except json.JSONDecodeError:
+                return

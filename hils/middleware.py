@@ -1,0 +1,254 @@
+"""The middleware: the manager's SimPy shell, the poller, keepalive, drift and recovery.
+
+The manager (:mod:`hils.manager`) decides; this module does. It turns agent
+actions into manager events, carries out the effects the manager returns (SET
+the call, start timers, halt polling, log), and feeds back timer expiries and
+signal observations. It runs unchanged in virtual and wall-clock time: only the
+environment's driver and the transport differ.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Generator
+from typing import Any
+
+import simpy
+
+from hils.actions import ActionConverter, ActionError, ActionType, Command
+from hils.config import IntersectionConfig
+from hils.drift import DriftMonitor
+from hils.events import EventLog, Kind
+from hils.manager import (
+    CommandEnded,
+    CommandRequested,
+    Dispatch,
+    Dropped,
+    Effect,
+    FailureDetected,
+    Manager,
+    Recovered,
+    RecoveryCompleted,
+    SignalObserved,
+    StartTimer,
+    State,
+    TimeoutEntered,
+    TimeoutReason,
+    TimerExpired,
+    Verified,
+)
+from hils.ntcip import UNIT_BACKUP_TIME, ControlColumn, SnmpError, control_oid, phases_to_groups
+from hils.poller import Poller, SignalCache, Snapshot
+from hils.transport import Transport, TransportError
+
+log = logging.getLogger(__name__)
+
+
+class Middleware:
+    """Everything between the agent and the transport, on one SimPy environment."""
+
+    def __init__(self, env: simpy.Environment, transport: Transport, config: IntersectionConfig,
+                 action_type: ActionType | str, events: EventLog, *, poll_hz: float | None = None) -> None:
+        params = config.middleware
+        self.env = env
+        self.transport = transport
+        self.config = config
+        self.log = events
+        events.bind(lambda: env.now)
+        self.manager = Manager(params.tau_trans)
+        self.converter = ActionConverter(config, ActionType(action_type))
+        self.cache = SignalCache()
+        self.poller = Poller(env, transport, self.cache, events, groups=config.groups,
+                             rate_hz=poll_hz or params.poll_hz, n_timeout=params.n_timeout,
+                             on_failure=lambda why: self._fail(TimeoutReason.COMMUNICATION, why))
+        self.drift = DriftMonitor(params.n_drift, events, lambda why: self._fail(TimeoutReason.DRIFT, why))
+        self.cache.subscribe(self._on_signal)
+        self.keepalive_enabled = True
+        self.keepalive_period = params.keepalive_period
+        self.call: frozenset[int] = frozenset()  # the VehCall last SET
+        self.last_set = float("-inf")
+        self.ready = env.event()
+        self._idle = env.event()
+        self._actions = 0
+
+    # --- public API -------------------------------------------------------------------------
+
+    @property
+    def state(self) -> State:
+        return self.manager.state
+
+    @property
+    def timeout_flag(self) -> bool:
+        """The system-wide timeout event flag: set in TIMEOUT until recovery."""
+        return self.manager.state is State.TIMEOUT
+
+    def start(self) -> simpy.Process:
+        """Read the controller, then start polling and the keepalive; ``ready`` fires when done."""
+        return self.env.process(self._startup())
+
+    def submit(self, value: Any) -> int:
+        """An agent's action value, converted and handed to the manager; returns the action id."""
+        self._actions += 1
+        action_id = self._actions
+        self.log.emit(Kind.ACTION_RECEIVED, action_id=action_id, action_type=self.converter.action_type.value,
+                      value=_plain(value))
+        try:
+            command = self.converter.convert(value)
+        except ActionError as exc:
+            self.log.emit(Kind.ACTION_REFUSED, action_id=action_id, error=type(exc).__name__, reason=exc.reason,
+                          message=str(exc))
+            return action_id
+        self.log.emit(Kind.ACTION_CONVERTED, action_id=action_id, command=command.phases, green=command.green,
+                      keep=command.keep)
+        self._feed(CommandRequested(self.env.now, action_id, command))
+        return action_id
+
+    def observe_step(self, step: float, took: float) -> None:
+        """Report one simulation step's cost to drift detection (ignored while in TIMEOUT)."""
+        if not self.timeout_flag:
+            self.drift.observe(step, took)
+
+    def wait_idle(self) -> simpy.Event:
+        """An event that fires when the manager is (or next becomes) IDLE."""
+        if self.manager.state is State.IDLE:
+            ev = self.env.event()
+            ev.succeed()
+            return ev
+        return self._idle
+
+    def recover(self) -> simpy.Process:
+        """Manual recovery: re-read the controller, align the call with what it shows, return to IDLE."""
+        return self.env.process(self._recover())
+
+    def close(self) -> simpy.Process:
+        """Clear the calls this run placed."""
+        return self.env.process(self._clear())
+
+    # --- processes ----------------------------------------------------------------------------
+
+    def _startup(self) -> Generator[simpy.Event, Any, None]:
+        try:
+            state = yield from self.poller.read_once()
+            (backup,) = yield self.transport.get([UNIT_BACKUP_TIME.instance()])
+        except (TransportError, SnmpError) as exc:
+            self._fail(TimeoutReason.COMMUNICATION, f"controller unreachable at start-up: {exc}")
+        else:
+            self.cache.update(state, self.env.now, 0)
+            self.converter.sync(state.greens)
+            if backup:
+                self.keepalive_period = min(self.keepalive_period, backup / 3.0)
+        self.env.process(self.poller.run())
+        self.env.process(self._keepalive())
+        self.ready.succeed()
+
+    def _keepalive(self) -> Generator[simpy.Event, Any, None]:
+        # Any SET of a control object restarts the controller's backup timer, so only
+        # refresh when no command has been SET within the period.
+        period = self.keepalive_period
+        while True:
+            due = self.last_set + period
+            if self.env.now < due:
+                yield self.env.timeout(due - self.env.now)
+                continue
+            if self.keepalive_enabled and self.call and not self.timeout_flag:
+                self._send(self.call, "keepalive")
+            else:
+                yield self.env.timeout(period)
+
+    def _recover(self) -> Generator[simpy.Event, Any, bool]:
+        self.log.emit(Kind.RECOVERY_STARTED, state=self.manager.state.value)
+        try:
+            state = yield from self.poller.read_once()
+            yield self._send(state.greens, "recovery")
+        except (TransportError, SnmpError) as exc:
+            self.log.emit(Kind.NOTE, message=f"recovery failed, still in TIMEOUT: {exc}")
+            return False
+        self.cache.update(state, self.env.now, self.poller.polls)
+        self.converter.sync(state.greens)
+        self.drift.reset()
+        self._feed(RecoveryCompleted(self.env.now, state.greens))
+        return True
+
+    def _clear(self) -> Generator[simpy.Event, Any, None]:
+        try:
+            yield self._send(frozenset(), "clear")
+        except (TransportError, SnmpError) as exc:
+            log.warning("could not clear the calls at the end of the run: %s", exc)
+
+    # --- the manager's shell ----------------------------------------------------------------------
+
+    def _feed(self, event) -> None:
+        before = self.manager.state
+        effects = self.manager.handle(event)
+        for effect in effects:
+            self._carry_out(effect)
+        after = self.manager.state
+        if after is not before:
+            self.log.emit(Kind.STATE, **{"from": before.value, "to": after.value})
+            if after is State.IDLE:
+                idle, self._idle = self._idle, self.env.event()
+                idle.succeed()
+
+    def _carry_out(self, effect: Effect) -> None:
+        match effect:
+            case Dispatch(command_id, action_id, command):
+                self._dispatch(command_id, action_id, command)
+            case StartTimer(kind, delay, token):
+                self.env.timeout(delay).callbacks.append(
+                    lambda _ev, kind=kind, token=token: self._feed(TimerExpired(self.env.now, kind, token)))
+            case Dropped(action_id, state):
+                self.log.emit(Kind.ACTION_DROPPED, action_id=action_id, state=state.value)
+            case Verified(command_id, command, poll_id, hold):
+                self.log.emit(Kind.TRANSITION_VERIFIED, command_id=command_id, command=command.phases,
+                              poll_id=poll_id, hold_s=hold)
+            case CommandEnded(command_id, outcome, hold):
+                self.log.emit(Kind.HOLD_RELEASED, command_id=command_id, reason=outcome, hold_s=hold)
+            case TimeoutEntered(reason, detail, command_id):
+                self.log.emit(Kind.TIMEOUT_ENTERED, reason=reason.value, detail=detail, command_id=command_id)
+                self.poller.halt()
+            case Recovered(greens):
+                self.log.emit(Kind.RECOVERED, greens=greens)
+                self.poller.resume()
+
+    def _dispatch(self, command_id: int, action_id: int, command: Command) -> None:
+        self.log.emit(Kind.COMMAND_DISPATCHED, action_id=action_id, command_id=command_id,
+                      command=command.phases, green=command.green)
+        self.converter.commit(command)
+        self._send(frozenset(command.phases), "command", command_id)
+
+    def _send(self, phases: frozenset[int], purpose: str, command_id: int | None = None) -> simpy.Event:
+        """SET VehCall to ``phases``; logs the SET and its answer. Returns the transport's event."""
+        masks = phases_to_groups(phases, self.config.groups)
+        varbinds = [(control_oid(ControlColumn.VEH_CALL, g), m) for g, m in enumerate(masks, start=1)]
+        self.call = phases
+        self.last_set = self.env.now
+        self.log.emit(Kind.SET_SENT, command_id=command_id, phases=phases, purpose=purpose)
+        done = self.transport.set(varbinds)
+        done.callbacks.append(lambda ev: self._answered(ev, purpose, command_id))
+        return done
+
+    def _answered(self, ev: simpy.Event, purpose: str, command_id: int | None) -> None:
+        if ev.ok:
+            self.log.emit(Kind.SET_ANSWERED, command_id=command_id, purpose=purpose)
+        else:
+            ev.defused = True  # a failed SET is logged; the transition timer or the poller decides what follows
+            self.log.emit(Kind.SET_FAILED, command_id=command_id, purpose=purpose,
+                          error=f"{type(ev.value).__name__}: {ev.value}")
+
+    def _on_signal(self, snap: Snapshot, changed: bool) -> None:
+        self._feed(SignalObserved(snap.t, snap.state.greens, snap.seq))
+
+    def _fail(self, reason: TimeoutReason, detail: str) -> None:
+        self._feed(FailureDetected(self.env.now, reason, detail))
+
+
+def _plain(value: Any) -> Any:
+    """A JSON-friendly copy of an action value for the log."""
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, (int, float, str, bool)) or value is None:
+        return value
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        return repr(value)

@@ -1,0 +1,305 @@
+"""NTCIP 1202 v02 object model shared by the middleware and the emulator.
+
+This is the only module that spells an OID. Everything else names objects by
+the definitions below and builds instance OIDs with the helpers here, so an
+OID typo can exist in one place only.
+
+Phase sets travel on the wire as group bitmasks: bit k of group g stands for
+phase 8 * (g - 1) + k + 1. Inside the project a phase set is a ``frozenset`` of
+phase numbers; :func:`phases_to_groups` and :func:`groups_to_phases` convert.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from enum import Enum, IntEnum
+
+Oid = tuple[int, ...]
+
+#: 1.3.6.1.4.1.1206.4.2.1: the NTCIP 1202 actuated signal controller node.
+ASC: Oid = (1, 3, 6, 1, 4, 1, 1206, 4, 2, 1)
+PHASES_PER_GROUP = 8
+
+
+class Syntax(Enum):
+    INTEGER = "INTEGER"
+    OCTET_STRING = "OCTET STRING"
+
+
+class Access(Enum):
+    READ_ONLY = "read-only"
+    READ_WRITE = "read-write"
+
+
+class ErrorStatus(IntEnum):
+    """SNMP error-status values (RFC 3416); v1 uses the first six."""
+
+    NO_ERROR = 0
+    TOO_BIG = 1
+    NO_SUCH_NAME = 2
+    BAD_VALUE = 3
+    READ_ONLY = 4
+    GEN_ERR = 5
+    NO_ACCESS = 6
+    WRONG_TYPE = 7
+    WRONG_LENGTH = 8
+    WRONG_ENCODING = 9
+    WRONG_VALUE = 10
+    NO_CREATION = 11
+    INCONSISTENT_VALUE = 12
+    RESOURCE_UNAVAILABLE = 13
+    COMMIT_FAILED = 14
+    UNDO_FAILED = 15
+    AUTHORIZATION_ERROR = 16
+    NOT_WRITABLE = 17
+    INCONSISTENT_NAME = 18
+
+
+class SnmpError(Exception):
+    """An SNMP-style refusal of a request: error status and the 1-based index of the varbind."""
+
+    def __init__(self, status: ErrorStatus, index: int = 0, detail: str = "") -> None:
+        # args are the constructor's arguments: SimPy re-raises an unhandled
+        # failure as type(exc)(*exc.args), which must rebuild this error.
+        super().__init__(status, index, detail)
+        self.status = status
+        self.index = index
+        self.detail = detail
+
+    def __str__(self) -> str:
+        return f"{self.status.name.lower()} at varbind {self.index}" + (f": {self.detail}" if self.detail else "")
+
+
+class PhaseColumn(IntEnum):
+    """Columns of phaseTable (A.1.2.1.c.p)."""
+
+    MINIMUM_GREEN = 4
+    PASSAGE = 5
+    MAXIMUM1 = 6
+    MAXIMUM2 = 7
+    YELLOW_CHANGE = 8
+    RED_CLEAR = 9
+    STARTUP = 20
+    OPTIONS = 21
+    RING = 22
+    CONCURRENCY = 23
+
+
+class StatusColumn(IntEnum):
+    """Columns of phaseStatusGroupTable (A.1.4.1.c.g)."""
+
+    REDS = 2
+    YELLOWS = 3
+    GREENS = 4
+    DONT_WALKS = 5
+    PED_CLEARS = 6
+    WALKS = 7
+    VEH_CALLS = 8
+    PED_CALLS = 9
+    PHASE_ONS = 10
+    PHASE_NEXTS = 11
+
+
+class ControlColumn(IntEnum):
+    """Columns of phaseControlGroupTable (A.1.5.1.c.g)."""
+
+    PHASE_OMIT = 2
+    PED_OMIT = 3
+    HOLD = 4
+    FORCE_OFF = 5
+    VEH_CALL = 6
+    PED_CALL = 7
+
+
+class ChannelColumn(IntEnum):
+    """Columns of channelStatusGroupTable (A.8.4.1.c.g)."""
+
+    REDS = 2
+    YELLOWS = 3
+    GREENS = 4
+
+
+class PhaseStartup(IntEnum):
+    OTHER = 1
+    PHASE_NOT_ON = 2
+    GREEN_WALK = 3
+    GREEN_NO_WALK = 4
+    YELLOW_CHANGE = 5
+    RED_CLEAR = 6
+
+
+class UnitControlStatus(IntEnum):
+    OTHER = 1
+    SYSTEM_CONTROL = 2
+    SYSTEM_STANDBY = 3
+    BACKUP_MODE = 4
+    MANUAL = 5
+    TIMEBASE = 6
+    INTERCONNECT = 7
+    INTERCONNECT_BACKUP = 8
+
+
+class UnitFlashStatus(IntEnum):
+    OTHER = 1
+    NOT_FLASH = 2
+    AUTOMATIC = 3
+    LOCAL_MANUAL = 4
+    FAULT_MONITOR = 5
+    MMU = 6
+    STARTUP = 7
+    PREEMPT = 8
+
+
+@dataclass(frozen=True, slots=True)
+class ObjectDef:
+    """One NTCIP object type: its name, OID prefix and SNMP properties.
+
+    ``prefix`` is the object's OID without the instance part; a scalar's
+    instance is ``.0``, a table column's instance is its row index.
+    """
+
+    name: str
+    prefix: Oid
+    syntax: Syntax
+    access: Access
+    low: int = 0
+    high: int = 255
+
+    def instance(self, *index: int) -> Oid:
+        return self.prefix + (index or (0,))
+
+
+def _o(name: str, suffix: Oid, syntax: Syntax = Syntax.INTEGER, access: Access = Access.READ_ONLY,
+       low: int = 0, high: int = 255) -> ObjectDef:
+    return ObjectDef(name, ASC + suffix, syntax, access, low, high)
+
+
+MAX_PHASES = _o("maxPhases", (1, 1))
+MAX_PHASE_GROUPS = _o("maxPhaseGroups", (1, 3))
+UNIT_BACKUP_TIME = _o("unitBackupTime", (3, 3), access=Access.READ_WRITE, high=65535)
+UNIT_CONTROL_STATUS = _o("unitControlStatus", (3, 5), low=1, high=8)
+UNIT_FLASH_STATUS = _o("unitFlashStatus", (3, 6), low=1, high=8)
+SYSTEM_PATTERN_CONTROL = _o("systemPatternControl", (4, 14), access=Access.READ_WRITE)
+
+_PHASE_NAMES = {
+    PhaseColumn.MINIMUM_GREEN: ("phaseMinimumGreen", Syntax.INTEGER),
+    PhaseColumn.PASSAGE: ("phasePassage", Syntax.INTEGER),
+    PhaseColumn.MAXIMUM1: ("phaseMaximum1", Syntax.INTEGER),
+    PhaseColumn.MAXIMUM2: ("phaseMaximum2", Syntax.INTEGER),
+    PhaseColumn.YELLOW_CHANGE: ("phaseYellowChange", Syntax.INTEGER),
+    PhaseColumn.RED_CLEAR: ("phaseRedClear", Syntax.INTEGER),
+    PhaseColumn.STARTUP: ("phaseStartup", Syntax.INTEGER),
+    PhaseColumn.OPTIONS: ("phaseOptions", Syntax.INTEGER),
+    PhaseColumn.RING: ("phaseRing", Syntax.INTEGER),
+    PhaseColumn.CONCURRENCY: ("phaseConcurrency", Syntax.OCTET_STRING),
+}
+PHASE_TABLE: dict[PhaseColumn, ObjectDef] = {
+    col: _o(name, (1, 2, 1, int(col)), syntax, high=65535) for col, (name, syntax) in _PHASE_NAMES.items()
+}
+STATUS_TABLE: dict[StatusColumn, ObjectDef] = {
+    col: _o("phaseStatusGroup" + col.name.title().replace("_", ""), (1, 4, 1, int(col))) for col in StatusColumn
+}
+CONTROL_TABLE: dict[ControlColumn, ObjectDef] = {
+    col: _o("phaseControlGroup" + col.name.title().replace("_", ""), (1, 5, 1, int(col)), access=Access.READ_WRITE)
+    for col in ControlColumn
+}
+CHANNEL_TABLE: dict[ChannelColumn, ObjectDef] = {
+    col: _o("channelStatusGroup" + col.name.title().replace("_", ""), (8, 4, 1, int(col))) for col in ChannelColumn
+}
+SEQUENCE_DATA = _o("sequenceData", (7, 3, 1, 3), Syntax.OCTET_STRING)
+
+ALL_OBJECTS: tuple[ObjectDef, ...] = (
+    MAX_PHASES, MAX_PHASE_GROUPS, UNIT_BACKUP_TIME, UNIT_CONTROL_STATUS, UNIT_FLASH_STATUS,
+    SYSTEM_PATTERN_CONTROL, SEQUENCE_DATA,
+    *PHASE_TABLE.values(), *STATUS_TABLE.values(), *CONTROL_TABLE.values(), *CHANNEL_TABLE.values(),
+)
+
+
+def phase_oid(column: PhaseColumn, phase: int) -> Oid:
+    return PHASE_TABLE[column].instance(phase)
+
+
+def status_oid(column: StatusColumn, group: int) -> Oid:
+    return STATUS_TABLE[column].instance(group)
+
+
+def control_oid(column: ControlColumn, group: int) -> Oid:
+    return CONTROL_TABLE[column].instance(group)
+
+
+def sequence_oid(sequence: int, ring: int) -> Oid:
+    return SEQUENCE_DATA.instance(sequence, ring)
+
+
+def group_count(max_phase: int) -> int:
+    """Number of 8-phase groups needed to hold phases 1..max_phase."""
+    return (max_phase + PHASES_PER_GROUP - 1) // PHASES_PER_GROUP
+
+
+def phases_to_groups(phases: Iterable[int], groups: int) -> tuple[int, ...]:
+    """Bitmask per group (group 1 first) for a set of phase numbers."""
+    masks = [0] * groups
+    for p in phases:
+        g, bit = divmod(p - 1, PHASES_PER_GROUP)
+        if p < 1 or g >= groups:
+            raise ValueError(f"phase {p} does not fit in {groups} phase group(s) (phases 1..{groups * 8})")
+        masks[g] |= 1 << bit
+    return tuple(masks)
+
+
+def groups_to_phases(masks: Sequence[int]) -> frozenset[int]:
+    """Phase numbers whose bits are set in the group bitmasks (group 1 first)."""
+    out = []
+    for g, mask in enumerate(masks):
+        if not 0 <= mask <= 255:
+            raise ValueError(f"group {g + 1} bitmask {mask} is outside 0..255")
+        out.extend(PHASES_PER_GROUP * g + k + 1 for k in range(PHASES_PER_GROUP) if mask >> k & 1)
+    return frozenset(out)
+
+
+def oid_str(oid: Oid) -> str:
+    return ".".join(map(str, oid))
+
+
+def parse_oid(text: str) -> Oid:
+    try:
+        return tuple(int(part) for part in text.strip().lstrip(".").split("."))
+    except ValueError:
+        raise ValueError(f"not a numeric OID: {text!r}") from None
+
+
+def object_for(oid: Oid) -> ObjectDef | None:
+    """The object type whose prefix the OID extends, or None."""
+    for obj in ALL_OBJECTS:
+        if oid[: len(obj.prefix)] == obj.prefix and len(oid) > len(obj.prefix):
+            return obj
+    return None
+
+
+SIGNAL_COLUMNS = (StatusColumn.REDS, StatusColumn.YELLOWS, StatusColumn.GREENS)
+
+
+def signal_oids(groups: int) -> tuple[Oid, ...]:
+    """The OIDs of one signal-state poll: reds, yellows, greens, each for groups 1..n."""
+    return tuple(status_oid(col, g) for col in SIGNAL_COLUMNS for g in range(1, groups + 1))
+
+
+@dataclass(frozen=True, slots=True)
+class SignalState:
+    """The phases showing red, yellow and green, as read in one poll."""
+
+    reds: frozenset[int]
+    yellows: frozenset[int]
+    greens: frozenset[int]
+
+    @classmethod
+    def from_values(cls, values: Sequence[int], groups: int) -> SignalState:
+        """Decode the values of a poll of :func:`signal_oids` (same order)."""
+        if len(values) != 3 * groups:
+            raise ValueError(f"a signal poll has {3 * groups} values, got {len(values)}")
+        return cls(*(groups_to_phases(values[i * groups:(i + 1) * groups]) for i in range(3)))
+
+    def indication(self, phase: int) -> str:
+        """'G', 'Y' or 'r' for one phase (SUMO's letters)."""
+        return "G" if phase in self.greens else "Y" if phase in self.yellows else "r"

@@ -1,0 +1,363 @@
+"""SUMO through libsumo: the traffic the controller's indications act on.
+
+SUMO never runs a signal program of its own here. Its traffic light is put under external
+control at start (all red) and from then on shows what :meth:`SumoSimulation.apply` gives
+it: the controller's phase colours mapped onto SUMO's link indices by the phase map derived
+from the network (:mod:`hils.sumo_net`).
+
+libsumo runs the simulation inside this process: one simulation per process at a time
+(the library holds it in globals) and only from the thread that started it. Stepping is the
+hot path of a co-simulation (four steps per simulated second), so :meth:`apply` and
+:meth:`step` do almost nothing beyond the libsumo call; queues are read only when asked
+for and, for the end-of-run maximum, sampled once per ``queue_sample_period``.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import tempfile
+import time
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from types import TracebackType
+
+import libsumo
+
+from hils.config import IntersectionConfig, load
+from hils.ntcip import SignalState
+from hils.sumo_net import SUMO_CONFIG, TLS_ID, PhaseMap, data_path, derive_phase_map, read_net
+
+
+class SumoError(RuntimeError):
+    """SUMO could not be started or used as asked."""
+
+
+@dataclass(frozen=True, slots=True)
+class LaneState:
+    """One lane in the last step: halting vehicles (< 0.1 m/s), their summed waiting time, all vehicles."""
+
+    halting: int
+    waiting_time: float
+    vehicles: int
+
+
+@dataclass(frozen=True, slots=True)
+class MovementState:
+    """Queues of the links one phase serves: halting vehicles on their incoming and outgoing lanes."""
+
+    phase: int
+    upstream_queue: int
+    downstream_queue: int
+
+    @property
+    def pressure(self) -> int:
+        return self.upstream_queue - self.downstream_queue
+
+
+@dataclass(frozen=True)
+class TrafficState:
+    """What the simulation looks like now. ``lanes`` covers the lanes of the signal's links;
+    ``departed`` and ``arrived`` count vehicles since the start (arrived: no longer in the
+    network, which includes any removed after a collision)."""
+
+    time: float
+    lanes: Mapping[str, LaneState]
+    movements: Mapping[int, MovementState]
+    departed: int
+    arrived: int
+
+
+@dataclass(frozen=True)
+class RunSummary:
+    """End-of-run figures. Delays are means over the vehicles that arrived (None before any did)."""
+
+    sim_time: float
+    departed: int
+    arrived: int
+    running: int
+    pending: int
+    mean_time_loss: float | None
+    mean_waiting_time: float | None
+    max_queue: Mapping[str, int]
+    collisions: int
+    teleports: int
+
+
+_active: SumoSimulation | None = None
+
+
+class SumoSimulation:
+    """One libsumo run of a network whose traffic light follows :class:`SignalState` s.
+
+    ``sumo_config`` defaults to the shipped four-leg scenario (``hils/data/four_leg.sumocfg``,
+    one hour of demand). ``end`` (s) is passed to SUMO as ``--end`` for its own outputs; how
+    far to step is the caller's choice, since libsumo steps on past it. ``time_to_teleport``
+    < 0 keeps vehicles that wait at a red in place however long it lasts, so delays are never
+    cut short by teleports.
+    """
+
+    def __init__(self, config: IntersectionConfig | None = None, *, seed: int = 0, end: float | None = None,
+                 step_length: float | None = None, sumo_config: str | Path | None = None,
+                 time_to_teleport: float = -1.0, quiet: bool = True, queue_sample_period: float = 1.0,
+                 tls_id: str = TLS_ID, extra_args: Sequence[str] = ()) -> None:
+        self.config = config or load()
+        self.seed = seed
+        self.end = end
+        self.step_length = step_length if step_length is not None else self.config.middleware.sumo_step
+        self.sumo_config = Path(sumo_config) if sumo_config is not None else data_path(SUMO_CONFIG)
+        self.time_to_teleport = time_to_teleport
+        self.quiet = quiet
+        self.tls_id = tls_id
+        self.extra_args = tuple(extra_args)
+        self._sample_every = max(1, round(queue_sample_period / self.step_length))
+        self._phase_map: PhaseMap | None = None
+        self._state_strings: dict[SignalState, str] = {}
+        self._applied_state: SignalState | None = None
+        self._applied: str = ""
+        self._until_sample = self._sample_every
+        self._approach_lanes: tuple[tuple[str, tuple[str, ...]], ...] = ()
+        self._max_queue: dict[str, int] = {}
+        self._lanes: tuple[str, ...] = ()
+        self._movement_lanes: tuple[tuple[int, tuple[str, ...], tuple[str, ...]], ...] = ()
+
+    # --- life cycle ----------------------------------------------------------------------
+
+    def command(self) -> list[str]:
+        """The SUMO command line this simulation starts with."""
+        cmd = ["sumo", "-c", str(self.sumo_config), "--step-length", repr(self.step_length),
+               "--seed", str(self.seed), "--time-to-teleport", repr(self.time_to_teleport),
+               "--no-step-log", "true",
+               # the tripinfo statistics give the mean delay of arrived vehicles during the run
+               "--duration-log.statistics", "true"]
+        if self.end is not None:
+            cmd += ["--end", repr(self.end)]
+        if self.quiet:
+            cmd += ["--no-warnings", "true"]
+        return cmd + list(self.extra_args)
+
+    def start(self) -> None:
+        """Start SUMO and take its traffic light over, showing all red until the first :meth:`apply`."""
+        global _active
+        if _active is not None:
+            raise SumoError("a SUMO simulation is already running in this process (libsumo runs one at a time); "
+                            "close it first")
+        if not self.sumo_config.is_file():
+            raise SumoError(f"SUMO configuration {self.sumo_config} does not exist")
+        with _console(self.quiet) as console:
+            try:
+                libsumo.start(self.command())
+            except libsumo.TraCIException as exc:
+                raise SumoError(f"SUMO did not start: {console.text() or exc}") from None
+        _active = self
+        try:
+            self._setup()
+        except BaseException:
+            self.close()
+            raise
+
+    def _setup(self) -> None:
+        tls = self.tls_id
+        if tls not in libsumo.trafficlight.getIDList():
+            raise SumoError(f"the network has no traffic light {tls!r}")
+        net = read_net(libsumo.simulation.getOption("net-file"))
+        pm = derive_phase_map(self.config, net, libsumo.trafficlight.getControlledLinks(tls), tls)
+        self._phase_map = pm
+        self._state_strings.clear()
+        self._applied_state = None
+        self._applied = "r" * len(pm.link_phases)
+        libsumo.trafficlight.setRedYellowGreenState(tls, self._applied)
+        self._until_sample = self._sample_every
+        self._approach_lanes = tuple(pm.approach_lanes.items())
+        self._max_queue = {approach: 0 for approach, _ in self._approach_lanes}
+        self._movement_lanes = tuple((p, pm.incoming_lanes(p), pm.outgoing_lanes(p)) for p in pm.phases)
+        lanes = [lane for _, inc, out in self._movement_lanes for lane in (*inc, *out)]
+        self._lanes = tuple(dict.fromkeys(lanes))
+
+    def close(self) -> None:
+        """End the simulation (idempotent); SUMO's end-of-run report is swallowed when quiet."""
+        global _active
+        if _active is not self:
+            return
+        _active = None
+        with _console(self.quiet):
+            libsumo.close()
+
+    @property
+    def running(self) -> bool:
+        return _active is self
+
+    def __enter__(self) -> SumoSimulation:
+        self.start()
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.close()
+
+    # --- hot path ------------------------------------------------------------------------
+
+    @property
+    def phase_map(self) -> PhaseMap:
+        if self._phase_map is None:
+            raise SumoError("the simulation has not been started")
+        return self._phase_map
+
+    @property
+    def time(self) -> float:
+        return libsumo.simulation.getTime()
+
+    def apply(self, state: SignalState) -> bool:
+        """Show ``state`` on the traffic light; True when SUMO's state had to change."""
+        if state == self._applied_state:
+            return False
+        self._applied_state = state
+        text = self._state_strings.get(state)
+        if text is None:
+            text = self._state_strings[state] = self.phase_map.state_string(state)
+        if text == self._applied:
+            return False
+        libsumo.trafficlight.setRedYellowGreenState(self.tls_id, text)
+        self._applied = text
+        return True
+
+    def step(self) -> float:
+        """Advance one SUMO step; returns the wall seconds it took."""
+        t0 = time.perf_counter()
+        libsumo.simulationStep()
+        self._until_sample -= 1
+        if not self._until_sample:
+            self._until_sample = self._sample_every
+            self._sample_queues()
+        return time.perf_counter() - t0
+
+    def _sample_queues(self) -> None:
+        halting = libsumo.lane.getLastStepHaltingNumber
+        top = self._max_queue
+        for approach, lanes in self._approach_lanes:
+            queue = sum(halting(lane) for lane in lanes)
+            if queue > top[approach]:
+                top[approach] = queue
+
+    # --- observation ---------------------------------------------------------------------
+
+    def indications(self) -> str:
+        """SUMO's current per-link state string."""
+        return libsumo.trafficlight.getRedYellowGreenState(self.tls_id)
+
+    def traffic_state(self) -> TrafficState:
+        lane = libsumo.lane
+        lanes = {name: LaneState(lane.getLastStepHaltingNumber(name), lane.getWaitingTime(name),
+                                 lane.getLastStepVehicleNumber(name)) for name in self._lanes}
+        movements = {p: MovementState(p, sum(lanes[n].halting for n in inc), sum(lanes[n].halting for n in out))
+                     for p, inc, out in self._movement_lanes}
+        departed = _stat("stats.vehicles.inserted")
+        return TrafficState(self.time, lanes, movements, int(departed),
+                            int(departed - _stat("stats.vehicles.running")))
+
+    def summary(self) -> RunSummary:
+        departed = int(_stat("stats.vehicles.inserted"))
+        running = int(_stat("stats.vehicles.running"))
+        arrived = departed - running
+        return RunSummary(
+            sim_time=self.time,
+            departed=departed,
+            arrived=arrived,
+            running=running,
+            pending=len(libsumo.simulation.getPendingVehicles()),
+            mean_time_loss=_stat("device.tripinfo.vehicleTripStatistics.timeLoss") if arrived else None,
+            mean_waiting_time=_stat("device.tripinfo.vehicleTripStatistics.waitingTime") if arrived else None,
+            max_queue=dict(self._max_queue),
+            collisions=int(_stat("stats.safety.collisions")),
+            teleports=int(_stat("stats.teleports.total")),
+        )
+
+    def run_fixed_time(self) -> None:
+        """Hand the light to SUMO itself, running :func:`fixed_time_states` as a static program."""
+        pm = self.phase_map
+        phases = [libsumo.trafficlight.Phase(duration, pm.state_string(state))
+                  for duration, state in fixed_time_states(self.config)]
+        logic = libsumo.trafficlight.Logic("hils-fixed", 0, 0, phases)
+        libsumo.trafficlight.setProgramLogic(self.tls_id, logic)
+        libsumo.trafficlight.setProgram(self.tls_id, "hils-fixed")
+        self._applied_state = None
+        self._applied = ""
+
+
+def fixed_time_states(config: IntersectionConfig) -> list[tuple[float, SignalState]]:
+    """One cycle of the config's sequence at maximum green: (duration, state) per interval."""
+    phases = config.phases
+    every = frozenset(phases)
+    out: list[tuple[float, SignalState]] = []
+    for pair in config.sequence:
+        on = frozenset(pair)
+        green = max(phases[p].max_green for p in pair)
+        yellow = max(phases[p].yellow for p in pair)
+        red_clear = max(phases[p].red_clear for p in pair)
+        out.append((green, SignalState(every - on, frozenset(), on)))
+        out.append((yellow, SignalState(every - on, on, frozenset())))
+        out.append((red_clear, SignalState(every, frozenset(), frozenset())))
+    return out
+
+
+def _stat(key: str) -> float:
+    """One of SUMO's running statistics (vehicle counts, trip means of the arrived)."""
+    return float(libsumo.simulation.getParameter("", key))
+
+
+def time_bare_sumo(seconds: float = 3600.0, *, seed: int = 0, config: IntersectionConfig | None = None,
+                   step_length: float | None = None, sumo_config: str | Path | None = None) -> float:
+    """Wall seconds libsumo alone takes to step the scenario for ``seconds`` of simulated time.
+
+    The same network, demand and SUMO options as :class:`SumoSimulation`, with SUMO running
+    the config's fixed cycle itself and no middleware: the baseline of the overhead benchmark.
+    Start-up is not timed.
+    """
+    sim = SumoSimulation(config, seed=seed, step_length=step_length, sumo_config=sumo_config, end=seconds)
+    with sim:
+        sim.run_fixed_time()
+        steps = round(seconds / sim.step_length)
+        step = libsumo.simulationStep
+        t0 = time.perf_counter()
+        for _ in range(steps):
+            step()
+        return time.perf_counter() - t0
+
+
+class _Console:
+    def __init__(self, path: Path | None) -> None:
+        self.path = path
+
+    def text(self) -> str:
+        if self.path is None:
+            return ""
+        return self.path.read_text(encoding="utf-8", errors="replace").strip()
+
+
+@contextmanager
+def _console(quiet: bool) -> Iterator[_Console]:
+    """Catch what SUMO prints on start and close (it has no option to stay silent).
+
+    libsumo writes from C++ straight to file descriptors 1 and 2, so Python's sys.stdout
+    cannot catch it: the descriptors themselves are pointed at a temporary file meanwhile.
+    """
+    if not quiet:
+        yield _Console(None)
+        return
+    sys.stdout.flush()
+    sys.stderr.flush()
+    with tempfile.TemporaryDirectory(prefix="hils-sumo-") as tmp:
+        path = Path(tmp) / "console.txt"
+        saved = os.dup(1), os.dup(2)
+        try:
+            with path.open("wb") as sink:
+                os.dup2(sink.fileno(), 1)
+                os.dup2(sink.fileno(), 2)
+                yield _Console(path)
+        finally:
+            os.dup2(saved[0], 1)
+            os.dup2(saved[1], 2)
+            os.close(saved[0])
+            os.close(saved[1])

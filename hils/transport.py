@@ -1,0 +1,123 @@
+"""The transport interface: GET and SET of NTCIP objects as SimPy events.
+
+Every request returns a SimPy event on the run's environment. It succeeds with
+the values (GET) or None (SET), or fails with :class:`CommunicationTimeout`
+when no answer came within tau_udp, or with :class:`hils.ntcip.SnmpError` when
+the controller refused. Requests are never retried here: the poller counts
+failures and the manager decides.
+
+:class:`LocalTransport` reaches an object surface in the same process (the
+emulator's MIB view) with a modeled latency and loss, for virtual time. The SNMP
+transport in :mod:`hils.snmp` implements the same interface over UDP.
+"""
+
+from __future__ import annotations
+
+import random
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Protocol
+
+import simpy
+
+from hils.ntcip import Oid, SnmpError
+
+Value = int | bytes
+VarBind = tuple[Oid, int]
+
+__all__ = [
+    "CommunicationTimeout",
+    "Latency",
+    "LocalTransport",
+    "ObjectSurface",
+    "SnmpError",
+    "Transport",
+    "TransportError",
+]
+
+
+class TransportError(Exception):
+    """A request that got no usable answer."""
+
+
+class CommunicationTimeout(TransportError):
+    """No answer within tau_udp."""
+
+
+class Transport(Protocol):
+    env: simpy.Environment
+
+    def get(self, oids: Sequence[Oid]) -> simpy.Event:
+        """GET of several objects in one PDU; the event's value is a tuple in the same order."""
+        ...
+
+    def set(self, varbinds: Sequence[VarBind]) -> simpy.Event:
+        """SET of several objects in one PDU; the event's value is None."""
+        ...
+
+    def close(self) -> None: ...
+
+
+class ObjectSurface(Protocol):
+    """What answers NTCIP get and set by OID: the emulator's MIB view, for one."""
+
+    def get_many(self, oids: Sequence[Oid]) -> tuple[Value, ...]: ...
+
+    def set_many(self, varbinds: Sequence[VarBind]) -> None: ...
+
+
+@dataclass(frozen=True, slots=True)
+class Latency:
+    """Modeled response time of a request: mean and uniform jitter, in seconds."""
+
+    mean: float = 0.0075
+    jitter: float = 0.0
+
+    def draw(self, rng: random.Random) -> float:
+        if self.jitter <= 0.0:
+            return self.mean
+        return max(0.0, self.mean + rng.uniform(-self.jitter, self.jitter))
+
+
+class LocalTransport:
+    """In-process transport for virtual time, with modeled latency and loss.
+
+    The request reaches the surface at once (the controller sees a SET when it
+    is sent); the answer comes back after the drawn latency. A lost request, or
+    an answer later than tau_udp, fails the event at tau_udp.
+    """
+
+    def __init__(self, env: simpy.Environment, surface: ObjectSurface, *, tau_udp: float = 1.0,
+                 get_latency: Latency | None = None, set_latency: Latency | None = None,
+                 loss: float = 0.0, seed: int = 0) -> None:
+        self.env = env
+        self.surface = surface
+        self.tau_udp = tau_udp
+        self.get_latency = get_latency or Latency(0.002)
+        self.set_latency = set_latency or Latency(0.0075)
+        self.loss = loss
+        self._rng = random.Random(seed)
+
+    def get(self, oids: Sequence[Oid]) -> simpy.Event:
+        return self._request(lambda: self.surface.get_many(oids), self.get_latency)
+
+    def set(self, varbinds: Sequence[VarBind]) -> simpy.Event:
+        return self._request(lambda: self.surface.set_many(varbinds), self.set_latency)
+
+    def close(self) -> None:
+        """Nothing to release in process."""
+
+    def _request(self, call, latency: Latency) -> simpy.Event:
+        done = self.env.event()
+        delay = latency.draw(self._rng)
+        if (self.loss and self._rng.random() < self.loss) or delay > self.tau_udp:
+            self.env.timeout(self.tau_udp).callbacks.append(
+                lambda _: done.fail(CommunicationTimeout(f"no answer within {self.tau_udp} s")))
+            return done
+        try:
+            value = call()
+        except SnmpError as exc:
+            self.env.timeout(delay, exc).callbacks.append(lambda ev: done.fail(ev.value))
+        else:
+            self.env.timeout(delay, value).callbacks.append(lambda ev: done.succeed(ev.value))
+        return done

@@ -1,0 +1,415 @@
+"""Config loading and validation: the shipped paper intersection and every rejection."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+from hils.config import ConfigError, IntersectionConfig, MiddlewareParams, load, parse
+from hils.ntcip import PhaseStartup
+
+SOURCE = "site/test.toml"
+ALL_PHASES = range(1, 9)
+PAPER_COMPATIBLE = {(1, 5), (1, 6), (2, 5), (2, 6), (3, 7), (3, 8), (4, 7), (4, 8)}
+
+
+def toml(*, timing: str = "min_green = 3\nmax_green = 20\nyellow = 3.0\nred_clear = 2.0",
+         phases: dict[int, str] | None = None,
+         rings: str = "[[1, 2, 3, 4], [5, 6, 7, 8]]",
+         barriers: str = "[[1, 2, 5, 6], [3, 4, 7, 8]]",
+         sequence: str = "[[1, 5], [2, 6], [3, 7], [4, 8]]",
+         pairs: str = "[[1, 5], [2, 6], [3, 7], [4, 8]]",
+         structure_extra: str = "", top_extra: str = "", middleware: str = "") -> str:
+    """A valid dual-ring eight-phase config, with the given parts replaced."""
+    phases = {p: "{}" for p in ALL_PHASES} | (phases or {})
+    phase_lines = "\n".join(f"{p} = {body}" for p, body in sorted(phases.items()))
+    return (f'name = "test"\n{top_extra}\n[timing]\n{timing}\n[phases]\n{phase_lines}\n'
+            f"[structure]\nrings = {rings}\nbarriers = {barriers}\nsequence = {sequence}\npairs = {pairs}\n"
+            f"{structure_extra}\n[middleware]\n{middleware}\n")
+
+
+def rejected(text: str) -> ConfigError:
+    with pytest.raises(ConfigError) as info:
+        parse(text, SOURCE)
+    err = info.value
+    # Every rejection names the file first, then the field.
+    assert str(err).startswith(f"{SOURCE}: {err.field}: ")
+    return err
+
+
+def matrix(marked: set[tuple[int, int]]) -> str:
+    """An 8x8 TOML matrix with 1 at the given pairs (both ways round)."""
+    rows = [[1 if (i, j) in marked or (j, i) in marked else 0 for j in ALL_PHASES] for i in ALL_PHASES]
+    return "[" + ", ".join(str(r) for r in rows) + "]"
+
+
+# --- the shipped default ---------------------------------------------------------------
+
+
+def test_default_loads_from_any_working_directory_with_the_papers_parameters(tmp_path: Path,
+                                                                           monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.chdir(tmp_path)
+    assert Path(os.getcwd()) == tmp_path
+    cfg = load()
+    assert cfg.phase_numbers == tuple(ALL_PHASES)
+    assert cfg.rings == ((1, 2, 3, 4), (5, 6, 7, 8))
+    assert cfg.barriers == (frozenset({1, 2, 5, 6}), frozenset({3, 4, 7, 8}))
+    assert cfg.pairs == ((1, 5), (2, 6), (3, 7), (4, 8))
+    assert cfg.sequence == ((1, 5), (2, 6), (3, 7), (4, 8))
+    assert cfg.groups == 1
+    for p, ph in cfg.phases.items():
+        assert (ph.number, ph.min_green, ph.max_green, ph.yellow, ph.red_clear) == (p, 3, 20, 3, 2)
+        assert ph.clearance == 5
+        assert ph.ring == (1 if p <= 4 else 2)
+    assert {p for p, ph in cfg.phases.items() if ph.startup is PhaseStartup.GREEN_NO_WALK} == {2, 6}
+    mw = cfg.middleware
+    assert (mw.poll_hz, mw.tau_udp, mw.tau_trans, mw.n_timeout, mw.n_drift) == (10, 1, 10, 5, 5)
+    assert (mw.sumo_step, mw.control_interval) == (0.25, 10)
+    assert mw.poll_period == pytest.approx(0.1)
+    assert mw.keepalive_period < mw.backup_time
+
+
+def test_derived_compatibility_is_exactly_the_papers_eight_pairs(paper_config: IntersectionConfig) -> None:
+    assert paper_config.compatibility == {frozenset(p) for p in PAPER_COMPATIBLE}
+    for a in ALL_PHASES:
+        for b in ALL_PHASES:
+            expected = (min(a, b), max(a, b)) in PAPER_COMPATIBLE
+            assert paper_config.compatible(a, b) is expected, (a, b)
+
+
+def test_ring_and_barrier_lookups(paper_config: IntersectionConfig) -> None:
+    assert [paper_config.ring_of(p) for p in ALL_PHASES] == [1, 1, 1, 1, 2, 2, 2, 2]
+    assert [paper_config.barrier_of(p) for p in ALL_PHASES] == [0, 0, 1, 1, 0, 0, 1, 1]
+
+
+def test_load_by_path_matches_the_default(tmp_path: Path, paper_toml: str,
+                                          paper_config: IntersectionConfig) -> None:
+    path = tmp_path / "copy.toml"
+    path.write_text(paper_toml, encoding="utf-8")
+    cfg = load(path)
+    assert cfg.source == str(path)
+    assert (cfg.phases, cfg.rings, cfg.pairs, cfg.compatibility, cfg.middleware) == (
+        paper_config.phases, paper_config.rings, paper_config.pairs, paper_config.compatibility,
+        paper_config.middleware)
+
+
+def test_missing_file_names_the_file(tmp_path: Path) -> None:
+    missing = tmp_path / "nope.toml"
+    with pytest.raises(ConfigError) as info:
+        load(missing)
+    assert info.value.source == str(missing)
+    assert str(missing) in str(info.value)
+    assert "cannot be read" in info.value.message
+
+
+def test_the_builder_makes_a_valid_config() -> None:
+    cfg = parse(toml(), SOURCE)
+    assert cfg.compatibility == {frozenset(p) for p in PAPER_COMPATIBLE}
+    assert cfg.source == SOURCE
+
+
+def test_per_phase_values_override_the_shared_timing() -> None:
+    cfg = parse(toml(phases={4: "{ min_green = 5, max_green = 40, yellow = 4.5, red_clear = 1.5 }"}), SOURCE)
+    ph = cfg.phases[4]
+    assert (ph.min_green, ph.max_green, ph.yellow, ph.red_clear) == (5, 40, 4.5, 1.5)
+    assert cfg.phases[3].max_green == 20
+
+
+# --- explicit matrices --------------------------------------------------------------------
+
+
+def test_an_explicit_compatibility_matrix_is_honoured() -> None:
+    allowed = PAPER_COMPATIBLE - {(2, 5)}
+    cfg = parse(toml(structure_extra=f"compatibility = {matrix(allowed)}"), SOURCE)
+    assert cfg.compatibility == {frozenset(p) for p in allowed}
+    assert not cfg.compatible(2, 5)
+    assert cfg.compatible(5, 1)
+
+
+def test_an_explicit_conflict_matrix_marks_conflicts() -> None:
+    conflicts = {(a, b) for a in ALL_PHASES for b in ALL_PHASES if a < b} - PAPER_COMPATIBLE | {(1, 6)}
+    cfg = parse(toml(structure_extra=f"conflict = {matrix(conflicts)}"), SOURCE)
+    assert cfg.compatibility == {frozenset(p) for p in PAPER_COMPATIBLE - {(1, 6)}}
+
+
+def test_an_explicit_matrix_allowing_nothing_is_not_replaced_by_the_derived_one() -> None:
+    err = rejected(toml(structure_extra=f"compatibility = {matrix(set())}"))
+    assert err.field == "structure.pairs[0]"
+    assert "phases 1 and 5 conflict" in err.message
+
+
+def test_a_pair_the_explicit_matrix_forbids_is_rejected() -> None:
+    err = rejected(toml(structure_extra=f"compatibility = {matrix(PAPER_COMPATIBLE - {(3, 7)})}"))
+    assert err.field == "structure.pairs[2]"
+    assert "phases 3 and 7 conflict" in err.message
+
+
+def test_start_up_phases_the_explicit_matrix_forbids_are_rejected() -> None:
+    err = rejected(toml(phases={2: '{ startup = "green" }', 6: '{ startup = "green" }'},
+                        sequence="[[1, 5], [3, 7], [4, 8]]", pairs="[[1, 5], [3, 7], [4, 8]]",
+                        structure_extra=f"compatibility = {matrix(PAPER_COMPATIBLE - {(2, 6)})}"))
+    assert err.field == "phases.6.startup"
+    assert "allowed" in err.message
+
+
+@pytest.mark.parametrize("key", ["compatibility", "conflict"])
+def test_an_asymmetric_matrix_is_rejected(key: str) -> None:
+    rows = [[0] * 8 for _ in ALL_PHASES]
+    rows[0][4] = 1  # [1][5] set, [5][1] not
+    err = rejected(toml(structure_extra=f"{key} = {rows}"))
+    assert err.field == f"structure.{key}"
+    assert "not symmetric" in err.message
+    assert "[1][5] = 1" in err.message and "[5][1] = 0" in err.message
+    assert "allowed: symmetric" in err.message
+
+
+@pytest.mark.parametrize("value", ["[[0, 1], [1, 0]]", "[[0, 0, 0, 0, 0, 0, 0, 2]] ", "true"])
+def test_a_malformed_matrix_is_rejected(value: str) -> None:
+    err = rejected(toml(structure_extra=f"compatibility = {value}"))
+    assert err.field == "structure.compatibility"
+    assert "8x8 matrix of 0 and 1" in err.message
+
+
+def test_both_matrices_at_once_are_rejected() -> None:
+    err = rejected(toml(structure_extra=f"compatibility = {matrix(PAPER_COMPATIBLE)}\n"
+                                        f"conflict = {matrix(set())}"))
+    assert "either compatibility or conflict" in err.message
+
+
+# --- structural rejections ---------------------------------------------------------------
+
+
+def test_a_phase_in_two_rings_is_rejected() -> None:
+    err = rejected(toml(rings="[[1, 2, 3, 4], [5, 6, 7, 8, 2]]"))
+    assert err.field == "structure.rings[1]"
+    assert "phase 2 is in rings 1 and 2" in err.message
+    assert "allowed: one ring per phase" in err.message
+
+
+def test_a_phase_in_no_ring_is_rejected() -> None:
+    err = rejected(toml(rings="[[1, 2, 3, 4], [5, 6, 7]]"))
+    assert err.field == "phases.8"
+    assert "no ring" in err.message
+
+
+@pytest.mark.parametrize("key", ["pairs", "sequence"])
+def test_a_conflicting_pair_is_rejected(key: str) -> None:
+    err = rejected(toml(**{key: "[[1, 5], [2, 7]]"}))
+    assert err.field == f"structure.{key}[1]"
+    assert "phases 2 and 7 conflict" in err.message
+    assert "allowed: compatible pairs" in err.message
+
+
+@pytest.mark.parametrize("key", ["pairs", "sequence"])
+def test_a_pair_in_the_wrong_ring_order_is_rejected(key: str) -> None:
+    err = rejected(toml(**{key: "[[5, 1]]"}))
+    assert err.field == f"structure.{key}[0]"
+    assert "a ring 1 phase first, then a ring 2 phase" in err.message
+
+
+@pytest.mark.parametrize("key", ["pairs", "sequence"])
+def test_a_pair_of_three_phases_is_rejected(key: str) -> None:
+    err = rejected(toml(**{key: "[[1, 5, 6]]"}))
+    assert err.field == f"structure.{key}[0]"
+    assert "exactly two phases" in err.message
+
+
+@pytest.mark.parametrize("key", ["pairs", "sequence"])
+def test_an_empty_pair_list_is_rejected(key: str) -> None:
+    assert rejected(toml(**{key: "[]"})).field == f"structure.{key}"
+
+
+@pytest.mark.parametrize(("part", "value", "field"), [
+    ("rings", "[[1, 2, 3, 4, 9], [5, 6, 7, 8]]", "structure.rings[0]"),
+    ("barriers", "[[1, 2, 5, 6], [3, 4, 7, 8, 9]]", "structure.barriers[1]"),
+    ("pairs", "[[1, 5], [2, 9]]", "structure.pairs[1]"),
+    ("sequence", "[[1, 5], [2, 6], [3, 7], [4, 0]]", "structure.sequence[3]"),
+])
+def test_an_unknown_phase_number_is_rejected(part: str, value: str, field: str) -> None:
+    err = rejected(toml(**{part: value}))
+    assert err.field == field
+    assert "unknown phase" in err.message
+    assert "allowed: [1, 2, 3, 4, 5, 6, 7, 8]" in err.message
+
+
+def test_a_phase_number_out_of_range_is_rejected() -> None:
+    err = rejected(toml(phases={300: "{}"}))
+    assert err.field == "phases.300"
+    assert "allowed: 1..255" in err.message
+
+
+def test_a_phase_in_two_barrier_groups_is_rejected() -> None:
+    err = rejected(toml(barriers="[[1, 2, 5, 6], [3, 4, 7, 8, 1]]"))
+    assert err.field == "structure.barriers[1]"
+    assert "phase 1 is in barrier groups 0 and 1" in err.message
+
+
+def test_a_phase_in_no_barrier_group_is_rejected() -> None:
+    err = rejected(toml(barriers="[[1, 2, 5, 6], [3, 4, 7]]"))
+    assert err.field == "structure.barriers"
+    assert "phase 8 is in no barrier group" in err.message
+
+
+def test_a_ring_out_of_barrier_order_is_rejected() -> None:
+    err = rejected(toml(rings="[[3, 1, 2, 4], [5, 6, 7, 8]]"))
+    assert err.field == "structure.rings[0]"
+    assert "barrier order" in err.message
+
+
+def test_three_rings_are_rejected() -> None:
+    assert rejected(toml(rings="[[1, 2], [3, 4], [5, 6, 7, 8]]")).field == "structure.rings"
+
+
+def test_start_up_phases_in_one_ring_are_rejected() -> None:
+    err = rejected(toml(phases={1: '{ startup = "green" }', 2: '{ startup = "green" }'}))
+    assert err.field == "phases.2.startup"
+    assert "cannot start together with phase 1" in err.message
+
+
+def test_start_up_phases_across_a_barrier_are_rejected() -> None:
+    err = rejected(toml(phases={2: '{ startup = "green" }', 7: '{ startup = "green" }'}))
+    assert err.field == "phases.7.startup"
+
+
+# --- timing rejections -----------------------------------------------------------------
+
+
+def test_max_green_below_min_green_is_rejected() -> None:
+    err = rejected(toml(phases={3: "{ min_green = 10, max_green = 8 }"}))
+    assert err.field == "phases.3.max_green"
+    assert "below min_green 10 s" in err.message
+    assert "allowed: max_green >= min_green" in err.message
+
+
+def test_a_shared_max_green_below_min_green_names_the_timing_table() -> None:
+    err = rejected(toml(timing="min_green = 5\nmax_green = 4\nyellow = 3.0\nred_clear = 2.0"))
+    assert err.field == "timing.max_green"
+    assert "allowed: max_green >= min_green" in err.message
+
+
+@pytest.mark.parametrize("key", ["yellow", "red_clear"])
+@pytest.mark.parametrize("value", ["0", "0.0", "-1.0"])
+def test_non_positive_clearance_is_rejected(key: str, value: str) -> None:
+    err = rejected(toml(phases={5: f"{{ {key} = {value} }}"}))
+    assert err.field == f"phases.5.{key}"
+    assert "allowed: > 0" in err.message
+
+
+@pytest.mark.parametrize("key", ["yellow", "red_clear"])
+def test_non_positive_shared_clearance_names_the_timing_table(key: str) -> None:
+    timing = "min_green = 3\nmax_green = 20\nyellow = 3.0\nred_clear = 2.0".replace(f"{key} = ", f"{key} = -")
+    err = rejected(toml(timing=timing))
+    assert err.field == f"timing.{key}"
+    assert "allowed: > 0" in err.message
+
+
+@pytest.mark.parametrize("key", ["yellow", "red_clear"])
+@pytest.mark.parametrize("value", ["3.05", "0.01", "2.25"])
+def test_clearance_not_in_tenths_is_rejected(key: str, value: str) -> None:
+    err = rejected(toml(phases={1: f"{{ {key} = {value} }}"}))
+    assert err.field == f"phases.1.{key}"
+    assert "allowed: multiples of 0.1 s" in err.message
+
+
+@pytest.mark.parametrize("value", ["0.3", "4.7", "25.5"])
+def test_clearance_in_tenths_is_accepted(value: str) -> None:
+    assert parse(toml(phases={1: f"{{ yellow = {value} }}"}), SOURCE).phases[1].yellow == float(value)
+
+
+def test_clearance_above_the_ntcip_range_is_rejected() -> None:
+    err = rejected(toml(phases={1: "{ red_clear = 25.6 }"}))
+    assert "<= 25.5" in err.message
+
+
+@pytest.mark.parametrize("value", ["0", "-3"])
+def test_non_positive_min_green_is_rejected(value: str) -> None:
+    err = rejected(toml(phases={1: f"{{ min_green = {value} }}"}))
+    assert err.field == "phases.1.min_green"
+    assert "allowed: >= 1" in err.message
+
+
+def test_a_missing_timing_is_rejected() -> None:
+    err = rejected(toml(timing="min_green = 3\nmax_green = 20\nyellow = 3.0"))
+    assert err.field == "phases.1.red_clear"
+    assert "is required" in err.message
+
+
+# --- unknown keys and wrong types ---------------------------------------------------------
+
+
+@pytest.mark.parametrize(("text", "field"), [
+    (toml(top_extra="colour = 1"), "colour"),
+    (toml(timing="min_green = 3\nmax_green = 20\nyellow = 3.0\nred_clear = 2.0\nall_red = 1"), "timing.all_red"),
+    (toml(phases={2: "{ passage = 2 }"}), "phases.2.passage"),
+    (toml(structure_extra="offset = 3"), "structure.offset"),
+    (toml(middleware="poll = 10"), "middleware.poll"),
+])
+def test_an_unknown_key_is_rejected_with_the_allowed_keys(text: str, field: str) -> None:
+    err = rejected(text)
+    assert err.field == field
+    assert err.message.startswith("unknown field; allowed: ")
+
+
+@pytest.mark.parametrize(("text", "field", "expected"), [
+    (toml(phases={1: '{ min_green = "3" }'}), "phases.1.min_green", "must be an integer"),
+    (toml(phases={1: "{ min_green = 3.5 }"}), "phases.1.min_green", "must be an integer"),
+    (toml(phases={1: "{ max_green = true }"}), "phases.1.max_green", "must be an integer"),
+    (toml(phases={1: '{ yellow = "3" }'}), "phases.1.yellow", "must be a finite number"),
+    (toml(phases={1: "{ red_clear = nan }"}), "phases.1.red_clear", "must be a finite number"),
+    (toml(phases={1: "{ red_clear = inf }"}), "phases.1.red_clear", "must be a finite number"),
+    (toml(phases={1: "3"}), "phases.1", "must be a table"),
+    (toml(phases={1: '{ startup = "amber" }'}), "phases.1.startup", "allowed: off, green, yellow, red_clear"),
+    (toml(phases={1: '{ approach = "up" }'}), "phases.1.approach", "allowed: north, south, east, west"),
+    (toml(phases={1: '{ turn = "u" }'}), "phases.1.turn", "allowed: left, through"),
+    (toml(rings='[[1, 2, "3", 4], [5, 6, 7, 8]]'), "structure.rings[0]", "must be a list of phase numbers"),
+    (toml(pairs='"1,5"'), "structure.pairs", "non-empty list"),
+    (toml(middleware="n_timeout = 2.5"), "middleware.n_timeout", "must be an integer"),
+    (toml(middleware='poll_hz = "fast"'), "middleware.poll_hz", "must be a finite number"),
+    (toml(middleware="tau_udp = 0"), "middleware.tau_udp", "allowed: > 0"),
+    (toml(middleware="backup_time = 70000"), "middleware.backup_time", "<= 65535"),
+    (toml(top_extra="name = 3").replace('name = "test"\n', ""), "name", "must be a string"),
+    ('name = "x"\n[phases]\n1 = {}\n', "structure", "is required"),
+])
+def test_a_wrong_type_or_value_is_rejected(text: str, field: str, expected: str) -> None:
+    err = rejected(text)
+    assert err.field == field
+    assert expected in err.message
+
+
+def test_invalid_toml_is_rejected() -> None:
+    err = rejected(toml() + "\n[phases\n")
+    assert err.field == "<file>"
+    assert "is not valid TOML" in err.message
+
+
+def test_a_config_error_is_a_value_error() -> None:
+    assert issubclass(ConfigError, ValueError)
+
+
+# --- with_middleware ------------------------------------------------------------------------
+
+
+def test_with_middleware_replaces_and_keeps_the_rest(paper_config: IntersectionConfig) -> None:
+    cfg = paper_config.with_middleware(poll_hz=20, backup_time=0)
+    assert (cfg.middleware.poll_hz, cfg.middleware.backup_time) == (20, 0)
+    assert cfg.middleware.tau_trans == paper_config.middleware.tau_trans
+    assert (cfg.phases, cfg.pairs, cfg.compatibility, cfg.source) == (
+        paper_config.phases, paper_config.pairs, paper_config.compatibility, paper_config.source)
+    assert paper_config.middleware == MiddlewareParams()
+
+
+@pytest.mark.parametrize(("changes", "field"), [
+    ({"poll_hz": 0}, "middleware.poll_hz"),
+    ({"n_drift": 0}, "middleware.n_drift"),
+    ({"tau_trans": "10"}, "middleware.tau_trans"),
+    ({"backup_time": -1}, "middleware.backup_time"),
+    ({"keepalive": 3}, "middleware.keepalive"),
+])
+def test_with_middleware_validates(paper_config: IntersectionConfig, changes: dict[str, object],
+                                   field: str) -> None:
+    with pytest.raises(ConfigError) as info:
+        paper_config.with_middleware(**changes)
+    assert info.value.field == field
+    assert info.value.source == paper_config.source

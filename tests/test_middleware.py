@@ -1,0 +1,280 @@
+"""The middleware's behaviour in virtual time against the in-process emulator."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import pytest
+import simpy
+
+from emulator.inprocess import VirtualTarget
+from hils.actions import ActionType
+from hils.config import IntersectionConfig
+from hils.events import EventLog, Kind
+from hils.manager import State
+from hils.middleware import Middleware
+from hils.ntcip import ControlColumn, UnitControlStatus
+from hils.runner import RunSpec, run_virtual
+
+
+class Rig:
+    """Middleware and emulator on one environment, started and settled."""
+
+    def __init__(self, config: IntersectionConfig, action_type: ActionType | str = ActionType.SELECTION,
+                 *, start_at: float = 5.0) -> None:
+        self.env = simpy.Environment()
+        self.target = VirtualTarget(self.env, config, seed=0)
+        self.log = EventLog()
+        self.mw = Middleware(self.env, self.target.transport, config, action_type, self.log)
+        self.mw.start()
+        # By start_at the start-up pair (2, 6) has served its minimum green, so transitions take
+        # exactly yellow + red clearance.
+        self.env.run(until=start_at)
+
+    def run(self, seconds: float) -> None:
+        self.env.run(until=self.env.now + seconds)
+
+    @property
+    def controller(self) -> Any:
+        return self.target.controller
+
+    @property
+    def veh_call(self) -> frozenset[int]:
+        return self.controller.control[ControlColumn.VEH_CALL]
+
+    def sets(self, purpose: str | None = None) -> list[dict[str, Any]]:
+        return [r for r in self.log.of(Kind.SET_SENT) if purpose is None or r["purpose"] == purpose]
+
+    def kinds(self, kind: Kind) -> list[dict[str, Any]]:
+        return self.log.of(kind)
+
+
+@pytest.mark.parametrize(("action_type", "value", "error", "reason"), [
+    (ActionType.SELECTION, (1, 2), "ConflictError", "conflict"),
+    (ActionType.SELECTION, (1, 9), "UnknownPhaseError", "unknown_phase"),
+    (ActionType.SELECTION, (1, 6), "NotInActionSetError", "not_in_action_set"),
+    (ActionType.SELECTION, "15", "ActionTypeError", "wrong_type"),
+    (ActionType.SWITCH, 2, "ActionTypeError", "wrong_type"),
+    (ActionType.DURATION, float("nan"), "DurationRangeError", "duration_out_of_range"),
+    (ActionType.DURATION, 1.1, "DurationRangeError", "duration_out_of_range"),
+])
+def test_refused_action_is_logged_and_nothing_is_sent(paper_config, action_type, value, error, reason) -> None:
+    rig = Rig(paper_config, action_type)
+    action_id = rig.mw.submit(value)
+    rig.run(30.0)
+    (refused,) = rig.kinds(Kind.ACTION_REFUSED)
+    assert refused["action_id"] == action_id
+    assert (refused["error"], refused["reason"]) == (error, reason)
+    assert refused["message"]
+    assert rig.sets() == []
+    assert rig.target.mib.set_count == 0
+    assert rig.veh_call == frozenset()
+    assert rig.kinds(Kind.ACTION_CONVERTED) == rig.kinds(Kind.COMMAND_DISPATCHED) == []
+    assert rig.mw.state is State.IDLE
+    assert rig.controller.greens == frozenset({2, 6})
+
+
+def test_a_valid_action_after_a_refused_one_is_served(paper_config) -> None:
+    rig = Rig(paper_config)
+    rig.mw.submit((1, 7))
+    rig.mw.submit((4, 8))
+    rig.run(8.0)
+    assert [r["phases"] for r in rig.sets("command")] == [frozenset({4, 8})]
+    assert rig.veh_call == frozenset({4, 8})
+    assert rig.controller.greens == frozenset({4, 8})
+
+
+def test_actions_while_on_hold_are_dropped(paper_config) -> None:
+    rig = Rig(paper_config)
+    first = rig.mw.submit((3, 7))
+    assert rig.mw.state is State.ON_HOLD
+    rig.run(1.0)
+    second = rig.mw.submit((4, 8))
+    third = rig.mw.submit((1, 5))
+    rig.run(10.0)
+    dropped = rig.kinds(Kind.ACTION_DROPPED)
+    assert [(r["action_id"], r["state"]) for r in dropped] == [(second, "on_hold"), (third, "on_hold")]
+    assert [r["action_id"] for r in rig.kinds(Kind.COMMAND_DISPATCHED)] == [first]
+    assert [r["phases"] for r in rig.sets("command")] == [frozenset({3, 7})]
+    assert rig.veh_call == frozenset({3, 7})
+    assert rig.controller.greens == frozenset({3, 7})
+    assert rig.mw.state is State.IDLE
+
+
+def test_actions_while_in_timeout_are_dropped(paper_config) -> None:
+    rig = Rig(paper_config)
+    step = paper_config.middleware.sumo_step
+    for _ in range(paper_config.middleware.n_drift):
+        rig.mw.observe_step(step, step * 2)
+    assert rig.mw.state is State.TIMEOUT
+    action_id = rig.mw.submit((3, 7))
+    rig.run(5.0)
+    assert [(r["action_id"], r["state"]) for r in rig.kinds(Kind.ACTION_DROPPED)] == [(action_id, "timeout")]
+    assert rig.sets() == []
+    assert rig.veh_call == frozenset()
+
+
+@pytest.mark.parametrize(("action_type", "value"), [(ActionType.SWITCH, 0), (ActionType.SELECTION, (2, 6)),
+                                                    (ActionType.SELECTION, [6, 2])])
+def test_keep_completes_at_once_without_a_set(paper_config, action_type, value) -> None:
+    rig = Rig(paper_config, action_type)
+    rig.mw.submit(value)
+    (released,) = rig.kinds(Kind.HOLD_RELEASED)
+    assert released["reason"] == "keep" and released["hold_s"] == 0.0
+    assert released["t"] == rig.env.now
+    assert rig.mw.state is State.IDLE
+    rig.run(1.0)
+    assert rig.sets() == [] and rig.target.mib.set_count == 0
+    assert rig.kinds(Kind.COMMAND_DISPATCHED) == []
+    assert [r["to"] for r in rig.kinds(Kind.STATE)] == []
+
+
+def test_switch_advances_the_controller_around_the_sequence(paper_config) -> None:
+    rig = Rig(paper_config, ActionType.SWITCH)
+    shown = []
+    for _ in range(5):
+        rig.mw.submit(1)
+        rig.run(10.0)
+        shown.append(rig.controller.greens)
+    assert shown == [frozenset(p) for p in [(3, 7), (4, 8), (1, 5), (2, 6), (3, 7)]]
+    assert [r["reason"] for r in rig.kinds(Kind.HOLD_RELEASED)] == ["verified"] * 5
+
+
+@pytest.mark.parametrize(("x", "green"), [(0.0, 3.0), (0.5, 11.5), (1.0, 20.0)])
+def test_duration_holds_for_transition_plus_prescribed_green(paper_config, x, green) -> None:
+    rig = Rig(paper_config, ActionType.DURATION)
+    rig.mw.submit(x)
+    dispatched_t = rig.env.now
+    rig.run(1.0)
+    assert rig.mw.state is State.ON_HOLD
+    rig.env.run(until=rig.mw.wait_idle())
+    (dispatched,) = rig.kinds(Kind.COMMAND_DISPATCHED)
+    assert dispatched["command"] == (3, 7) and math.isclose(dispatched["green"], green)
+    (verified,) = rig.kinds(Kind.TRANSITION_VERIFIED)
+    (released,) = rig.kinds(Kind.HOLD_RELEASED)
+    assert released["reason"] == "served"
+    assert math.isclose(released["t"] - verified["t"], green, abs_tol=1e-9)
+    transition = verified["t"] - dispatched_t
+    assert 5.0 <= transition <= 5.11
+    assert math.isclose(released["hold_s"], transition + green, abs_tol=1e-9)
+    assert rig.controller.greens == frozenset({3, 7}), "the pair must still be green when its time is served"
+
+
+def test_duration_agent_is_asked_again_only_when_the_green_is_served(paper_config) -> None:
+    spec = RunSpec(paper_config, ActionType.DURATION, agent="random", duration=120.0, seed=4)
+    records = run_virtual(spec).records
+    asked = [r["t"] for r in records if r["kind"] == "action_received"]
+    served = [r["t"] for r in records if r["kind"] == "hold_released"]
+    assert len(asked) >= 4
+    assert not [r for r in records if r["kind"] == "action_dropped"]
+    # Every action after the first comes at the instant the previous green was served.
+    assert all(any(math.isclose(a, s) for s in served) for a in asked[1:])
+
+
+@pytest.mark.parametrize("keepalive", [True, False])
+def test_keepalive_keeps_the_controller_out_of_backup_mode(paper_config, keepalive: bool) -> None:
+    config = paper_config.with_middleware(backup_time=6)
+    rig = Rig(config, ActionType.SWITCH)
+    rig.mw.keepalive_enabled = keepalive
+    rig.mw.submit(1)
+    statuses = []
+    for _ in range(120):
+        rig.run(1.0)
+        statuses.append(rig.controller.control_status)
+    command_sets = rig.sets("command")
+    assert len(command_sets) == 1
+    if keepalive:
+        assert UnitControlStatus.BACKUP_MODE not in statuses
+        assert set(statuses) == {UnitControlStatus.SYSTEM_CONTROL}
+        assert rig.veh_call == frozenset({3, 7})
+        times = [r["t"] for r in rig.sets()]
+        assert all(b - a <= 6 / 3 + 1e-6 for a, b in zip(times, times[1:], strict=False))
+        assert all(r["phases"] == frozenset({3, 7}) for r in rig.sets("keepalive"))
+    else:
+        assert rig.sets("keepalive") == []
+        first = statuses.index(UnitControlStatus.BACKUP_MODE)
+        assert first == 6 - 1, "backup mode must come backup_time after the last SET"
+        assert rig.veh_call == frozenset()
+
+
+def test_calls_are_cleared_at_the_end_of_a_run(paper_config) -> None:
+    result = run_virtual(RunSpec(paper_config, ActionType.SELECTION, agent="random", duration=60.0, seed=3))
+    assert result.target.controller.control[ControlColumn.VEH_CALL] == frozenset()
+    records = result.records
+    sets = [r for r in records if r["kind"] == "set_sent"]
+    assert any(r["purpose"] == "command" for r in sets)
+    assert sets[-1]["purpose"] == "clear" and sets[-1]["phases"] == frozenset()
+    assert [r["kind"] for r in records[-2:]] == ["set_answered", "run_ended"]
+
+
+def test_recover_in_idle_changes_nothing(paper_config) -> None:
+    rig = Rig(paper_config, ActionType.SWITCH)
+    rig.mw.submit(1)
+    rig.run(8.0)
+    position = rig.mw.converter.position
+    sets = len(rig.sets())
+    assert rig.env.run(until=rig.mw.recover()) is True
+    rig.run(1.0)
+    assert rig.mw.state is State.IDLE
+    assert rig.kinds(Kind.RECOVERED) == [] and rig.kinds(Kind.TIMEOUT_ENTERED) == []
+    assert len(rig.sets()) == sets
+    assert rig.mw.converter.position == position
+    rig.mw.submit(1)
+    rig.run(8.0)
+    assert rig.controller.greens == frozenset({4, 8})
+
+
+def test_recover_while_on_hold_does_not_disturb_the_transition(paper_config) -> None:
+    rig = Rig(paper_config, ActionType.SWITCH)
+    rig.mw.submit(1)
+    rig.run(1.0)
+    assert rig.mw.state is State.ON_HOLD
+    rig.env.run(until=rig.mw.recover())
+    rig.run(8.0)
+    assert rig.kinds(Kind.TIMEOUT_ENTERED) == []
+    assert [r["reason"] for r in rig.kinds(Kind.HOLD_RELEASED)] == ["verified"]
+    assert rig.veh_call == frozenset({3, 7})
+    assert rig.controller.greens == frozenset({3, 7})
+    assert rig.mw.converter.current_pair == (3, 7)
+
+
+def test_transition_not_shown_within_tau_trans_enters_timeout_and_recovery_resumes(paper_config) -> None:
+    rig = Rig(paper_config)
+    rig.controller.control[ControlColumn.PHASE_OMIT] = frozenset({3, 7})  # the controller will not serve them
+    rig.mw.submit((3, 7))
+    rig.run(paper_config.middleware.tau_trans + 1.0)
+    assert rig.mw.state is State.TIMEOUT
+    (entered,) = rig.kinds(Kind.TIMEOUT_ENTERED)
+    assert entered["reason"] == "transition" and entered["command_id"] == 1
+    assert math.isclose(entered["t"] - rig.kinds(Kind.COMMAND_DISPATCHED)[0]["t"], paper_config.middleware.tau_trans)
+    assert [r["reason"] for r in rig.kinds(Kind.HOLD_RELEASED)] == ["timeout"]
+    assert rig.mw.poller.halted
+
+    rig.controller.control[ControlColumn.PHASE_OMIT] = frozenset()
+    assert rig.env.run(until=rig.mw.recover()) is True
+    assert rig.mw.state is State.IDLE and not rig.mw.poller.halted
+    (recovered,) = rig.kinds(Kind.RECOVERED)
+    assert recovered["greens"] == rig.controller.greens
+    # Recovery aligns the call with what the controller shows, so nothing moves by itself.
+    assert rig.sets("recovery")[-1]["phases"] == rig.controller.greens
+    rig.mw.submit((4, 8))
+    rig.run(8.0)
+    assert rig.controller.greens == frozenset({4, 8})
+
+
+def test_drift_needs_n_drift_consecutive_steps(paper_config) -> None:
+    rig = Rig(paper_config)
+    step = paper_config.middleware.sumo_step
+    n = paper_config.middleware.n_drift
+    for _ in range(n - 1):
+        rig.mw.observe_step(step, step * 1.5)
+    rig.mw.observe_step(step, step * 0.5)
+    for _ in range(n - 1):
+        rig.mw.observe_step(step, step * 1.5)
+    assert rig.mw.state is State.IDLE
+    rig.mw.observe_step(step, step * 1.5)
+    assert rig.mw.state is State.TIMEOUT
+    (entered,) = rig.kinds(Kind.TIMEOUT_ENTERED)
+    assert entered["reason"] == "drift"
+    assert [r["consecutive"] for r in rig.kinds(Kind.DRIFT)] == [1, 2, 3, 4, 1, 2, 3, 4, 5]

@@ -1,0 +1,381 @@
+"""SnmpTransport against net-snmp's real snmpd on 127.0.0.1, driven by the wall clock.
+
+Needs the Debian packages ``snmpd`` (the agent) and ``snmp`` (``snmpget``, to
+tell when the agent answers). The agent runs in the foreground on a free UDP
+port with a config file of its own and is killed at the end of the module.
+
+Objects used (standard MIB-2 / net-snmp, always present):
+sysDescr (OCTET STRING), sysUpTime (TimeTicks), snmpInPkts (Counter32, counts
+every datagram the agent receives), snmpEnableAuthenTraps (writable INTEGER
+1/2) and UCD-SNMP versionDoDebugging (writable INTEGER; 0 keeps it off).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import socket
+import subprocess
+import time
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+import simpy
+
+from hils.clock import WallClockDriver
+from hils.ntcip import ErrorStatus, SnmpError
+from hils.snmp import SnmpTarget, SnmpTransport, SnmpVersion
+from hils.transport import CommunicationTimeout
+
+SYS_DESCR = (1, 3, 6, 1, 2, 1, 1, 1, 0)
+SYS_UPTIME = (1, 3, 6, 1, 2, 1, 1, 3, 0)
+SNMP_IN_PKTS = (1, 3, 6, 1, 2, 1, 11, 1, 0)
+AUTHEN_TRAPS = (1, 3, 6, 1, 2, 1, 11, 30, 0)
+DO_DEBUGGING = (1, 3, 6, 1, 4, 1, 2021, 100, 20, 0)
+MISSING = (1, 3, 6, 1, 2, 1, 1, 99, 0)
+
+SLACK = 0.5
+VERSIONS = ["1", "2c"]
+
+SNMPD_CONF = """\
+rocommunity public 127.0.0.1
+rwcommunity private 127.0.0.1
+"""
+
+
+def _tool(name: str) -> str:
+    path = shutil.which(name, path=os.pathsep.join([os.environ.get("PATH", ""), "/usr/sbin", "/usr/bin"]))
+    if path is None:
+        raise RuntimeError(f"{name} not found: install the Debian packages snmpd and snmp")
+    return path
+
+
+def _free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+def _answers(snmpget: str, port: int) -> bool:
+    probe = subprocess.run([snmpget, "-v2c", "-c", "public", "-t", "0.2", "-r", "0", "-On",
+                            f"127.0.0.1:{port}", ".1.3.6.1.2.1.1.3.0"], capture_output=True, timeout=5)
+    return probe.returncode == 0
+
+
+@pytest.fixture(scope="module")
+def snmpd_port(tmp_path_factory) -> Iterator[int]:
+    snmpd, snmpget = _tool("snmpd"), _tool("snmpget")
+    workdir = tmp_path_factory.mktemp("snmpd")
+    conf = workdir / "snmpd.conf"
+    conf.write_text(SNMPD_CONF)
+    # No MIB loading (quiet, fast), persistent state in tmp, no smux listener on TCP 199.
+    env = {**os.environ, "MIBS": "", "SNMP_PERSISTENT_DIR": str(workdir / "persist")}
+    for _attempt in range(3):
+        port = _free_udp_port()
+        proc = subprocess.Popen([snmpd, "-f", "-Lf", str(workdir / "snmpd.log"), "-C", "-c", str(conf),
+                                 "-I", "-smux", f"udp:127.0.0.1:{port}"],
+                                env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        deadline = time.monotonic() + 10.0
+        while proc.poll() is None and time.monotonic() < deadline and not _answers(snmpget, port):
+            time.sleep(0.05)
+        if proc.poll() is None and _answers(snmpget, port):
+            break
+        proc.kill()
+        proc.wait()
+    else:
+        raise RuntimeError(f"snmpd did not start; see {workdir / 'snmpd.log'}")
+    try:
+        yield port
+    finally:
+        proc.terminate()
+        try:
+            proc.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+@pytest.fixture
+def driver() -> Iterator[WallClockDriver]:
+    drv = WallClockDriver(simpy.Environment())
+    yield drv
+    drv.close()
+
+
+@pytest.fixture
+def connect(driver):
+    """Make transports on the test's driver; all are closed at teardown."""
+    made: list[SnmpTransport] = []
+
+    def make(port: int, *, version: str = "2c", community: str = "public", tau_udp: float = 1.0) -> SnmpTransport:
+        target = SnmpTarget.parse(f"snmp://127.0.0.1:{port}?community={community}&version={version}")
+        transport = SnmpTransport(driver.env, driver, target, tau_udp=tau_udp)
+        made.append(transport)
+        return transport
+
+    yield make
+    for transport in made:
+        transport.close()
+
+
+@pytest.fixture
+def silent_port() -> Iterator[socket.socket]:
+    """A bound UDP socket that never answers: requests to it get no reply (and no ICMP error)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        sock.bind(("127.0.0.1", 0))
+        sock.setblocking(False)
+        yield sock
+
+
+def run_process(driver: WallClockDriver, generator, limit: float = 5.0):
+    """Run one SimPy process under the wall clock until it ends (at most `limit` s) and return its value."""
+    env = driver.env
+    proc = env.process(generator)
+    proc.callbacks.append(lambda _: driver.stop())
+    driver.run_sync(until=env.now + limit, handle_signals=False)
+    assert proc.triggered, f"process not finished after {limit} s"
+    return proc.value
+
+
+@pytest.mark.parametrize("version", VERSIONS)
+def test_get_of_several_objects_is_one_pdu_with_int_and_bytes(driver, connect, snmpd_port, version):
+    transport = connect(snmpd_port, version=version)
+
+    def poll():
+        first = yield transport.get([SNMP_IN_PKTS, SYS_DESCR, SYS_UPTIME])
+        second = yield transport.get([SNMP_IN_PKTS, SYS_DESCR, SYS_UPTIME])
+        return first, second
+
+    first, second = run_process(driver, poll())
+    in_pkts, descr, uptime = first
+    assert type(in_pkts) is int and type(uptime) is int
+    assert isinstance(descr, bytes) and descr
+    assert second[1] == descr
+    assert second[2] >= uptime
+    # One datagram per GET: the agent counted exactly one packet between the two reads.
+    assert second[0] - in_pkts == 1
+
+
+@pytest.mark.parametrize("version", VERSIONS)
+def test_set_of_several_integers_in_one_pdu_then_read_back(driver, connect, snmpd_port, version):
+    transport = connect(snmpd_port, version=version, community="private")
+
+    def scenario():
+        done = yield transport.set([(AUTHEN_TRAPS, np.int64(1)), (DO_DEBUGGING, 0)])
+        after_first = yield transport.get([AUTHEN_TRAPS, DO_DEBUGGING])
+        yield transport.set([(AUTHEN_TRAPS, 2)])
+        after_second = yield transport.get([AUTHEN_TRAPS])
+        return done, after_first, after_second
+
+    done, after_first, after_second = run_process(driver, scenario())
+    assert done is None
+    assert after_first == (1, 0)
+    assert after_second == (2,)
+
+
+@pytest.mark.parametrize(("version", "status"), [("1", ErrorStatus.NO_SUCH_NAME), ("2c", ErrorStatus.NO_ACCESS)])
+def test_set_with_the_read_only_community_is_refused(driver, connect, snmpd_port, version, status):
+    reader = connect(snmpd_port, version=version)
+    writer = connect(snmpd_port, version=version, community="private")
+
+    def scenario():
+        yield writer.set([(AUTHEN_TRAPS, 2)])
+        try:
+            yield reader.set([(AUTHEN_TRAPS, 1)])
+        except SnmpError as exc:
+            refusal = exc
+        else:
+            pytest.fail("a SET with the read-only community succeeded")
+        value = yield reader.get([AUTHEN_TRAPS])
+        return refusal, value
+
+    refusal, value = run_process(driver, scenario())
+    assert refusal.status is status
+    assert refusal.index == 1
+    assert value == (2,)
+
+
+@pytest.mark.parametrize("version", VERSIONS)
+def test_get_of_a_missing_object_is_no_such_name_at_its_index(driver, connect, snmpd_port, version):
+    transport = connect(snmpd_port, version=version)
+
+    def scenario():
+        try:
+            yield transport.get([SYS_UPTIME, MISSING])
+        except SnmpError as exc:
+            return exc
+        pytest.fail("GET of a missing object succeeded")
+
+    refusal = run_process(driver, scenario())
+    assert refusal.status is ErrorStatus.NO_SUCH_NAME
+    assert refusal.index == 2
+
+
+def test_set_error_index_points_at_the_refused_varbind(driver, connect, snmpd_port):
+    transport = connect(snmpd_port, community="private")
+
+    def scenario():
+        try:
+            yield transport.set([(AUTHEN_TRAPS, 1), (MISSING, 1)])
+        except SnmpError as exc:
+            return exc
+        pytest.fail("SET of a missing object succeeded")
+
+    refusal = run_process(driver, scenario())
+    assert refusal.index == 2
+    assert refusal.status in {ErrorStatus.NOT_WRITABLE, ErrorStatus.NO_CREATION, ErrorStatus.NO_ACCESS}
+
+
+def test_unhandled_refusal_propagates_from_the_run_with_its_status(driver, connect, snmpd_port):
+    transport = connect(snmpd_port)
+
+    def careless():
+        yield transport.get([MISSING])
+
+    with pytest.raises(SnmpError) as info:
+        run_process(driver, careless())
+    assert info.value.status is ErrorStatus.NO_SUCH_NAME
+    assert info.value.index == 1
+
+
+def test_no_answer_fails_with_timeout_after_tau_udp_and_is_not_retried(driver, connect, silent_port):
+    tau = 0.2
+    transport = connect(silent_port.getsockname()[1], tau_udp=tau)
+    env = driver.env
+
+    def scenario():
+        sent_at, wall = env.now, time.perf_counter()
+        try:
+            yield transport.get([SYS_UPTIME])
+        except CommunicationTimeout:
+            failed = (env.now - sent_at, time.perf_counter() - wall)
+        else:
+            pytest.fail("a GET to a silent port succeeded")
+        # Outlive pysnmp's own (later) timeout, which would be when a retry went out.
+        yield env.timeout(tau + 1.5)
+        return failed
+
+    sim_elapsed, wall_elapsed = run_process(driver, scenario())
+    assert tau <= sim_elapsed < tau + SLACK
+    assert tau <= wall_elapsed < tau + SLACK
+    datagrams = 0
+    while True:
+        try:
+            silent_port.recv(65535)
+        except BlockingIOError:
+            break
+        datagrams += 1
+    assert datagrams == 1
+
+
+def test_close_cancels_requests_in_flight_and_refuses_new_ones(driver, connect, silent_port):
+    transport = connect(silent_port.getsockname()[1], tau_udp=0.1)
+    env = driver.env
+
+    def scenario():
+        pending = transport.get([SYS_UPTIME])
+        yield env.timeout(0.01)
+        transport.close()
+        yield env.timeout(0.3)
+        return pending
+
+    pending = run_process(driver, scenario())
+    assert not pending.triggered
+    with pytest.raises(RuntimeError, match="closed"):
+        transport.get([SYS_UPTIME])
+
+
+def test_concurrent_requests_each_get_their_own_answer(driver, connect, snmpd_port):
+    transport = connect(snmpd_port)
+    env = driver.env
+    shapes = {"uptime": [SYS_UPTIME], "descr": [SYS_DESCR, SYS_UPTIME], "traps": [AUTHEN_TRAPS, SYS_DESCR]}
+    results: dict[str, list] = {name: [] for name in shapes}
+
+    def poller(name):
+        for _ in range(20):
+            results[name].append((yield transport.get(shapes[name])))
+
+    def scenario():
+        yield simpy.AllOf(env, [env.process(poller(name)) for name in shapes])
+
+    run_process(driver, scenario())
+    for name, oids in shapes.items():
+        assert len(results[name]) == 20
+        assert all(len(values) == len(oids) for values in results[name])
+    assert all(type(v[0]) is int for v in results["uptime"])
+    assert all(isinstance(v[0], bytes) and type(v[1]) is int for v in results["descr"])
+    assert all(v[0] in (1, 2) and isinstance(v[1], bytes) for v in results["traps"])
+    uptimes = [v[0] for v in results["uptime"]]
+    assert uptimes == sorted(uptimes)
+
+
+def test_sequential_gets_sustain_more_than_the_poll_rate(driver, connect, snmpd_port):
+    transport = connect(snmpd_port)
+    count = 300
+
+    def poll():
+        start = time.perf_counter()
+        for _ in range(count):
+            yield transport.get([SNMP_IN_PKTS, SYS_UPTIME, AUTHEN_TRAPS])
+        return time.perf_counter() - start
+
+    elapsed = run_process(driver, poll(), limit=30.0)
+    # 100 Hz is the top of the poll path's range; loopback does well over 1000/s.
+    assert count / elapsed > 100.0
+
+
+def test_request_arguments_are_checked_before_anything_is_sent(driver, connect, silent_port):
+    transport = connect(silent_port.getsockname()[1])
+    with pytest.raises(ValueError, match="at least one OID"):
+        transport.get([])
+    with pytest.raises(ValueError, match="at least one varbind"):
+        transport.set([])
+    with pytest.raises(TypeError, match="only INTEGER"):
+        transport.set([(AUTHEN_TRAPS, "1")])
+    with pytest.raises(TypeError, match="only INTEGER"):
+        transport.set([(AUTHEN_TRAPS, 1.0)])
+    with pytest.raises(TypeError, match="only INTEGER"):
+        transport.set([(AUTHEN_TRAPS, True)])
+    with pytest.raises(ValueError, match="Integer32"):
+        transport.set([(AUTHEN_TRAPS, 2**31)])
+
+
+def test_transport_checks_its_driver_and_tau(driver):
+    target = SnmpTarget("127.0.0.1")
+    with pytest.raises(ValueError, match="environment"):
+        SnmpTransport(simpy.Environment(), driver, target)
+    with pytest.raises(ValueError, match="tau_udp"):
+        SnmpTransport(driver.env, driver, target, tau_udp=0)
+
+
+@pytest.mark.parametrize(("url", "expected"), [
+    ("snmp://10.0.0.5", SnmpTarget("10.0.0.5", 161, "public", SnmpVersion.V2C)),
+    ("snmp://controller.local:501?community=administrator&version=1",
+     SnmpTarget("controller.local", 501, "administrator", SnmpVersion.V1)),
+    ("snmp://127.0.0.1:1161/?version=2C&community=a%26b", SnmpTarget("127.0.0.1", 1161, "a&b", SnmpVersion.V2C)),
+])
+def test_target_url_parsing(url, expected):
+    assert SnmpTarget.parse(url) == expected
+
+
+@pytest.mark.parametrize(("url", "message"), [
+    ("udp://10.0.0.5:161", "must start with snmp://"),
+    ("10.0.0.5:161", "must start with snmp://"),
+    ("snmp://", "no host"),
+    ("snmp://10.0.0.5:port", "port must be a number"),
+    ("snmp://10.0.0.5:70000", "port must be a number"),
+    ("snmp://10.0.0.5:0", "outside 1..65535"),
+    ("snmp://10.0.0.5?version=3", "version '3' is not one of 1, 2c"),
+    ("snmp://10.0.0.5?retries=2", "unknown option 'retries'; allowed: community, version"),
+    ("snmp://10.0.0.5?community=a&community=b", "given twice"),
+    ("snmp://10.0.0.5?community=", "community is empty"),
+    ("snmp://10.0.0.5?community", "not KEY=VALUE"),
+    ("snmp://admin@10.0.0.5", "as ?community=NAME"),
+    ("snmp://10.0.0.5/1.3.6", "path or fragment"),
+    ("snmp://[::1]:161", "IPv6"),
+])
+def test_target_url_errors_say_what_is_wrong(url, message):
+    with pytest.raises(ValueError, match=re.escape(message)):
+        SnmpTarget.parse(url)
