@@ -136,9 +136,12 @@ class Controller:
             ring.phase, ring.last, ring.interval = p, p, _STARTUP_INTERVAL[self.config.phases[p].startup]
         self._refresh_status()
 
-    def process(self, env: simpy.Environment):
-        """SimPy process ticking the controller every 0.1 s, without accumulating float error."""
-        start = env.now
+    def process(self, env: simpy.Environment, phase: float = 0.0):
+        """SimPy process ticking the controller every 0.1 s, without accumulating float error.
+
+        ``phase`` (0 <= phase < 0.1 s) shifts the tick grid: a real controller's ticks keep their
+        own phase relative to whoever talks to it."""
+        start = env.now + phase
         while True:
             due = start + (self.tick + 1) * TICK
             yield env.timeout(max(0.0, due - env.now))

@@ -8,9 +8,11 @@ through the ``hils.targets`` entry point, so the middleware never imports it).
 
 from __future__ import annotations
 
+import random
+
 import simpy
 
-from emulator.controller import Controller
+from emulator.controller import TICK, Controller
 from emulator.mib import MibView
 from hils.config import IntersectionConfig
 from hils.transport import Latency, LocalTransport
@@ -27,4 +29,7 @@ class VirtualTarget:
         self.mib = MibView(self.controller)
         self.transport = LocalTransport(env, self.mib, tau_udp=config.middleware.tau_udp,
                                         get_latency=get_latency, set_latency=set_latency, loss=loss, seed=seed)
-        self.process = env.process(self.controller.process(env))
+        # The controller powered up at some instant of its own: its tick grid has a phase, drawn from
+        # the seed, against the middleware's poll and decision times.
+        self.tick_phase = random.Random(f"tick-phase-{seed}").uniform(0.0, TICK)
+        self.process = env.process(self.controller.process(env, self.tick_phase))

@@ -73,7 +73,10 @@ __all__ = [
     "StuckSurface",
     "TransportFault",
     "Window",
+    "WrappedAgent",
+    "bad_value",
     "error_status",
+    "status_name",
 ]
 
 
@@ -88,7 +91,9 @@ class Window:
         return self.start <= t < self.end
 
     def describe(self) -> str:
-        return f"[{self.start:g}, {'end' if math.isinf(self.end) else f'{self.end:g}'})"
+        if math.isinf(self.end):
+            return f"from {self.start:g} s" if self.start else "throughout"
+        return f"in [{self.start:g}, {self.end:g}) s"
 
 
 class Op(StrEnum):
@@ -145,8 +150,12 @@ class Fault:
         """Called before the run starts (agent, step-cost and middleware faults install here)."""
 
     def describe(self) -> str:
-        limit = "" if self.limit is None else f", at most {self.limit}"
-        return f"{self.kind} in {self.window.describe()}{limit}"
+        """What the fault does, when, and how often at most (for reports)."""
+        return f"{self.kind} {self.scope()}"
+
+    def scope(self) -> str:
+        limit = "" if self.limit is None else f", at most {self.limit} times"
+        return f"{self.window.describe()}{limit}"
 
 
 # --- the transport ------------------------------------------------------------------------------
@@ -178,9 +187,8 @@ class TransportFault(Fault):
     def response_delay(self, op: Op, now: float) -> float:
         return 0.0
 
-    def describe(self) -> str:
-        ops = "/".join(sorted(self.ops))
-        return f"{super().describe()} on {ops}"
+    def scope(self) -> str:
+        return f"{'+'.join(sorted(self.ops))} {super().scope()}"
 
 
 class FaultyTransport:
@@ -300,7 +308,7 @@ class DatagramLoss(TransportFault):
 
     def describe(self) -> str:
         burst = f" in bursts of {self.burst}" if self.burst > 1 else ""
-        return f"{self.direction} datagrams lost with p={self.probability:g}{burst}, {super().describe()}"
+        return f"{self.direction} datagrams lost, p={self.probability:g}{burst}, {self.scope()}"
 
 
 class ResponseDelay(TransportFault):
@@ -327,11 +335,16 @@ class ResponseDelay(TransportFault):
         return extra
 
     def describe(self) -> str:
-        return f"answers {self.delay:g} s +/- {self.jitter:g} s late (p={self.probability:g}), {super().describe()}"
+        return f"answers {self.delay:g} +/- {self.jitter:g} s late, p={self.probability:g}, {self.scope()}"
 
 
 _ERROR_NAMES = {"".join([w.lower() if i == 0 else w.capitalize() for i, w in enumerate(s.name.split("_"))]): s
                 for s in ErrorStatus if s is not ErrorStatus.NO_ERROR}
+
+
+def status_name(status: ErrorStatus) -> str:
+    """The RFC 3416 name of an error status (``genErr``)."""
+    return next(name for name, s in _ERROR_NAMES.items() if s is status)
 
 
 def error_status(name: str) -> ErrorStatus:
@@ -369,7 +382,7 @@ class ErrorResponses(TransportFault):
         return SnmpError(self.status, 1, f"injected by fault {self.name!r}")
 
     def describe(self) -> str:
-        return f"{self.status.name} answers (p={self.probability:g}), {super().describe()}"
+        return f"{status_name(self.status)} answers, p={self.probability:g}, {self.scope()}"
 
 
 # --- the controller ------------------------------------------------------------------------------
@@ -411,7 +424,7 @@ class StuckController(Fault):
         return StuckSurface(surface, self, lambda: env.now)
 
     def describe(self) -> str:
-        return f"VehCall SETs acknowledged and ignored, {super().describe()}"
+        return f"VehCall SETs acknowledged and ignored {self.scope()}"
 
 
 class Reboot(TransportFault):
@@ -490,8 +503,8 @@ class SlowSteps(Fault):
         return cost
 
     def describe(self) -> str:
-        return (f"{self.limit} steps costing {self.cost:g} s in runs of {self.consecutive} "
-                f"(gap {self.gap}) from {self.window.start:g} s")
+        return (f"{self.limit} steps costing {self.cost:g} s, in runs of {self.consecutive} "
+                f"with {self.gap} on time between, from {self.window.start:g} s")
 
 
 # --- the agent ------------------------------------------------------------------------------------------
@@ -538,6 +551,18 @@ def bad_value(kind: BadActionKind, action_type: ActionType, config: Intersection
             return "advance"
 
 
+class WrappedAgent:
+    """An agent whose ``act`` goes through a fault's hook, which may call the real agent or not."""
+
+    def __init__(self, inner: Agent, hook: Callable[[Agent, Observation], Any]) -> None:
+        self.inner = inner
+        self.action_type = inner.action_type
+        self._hook = hook
+
+    def act(self, observation: Observation) -> Any:
+        return self._hook(self.inner, observation)
+
+
 def _observation(run: Run) -> Observation:
     return Observation(run.env.now, run.middleware.cache.state, run.simulation.traffic_state())
 
@@ -553,24 +578,19 @@ class BadActions(Fault):
         self.action = action
 
     def on_run(self, run: Run, target: FaultTarget) -> None:
-        inner = run.agent
         value = bad_value(self.action, run.spec.action_type, run.spec.config)
-        fault = self
 
-        class Misbehaving:
-            action_type = inner.action_type
+        def act(inner: Agent, observation: Observation) -> Any:
+            now = run.env.now
+            if self.active(now):
+                self.fire(now)
+                return value
+            return inner.act(observation)
 
-            def act(self, observation: Observation) -> Any:
-                now = run.env.now
-                if fault.active(now):
-                    fault.fire(now)
-                    return value
-                return inner.act(observation)
-
-        run.agent = Misbehaving()
+        run.agent = WrappedAgent(run.agent, act)
 
     def describe(self) -> str:
-        return f"{self.action} actions, {super().describe()}"
+        return f"{self.action} actions {self.scope()}"
 
 
 class ActionBurst(Fault):
@@ -587,32 +607,26 @@ class ActionBurst(Fault):
         self.size = size
 
     def on_run(self, run: Run, target: FaultTarget) -> None:
-        inner: Agent = run.agent
-        fault = self
-
-        def burst() -> Generator[simpy.Event, Any, None]:
-            # A process starts after the agent loop has submitted the action it was returned with.
+        def burst(inner: Agent) -> Generator[simpy.Event, Any, None]:
+            # Started from act(), this process runs once the agent loop has submitted the action.
             yield run.env.timeout(0)
-            for _ in range(fault.size):
+            for _ in range(self.size):
                 now = run.env.now
-                if run.middleware.state is not State.ON_HOLD or not fault.active(now):
+                if run.middleware.state is not State.ON_HOLD or not self.active(now):
                     return
-                fault.fire(now)
+                self.fire(now)
                 run.middleware.submit(inner.act(_observation(run)))
 
-        class Bursting:
-            action_type = inner.action_type
+        def act(inner: Agent, observation: Observation) -> Any:
+            value = inner.act(observation)
+            if self.active(run.env.now):
+                run.env.process(burst(inner))
+            return value
 
-            def act(self, observation: Observation) -> Any:
-                value = inner.act(observation)
-                if fault.active(run.env.now):
-                    run.env.process(burst())
-                return value
-
-        run.agent = Bursting()
+        run.agent = WrappedAgent(run.agent, act)
 
     def describe(self) -> str:
-        return f"{self.size} extra actions after each action, {super().describe()}"
+        return f"{self.size} extra actions after each action {self.scope()}"
 
 
 class ActionsDuringTimeout(Fault):
@@ -637,7 +651,7 @@ class ActionsDuringTimeout(Fault):
             yield env.timeout(self.period)
 
     def describe(self) -> str:
-        return f"actions every {self.period:g} s while in TIMEOUT, {super().describe()}"
+        return f"actions every {self.period:g} s while in TIMEOUT {self.scope()}"
 
 
 # --- the middleware ----------------------------------------------------------------------------------------
@@ -670,7 +684,7 @@ class KeepaliveSuppressed(Fault):
             mw.keepalive_enabled = True
 
     def describe(self) -> str:
-        return f"keepalive off in {self.window.describe()}"
+        return f"keepalive off {self.window.describe()}"
 
 
 # --- the target and the monitor ---------------------------------------------------------------------------

@@ -62,7 +62,9 @@ class Middleware:
                              rate_hz=poll_hz or params.poll_hz, n_timeout=params.n_timeout,
                              on_failure=lambda why: self._fail(TimeoutReason.COMMUNICATION, why))
         self.drift = DriftMonitor(params.n_drift, events, lambda why: self._fail(TimeoutReason.DRIFT, why))
-        self.cache.subscribe(self._on_signal)
+        # Every poll, not only changes: a command for phases already green is verified by the
+        # next poll, which shows no change.
+        self.cache.subscribe(self._on_signal, every_poll=True)
         self.keepalive_enabled = True
         self.keepalive_period = params.keepalive_period
         self.call: frozenset[int] = frozenset()  # the VehCall last SET
@@ -156,6 +158,11 @@ class Middleware:
                 yield self.env.timeout(period)
 
     def _recover(self) -> Generator[simpy.Event, Any, bool]:
+        if not self.timeout_flag:
+            # Outside TIMEOUT there is nothing to recover, and re-SETting the call to the greens
+            # shown would cancel a command in transition.
+            self.log.emit(Kind.NOTE, message=f"recover() in {self.manager.state.value}: nothing to recover")
+            return True
         self.log.emit(Kind.RECOVERY_STARTED, state=self.manager.state.value)
         try:
             state = yield from self.poller.read_once()

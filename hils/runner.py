@@ -8,10 +8,12 @@ in :mod:`hils.wire` drives the same object against an SNMP target.
 
 from __future__ import annotations
 
+import gc
 import logging
 import time
 from collections.abc import Callable, Generator
 from dataclasses import dataclass
+from functools import cached_property
 from importlib.metadata import entry_points
 from pathlib import Path
 from typing import Any, Protocol
@@ -22,6 +24,7 @@ from hils.actions import ActionType
 from hils.agents import Agent, Observation, load_agent
 from hils.config import IntersectionConfig
 from hils.events import EventLog, Kind
+from hils.events import read as read_events
 from hils.middleware import Middleware
 from hils.ntcip import SignalState
 from hils.transport import Transport
@@ -98,7 +101,9 @@ class Run:
                  agent: Agent | None = None, mode: str = "virtual") -> None:
         self.spec = spec
         self.env = env
-        self.events = EventLog(spec.log_path)
+        # A run that writes its log to a file does not also keep it in memory: a long run's records
+        # would grow the heap that every full garbage collection walks, in the middle of the hot path.
+        self.events = EventLog(spec.log_path, keep=spec.log_path is None)
         self.middleware = Middleware(env, transport, spec.config, spec.action_type, self.events,
                                      poll_hz=spec.poll_hz)
         self.agent = agent or load_agent(spec.agent_spec, spec.config, spec.action_type, spec.seed)
@@ -109,6 +114,9 @@ class Run:
         self.traffic_samples: list[tuple[float, dict[str, int]]] = []
 
     def start(self) -> None:
+        # Everything loaded so far (SUMO, numpy, the config) lives for the whole run: keep it out of
+        # the collector's way so that collections during the run stay short.
+        gc.freeze()
         cfg = self.spec.config
         self.events.emit(Kind.RUN_STARTED, config=cfg.name, source=cfg.source, seed=self.spec.seed, mode=self.mode,
                          action_type=self.spec.action_type.value, agent=self.spec.agent_spec,
@@ -214,9 +222,10 @@ class RunResult:
     target: Any
     wall_s: float
 
-    @property
+    @cached_property
     def records(self) -> list[dict[str, Any]]:
-        return self.run.events.records
+        log = self.run.events
+        return log.records if log.keep else list(read_events(log.path))
 
 
 def run_virtual(spec: RunSpec, *, target_factory: TargetFactory | None = None,

@@ -97,6 +97,7 @@ class ManagerMachine(RuleBasedStateMachine):
         self.ended: dict[int, str] = {}
         self.keeps: set[int] = set()
         self.open: int | None = None  # the dispatched command not yet ended
+        self.consistent = True  # False once a check failed: the trackers no longer match the manager
 
     # --- the shell -----------------------------------------------------------------------------
 
@@ -107,6 +108,7 @@ class ManagerMachine(RuleBasedStateMachine):
 
     def feed(self, ev: Event) -> list[Effect]:
         m = self.manager
+        self.consistent = False
         before, open_before, greens_before = m.state, self.open, m.greens
         effects = m.handle(ev)
         after = m.state
@@ -199,6 +201,7 @@ class ManagerMachine(RuleBasedStateMachine):
         if m.pending is not None:
             assert m.pending.command_id == self.open
         assert len(self.dispatched) - len(self.ended) <= 1
+        self.consistent = True
         return effects
 
     # --- rules ---------------------------------------------------------------------------------
@@ -291,6 +294,8 @@ class ManagerMachine(RuleBasedStateMachine):
             assert self.manager.state is state
 
     def teardown(self) -> None:
+        if not self.consistent:
+            return  # a rule failed: report that failure, not one that follows from it
         # A failure ends whatever is pending, so every dispatched command has now ended exactly once.
         if self.manager.state is not State.TIMEOUT:
             self.feed(FailureDetected(self.t + 1.0, TimeoutReason.COMMUNICATION))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from itertools import pairwise
 from typing import Any
 
 import pytest
@@ -189,7 +190,7 @@ def test_keepalive_keeps_the_controller_out_of_backup_mode(paper_config, keepali
         assert set(statuses) == {UnitControlStatus.SYSTEM_CONTROL}
         assert rig.veh_call == frozenset({3, 7})
         times = [r["t"] for r in rig.sets()]
-        assert all(b - a <= 6 / 3 + 1e-6 for a, b in zip(times, times[1:], strict=False))
+        assert all(b - a <= 6 / 3 + 1e-6 for a, b in pairwise(times))
         assert all(r["phases"] == frozenset({3, 7}) for r in rig.sets("keepalive"))
     else:
         assert rig.sets("keepalive") == []
@@ -251,16 +252,20 @@ def test_transition_not_shown_within_tau_trans_enters_timeout_and_recovery_resum
     assert [r["reason"] for r in rig.kinds(Kind.HOLD_RELEASED)] == ["timeout"]
     assert rig.mw.poller.halted
 
-    rig.controller.control[ControlColumn.PHASE_OMIT] = frozenset()
     assert rig.env.run(until=rig.mw.recover()) is True
     assert rig.mw.state is State.IDLE and not rig.mw.poller.halted
     (recovered,) = rig.kinds(Kind.RECOVERED)
-    assert recovered["greens"] == rig.controller.greens
-    # Recovery aligns the call with what the controller shows, so nothing moves by itself.
-    assert rig.sets("recovery")[-1]["phases"] == rig.controller.greens
+    assert recovered["greens"] == rig.controller.greens == frozenset({2, 6})
+    # Recovery aligns the call with what the controller shows, so the stale call is gone.
+    assert rig.sets("recovery")[-1]["phases"] == frozenset({2, 6})
+    assert rig.veh_call == frozenset({2, 6})
+    rig.controller.control[ControlColumn.PHASE_OMIT] = frozenset()
+    rig.run(8.0)
+    assert rig.controller.greens == frozenset({2, 6})
     rig.mw.submit((4, 8))
     rig.run(8.0)
     assert rig.controller.greens == frozenset({4, 8})
+    assert [r["reason"] for r in rig.kinds(Kind.HOLD_RELEASED)] == ["timeout", "verified"]
 
 
 def test_drift_needs_n_drift_consecutive_steps(paper_config) -> None:
@@ -278,3 +283,18 @@ def test_drift_needs_n_drift_consecutive_steps(paper_config) -> None:
     (entered,) = rig.kinds(Kind.TIMEOUT_ENTERED)
     assert entered["reason"] == "drift"
     assert [r["consecutive"] for r in rig.kinds(Kind.DRIFT)] == [1, 2, 3, 4, 1, 2, 3, 4, 5]
+
+
+def test_a_command_for_a_pair_already_green_is_verified_by_the_next_poll(paper_config) -> None:
+    rig = Rig(paper_config, ActionType.DURATION)
+    # A stale sequence position (as after a recovery that read the controller mid-transition)
+    # makes the next pair the one already green: no poll will show a change.
+    rig.mw.converter.position = paper_config.sequence.index((1, 5))
+    rig.mw.submit(0.0)
+    (dispatched,) = rig.kinds(Kind.COMMAND_DISPATCHED)
+    assert dispatched["command"] == (2, 6)
+    rig.run(4.0)
+    (verified,) = rig.kinds(Kind.TRANSITION_VERIFIED)
+    assert verified["hold_s"] <= 0.1 + 1e-9
+    assert rig.kinds(Kind.TIMEOUT_ENTERED) == []
+    assert [r["reason"] for r in rig.kinds(Kind.HOLD_RELEASED)] == ["served"]

@@ -1,0 +1,871 @@
+"""Declarative fault scenarios: TOML files of faults and expected outcomes, and their runner.
+
+A scenario file says which intersection, agent and action type to run, for how
+long and from which seed, which faults to inject when (:mod:`harness.faults`),
+and what must come out. It is validated whole when loaded; an unknown key or a
+bad value is refused with a :class:`ScenarioError` naming the file and the key.
+
+The format (every key but ``duration`` and ``[[faults]]`` optional)::
+
+    name = "communication-loss"         # default: the file name without .toml
+    description = "one line shown by `hils faults list`"
+    config = "my_intersection.toml"     # relative to this file; default: the shipped four-leg
+    action_type = "selection"           # selection | switch | duration
+    agent = "random"                    # default: the action type's default agent
+    duration = 60.0                     # simulated seconds
+    seed = 1
+    recover_after = 5.0                 # s in TIMEOUT before recover() is called; -1: never
+    poll_hz = 10.0                      # default: the config's rate
+
+    [middleware]                        # overrides of the config's middleware parameters
+    n_timeout = 5
+
+    [[faults]]                          # see FAULT_TYPES for the keys of each type
+    type = "drop"
+    start = 20.0
+    end = 40.0
+
+    [expect]
+    timeout = "communication"           # none (default) | any | communication | transition | drift, or a list
+    detect_within = 5.5                 # s from the fault's first firing to TIMEOUT
+    recover_within = 0.5                # s from the recover() call that succeeded to IDLE
+
+Implicit expectations, always checked: every fault fired at least once; no
+command SET holds two conflicting phases; the controller never showed two
+conflicting phases (sampled every tick) nor went to MMU flash; no command or
+keepalive was sent while in TIMEOUT; the log is whole (seq gapless, the run
+started and ended, every dispatched command ended once, every SET was answered
+or failed). Each can be switched off in ``[expect]`` (``no_conflicting_command
+= false`` ...) for a scenario that studies that very failure.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import tomllib
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from harness.faults import (
+    BAD_KINDS,
+    ActionBurst,
+    ActionsDuringTimeout,
+    BadActionKind,
+    BadActions,
+    DatagramLoss,
+    Direction,
+    ErrorResponses,
+    Fault,
+    FaultTarget,
+    IndicationMonitor,
+    KeepaliveSuppressed,
+    Op,
+    Reboot,
+    ResponseDelay,
+    SlowSteps,
+    StuckController,
+    Window,
+    error_status,
+)
+from hils import config as config_mod
+from hils.actions import ActionError, ActionType
+from hils.config import ConfigError, IntersectionConfig, MiddlewareParams
+from hils.events import Kind
+from hils.manager import TimeoutReason
+from hils.ntcip import UnitControlStatus
+from hils.runner import Run, RunSpec, run_virtual
+
+__all__ = [
+    "FAULT_TYPES",
+    "Check",
+    "Expectations",
+    "FaultReport",
+    "FaultSpec",
+    "Scenario",
+    "ScenarioError",
+    "ScenarioResult",
+    "default_suite",
+    "discover",
+    "evaluate",
+    "load_scenario",
+    "parse_scenario",
+    "run_scenario",
+]
+
+SCENARIO_KEYS = ("name", "description", "config", "action_type", "agent", "duration", "seed", "recover_after",
+                 "poll_hz", "middleware", "faults", "expect")
+
+
+class ScenarioError(ConfigError):
+    """A scenario file that cannot be used; the message names the file and the key."""
+
+
+def default_suite() -> Path:
+    """The shipped suite: ``fault_scenarios/`` beside the ``harness`` package."""
+    return Path(__file__).resolve().parents[1] / "fault_scenarios"
+
+
+# --- validation helpers -----------------------------------------------------------------------------
+
+
+class _Reader:
+    """Reads keys of one TOML table, refusing what is not allowed, naming the file and the key."""
+
+    def __init__(self, raw: Any, where: str, source: str, allowed: Iterable[str]) -> None:
+        self.source = source
+        self.where = where
+        if not isinstance(raw, dict):
+            raise ScenarioError(source, where.rstrip(".") or "<file>", "must be a table")
+        self.raw = raw
+        allowed = tuple(allowed)
+        for key in raw:
+            if key not in allowed:
+                raise ScenarioError(source, f"{where}{key}", f"unknown key; allowed: {', '.join(allowed)}")
+
+    def error(self, key: str, message: str) -> ScenarioError:
+        return ScenarioError(self.source, f"{self.where}{key}", message)
+
+    def has(self, key: str) -> bool:
+        return key in self.raw
+
+    def number(self, key: str, default: Any = None, *, integer: bool = False, low: float | None = None,
+               low_open: bool = False, high: float | None = None) -> Any:
+        value = self.raw.get(key, default)
+        if value is None:
+            raise self.error(key, "is required")
+        kinds = (int,) if integer else (int, float)
+        if isinstance(value, bool) or not isinstance(value, kinds) or (
+                isinstance(value, float) and not math.isfinite(value)):
+            raise self.error(key, f"must be {'an integer' if integer else 'a finite number'}, got {value!r}")
+        if (low is not None and (value <= low if low_open else value < low)) or (high is not None and value > high):
+            lo = "" if low is None else f"{'>' if low_open else '>='} {low:g}"
+            hi = "" if high is None else f"<= {high:g}"
+            raise self.error(key, f"is {value}; allowed: {' and '.join(x for x in (lo, hi) if x)}")
+        return value if integer else float(value)
+
+    def optional_number(self, key: str, **kwargs: Any) -> Any:
+        return self.number(key, **kwargs) if key in self.raw else None
+
+    def string(self, key: str, default: str | None = None, *, choices: Iterable[str] | None = None) -> str:
+        value = self.raw.get(key, default)
+        if value is None:
+            raise self.error(key, "is required")
+        if not isinstance(value, str):
+            raise self.error(key, f"must be a string, got {value!r}")
+        if choices is not None:
+            options = tuple(choices)
+            if value not in options:
+                raise self.error(key, f"is {value!r}; allowed: {', '.join(options)}")
+        return value
+
+    def strings(self, key: str, *, choices: Iterable[str]) -> tuple[str, ...]:
+        """A string or a list of strings, each one of ``choices``."""
+        value = self.raw.get(key)
+        items = [value] if isinstance(value, str) else value
+        options = tuple(choices)
+        if not isinstance(items, list) or not items or not all(isinstance(v, str) for v in items):
+            raise self.error(key, f"must be a string or a non-empty list of strings, got {value!r}")
+        for v in items:
+            if v not in options:
+                raise self.error(key, f"has {v!r}; allowed: {', '.join(options)}")
+        return tuple(items)
+
+    def boolean(self, key: str, default: bool) -> bool:
+        value = self.raw.get(key, default)
+        if not isinstance(value, bool):
+            raise self.error(key, f"must be true or false, got {value!r}")
+        return value
+
+
+# --- faults -------------------------------------------------------------------------------------------------
+
+_WINDOW_KEYS = ("start", "end", "count")
+
+
+@dataclass(frozen=True)
+class FaultType:
+    """One ``type`` of ``[[faults]]``: its keys and how to build the fault from them."""
+
+    keys: tuple[str, ...]
+    build: Callable[[_Reader, str, int, ActionType], Fault]
+    help: str
+
+
+def _window(r: _Reader) -> Window:
+    start = r.number("start", 0.0, low=0)
+    end = r.number("end", math.inf) if r.has("end") else math.inf
+    if end <= start:
+        raise r.error("end", f"is {end:g}; allowed: > start ({start:g})")
+    return Window(start, end)
+
+
+def _count(r: _Reader) -> int | None:
+    return r.optional_number("count", integer=True, low=1)
+
+
+def _ops(r: _Reader) -> frozenset[Op]:
+    if not r.has("ops"):
+        return frozenset(Op)
+    return frozenset(Op(v) for v in r.strings("ops", choices=[o.value for o in Op]))
+
+
+def _probability(r: _Reader) -> float:
+    return r.number("probability", 1.0, low=0, low_open=True, high=1)
+
+
+def _build_drop(r: _Reader, name: str, seed: int, _at: ActionType) -> Fault:
+    return DatagramLoss(name, direction=Direction(r.string("direction", "both", choices=[d.value for d in Direction])),
+                        probability=_probability(r), burst=r.number("burst", 1, integer=True, low=1),
+                        seed=seed, ops=_ops(r), window=_window(r), count=_count(r))
+
+
+def _build_delay(r: _Reader, name: str, seed: int, _at: ActionType) -> Fault:
+    return ResponseDelay(name, delay=r.number("delay", low=0), jitter=r.number("jitter", 0.0, low=0),
+                         probability=_probability(r), seed=seed, ops=_ops(r), window=_window(r), count=_count(r))
+
+
+def _build_error(r: _Reader, name: str, seed: int, _at: ActionType) -> Fault:
+    try:
+        status = error_status(r.string("status", "genErr"))
+    except ValueError as exc:
+        raise r.error("status", str(exc)) from None
+    return ErrorResponses(name, status=status, probability=_probability(r), seed=seed, ops=_ops(r),
+                          window=_window(r), count=_count(r))
+
+
+def _build_stuck(r: _Reader, name: str, _seed: int, _at: ActionType) -> Fault:
+    return StuckController(name, window=_window(r), count=_count(r))
+
+
+def _build_reboot(r: _Reader, name: str, _seed: int, _at: ActionType) -> Fault:
+    return Reboot(name, at=r.number("at", low=0), silent_for=r.number("silent_for", low=0, low_open=True))
+
+
+def _build_slow(r: _Reader, name: str, _seed: int, _at: ActionType) -> Fault:
+    return SlowSteps(name, start=r.number("start", 0.0, low=0), count=r.number("count", integer=True, low=1),
+                     cost=r.number("cost", low=0, low_open=True),
+                     consecutive=r.number("consecutive", 1, integer=True, low=1),
+                     gap=r.number("gap", 1, integer=True, low=0))
+
+
+def _build_bad(r: _Reader, name: str, _seed: int, action_type: ActionType) -> Fault:
+    kind = BadActionKind(r.string("action", choices=[k.value for k in BadActionKind]))
+    if kind not in BAD_KINDS[action_type]:
+        raise r.error("action", f"is {kind.value!r}, which a {action_type.value} agent cannot issue; allowed: "
+                                f"{', '.join(sorted(BAD_KINDS[action_type]))}")
+    return BadActions(name, action=kind, window=_window(r), count=_count(r))
+
+
+def _build_burst(r: _Reader, name: str, _seed: int, _at: ActionType) -> Fault:
+    return ActionBurst(name, size=r.number("size", integer=True, low=1), window=_window(r), count=_count(r))
+
+
+def _build_during_timeout(r: _Reader, name: str, _seed: int, _at: ActionType) -> Fault:
+    return ActionsDuringTimeout(name, rate_hz=r.number("rate_hz", 1.0, low=0, low_open=True, high=100),
+                                window=_window(r), count=_count(r))
+
+
+def _build_keepalive(r: _Reader, name: str, _seed: int, _at: ActionType) -> Fault:
+    return KeepaliveSuppressed(name, window=_window(r))
+
+
+_TRANSPORT = ("ops", "probability", *_WINDOW_KEYS)
+FAULT_TYPES: dict[str, FaultType] = {
+    "drop": FaultType(("direction", "burst", *_TRANSPORT), _build_drop,
+                      "datagrams lost (direction request|response|both, probability, burst)"),
+    "delay": FaultType(("delay", "jitter", *_TRANSPORT), _build_delay, "answers delayed by delay +/- jitter s"),
+    "snmp_error": FaultType(("status", *_TRANSPORT), _build_error, "SNMP error answers (status genErr...)"),
+    "stuck": FaultType(_WINDOW_KEYS, _build_stuck, "the controller acknowledges and ignores phase calls"),
+    "reboot": FaultType(("at", "silent_for"), _build_reboot, "silent for silent_for s, then power-up"),
+    "slow_steps": FaultType(("start", "count", "cost", "consecutive", "gap"), _build_slow,
+                            "count simulation steps costing cost s, in runs of consecutive"),
+    "bad_actions": FaultType(("action", *_WINDOW_KEYS), _build_bad,
+                             "invalid agent actions (conflict, unknown_phase, not_in_set, nan, out_of_range, "
+                             "wrong_type)"),
+    "action_burst": FaultType(("size", *_WINDOW_KEYS), _build_burst, "size extra actions right after each action"),
+    "actions_during_timeout": FaultType(("rate_hz", *_WINDOW_KEYS), _build_during_timeout,
+                                        "agent actions at rate_hz while in TIMEOUT"),
+    "keepalive_off": FaultType(("start", "end"), _build_keepalive, "the middleware's keepalive switched off"),
+}
+
+
+@dataclass(frozen=True)
+class FaultSpec:
+    """One validated ``[[faults]]`` entry; :meth:`build` makes a fresh fault for each run."""
+
+    type: str
+    name: str
+    index: int
+    raw: Mapping[str, Any]
+    source: str
+
+    def build(self, seed: int, action_type: ActionType) -> Fault:
+        keys = ("type", "name", *FAULT_TYPES[self.type].keys)
+        r = _Reader(dict(self.raw), f"faults[{self.index}].", self.source, keys)
+        # Each fault draws from its own stream, so adding a fault leaves the others' draws alone.
+        return FAULT_TYPES[self.type].build(r, self.name, seed * 1009 + self.index, action_type)
+
+
+# --- expectations ---------------------------------------------------------------------------------------------
+
+NO_TIMEOUT = "none"
+ANY_TIMEOUT = "any"
+_TIMEOUT_CHOICES = (NO_TIMEOUT, ANY_TIMEOUT, *(r.value for r in TimeoutReason))
+
+
+def _refusal_reasons() -> tuple[str, ...]:
+    seen, todo = set(), [ActionError]
+    while todo:
+        cls = todo.pop()
+        seen.add(cls.reason)
+        todo.extend(cls.__subclasses__())
+    return tuple(sorted(seen))
+
+
+def _status_name(status: UnitControlStatus) -> str:
+    return status.name.lower()
+
+
+_STATUS_NAMES = {_status_name(s): s for s in UnitControlStatus}
+
+
+@dataclass(frozen=True)
+class Expectations:
+    timeout: tuple[str, ...] = (NO_TIMEOUT,)  # "none", "any", or the reasons allowed (at least one TIMEOUT)
+    timeouts: int | None = None  # exact number of TIMEOUT episodes
+    detect_within: float | None = None
+    detect_from: str = "fault"  # fault: its first firing | dispatch: the command that timed out
+    after_fault: str | None = None  # the fault detection is measured from; default: the first to fire
+    recover_within: float | None = None
+    refused: int | None = None
+    refused_reason: str | None = None
+    dropped_on_hold: int | None = None  # at least
+    dropped_in_timeout: int | None = None  # at least
+    records: Mapping[str, int] = field(default_factory=dict)  # kind -> exact count
+    control_status_seen: tuple[str, ...] = ()
+    control_status_never: tuple[str, ...] = ()
+    no_conflicting_command: bool = True
+    no_conflicting_indication: bool = True
+    no_commands_in_timeout: bool = True
+    log_complete: bool = True
+
+
+_EXPECT_KEYS = ("timeout", "timeouts", "detect_within", "detect_from", "after_fault", "recover_within", "refused",
+                "refused_reason", "dropped_on_hold", "dropped_in_timeout", "records", "control_status_seen",
+                "control_status_never", "no_conflicting_command", "no_conflicting_indication",
+                "no_commands_in_timeout", "log_complete")
+
+
+def _expectations(raw: Any, source: str, fault_names: Iterable[str]) -> Expectations:
+    r = _Reader(raw, "expect.", source, _EXPECT_KEYS)
+    timeout = r.strings("timeout", choices=_TIMEOUT_CHOICES) if r.has("timeout") else (NO_TIMEOUT,)
+    if len(timeout) > 1 and (NO_TIMEOUT in timeout or ANY_TIMEOUT in timeout):
+        raise r.error("timeout", "'none' and 'any' stand alone; a list names TIMEOUT reasons")
+    enters = timeout != (NO_TIMEOUT,)
+    for key in ("detect_within", "recover_within", "timeouts", "detect_from", "after_fault"):
+        if r.has(key) and not enters:
+            raise r.error(key, "needs expect.timeout to allow a TIMEOUT (a reason, a list of reasons, or 'any')")
+    detect_from = r.string("detect_from", "fault", choices=("fault", "dispatch"))
+    if detect_from == "dispatch" and timeout != (TimeoutReason.TRANSITION.value,):
+        raise r.error("detect_from", "'dispatch' applies to timeout = 'transition' only")
+    after_fault = r.string("after_fault", choices=tuple(fault_names)) if r.has("after_fault") else None
+    records = _Reader(r.raw.get("records", {}), "expect.records.", source, [k.value for k in Kind])
+    return Expectations(
+        timeout=timeout,
+        timeouts=r.optional_number("timeouts", integer=True, low=1),
+        detect_within=r.optional_number("detect_within", low=0, low_open=True),
+        detect_from=detect_from,
+        after_fault=after_fault,
+        recover_within=r.optional_number("recover_within", low=0, low_open=True),
+        refused=r.optional_number("refused", integer=True, low=0),
+        refused_reason=r.string("refused_reason", choices=_refusal_reasons()) if r.has("refused_reason") else None,
+        dropped_on_hold=r.optional_number("dropped_on_hold", integer=True, low=1),
+        dropped_in_timeout=r.optional_number("dropped_in_timeout", integer=True, low=1),
+        records={k: records.number(k, integer=True, low=0) for k in records.raw},
+        control_status_seen=r.strings("control_status_seen", choices=_STATUS_NAMES) if r.has(
+            "control_status_seen") else (),
+        control_status_never=r.strings("control_status_never", choices=_STATUS_NAMES) if r.has(
+            "control_status_never") else (),
+        no_conflicting_command=r.boolean("no_conflicting_command", True),
+        no_conflicting_indication=r.boolean("no_conflicting_indication", True),
+        no_commands_in_timeout=r.boolean("no_commands_in_timeout", True),
+        log_complete=r.boolean("log_complete", True),
+    )
+
+
+# --- the scenario ------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Scenario:
+    name: str
+    source: str
+    description: str
+    config: IntersectionConfig
+    action_type: ActionType
+    agent: str | None
+    duration: float
+    seed: int
+    recover_after: float | None
+    poll_hz: float | None
+    faults: tuple[FaultSpec, ...]
+    expect: Expectations
+
+    def spec(self, log_path: Path | None = None) -> RunSpec:
+        return RunSpec(self.config, self.action_type, self.agent, self.duration, self.seed, log_path,
+                       self.poll_hz, self.recover_after)
+
+    def build_faults(self) -> list[Fault]:
+        return [f.build(self.seed, self.action_type) for f in self.faults]
+
+    def summary(self) -> str:
+        kinds = ", ".join(f.type for f in self.faults)
+        return f"{self.description or kinds} [{self.action_type.value}, {self.duration:g} s; faults: {kinds}]"
+
+
+def load_scenario(path: str | Path) -> Scenario:
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ScenarioError(str(p), "<file>", f"cannot be read ({exc.strerror})") from None
+    return parse_scenario(text, str(p), base=p.parent, default_name=p.stem)
+
+
+def parse_scenario(text: str, source: str = "<memory>", *, base: Path | None = None,
+                   default_name: str = "scenario") -> Scenario:
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ScenarioError(source, "<file>", f"is not valid TOML ({exc})") from None
+    r = _Reader(raw, "", source, SCENARIO_KEYS)
+    config = _config(r, base)
+    action_type = ActionType(r.string("action_type", ActionType.SELECTION.value, choices=[t.value for t in ActionType]))
+    recover_after = r.number("recover_after", 5.0, low=-1)
+    faults = _fault_specs(r, source, action_type)
+    names = [f.name for f in faults]
+    expect = _expectations(raw.get("expect", {}), source, names)
+    scenario = Scenario(
+        name=r.string("name", default_name),
+        source=source,
+        description=r.string("description", ""),
+        config=config,
+        action_type=action_type,
+        agent=r.string("agent") if r.has("agent") else None,
+        duration=r.number("duration", low=0, low_open=True, high=24 * 3600),
+        seed=r.number("seed", 0, integer=True, low=0),
+        recover_after=None if recover_after < 0 else recover_after,
+        poll_hz=r.optional_number("poll_hz", low=0, low_open=True, high=1000),
+        faults=tuple(faults),
+        expect=expect,
+    )
+    # Build once now so that a bad combination is refused at load time, not mid-suite.
+    scenario.build_faults()
+    return scenario
+
+
+def _config(r: _Reader, base: Path | None) -> IntersectionConfig:
+    try:
+        if r.has("config"):
+            path = Path(r.string("config"))
+            cfg = config_mod.load(path if path.is_absolute() or base is None else base / path)
+        else:
+            cfg = config_mod.load()
+    except ConfigError as exc:
+        raise r.error("config", str(exc)) from None
+    overrides = _Reader(r.raw.get("middleware", {}), "middleware.", r.source, MiddlewareParams.__dataclass_fields__)
+    try:
+        return cfg.with_middleware(**overrides.raw) if overrides.raw else cfg
+    except ConfigError as exc:
+        raise ScenarioError(r.source, exc.field, exc.message) from None
+
+
+def _fault_specs(r: _Reader, source: str, action_type: ActionType) -> list[FaultSpec]:
+    raw = r.raw.get("faults")
+    if not isinstance(raw, list) or not raw or not all(isinstance(f, dict) for f in raw):
+        raise r.error("faults", "must be a non-empty array of tables ([[faults]])")
+    specs, names = [], set()
+    for i, item in enumerate(raw):
+        where = f"faults[{i}]."
+        kind = item.get("type")
+        if kind not in FAULT_TYPES:
+            raise ScenarioError(source, f"{where}type", f"is {kind!r}; allowed: {', '.join(FAULT_TYPES)}")
+        fr = _Reader(item, where, source, ("type", "name", *FAULT_TYPES[kind].keys))
+        name = fr.string("name", f"{kind}#{i}")
+        if name in names:
+            raise fr.error("name", f"{name!r} is used by another fault; names must be unique")
+        names.add(name)
+        spec = FaultSpec(kind, name, i, dict(item), source)
+        spec.build(0, action_type)  # validates the keys' values
+        specs.append(spec)
+    return specs
+
+
+def discover(paths: Iterable[str | Path]) -> list[Path]:
+    """Scenario files: each path is a file, or a directory whose ``*.toml`` files are taken in name order."""
+    out: list[Path] = []
+    for p in map(Path, paths):
+        if p.is_dir():
+            out.extend(sorted(p.glob("*.toml")))
+        elif p.is_file():
+            out.append(p)
+        else:
+            raise ScenarioError(str(p), "<file>", "does not exist")
+    return out
+
+
+# --- running and judging ----------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Check:
+    """One expectation and what happened."""
+
+    expectation: str
+    ok: bool
+    message: str  # what was expected and, if it failed, what happened instead
+
+
+@dataclass(frozen=True)
+class FaultReport:
+    name: str
+    kind: str
+    description: str
+    fired: int
+    first_fired: float | None
+    details: Mapping[str, int]
+
+
+@dataclass(frozen=True)
+class Episode:
+    """One stay in TIMEOUT."""
+
+    reason: str
+    entered: float
+    command_id: int | None
+    recovery_called: float | None  # the recover() call that succeeded
+    recovered: float | None
+    failed_recoveries: int
+
+
+@dataclass(frozen=True)
+class ScenarioResult:
+    scenario: Scenario
+    checks: tuple[Check, ...]
+    faults: tuple[FaultReport, ...]
+    episodes: tuple[Episode, ...]
+    detection_s: float | None
+    recovery_s: float | None
+    records: int
+    wall_s: float
+
+    @property
+    def passed(self) -> bool:
+        return all(c.ok for c in self.checks)
+
+    @property
+    def failures(self) -> list[Check]:
+        return [c for c in self.checks if not c.ok]
+
+    def fired_text(self) -> str:
+        return ", ".join(f"{f.name} x{f.fired}" for f in self.faults)
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "scenario": self.scenario.name,
+            "source": self.scenario.source,
+            "passed": self.passed,
+            "detection_s": _round(self.detection_s),
+            "recovery_s": _round(self.recovery_s),
+            "timeouts": [{k: _round(v) if isinstance(v, float) else v for k, v in vars_of(e).items()}
+                         for e in self.episodes],
+            "faults": [vars_of(f) for f in self.faults],
+            "checks": [vars_of(c) for c in self.checks],
+            "records": self.records,
+            "wall_s": round(self.wall_s, 4),
+            "sim_s": self.scenario.duration,
+        }
+
+
+def _round(t: float | None) -> float | None:
+    return None if t is None else round(t, 6)
+
+
+def vars_of(obj: Any) -> dict[str, Any]:
+    return {k: (dict(v) if isinstance(v, Mapping) else v) for k, v in obj.__dict__.items()}
+
+
+def run_scenario(scenario: Scenario, *, log_path: Path | None = None) -> ScenarioResult:
+    """Run one scenario in virtual time and judge its expectations."""
+    t0 = time.perf_counter()
+    faults = scenario.build_faults()
+    monitors: list[IndicationMonitor] = []
+
+    def target_factory(env, config, seed=0):
+        target = FaultTarget(env, config, seed=seed, faults=faults)
+        monitors.append(IndicationMonitor(env, target.controller, config))
+        return target
+
+    def configure(run: Run, target: FaultTarget) -> None:
+        for fault in faults:
+            fault.on_run(run, target)
+
+    result = run_virtual(scenario.spec(log_path), target_factory=target_factory, configure=configure)
+    return evaluate(scenario, result.records, faults, monitors[0], wall_s=time.perf_counter() - t0)
+
+
+def _episodes(records: list[dict[str, Any]]) -> list[Episode]:
+    out: list[Episode] = []
+    current: dict[str, Any] | None = None
+    for rec in records:
+        kind = rec["kind"]
+        if kind == Kind.TIMEOUT_ENTERED:
+            current = {"reason": rec["reason"], "entered": rec["t"], "command_id": rec.get("command_id"),
+                       "calls": [], "recovered": None}
+        elif current is None:
+            continue
+        elif kind == Kind.RECOVERY_STARTED:
+            current["calls"].append(rec["t"])
+        elif kind == Kind.RECOVERED:
+            current["recovered"] = rec["t"]
+            out.append(_episode(current))
+            current = None
+    if current is not None:
+        out.append(_episode(current))
+    return out
+
+
+def _episode(d: dict[str, Any]) -> Episode:
+    calls = d["calls"]
+    if d["recovered"] is None:
+        return Episode(d["reason"], d["entered"], d["command_id"], None, None, len(calls))
+    return Episode(d["reason"], d["entered"], d["command_id"], calls[-1] if calls else None, d["recovered"],
+                   max(0, len(calls) - 1))
+
+
+def evaluate(scenario: Scenario, records: list[dict[str, Any]], faults: list[Fault],
+             monitor: IndicationMonitor | None, *, wall_s: float = 0.0) -> ScenarioResult:
+    """Judge a run's records, faults and controller samples against the scenario's expectations."""
+    ex = scenario.expect
+    cfg = scenario.config
+    checks: list[Check] = []
+
+    def check(name: str, ok: bool, message: str) -> None:
+        checks.append(Check(name, ok, message))
+
+    for f in faults:
+        check(f"fault {f.name} fired", f.fired > 0,
+              f"fault {f.name!r} ({f.describe()}) to fire at least once" + (
+                  f"; fired {f.fired} times" if f.fired else
+                  "; it never fired, so the scenario proves nothing about it"))
+
+    episodes = _episodes(records)
+    by_kind: dict[str, list[dict[str, Any]]] = {}
+    for rec in records:
+        by_kind.setdefault(rec["kind"], []).append(rec)
+
+    # Detection: from the reference fault's first firing (or the command's dispatch) to the first TIMEOUT after it.
+    fired = [f for f in faults if f.first_fired is not None]
+    ref_fault = next((f for f in fired if f.name == ex.after_fault), None) if ex.after_fault else (
+        min(fired, key=lambda f: f.first_fired) if fired else None)
+    detection = None
+    first_episode = None
+    if ref_fault is not None:
+        first_episode = next((e for e in episodes if e.entered >= ref_fault.first_fired), None)
+    if first_episode is not None:
+        if ex.detect_from == "dispatch":
+            dispatched = {r["command_id"]: r["t"] for r in by_kind.get(Kind.COMMAND_DISPATCHED, [])}
+            start = dispatched.get(first_episode.command_id)
+            detection = None if start is None else first_episode.entered - start
+        else:
+            detection = first_episode.entered - ref_fault.first_fired
+    recoveries = [e.recovered - e.recovery_called for e in episodes if e.recovered is not None]
+    recovery = max(recoveries) if recoveries else None
+
+    _check_timeouts(ex, episodes, check)
+    if ex.detect_within is not None:
+        _check_detection(ex, ref_fault, first_episode, detection, check)
+    if ex.recover_within is not None:
+        _check_recovery(ex, episodes, check)
+    _check_actions(ex, by_kind, check)
+    for kind, n in ex.records.items():
+        got = len(by_kind.get(kind, []))
+        check(f"records.{kind}", got == n, f"{n} {kind} records" + ("" if got == n else f"; got {got}"))
+    if ex.no_conflicting_command:
+        _check_commands(cfg, by_kind.get(Kind.SET_SENT, []), check)
+    if ex.no_commands_in_timeout:
+        _check_quiet_in_timeout(records, check)
+    if ex.no_conflicting_indication or ex.control_status_seen or ex.control_status_never:
+        _check_controller(ex, monitor, check)
+    if ex.log_complete:
+        _check_log(records, cfg, check)
+    reports = tuple(FaultReport(f.name, f.kind, f.describe(), f.fired, f.first_fired, dict(f.details))
+                    for f in faults)
+    return ScenarioResult(scenario, tuple(checks), reports, tuple(episodes), detection, recovery, len(records),
+                          wall_s)
+
+
+def _fmt(t: float | None) -> str:
+    return "-" if t is None else f"{t:.3f}"
+
+
+def _check_timeouts(ex: Expectations, episodes: list[Episode], check: Callable[[str, bool, str], None]) -> None:
+    seen = ", ".join(f"{e.reason} at {e.entered:.3f} s" for e in episodes) or "none"
+    if ex.timeout == (NO_TIMEOUT,):
+        check("timeout", not episodes, "no TIMEOUT" + ("" if not episodes else f"; got TIMEOUT: {seen}"))
+    elif ex.timeout != (ANY_TIMEOUT,):
+        allowed = set(ex.timeout)
+        wrong = [e for e in episodes if e.reason not in allowed]
+        ok = bool(episodes) and not wrong
+        want = " or ".join(ex.timeout)
+        check("timeout", ok, f"TIMEOUT because of {want}" + ("" if ok else f"; got: {seen}"))
+    if ex.timeouts is not None:
+        check("timeouts", len(episodes) == ex.timeouts,
+              f"{ex.timeouts} TIMEOUT episodes" + ("" if len(episodes) == ex.timeouts else
+                                                   f"; got {len(episodes)}: {seen}"))
+
+
+def _check_detection(ex: Expectations, ref: Fault | None, episode: Episode | None, detection: float | None,
+                     check: Callable[[str, bool, str], None]) -> None:
+    origin = "the dispatch of the command that timed out" if ex.detect_from == "dispatch" else (
+        f"fault {ref.name!r} first fired" if ref else "the fault first fired")
+    want = f"TIMEOUT within {ex.detect_within:g} s after {origin}"
+    if ref is None or ref.first_fired is None:
+        check("detect_within", False, f"{want}; no fault fired")
+    elif episode is None:
+        check("detect_within", False, f"{want} (at {ref.first_fired:.3f} s); no TIMEOUT followed")
+    elif detection is None:
+        check("detect_within", False, f"{want}; TIMEOUT at {episode.entered:.3f} s has no dispatched command")
+    else:
+        ok = 0.0 <= detection <= ex.detect_within
+        check("detect_within", ok, want + ("" if ok else
+                                           f"; got TIMEOUT ({episode.reason}) at {episode.entered:.3f} s, "
+                                           f"{detection:.3f} s after"))
+
+
+def _check_recovery(ex: Expectations, episodes: list[Episode], check: Callable[[str, bool, str], None]) -> None:
+    want = f"every TIMEOUT back to IDLE within {ex.recover_within:g} s of the recover() call that succeeded"
+    problems = []
+    for e in episodes:
+        if e.recovered is None:
+            problems.append(f"TIMEOUT ({e.reason}) at {e.entered:.3f} s never recovered "
+                            f"({e.failed_recoveries} recover() calls failed)")
+        elif e.recovered - e.recovery_called > ex.recover_within:
+            problems.append(f"TIMEOUT at {e.entered:.3f} s took {e.recovered - e.recovery_called:.3f} s to recover")
+    check("recover_within", not problems, want + ("" if not problems else "; got: " + "; ".join(problems)))
+
+
+def _check_actions(ex: Expectations, by_kind: dict[str, list[dict[str, Any]]],
+                   check: Callable[[str, bool, str], None]) -> None:
+    refused = by_kind.get(Kind.ACTION_REFUSED, [])
+    if ex.refused is not None:
+        ids = {r["action_id"] for r in refused}
+        sent_for = sorted(r["action_id"] for r in by_kind.get(Kind.COMMAND_DISPATCHED, []) if r["action_id"] in ids)
+        ok = len(refused) == ex.refused and not sent_for
+        got = f"; got {len(refused)} refused" + (f", commands dispatched for refused actions {sent_for}"
+                                                 if sent_for else "")
+        check("refused", ok, f"{ex.refused} actions refused and nothing sent for them" + ("" if ok else got))
+    if ex.refused_reason is not None:
+        other = sorted({r["reason"] for r in refused} - {ex.refused_reason})
+        ok = bool(refused) and not other
+        check("refused_reason", ok, f"refusals because of {ex.refused_reason}" + (
+            "" if ok else f"; got reasons {other or 'none (nothing refused)'}"))
+    dropped = by_kind.get(Kind.ACTION_DROPPED, [])
+    for key, state, least in (("dropped_on_hold", "on_hold", ex.dropped_on_hold),
+                              ("dropped_in_timeout", "timeout", ex.dropped_in_timeout)):
+        if least is not None:
+            got = sum(1 for r in dropped if r["state"] == state)
+            check(key, got >= least, f"at least {least} actions dropped while {state.upper()}" + (
+                "" if got >= least else f"; got {got}"))
+
+
+def _check_commands(cfg: IntersectionConfig, sets: list[dict[str, Any]],
+                    check: Callable[[str, bool, str], None]) -> None:
+    bad = []
+    for r in sets:
+        phases = sorted(r["phases"])
+        unknown = [p for p in phases if p not in cfg.phases]
+        clash = [(a, b) for i, a in enumerate(phases) for b in phases[i + 1:] if not cfg.compatible(a, b)]
+        if unknown or clash:
+            bad.append(f"set_sent seq {r['seq']} at {r['t']:.3f} s phases {phases}")
+    check("no_conflicting_command", not bad,
+          f"no SET of conflicting or unknown phases ({len(sets)} SETs checked)" + (
+              "" if not bad else "; got: " + "; ".join(bad[:5])))
+
+
+def _check_quiet_in_timeout(records: list[dict[str, Any]], check: Callable[[str, bool, str], None]) -> None:
+    in_timeout = False
+    bad = []
+    for r in records:
+        if r["kind"] == Kind.TIMEOUT_ENTERED:
+            in_timeout = True
+        elif r["kind"] == Kind.RECOVERED:
+            in_timeout = False
+        elif in_timeout and r["kind"] == Kind.SET_SENT and r["purpose"] in ("command", "keepalive"):
+            bad.append(f"{r['purpose']} SET at {r['t']:.3f} s")
+    check("no_commands_in_timeout", not bad,
+          "no command or keepalive SET while in TIMEOUT" + ("" if not bad else "; got: " + "; ".join(bad[:5])))
+
+
+def _check_controller(ex: Expectations, monitor: IndicationMonitor | None,
+                      check: Callable[[str, bool, str], None]) -> None:
+    if monitor is None:
+        check("controller", False, "controller samples needed, but the target has no controller to sample")
+        return
+    if ex.no_conflicting_indication:
+        bad = [f"{list(c.phases)} at {c.t:.3f} s" for c in monitor.conflicts[:5]]
+        if monitor.mmu_flash_at is not None:
+            bad.append(f"MMU flash at {monitor.mmu_flash_at:.3f} s")
+        check("no_conflicting_indication", not bad,
+              f"the controller never showed conflicting phases ({monitor.samples} samples)" + (
+                  "" if not bad else "; got: " + "; ".join(bad)))
+    seen = {_status_name(s): t for s, t in monitor.status_first_seen.items()}
+    for name in ex.control_status_seen:
+        check("control_status_seen", name in seen, f"unitControlStatus {name} seen" + (
+            f" (first at {seen[name]:.3f} s)" if name in seen else f"; got only {sorted(seen)}"))
+    for name in ex.control_status_never:
+        check("control_status_never", name not in seen, f"unitControlStatus never {name}" + (
+            "" if name not in seen else f"; got {name} at {seen[name]:.3f} s"))
+
+
+def _check_log(records: list[dict[str, Any]], cfg: IntersectionConfig,
+               check: Callable[[str, bool, str], None]) -> None:
+    problems = []
+    seqs = [r["seq"] for r in records]
+    if seqs != list(range(len(records))):
+        gap = next((i for i, s in enumerate(seqs) if s != i), len(seqs))
+        problems.append(f"seq not gapless from 0 (first break at position {gap})")
+    if not records or records[0]["kind"] != Kind.RUN_STARTED or records[-1]["kind"] != Kind.RUN_ENDED:
+        problems.append("the log does not run from run_started to run_ended")
+    ends: dict[int, int] = {}
+    for r in records:
+        if r["kind"] == Kind.HOLD_RELEASED:
+            ends[r["command_id"]] = ends.get(r["command_id"], 0) + 1
+    dispatched = [r["command_id"] for r in records if r["kind"] == Kind.COMMAND_DISPATCHED]
+    final_state = next((r["to"] for r in reversed(records) if r["kind"] == Kind.STATE), "idle")
+    for i, cid in enumerate(dispatched):
+        n = ends.get(cid, 0)
+        # Only the last command may still be ON_HOLD when the run ends.
+        if n > 1 or (n == 0 and not (i == len(dispatched) - 1 and final_state == "on_hold")):
+            problems.append(f"command {cid} ended {n} times")
+    answers: dict[tuple[Any, str], int] = {}
+    for r in records:
+        if r["kind"] in (Kind.SET_ANSWERED, Kind.SET_FAILED):
+            key = (r["command_id"], r["purpose"])
+            answers[key] = answers.get(key, 0) + 1
+    end_t = records[-1]["t"] if records else 0.0
+    unanswered = 0
+    for r in records:
+        if r["kind"] == Kind.SET_SENT:
+            key = (r["command_id"], r["purpose"])
+            if answers.get(key, 0) > 0:
+                answers[key] -= 1
+            elif end_t - r["t"] >= cfg.middleware.tau_udp:
+                unanswered += 1  # a SET still in flight at the end of the run is not missing
+    if unanswered:
+        problems.append(f"{unanswered} SETs neither answered nor failed")
+    check("log_complete", not problems, f"every event logged ({len(records)} records)" + (
+        "" if not problems else "; got: " + "; ".join(problems[:5])))
