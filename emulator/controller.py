@@ -159,7 +159,7 @@ class Controller:
     @property
     def calls(self) -> frozenset[int]:
         """Vehicle calls the controller acts on: called, configured and not omitted."""
-        return (self.control[ControlColumn.VEH_CALL] & self.config.phases.keys()) - self.control[
+        return self.control[ControlColumn.VEH_CALL].intersection(self.config.phases) - self.control[
             ControlColumn.PHASE_OMIT]
 
     # --- status -------------------------------------------------------------------------
@@ -186,6 +186,8 @@ class Controller:
     @property
     def phase_nexts(self) -> frozenset[int]:
         """The phase each clearing ring will serve next, as the calls stand now."""
+        if self.flashing:
+            return frozenset()  # a flashing controller times nothing, so nothing comes next
         calls = self.calls
         out = set()
         for r in self.rings:

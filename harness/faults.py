@@ -723,6 +723,7 @@ class FaultTarget:
         self._ticking.defused = True  # the interrupted tick process ends here on purpose
         self._ticking.interrupt("power cycle")
         self.controller.reset()
+        # Its new tick grid starts at power-up, wherever that falls against the middleware's times.
         self._ticking = self.env.process(self.controller.process(self.env))
 
 
@@ -746,7 +747,7 @@ class IndicationMonitor:
         env.process(self._sample())
 
     def _sample(self) -> Generator[simpy.Event, Any, None]:
-        # Half a tick after the controller's tick, so each sample sees one whole tick's display.
+        # Once per tick: a display lasts at least one tick, so none is missed.
         start = self.env.now + TICK / 2
         k = 0
         while True:

@@ -39,7 +39,7 @@ class Kind(StrEnum):
     POLL = "poll"                              # poll_id, greens, yellows, reds (on change only), changed
     POLL_FAILED = "poll_failed"                # poll_id, error, consecutive
     TRANSITION_VERIFIED = "transition_verified"  # command_id, command, poll_id, hold_s
-    HOLD_RELEASED = "hold_released"            # command_id, reason (verified|keep|duration_served)
+    HOLD_RELEASED = "hold_released"            # command_id, reason (verified|served|timeout|keep), hold_s
     DRIFT = "drift"                            # step_s, took_s, consecutive
     TIMEOUT_ENTERED = "timeout_entered"        # reason (communication|transition|drift), command_id, detail
     RECOVERY_STARTED = "recovery_started"      # -

@@ -221,6 +221,7 @@ class RunResult:
     run: Run
     target: Any
     wall_s: float
+    lateness: Any = None  # wall-clock runs: the driver's lateness summary
 
     @cached_property
     def records(self) -> list[dict[str, Any]]:

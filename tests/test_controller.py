@@ -65,6 +65,11 @@ def variant(paper_toml: str, *, replace: dict[str, str] | None = None, structure
     return parse(text, "variant.toml")
 
 
+def compatibility_rows(allowed: set[tuple[int, int]]) -> list[list[int]]:
+    """An explicit 8x8 compatibility matrix allowing exactly these pairs."""
+    return [[1 if (min(a, b), max(a, b)) in allowed else 0 for b in range(1, 9)] for a in range(1, 9)]
+
+
 def assert_status_consistent(c: Controller) -> None:
     assert c.greens | c.yellows | c.reds == ALL_PHASES
     assert not (c.greens & c.yellows) and not (c.greens & c.reds) and not (c.yellows & c.reds)
@@ -395,8 +400,7 @@ def test_the_backup_timer_is_disarmed_until_the_first_set(controller: Controller
 
 def test_the_monitor_flashes_on_a_pair_the_matrix_forbids(paper_toml: str) -> None:
     allowed = {(1, 5), (1, 6), (2, 6), (3, 7), (3, 8), (4, 7), (4, 8)}  # 2-5 is forbidden
-    rows = [[1 if (min(a, b), max(a, b)) in allowed else 0 for b in range(1, 9)] for a in range(1, 9)]
-    cfg = variant(paper_toml, structure_extra=f"compatibility = {rows}")
+    cfg = variant(paper_toml, structure_extra=f"compatibility = {compatibility_rows(allowed)}")
     assert not cfg.compatible(2, 5)
     c = Controller(cfg)
     c.backup_time = 0
@@ -412,6 +416,30 @@ def test_the_monitor_flashes_on_a_pair_the_matrix_forbids(paper_toml: str) -> No
     assert [(r.phase, r.interval, r.ticks) for r in c.rings] == rings
     assert c.reds == ALL_PHASES
     assert c.flash_status is UnitFlashStatus.MMU
+
+
+def test_a_flash_during_clearance_announces_no_next_phase(paper_toml: str) -> None:
+    # 1 clears for 6.0 s of yellow while 5 clears in 5.0 s: 6 starts beside a yellow 1, which the matrix forbids.
+    allowed = {(1, 5), (2, 5), (2, 6), (3, 7), (3, 8), (4, 7), (4, 8)}
+    cfg = variant(paper_toml, replace={'1 = { approach = "west", turn = "left" }':
+                                       '1 = { approach = "west", turn = "left", yellow = 6.0 }'},
+                  structure_extra=f"compatibility = {compatibility_rows(allowed)}")
+    c = Controller(cfg)
+    serve(c, {1, 5})
+    c.set_control(CALL, {2, 6})
+    start = c.tick
+    step_until(c, lambda c: c.flashing, limit=60)
+    assert c.tick - start == YELLOW + RED + 1
+    assert c.yellows == frozenset() and c.reds == ALL_PHASES
+    assert c.phase_nexts == frozenset()
+
+
+def test_status_sets_are_frozen(controller: Controller) -> None:
+    controller.set_control(CALL, {3, 4})
+    controller.step()
+    status = (controller.calls, controller.greens, controller.yellows, controller.reds, controller.phase_ons,
+              controller.phase_nexts)
+    assert all(isinstance(s, frozenset) for s in status)
 
 
 def test_the_monitor_stays_quiet_on_the_paper_matrix(controller: Controller) -> None:

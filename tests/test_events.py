@@ -27,7 +27,7 @@ def _as_written(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
 
 def test_every_record_has_the_common_keys_and_a_gapless_seq(paper_config, tmp_path: Path) -> None:
     path = tmp_path / "run.jsonl"
-    result = run_virtual(RunSpec(paper_config, ActionType.SWITCH, agent="random", duration=120.0, seed=2,
+    run_virtual(RunSpec(paper_config, ActionType.SWITCH, agent="random", duration=120.0, seed=2,
                                  log_path=path))
     records = list(read(path))
     assert len(records) > 1000
@@ -40,7 +40,6 @@ def test_every_record_has_the_common_keys_and_a_gapless_seq(paper_config, tmp_pa
     assert all(a["t"] <= b["t"] for a, b in pairwise(records))
     assert all(a["wall_ns"] <= b["wall_ns"] for a, b in pairwise(records))
     assert records[0]["kind"] == "run_started" and records[-1]["kind"] == "run_ended"
-    assert records == _as_written(result.records)
 
 
 def test_records_are_written_through_while_the_log_is_open(tmp_path: Path) -> None:
@@ -81,18 +80,24 @@ class CrashingAgent:
 
 def test_a_crashed_run_keeps_every_record_emitted_before_the_crash(paper_config, tmp_path: Path) -> None:
     path = tmp_path / "crash.jsonl"
-    runs: list[Run] = []
+    emitted: list[dict[str, Any]] = []
 
     def configure(run: Run, target: Any) -> None:
         run.agent = CrashingAgent(crash_after=3)
-        runs.append(run)
+        emit = run.events.emit
+
+        def spy(kind: Kind, **fields: Any) -> dict[str, Any]:
+            emitted.append(emit(kind, **fields))
+            return emitted[-1]
+
+        run.events.emit = spy
 
     with pytest.raises(RuntimeError, match="agent crashed"):
         run_virtual(RunSpec(paper_config, ActionType.SWITCH, duration=600.0, seed=1, log_path=path),
                     configure=configure)
-    (run,) = runs
     on_disk = list(read(path))
-    assert on_disk == _as_written(run.events.records)
+    assert len(emitted) > 100
+    assert on_disk == _as_written(emitted)
     assert len([r for r in on_disk if r["kind"] == "action_received"]) == 3
     assert len([r for r in on_disk if r["kind"] == "transition_verified"]) == 3
     assert on_disk[-1]["t"] >= 20.0, "the run went on until the fourth decision"
