@@ -127,6 +127,9 @@ class Controller:
         self.control: dict[ControlColumn, frozenset[int]] = {c: frozenset() for c in ControlColumn}
         self.control_status = UnitControlStatus.OTHER
         self.flash_status = UnitFlashStatus.NOT_FLASH
+        self._calls_key: tuple[frozenset[int], frozenset[int]] | None = None
+        self._calls: frozenset[int] = frozenset()
+        self._changed = True
         self._since_set: int | None = None  # ticks since the last control SET; None = backup timer disarmed
         self.rings = [Ring(i + 1, order) for i, order in enumerate(self.config.rings)]
         started = [p for p, ph in self.config.phases.items() if ph.startup in _STARTUP_INTERVAL]
@@ -215,8 +218,10 @@ class Controller:
                 self._start(r, p)
         if all(r.interval is Interval.DWELL for r in self.rings):
             self._cross(calls)
-        self._refresh_status()
-        self._monitor()
+        if self._changed:
+            self._changed = False
+            self._refresh_status()
+            self._monitor()
 
     def _backup_timer(self) -> None:
         if self._since_set is None or self.backup_time == 0:
@@ -259,6 +264,7 @@ class Controller:
 
     def _enter(self, r: Ring, interval: Interval) -> None:
         r.interval, r.ticks, r.max_ticks = interval, 0, 0
+        self._changed = True
         if self.on_change is not None:
             self.on_change(Change(self.tick, r.number, r.phase, interval))
 

@@ -16,6 +16,7 @@ from __future__ import annotations
 import bisect
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from functools import lru_cache
 
 from emulator.controller import Controller, tenths
 from hils.ntcip import (
@@ -173,8 +174,12 @@ class MibView:
         return out
 
 
+# Status is read at 10-100 Hz and takes few distinct values: convert each phase set once.
+_masks = lru_cache(maxsize=1024)(phases_to_groups)
+
+
 def _group_reader(read: Callable[[], frozenset[int]], group: int, groups: int) -> Callable[[], int]:
-    return lambda: phases_to_groups(read(), groups)[group - 1]
+    return lambda: _masks(read(), groups)[group - 1]
 
 
 def _group_writer(c: Controller, column: ControlColumn, group: int) -> Callable[[int], None]:

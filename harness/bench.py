@@ -12,6 +12,8 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from harness import machine
 from hils import config as config_mod
 from hils.actions import ActionType
@@ -35,6 +37,17 @@ def register(sub: argparse._SubParsersAction) -> None:
     lat.add_argument("--seed", type=int, default=0)
     lat.add_argument("--out", type=Path, default=REPORT_DIR / "latency.json", metavar="FILE")
     lat.set_defaults(func=_latency_command)
+    over = commands.add_parser("overhead", help="wall time of the full loop over bare SUMO (target <= 1.5)",
+                               description="The cost of the HILS over bare SUMO: the wall time of the full loop "
+                                           "(SUMO at 0.25 s steps, 10 Hz polling, middleware, emulator, max-pressure "
+                                           "every 10 s) in virtual time, divided by the wall time of libsumo alone "
+                                           "stepping the same network and demand. Measured alternately, side by "
+                                           "side, several times; the ratio of medians is reported.")
+    over.add_argument("--duration", type=float, default=3600.0, metavar="S", help="simulated seconds (3600)")
+    over.add_argument("--repeat", type=int, default=3, help="alternating measurements of each (3)")
+    over.add_argument("--seed", type=int, default=0)
+    over.add_argument("--out", type=Path, default=REPORT_DIR / "overhead.json", metavar="FILE")
+    over.set_defaults(func=_overhead_command)
 
 
 def measure_latency(samples: int, seed: int = 0) -> dict[str, Stats]:
@@ -72,5 +85,43 @@ def _latency_command(args: argparse.Namespace) -> int:
     print("target: mean < 50 us, p99 < 200 us")
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps({"machine": info, "latency": rows}, indent=2) + "\n", encoding="utf-8")
+    print(f"written: {args.out}")
+    return 0
+
+
+def measure_overhead(duration: float, repeat: int, seed: int) -> dict[str, Any]:
+    """Alternating timings of bare SUMO and of the full loop over the same simulated time."""
+    from hils.sumo import SumoSimulation, time_bare_sumo
+
+    cfg = config_mod.load()
+    bare, full = [], []
+    for _ in range(repeat):
+        bare.append(time_bare_sumo(duration, seed=seed, config=cfg))
+        sim = SumoSimulation(cfg, seed=seed, end=duration)
+        sim.start()
+        try:
+            with tempfile.TemporaryDirectory() as tmp:
+                spec = RunSpec(cfg, ActionType.SELECTION, duration=duration, seed=seed, sumo=True,
+                               log_path=Path(tmp) / "events.jsonl")
+                full.append(run_virtual(spec, simulation=sim, chunk=duration).wall_s)
+        finally:
+            sim.close()
+    bare_s, full_s = float(np.median(bare)), float(np.median(full))
+    return {"duration_s": duration, "bare_sumo_s": bare, "hils_s": full, "bare_median_s": bare_s,
+            "hils_median_s": full_s, "ratio": full_s / bare_s}
+
+
+def _overhead_command(args: argparse.Namespace) -> int:
+    info = machine.describe()
+    figures = measure_overhead(args.duration, args.repeat, args.seed)
+    print(machine.header(info))
+    print(f"one simulated {figures['duration_s']:g} s, {args.repeat} alternating runs each:")
+    print(f"  bare libsumo      median {figures['bare_median_s']:.2f} s  "
+          + " ".join(f"{x:.2f}" for x in figures["bare_sumo_s"]))
+    print(f"  full HILS loop    median {figures['hils_median_s']:.2f} s  "
+          + " ".join(f"{x:.2f}" for x in figures["hils_s"]))
+    print(f"  ratio             {figures['ratio']:.2f} (target <= 1.5)")
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps({"machine": info, "overhead": figures}, indent=2) + "\n", encoding="utf-8")
     print(f"written: {args.out}")
     return 0

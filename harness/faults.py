@@ -671,15 +671,24 @@ class KeepaliveSuppressed(Fault):
 
     def _suppress(self, run: Run) -> Generator[simpy.Event, Any, None]:
         env, mw = run.env, run.middleware
+        end = self.window.end
         yield env.timeout(self.window.start)
         mw.keepalive_enabled = False
-        counted = env.now
-        while env.now < self.window.end:
-            due = max(mw.last_set, counted) + mw.keepalive_period
-            yield env.timeout(max(0.0, min(due, self.window.end) - env.now))
-            if env.now >= due and mw.last_set + mw.keepalive_period <= env.now and mw.call and not mw.timeout_flag:
+        while True:
+            seen, period = mw.last_set, mw.keepalive_period
+            if math.isinf(seen):  # nothing SET yet: no refresh due
+                wake = env.now + period
+                yield env.timeout(min(wake, end) - env.now)
+                if wake >= end:
+                    break
+                continue
+            # The refreshes the keepalive would have sent fall every period after the last SET.
+            due = seen + (math.floor((env.now - seen) / period + 1e-9) + 1) * period
+            yield env.timeout(max(0.0, min(due, end) - env.now))
+            if due >= end:
+                break
+            if mw.last_set == seen and mw.call and not mw.timeout_flag:
                 self.fire(env.now)
-                counted = env.now
         if not run.ended:
             mw.keepalive_enabled = True
 

@@ -3,7 +3,8 @@
 ``hils faults run [PATH ...]`` runs every scenario (default: the shipped suite
 in ``fault_scenarios/``), prints a results table, writes ``faults.md`` and
 ``faults.json`` to the report directory and exits 1 if any expectation failed.
-``hils faults list [PATH ...]`` prints one line per scenario.
+``hils faults list [PATH ...]`` prints one line per scenario. ``hils faults
+proxy`` relays UDP to an SNMP agent with faults on a schedule (:mod:`harness.proxy`).
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from harness.proxy import register_proxy
 from harness.scenarios import Scenario, ScenarioResult, default_suite, discover, load_scenario, run_scenario
 
 RUN_HELP = """\
@@ -54,6 +56,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     listing.add_argument("paths", nargs="*", metavar="PATH",
                          help="scenario files or directories of them (default: the shipped suite)")
     listing.set_defaults(func=_list)
+
+    register_proxy(commands)
 
 
 def _scenarios(paths: Sequence[str]) -> list[Scenario]:

@@ -5,38 +5,51 @@ long and from which seed, which faults to inject when (:mod:`harness.faults`),
 and what must come out. It is validated whole when loaded; an unknown key or a
 bad value is refused with a :class:`ScenarioError` naming the file and the key.
 
-The format (every key but ``duration`` and ``[[faults]]`` optional)::
+The format (only ``duration`` and one ``[[faults]]`` are required)::
 
     name = "communication-loss"         # default: the file name without .toml
     description = "one line shown by `hils faults list`"
     config = "my_intersection.toml"     # relative to this file; default: the shipped four-leg
     action_type = "selection"           # selection | switch | duration
-    agent = "random"                    # default: the action type's default agent
+    agent = "random"                    # built-in or package.module:Class; default: the action type's
     duration = 60.0                     # simulated seconds
     seed = 1
-    recover_after = 5.0                 # s in TIMEOUT before recover() is called; -1: never
-    poll_hz = 10.0                      # default: the config's rate
+    recover_after = 5.0                 # s in TIMEOUT before recover() is called; negative: never
 
     [middleware]                        # overrides of the config's middleware parameters
     n_timeout = 5
 
-    [[faults]]                          # see FAULT_TYPES for the keys of each type
+    [[faults]]                          # one table per fault; ``type`` picks one of FAULT_TYPES
     type = "drop"
-    start = 20.0
-    end = 40.0
+    name = "link-down"                  # default: type#index; shown in reports
+    start = 20.0                        # most types: a window [start, end) and an optional count
+    end = 35.0
 
     [expect]
     timeout = "communication"           # none (default) | any | communication | transition | drift, or a list
-    detect_within = 5.5                 # s from the fault's first firing to TIMEOUT
-    recover_within = 0.5                # s from the recover() call that succeeded to IDLE
+    timeouts = 1                        # exact number of TIMEOUT episodes
+    detect_within = 5.2                 # s from the fault's first firing to TIMEOUT
+    detect_from = "fault"               # or "dispatch": from the dispatch of the command that timed out
+    after_fault = "link-down"           # the fault detection counts from; default: the first to fire
+    recover_within = 0.1                # s from the recover() call that succeeded back to IDLE, every TIMEOUT
+    refused = 3                         # exactly this many actions refused, and no command for any of them
+    refused_reason = "conflict"         # every refusal for this reason
+    dropped_on_hold = 5                 # at least this many actions dropped while ON_HOLD
+    dropped_in_timeout = 5              # ... while in TIMEOUT
+    records = { drift = 5 }             # exact number of event records of a kind
+    control_status_seen = ["backup_mode"]   # unitControlStatus values the controller must show
+    control_status_never = ["backup_mode"] # ... and must never show
 
-Implicit expectations, always checked: every fault fired at least once; no
-command SET holds two conflicting phases; the controller never showed two
+Implicit expectations, always checked: every fault fired at least once (a
+scenario cannot pass because its fault never happened); no SET holds two
+conflicting phases or an unknown one; the controller never showed two
 conflicting phases (sampled every tick) nor went to MMU flash; no command or
-keepalive was sent while in TIMEOUT; the log is whole (seq gapless, the run
-started and ended, every dispatched command ended once, every SET was answered
-or failed). Each can be switched off in ``[expect]`` (``no_conflicting_command
-= false`` ...) for a scenario that studies that very failure.
+keepalive was sent while in TIMEOUT; the log is whole (seq gapless from 0, the
+run started and ended, every dispatched command ended exactly once, every SET
+was answered or failed). Each can be switched off in ``[expect]``
+(``no_conflicting_command``, ``no_conflicting_indication``,
+``no_commands_in_timeout``, ``log_complete`` = false) for a scenario that studies
+that very failure. A scenario with no ``timeout`` key expects no TIMEOUT.
 """
 
 from __future__ import annotations
@@ -45,7 +58,7 @@ import math
 import time
 import tomllib
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -72,6 +85,7 @@ from harness.faults import (
 )
 from hils import config as config_mod
 from hils.actions import ActionError, ActionType
+from hils.agents import AgentError, load_agent
 from hils.config import ConfigError, IntersectionConfig, MiddlewareParams
 from hils.events import Kind
 from hils.manager import TimeoutReason
@@ -96,7 +110,7 @@ __all__ = [
 ]
 
 SCENARIO_KEYS = ("name", "description", "config", "action_type", "agent", "duration", "seed", "recover_after",
-                 "poll_hz", "middleware", "faults", "expect")
+                 "middleware", "faults", "expect")
 
 
 class ScenarioError(ConfigError):
@@ -353,10 +367,7 @@ class Expectations:
     log_complete: bool = True
 
 
-_EXPECT_KEYS = ("timeout", "timeouts", "detect_within", "detect_from", "after_fault", "recover_within", "refused",
-                "refused_reason", "dropped_on_hold", "dropped_in_timeout", "records", "control_status_seen",
-                "control_status_never", "no_conflicting_command", "no_conflicting_indication",
-                "no_commands_in_timeout", "log_complete")
+_EXPECT_KEYS = tuple(Expectations.__dataclass_fields__)
 
 
 def _expectations(raw: Any, source: str, fault_names: Iterable[str]) -> Expectations:
@@ -410,13 +421,12 @@ class Scenario:
     duration: float
     seed: int
     recover_after: float | None
-    poll_hz: float | None
     faults: tuple[FaultSpec, ...]
     expect: Expectations
 
     def spec(self, log_path: Path | None = None) -> RunSpec:
         return RunSpec(self.config, self.action_type, self.agent, self.duration, self.seed, log_path,
-                       self.poll_hz, self.recover_after)
+                       recover_after=self.recover_after)
 
     def build_faults(self) -> list[Fault]:
         return [f.build(self.seed, self.action_type) for f in self.faults]
@@ -444,7 +454,7 @@ def parse_scenario(text: str, source: str = "<memory>", *, base: Path | None = N
     r = _Reader(raw, "", source, SCENARIO_KEYS)
     config = _config(r, base)
     action_type = ActionType(r.string("action_type", ActionType.SELECTION.value, choices=[t.value for t in ActionType]))
-    recover_after = r.number("recover_after", 5.0, low=-1)
+    recover_after = r.number("recover_after", 5.0)
     faults = _fault_specs(r, source, action_type)
     names = [f.name for f in faults]
     expect = _expectations(raw.get("expect", {}), source, names)
@@ -458,12 +468,13 @@ def parse_scenario(text: str, source: str = "<memory>", *, base: Path | None = N
         duration=r.number("duration", low=0, low_open=True, high=24 * 3600),
         seed=r.number("seed", 0, integer=True, low=0),
         recover_after=None if recover_after < 0 else recover_after,
-        poll_hz=r.optional_number("poll_hz", low=0, low_open=True, high=1000),
         faults=tuple(faults),
         expect=expect,
     )
-    # Build once now so that a bad combination is refused at load time, not mid-suite.
-    scenario.build_faults()
+    try:
+        load_agent(scenario.spec().agent_spec, config, action_type, scenario.seed)
+    except AgentError as exc:
+        raise r.error("agent", str(exc)) from None
     return scenario
 
 
@@ -499,7 +510,7 @@ def _fault_specs(r: _Reader, source: str, action_type: ActionType) -> list[Fault
             raise fr.error("name", f"{name!r} is used by another fault; names must be unique")
         names.add(name)
         spec = FaultSpec(kind, name, i, dict(item), source)
-        spec.build(0, action_type)  # validates the keys' values
+        spec.build(0, action_type)  # refuses a bad value now, not mid-suite
         specs.append(spec)
     return specs
 
@@ -580,10 +591,10 @@ class ScenarioResult:
             "passed": self.passed,
             "detection_s": _round(self.detection_s),
             "recovery_s": _round(self.recovery_s),
-            "timeouts": [{k: _round(v) if isinstance(v, float) else v for k, v in vars_of(e).items()}
+            "timeouts": [{k: _round(v) if isinstance(v, float) else v for k, v in asdict(e).items()}
                          for e in self.episodes],
-            "faults": [vars_of(f) for f in self.faults],
-            "checks": [vars_of(c) for c in self.checks],
+            "faults": [asdict(f) for f in self.faults],
+            "checks": [asdict(c) for c in self.checks],
             "records": self.records,
             "wall_s": round(self.wall_s, 4),
             "sim_s": self.scenario.duration,
@@ -594,8 +605,6 @@ def _round(t: float | None) -> float | None:
     return None if t is None else round(t, 6)
 
 
-def vars_of(obj: Any) -> dict[str, Any]:
-    return {k: (dict(v) if isinstance(v, Mapping) else v) for k, v in obj.__dict__.items()}
 
 
 def run_scenario(scenario: Scenario, *, log_path: Path | None = None) -> ScenarioResult:

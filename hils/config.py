@@ -292,7 +292,8 @@ def from_dict(raw: Mapping[str, Any], source: str = "<memory>") -> IntersectionC
         raise ConfigError(source, "phases", "is required: a table of phases keyed by phase number")
     numbers = []
     for key in raw_phases:
-        if not key.isdigit() or not 1 <= int(key) <= 255:
+        # "01" would name phase 1 a second way and miss every later lookup by str(number).
+        if not key.isdigit() or key != str(int(key)) or not 1 <= int(key) <= 255:
             raise ConfigError(source, f"phases.{key}", "is not a phase number; allowed: 1..255")
         numbers.append(int(key))
     numbers.sort()

@@ -33,6 +33,13 @@ class Snapshot:
     seq: int
 
 
+@dataclass(frozen=True, slots=True)
+class _Decoded:
+    state: SignalState
+    greens: tuple[int, ...]
+    yellows: tuple[int, ...]
+
+
 class SignalCache:
     """Latest signal state; notifies subscribers when it changes."""
 
@@ -75,6 +82,7 @@ class Poller:
         self.polls = 0
         self.halted = False
         self._resume = env.event()
+        self._decoded: dict[tuple, _Decoded] = {}
 
     def halt(self) -> None:
         self.halted = True
@@ -88,7 +96,16 @@ class Poller:
     def read_once(self):
         """One GET of the signal state (a SimPy process body); returns the SignalState or raises."""
         values = yield self.transport.get(self.oids)
-        return SignalState.from_values(values, self.groups)
+        return self._decode(values).state
+
+    def _decode(self, values: tuple) -> _Decoded:
+        # A controller shows a handful of distinct states: decode each once, with its log fields.
+        decoded = self._decoded.get(values)
+        if decoded is None:
+            state = SignalState.from_values(values, self.groups)
+            decoded = self._decoded[tuple(values)] = _Decoded(state, tuple(sorted(state.greens)),
+                                                              tuple(sorted(state.yellows)))
+        return decoded
 
     def run(self):
         start = self.env.now
@@ -101,7 +118,8 @@ class Poller:
             self.polls += 1
             poll_id = self.polls
             try:
-                state = yield from self.read_once()
+                values = yield self.transport.get(self.oids)
+                decoded = self._decode(values)
             except (TransportError, SnmpError, ValueError) as exc:
                 self.consecutive_failures += 1
                 self.log.emit(Kind.POLL_FAILED, poll_id=poll_id, error=f"{type(exc).__name__}: {exc}",
@@ -110,8 +128,9 @@ class Poller:
                     self.on_failure(f"{self.n_timeout} consecutive polls failed (last: {type(exc).__name__})")
             else:
                 self.consecutive_failures = 0
+                state = decoded.state
                 changed = self.cache.snapshot is None or state != self.cache.snapshot.state
-                self.log.emit(Kind.POLL, poll_id=poll_id, greens=state.greens, yellows=state.yellows,
+                self.log.emit(Kind.POLL, poll_id=poll_id, greens=decoded.greens, yellows=decoded.yellows,
                               changed=changed)
                 self.cache.update(state, self.env.now, poll_id)
             # Next slot on the fixed grid; if this poll overran, go at once on the next free slot.

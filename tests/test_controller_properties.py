@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from hypothesis import HealthCheck, given, settings
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from emulator.controller import Controller, tenths
@@ -21,7 +21,7 @@ from hils.ntcip import ControlColumn, UnitFlashStatus
 
 RING1, RING2 = (1, 2, 3, 4), (5, 6, 7, 8)
 ALL_PHASES = frozenset(RING1 + RING2)
-SETTINGS = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+SETTINGS = settings(max_examples=60, deadline=None)
 
 
 @st.composite

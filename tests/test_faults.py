@@ -338,6 +338,11 @@ def test_keepalive_suppressed_lets_the_backup_time_run_out(paper_config):
     assert 30.0 <= seen[UnitControlStatus.BACKUP_MODE] <= 30.25  # 30 s after the command's SET, to a tick
     assert not any(r["purpose"] == "keepalive" for r in sets)
     assert off.fired == 4  # at 10, 20, 30 and 40 s a refresh was due
+    short = KeepaliveSuppressed("short", window=Window(0.0, 15.0))
+    seen, sets = statuses([short])
+    assert UnitControlStatus.BACKUP_MODE not in seen  # switched back on in time
+    assert [r["t"] for r in sets if r["purpose"] == "keepalive"] == pytest.approx([20.004, 30.004, 40.004])
+    assert short.fired == 1
 
 
 def test_the_monitor_sees_conflicting_indications_and_mmu_flash(paper_config):

@@ -176,11 +176,11 @@ def test_transition_is_verified_on_the_first_poll_that_shows_it(paper_config) ->
     (dispatched,) = rig.log.of(Kind.COMMAND_DISPATCHED)
     (verified,) = rig.log.of(Kind.TRANSITION_VERIFIED)
     polls = [r for r in rig.log.of(Kind.POLL) if r["t"] >= dispatched["t"]]
-    first = next(r for r in polls if {3, 7} <= r["greens"])
+    first = next(r for r in polls if {3, 7} <= set(r["greens"]))
     assert verified["poll_id"] == first["poll_id"]
     assert verified["t"] == first["t"]
     before = [r for r in polls if r["poll_id"] < first["poll_id"]]
-    assert before and not any({3, 7} <= r["greens"] for r in before)
+    assert before and not any({3, 7} <= set(r["greens"]) for r in before)
     # Yellow 3 s + red clearance 2 s, seen within one poll period.
     assert 5.0 <= verified["hold_s"] <= 5.0 + 0.1 + 0.01
     assert mw.state is State.IDLE

@@ -1,0 +1,126 @@
+"""The UDP fault proxy: its schedule on its own, then the communication-failure scenario over real UDP."""
+
+from __future__ import annotations
+
+import asyncio
+import re
+import select
+import signal
+import subprocess
+import sys
+
+from serving import start_server
+
+from harness.faults import Direction, Window
+from harness.proxy import Action, ProxyRule, UdpFaultProxy, parse_delay, parse_drop
+from hils import config as config_mod
+from hils.actions import ActionType
+from hils.events import Kind
+from hils.runner import RunSpec
+from hils.wire import run_wire
+
+LOCAL = ("127.0.0.1", 0)
+
+
+class Echo(asyncio.DatagramProtocol):
+    def connection_made(self, transport):
+        self.transport = transport
+
+    def datagram_received(self, data, addr):
+        self.transport.sendto(data, addr)
+
+
+class Client(asyncio.DatagramProtocol):
+    def __init__(self, loop):
+        self.loop = loop
+        self.received: dict[int, float] = {}
+
+    def datagram_received(self, data, addr):
+        self.received[int(data)] = self.loop.time()
+
+
+async def ping_through_proxy(rules, count=13, period=0.1):
+    """Send datagram i at i * period through a proxy to an echo server; the proxy, when each was
+    sent and when each came back."""
+    loop = asyncio.get_running_loop()
+    echo, _ = await loop.create_datagram_endpoint(Echo, local_addr=LOCAL)
+    proxy = UdpFaultProxy(LOCAL, echo.get_extra_info("sockname")[:2], rules)
+    address = await proxy.start()
+    client = Client(loop)
+    sock, _ = await loop.create_datagram_endpoint(lambda: client, remote_addr=address)
+    sent = {}
+    start = loop.time()
+    try:
+        for i in range(count):
+            await asyncio.sleep(max(0.0, start + i * period - loop.time()))
+            sent[i] = loop.time()
+            sock.sendto(str(i).encode())
+        await asyncio.sleep(0.5)
+    finally:
+        sock.close()
+        proxy.close()
+        echo.close()
+    return proxy, sent, client.received
+
+
+def test_the_proxy_drops_in_its_window_and_delays_in_its_window():
+    rules = [ProxyRule(Action.DROP, Window(0.25, 0.55)),
+             ProxyRule(Action.DELAY, Window(0.75, 1.05), Direction.RESPONSE, delay=0.2)]
+    proxy, sent, received = asyncio.run(ping_through_proxy(rules))
+    assert set(received) == set(range(13)) - {3, 4, 5}  # sent at 0.3, 0.4, 0.5 s: never delivered
+    rtt = {i: received[i] - sent[i] for i in received}
+    assert all(rtt[i] >= 0.2 for i in (8, 9, 10))  # answered at 0.8, 0.9, 1.0 s: late
+    assert all(rtt[i] < 0.1 for i in (0, 1, 2, 6, 7, 11, 12))
+    assert proxy.stats.dropped == {"request": 3, "response": 0}
+    assert proxy.stats.delayed == {"request": 0, "response": 3}
+    assert proxy.stats.forwarded == {"request": 10, "response": 10}
+
+
+def test_proxy_schedules_parse_from_the_command_line():
+    assert parse_drop("2:9") == ProxyRule(Action.DROP, Window(2.0, 9.0))
+    assert parse_drop("5::request").window == Window(5.0) and parse_drop("5::request").direction is Direction.REQUEST
+    rule = parse_delay("0.3+-0.1@10:20:response")
+    assert (rule.delay, rule.jitter, rule.window, rule.direction) == (0.3, 0.1, Window(10, 20), Direction.RESPONSE)
+
+
+def start_proxy(upstream_port: int, *args: str) -> tuple[subprocess.Popen[str], int]:
+    cmd = [sys.executable, "-m", "hils.cli", "faults", "proxy", "--upstream", f"127.0.0.1:{upstream_port}", *args]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    ready, _, _ = select.select([proc.stdout], [], [], 20)
+    line = proc.stdout.readline() if ready else ""
+    match = re.fullmatch(r"proxying udp:127\.0\.0\.1:(\d+) -> 127\.0\.0\.1:\d+\n", line)
+    if match is None:
+        proc.kill()
+        raise AssertionError(f"no ready line from the proxy, got {line!r}; stderr: {proc.communicate()[1]}")
+    return proc, int(match[1])
+
+
+def test_communication_failure_over_real_udp_at_wall_clock_time(tmp_path):
+    """The paper's first error through the proxy: every datagram lost from 2 s to 9 s of the run."""
+    config = config_mod.load()  # the paper's parameters: 10 Hz polls, tau_udp 1 s, n_timeout 5
+    served = start_server(tmp_path / "serve.log")
+    proxy, port = start_proxy(served.port, "--drop", "2:9")
+    try:
+        spec = RunSpec(config, ActionType.SELECTION, duration=14.0, seed=1, recover_after=1.0,
+                       log_path=tmp_path / "events.jsonl")
+        result = run_wire(spec, f"snmp://127.0.0.1:{port}?community=private&version=2c")
+    finally:
+        proxy.send_signal(signal.SIGTERM)
+        proxy_out, _ = proxy.communicate(timeout=10)
+        served.stop()
+    records = result.records
+    (timeout,) = [r for r in records if r["kind"] == Kind.TIMEOUT_ENTERED]
+    assert timeout["reason"] == "communication"
+    # The proxy's clock starts at the run's first poll: 5 polls failing at tau_udp from 2 s on, each
+    # next poll going out on the next 0.1 s slot of the poller's grid.
+    assert 6.9 <= timeout["t"] <= 8.0
+    failed = [r for r in records if r["kind"] == Kind.POLL_FAILED and r["t"] <= timeout["t"]]
+    assert [r["consecutive"] for r in failed] == [1, 2, 3, 4, 5]
+    (recovered,) = [r for r in records if r["kind"] == Kind.RECOVERED]
+    assert 9.0 <= recovered["t"] <= 12.5  # the first recover() after the link is back
+    assert not [r for r in records if r["kind"] == Kind.SET_SENT and r["purpose"] == "command"
+                and timeout["t"] <= r["t"] < recovered["t"]]
+    assert all(config.compatible(*r["phases"]) for r in records if r["kind"] == Kind.SET_SENT and r["phases"])
+    assert [r["seq"] for r in records] == list(range(len(records)))
+    dropped = re.search(r"dropped (\d+) requests", proxy_out)
+    assert dropped and int(dropped[1]) >= 6, proxy_out
