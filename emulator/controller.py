@@ -130,6 +130,7 @@ class Controller:
         self._calls_key: tuple[frozenset[int], frozenset[int]] | None = None
         self._calls: frozenset[int] = frozenset()
         self._changed = True
+        self._quiet: tuple[frozenset[int], ...] | None = None
         self._since_set: int | None = None  # ticks since the last control SET; None = backup timer disarmed
         self.rings = [Ring(i + 1, order) for i, order in enumerate(self.config.rings)]
         started = [p for p, ph in self.config.phases.items() if ph.startup in _STARTUP_INTERVAL]
@@ -210,6 +211,13 @@ class Controller:
         if self.flashing:
             return
         calls = self.calls
+        inputs = (calls, self.control[ControlColumn.HOLD], self.control[ControlColumn.FORCE_OFF])
+        if inputs == self._quiet:
+            # Nothing is timing and the inputs are as they were: only the greens' counters move.
+            for r in self.rings:
+                if r.interval is Interval.GREEN:
+                    r.ticks += 1
+            return
         blocked = self._blocked(calls)
         for r in self.rings:
             self._time(r, calls, blocked)
@@ -218,10 +226,14 @@ class Controller:
                 self._start(r, p)
         if all(r.interval is Interval.DWELL for r in self.rings):
             self._cross(calls)
-        if self._changed:
-            self._changed = False
+        changed, self._changed = self._changed, False
+        if changed:
             self._refresh_status()
             self._monitor()
+        # Quiet: every ring rests (green without conflicting demand, or dwelling with nothing to start).
+        resting = all(r.interval is Interval.DWELL or (r.interval is Interval.GREEN and not r.max_ticks)
+                      for r in self.rings)
+        self._quiet = inputs if resting and not changed else None
 
     def _backup_timer(self) -> None:
         if self._since_set is None or self.backup_time == 0:

@@ -23,6 +23,8 @@ from enum import StrEnum
 from pathlib import Path
 from typing import IO, Any
 
+import orjson
+
 
 class Kind(StrEnum):
     """Event kinds and the keys each one adds."""
@@ -54,10 +56,11 @@ class EventLog:
 
     def __init__(self, path: str | Path | None = None, *, keep: bool = True, clock=None) -> None:
         self.path = Path(path) if path is not None else None
-        self._file: IO[str] | None = None
+        self._file: IO[bytes] | None = None
         if self.path is not None:
             self.path.parent.mkdir(parents=True, exist_ok=True)
-            self._file = self.path.open("w", encoding="utf-8")
+            # Unbuffered: each record is one write(2), on disk (in the OS) before emit returns.
+            self._file = self.path.open("wb", buffering=0)
         self.records: list[dict[str, Any]] = []
         self.keep = keep
         self._seq = 0
@@ -74,8 +77,7 @@ class EventLog:
         if self.keep:
             self.records.append(rec)
         if self._file is not None:
-            self._file.write(json.dumps(rec, separators=(",", ":"), default=_jsonable) + "\n")
-            self._file.flush()
+            self._file.write(orjson.dumps(rec, default=_jsonable, option=orjson.OPT_APPEND_NEWLINE))
         return rec
 
     def of(self, *kinds: Kind) -> list[dict[str, Any]]:

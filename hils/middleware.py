@@ -243,7 +243,10 @@ class Middleware:
                           error=f"{type(ev.value).__name__}: {ev.value}")
 
     def _on_signal(self, snap: Snapshot, changed: bool) -> None:
-        self._feed(SignalObserved(snap.t, snap.state.greens, snap.seq))
+        # ON_HOLD verifies on every poll (a command may target what is already shown); otherwise
+        # an unchanged poll tells the manager nothing new.
+        if changed or self.manager.state is State.ON_HOLD:
+            self._feed(SignalObserved(snap.t, snap.state.greens, snap.seq))
 
     def _fail(self, reason: TimeoutReason, detail: str) -> None:
         self._feed(FailureDetected(self.env.now, reason, detail))

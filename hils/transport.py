@@ -108,16 +108,17 @@ class LocalTransport:
         """Nothing to release in process."""
 
     def _request(self, call, latency: Latency) -> simpy.Event:
-        done = self.env.event()
         delay = latency.draw(self._rng)
         if (self.loss and self._rng.random() < self.loss) or delay > self.tau_udp:
+            done = self.env.event()
             self.env.timeout(self.tau_udp).callbacks.append(
                 lambda _: done.fail(CommunicationTimeout(f"no answer within {self.tau_udp} s")))
             return done
         try:
             value = call()
         except SnmpError as exc:
+            done = self.env.event()
             self.env.timeout(delay, exc).callbacks.append(lambda ev: done.fail(ev.value))
-        else:
-            self.env.timeout(delay, value).callbacks.append(lambda ev: done.succeed(ev.value))
-        return done
+            return done
+        # The answer arrives after the latency: the timeout itself is the request's event.
+        return self.env.timeout(delay, value)
