@@ -11,8 +11,9 @@ Rules of this file
   this file, exact and testable.
 - :meth:`SnmpAgent.respond` turns one datagram into one answer (or None for a
   dropped datagram) synchronously and without I/O; it applies a SET to the MIB
-  view at once. Only the endpoint sends, after the modeled latency, so a slow
-  answer never holds up the next request.
+  view at once. Only the endpoint sends, on an asyncio timer at the arrival
+  time plus the modeled latency, so a slow answer never holds up the next
+  request.
 
 Theory of operation
 -------------------
@@ -42,8 +43,10 @@ GETNEXT/GETBULK past the last object   endOfMibView varbind           noSuchName
 answer larger than max_message_size    tooBig, no varbinds            tooBig
 =====================================  =============================  ===========
 
-These are the answers net-snmp's own snmpd gives in the same cases. A refused
-SET changes nothing: the view validates every varbind before applying any.
+Where net-snmp's own snmpd meets the same case (read-only community, read-only
+or unknown object, wrong type, missing object or instance) it answers the same,
+in both versions. A refused SET changes nothing: the view validates every
+varbind before applying any.
 """
 
 from __future__ import annotations
@@ -207,12 +210,14 @@ class SnmpAgent:
         if self._transport is not None:
             self._transport.close()
 
-    def _send_later(self, answer: bytes, addr: tuple[str, int]) -> None:
-        delay = self.latency.draw(self._rng)
-        if delay <= 0.0:
+    def _send_later(self, answer: bytes, addr: tuple[str, int], arrived: float) -> None:
+        """Send at ``arrived`` (loop time) plus the drawn latency: the decoding time is part of it."""
+        loop = asyncio.get_running_loop()
+        due = arrived + self.latency.draw(self._rng)
+        if due <= loop.time():
             self._sendto(answer, addr)
         else:
-            asyncio.get_running_loop().call_later(delay, self._sendto, answer, addr)
+            loop.call_at(due, self._sendto, answer, addr)
 
     def _sendto(self, answer: bytes, addr: tuple[str, int]) -> None:
         if self._transport is not None and not self._transport.is_closing():
@@ -378,9 +383,10 @@ class _Endpoint(asyncio.DatagramProtocol):
         self.agent = agent
 
     def datagram_received(self, data: bytes, addr: tuple[str, int]) -> None:
+        arrived = asyncio.get_running_loop().time()
         answer = self.agent.respond(data, f"{addr[0]}:{addr[1]}")
         if answer is not None:
-            self.agent._send_later(answer, addr)
+            self.agent._send_later(answer, addr, arrived)
 
     def error_received(self, exc: Exception) -> None:
         # An ICMP error for an earlier answer (the manager went away): nothing to do for us.

@@ -289,7 +289,7 @@ def _build_keepalive(r: _Reader, name: str, _seed: int, _at: ActionType) -> Faul
 _TRANSPORT = ("ops", "probability", *_WINDOW_KEYS)
 FAULT_TYPES: dict[str, FaultType] = {
     "drop": FaultType(("direction", "burst", *_TRANSPORT), _build_drop,
-                      "datagrams lost (direction request|response|both, probability, burst)"),
+                      "datagrams lost (direction request, response or both; probability; burst)"),
     "delay": FaultType(("delay", "jitter", *_TRANSPORT), _build_delay, "answers delayed by delay +/- jitter s"),
     "snmp_error": FaultType(("status", *_TRANSPORT), _build_error, "SNMP error answers (status genErr...)"),
     "stuck": FaultType(_WINDOW_KEYS, _build_stuck, "the controller acknowledges and ignores phase calls"),

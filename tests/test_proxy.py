@@ -9,9 +9,8 @@ import signal
 import subprocess
 import sys
 
-from serving import start_server
-
 from harness.faults import Direction, Window
+from harness.processes import start_emulator
 from harness.proxy import Action, ProxyRule, UdpFaultProxy, parse_delay, parse_drop
 from hils import config as config_mod
 from hils.actions import ActionType
@@ -98,7 +97,7 @@ def start_proxy(upstream_port: int, *args: str) -> tuple[subprocess.Popen[str], 
 def test_communication_failure_over_real_udp_at_wall_clock_time(tmp_path):
     """The paper's first error through the proxy: every datagram lost from 2 s to 9 s of the run."""
     config = config_mod.load()  # the paper's parameters: 10 Hz polls, tau_udp 1 s, n_timeout 5
-    served = start_server(tmp_path / "serve.log")
+    served = start_emulator(tmp_path / "serve.log")
     proxy, port = start_proxy(served.port, "--drop", "2:9")
     try:
         spec = RunSpec(config, ActionType.SELECTION, duration=14.0, seed=1, recover_after=1.0,

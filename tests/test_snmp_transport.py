@@ -12,11 +12,8 @@ every datagram the agent receives), snmpEnableAuthenTraps (writable INTEGER
 
 from __future__ import annotations
 
-import os
 import re
-import shutil
 import socket
-import subprocess
 import time
 from collections.abc import Iterator
 
@@ -24,6 +21,7 @@ import numpy as np
 import pytest
 import simpy
 
+from harness.processes import snmpd
 from hils.clock import WallClockDriver
 from hils.ntcip import ErrorStatus, SnmpError
 from hils.snmp import SnmpTarget, SnmpTransport, SnmpVersion
@@ -39,62 +37,10 @@ MISSING = (1, 3, 6, 1, 2, 1, 1, 99, 0)
 SLACK = 0.5
 VERSIONS = ["1", "2c"]
 
-SNMPD_CONF = """\
-rocommunity public 127.0.0.1
-rwcommunity private 127.0.0.1
-"""
-
-
-def _tool(name: str) -> str:
-    path = shutil.which(name, path=os.pathsep.join([os.environ.get("PATH", ""), "/usr/sbin", "/usr/bin"]))
-    if path is None:
-        raise RuntimeError(f"{name} not found: install the Debian packages snmpd and snmp")
-    return path
-
-
-def _free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
-
-
-def _answers(snmpget: str, port: int) -> bool:
-    probe = subprocess.run([snmpget, "-v2c", "-c", "public", "-t", "0.2", "-r", "0", "-On",
-                            f"127.0.0.1:{port}", ".1.3.6.1.2.1.1.3.0"], capture_output=True, timeout=5)
-    return probe.returncode == 0
-
-
 @pytest.fixture(scope="module")
 def snmpd_port(tmp_path_factory) -> Iterator[int]:
-    snmpd, snmpget = _tool("snmpd"), _tool("snmpget")
-    workdir = tmp_path_factory.mktemp("snmpd")
-    conf = workdir / "snmpd.conf"
-    conf.write_text(SNMPD_CONF)
-    # No MIB loading (quiet, fast), persistent state in tmp, no smux listener on TCP 199.
-    env = {**os.environ, "MIBS": "", "SNMP_PERSISTENT_DIR": str(workdir / "persist")}
-    for _attempt in range(3):
-        port = _free_udp_port()
-        proc = subprocess.Popen([snmpd, "-f", "-Lf", str(workdir / "snmpd.log"), "-C", "-c", str(conf),
-                                 "-I", "-smux", f"udp:127.0.0.1:{port}"],
-                                env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        deadline = time.monotonic() + 10.0
-        while proc.poll() is None and time.monotonic() < deadline and not _answers(snmpget, port):
-            time.sleep(0.05)
-        if proc.poll() is None and _answers(snmpget, port):
-            break
-        proc.kill()
-        proc.wait()
-    else:
-        raise RuntimeError(f"snmpd did not start; see {workdir / 'snmpd.log'}")
-    try:
+    with snmpd(tmp_path_factory.mktemp("snmpd")) as port:
         yield port
-    finally:
-        proc.terminate()
-        try:
-            proc.wait(timeout=5)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
 
 
 @pytest.fixture

@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import re
 
-from serving import start_server
-
+from harness.processes import start_emulator
 from hils import config as config_mod
 from hils.actions import ActionType
 from hils.events import Kind
@@ -17,7 +16,7 @@ CFG = config_mod.load()
 
 
 def test_thirty_seconds_of_phase_switching_over_snmp(tmp_path):
-    served = start_server(tmp_path / "serve.log", verbose=True)
+    served = start_emulator(tmp_path / "serve.log", verbose=True)
     try:
         spec = RunSpec(CFG.with_middleware(poll_hz=50.0), ActionType.SWITCH, duration=36.0, seed=0,
                        log_path=tmp_path / "events.jsonl")
