@@ -123,7 +123,6 @@ class Fault:
         self.limit = count
         self.fired = 0
         self.first_fired: float | None = None
-        self.last_fired: float | None = None
         self.details: dict[str, int] = {}
 
     def active(self, now: float) -> bool:
@@ -133,7 +132,6 @@ class Fault:
         self.fired += 1
         if self.first_fired is None:
             self.first_fired = now
-        self.last_fired = now
 
     def note(self, key: str) -> None:
         """Count a secondary effect (shown in the report's details)."""

@@ -81,9 +81,9 @@ class MiddlewareParams:
         return 1.0 / self.poll_hz
 
     @property
-    def keepalive_period(self) -> float:
-        """How often the current call is SET again: well inside the backup time."""
-        return self.backup_time / 3.0
+    def keepalive_period(self) -> float | None:
+        """How often the current call is SET again: well inside the backup time (None: no backup time)."""
+        return self.backup_time / 3.0 if self.backup_time else None
 
 
 @dataclass(frozen=True)
@@ -360,6 +360,12 @@ def from_dict(raw: Mapping[str, Any], source: str = "<memory>") -> IntersectionC
 
     pairs = _pairs(structure.get("pairs"), "structure.pairs", phases, compatibility, source)
     sequence = _pairs(structure.get("sequence"), "structure.sequence", phases, compatibility, source)
+    for name, listed in (("pairs", pairs), ("sequence", sequence)):
+        for i, (a, b) in enumerate(listed):
+            if frozenset((a, b)) not in derived:
+                raise ConfigError(source, f"structure.{name}[{i}]",
+                                  f"phases {a} and {b} are in different barrier groups, so the controller never "
+                                  "shows them together; allowed: pairs within one barrier group")
     middleware = raw.get("middleware", {})
     if not isinstance(middleware, dict):
         raise ConfigError(source, "middleware", "must be a table of middleware parameters")

@@ -138,7 +138,8 @@ class Middleware:
             self.cache.update(state, self.env.now, 0)
             self.converter.sync(state.greens)
             if backup:
-                self.keepalive_period = min(self.keepalive_period, backup / 3.0)
+                limit = backup / 3.0  # the controller's own backup time rules
+                self.keepalive_period = min(self.keepalive_period, limit) if self.keepalive_period else limit
         self.env.process(self.poller.run())
         self.env.process(self._keepalive())
         self.ready.succeed()
@@ -147,6 +148,8 @@ class Middleware:
         # Any SET of a control object restarts the controller's backup timer, so only
         # refresh when no command has been SET within the period.
         period = self.keepalive_period
+        if not period:
+            return  # neither the config nor the controller has a backup time: nothing to refresh
         while True:
             due = self.last_set + period
             if self.env.now < due:

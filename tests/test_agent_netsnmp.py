@@ -13,12 +13,9 @@ import asyncio
 import itertools
 import random
 import re
-import select
-import shutil
 import signal
 import socket
 import subprocess
-import sys
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -33,6 +30,7 @@ from emulator.agent import DEFAULT_MAX_MESSAGE_SIZE, DropReason, RequestKind, Sn
 from emulator.controller import Controller
 from emulator.mib import MibView
 from emulator.serve import WallClockTicker
+from harness.processes import Served, start_emulator, tool
 from hils.config import IntersectionConfig
 from hils.ntcip import (
     ASC,
@@ -68,53 +66,16 @@ PHASES_2_6 = 0b00100010  # 34
 PHASES_4_8 = 0b10001000  # 136
 
 
-def _tool(name: str) -> str:
-    path = shutil.which(name)
-    if path is None:
-        raise RuntimeError(f"{name} not found: install the Debian package snmp")
-    return path
-
-
-# --- the server under test -----------------------------------------------------------------------
-
-@dataclass
-class Served:
-    proc: subprocess.Popen[str]
-    port: int
-    ready_at: float  # time.monotonic() when the ready line was read
-    log: Path
-
-    def stop(self, sig: signal.Signals = signal.SIGTERM) -> tuple[int, str]:
-        """Signal the server; its exit code and the rest of its stdout."""
-        self.proc.send_signal(sig)
-        out, _ = self.proc.communicate(timeout=10)
-        return self.proc.returncode, out
-
-
-def start_server(log: Path, *args: str, verbose: bool = False) -> Served:
-    cmd = [sys.executable, "-m", "hils.cli", *(["-v"] if verbose else []), "emulator", "serve", "--port", "0", *args]
-    with log.open("w") as err:
-        proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=err, text=True)
-    ready, _, _ = select.select([proc.stdout], [], [], 20)
-    line = proc.stdout.readline() if ready else ""
-    match = re.fullmatch(r"serving (.+) on udp:127\.0\.0\.1:(\d+) \(ro=(\S+) rw=(\S+)\)\n", line)
-    if match is None:
-        proc.kill()
-        proc.wait()
-        raise AssertionError(f"no ready line, got {line!r}; stderr:\n{log.read_text()}")
-    return Served(proc, int(match[2]), time.monotonic(), log)
-
-
 @pytest.fixture(scope="module")
 def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Served]:
     """One agent shared by the tests that leave its signal state alone."""
-    served = start_server(tmp_path_factory.mktemp("agent") / "serve.log")
+    served = start_emulator(tmp_path_factory.mktemp("agent") / "serve.log")
     yield served
     served.stop()
 
 
-def run(tool: str, version: str, community: str, port: int, *args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([_tool(tool), f"-v{version}", "-c", community, "-On", "-t", "1", "-r", "0",
+def run(program: str, version: str, community: str, port: int, *args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([tool(program), f"-v{version}", "-c", community, "-On", "-t", "1", "-r", "0",
                            f"127.0.0.1:{port}", *args], capture_output=True, text=True, timeout=20)
 
 
@@ -208,14 +169,14 @@ def test_configured_objects_read_back(server: Served, version: str, paper_config
     assert got[oid_str(phase_oid(PhaseColumn.CONCURRENCY, 1))] == "Hex-STRING: 05 06 "
 
 
-@pytest.mark.parametrize(("tool", "version", "options"), [
+@pytest.mark.parametrize(("program", "version", "options"), [
     ("snmpwalk", "1", ()),  # GETNEXT
     ("snmpwalk", "2c", ()),  # GETNEXT
     ("snmpbulkwalk", "2c", ("-Cr7",)),  # GETBULK, 7 per answer: rows end mid-table
 ])
-def test_walk_lists_every_object_in_order(server: Served, paper_config: IntersectionConfig, tool: str,
+def test_walk_lists_every_object_in_order(server: Served, paper_config: IntersectionConfig, program: str,
                                           version: str, options: tuple[str, ...]) -> None:
-    done = run(tool, version, "public", server.port, *options, A)
+    done = run(program, version, "public", server.port, *options, A)
     assert done.returncode == 0, done.stderr
     walked = [parse_oid(oid) for oid in values(done.stdout)]
     expected = MibView(Controller(paper_config)).oids
@@ -290,7 +251,7 @@ def test_refused_set_reports_and_changes_nothing(server: Served, version: str, c
 # --- the model ticks at wall-clock time --------------------------------------------------------------
 
 def test_vehicle_call_moves_greens_through_yellow_in_wall_clock_time(tmp_path: Path) -> None:
-    served = start_server(tmp_path / "serve.log")
+    served = start_emulator(tmp_path / "serve.log")
     try:
         assert integers(served.port, GREENS_1) == [PHASES_2_6]
         done = run("snmpset", "2c", "private", served.port, VEH_CALL_1, "i", str(PHASES_4_8))
@@ -340,7 +301,7 @@ def test_ticker_catches_up_on_missed_ticks_and_counts_them(paper_config: Interse
 # --- what gets no answer -------------------------------------------------------------------------------
 
 def test_foreign_datagrams_are_dropped_counted_and_the_agent_keeps_answering(tmp_path: Path) -> None:
-    served = start_server(tmp_path / "serve.log", "--latency-ms", "30", "--jitter-ms", "5", verbose=True)
+    served = start_emulator(tmp_path / "serve.log", "--latency-ms", "30", "--jitter-ms", "5", verbose=True)
     valid = request(api.SNMP_VERSION_2C, "public", RequestKind.GET, [MAX_PHASES.instance()])
     response = api.v2c.Message()
     api.v2c.apiMessage.set_defaults(response)
@@ -359,7 +320,7 @@ def test_foreign_datagrams_are_dropped_counted_and_the_agent_keeps_answering(tmp
             with pytest.raises(TimeoutError):
                 sock.recv(65535)
         # A real SNMPv3 discovery request, and a GET with a community the agent does not know.
-        v3 = subprocess.run([_tool("snmpget"), "-v3", "-l", "noAuthNoPriv", "-u", "nobody", "-On", "-t", "0.5",
+        v3 = subprocess.run([tool("snmpget"), "-v3", "-l", "noAuthNoPriv", "-u", "nobody", "-On", "-t", "0.5",
                              "-r", "0", f"127.0.0.1:{served.port}", MAX_PHASES_0], capture_output=True, text=True)
         assert "Timeout" in v3.stderr
         wrong = run("snmpget", "2c", "secret", served.port, MAX_PHASES_0)
@@ -388,7 +349,7 @@ def test_foreign_datagrams_are_dropped_counted_and_the_agent_keeps_answering(tmp
 
 
 def test_sigterm_stops_cleanly_with_a_summary(tmp_path: Path) -> None:
-    served = start_server(tmp_path / "serve.log", "--ro-community", "ro", "--rw-community", "rw")
+    served = start_emulator(tmp_path / "serve.log", "--ro-community", "ro", "--rw-community", "rw")
     assert run("snmpset", "2c", "rw", served.port, VEH_CALL_1, "i", "1").returncode == 0
     assert run("snmpset", "2c", "ro", served.port, VEH_CALL_1, "i", "2").returncode != 0
     code, out = served.stop(signal.SIGTERM)

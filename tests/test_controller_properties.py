@@ -62,6 +62,7 @@ def configs(draw: st.DrawFn) -> IntersectionConfig:
     return from_dict(raw, "random.toml")
 
 
+# Calls are listed twice: they are what the middleware SETs most, and what moves the controller.
 SETTABLE = (ControlColumn.VEH_CALL, ControlColumn.VEH_CALL, ControlColumn.HOLD, ControlColumn.FORCE_OFF,
             ControlColumn.PHASE_OMIT)
 phase_sets = st.frozensets(st.sampled_from(sorted(ALL_PHASES)))

@@ -298,3 +298,18 @@ def test_a_command_for_a_pair_already_green_is_verified_by_the_next_poll(paper_c
     assert verified["hold_s"] <= 0.1 + 1e-9
     assert rig.kinds(Kind.TIMEOUT_ENTERED) == []
     assert [r["reason"] for r in rig.kinds(Kind.HOLD_RELEASED)] == ["served"]
+
+
+def test_no_backup_time_anywhere_means_no_keepalive_and_no_stall(paper_config) -> None:
+    cfg = paper_config.with_middleware(backup_time=0)
+    env = simpy.Environment()
+    target = VirtualTarget(env, cfg)
+    target.controller.backup_time = 0
+    log = EventLog()
+    mw = Middleware(env, target.transport, cfg, "switch", log)
+    mw.start()
+    env.run(until=1.0)
+    mw.submit(1)
+    env.run(until=120.0)  # would never get here if the keepalive spun at one instant
+    assert mw.keepalive_period is None
+    assert [r["purpose"] for r in log.of(Kind.SET_SENT)] == ["command"]
