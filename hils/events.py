@@ -35,7 +35,7 @@ class Kind(StrEnum):
     ACTION_REFUSED = "action_refused"          # action_id, error, reason
     ACTION_DROPPED = "action_dropped"          # action_id, state
     COMMAND_DISPATCHED = "command_dispatched"  # action_id, command_id, command, green
-    SET_SENT = "set_sent"                      # command_id, phases, purpose (command|keepalive|clear)
+    SET_SENT = "set_sent"                      # command_id, phases, purpose (command|retry|keepalive|recovery|clear)
     SET_ANSWERED = "set_answered"              # command_id, purpose
     SET_FAILED = "set_failed"                  # command_id, purpose, error
     POLL = "poll"                              # poll_id, greens, yellows, reds (on change only), changed

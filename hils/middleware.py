@@ -30,6 +30,7 @@ from hils.manager import (
     Recovered,
     RecoveryCompleted,
     SignalObserved,
+    Stage,
     StartTimer,
     State,
     TimeoutEntered,
@@ -39,7 +40,7 @@ from hils.manager import (
 )
 from hils.ntcip import UNIT_BACKUP_TIME, ControlColumn, SnmpError, control_oid, phases_to_groups
 from hils.poller import Poller, SignalCache, Snapshot
-from hils.transport import Transport, TransportError
+from hils.transport import CommunicationTimeout, Transport, TransportError
 
 log = logging.getLogger(__name__)
 
@@ -129,17 +130,24 @@ class Middleware:
     # --- processes ----------------------------------------------------------------------------
 
     def _startup(self) -> Generator[simpy.Event, Any, None]:
-        try:
-            state = yield from self.poller.read_once()
-            (backup,) = yield self.transport.get([UNIT_BACKUP_TIME.instance()])
-        except (TransportError, SnmpError) as exc:
-            self._fail(TimeoutReason.COMMUNICATION, f"controller unreachable at start-up: {exc}")
-        else:
+        # Like the poller, give up only after n_timeout consecutive failures: one lost datagram
+        # at start-up is no reason to halt.
+        for attempt in range(1, self.config.middleware.n_timeout + 1):
+            try:
+                state = yield from self.poller.read_once()
+                (backup,) = yield self.transport.get([UNIT_BACKUP_TIME.instance()])
+            except (TransportError, SnmpError) as exc:
+                self.log.emit(Kind.POLL_FAILED, poll_id=0, error=f"start-up read: {type(exc).__name__}: {exc}",
+                              consecutive=attempt)
+                if attempt == self.config.middleware.n_timeout:
+                    self._fail(TimeoutReason.COMMUNICATION, f"controller unreachable at start-up: {exc}")
+                continue
             self.cache.update(state, self.env.now, 0)
             self.converter.sync(state.greens)
             if backup:
                 limit = backup / 3.0  # the controller's own backup time rules
                 self.keepalive_period = min(self.keepalive_period, limit) if self.keepalive_period else limit
+            break
         self.env.process(self.poller.run())
         self.env.process(self._keepalive())
         self.ready.succeed()
@@ -241,9 +249,17 @@ class Middleware:
         if ev.ok:
             self.log.emit(Kind.SET_ANSWERED, command_id=command_id, purpose=purpose)
         else:
-            ev.defused = True  # a failed SET is logged; the transition timer or the poller decides what follows
+            ev.defused = True  # a failed SET is logged; what follows is decided here or by the timers
             self.log.emit(Kind.SET_FAILED, command_id=command_id, purpose=purpose,
                           error=f"{type(ev.value).__name__}: {ev.value}")
+            pending = self.manager.pending
+            if (isinstance(ev.value, CommunicationTimeout) and purpose in ("command", "retry")
+                    and pending is not None and pending.command_id == command_id
+                    and pending.stage is Stage.TRANSITION):
+                # No answer: the call may never have reached the controller. SET it again (it is
+                # idempotent) while the command waits for its transition; tau_trans still bounds the
+                # wait, and each try takes tau_udp. A refusal (an SNMP error) is not retried.
+                self._send(frozenset(pending.command.phases), "retry", command_id)
 
     def _on_signal(self, snap: Snapshot, changed: bool) -> None:
         # ON_HOLD verifies on every poll (a command may target what is already shown); otherwise

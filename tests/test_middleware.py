@@ -17,6 +17,7 @@ from hils.manager import State
 from hils.middleware import Middleware
 from hils.ntcip import ControlColumn, UnitControlStatus
 from hils.runner import RunSpec, run_virtual
+from hils.transport import CommunicationTimeout
 
 
 class Rig:
@@ -313,3 +314,43 @@ def test_no_backup_time_anywhere_means_no_keepalive_and_no_stall(paper_config) -
     env.run(until=120.0)  # would never get here if the keepalive spun at one instant
     assert mw.keepalive_period is None
     assert [r["purpose"] for r in log.of(Kind.SET_SENT)] == ["command"]
+
+
+class _FirstSetLost:
+    """Loses the first SET request: it never reaches the controller and fails after tau_udp."""
+
+    def __init__(self, inner, tau_udp: float) -> None:
+        self.inner, self.env, self.tau_udp, self.lost = inner, inner.env, tau_udp, 0
+
+    def get(self, oids):
+        return self.inner.get(oids)
+
+    def set(self, varbinds):
+        if self.lost:
+            return self.inner.set(varbinds)
+        self.lost += 1
+        failed = self.env.event()
+        self.env.timeout(self.tau_udp).callbacks.append(
+            lambda _: failed.fail(CommunicationTimeout("lost")))
+        return failed
+
+    def close(self) -> None:
+        self.inner.close()
+
+
+def test_a_command_set_without_answer_is_sent_again_and_the_transition_completes(paper_config) -> None:
+    env = simpy.Environment()
+    target = VirtualTarget(env, paper_config)
+    log = EventLog()
+    mw = Middleware(env, _FirstSetLost(target.transport, paper_config.middleware.tau_udp), paper_config,
+                    "switch", log)
+    mw.start()
+    env.run(until=5.0)
+    mw.submit(1)
+    env.run(until=20.0)
+    sent = [(r["purpose"], r["t"]) for r in log.of(Kind.SET_SENT) if r["purpose"] != "keepalive"]
+    assert [p for p, _ in sent] == ["command", "retry"]
+    assert sent[1][1] - sent[0][1] == pytest.approx(paper_config.middleware.tau_udp)
+    (verified,) = log.of(Kind.TRANSITION_VERIFIED)
+    assert verified["hold_s"] == pytest.approx(paper_config.middleware.tau_udp + 5.0, abs=0.2)
+    assert not log.of(Kind.TIMEOUT_ENTERED)
