@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 from hils import config as config_mod
 
@@ -49,6 +50,8 @@ def _register_serve(commands: argparse._SubParsersAction) -> None:
     serve.add_argument("--latency-ms", type=float, default=0.0, metavar="MS", help="mean response delay (0)")
     serve.add_argument("--jitter-ms", type=float, default=0.0, metavar="MS",
                        help="uniform jitter of the response delay, +/- MS (0)")
+    serve.add_argument("--trace", type=Path, metavar="FILE",
+                       help="write every interval change as JSON Lines, stamped with the monotonic clock")
     serve.set_defaults(func=_serve)
 
 
@@ -64,7 +67,8 @@ def _serve(args: argparse.Namespace) -> int:
         raise SystemExit("hils emulator serve: --latency-ms and --jitter-ms must not be negative")
     cfg = config_mod.load(args.config)
     options = ServeOptions(host=args.host, port=args.port, ro_community=args.ro_community,
-                           rw_community=args.rw_community, latency=Latency(args.latency_ms / 1e3, args.jitter_ms / 1e3))
+                           rw_community=args.rw_community, latency=Latency(args.latency_ms / 1e3, args.jitter_ms / 1e3),
+                           trace=args.trace)
 
     def ready(address: tuple[str, int]) -> None:
         # Scripts and tests wait for this line: it is printed only once requests are answered.

@@ -16,10 +16,13 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import json
 import logging
 import signal
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 
 from emulator.agent import DropReason, RequestKind, SnmpAgent
 from emulator.controller import TICK, Change, Controller
@@ -77,6 +80,7 @@ class ServeOptions:
     rw_community: str = "private"
     latency: Latency = NO_LATENCY
     seed: int | None = None
+    trace: Path | None = None  # JSON Lines of every interval change, stamped with time.monotonic_ns()
 
 
 @dataclass(frozen=True, slots=True)
@@ -113,7 +117,8 @@ class EmulatorServer:
     def __init__(self, config: IntersectionConfig, options: ServeOptions | None = None) -> None:
         self.config = config
         self.options = options or ServeOptions()
-        self.controller = Controller(config, on_change=_log_change)
+        self._trace = self.options.trace.open("w", buffering=1) if self.options.trace else None
+        self.controller = Controller(config, on_change=self._on_change)
         self.view = MibView(self.controller)
         self.agent = SnmpAgent(self.view, ro_community=self.options.ro_community,
                                rw_community=self.options.rw_community, latency=self.options.latency,
@@ -133,9 +138,19 @@ class EmulatorServer:
             raise RuntimeError("the server is not started")
         return self._ticking
 
+    def _on_change(self, change: Change) -> None:
+        log.debug("tick %d: ring %d phase %s %s", change.tick, change.ring, change.phase, change.interval.value)
+        if self._trace is not None:
+            # Monotonic nanoseconds are comparable with the middleware's event log stamps
+            # (same clock, other process): what the wire benchmark measures lags from.
+            self._trace.write(json.dumps({"wall_ns": time.monotonic_ns(), "tick": change.tick, "ring": change.ring,
+                                          "phase": change.phase, "interval": change.interval.value}) + "\n")
+
     async def stop(self) -> ServeSummary:
         """Stop answering and ticking; raises what ended the ticker if it failed."""
         self.agent.close()
+        if self._trace is not None:
+            self._trace.close()
         if self._ticking is not None:
             self._ticking.cancel()
             with contextlib.suppress(asyncio.CancelledError):
@@ -166,7 +181,3 @@ async def serve_until_signalled(config: IntersectionConfig, options: ServeOption
             loop.remove_signal_handler(sig)
     # The ticker ends on its own only when the model fails; stop() then raises that failure.
     return await server.stop()
-
-
-def _log_change(change: Change) -> None:
-    log.debug("tick %d: ring %d phase %s %s", change.tick, change.ring, change.phase, change.interval.value)
