@@ -16,15 +16,18 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import copy
 import json
 import logging
 import signal
 import time
+from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass
+from enum import Enum
 from pathlib import Path
 
-from emulator.agent import DropReason, RequestKind, SnmpAgent
+from emulator.agent import AgentStats, DropReason, RequestKind, SnmpAgent
 from emulator.controller import TICK, Change, Controller
 from emulator.mib import MibView
 from hils.config import IntersectionConfig
@@ -87,28 +90,17 @@ class ServeOptions:
 class ServeSummary:
     """What one serving session did, for the closing line."""
 
-    requests: dict[RequestKind, int]
-    errors: int
-    dropped: dict[DropReason, int]
-    ticks: int
-    late_ticks: int
-    max_lateness: float
-
-    @property
-    def answered(self) -> int:
-        return sum(self.requests.values())
-
-    @property
-    def total_dropped(self) -> int:
-        return sum(self.dropped.values())
+    traffic: AgentStats  # a copy of the agent's counters at the end
+    ticks: TickStats
 
     def describe(self) -> str:
-        def parts(counts: dict) -> str:
-            return ", ".join(f"{k.value} {n}" for k, n in counts.items() if n) or "none"
+        def parts(counts: Counter, kinds: type[Enum]) -> str:
+            return ", ".join(f"{k.value} {counts[k]}" for k in kinds if counts[k]) or "none"
 
-        return (f"served {self.answered} requests ({parts(self.requests)}), {self.errors} answered with an error; "
-                f"dropped {self.total_dropped} datagrams ({parts(self.dropped)}); "
-                f"{self.ticks} ticks, {self.late_ticks} late (max {self.max_lateness * 1e3:.1f} ms)")
+        t, k = self.traffic, self.ticks
+        return (f"served {t.answered} requests ({parts(t.requests, RequestKind)}), {t.errors} answered with an "
+                f"error; dropped {t.total_dropped} datagrams ({parts(t.dropped, DropReason)}); "
+                f"{k.ticks} ticks, {k.late} late (max {k.max_lateness * 1e3:.1f} ms)")
 
 
 class EmulatorServer:
@@ -158,9 +150,7 @@ class EmulatorServer:
         return self.summary()
 
     def summary(self) -> ServeSummary:
-        stats, ticks = self.agent.stats, self.ticker.stats
-        return ServeSummary({k: stats.requests[k] for k in RequestKind}, stats.errors,
-                            {r: stats.dropped[r] for r in DropReason}, ticks.ticks, ticks.late, ticks.max_lateness)
+        return ServeSummary(copy.deepcopy(self.agent.stats), copy.copy(self.ticker.stats))
 
 
 async def serve_until_signalled(config: IntersectionConfig, options: ServeOptions,

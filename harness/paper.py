@@ -179,14 +179,8 @@ def trajectory_zoom_figure(records: list[dict[str, Any]], t0: float, path: Path)
     end_events += [r for r in records if r["kind"] == Kind.STATE and r["t"] == verified["t"] and r["to"] == "idle"]
     answered = next(r for r in records if r["kind"] == Kind.SET_ANSWERED and r.get("command_id") == cid)
     fig, (ax_start, ax_mid, ax_end) = plt.subplots(3, 1, figsize=(10, 6.4), height_ratios=[1, 1.3, 1])
-    base = start_events[0]["wall_ns"]
-    for r in start_events:
-        label = r["kind"] if r["kind"] != Kind.STATE else "state -> on_hold"
-        ax_start.scatter((r["wall_ns"] - base) / 1e3, 0, label=label, zorder=3, s=40)
-    ax_start.set_yticks([])
-    ax_start.set_xlabel("wall clock since the agent's output (us)")
-    ax_start.set_title("Start of Command 1: agent output to SET dispatch")
-    ax_start.legend(fontsize=7, ncol=4, loc="upper center", bbox_to_anchor=(0.5, -0.45))
+    _event_strip(ax_start, start_events, "wall clock since the agent's output (us)",
+                 "Start of Command 1: agent output to SET dispatch")
     lo, hi = first["t"] - 0.5, verified["t"] + 0.5
     for row, (pair, spans) in enumerate(_pair_spans(records, 0.0, lo, hi).items()):
         if pair in ((3, 7), (4, 8)):
@@ -200,23 +194,29 @@ def trajectory_zoom_figure(records: list[dict[str, Any]], t0: float, path: Path)
     ax_mid.set_xlabel("simulation time (s)")
     ax_mid.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.0, 0.5))
     ax_mid.set_title(f"Command 1, whole transition: hold {verified['hold_s']:.3f} s")
-    base_end = end_events[0]["wall_ns"]
-    for r in end_events:
-        label = r["kind"] if r["kind"] != Kind.STATE else "state -> idle"
-        ax_end.scatter((r["wall_ns"] - base_end) / 1e3, 0, label=label, zorder=3, s=40)
-    ax_end.set_yticks([])
-    ax_end.set_xlabel("wall clock since the verifying poll was handled (us)")
-    ax_end.set_title("End of Command 1: matched verification to IDLE")
-    ax_end.legend(fontsize=7, ncol=3, loc="upper center", bbox_to_anchor=(0.5, -0.45))
+    _event_strip(ax_end, end_events, "wall clock since the verifying poll was handled (us)",
+                 "End of Command 1: matched verification to IDLE")
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return {
-        "start_window_us": (start_events[-1]["wall_ns"] - base) / 1e3,
+        "start_window_us": (start_events[-1]["wall_ns"] - start_events[0]["wall_ns"]) / 1e3,
         "set_answered_after_dispatch_ms": (answered["t"] - first["t"]) * 1e3,
         "hold_s": verified["hold_s"],
-        "end_window_us": (end_events[-1]["wall_ns"] - base_end) / 1e3,
+        "end_window_us": (end_events[-1]["wall_ns"] - end_events[0]["wall_ns"]) / 1e3,
     }
+
+
+def _event_strip(ax, events: list[dict[str, Any]], xlabel: str, title: str) -> None:
+    """Events of a few microseconds on one line, by their wall-clock stamps."""
+    base = events[0]["wall_ns"]
+    for r in events:
+        label = r["kind"] if r["kind"] != Kind.STATE else f"state -> {r['to']}"
+        ax.scatter((r["wall_ns"] - base) / 1e3, 0, label=label, zorder=3, s=40)
+    ax.set_yticks([])
+    ax.set_xlabel(xlabel)
+    ax.set_title(title)
+    ax.legend(fontsize=7, ncol=len(events), loc="upper center", bbox_to_anchor=(0.5, -0.45))
 
 
 # --- holds ---------------------------------------------------------------------------------------
