@@ -360,10 +360,10 @@ def from_dict(raw: Mapping[str, Any], source: str = "<memory>") -> IntersectionC
 
     pairs = _pairs(structure.get("pairs"), "structure.pairs", phases, compatibility, source)
     sequence = _pairs(structure.get("sequence"), "structure.sequence", phases, compatibility, source)
-    for name, listed in (("pairs", pairs), ("sequence", sequence)):
+    for key, listed in (("pairs", pairs), ("sequence", sequence)):
         for i, (a, b) in enumerate(listed):
             if frozenset((a, b)) not in derived:
-                raise ConfigError(source, f"structure.{name}[{i}]",
+                raise ConfigError(source, f"structure.{key}[{i}]",
                                   f"phases {a} and {b} are in different barrier groups, so the controller never "
                                   "shows them together; allowed: pairs within one barrier group")
     middleware = raw.get("middleware", {})

@@ -174,7 +174,7 @@ class Run:
                 sim.apply(cache.snapshot.state)
             sim.step()
 
-        while True:
+        while not self.ended:
             took = self.step_cost(one_step)
             self.middleware.observe_step(step, took)
             k += 1

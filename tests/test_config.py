@@ -419,3 +419,7 @@ def test_with_middleware_validates(paper_config: IntersectionConfig, changes: di
         paper_config.with_middleware(**changes)
     assert info.value.field == field
     assert info.value.source == paper_config.source
+
+
+def test_the_shipped_config_keeps_its_name() -> None:
+    assert load().name == "paper four-leg intersection"
