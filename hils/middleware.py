@@ -71,7 +71,7 @@ class Middleware:
         self.call: frozenset[int] = frozenset()  # the VehCall last SET
         self.last_set = float("-inf")
         self.ready = env.event()
-        self._idle = env.event()
+        self._entering: dict[State, simpy.Event] = {}  # events of processes waiting for a state
         self._actions = 0
 
     # --- public API -------------------------------------------------------------------------
@@ -111,13 +111,16 @@ class Middleware:
         if not self.timeout_flag:
             self.drift.observe(step, took)
 
-    def wait_idle(self) -> simpy.Event:
-        """An event that fires when the manager is (or next becomes) IDLE."""
-        if self.manager.state is State.IDLE:
+    def wait_for(self, state: State) -> simpy.Event:
+        """An event that fires when the manager is (or next becomes) in ``state``."""
+        if self.manager.state is state:
             ev = self.env.event()
             ev.succeed()
             return ev
-        return self._idle
+        return self._entering.setdefault(state, self.env.event())
+
+    def wait_idle(self) -> simpy.Event:
+        return self.wait_for(State.IDLE)
 
     def recover(self) -> simpy.Process:
         """Manual recovery: re-read the controller, align the call with what it shows, return to IDLE."""
@@ -203,9 +206,9 @@ class Middleware:
         after = self.manager.state
         if after is not before:
             self.log.emit(Kind.STATE, **{"from": before.value, "to": after.value})
-            if after is State.IDLE:
-                idle, self._idle = self._idle, self.env.event()
-                idle.succeed()
+            waiting = self._entering.pop(after, None)
+            if waiting is not None:
+                waiting.succeed()
 
     def _carry_out(self, effect: Effect) -> None:
         match effect:

@@ -59,13 +59,23 @@ def signal_timeline(records: Sequence[dict[str, Any]], config: IntersectionConfi
     return path
 
 
-def queues(samples: Sequence[tuple[float, Mapping[str, int]]], path: Path, *, title: str = "Queues") -> Path:
-    fig, ax = plt.subplots(figsize=(11, 3.6))
+def queues(samples: Sequence[tuple[float, Mapping[str, int]]], path: Path, *, title: str = "Queues",
+           bin_s: float = 60.0) -> Path:
+    """Longest queue per approach in each ``bin_s`` window: samples every few seconds are too
+    jagged to read, and the longest queue is what a traffic engineer looks for."""
     names = sorted({k for _, q in samples for k in q})
+    bins: dict[int, dict[str, int]] = {}
+    for t, q in samples:
+        row = bins.setdefault(int(t // bin_s), {})
+        for name in names:
+            row[name] = max(row.get(name, 0), q.get(name, 0))
+    fig, ax = plt.subplots(figsize=(11, 3.6))
+    starts = sorted(bins)
     for name in names:
-        ax.plot([t for t, _ in samples], [q.get(name, 0) for _, q in samples], label=name, linewidth=1.2)
-    ax.set_xlabel("simulation time (s)")
-    ax.set_ylabel("halting vehicles")
+        ax.step([b * bin_s / 60.0 for b in starts], [bins[b][name] for b in starts], where="post", label=name,
+                linewidth=1.4)
+    ax.set_xlabel("simulation time (min)")
+    ax.set_ylabel(f"longest queue per {bin_s:g} s (veh)")
     ax.set_title(title)
     if names:
         ax.legend(ncol=len(names), fontsize="small")

@@ -25,6 +25,7 @@ from hils.agents import Agent, Observation, load_agent
 from hils.config import IntersectionConfig
 from hils.events import EventLog, Kind
 from hils.events import read as read_events
+from hils.manager import State
 from hils.middleware import Middleware
 from hils.ntcip import SignalState
 from hils.transport import Transport
@@ -159,7 +160,7 @@ class Run:
             mw.submit(self.agent.act(self._observation()))
             if not duration_actions:
                 yield self.env.timeout(interval)
-            elif mw.state.value == "idle":
+            elif mw.state is State.IDLE:
                 yield self.env.timeout(step)  # refused or kept: do not ask again at the same instant
 
     def _simulation_loop(self) -> Generator[simpy.Event, Any, None]:
@@ -195,13 +196,12 @@ class Run:
     def _auto_recover(self) -> Generator[simpy.Event, Any, None]:
         mw = self.middleware
         while True:
-            yield self.env.timeout(self.spec.config.middleware.sumo_step)
-            if mw.timeout_flag:
-                yield self.env.timeout(self.spec.recover_after)
-                while mw.timeout_flag:
-                    ok = yield mw.recover()
-                    if not ok:
-                        yield self.env.timeout(self.spec.recover_after)
+            yield mw.wait_for(State.TIMEOUT)
+            yield self.env.timeout(self.spec.recover_after)
+            while mw.timeout_flag:
+                ok = yield mw.recover()
+                if not ok:
+                    yield self.env.timeout(self.spec.recover_after)
 
 
 TargetFactory = Callable[..., Any]
