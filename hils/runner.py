@@ -135,6 +135,7 @@ class Run:
         def ending():
             self.ended = True
             self.middleware.keepalive_enabled = False
+            self.middleware.poller.halt()
             yield self.middleware.close()
             self.events.emit(Kind.RUN_ENDED, reason=reason)
             self.events.close()

@@ -41,7 +41,14 @@ def run_wire(spec: RunSpec, target_url: str, *, simulation: Simulation | None = 
         driver.run_sync(until=spec.duration)
         reason = "duration" if env.now >= spec.duration else "interrupted"
         ending = run.finish(reason)
-        ending.callbacks.append(lambda _ev: driver.stop())
+
+        def settle():
+            yield ending
+            # Let an answer to the last poll, already on its way, land before the socket closes.
+            yield env.timeout(0.05)
+            driver.stop()
+
+        env.process(settle())
         # Bounded: the clearing SET answers or fails within tau_udp.
         driver.run_sync(until=env.now + spec.config.middleware.tau_udp + 1.0)
     finally:
