@@ -10,8 +10,8 @@ proxy`` relays UDP to an SNMP agent with faults on a schedule (:mod:`harness.pro
 from __future__ import annotations
 
 import argparse
-import logging
 import json
+import logging
 import sys
 import time
 from collections.abc import Sequence
