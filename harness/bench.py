@@ -1,7 +1,9 @@
 """`hils bench ...`: benchmarks that print figures and write them under reports/bench/.
 
 Figures are wall-clock measurements on a shared machine: each report states
-the machine, and comparisons are made side by side within one run.
+the machine, and comparisons are made side by side within one run. Modules that
+load libsumo or pysnmp are imported where they are used, so that `hils --help`
+does not pay for them.
 """
 
 from __future__ import annotations
@@ -9,16 +11,22 @@ from __future__ import annotations
 import argparse
 import json
 import tempfile
+import time
 from importlib import resources
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import simpy
 
 from harness import machine
+from harness.processes import snmpd, start_emulator
 from hils import config as config_mod
 from hils.actions import ActionType
+from hils.clock import WallClockDriver
+from hils.events import Kind
 from hils.latency import PAPER_LATENCY_MS, Stats, internal_latencies_ms
+from hils.ntcip import signal_oids
 from hils.runner import RunSpec, run_virtual
 
 REPORT_DIR = Path("reports/bench")
@@ -150,11 +158,6 @@ SNMPD_OIDS = ((1, 3, 6, 1, 2, 1, 4, 1, 0), (1, 3, 6, 1, 2, 1, 4, 2, 0), (1, 3, 6
 def measure_get_rtt(url: str, oids: tuple, count: int) -> dict[str, float]:
     """Sequential GETs of ``oids`` in one PDU through the middleware's transport at wall-clock time:
     round trip per request (ms) and the request rate sustained."""
-    import time
-
-    import simpy
-
-    from hils.clock import WallClockDriver
     from hils.snmp import SnmpTarget, SnmpTransport
 
     env = simpy.Environment()
@@ -186,8 +189,6 @@ def measure_get_rtt(url: str, oids: tuple, count: int) -> dict[str, float]:
 def measure_verification_lag(rate_hz: float, duration: float, workdir: Path) -> dict[str, Any]:
     """Phase switching at wall-clock time against a served emulator that traces its intervals:
     per command, the lag (ms) from the commanded phases turning green to the manager's IDLE."""
-    from harness.processes import start_emulator
-    from hils.events import Kind
     from hils.wire import run_wire
 
     # Short minimum greens and a decision every 6.5 s: more transitions per minute of wall clock.
@@ -219,9 +220,6 @@ def measure_verification_lag(rate_hz: float, duration: float, workdir: Path) -> 
 
 
 def _wire_command(args: argparse.Namespace) -> int:
-    from harness.processes import snmpd, start_emulator
-    from hils.ntcip import signal_oids
-
     info = machine.describe()
     rates = [float(r) for r in args.rates.split(",")]
     out: dict[str, Any] = {"machine": info}

@@ -49,7 +49,7 @@ class Middleware:
     """Everything between the agent and the transport, on one SimPy environment."""
 
     def __init__(self, env: simpy.Environment, transport: Transport, config: IntersectionConfig,
-                 action_type: ActionType | str, events: EventLog, *, poll_hz: float | None = None) -> None:
+                 action_type: ActionType | str, events: EventLog) -> None:
         params = config.middleware
         self.env = env
         self.transport = transport
@@ -60,7 +60,7 @@ class Middleware:
         self.converter = ActionConverter(config, ActionType(action_type))
         self.cache = SignalCache()
         self.poller = Poller(env, transport, self.cache, events, groups=config.groups,
-                             rate_hz=poll_hz or params.poll_hz, n_timeout=params.n_timeout,
+                             rate_hz=params.poll_hz, n_timeout=params.n_timeout,
                              on_failure=lambda why: self._fail(TimeoutReason.COMMUNICATION, why))
         self.drift = DriftMonitor(params.n_drift, events, lambda why: self._fail(TimeoutReason.DRIFT, why))
         # Every poll, not only changes: a command for phases already green is verified by the

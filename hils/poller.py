@@ -95,8 +95,12 @@ class Poller:
 
     def read_once(self):
         """One GET of the signal state (a SimPy process body); returns the SignalState or raises."""
+        decoded = yield from self._read()
+        return decoded.state
+
+    def _read(self):
         values = yield self.transport.get(self.oids)
-        return self._decode(values).state
+        return self._decode(values)
 
     def _decode(self, values: tuple) -> _Decoded:
         # A controller shows a handful of distinct states: decode each once, with its log fields.
@@ -118,8 +122,7 @@ class Poller:
             self.polls += 1
             poll_id = self.polls
             try:
-                values = yield self.transport.get(self.oids)
-                decoded = self._decode(values)
+                decoded = yield from self._read()
             except (TransportError, SnmpError, ValueError) as exc:
                 self.consecutive_failures += 1
                 self.log.emit(Kind.POLL_FAILED, poll_id=poll_id, error=f"{type(exc).__name__}: {exc}",

@@ -84,7 +84,6 @@ class RunSpec:
     duration: float = 3600.0
     seed: int = 0
     log_path: Path | None = None
-    poll_hz: float | None = None  # None: the config's rate
     recover_after: float | None = 5.0  # call recover() this long after entering TIMEOUT; None: never
 
     sumo: bool = False  # whether a traffic simulation runs (decides the default agent)
@@ -105,8 +104,7 @@ class Run:
         # A run that writes its log to a file does not also keep it in memory: a long run's records
         # would grow the heap that every full garbage collection walks, in the middle of the hot path.
         self.events = EventLog(spec.log_path, keep=spec.log_path is None)
-        self.middleware = Middleware(env, transport, spec.config, spec.action_type, self.events,
-                                     poll_hz=spec.poll_hz)
+        self.middleware = Middleware(env, transport, spec.config, spec.action_type, self.events)
         self.agent = agent or load_agent(spec.agent_spec, spec.config, spec.action_type, spec.seed)
         self.simulation = simulation or NoSimulation()
         self.step_cost = step_cost
