@@ -27,7 +27,7 @@ from hils.clock import WallClockDriver
 from hils.events import Kind
 from hils.latency import PAPER_LATENCY_MS, Stats, internal_latencies_ms
 from hils.ntcip import signal_oids
-from hils.runner import RunSpec, run_virtual
+from hils.testbed import RunSpec, run_spec
 
 REPORT_DIR = Path("reports/bench")
 
@@ -84,7 +84,7 @@ def measure_latency(samples: int, seed: int = 0) -> dict[str, Stats]:
             duration = samples * per_command[action_type] * 1.15
             spec = RunSpec(cfg, action_type, duration=duration, seed=seed,
                            log_path=Path(tmp) / f"{action_type.value}.jsonl")
-            result = run_virtual(spec, chunk=duration)
+            result = run_spec(spec)
             values = internal_latencies_ms(result.records).get(action_type.value, [])
             out[action_type.value] = Stats.of(values[:samples])
     return out
@@ -125,7 +125,7 @@ def measure_overhead(duration: float, repeat: int, seed: int) -> dict[str, Any]:
             with tempfile.TemporaryDirectory() as tmp:
                 spec = RunSpec(cfg, ActionType.SELECTION, duration=duration, seed=seed, sumo=True,
                                log_path=Path(tmp) / "events.jsonl")
-                full.append(run_virtual(spec, simulation=sim, chunk=duration).wall_s)
+                full.append(run_spec(spec, simulation=sim).wall_s)
         finally:
             sim.close()
     bare_s, full_s = float(np.median(bare)), float(np.median(full))
@@ -189,7 +189,6 @@ def measure_get_rtt(url: str, oids: tuple, count: int) -> dict[str, float]:
 def measure_verification_lag(rate_hz: float, duration: float, workdir: Path) -> dict[str, Any]:
     """Phase switching at wall-clock time against a served emulator that traces its intervals:
     per command, the lag (ms) from the commanded phases turning green to the manager's IDLE."""
-    from hils.wire import run_wire
 
     # Short minimum greens and a decision every 6.5 s: more transitions per minute of wall clock.
     # The emulator and the middleware read the same config file.
@@ -201,7 +200,7 @@ def measure_verification_lag(rate_hz: float, duration: float, workdir: Path) -> 
     served = start_emulator(workdir / f"serve-{rate_hz:g}.log", "--config", str(variant), "--trace", str(trace))
     try:
         spec = RunSpec(cfg, ActionType.SWITCH, duration=duration, log_path=workdir / f"events-{rate_hz:g}.jsonl")
-        records = run_wire(spec, f"snmp://127.0.0.1:{served.port}?community=private&version=2c").records
+        records = run_spec(spec, target=f"snmp://127.0.0.1:{served.port}?community=private&version=2c").records
     finally:
         served.stop()
     greens = [json.loads(line) for line in trace.read_text().splitlines()]

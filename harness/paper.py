@@ -29,7 +29,7 @@ from hils.config import IntersectionConfig
 from hils.events import Kind
 from hils.latency import PAPER_LATENCY_MS, Stats, internal_latencies_ms, transition_holds
 from hils.plots import COLORS, signal_intervals
-from hils.runner import RunSpec, run_virtual
+from hils.testbed import RunSpec, run_spec
 
 OUT = Path("reports/paper")
 PAPER_HOLD = (5.18, 5.20)  # seconds, the paper's range of holds per transition at 10 Hz polling
@@ -64,17 +64,9 @@ class ScriptedSwitchAgent:
 
 
 def latency_table(cfg: IntersectionConfig, duration: float, seed: int) -> dict[str, Stats]:
-    from hils.sumo import SumoSimulation
-
     out = {}
     for action_type in ActionType:
-        sim = SumoSimulation(cfg, seed=seed, end=duration)
-        sim.start()
-        try:
-            result = run_virtual(RunSpec(cfg, action_type, duration=duration, seed=seed, sumo=True), simulation=sim,
-                                 chunk=duration)
-        finally:
-            sim.close()
+        result = run_spec(RunSpec(cfg, action_type, duration=duration, seed=seed, sumo=True))
         out[action_type.value] = Stats.of(internal_latencies_ms(result.records).get(action_type.value, []))
     return out
 
@@ -100,7 +92,7 @@ def trajectory_run(cfg: IntersectionConfig, seed: int) -> tuple[list[dict[str, A
     def configure(run, target):
         run.agent = ScriptedSwitchAgent([1, 0, 1, 0, 1])
 
-    records = run_virtual(spec, configure=configure).records
+    records = run_spec(spec, configure=configure).records
     received = [r for r in records if r["kind"] == Kind.ACTION_RECEIVED]
     return records, received[2]["t"]
 
@@ -232,7 +224,7 @@ def holds_by_rate(cfg: IntersectionConfig, rates: tuple[float, ...], seed: int, 
         holds: list[float] = []
         for k in range(runs):
             spec = RunSpec(cfg.with_middleware(poll_hz=rate), ActionType.SWITCH, duration=300.0, seed=seed + k)
-            holds += transition_holds(run_virtual(spec, chunk=300.0).records)[2:]
+            holds += transition_holds(run_spec(spec).records)[2:]
         out[rate] = Stats.of(holds)
     return out
 

@@ -9,15 +9,20 @@ there: `hils emulator serve`, or a real controller.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
+import signal
+import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 from hils import config as config_mod
 from hils import plots, summary
 from hils.actions import ActionType
-from hils.agents import AgentError
-from hils.runner import DEFAULT_AGENTS, RunSpec, Simulation, run_virtual
+from hils.errors import UserError
+from hils.testbed import DEFAULT_AGENTS, VIRTUAL, AgentFailed, RunInterrupted, RunSpec, Testbed
 
 log = logging.getLogger(__name__)
 
@@ -72,7 +77,7 @@ def _window(text: str) -> tuple[float, float]:
     try:
         a, b = (float(x) for x in text.split(":"))
     except ValueError:
-        raise SystemExit(f"hils run: --plot-window must be START:END in seconds, got {text!r}") from None
+        raise UsageError(f"--plot-window must be START:END in seconds, got {text!r}") from None
     return a, b
 
 
@@ -81,49 +86,106 @@ def run_command(args: argparse.Namespace) -> int:
     if args.poll_hz is not None:
         cfg = cfg.with_middleware(poll_hz=args.poll_hz)
     window = _window(args.plot_window)
-    out = args.out or Path("reports/runs") / f"{time.strftime('%Y%m%d-%H%M%S')}-{args.action_type}"
-    out.mkdir(parents=True, exist_ok=True)
+    if not args.duration > 0:
+        raise UsageError(f"--duration must be positive seconds, got {args.duration:g}")
+    out = _run_folder(args.out, args.action_type)
+    log_path = args.log or out / "events.jsonl"
     spec = RunSpec(cfg, ActionType(args.action_type), agent=args.agent, duration=args.duration, seed=args.seed,
-                   log_path=args.log or out / "events.jsonl",
-                   recover_after=None if args.recover_after < 0 else args.recover_after, sumo=not args.no_sumo)
-    simulation = None if args.no_sumo else _sumo(cfg, args)
-    try:
-        if args.target:
-            from hils.wire import run_wire
-
-            result = run_wire(spec, args.target, simulation=simulation)
-        else:
-            result = _run_with_progress(spec, simulation, args.no_progress)
-    except AgentError as exc:
-        print(f"hils run: {exc}")
-        return 2
-    finally:
-        if simulation is not None:
-            traffic = simulation.summary()
-            simulation.close()
-    records = result.records
-    s = summary.summarize(records, cfg, traffic=None if simulation is None else traffic, wall_s=result.wall_s)
+                   log_path=log_path, recover_after=None if args.recover_after < 0 else args.recover_after,
+                   sumo=not args.no_sumo)
+    tb = Testbed(cfg, action_type=spec.action_type, target=args.target or VIRTUAL, sumo=spec.sumo, seed=spec.seed,
+                 agent=spec.agent, duration=spec.duration, log_path=log_path, recover_after=spec.recover_after)
+    error: BaseException | None = None
+    with _terminate_as_interrupt(), tb:
+        try:
+            tb.reset()
+            if tb.mode == VIRTUAL and not args.no_progress:
+                with _progress(spec) as bar:
+                    tb.run(progress=lambda t: bar.update(t - bar.n))
+            else:
+                tb.run()
+        except (AgentFailed, RunInterrupted, KeyboardInterrupt) as exc:
+            error = exc
+        except UserError:
+            raise
+        except Exception as exc:  # an error inside the run: the run is finished, say so and keep what it logged
+            if args.verbose:
+                raise
+            error = exc
+    records = tb.records
+    s = summary.summarize(records, cfg, traffic=tb.traffic, wall_s=tb.wall_s)
     summary.write(s, out / "summary.json")
-    plots.signal_timeline(records, cfg, out / "signal_timeline.png", start=window[0], end=window[1])
-    if result.run.traffic_samples:
-        plots.queues(result.run.traffic_samples, out / "queues.png", title=f"Queues per approach, {cfg.name}")
+    outputs = [log_path.name if log_path.parent == out else str(log_path), "summary.json"]
+    if records:
+        plots.signal_timeline(records, cfg, out / "signal_timeline.png", start=window[0], end=window[1])
+        outputs.append("signal_timeline.png")
+    if tb.traffic_samples:
+        plots.queues(tb.traffic_samples, out / "queues.png", title=f"Queues per approach, {cfg.name}")
+        outputs.append("queues.png")
     print(summary.render(s))
-    print(f"Outputs in {out}/: {spec.log_path.name if spec.log_path.parent == out else spec.log_path}, "
-          "summary.json, signal_timeline.png" + (", queues.png" if result.run.traffic_samples else ""))
-    return 0
+    print(f"Outputs in {out}/: {', '.join(outputs)}")
+    return _ending(tb.end_reason, error)
 
 
-def _sumo(cfg: config_mod.IntersectionConfig, args: argparse.Namespace) -> Simulation:
-    from hils.sumo import SumoSimulation
-
-    sim = SumoSimulation(cfg, seed=args.seed, end=args.duration)
-    sim.start()
-    return sim
+class UsageError(UserError):
+    """A command-line mistake: one line on stderr, exit status 2."""
 
 
-def _run_with_progress(spec: RunSpec, simulation: Simulation | None, quiet: bool):
+#: Exit status per way a run ends (0 only for a normal end).
+EXIT_STATUS = {"duration": 0, "interrupted": 130, "terminated": 143, "agent_error": 1, "error": 1}
+
+
+def _ending(reason: str | None, error: BaseException | None) -> int:
+    """Say how the run ended (one line, stderr for anything but a normal end) and return the exit status."""
+    if reason == "duration" and error is None:
+        print("Run ended: its duration passed.")
+        return 0
+    cause = error.__cause__ if isinstance(error, AgentFailed) and error.__cause__ else error
+    how = {"interrupted": "interrupted (Ctrl-C)", "terminated": "terminated (SIGTERM)",
+           "agent_error": f"the agent failed: {error}", }.get(reason or "error", f"error: {cause}")
+    print(f"hils run: run ended early, {how}; calls cleared, outputs written (use -v for a traceback)",
+          file=sys.stderr)
+    if isinstance(error, AgentFailed) and cause is not error:
+        log.debug("agent traceback", exc_info=cause)
+    return EXIT_STATUS.get(reason or "error", 1)
+
+
+def _run_folder(given: Path | None, action_type: str) -> Path:
+    """The run's folder: the one given, or a new one under reports/runs/ that no other run uses."""
+    if given is not None:
+        try:
+            given.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise UsageError(f"cannot create the output folder {given}: {exc.strerror}") from None
+        return given
+    base = Path("reports/runs") / f"{time.strftime('%Y%m%d-%H%M%S')}-{action_type}"
+    for n in range(1, 1000):
+        candidate = base if n == 1 else base.with_name(f"{base.name}-{n}")
+        try:
+            candidate.mkdir(parents=True, exist_ok=False)
+        except FileExistsError:
+            continue  # another run started in the same second: take the next name
+        except OSError as exc:
+            raise UsageError(f"cannot create the output folder {candidate}: {exc.strerror}") from None
+        return candidate
+    raise UsageError(f"no free run folder name beside {base}")
+
+
+@contextlib.contextmanager
+def _terminate_as_interrupt() -> Iterator[None]:
+    """SIGTERM ends a virtual-time run like Ctrl-C does (the wall-clock driver handles both itself)."""
+    def handler(signum: int, frame: Any) -> None:
+        raise RunInterrupted("terminated")
+
+    previous = signal.signal(signal.SIGTERM, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _progress(spec: RunSpec):
     from tqdm import tqdm
 
-    with tqdm(total=spec.duration, unit="sim s", disable=quiet, desc=f"{spec.action_type.value}",
-              bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f} sim s [{elapsed}<{remaining}]") as bar:
-        return run_virtual(spec, simulation=simulation, progress=lambda t: bar.update(t - bar.n))
+    return tqdm(total=spec.duration, unit="sim s", desc=f"{spec.action_type.value}",
+                bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f} sim s [{elapsed}<{remaining}]")

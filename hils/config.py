@@ -19,6 +19,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
+from hils.errors import UserError
 from hils.ntcip import PhaseStartup, group_count
 
 Pair = tuple[int, int]
@@ -35,7 +36,7 @@ APPROACHES = ("north", "south", "east", "west")
 TURNS = ("left", "through")
 
 
-class ConfigError(ValueError):
+class ConfigError(UserError, ValueError):
     """A configuration that cannot be used; says where and what is allowed."""
 
     def __init__(self, source: str, field_name: str, message: str) -> None:

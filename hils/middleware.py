@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Generator
+from dataclasses import dataclass
 from typing import Any
 
 import simpy
@@ -43,6 +44,15 @@ from hils.poller import Poller, SignalCache, Snapshot
 from hils.transport import CommunicationTimeout, Transport, TransportError
 
 log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True, slots=True)
+class Submission:
+    """What became of an action handed to :meth:`Middleware.submit`."""
+
+    action_id: int
+    error: ActionError | None = None  # refused by the converter: nothing was sent
+    dropped: bool = False  # converted, but the manager was not IDLE
 
 
 class Middleware:
@@ -89,8 +99,8 @@ class Middleware:
         """Read the controller, then start polling and the keepalive; ``ready`` fires when done."""
         return self.env.process(self._startup())
 
-    def submit(self, value: Any) -> int:
-        """An agent's action value, converted and handed to the manager; returns the action id."""
+    def submit(self, value: Any) -> Submission:
+        """An agent's action value, converted and handed to the manager."""
         self._actions += 1
         action_id = self._actions
         self.log.emit(Kind.ACTION_RECEIVED, action_id=action_id, action_type=self.converter.action_type.value,
@@ -100,11 +110,11 @@ class Middleware:
         except ActionError as exc:
             self.log.emit(Kind.ACTION_REFUSED, action_id=action_id, error=type(exc).__name__, reason=exc.reason,
                           message=str(exc))
-            return action_id
+            return Submission(action_id, error=exc)
         self.log.emit(Kind.ACTION_CONVERTED, action_id=action_id, command=command.phases, green=command.green,
                       keep=command.keep)
-        self._feed(CommandRequested(self.env.now, action_id, command))
-        return action_id
+        effects = self._feed(CommandRequested(self.env.now, action_id, command))
+        return Submission(action_id, dropped=any(isinstance(e, Dropped) for e in effects))
 
     def observe_step(self, step: float, took: float) -> None:
         """Report one simulation step's cost to drift detection (ignored while in TIMEOUT)."""
@@ -117,6 +127,10 @@ class Middleware:
             ev = self.env.event()
             ev.succeed()
             return ev
+        return self.entering(state)
+
+    def entering(self, state: State) -> simpy.Event:
+        """An event that fires the next time the manager enters ``state`` (not if it is there now)."""
         return self._entering.setdefault(state, self.env.event())
 
     def wait_idle(self) -> simpy.Event:
@@ -198,7 +212,7 @@ class Middleware:
 
     # --- the manager's shell ----------------------------------------------------------------------
 
-    def _feed(self, event) -> None:
+    def _feed(self, event) -> list[Effect]:
         before = self.manager.state
         effects = self.manager.handle(event)
         for effect in effects:
@@ -209,6 +223,7 @@ class Middleware:
             waiting = self._entering.pop(after, None)
             if waiting is not None:
                 waiting.succeed()
+        return effects
 
     def _carry_out(self, effect: Effect) -> None:
         match effect:

@@ -16,26 +16,28 @@ from hils.events import EventLog, Kind
 from hils.manager import State
 from hils.middleware import Middleware
 from hils.ntcip import ControlColumn, UnitControlStatus
-from hils.runner import RunSpec, run_virtual
+from hils.testbed import RunSpec, Testbed, run_spec
 from hils.transport import CommunicationTimeout
 
 
 class Rig:
-    """Middleware and emulator on one environment, started and settled."""
+    """A Testbed against the in-process emulator, started and settled, driven action by action."""
 
     def __init__(self, config: IntersectionConfig, action_type: ActionType | str = ActionType.SELECTION,
                  *, start_at: float = 5.0) -> None:
-        self.env = simpy.Environment()
-        self.target = VirtualTarget(self.env, config, seed=0)
-        self.log = EventLog()
-        self.mw = Middleware(self.env, self.target.transport, config, action_type, self.log)
-        self.mw.start()
+        self.tb = Testbed(config, action_type=action_type, seed=0, recover_after=None)
+        self.tb.reset()
+        self.env, self.target, self.log, self.mw = self.tb.env, self.tb.target, self.tb.events, self.tb.middleware
         # By start_at the start-up pair (2, 6) has served its minimum green, so transitions take
         # exactly yellow + red clearance.
-        self.env.run(until=start_at)
+        self.tb.run_for(start_at - self.env.now)
+
+    def submit(self, value: Any) -> int:
+        """Hand an action to the middleware at once (no decision point); returns its action id."""
+        return self.mw.submit(value).action_id
 
     def run(self, seconds: float) -> None:
-        self.env.run(until=self.env.now + seconds)
+        self.tb.run_for(seconds)
 
     @property
     def controller(self) -> Any:
@@ -63,7 +65,7 @@ class Rig:
 ])
 def test_refused_action_is_logged_and_nothing_is_sent(paper_config, action_type, value, error, reason) -> None:
     rig = Rig(paper_config, action_type)
-    action_id = rig.mw.submit(value)
+    action_id = rig.submit(value)
     rig.run(30.0)
     (refused,) = rig.kinds(Kind.ACTION_REFUSED)
     assert refused["action_id"] == action_id
@@ -79,8 +81,8 @@ def test_refused_action_is_logged_and_nothing_is_sent(paper_config, action_type,
 
 def test_a_valid_action_after_a_refused_one_is_served(paper_config) -> None:
     rig = Rig(paper_config)
-    rig.mw.submit((1, 7))
-    rig.mw.submit((4, 8))
+    rig.submit((1, 7))
+    rig.submit((4, 8))
     rig.run(8.0)
     assert [r["phases"] for r in rig.sets("command")] == [frozenset({4, 8})]
     assert rig.veh_call == frozenset({4, 8})
@@ -89,11 +91,11 @@ def test_a_valid_action_after_a_refused_one_is_served(paper_config) -> None:
 
 def test_actions_while_on_hold_are_dropped(paper_config) -> None:
     rig = Rig(paper_config)
-    first = rig.mw.submit((3, 7))
+    first = rig.submit((3, 7))
     assert rig.mw.state is State.ON_HOLD
     rig.run(1.0)
-    second = rig.mw.submit((4, 8))
-    third = rig.mw.submit((1, 5))
+    second = rig.submit((4, 8))
+    third = rig.submit((1, 5))
     rig.run(10.0)
     dropped = rig.kinds(Kind.ACTION_DROPPED)
     assert [(r["action_id"], r["state"]) for r in dropped] == [(second, "on_hold"), (third, "on_hold")]
@@ -110,7 +112,7 @@ def test_actions_while_in_timeout_are_dropped(paper_config) -> None:
     for _ in range(paper_config.middleware.n_drift):
         rig.mw.observe_step(step, step * 2)
     assert rig.mw.state is State.TIMEOUT
-    action_id = rig.mw.submit((3, 7))
+    action_id = rig.submit((3, 7))
     rig.run(5.0)
     assert [(r["action_id"], r["state"]) for r in rig.kinds(Kind.ACTION_DROPPED)] == [(action_id, "timeout")]
     assert rig.sets() == []
@@ -121,7 +123,7 @@ def test_actions_while_in_timeout_are_dropped(paper_config) -> None:
                                                     (ActionType.SELECTION, [6, 2])])
 def test_keep_completes_at_once_without_a_set(paper_config, action_type, value) -> None:
     rig = Rig(paper_config, action_type)
-    rig.mw.submit(value)
+    rig.submit(value)
     (released,) = rig.kinds(Kind.HOLD_RELEASED)
     assert released["reason"] == "keep" and released["hold_s"] == 0.0
     assert released["t"] == rig.env.now
@@ -136,7 +138,7 @@ def test_switch_advances_the_controller_around_the_sequence(paper_config) -> Non
     rig = Rig(paper_config, ActionType.SWITCH)
     shown = []
     for _ in range(5):
-        rig.mw.submit(1)
+        rig.submit(1)
         rig.run(10.0)
         shown.append(rig.controller.greens)
     assert shown == [frozenset(p) for p in [(3, 7), (4, 8), (1, 5), (2, 6), (3, 7)]]
@@ -146,7 +148,7 @@ def test_switch_advances_the_controller_around_the_sequence(paper_config) -> Non
 @pytest.mark.parametrize(("x", "green"), [(0.0, 3.0), (0.5, 11.5), (1.0, 20.0)])
 def test_duration_holds_for_transition_plus_prescribed_green(paper_config, x, green) -> None:
     rig = Rig(paper_config, ActionType.DURATION)
-    rig.mw.submit(x)
+    rig.submit(x)
     dispatched_t = rig.env.now
     rig.run(1.0)
     assert rig.mw.state is State.ON_HOLD
@@ -165,7 +167,7 @@ def test_duration_holds_for_transition_plus_prescribed_green(paper_config, x, gr
 
 def test_duration_agent_is_asked_again_only_when_the_green_is_served(paper_config) -> None:
     spec = RunSpec(paper_config, ActionType.DURATION, agent="random", duration=120.0, seed=4)
-    records = run_virtual(spec).records
+    records = run_spec(spec).records
     asked = [r["t"] for r in records if r["kind"] == "action_received"]
     served = [r["t"] for r in records if r["kind"] == "hold_released"]
     assert len(asked) >= 4
@@ -179,7 +181,7 @@ def test_keepalive_keeps_the_controller_out_of_backup_mode(paper_config, keepali
     config = paper_config.with_middleware(backup_time=6)
     rig = Rig(config, ActionType.SWITCH)
     rig.mw.keepalive_enabled = keepalive
-    rig.mw.submit(1)
+    rig.submit(1)
     statuses = []
     for _ in range(120):
         rig.run(1.0)
@@ -201,7 +203,7 @@ def test_keepalive_keeps_the_controller_out_of_backup_mode(paper_config, keepali
 
 
 def test_calls_are_cleared_at_the_end_of_a_run(paper_config) -> None:
-    result = run_virtual(RunSpec(paper_config, ActionType.SELECTION, agent="random", duration=60.0, seed=3))
+    result = run_spec(RunSpec(paper_config, ActionType.SELECTION, agent="random", duration=60.0, seed=3))
     assert result.target.controller.control[ControlColumn.VEH_CALL] == frozenset()
     records = result.records
     sets = [r for r in records if r["kind"] == "set_sent"]
@@ -212,7 +214,7 @@ def test_calls_are_cleared_at_the_end_of_a_run(paper_config) -> None:
 
 def test_recover_in_idle_changes_nothing(paper_config) -> None:
     rig = Rig(paper_config, ActionType.SWITCH)
-    rig.mw.submit(1)
+    rig.submit(1)
     rig.run(8.0)
     position = rig.mw.converter.position
     sets = len(rig.sets())
@@ -222,14 +224,14 @@ def test_recover_in_idle_changes_nothing(paper_config) -> None:
     assert rig.kinds(Kind.RECOVERED) == [] and rig.kinds(Kind.TIMEOUT_ENTERED) == []
     assert len(rig.sets()) == sets
     assert rig.mw.converter.position == position
-    rig.mw.submit(1)
+    rig.submit(1)
     rig.run(8.0)
     assert rig.controller.greens == frozenset({4, 8})
 
 
 def test_recover_while_on_hold_does_not_disturb_the_transition(paper_config) -> None:
     rig = Rig(paper_config, ActionType.SWITCH)
-    rig.mw.submit(1)
+    rig.submit(1)
     rig.run(1.0)
     assert rig.mw.state is State.ON_HOLD
     rig.env.run(until=rig.mw.recover())
@@ -244,7 +246,7 @@ def test_recover_while_on_hold_does_not_disturb_the_transition(paper_config) -> 
 def test_transition_not_shown_within_tau_trans_enters_timeout_and_recovery_resumes(paper_config) -> None:
     rig = Rig(paper_config)
     rig.controller.control[ControlColumn.PHASE_OMIT] = frozenset({3, 7})  # the controller will not serve them
-    rig.mw.submit((3, 7))
+    rig.submit((3, 7))
     rig.run(paper_config.middleware.tau_trans + 1.0)
     assert rig.mw.state is State.TIMEOUT
     (entered,) = rig.kinds(Kind.TIMEOUT_ENTERED)
@@ -263,7 +265,7 @@ def test_transition_not_shown_within_tau_trans_enters_timeout_and_recovery_resum
     rig.controller.control[ControlColumn.PHASE_OMIT] = frozenset()
     rig.run(8.0)
     assert rig.controller.greens == frozenset({2, 6})
-    rig.mw.submit((4, 8))
+    rig.submit((4, 8))
     rig.run(8.0)
     assert rig.controller.greens == frozenset({4, 8})
     assert [r["reason"] for r in rig.kinds(Kind.HOLD_RELEASED)] == ["timeout", "verified"]
@@ -291,7 +293,7 @@ def test_a_command_for_a_pair_already_green_is_verified_by_the_next_poll(paper_c
     # A stale sequence position (as after a recovery that read the controller mid-transition)
     # makes the next pair the one already green: no poll will show a change.
     rig.mw.converter.position = paper_config.sequence.index((1, 5))
-    rig.mw.submit(0.0)
+    rig.submit(0.0)
     (dispatched,) = rig.kinds(Kind.COMMAND_DISPATCHED)
     assert dispatched["command"] == (2, 6)
     rig.run(4.0)

@@ -11,7 +11,7 @@ from harness.faults import FaultTarget, IndicationMonitor
 from harness.scenarios import ScenarioError, default_suite, evaluate, load_scenario, parse_scenario, run_scenario
 from hils.cli import main
 from hils.events import Kind
-from hils.runner import run_virtual
+from hils.testbed import run_spec
 
 SUITE = default_suite()
 
@@ -106,7 +106,7 @@ def test_the_implicit_checks_catch_a_conflicting_command_and_a_lost_record():
         monitors.append(IndicationMonitor(env, target.controller, config))
         return target
 
-    records = run_virtual(scenario.spec(), target_factory=factory).records
+    records = run_spec(scenario.spec(), target=factory).records
     sent = next(i for i, r in enumerate(records) if r["kind"] == Kind.SET_SENT)
     records[sent] = {**records[sent], "phases": frozenset({1, 7})}
     del records[sent + 1]
