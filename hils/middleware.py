@@ -290,10 +290,15 @@ class Middleware:
 
 
 def _plain(value: Any) -> Any:
-    """A JSON-friendly copy of an action value for the log."""
+    """A JSON-friendly copy of an action value for the log (whatever the agent returned)."""
+    if hasattr(value, "tolist"):
+        value = value.tolist()  # numpy arrays and scalars
     if isinstance(value, (list, tuple)):
         return [_plain(v) for v in value]
-    if isinstance(value, (int, float, str, bool)) or value is None:
+    if isinstance(value, int) and not isinstance(value, bool):
+        # The log's encoder takes 64-bit integers only: a larger one is logged as its text.
+        return value if -(2**63) <= value < 2**64 else repr(value)[:40]
+    if isinstance(value, (float, str, bool)) or value is None:
         return value
     try:
         return float(value)

@@ -311,7 +311,7 @@ class Testbed:
         gc.freeze()
         cfg = self.config
         self.events.emit(Kind.RUN_STARTED, config=cfg.name, source=cfg.source, seed=self.seed, mode=self.mode,
-                         action_type=self.action_type.value, agent=_agent_name(self.agent, self.spec),
+                         action_type=self.action_type.value, agent=_agent_name(self._agent_spec, self.spec),
                          duration=self.duration)
         self.middleware.start()
         self.env.process(self._simulation_loop())
@@ -597,10 +597,9 @@ def _check_target(url: str) -> None:
         raise TargetError(str(exc)) from None
 
 
-def _agent_name(agent: Agent | None, spec: RunSpec) -> str:
-    if agent is None or spec.agent is not None or isinstance(agent, str):
-        return spec.agent_spec
-    return type(agent).__name__
+def _agent_name(given: str | Agent | None, spec: RunSpec) -> str:
+    """How the log names the agent: its spec, or the class of an agent object handed in."""
+    return spec.agent_spec if given is None or isinstance(given, str) else type(given).__name__
 
 
 def _reason_of(exc: BaseException) -> str:

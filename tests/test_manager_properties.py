@@ -53,17 +53,20 @@ def _selection_valid(a: int, b: int) -> bool:
     return frozenset((a, b)) in {frozenset(p) for p in CONFIG.pairs}
 
 
-_shapes = st.sampled_from([tuple, list, lambda v: np.array(v, dtype=np.int64), lambda v: tuple(map(np.int32, v))])
+_shapes = st.sampled_from([tuple, list, lambda v: np.array(v, dtype=np.int64), lambda v: tuple(map(np.int32, v)),
+                          lambda v: np.array(v, dtype=np.float32)])
 _any_pair = st.tuples(st.integers(-1, 10), st.integers(-1, 10), _shapes).map(
     lambda t: (t[2]((t[0], t[1])), _selection_valid(t[0], t[1])))
 _good_pair = st.tuples(st.sampled_from(CONFIG.pairs), st.booleans(), _shapes).map(
     lambda t: (t[2](t[0][::-1] if t[1] else t[0]), True))
-_bad_selection_type = st.sampled_from(["15", None, 3, 1.5, (1, 5, 2), [1.0, 5.0], [True, 5], b"\x01\x05", (1,)])
+_bad_selection_type = st.sampled_from(["15", None, 3, 1.5, (1, 5, 2), [1.5, 5.0], [True, 5], b"\x01\x05", (1,),
+                                      {1, 5}, {1: 5}])
 SELECTION = st.one_of(_good_pair, _any_pair, _bad_selection_type.map(lambda v: (v, False)))
 
 SWITCH = st.one_of(
-    st.sampled_from([0, 1, np.int64(0), np.int64(1), np.uint8(1)]).map(lambda v: (v, True)),
-    st.one_of(st.sampled_from([True, False, 0.0, 1.0, "1", None, [1]]),
+    st.sampled_from([0, 1, np.int64(0), np.int64(1), np.uint8(1), 0.0, 1.0, np.float32(1.0), np.array(0),
+                     np.array([1])]).map(lambda v: (v, True)),
+    st.one_of(st.sampled_from([True, False, 0.5, "1", None, [1], 2**80]),
               st.integers(max_value=-1), st.integers(min_value=2)).map(lambda v: (v, False)),
 )
 
