@@ -59,6 +59,7 @@ import time
 import tomllib
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import asdict, dataclass, field
+from importlib import resources
 from pathlib import Path
 from typing import Any
 
@@ -118,8 +119,8 @@ class ScenarioError(ConfigError):
 
 
 def default_suite() -> Path:
-    """The shipped suite: ``fault_scenarios/`` beside the ``harness`` package."""
-    return Path(__file__).resolve().parents[1] / "fault_scenarios"
+    """The shipped suite: ``harness/fault_scenarios/``, package data, so it is there however hils was installed."""
+    return Path(str(resources.files("harness") / "fault_scenarios"))
 
 
 # --- validation helpers -----------------------------------------------------------------------------

@@ -320,12 +320,15 @@ class Testbed:
         if not isinstance(self.simulation, NoSimulation):
             self.env.process(self._sample_traffic())
 
-    def finish(self, reason: str = "duration") -> None:
+    def finish(self, reason: str | None = None) -> None:
         """End the run: clear the calls placed, log ``run_ended`` with ``reason``, close the log.
 
+        ``reason`` defaults to ``duration`` once the duration has passed, else ``closed``.
         Idempotent; bounded in wall-clock time (the clearing SET answers or fails within tau_udp)."""
         if self.env is None or self.ended:
             return
+        if reason is None:
+            reason = "duration" if self.done else "closed"
         self.ended = True
         self.end_reason = reason
         mw = self.middleware
@@ -362,7 +365,7 @@ class Testbed:
         if self.env is None:
             return
         try:
-            self.finish("closed")
+            self.finish()
         finally:
             if self.transport is not None:
                 self.transport.close()
@@ -378,7 +381,7 @@ class Testbed:
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
                  tb: TracebackType | None) -> None:
         if self.env is not None and not self.ended:
-            self.finish(_reason_of(exc) if exc is not None else "closed")
+            self.finish(_reason_of(exc) if exc is not None else None)
         self.close()
 
     # --- stepping ---------------------------------------------------------------------------------

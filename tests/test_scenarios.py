@@ -183,5 +183,5 @@ def test_a_config_path_is_resolved_beside_the_scenario(tmp_path, paper_toml):
 
 
 def test_the_suite_is_found_beside_the_harness_package():
-    assert Path(__file__).resolve().parents[1] / "fault_scenarios" == SUITE
+    assert Path(__file__).resolve().parents[1] / "harness" / "fault_scenarios" == SUITE
     assert SUITE.is_dir()
