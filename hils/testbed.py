@@ -334,8 +334,6 @@ class Testbed:
         mw = self.middleware
 
         def ending() -> Generator[simpy.Event, Any, None]:
-            mw.keepalive_enabled = False
-            mw.poller.halt()
             yield mw.close()
             self.events.emit(Kind.RUN_ENDED, reason=reason)
             self.events.close()
@@ -389,8 +387,7 @@ class Testbed:
     def observe(self) -> Observation:
         """What an agent sees now."""
         mw = self._mw
-        return Observation(self._env.now, mw.cache.state, self.simulation.traffic_state(), mw.converter.next_pair,
-                           mw.state)
+        return Observation(self._env.now, mw.cache.state, self.simulation.traffic_state(), mw.next_pair, mw.state)
 
     def step(self, action: Any) -> tuple[Observation, dict[str, Any]]:
         """Submit ``action`` and run to the next decision point; returns the observation and an info mapping.

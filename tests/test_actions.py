@@ -34,11 +34,30 @@ PAPER_MATRIX = [
 ]
 
 
+class Positioned:
+    """A converter at a position of the cyclic sequence, moved as the manager moves it."""
+
+    def __init__(self, config: IntersectionConfig, action_type: ActionType, greens: frozenset[int] | None) -> None:
+        self.conv = ActionConverter(config, action_type)
+        self.sequence = config.sequence
+        self.position = next((i for i, pair in enumerate(self.sequence) if greens and set(pair) <= greens), -1)
+
+    def convert(self, value: object) -> Command:
+        return self.conv.convert(value, self.position)
+
+    def commit(self, command: Command) -> None:
+        self.position = self.sequence.index(command.phases)
+
+    @property
+    def current_pair(self) -> tuple[int, int] | None:
+        return self.conv.pair_at(self.position)
+
+    def green_range(self, pair: tuple[int, int]) -> tuple[float, float]:
+        return self.conv.green_range(pair)
+
+
 def converter(config: IntersectionConfig, action_type: ActionType, greens: frozenset[int] | None = None):
-    conv = ActionConverter(config, action_type)
-    if greens is not None:
-        conv.sync(greens)
-    return conv
+    return Positioned(config, action_type, greens)
 
 
 # --- conflict matrix -------------------------------------------------------------------------

@@ -216,14 +216,14 @@ def test_recover_in_idle_changes_nothing(paper_config) -> None:
     rig = Rig(paper_config, ActionType.SWITCH)
     rig.submit(1)
     rig.run(8.0)
-    position = rig.mw.converter.position
+    position = rig.mw.manager.position
     sets = len(rig.sets())
     assert rig.env.run(until=rig.mw.recover()) is True
     rig.run(1.0)
     assert rig.mw.state is State.IDLE
     assert rig.kinds(Kind.RECOVERED) == [] and rig.kinds(Kind.TIMEOUT_ENTERED) == []
     assert len(rig.sets()) == sets
-    assert rig.mw.converter.position == position
+    assert rig.mw.manager.position == position
     rig.submit(1)
     rig.run(8.0)
     assert rig.controller.greens == frozenset({4, 8})
@@ -240,7 +240,7 @@ def test_recover_while_on_hold_does_not_disturb_the_transition(paper_config) -> 
     assert [r["reason"] for r in rig.kinds(Kind.HOLD_RELEASED)] == ["verified"]
     assert rig.veh_call == frozenset({3, 7})
     assert rig.controller.greens == frozenset({3, 7})
-    assert rig.mw.converter.current_pair == (3, 7)
+    assert rig.mw.manager.position == paper_config.sequence.index((3, 7))
 
 
 def test_transition_not_shown_within_tau_trans_enters_timeout_and_recovery_resumes(paper_config) -> None:
@@ -292,7 +292,7 @@ def test_a_command_for_a_pair_already_green_is_verified_by_the_next_poll(paper_c
     rig = Rig(paper_config, ActionType.DURATION)
     # A stale sequence position (as after a recovery that read the controller mid-transition)
     # makes the next pair the one already green: no poll will show a change.
-    rig.mw.converter.position = paper_config.sequence.index((1, 5))
+    rig.mw.manager.position = paper_config.sequence.index((1, 5))
     rig.submit(0.0)
     (dispatched,) = rig.kinds(Kind.COMMAND_DISPATCHED)
     assert dispatched["command"] == (2, 6)
@@ -314,7 +314,7 @@ def test_no_backup_time_anywhere_means_no_keepalive_and_no_stall(paper_config) -
     env.run(until=1.0)
     mw.submit(1)
     env.run(until=120.0)  # would never get here if the keepalive spun at one instant
-    assert mw.keepalive_period is None
+    assert mw.keepalive_period == 0.0  # 0: no keepalive
     assert [r["purpose"] for r in log.of(Kind.SET_SENT)] == ["command"]
 
 
