@@ -66,8 +66,7 @@ from pyasn1.type import univ
 from pysnmp.proto import api, rfc1905
 
 from emulator.mib import MibView, Value
-from hils.ntcip import Access, ErrorStatus, Oid, SnmpError, object_for, oid_str
-from hils.transport import Latency
+from hils.ntcip import Access, ErrorStatus, Latency, Oid, SnmpError, object_for, oid_str
 
 log = logging.getLogger(__name__)
 

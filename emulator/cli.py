@@ -59,7 +59,7 @@ def _serve(args: argparse.Namespace) -> int:
     import asyncio
 
     from emulator.serve import ServeOptions, serve_until_signalled
-    from hils.transport import Latency
+    from hils.ntcip import Latency
 
     if args.ro_community == args.rw_community:
         raise SystemExit("hils emulator serve: --ro-community and --rw-community must differ")

@@ -41,12 +41,11 @@ from hils.ntcip import (
     SnmpError,
     StatusColumn,
     Syntax,
+    Value,
     groups_to_phases,
     phases_to_groups,
     sequence_oid,
 )
-
-Value = int | bytes
 
 
 @dataclass(frozen=True, slots=True)

@@ -31,7 +31,7 @@ from emulator.agent import AgentStats, DropReason, RequestKind, SnmpAgent
 from emulator.controller import TICK, Change, Controller
 from emulator.mib import MibView
 from hils.config import IntersectionConfig
-from hils.transport import Latency
+from hils.ntcip import Latency
 
 log = logging.getLogger(__name__)
 

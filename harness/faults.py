@@ -715,11 +715,8 @@ class FaultTarget:
         surface: ObjectSurface = self.mib
         for fault in faults:
             surface = fault.wrap_surface(surface, env)
-        inner: Transport = self.base.transport
-        if surface is not self.mib:
-            wire = self.base.transport
-            inner = LocalTransport(env, surface, tau_udp=wire.tau_udp, get_latency=wire.get_latency,
-                                   set_latency=wire.set_latency, loss=wire.loss, seed=seed)
+        inner = LocalTransport(env, surface, tau_udp=config.middleware.tau_udp, get_latency=self.base.get_latency,
+                               set_latency=self.base.set_latency, seed=seed)
         self.transport = FaultyTransport(env, inner, tau_udp=config.middleware.tau_udp)
         self._ticking = self.base.process
         for fault in faults:

@@ -1,4 +1,5 @@
-"""NTCIP 1202 v02 object model shared by the middleware and the emulator.
+"""NTCIP 1202 v02 object model, SNMP value types and the latency model: what the middleware and
+the emulator share (the emulator imports nothing else of hils but the intersection config).
 
 This is the only module that spells an OID. Everything else names objects by
 the definitions below and builds instance OIDs with the helpers here, so an
@@ -11,11 +12,13 @@ phase numbers; :func:`phases_to_groups` and :func:`groups_to_phases` convert.
 
 from __future__ import annotations
 
+import random
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from enum import Enum, IntEnum
 
 Oid = tuple[int, ...]
+Value = int | bytes  # what an NTCIP object holds: INTEGER or OCTET STRING
 
 #: 1.3.6.1.4.1.1206.4.2.1: the NTCIP 1202 actuated signal controller node.
 ASC: Oid = (1, 3, 6, 1, 4, 1, 1206, 4, 2, 1)
@@ -303,3 +306,16 @@ class SignalState:
     def indication(self, phase: int) -> str:
         """'G', 'Y' or 'r' for one phase (SUMO's letters)."""
         return "G" if phase in self.greens else "Y" if phase in self.yellows else "r"
+
+
+@dataclass(frozen=True, slots=True)
+class Latency:
+    """Modeled response time of a request: mean and uniform jitter, in seconds."""
+
+    mean: float = 0.0075
+    jitter: float = 0.0
+
+    def draw(self, rng: random.Random) -> float:
+        if self.jitter <= 0.0:
+            return self.mean
+        return max(0.0, self.mean + rng.uniform(-self.jitter, self.jitter))

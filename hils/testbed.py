@@ -19,7 +19,9 @@ Rules of this module
   transport differ. ``target="virtual"`` (the default) is the in-process emulator, found through
   the ``hils.targets`` entry point so that ``hils`` never imports it; ``target="snmp://..."`` is a
   real controller, or ``hils emulator serve``, at wall-clock time; a callable target is a factory
-  ``(env, config, seed=...) -> object with .transport`` (the fault harness puts its faults there).
+  ``(env, config, seed=...) -> target`` whose target has a ``transport``, or a ``surface`` (with
+  ``get_latency`` and ``set_latency``) that an in-process transport reaches (the fault harness puts
+  its faults there).
 - A decision point is the end of the control interval for selection and switch actions, the end of
   the served green for duration actions, and, earlier, the manager entering TIMEOUT or the end of
   the run's ``duration``.
@@ -54,7 +56,7 @@ from hils.events import read as read_events
 from hils.manager import State
 from hils.middleware import Middleware
 from hils.ntcip import SignalState
-from hils.transport import Transport
+from hils.transport import LocalTransport, Transport
 
 log = logging.getLogger(__name__)
 
@@ -267,8 +269,11 @@ class Testbed:
         spec = self._target_spec
         if self.mode == VIRTUAL:
             factory = virtual_target_factory() if spec == VIRTUAL else spec
-            self.target = factory(env, self.config, seed=self.seed)
-            self.transport = self.target.transport
+            target = self.target = factory(env, self.config, seed=self.seed)
+            # A target brings its transport, or an object surface that an in-process transport reaches.
+            self.transport = getattr(target, "transport", None) or LocalTransport(
+                env, target.surface, tau_udp=self.config.middleware.tau_udp, get_latency=target.get_latency,
+                set_latency=target.set_latency, seed=self.seed)
             self.step_cost = modeled_cost
             self._driver = None
             return

@@ -60,9 +60,9 @@ def test_loss_of_n_timeout_polls_enters_timeout_and_recovery_resumes_service():
     def configure(run, target):
         def outage():
             yield run.env.timeout(100.0)
-            target.transport.loss = 1.0
+            run.transport.loss = 1.0
             yield run.env.timeout(7.0)
-            target.transport.loss = 0.0
+            run.transport.loss = 0.0
         run.env.process(outage())
 
     result = run_spec(RunSpec(CFG, ActionType.SWITCH, duration=300.0, seed=1, recover_after=5.0),

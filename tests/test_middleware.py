@@ -12,12 +12,11 @@ import simpy
 from emulator.inprocess import VirtualTarget
 from hils.actions import ActionType
 from hils.config import IntersectionConfig
-from hils.events import EventLog, Kind
+from hils.events import Kind
 from hils.manager import State
-from hils.middleware import Middleware
 from hils.ntcip import ControlColumn, UnitControlStatus
 from hils.testbed import RunSpec, Testbed, run_spec
-from hils.transport import CommunicationTimeout
+from hils.transport import CommunicationTimeout, LocalTransport
 
 
 class Rig:
@@ -305,17 +304,13 @@ def test_a_command_for_a_pair_already_green_is_verified_by_the_next_poll(paper_c
 
 def test_no_backup_time_anywhere_means_no_keepalive_and_no_stall(paper_config) -> None:
     cfg = paper_config.with_middleware(backup_time=0)
-    env = simpy.Environment()
-    target = VirtualTarget(env, cfg)
-    target.controller.backup_time = 0
-    log = EventLog()
-    mw = Middleware(env, target.transport, cfg, "switch", log)
-    mw.start()
-    env.run(until=1.0)
-    mw.submit(1)
-    env.run(until=120.0)  # would never get here if the keepalive spun at one instant
-    assert mw.keepalive_period == 0.0  # 0: no keepalive
-    assert [r["purpose"] for r in log.of(Kind.SET_SENT)] == ["command"]
+    tb = Testbed(cfg, action_type="switch", on_reset=lambda _tb, target: setattr(target.controller, "backup_time", 0))
+    tb.reset()
+    tb.run_for(1.0)
+    tb.middleware.submit(1)
+    tb.run_for(120.0)  # would never get here if the keepalive spun at one instant
+    assert tb.middleware.keepalive_period == 0.0  # 0: no keepalive
+    assert [r["purpose"] for r in tb.events.of(Kind.SET_SENT)] == ["command"]
 
 
 class _FirstSetLost:
@@ -341,15 +336,21 @@ class _FirstSetLost:
 
 
 def test_a_command_set_without_answer_is_sent_again_and_the_transition_completes(paper_config) -> None:
-    env = simpy.Environment()
-    target = VirtualTarget(env, paper_config)
-    log = EventLog()
-    mw = Middleware(env, _FirstSetLost(target.transport, paper_config.middleware.tau_udp), paper_config,
-                    "switch", log)
-    mw.start()
-    env.run(until=5.0)
-    mw.submit(1)
-    env.run(until=20.0)
+    tau_udp = paper_config.middleware.tau_udp
+
+    def target(env: simpy.Environment, config: IntersectionConfig, seed: int = 0) -> VirtualTarget:
+        base = VirtualTarget(env, config, seed=seed)
+        base.transport = _FirstSetLost(LocalTransport(env, base.surface, tau_udp=tau_udp,
+                                                      get_latency=base.get_latency, set_latency=base.set_latency),
+                                       tau_udp)
+        return base
+
+    tb = Testbed(paper_config, action_type="switch", target=target)
+    tb.reset()
+    tb.run_for(5.0 - tb.now)
+    tb.middleware.submit(1)
+    tb.run_for(15.0)
+    log = tb.events
     sent = [(r["purpose"], r["t"]) for r in log.of(Kind.SET_SENT) if r["purpose"] != "keepalive"]
     assert [p for p, _ in sent] == ["command", "retry"]
     assert sent[1][1] - sent[0][1] == pytest.approx(paper_config.middleware.tau_udp)
