@@ -46,8 +46,8 @@ class Kind(StrEnum):
     TIMEOUT_ENTERED = "timeout_entered"        # reason (communication|transition|drift), command_id, detail
     RECOVERY_STARTED = "recovery_started"      # -
     RECOVERED = "recovered"                    # greens
-    STATE = "state"                            # from, to (manager state changes)
-    RUN_ENDED = "run_ended"                    # reason, t_end
+    STATE = "state"                            # from, to: the paper's names (idle, on_hold, timeout)
+    RUN_ENDED = "run_ended"                    # reason (duration|closed|interrupted|terminated|agent_error|error)
     NOTE = "note"                              # free text for harness faults and components
 
 

@@ -240,3 +240,20 @@ def short_interval_config(tmp_path: Path) -> Path:
     source = (resources.files("hils.data") / DEFAULT_CONFIG_NAME).read_text(encoding="utf-8")
     path.write_text(source.replace("control_interval = 10.0", "control_interval = 2.0"), encoding="utf-8")
     return path
+
+
+def test_an_error_inside_the_run_finishes_it_before_it_propagates() -> None:
+    def broken(tb: Testbed, target: Any) -> None:
+        def fail_at_30():
+            yield tb.env.timeout(30.0)
+            raise RuntimeError("a part of the run broke")
+
+        tb.env.process(fail_at_30())
+
+    tb = Testbed(CFG, action_type="switch", agent="fixed-cycle", duration=600.0, on_reset=broken)
+    with pytest.raises(RuntimeError, match="a part of the run broke"):
+        tb.run()
+    assert tb.records[-1]["kind"] == Kind.RUN_ENDED and tb.records[-1]["reason"] == "error"
+    assert [r["phases"] for r in kinds(tb, Kind.SET_SENT)][-1] == frozenset()
+    assert tb.target.controller.control[ControlColumn.VEH_CALL] == frozenset(), "the calls are cleared"
+    tb.close()
