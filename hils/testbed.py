@@ -32,13 +32,13 @@ Rules of this module
 
 from __future__ import annotations
 
+import dataclasses
 import gc
 import logging
 import math
 import signal
 import time
 from collections.abc import Callable, Generator
-from dataclasses import dataclass
 from importlib.metadata import entry_points
 from pathlib import Path
 from types import TracebackType
@@ -132,7 +132,7 @@ def virtual_target_factory() -> TargetFactory:
     return found[0].load()
 
 
-@dataclass(frozen=True)
+@dataclasses.dataclass(frozen=True)
 class RunSpec:
     """What a run is, as the CLI and the harness describe it (see :class:`Testbed` for the fields)."""
 
@@ -247,7 +247,7 @@ class Testbed:
             self.close()
         if seed is not None:
             self.seed = seed
-            self.spec = RunSpec(**{**self.spec.__dict__, "seed": seed})
+            self.spec = dataclasses.replace(self.spec, seed=seed)
         self._wall_t0 = time.perf_counter()
         self.ended, self.end_reason, self.traffic = False, None, None
         self.traffic_samples = []
@@ -618,7 +618,7 @@ def _reason_of(exc: BaseException) -> str:
     return "error"
 
 
-@dataclass
+@dataclasses.dataclass
 class RunResult:
     """A finished run: the Testbed (its records, traffic summary, lateness) and the wall time."""
 
