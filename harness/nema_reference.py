@@ -1,0 +1,384 @@
+"""SUMO's own NEMA controller as an independent reference for ours: the differential test.
+
+Rules of this file
+------------------
+- The reference is SUMO's ``tlLogic type="NEMA"`` (``NEMAController.cpp`` of libsumo 1.28),
+  run on the shipped four-leg network with the timings of an :class:`IntersectionConfig`.
+  Nothing of it is re-implemented here: SUMO decides, we only feed calls and read colours.
+- Calls reach SUMO the way a cabinet's detectors would: through the lane-area detectors its
+  NEMA logic generates on every incoming lane, with ``lanearea.overrideVehicleNumber`` (one
+  vehicle while the phase is called, override released when not). No vehicle ever drives.
+- Both controllers get the same :data:`CallSequence` and run on the same 0.1 s grid: the
+  calls of tick ``k`` are in place before the step that ends at tick ``k + 1``.
+- A timeline is read from the colours each controller shows after every step (green,
+  yellow, red per phase), never from internal state, so the comparison stays valid whatever
+  either controller's internals look like. A change is the onset of a colour on one phase.
+- One libsumo simulation per process: a run starts SUMO, steps it and closes it before
+  returning (a start costs about 10 ms on this network).
+
+Theory of operation
+-------------------
+:func:`sumo_program` writes the NEMA program: ring strings with two slots per barrier group
+(SUMO derives a phase's barrier side from its slot, ``barrierNum = ringIter / 2``), the last
+phase of each ring in each group as SUMO's barrier and coordinate phases (in free mode they
+only name its default, dual-entry phases: the throughs here), minimum and maximum green,
+yellow and red from the config, and the vehicle extension (passage) of one step, the
+shortest SUMO times correctly (with 0 a green would end at once despite its call): with it a
+held call extends a green as a presence call does in ours. SUMO's default of minimum recall
+on every phase is switched off (``minRecall`` empty), as our controller serves only calls.
+In free mode SUMO starts in the first phase of each ring; :func:`comparable_config` gives
+our controller the same start-up and no backup timer (the sequences never refresh a SET).
+
+:func:`compare` pairs the changes of the two timelines (same phase, same colour, at most
+``tolerance`` ticks apart, in order) and reports the agreement: matched changes over all
+distinct changes (matched + unmatched on either side), so a change only one side makes
+counts against it. ``python -m harness.nema_reference`` prints the figure for the targeted
+scenarios and for seeded random call sequences.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import dataclasses
+import random
+import sys
+import tempfile
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass
+from enum import StrEnum
+from pathlib import Path
+from xml.sax.saxutils import quoteattr
+
+import libsumo
+
+from emulator.controller import Controller
+from hils.config import IntersectionConfig, load
+from hils.ntcip import ControlColumn, PhaseStartup
+from hils.sumo_net import NET_FILE, PhaseMap, data_path, derive_phase_map, read_net
+
+TICK = 0.1  # seconds per step, both controllers
+PROGRAM_ID = "NEMA"
+SUMO_PASSAGE = 0.1  # s: SUMO's vehicle extension, one step (see the theory of operation)
+AGREEMENT_REQUIRED = 0.95
+
+CallSequence = tuple[tuple[int, frozenset[int]], ...]
+"""``(tick, phases)`` in ascending tick order: from that tick on exactly these phases are called."""
+
+
+class ReferenceError(ValueError):
+    """A config or call sequence SUMO's NEMA controller cannot be given; says what is allowed."""
+
+
+class Color(StrEnum):
+    GREEN = "green"
+    YELLOW = "yellow"
+    RED = "red"
+
+
+@dataclass(frozen=True, slots=True, order=True)
+class ColorChange:
+    """A phase starts showing a colour at a tick."""
+
+    tick: int
+    phase: int
+    color: Color
+
+    def __str__(self) -> str:
+        return f"{self.tick / 10:.1f}s {self.phase} {self.color}"
+
+
+Timeline = tuple[ColorChange, ...]
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """Two timelines of the same calls, paired change by change."""
+
+    ours: Timeline
+    reference: Timeline
+    matched: tuple[tuple[ColorChange, ColorChange], ...]
+    only_ours: Timeline
+    only_reference: Timeline
+
+    @property
+    def agreement(self) -> float:
+        """Matched changes over distinct changes (1.0 when neither side changes anything)."""
+        total = len(self.matched) + len(self.only_ours) + len(self.only_reference)
+        return len(self.matched) / total if total else 1.0
+
+    def report(self) -> str:
+        lines = [f"agreement {self.agreement:.1%} ({len(self.matched)} matched, "
+                 f"{len(self.only_ours)} only ours, {len(self.only_reference)} only SUMO)"]
+        lines += [f"  only ours: {c}" for c in self.only_ours]
+        lines += [f"  only SUMO: {c}" for c in self.only_reference]
+        return "\n".join(lines)
+
+
+# --- the two configs -------------------------------------------------------------------
+
+
+def comparable_config(config: IntersectionConfig) -> IntersectionConfig:
+    """Our side of the comparison: SUMO's free-mode start-up (first phase of each ring green)
+    and no backup timer, everything else as given."""
+    firsts = {ring[0] for ring in config.rings}
+    phases = {p: dataclasses.replace(ph, startup=PhaseStartup.GREEN_NO_WALK if p in firsts
+                                     else PhaseStartup.PHASE_NOT_ON)
+              for p, ph in config.phases.items()}
+    return dataclasses.replace(config, phases=phases).with_middleware(backup_time=0)
+
+
+def _ring_slots(config: IntersectionConfig) -> list[list[int]]:
+    """Per ring, two slots per barrier group (0 for an empty slot), as SUMO's ring strings."""
+    where = f"{config.source}: structure"
+    if len(config.rings) != 2 or len(config.barriers) != 2:
+        raise ReferenceError(f"{where}: SUMO's NEMA controller has exactly 2 rings and 2 barrier groups; "
+                             f"this config has {len(config.rings)} rings and {len(config.barriers)} groups")
+    if max(config.phases) > 8:
+        raise ReferenceError(f"{where}: SUMO's NEMA controller reads phase numbers as single digits; "
+                             f"allowed: phases 1 to 8, got {max(config.phases)}")
+    slots = []
+    for ring in config.rings:
+        row = []
+        for group in range(2):
+            mine = [p for p in ring if config.barrier_of(p) == group]
+            if len(mine) > 2 or not mine:
+                raise ReferenceError(f"{where}: ring {list(ring)} has {len(mine)} phases in barrier group "
+                                     f"{group + 1}; SUMO's NEMA controller allows 1 or 2")
+            row += mine + [0] * (2 - len(mine))
+        slots.append(row)
+    return slots
+
+
+def sumo_program(config: IntersectionConfig, phase_map: PhaseMap) -> str:
+    """The additional file with SUMO's NEMA program for ``config`` (see the theory of operation)."""
+    slots = _ring_slots(config)
+    # the last phase of each ring before each barrier: SUMO's barrier (group 2) and coordinate
+    # (group 1) phases, which in free mode are its dual-entry defaults
+    last = [[next(p for p in reversed(row[2 * g:2 * g + 2]) if p) for g in range(2)] for row in slots]
+    params = {
+        "ring1": ",".join(map(str, slots[0])),
+        "ring2": ",".join(map(str, slots[1])),
+        "barrierPhases": f"{last[0][1]},{last[1][1]}",
+        "coordinatePhases": f"{last[0][0]},{last[1][0]}",
+        "minRecall": "",
+        "maxRecall": "",
+    }
+    lines = [f'<additional>\n  <tlLogic id="{phase_map.tls_id}" programID="{PROGRAM_ID}" type="NEMA" offset="0">']
+    lines += [f"    <param key={quoteattr(k)} value={quoteattr(v)}/>" for k, v in params.items()]
+    for p, ph in sorted(config.phases.items()):
+        state = "".join("G" if q == p else "r" for q in phase_map.link_phases)
+        lines.append(f'    <phase duration="99" minDur="{ph.min_green:g}" maxDur="{ph.max_green:g}" '
+                     f'vehext="{SUMO_PASSAGE:g}" yellow="{ph.yellow:g}" red="{ph.red_clear:g}" '
+                     f'name="{p}" state="{state}"/>')
+    lines.append("  </tlLogic>\n</additional>\n")
+    return "\n".join(lines)
+
+
+# --- running each side -----------------------------------------------------------------
+
+
+def _check(calls: CallSequence, ticks: int, config: IntersectionConfig) -> None:
+    last = -1
+    for tick, phases in calls:
+        if tick <= last or tick < 0:
+            raise ReferenceError(f"call sequence: tick {tick} after tick {last}; allowed: ascending ticks >= 0")
+        unknown = set(phases) - set(config.phases)
+        if unknown:
+            raise ReferenceError(f"call sequence: tick {tick} calls unknown phase(s) {sorted(unknown)}; "
+                                 f"allowed: {sorted(config.phases)}")
+        last = tick
+    if ticks <= 0:
+        raise ReferenceError(f"run length {ticks} ticks; allowed: > 0")
+
+
+def _changes(previous: Mapping[int, Color], now: Mapping[int, Color], tick: int) -> list[ColorChange]:
+    return [ColorChange(tick, p, c) for p, c in now.items() if previous[p] is not c]
+
+
+def run_ours(config: IntersectionConfig, calls: CallSequence, ticks: int) -> Timeline:
+    """Our controller (on :func:`comparable_config`) under ``calls`` for ``ticks`` steps."""
+    _check(calls, ticks, config)
+    controller = Controller(comparable_config(config))
+    pending = dict(calls)
+
+    def colors() -> dict[int, Color]:
+        g, y = controller.greens, controller.yellows
+        return {p: Color.GREEN if p in g else Color.YELLOW if p in y else Color.RED for p in config.phases}
+
+    shown = colors()
+    out: list[ColorChange] = []
+    for k in range(ticks):
+        if k in pending:
+            controller.set_control(ControlColumn.VEH_CALL, pending[k])
+        controller.step()
+        now = colors()
+        out += _changes(shown, now, controller.tick)
+        shown = now
+    return tuple(out)
+
+
+_SUMO_COLOR = {"G": Color.GREEN, "g": Color.GREEN, "y": Color.YELLOW, "Y": Color.YELLOW}
+
+
+@contextlib.contextmanager
+def _sumo(program: str) -> Iterator[None]:
+    if libsumo.simulation.isLoaded():
+        raise ReferenceError("a SUMO simulation is already running in this process (libsumo runs one at a "
+                             "time); close it before running the reference")
+    with tempfile.TemporaryDirectory(prefix="hils-nema-") as tmp:
+        additional = Path(tmp) / "nema.add.xml"
+        additional.write_text(program, encoding="utf-8")
+        libsumo.start(["sumo", "-n", str(data_path(NET_FILE)), "-a", str(additional), "--step-length", str(TICK),
+                       "--no-step-log", "true", "--no-warnings", "true", "--duration-log.disable", "true"])
+        try:
+            yield
+        finally:
+            libsumo.close()
+
+
+def run_reference(config: IntersectionConfig, calls: CallSequence, ticks: int) -> Timeline:
+    """SUMO's NEMA controller under ``calls`` for ``ticks`` steps of 0.1 s."""
+    _check(calls, ticks, config)
+    phase_map = derive_phase_map(config, read_net())
+    first_link = {p: phase_map.link_phases.index(p) for p in config.phases}
+    pending = dict(calls)
+    out: list[ColorChange] = []
+    with _sumo(sumo_program(config, phase_map)):
+        if libsumo.trafficlight.getProgram(phase_map.tls_id) != PROGRAM_ID:
+            libsumo.trafficlight.setProgram(phase_map.tls_id, PROGRAM_ID)
+        lane_detector = {libsumo.lanearea.getLaneID(d): d for d in libsumo.lanearea.getIDList()}
+        detectors = {p: [lane_detector[lane] for lane in phase_map.incoming_lanes(p)] for p in config.phases}
+
+        def colors() -> dict[int, Color]:
+            state = libsumo.trafficlight.getRedYellowGreenState(phase_map.tls_id)
+            return {p: _SUMO_COLOR.get(state[i], Color.RED) for p, i in first_link.items()}
+
+        shown = colors()
+        called: frozenset[int] = frozenset()
+        for k in range(ticks):
+            if k in pending:
+                for p in called ^ pending[k]:
+                    for d in detectors[p]:
+                        libsumo.lanearea.overrideVehicleNumber(d, 1 if p in pending[k] else -1)
+                called = pending[k]
+            libsumo.simulationStep()
+            now = colors()
+            out += _changes(shown, now, k + 1)
+            shown = now
+    return tuple(out)
+
+
+# --- comparison ------------------------------------------------------------------------
+
+
+def compare(ours: Timeline, reference: Timeline, tolerance: int = 1) -> Comparison:
+    """Pair changes of the same phase and colour at most ``tolerance`` ticks apart, in order."""
+    matched: list[tuple[ColorChange, ColorChange]] = []
+    only_ours: list[ColorChange] = []
+    only_ref: list[ColorChange] = []
+    keys = sorted({(c.phase, c.color) for c in (*ours, *reference)})
+    for phase, color in keys:
+        a = [c for c in ours if (c.phase, c.color) == (phase, color)]
+        b = [c for c in reference if (c.phase, c.color) == (phase, color)]
+        i = j = 0
+        while i < len(a) and j < len(b):
+            if abs(a[i].tick - b[j].tick) <= tolerance:
+                matched.append((a[i], b[j]))
+                i, j = i + 1, j + 1
+            elif a[i].tick < b[j].tick:
+                only_ours.append(a[i])
+                i += 1
+            else:
+                only_ref.append(b[j])
+                j += 1
+        only_ours += a[i:]
+        only_ref += b[j:]
+    return Comparison(ours, reference, tuple(sorted(matched)), tuple(sorted(only_ours)), tuple(sorted(only_ref)))
+
+
+def differential(config: IntersectionConfig, calls: CallSequence, ticks: int) -> Comparison:
+    """Both controllers under the same calls, compared within 0.1 s."""
+    return compare(run_ours(config, calls, ticks), run_reference(config, calls, ticks))
+
+
+# --- call sequences --------------------------------------------------------------------
+
+
+def seconds(*steps: tuple[float, Sequence[int]]) -> CallSequence:
+    """A call sequence written in seconds: ``seconds((0, [2, 6]), (15, [6, 4, 8]))``."""
+    return tuple((round(t * 10), frozenset(ps)) for t, ps in steps)
+
+
+# Targeted scenarios on the paper's intersection (rings 1-2-3-4 / 5-6-7-8, barriers 1256 | 3478,
+# min 3 s, max 20 s, yellow 3 s, red 2 s). Both controllers start with 1+5 green; a call on 2+6
+# at 0 s brings 2+6 green at 8 s. Each is (calls, length in ticks).
+SCENARIOS: dict[str, tuple[CallSequence, int]] = {
+    # 4 and 8 called while 2+6 time; 2's call drops at 23 s (15 s into its green), 6's at 26 s:
+    # 2 waits at the barrier, 2 and 6 turn yellow together at 26 s
+    "barrier crossing together": (seconds((0, [2, 6]), (12, [2, 6, 4, 8]), (23, [6, 4, 8]), (26, [4, 8]),
+                                          (45, [])), 500),
+    # 6 maxes out (20 s after the conflicting call) while 2 has gapped out: both cross together
+    "max-out of one ring while the other times": (seconds((0, [2, 6]), (10, [2, 6, 8]), (14, [6, 8]),
+                                                          (45, [])), 500),
+    # 1+5 end for a call on 4 at 3 s (next: 4, with 8 by dual entry); a call on 2 during their
+    # yellow does not redirect ring 1: 4+8 first, then 2 (with 6)
+    "phase next decided at yellow": (seconds((0, [4]), (5, [2, 4]), (20, [2]), (40, [])), 450),
+    # 2+6 green, 6's call drops and 5 is called while 2 keeps its call: ring 2 backs into 5
+    "backing into a phase": (seconds((0, [2, 6]), (14, [2, 5]), (30, [])), 400),
+    # from 1+5, only 4 is called: ring 2 enters the other side on its dual-entry phase 8
+    "dual entry": (seconds((0, [4]), (20, [])), 300),
+    # a lone call on 1 while 4+8 rest: 1 enters with its dual-entry partner 6
+    "dual entry back across": (seconds((0, [4, 8]), (10, [1]), (30, [])), 400),
+}
+
+
+def random_calls(rng: random.Random, ticks: int, phases: Sequence[int]) -> CallSequence:
+    """Random held and flickering calls: every 1-15 s a new set of 0-4 called phases."""
+    out: list[tuple[int, frozenset[int]]] = []
+    tick = 0
+    while tick < ticks:
+        out.append((tick, frozenset(rng.sample(list(phases), rng.randint(0, 4)))))
+        tick += rng.randint(10, 150)
+    return tuple(out)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m harness.nema_reference",
+                                     description="Agreement of our controller with SUMO's NEMA controller.")
+    parser.add_argument("--config", help="intersection TOML (default: the shipped four-leg intersection)")
+    parser.add_argument("--random", type=int, default=50, help="random call sequences (default 50)")
+    parser.add_argument("--length", type=float, default=300.0, help="seconds per random sequence (default 300)")
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("-v", "--verbose", action="store_true", help="list the changes that do not agree")
+    args = parser.parse_args(argv)
+    try:
+        config = load(args.config)
+        matched = total = 0
+        for name, (calls, ticks) in SCENARIOS.items():
+            result = differential(config, calls, ticks)
+            print(f"{name:45s} {result.agreement:6.1%}")
+            if args.verbose and result.agreement < 1:
+                print(result.report())
+            matched += len(result.matched)
+            total += len(result.matched) + len(result.only_ours) + len(result.only_reference)
+        rng = random.Random(args.seed)
+        ticks = round(args.length * 10)
+        r_matched = r_total = 0
+        for i in range(args.random):
+            result = differential(config, random_calls(rng, ticks, sorted(config.phases)), ticks)
+            if args.verbose and result.agreement < 1:
+                print(f"random {i}: " + result.report())
+            r_matched += len(result.matched)
+            r_total += len(result.matched) + len(result.only_ours) + len(result.only_reference)
+    except (ReferenceError, ValueError) as exc:
+        print(f"nema_reference: {exc}", file=sys.stderr)
+        return 1
+    print(f"{'targeted scenarios':45s} {matched / max(total, 1):6.1%} of {total} changes")
+    print(f"{f'{args.random} random sequences of {args.length:g} s':45s} {r_matched / max(r_total, 1):6.1%} "
+          f"of {r_total} changes")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
