@@ -107,11 +107,26 @@ class Comparison:
         total = len(self.matched) + len(self.only_ours) + len(self.only_reference)
         return len(self.matched) / total if total else 1.0
 
-    def report(self) -> str:
+    @property
+    def first_difference(self) -> ColorChange | None:
+        """The earliest change only one side makes: where the timelines part (the rest often follows from it)."""
+        return min((*self.only_ours, *self.only_reference), default=None)
+
+    def report(self, calls: CallSequence = (), window: int = 150) -> str:
+        """Agreement and, around the first difference, the calls and both timelines."""
         lines = [f"agreement {self.agreement:.1%} ({len(self.matched)} matched, "
                  f"{len(self.only_ours)} only ours, {len(self.only_reference)} only SUMO)"]
-        lines += [f"  only ours: {c}" for c in self.only_ours]
-        lines += [f"  only SUMO: {c}" for c in self.only_reference]
+        first = self.first_difference
+        if first is not None:
+            t = first.tick
+            lines.append(f"  first difference at {t / 10:.1f}s")
+            if calls:
+                start = max((k for k, _ in calls if k <= t - window), default=0)
+                shown = [f"{k / 10:.1f}s {sorted(ps)}" for k, ps in calls if start <= k <= t]
+                lines.append("  calls: " + ", ".join(shown))
+            for name, timeline in (("ours", self.ours), ("SUMO", self.reference)):
+                near = [str(c) for c in timeline if t - window <= c.tick <= t + window // 2]
+                lines.append(f"  {name}: " + ", ".join(near))
         return "\n".join(lines)
 
 
@@ -359,16 +374,17 @@ def main(argv: Sequence[str] | None = None) -> int:
             result = differential(config, calls, ticks)
             print(f"{name:45s} {result.agreement:6.1%}")
             if args.verbose and result.agreement < 1:
-                print(result.report())
+                print(result.report(calls))
             matched += len(result.matched)
             total += len(result.matched) + len(result.only_ours) + len(result.only_reference)
         rng = random.Random(args.seed)
         ticks = round(args.length * 10)
         r_matched = r_total = 0
         for i in range(args.random):
-            result = differential(config, random_calls(rng, ticks, sorted(config.phases)), ticks)
+            calls = random_calls(rng, ticks, sorted(config.phases))
+            result = differential(config, calls, ticks)
             if args.verbose and result.agreement < 1:
-                print(f"random {i}: " + result.report())
+                print(f"random {i}: " + result.report(calls))
             r_matched += len(result.matched)
             r_total += len(result.matched) + len(result.only_ours) + len(result.only_reference)
     except (ReferenceError, ValueError) as exc:
