@@ -165,12 +165,16 @@ def _ring_slots(config: IntersectionConfig) -> list[list[int]]:
     return slots
 
 
+def _default_phases(config: IntersectionConfig) -> list[list[int]]:
+    """Per ring and barrier group, the last phase of the ring there: SUMO's barrier (group 2) and
+    coordinate (group 1) phases, which in free mode are the phases it enters by dual entry."""
+    return [[next(p for p in reversed(row[2 * g:2 * g + 2]) if p) for g in range(2)] for row in _ring_slots(config)]
+
+
 def sumo_program(config: IntersectionConfig, phase_map: PhaseMap) -> str:
     """The additional file with SUMO's NEMA program for ``config`` (see the theory of operation)."""
     slots = _ring_slots(config)
-    # the last phase of each ring before each barrier: SUMO's barrier (group 2) and coordinate
-    # (group 1) phases, which in free mode are its dual-entry defaults
-    last = [[next(p for p in reversed(row[2 * g:2 * g + 2]) if p) for g in range(2)] for row in slots]
+    last = _default_phases(config)
     params = {
         "ring1": ",".join(map(str, slots[0])),
         "ring2": ",".join(map(str, slots[1])),
@@ -287,8 +291,12 @@ def run_reference(config: IntersectionConfig, calls: CallSequence, ticks: int) -
 # --- comparison ------------------------------------------------------------------------
 
 
-def compare(ours: Timeline, reference: Timeline, tolerance: int = 1) -> Comparison:
-    """Pair changes of the same phase and colour at most ``tolerance`` ticks apart, in order."""
+def compare(ours: Timeline, reference: Timeline, tolerance: int = 1, until: int | None = None) -> Comparison:
+    """Pair changes of the same phase and colour at most ``tolerance`` ticks apart, in order;
+    with ``until``, only the changes before that tick take part."""
+    if until is not None:
+        ours = tuple(c for c in ours if c.tick < until)
+        reference = tuple(c for c in reference if c.tick < until)
     matched: list[tuple[ColorChange, ColorChange]] = []
     only_ours: list[ColorChange] = []
     only_ref: list[ColorChange] = []
@@ -312,9 +320,41 @@ def compare(ours: Timeline, reference: Timeline, tolerance: int = 1) -> Comparis
     return Comparison(ours, reference, tuple(sorted(matched)), tuple(sorted(only_ours)), tuple(sorted(only_ref)))
 
 
-def differential(config: IntersectionConfig, calls: CallSequence, ticks: int) -> Comparison:
-    """Both controllers under the same calls, compared within 0.1 s."""
-    return compare(run_ours(config, calls, ticks), run_reference(config, calls, ticks))
+def differential(config: IntersectionConfig, calls: CallSequence, ticks: int, *,
+                 stop_at_redirect: bool = False) -> Comparison:
+    """Both controllers under the same calls, compared within 0.1 s; with ``stop_at_redirect``,
+    only up to the first green SUMO redirected during clearance (:func:`clearance_redirect`)."""
+    reference = run_reference(config, calls, ticks)
+    redirect = clearance_redirect(config, calls, reference) if stop_at_redirect else None
+    return compare(run_ours(config, calls, ticks), reference,
+                   until=None if redirect is None else redirect.tick - 1)
+
+
+def clearance_redirect(config: IntersectionConfig, calls: CallSequence, reference: Timeline) -> ColorChange | None:
+    """The first green onset in SUMO's timeline that SUMO chose after its ring's yellow had begun.
+
+    SUMO lets a call that appears during clearance redirect a ring to another phase on the same
+    barrier side (``NEMAPhase::trySwitch``: a transition decision "can be overriden but only if the
+    new transition is on the same side of a barrier"); NEMA TS2 and our controller keep the phase
+    next chosen at the start of yellow. A green of phase q after its ring's yellow onset at tick y
+    is SUMO's choice at y when q was called at y or is its ring's dual-entry phase on q's side;
+    otherwise a later call chose it. From there on the two controllers serve different phases by
+    design, so the differential comparison stops there."""
+    defaults = {p for row in _default_phases(config) for p in row}
+    ring = {p: config.ring_of(p) for p in config.phases}
+    in_force = sorted(calls)
+    yellow_at: dict[int, int] = {}
+    for change in reference:
+        r = ring[change.phase]
+        if change.color is Color.YELLOW:
+            yellow_at[r] = change.tick
+        elif change.color is Color.GREEN and r in yellow_at:
+            y = yellow_at[r]
+            # the calls the step ending at tick y read: those placed at tick y - 1 or before
+            called = next((ps for k, ps in reversed(in_force) if k <= y - 1), frozenset())
+            if change.phase not in called and change.phase not in defaults:
+                return change
+    return None
 
 
 # --- call sequences --------------------------------------------------------------------
