@@ -16,6 +16,7 @@ from harness.nema_reference import (
     Color,
     ColorChange,
     ReferenceError,
+    clearance_redirect,
     compare,
     run_ours,
     run_reference,
@@ -87,3 +88,13 @@ def test_reference_backs_into_an_earlier_phase(paper_config: IntersectionConfig)
 def test_reference_enters_with_the_dual_entry_phase(paper_config: IntersectionConfig) -> None:
     ref = run_reference(paper_config, *SCENARIOS["dual entry"])
     assert onset(ref, 4, Color.GREEN) == onset(ref, 8, Color.GREEN) == 81
+
+
+def test_reference_redirects_a_ring_during_clearance(paper_config: IntersectionConfig) -> None:
+    """SUMO's quirk: a call during clearance changes the phase next chosen at yellow (3 for 4)."""
+    calls, ticks = seconds((0, [2, 6]), (12, [4]), (13, [3, 4]), (40, [])), 500
+    ref = run_reference(paper_config, calls, ticks)
+    assert onset(ref, 3, Color.GREEN) == 171 and onset(ref, 4, Color.GREEN) == 421
+    assert clearance_redirect(paper_config, calls, ref) == ColorChange(171, 3, Color.GREEN)
+    for name, (calls, ticks) in SCENARIOS.items():
+        assert clearance_redirect(paper_config, calls, run_reference(paper_config, calls, ticks)) is None, name
