@@ -41,10 +41,11 @@ from __future__ import annotations
 import argparse
 import contextlib
 import dataclasses
+import itertools
 import random
 import sys
 import tempfile
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from enum import StrEnum
 from pathlib import Path
@@ -52,7 +53,7 @@ from xml.sax.saxutils import quoteattr
 
 import libsumo
 
-from emulator.controller import Controller
+from emulator.controller import Controller, tenths
 from hils.config import IntersectionConfig, load
 from hils.ntcip import ControlColumn, PhaseStartup
 from hils.sumo_net import NET_FILE, PhaseMap, data_path, derive_phase_map, read_net
@@ -321,40 +322,135 @@ def compare(ours: Timeline, reference: Timeline, tolerance: int = 1, until: int 
 
 
 def differential(config: IntersectionConfig, calls: CallSequence, ticks: int, *,
-                 stop_at_redirect: bool = False) -> Comparison:
-    """Both controllers under the same calls, compared within 0.1 s; with ``stop_at_redirect``,
-    only up to the first green SUMO redirected during clearance (:func:`clearance_redirect`)."""
+                 stop_at_quirk: bool = False) -> Comparison:
+    """Both controllers under the same calls, compared within 0.1 s; with ``stop_at_quirk``, only
+    up to the first of SUMO's documented quirks (:func:`reference_quirks`)."""
     reference = run_reference(config, calls, ticks)
-    redirect = clearance_redirect(config, calls, reference) if stop_at_redirect else None
-    return compare(run_ours(config, calls, ticks), reference,
-                   until=None if redirect is None else redirect.tick - 1)
+    quirks = reference_quirks(config, calls, reference, ticks) if stop_at_quirk else ()
+    return compare(run_ours(config, calls, ticks), reference, until=quirks[0].since if quirks else None)
 
 
-def clearance_redirect(config: IntersectionConfig, calls: CallSequence, reference: Timeline) -> ColorChange | None:
-    """The first green onset in SUMO's timeline that SUMO chose after its ring's yellow had begun.
+class Quirk(StrEnum):
+    """Where SUMO's NEMA logic departs from NEMA TS2 operation as our controller implements it
+    (docs/nema_differences.md gives an example of each and the source)."""
 
-    SUMO lets a call that appears during clearance redirect a ring to another phase on the same
-    barrier side (``NEMAPhase::trySwitch``: a transition decision "can be overriden but only if the
-    new transition is on the same side of a barrier"); NEMA TS2 and our controller keep the phase
-    next chosen at the start of yellow. A green of phase q after its ring's yellow onset at tick y
-    is SUMO's choice at y when q was called at y or is its ring's dual-entry phase on q's side;
-    otherwise a later call chose it. From there on the two controllers serve different phases by
-    design, so the differential comparison stops there."""
-    defaults = {p for row in _default_phases(config) for p in row}
-    ring = {p: config.ring_of(p) for p in config.phases}
-    in_force = sorted(calls)
-    yellow_at: dict[int, int] = {}
-    for change in reference:
-        r = ring[change.phase]
-        if change.color is Color.YELLOW:
-            yellow_at[r] = change.tick
-        elif change.color is Color.GREEN and r in yellow_at:
-            y = yellow_at[r]
-            # the calls the step ending at tick y read: those placed at tick y - 1 or before
-            called = next((ps for k, ps in reversed(in_force) if k <= y - 1), frozenset())
-            if change.phase not in called and change.phase not in defaults:
-                return change
-    return None
+    REDIRECTED = "next phase changed during clearance"
+    PULLED_ACROSS = "clearing ring pulled across the barrier"
+    FORCED_END = "green ended early by the other ring"
+    SKIPPED = "called phase skipped to cross the barrier"
+
+
+@dataclass(frozen=True, slots=True)
+class QuirkSighting:
+    """A quirk seen at ``tick`` in SUMO's timeline; from ``since`` on the controllers may differ."""
+
+    since: int
+    tick: int
+    phase: int
+    kind: Quirk
+
+
+def reference_quirks(config: IntersectionConfig, calls: CallSequence, reference: Timeline,
+                     ticks: int) -> tuple[QuirkSighting, ...]:
+    """SUMO's departures from the NEMA rules our controller keeps, found in its timeline and calls.
+
+    - REDIRECTED: a ring enters another phase than the one it chose at the start of its yellow,
+      i.e. the first phase called then on the entered phase's side in ring order after the one
+      that ended (or that side's dual-entry phase when none was called). SUMO lets later calls
+      change a decision while the new target is on the same barrier side
+      (``NEMAPhase::trySwitch``); rule 2 of issue 9 keeps it.
+    - PULLED_ACROSS: a ring that began its yellow alone (a move on its side of the barrier) enters
+      a phase across the barrier, because the other ring became ready to cross meanwhile
+      (``NEMALogic::getNextPhases`` gives the clearing ring its default transition across).
+    - FORCED_END: a green ends while its own call is on, before its minimum, or before its
+      maximum timed from the conflicting call, without having gapped out: the other ring's
+      green-rest max-out sets it ready too (``NEMAPhase::update``, "force the counterparty to be
+      ready to switch").
+    - SKIPPED: both rings cross the barrier while one of them had a call on a phase after its
+      own before the barrier (1 -> 4 with 2 called): the crossing pair has the smaller summed
+      ring distance (``NEMALogic::getNextPhases``) because a green-rest phase staying counts the
+      full ring (``PhaseTransitionLogic::getDistance``); a NEMA ring serves its called phases in
+      sequence before the barrier.
+    """
+    called = _calls_read(calls, ticks)
+    side = {p: config.barrier_of(p) for p in config.phases}
+    ring_of = {p: config.ring_of(p) - 1 for p in config.phases}
+    order = [list(r) for r in config.rings]
+    defaults = _default_phases(config)
+    shown = {ring[0]: Color.GREEN for ring in config.rings}
+    green_since = {r: 0 for r in range(len(order))}
+    phase = {r: order[r][0] for r in range(len(order))}
+    yellow: dict[int, tuple[int, bool]] = {}  # ring -> (yellow onset, began alone)
+    out: list[QuirkSighting] = []
+
+    def after(p: int) -> list[int]:
+        ring = order[ring_of[p]]
+        i = ring.index(p)
+        return [ring[(i + k) % len(ring)] for k in range(1, len(ring))]
+
+    def conflict(p: int, k: int) -> bool:
+        return any(q != p and (ring_of[q] == ring_of[p] or side[q] != side[p]) for q in called[k])
+
+    by_tick: dict[int, list[ColorChange]] = {}
+    for c in reference:
+        by_tick.setdefault(c.tick, []).append(c)
+    for t in sorted(by_tick):
+        changes = by_tick[t]
+        turning = {c.phase for c in changes if c.color is Color.YELLOW}
+        for c in changes:
+            r = ring_of[c.phase]
+            if c.color is Color.YELLOW:
+                p, g = c.phase, green_since[r]
+                ph = config.phases[p]
+                if p in called[t] and not _legitimate_end(p, g, t, ph.min_green, ph.max_green, called, conflict):
+                    out.append(QuirkSighting(t, t, p, Quirk.FORCED_END))
+                yellow[r] = (t, phase[1 - r] not in turning)
+            elif c.color is Color.GREEN and r in yellow:
+                y, alone = yellow.pop(r)
+                p, q = phase[r], c.phase
+                ahead = list(itertools.takewhile(side[p].__eq__, (side[x] for x in after(p))))
+                ahead = after(p)[:len(ahead)]
+                if alone and side[q] != side[p]:
+                    out.append(QuirkSighting(y + 1, t, q, Quirk.PULLED_ACROSS))
+                elif side[q] != side[p] and any(x in called[y] for x in ahead):
+                    out.append(QuirkSighting(y, t, q, Quirk.SKIPPED))
+                else:
+                    chosen = next((x for x in after(p) if x in called[y] and side[x] == side[q]),
+                                  defaults[r][side[q]])
+                    if q != chosen:
+                        out.append(QuirkSighting(y + 1, t, q, Quirk.REDIRECTED))
+                phase[r], green_since[r] = q, t
+        for c in changes:
+            shown[c.phase] = c.color
+    return tuple(sorted(out, key=lambda s: s.since))
+
+
+def _legitimate_end(p: int, green: int, end: int, min_green: float, max_green: float,
+                    called: Sequence[frozenset[int]], conflict: Callable[[int, int], bool]) -> bool:
+    """A green of ``p`` from ``green`` ending at ``end`` with its call on: after its minimum, and
+    either maxed out (conflicting demand for its maximum without a break) or gapped out earlier
+    (call off with conflicting demand after the minimum: the gap-out is kept)."""
+    if end - green < tenths(min_green):
+        return False
+    run = 0
+    for k in range(end, green, -1):
+        if not conflict(p, k):
+            break
+        run += 1
+    if run >= tenths(max_green):
+        return True
+    return any(p not in called[k] and conflict(p, k) for k in range(green + tenths(min_green), end))
+
+
+def _calls_read(calls: CallSequence, ticks: int) -> list[frozenset[int]]:
+    """Per tick k, the calls the step ending at tick k reads (those placed at tick k - 1 or before)."""
+    out = [frozenset()] * (ticks + 1)
+    pending = dict(calls)
+    now: frozenset[int] = frozenset()
+    for k in range(1, ticks + 1):
+        now = pending.get(k - 1, now)
+        out[k] = now
+    return out
 
 
 # --- call sequences --------------------------------------------------------------------

@@ -13,11 +13,14 @@ import pytest
 
 from harness.nema_reference import (
     SCENARIOS,
+    CallSequence,
     Color,
     ColorChange,
+    Quirk,
+    QuirkSighting,
     ReferenceError,
-    clearance_redirect,
     compare,
+    reference_quirks,
     run_ours,
     run_reference,
     seconds,
@@ -95,6 +98,22 @@ def test_reference_redirects_a_ring_during_clearance(paper_config: IntersectionC
     calls, ticks = seconds((0, [2, 6]), (12, [4]), (13, [3, 4]), (40, [])), 500
     ref = run_reference(paper_config, calls, ticks)
     assert onset(ref, 3, Color.GREEN) == 171 and onset(ref, 4, Color.GREEN) == 421
-    assert clearance_redirect(paper_config, calls, ref) == ColorChange(171, 3, Color.GREEN)
+    assert reference_quirks(paper_config, calls, ref, ticks) == (QuirkSighting(122, 171, 3, Quirk.REDIRECTED),)
     for name, (calls, ticks) in SCENARIOS.items():
-        assert clearance_redirect(paper_config, calls, run_reference(paper_config, calls, ticks)) is None, name
+        assert reference_quirks(paper_config, calls, run_reference(paper_config, calls, ticks), ticks) == (), name
+
+
+@pytest.mark.parametrize(("calls", "ticks", "kind", "tick"), [
+    # 3+7 green, calls on 1, 5 and 8: SUMO crosses to 1+5 and leaves 8 (after 7, before the barrier) unserved
+    (seconds((0, [3, 7]), (12, [1, 5, 8]), (30, [])), 400, Quirk.SKIPPED, 171),
+    # 2+5 green; 5 ends alone toward 6 (called), then 2 becomes ready with 3 called: SUMO takes ring 2
+    # across with ring 1 (3+8) instead of serving 6
+    (seconds((0, [2, 5]), (9, [3, 6]), (30, [])), 400, Quirk.PULLED_ACROSS, 161),
+    # 3+8 -> 4+8; 8's max-out (timed from the call on 4, its concurrent phase) ends 4 too, 15 s into
+    # its 20 s maximum with its call on
+    (seconds((0, [3, 8]), (12, [4, 8]), (15, [2, 4, 8]), (45, [])), 500, Quirk.FORCED_END, 320),
+])
+def test_reference_quirks_are_recognised(paper_config: IntersectionConfig, calls: CallSequence, ticks: int,
+                                         kind: Quirk, tick: int) -> None:
+    quirks = reference_quirks(paper_config, calls, run_reference(paper_config, calls, ticks), ticks)
+    assert quirks and quirks[0].kind is kind and quirks[0].tick == tick, quirks
