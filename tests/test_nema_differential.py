@@ -80,7 +80,7 @@ def test_reference_crosses_the_barrier_with_both_rings(paper_config: Intersectio
 
 def test_reference_keeps_the_next_phase_chosen_at_yellow(paper_config: IntersectionConfig) -> None:
     ref = run_reference(paper_config, *SCENARIOS["phase next decided at yellow"])
-    assert onset(ref, 4, Color.GREEN) == 81 < onset(ref, 2, Color.GREEN, after=81)
+    assert onset(ref, 4, Color.GREEN) == 80 < onset(ref, 2, Color.GREEN, after=80)
 
 
 def test_reference_backs_into_an_earlier_phase(paper_config: IntersectionConfig) -> None:
@@ -90,7 +90,7 @@ def test_reference_backs_into_an_earlier_phase(paper_config: IntersectionConfig)
 
 def test_reference_enters_with_the_dual_entry_phase(paper_config: IntersectionConfig) -> None:
     ref = run_reference(paper_config, *SCENARIOS["dual entry"])
-    assert onset(ref, 4, Color.GREEN) == onset(ref, 8, Color.GREEN) == 81
+    assert onset(ref, 4, Color.GREEN) == onset(ref, 8, Color.GREEN) == 80
 
 
 def test_reference_redirects_a_ring_during_clearance(paper_config: IntersectionConfig) -> None:
@@ -108,7 +108,7 @@ def test_reference_redirects_a_ring_during_clearance(paper_config: IntersectionC
     (seconds((0, [3, 7]), (12, [1, 5, 8]), (30, [])), 400, Quirk.SKIPPED, 171),
     # 2+5 green; 5 ends alone toward 6 (called), then 2 becomes ready with 3 called: SUMO takes ring 2
     # across with ring 1 (3+8) instead of serving 6
-    (seconds((0, [2, 5]), (9, [3, 6]), (30, [])), 400, Quirk.PULLED_ACROSS, 161),
+    (seconds((0, [2, 5]), (9, [3, 6]), (30, [])), 400, Quirk.PULLED_ACROSS, 160),
     # 3+8 -> 4+8; 8's max-out (timed from the call on 4, its concurrent phase) ends 4 too, 15 s into
     # its 20 s maximum with its call on
     (seconds((0, [3, 8]), (12, [4, 8]), (15, [2, 4, 8]), (45, [])), 500, Quirk.FORCED_END, 320),
