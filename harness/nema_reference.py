@@ -70,7 +70,7 @@ CallSequence = tuple[tuple[int, frozenset[int]], ...]
 """``(tick, phases)`` in ascending tick order: from that tick on exactly these phases are called."""
 
 
-class ReferenceError(ValueError):
+class NemaReferenceError(ValueError):
     """A config or call sequence SUMO's NEMA controller cannot be given; says what is allowed."""
 
 
@@ -151,10 +151,10 @@ def _ring_slots(config: IntersectionConfig) -> list[list[int]]:
     """Per ring, two slots per barrier group (0 for an empty slot), as SUMO's ring strings."""
     where = f"{config.source}: structure"
     if len(config.rings) != 2 or len(config.barriers) != 2:
-        raise ReferenceError(f"{where}: SUMO's NEMA controller has exactly 2 rings and 2 barrier groups; "
+        raise NemaReferenceError(f"{where}: SUMO's NEMA controller has exactly 2 rings and 2 barrier groups; "
                              f"this config has {len(config.rings)} rings and {len(config.barriers)} groups")
     if max(config.phases) > 8:
-        raise ReferenceError(f"{where}: SUMO's NEMA controller reads phase numbers as single digits; "
+        raise NemaReferenceError(f"{where}: SUMO's NEMA controller reads phase numbers as single digits; "
                              f"allowed: phases 1 to 8, got {max(config.phases)}")
     slots = []
     for ring in config.rings:
@@ -162,7 +162,7 @@ def _ring_slots(config: IntersectionConfig) -> list[list[int]]:
         for group in range(2):
             mine = [p for p in ring if config.barrier_of(p) == group]
             if len(mine) > 2 or not mine:
-                raise ReferenceError(f"{where}: ring {list(ring)} has {len(mine)} phases in barrier group "
+                raise NemaReferenceError(f"{where}: ring {list(ring)} has {len(mine)} phases in barrier group "
                                      f"{group + 1}; SUMO's NEMA controller allows 1 or 2")
             row += mine + [0] * (2 - len(mine))
         slots.append(row)
@@ -205,14 +205,14 @@ def _check(calls: CallSequence, ticks: int, config: IntersectionConfig) -> None:
     last = -1
     for tick, phases in calls:
         if tick <= last or tick < 0:
-            raise ReferenceError(f"call sequence: tick {tick} after tick {last}; allowed: ascending ticks >= 0")
+            raise NemaReferenceError(f"call sequence: tick {tick} after tick {last}; allowed: ascending ticks >= 0")
         unknown = set(phases) - set(config.phases)
         if unknown:
-            raise ReferenceError(f"call sequence: tick {tick} calls unknown phase(s) {sorted(unknown)}; "
+            raise NemaReferenceError(f"call sequence: tick {tick} calls unknown phase(s) {sorted(unknown)}; "
                                  f"allowed: {sorted(config.phases)}")
         last = tick
     if ticks <= 0:
-        raise ReferenceError(f"run length {ticks} ticks; allowed: > 0")
+        raise NemaReferenceError(f"run length {ticks} ticks; allowed: > 0")
 
 
 def _changes(previous: Mapping[int, Color], now: Mapping[int, Color], tick: int) -> list[ColorChange]:
@@ -247,7 +247,7 @@ _SUMO_COLOR = {"G": Color.GREEN, "g": Color.GREEN, "y": Color.YELLOW, "Y": Color
 @contextlib.contextmanager
 def _sumo(program: str) -> Iterator[None]:
     if libsumo.simulation.isLoaded():
-        raise ReferenceError("a SUMO simulation is already running in this process (libsumo runs one at a "
+        raise NemaReferenceError("a SUMO simulation is already running in this process (libsumo runs one at a "
                              "time); close it before running the reference")
     with tempfile.TemporaryDirectory(prefix="hils-nema-") as tmp:
         additional = Path(tmp) / "nema.add.xml"
@@ -541,7 +541,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             kinds.update(q.kind for q in quirks[:1])
             if args.verbose and until_quirk[-1].agreement < 1:
                 print(f"random {i}: " + until_quirk[-1].report(calls))
-    except (ReferenceError, ValueError) as exc:
+    except (NemaReferenceError, ValueError) as exc:
         print(f"nema_reference: {exc}", file=sys.stderr)
         return 1
     for label, results in ((f"targeted scenarios ({len(targeted)})", targeted),

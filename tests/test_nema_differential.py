@@ -16,9 +16,9 @@ from harness.nema_reference import (
     CallSequence,
     Color,
     ColorChange,
+    NemaReferenceError,
     Quirk,
     QuirkSighting,
-    ReferenceError,
     compare,
     reference_quirks,
     run_ours,
@@ -56,9 +56,9 @@ def test_compare_pairs_within_a_tick_and_counts_both_sides() -> None:
 
 
 def test_bad_call_sequences_are_refused(paper_config: IntersectionConfig) -> None:
-    with pytest.raises(ReferenceError, match="unknown phase"):
+    with pytest.raises(NemaReferenceError, match="unknown phase"):
         run_ours(paper_config, ((0, frozenset({9})),), 10)
-    with pytest.raises(ReferenceError, match="ascending"):
+    with pytest.raises(NemaReferenceError, match="ascending"):
         run_reference(paper_config, ((5, frozenset()), (5, frozenset({2}))), 10)
 
 
