@@ -138,11 +138,14 @@ class Comparison:
 
 
 def comparable_config(config: IntersectionConfig) -> IntersectionConfig:
-    """Our side of the comparison: SUMO's free-mode start-up (first phase of each ring green)
-    and no backup timer, everything else as given."""
+    """Our side of the comparison: SUMO's free-mode start-up (first phase of each ring green), its
+    hard-coded dual entry (the last phase of each ring in each barrier group: the throughs) and no
+    backup timer, everything else as given."""
     firsts = {ring[0] for ring in config.rings}
+    duals = {[p for p in ring if config.barrier_of(p) == b][-1] for ring in config.rings
+             for b in range(len(config.barriers)) if any(config.barrier_of(p) == b for p in ring)}
     phases = {p: dataclasses.replace(ph, startup=PhaseStartup.GREEN_NO_WALK if p in firsts
-                                     else PhaseStartup.PHASE_NOT_ON)
+                                     else PhaseStartup.PHASE_NOT_ON, dual_entry=p in duals)
               for p, ph in config.phases.items()}
     return dataclasses.replace(config, phases=phases).with_middleware(backup_time=0)
 

@@ -9,10 +9,17 @@ and closes its own (about 10 ms), so the tests run sequentially in this process.
 
 from __future__ import annotations
 
+import random
+
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from harness.nema_reference import (
+    AGREEMENT_REQUIRED,
     SCENARIOS,
+    WARM_UP,
+    WARM_UP_TICKS,
     CallSequence,
     Color,
     ColorChange,
@@ -20,6 +27,9 @@ from harness.nema_reference import (
     Quirk,
     QuirkSighting,
     compare,
+    differential,
+    pooled,
+    random_calls,
     reference_quirks,
     run_ours,
     run_reference,
@@ -117,3 +127,54 @@ def test_reference_quirks_are_recognised(paper_config: IntersectionConfig, calls
                                          kind: Quirk, tick: int) -> None:
     quirks = reference_quirks(paper_config, calls, run_reference(paper_config, calls, ticks), ticks)
     assert quirks and quirks[0].kind is kind and quirks[0].tick == tick, quirks
+
+
+# --- our controller agrees ---------------------------------------------------------------
+
+
+@pytest.mark.parametrize("name", sorted(SCENARIOS))
+def test_targeted_scenarios_agree(paper_config: IntersectionConfig, name: str) -> None:
+    calls, ticks = SCENARIOS[name]
+    result = differential(paper_config, calls, ticks)
+    assert result.agreement >= AGREEMENT_REQUIRED, f"{name}: {result.report(calls)}"
+
+
+def test_barrier_crossing_example_of_the_issue(paper_config: IntersectionConfig) -> None:
+    ours = run_ours(paper_config, *SCENARIOS["barrier crossing together"])
+    assert onset(ours, 2, Color.YELLOW) == onset(ours, 6, Color.YELLOW) == 261
+
+
+def _pooled_agreement(config: IntersectionConfig, cases: list[tuple[CallSequence, int]]) -> None:
+    """At least 95 % of the changes of all ``cases`` agree, each compared up to SUMO's first quirk."""
+    results = [(calls, differential(config, calls, ticks, stop_at_quirk=True)) for calls, ticks in cases]
+    matched, total = pooled([r for _, r in results])
+    assert matched >= AGREEMENT_REQUIRED * total, f"{matched} of {total} changes agree:\n" + "\n".join(
+        r.report(calls) for calls, r in results if r.agreement < 1)
+
+
+def test_seeded_random_sequences_agree(paper_config: IntersectionConfig) -> None:
+    """40 sequences of five minutes (the figure of python -m harness.nema_reference, other seed)."""
+    rng = random.Random(9)
+    cases = [(random_calls(rng, 3000, sorted(paper_config.phases)), 3000) for _ in range(40)]
+    compared = sum(len(differential(paper_config, c, t, stop_at_quirk=True).reference) for c, t in cases[:5])
+    assert compared >= 50  # SUMO's quirks leave enough of the sequences to compare
+    _pooled_agreement(paper_config, cases)
+
+
+@st.composite
+def call_sequences(draw: st.DrawFn) -> tuple[CallSequence, int]:
+    """After the warm-up, calls that are held (up to 30 s) and calls that come and go (down to a tick)."""
+    segments = draw(st.lists(st.tuples(st.one_of(st.integers(1, 20), st.integers(20, 300)),
+                                       st.frozensets(st.integers(1, 8), max_size=4)), min_size=1, max_size=25))
+    out, tick = list(WARM_UP), WARM_UP_TICKS
+    for length, phases in segments:
+        out.append((tick, phases))
+        tick += length
+    return tuple(out), tick + 300  # and 30 s without a change to settle
+
+
+@settings(max_examples=15, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
+@given(cases=st.lists(call_sequences(), min_size=10, max_size=10))
+def test_random_call_sequences_agree(paper_config: IntersectionConfig,
+                                     cases: list[tuple[CallSequence, int]]) -> None:
+    _pooled_agreement(paper_config, cases)
