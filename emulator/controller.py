@@ -29,8 +29,10 @@ docs/nema_differences.md for where and why we differ):
 2. A green is ready to end when it is not held and has timed its minimum, and it gapped out, maxed
    out or is forced off (ForceOff acts only while conflicting demand exists).
 3. A ready ring wishes for the nearest called phase after its own in ring order (cyclically), its
-   own excluded; a phase with ``backup_prevent`` is not backed into (served again from a later phase
-   of its barrier group) while the other ring times: the ring wishes to reach it across the barrier.
+   own excluded. A phase with ``backup_prevent`` is not backed into (served from a later phase of
+   its barrier group): the ring reaches it through a barrier cycle, as if it lay across the barrier
+   (both rings clear and re-enter the group), and for the other ring that call is conflicting
+   demand, as a call across the barrier is.
 4. A wish within the barrier group is served at once: the ring clears (yellow, red clearance) and
    enters the wished phase; backing into an earlier phase of the group waits while both rings are
    ready and one of them wishes across the barrier (the crossing goes first).
@@ -278,7 +280,16 @@ class Controller:
 
     def _conflicting(self, r: Ring, calls: frozenset[int]) -> bool:
         p = r.phase
-        return any(q != p and (self._ring_of[q] == r.number or self._barrier[q] != self._barrier[p]) for q in calls)
+        return any(q != p and (self._ring_of[q] == r.number or self._barrier[q] != self._barrier[p]
+                               or self._needs_cycle(q)) for q in calls)
+
+    def _needs_cycle(self, q: int) -> bool:
+        """A backup-prevented phase behind its ring's current phase in this group: served after a barrier cycle."""
+        if q not in self._backup_prevent or self._barrier[q] != self.group:
+            return False
+        current = self.rings[self._ring_of[q] - 1].phase
+        return (current is not None and self._barrier[current] == self.group
+                and self._order[q] < self._order[current])
 
     def _time(self, r: Ring, calls: frozenset[int]) -> None:
         """Rule 1, and the clearance intervals."""
@@ -304,10 +315,12 @@ class Controller:
         target = r.target
         if target is not None and target in self.control[ControlColumn.PHASE_OMIT]:
             target = r.target = None  # omitted during the clearance: decide again
+        if self._crossing_to is not None:
+            return  # a crossing is under way: wait for every ring to finish its clearance
         if target is not None and self._barrier[target] == self.group:
             self._start(r, target)
-        elif self._crossing_to is None:
-            self._enter(r, Interval.DWELL)  # nothing committed here, and no crossing under way
+        else:
+            self._enter(r, Interval.DWELL)  # nothing committed here
 
     def _ready(self, r: Ring, calls: frozenset[int]) -> bool:
         """Rule 2."""
@@ -334,16 +347,8 @@ class Controller:
         if not calls or self._crossing_to is not None:
             return
         ready = {r.number: self._ready(r, calls) for r in self.rings}
-        wishes: dict[int, int | None] = {}
-        for r in self.rings:
-            if ready[r.number]:
-                wish = self._wish(r, calls)
-                if (wish is not None and wish in self._backup_prevent and self._barrier[wish] == self.group
-                        and r.phase is not None and self._order[wish] < self._order[r.phase]
-                        and self._barrier[r.phase] == self.group and not all(ready.values())):
-                    wish = None  # rule 3: not backed into while the other ring times
-                wishes[r.number] = wish
-        across = {n: q for n, q in wishes.items() if q is not None and self._crosses(q)}
+        wishes = {r.number: self._wish(r, calls) for r in self.rings if ready[r.number]}
+        across = {n: q for n, q in wishes.items() if q is not None and (self._crosses(q) or self._needs_cycle(q))}
         all_ready = all(ready.values())
         # Rules 4 and 6: within the group.
         for r in self.rings:
@@ -361,10 +366,16 @@ class Controller:
         # Rule 5: crossing, once every ring is ready with a wish across or none.
         if across and all(ready[r.number] and (wishes.get(r.number) is None or r.number in across)
                           for r in self.rings):
-            group = self._barrier[next(iter(across.values()))]
+            # The next barrier group in sequence that a ring wishes to enter; the same group again
+            # (a barrier cycle) when only backup-prevented phases are wished for.
+            wished = {self._barrier[q] for q in across.values()}
+            n = len(self.config.barriers)
+            group = next(g for g in ((self.group + k) % n for k in range(1, n + 1)) if g in wished)
             self._crossing_to = group
             for r in self.rings:
-                target = across.get(r.number, self._dual_entry.get((r.number, group)))
+                wish = across.get(r.number)
+                target = wish if wish is not None and self._barrier[wish] == group else self._dual_entry.get(
+                    (r.number, group))
                 if r.interval is Interval.GREEN:
                     self._clear(r, target)
                 else:

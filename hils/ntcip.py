@@ -77,16 +77,30 @@ class SnmpError(Exception):
 class PhaseColumn(IntEnum):
     """Columns of phaseTable (A.1.2.1.c.p)."""
 
+    WALK = 2
+    PEDESTRIAN_CLEAR = 3
     MINIMUM_GREEN = 4
     PASSAGE = 5
     MAXIMUM1 = 6
     MAXIMUM2 = 7
     YELLOW_CHANGE = 8
     RED_CLEAR = 9
+    RED_REVERT = 10
     STARTUP = 20
     OPTIONS = 21
     RING = 22
     CONCURRENCY = 23
+
+
+class PhaseOption(IntEnum):
+    """Bits of phaseOptions (NTCIP 1202 v02, 2.2.2.21)."""
+
+    ENABLED = 0
+    MIN_RECALL = 6
+    MAX_RECALL = 7
+    PED_RECALL = 8
+    SOFT_RECALL = 9
+    DUAL_ENTRY = 10
 
 
 class StatusColumn(IntEnum):
@@ -186,12 +200,15 @@ UNIT_FLASH_STATUS = _o("unitFlashStatus", (3, 6), low=1, high=8)
 SYSTEM_PATTERN_CONTROL = _o("systemPatternControl", (4, 14), access=Access.READ_WRITE)
 
 _PHASE_NAMES = {
+    PhaseColumn.WALK: ("phaseWalk", Syntax.INTEGER),
+    PhaseColumn.PEDESTRIAN_CLEAR: ("phasePedestrianClear", Syntax.INTEGER),
     PhaseColumn.MINIMUM_GREEN: ("phaseMinimumGreen", Syntax.INTEGER),
     PhaseColumn.PASSAGE: ("phasePassage", Syntax.INTEGER),
     PhaseColumn.MAXIMUM1: ("phaseMaximum1", Syntax.INTEGER),
     PhaseColumn.MAXIMUM2: ("phaseMaximum2", Syntax.INTEGER),
     PhaseColumn.YELLOW_CHANGE: ("phaseYellowChange", Syntax.INTEGER),
     PhaseColumn.RED_CLEAR: ("phaseRedClear", Syntax.INTEGER),
+    PhaseColumn.RED_REVERT: ("phaseRedRevert", Syntax.INTEGER),
     PhaseColumn.STARTUP: ("phaseStartup", Syntax.INTEGER),
     PhaseColumn.OPTIONS: ("phaseOptions", Syntax.INTEGER),
     PhaseColumn.RING: ("phaseRing", Syntax.INTEGER),

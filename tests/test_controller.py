@@ -214,9 +214,12 @@ def test_backup_prevent_keeps_the_ring_from_backing_until_the_barrier(paper_toml
     c.backup_time = 0
     serve(c, {3, 8})
     c.set_control(CALL, {3, 7})
-    trace = record(c, 3 * MAX)
-    # Ring 2 may not back into 7 while 3 times (3 has its call and nothing conflicts: it rests).
-    assert runs(trace, 8) == [("G", 3 * MAX)] and runs(trace, 7) == [("r", 3 * MAX)]
+    trace = record(c, MAX + YELLOW + RED + 10)
+    # Ring 2 may not back into 7: it gets there through a barrier cycle. For 3 (which has its call)
+    # the call on 7 is conflicting demand: 3 maxes out, then both rings clear and re-enter the group.
+    assert runs(trace, 8) == [("G", MAX - 1), ("Y", YELLOW), ("r", RED + 11)]
+    assert runs(trace, 3)[:2] == [("G", MAX - 1), ("Y", YELLOW)]
+    assert runs(trace, 7) == [("r", MAX - 1 + YELLOW + RED), ("G", 11)]
 
 
 @pytest.mark.parametrize("calls", [set(), {2}, {2, 6}])
