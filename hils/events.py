@@ -35,7 +35,8 @@ class Kind(StrEnum):
     ACTION_REFUSED = "action_refused"          # action_id, error, reason
     ACTION_DROPPED = "action_dropped"          # action_id, state
     COMMAND_DISPATCHED = "command_dispatched"  # action_id, command_id, command, green
-    SET_SENT = "set_sent"                      # command_id, phases, purpose (command|retry|keepalive|recovery|clear)
+    SET_SENT = "set_sent"                      # command_id, phases, purpose: startup|command|retry|keepalive|
+    #                                                        recovery|clear (startup: all six objects at 0)
     SET_ANSWERED = "set_answered"              # command_id, purpose
     SET_FAILED = "set_failed"                  # command_id, purpose, error
     POLL = "poll"                              # poll_id, greens, yellows, reds (on change only), changed

@@ -522,7 +522,8 @@ class Manager:
 
     def _close(self, ev: CloseRequested, out: list[Effect]) -> None:
         out.append(HaltPolling())
-        self._send(frozenset(), Purpose.CLEAR, None, ev.t, out)
+        if self.last_set > float("-inf"):  # a run that never SET a call has none to clear
+            self._send(frozenset(), Purpose.CLEAR, None, ev.t, out)
         self._keepalive_token = None
 
     # --- helpers ---------------------------------------------------------------------------------------

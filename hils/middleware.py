@@ -55,8 +55,20 @@ from hils.manager import (
     TimerExpired,
     Verified,
 )
-from hils.ntcip import UNIT_BACKUP_TIME, ControlColumn, SnmpError, control_oid, phases_to_groups
+from hils.ntcip import (
+    SYSTEM_PATTERN_CONTROL,
+    UNIT_BACKUP_TIME,
+    UNIT_FLASH_STATUS,
+    ControlColumn,
+    ErrorStatus,
+    SignalState,
+    SnmpError,
+    control_oid,
+    groups_to_phases,
+    phases_to_groups,
+)
 from hils.poller import Poller, SignalCache, Snapshot
+from hils.preflight import ControllerReading, Verdict, judge
 from hils.transport import CommunicationTimeout, Transport, TransportError
 
 log = logging.getLogger(__name__)
@@ -75,8 +87,13 @@ class Middleware:
     """Everything between the agent and the transport, on one SimPy environment."""
 
     def __init__(self, env: simpy.Environment, transport: Transport, config: IntersectionConfig,
-                 action_type: ActionType | str, events: EventLog) -> None:
+                 action_type: ActionType | str, events: EventLog, *, where: str = "the controller",
+                 community: str | None = None) -> None:
         params = config.middleware
+        self.where = where  # how messages name the controller (HOST:PORT)
+        self.community = community
+        self.startup_error: str | None = None  # why the start-up read or write failed, if it did
+        self.verdict = Verdict((), ())  # the start-up checks' refusals and warnings
         self.env = env
         self.transport = transport
         self.config = config
@@ -191,21 +208,60 @@ class Middleware:
     def _startup(self) -> Generator[simpy.Event, Any, None]:
         # Like the poller, give up only after n_timeout consecutive failures: one lost datagram
         # at start-up is no reason to halt.
-        for attempt in range(1, self.config.middleware.n_timeout + 1):
+        n = self.config.middleware.n_timeout
+        for attempt in range(1, n + 1):
             try:
-                state = yield from self.poller.read_once()
-                (backup,) = yield self.transport.get([UNIT_BACKUP_TIME.instance()])
-            except (TransportError, SnmpError) as exc:
+                state, reading = yield from self._read_controller_setup()
+                # The control objects are ours while we run: whatever someone else left is cleared,
+                # and this harmless SET shows whether the community may write.
+                yield self._send_direct(_cleared_control(self.config.groups), "startup")
+            except SnmpError as exc:
+                self.startup_error = _refusal_text(exc, self.where)
+                self.log.emit(Kind.NOTE, message=f"start-up: {self.startup_error}")
+                self._fail(TimeoutReason.COMMUNICATION, self.startup_error)
+                break
+            except TransportError as exc:
                 self.log.emit(Kind.POLL_FAILED, poll_id=0, error=f"start-up read: {type(exc).__name__}: {exc}",
                               consecutive=attempt)
-                if attempt == self.config.middleware.n_timeout:
+                if attempt == n:
+                    self.startup_error = (f"no answer from {self.where} within {n} x tau_udp = "
+                                          f"{n * self.config.middleware.tau_udp:g} s: is the controller there, "
+                                          "at that address and port, and is the community right?")
                     self._fail(TimeoutReason.COMMUNICATION, f"controller unreachable at start-up: {exc}")
                 continue
+            self.verdict = judge(reading, where=self.where, community=self.community,
+                                 keepalive_period=self.manager.keepalive_period)
+            for line in (*self.verdict.refusals, *self.verdict.warnings):
+                self.log.emit(Kind.NOTE, message=f"start-up: {line}")
             self.cache.update(state, self.env.now, 0)
-            self._feed(Started(self.env.now, state.greens, int(backup)))
+            self._feed(Started(self.env.now, state.greens, reading.backup_time))
             break
         self.env.process(self.poller.run())
         self.ready.succeed()
+
+    def _read_controller_setup(self) -> Generator[simpy.Event, Any, tuple[SignalState, ControllerReading]]:
+        state = yield from self.poller.read_once()
+        backup, pattern, flash = yield self.transport.get(
+            [UNIT_BACKUP_TIME.instance(), SYSTEM_PATTERN_CONTROL.instance(), UNIT_FLASH_STATUS.instance()])
+        groups = self.config.groups
+        masks = yield self.transport.get([control_oid(c, g) for c in ControlColumn for g in range(1, groups + 1)])
+        control = {c: groups_to_phases(masks[i * groups:(i + 1) * groups]) for i, c in enumerate(ControlColumn)}
+        return state, ControllerReading(int(backup), int(pattern), int(flash), control)
+
+    def _send_direct(self, varbinds: list[tuple[Any, int]], purpose: str) -> simpy.Event:
+        """A SET outside the state machine (start-up only): logged like the others."""
+        self.log.emit(Kind.SET_SENT, command_id=None, phases=frozenset(), purpose=purpose)
+        done = self.transport.set(varbinds)
+
+        def answered(ev: simpy.Event) -> None:
+            if ev.ok:
+                self.log.emit(Kind.SET_ANSWERED, command_id=None, purpose=purpose)
+            else:
+                self.log.emit(Kind.SET_FAILED, command_id=None, purpose=purpose,
+                              error=f"{type(ev.value).__name__}: {ev.value}")
+
+        done.callbacks.append(answered)
+        return done
 
     def _recover(self) -> Generator[simpy.Event, Any, bool]:
         self._feed(RecoveryRequested(self.env.now))
@@ -312,6 +368,22 @@ class Middleware:
 
     def _fail(self, reason: TimeoutReason, detail: str) -> None:
         self._feed(FailureDetected(self.env.now, reason, detail))
+
+
+_NOT_WRITABLE = {ErrorStatus.NO_ACCESS, ErrorStatus.NOT_WRITABLE, ErrorStatus.READ_ONLY, ErrorStatus.NO_SUCH_NAME,
+                 ErrorStatus.AUTHORIZATION_ERROR}
+
+
+def _cleared_control(groups: int) -> list[tuple[Any, int]]:
+    """Every control object of every group at 0."""
+    return [(control_oid(c, g), 0) for c in ControlColumn for g in range(1, groups + 1)]
+
+
+def _refusal_text(exc: SnmpError, where: str) -> str:
+    if exc.status in _NOT_WRITABLE:
+        return (f"the controller at {where} refuses to be written ({exc.status.name.lower()}): the community "
+                "can read but not write; use the controller's read-write community (Cobalt: its user name)")
+    return f"the controller at {where} refused the start-up read or write: {exc}"
 
 
 def _plain(value: Any) -> Any:

@@ -56,6 +56,7 @@ from hils.events import read as read_events
 from hils.manager import State
 from hils.middleware import Middleware
 from hils.ntcip import SignalState
+from hils.preflight import ControllerCheckFailed
 from hils.transport import LocalTransport, Transport
 
 log = logging.getLogger(__name__)
@@ -256,14 +257,28 @@ class Testbed:
         # A run that writes its log to a file does not also keep it in memory: a long run's records
         # would grow the heap that every full garbage collection walks, in the middle of the hot path.
         self.events = EventLog(self.log_path, keep=self.log_path is None)
-        self.middleware = Middleware(env, self.transport, self.config, self.action_type, self.events)
+        where, community = ("the in-process emulator", None) if self.mode == VIRTUAL else (
+            f"{self.target.host}:{self.target.port}", getattr(self.target, "community", None))
+        self.middleware = Middleware(env, self.transport, self.config, self.action_type, self.events, where=where,
+                                     community=community)
         self._assemble_simulation()
         self.agent = self._load_agent()
         if self.on_reset is not None:
             self.on_reset(self, self.target)
         self._start()
         self._advance(None, self.middleware.ready)
+        self._check_controller()
         return self.observe()
+
+    def _check_controller(self) -> None:
+        """The start-up checks: refuse a controller unfit for a run (one line each), warn about the rest."""
+        mw = self.middleware
+        refusals = ([mw.startup_error] if mw.startup_error else []) + list(mw.verdict.refusals)
+        for line in mw.verdict.warnings:
+            log.warning("%s", line)
+        if refusals:
+            self.finish("error")
+            raise ControllerCheckFailed("; ".join(refusals))
 
     def _assemble_target(self, env: simpy.Environment) -> None:
         spec = self._target_spec

@@ -332,7 +332,8 @@ def test_keepalive_suppressed_lets_the_backup_time_run_out(paper_config):
 
     seen, sets = statuses([])
     assert UnitControlStatus.BACKUP_MODE not in seen
-    assert [r["t"] for r in sets if r["purpose"] == "keepalive"] == pytest.approx([10.004, 20.004, 30.004, 40.004])
+    t0 = next(r["t"] for r in sets if r["purpose"] == "command")  # the command's SET, right after start-up
+    assert [r["t"] for r in sets if r["purpose"] == "keepalive"] == pytest.approx([t0 + 10, t0 + 20, t0 + 30, t0 + 40])
     off = KeepaliveSuppressed("off")
     seen, sets = statuses([off])
     assert 30.0 <= seen[UnitControlStatus.BACKUP_MODE] <= 30.25  # 30 s after the command's SET, to a tick
@@ -341,7 +342,7 @@ def test_keepalive_suppressed_lets_the_backup_time_run_out(paper_config):
     short = KeepaliveSuppressed("short", window=Window(0.0, 15.0))
     seen, sets = statuses([short])
     assert UnitControlStatus.BACKUP_MODE not in seen  # switched back on in time
-    assert [r["t"] for r in sets if r["purpose"] == "keepalive"] == pytest.approx([20.004, 30.004, 40.004])
+    assert [r["t"] for r in sets if r["purpose"] == "keepalive"] == pytest.approx([t0 + 20, t0 + 30, t0 + 40])
     assert short.fired == 1
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import pytest
@@ -71,7 +72,7 @@ def test_a_wrong_expectation_fails_saying_which_and_what_happened(tmp_path):
     (failure,) = result.failures
     assert failure.expectation == "detect_within"
     assert "TIMEOUT within 1 s after fault 'link-down' first fired" in failure.message
-    assert "got TIMEOUT (communication) at 25.004 s, 5.000 s after" in failure.message
+    assert re.search(r"got TIMEOUT \(communication\) at 25\.0\d\d s, 5\.000 s after", failure.message)
 
 
 def test_a_scenario_expecting_no_timeout_fails_when_one_happens(tmp_path, capsys):
@@ -80,7 +81,7 @@ def test_a_scenario_expecting_no_timeout_fails_when_one_happens(tmp_path, capsys
     code = main(["faults", "run", str(path), "--report-dir", str(tmp_path / "rep"), "--no-progress"])
     out = capsys.readouterr().out
     assert code == 1
-    assert "FAIL ride: timeout: expected no TIMEOUT; got TIMEOUT: communication at 25.004 s" in out
+    assert re.search(r"FAIL ride: timeout: expected no TIMEOUT; got TIMEOUT: communication at 25\.0\d\d s", out)
     assert json.loads((tmp_path / "rep" / "faults.json").read_text())["failed"] == 1
 
 

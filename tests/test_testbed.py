@@ -75,7 +75,7 @@ def test_a_refused_action_raises_sends_nothing_and_takes_no_time() -> None:
             tb.step((1, 2))
         assert isinstance(caught.value, ActionError)
         assert tb.now == obs.t
-        assert not kinds(tb, Kind.SET_SENT)
+        assert [r["purpose"] for r in kinds(tb, Kind.SET_SENT)] == ["startup"]
         (refused,) = kinds(tb, Kind.ACTION_REFUSED)
         assert refused["reason"] == "conflict"
         _, info = tb.wait()
