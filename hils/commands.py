@@ -22,6 +22,7 @@ from hils import config as config_mod
 from hils import plots, summary
 from hils.actions import ActionType
 from hils.errors import UserError
+from hils.status import StatusLine
 from hils.testbed import DEFAULT_AGENTS, VIRTUAL, AgentFailed, RunInterrupted, RunSpec, Testbed
 
 log = logging.getLogger(__name__)
@@ -93,8 +94,11 @@ def run_command(args: argparse.Namespace) -> int:
     spec = RunSpec(cfg, ActionType(args.action_type), agent=args.agent, duration=args.duration, seed=args.seed,
                    log_path=log_path, recover_after=None if args.recover_after < 0 else args.recover_after,
                    sumo=not args.no_sumo)
+    # A wall-clock run is never silent: a live status line (periodic log lines when not on a terminal).
+    status = StatusLine() if args.target and not args.no_progress else None
     tb = Testbed(cfg, action_type=spec.action_type, target=args.target or VIRTUAL, sumo=spec.sumo, seed=spec.seed,
-                 agent=spec.agent, duration=spec.duration, log_path=log_path, recover_after=spec.recover_after)
+                 agent=spec.agent, duration=spec.duration, log_path=log_path, recover_after=spec.recover_after,
+                 on_reset=status.start if status else None)
     error: BaseException | None = None
     with _terminate_as_interrupt(), tb:
         try:
@@ -112,6 +116,9 @@ def run_command(args: argparse.Namespace) -> int:
             if args.verbose:
                 raise
             error = exc
+        finally:
+            if status is not None:
+                status.close()
     records = tb.records
     s = summary.summarize(records, cfg, traffic=tb.traffic, wall_s=tb.wall_s)
     summary.write(s, out / "summary.json")

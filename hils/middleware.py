@@ -114,6 +114,7 @@ class Middleware:
         self._leaving_recovery: simpy.Event | None = None
         self._clearing: simpy.Event | None = None
         self._actions = 0
+        self.last_hold: float | None = None  # s from dispatch to verification of the last verified transition
 
     # --- public API -------------------------------------------------------------------------
 
@@ -317,6 +318,7 @@ class Middleware:
             case Dropped(action_id, state):
                 self.log.emit(Kind.ACTION_DROPPED, action_id=action_id, state=state)
             case Verified(command_id, command, poll_id, hold):
+                self.last_hold = hold
                 self.log.emit(Kind.TRANSITION_VERIFIED, command_id=command_id, command=command.phases,
                               poll_id=poll_id, hold_s=hold)
             case CommandEnded(command_id, outcome, hold):

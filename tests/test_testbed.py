@@ -3,7 +3,9 @@ and every way a run can end (normal, agent error, Ctrl-C, SIGTERM) leaving the c
 
 from __future__ import annotations
 
+import io
 import json
+import logging
 import os
 import signal
 import subprocess
@@ -23,6 +25,7 @@ from hils.actions import ConflictError
 from hils.config import DEFAULT_CONFIG_NAME, IntersectionConfig, load
 from hils.events import Kind, read
 from hils.ntcip import ControlColumn, control_oid, oid_str
+from hils.status import StatusLine
 
 CFG = load()
 
@@ -257,3 +260,29 @@ def test_an_error_inside_the_run_finishes_it_before_it_propagates() -> None:
     assert [r["phases"] for r in kinds(tb, Kind.SET_SENT)][-1] == frozenset()
     assert tb.target.controller.control[ControlColumn.VEH_CALL] == frozenset(), "the calls are cleared"
     tb.close()
+
+
+class _Terminal(io.StringIO):
+    def isatty(self) -> bool:
+        return True
+
+
+def test_the_status_line_on_a_terminal_and_as_log_lines(caplog: pytest.LogCaptureFixture) -> None:
+    terminal = _Terminal()
+    status = StatusLine(stream=terminal)
+    with Testbed(CFG, action_type="switch", on_reset=status.start, seed=0) as tb:
+        tb.reset()
+        tb.step(1)
+        tb.run_for(3.0)
+    status.close()
+    shown = terminal.getvalue()
+    assert shown.count("\r") == int(tb.records[-1]["t"] / 0.5)
+    assert "ON_HOLD" in shown and "IDLE" in shown and "yellow 2+6" in shown and "green 3+7" in shown
+    assert "last hold 8.1" in shown and shown.endswith("\n")  # the start-up green first times its minimum
+    with caplog.at_level(logging.INFO, logger="hils.status"):
+        status = StatusLine(stream=io.StringIO(), log_every=5.0)
+        with Testbed(CFG, action_type="switch", on_reset=status.start) as tb:
+            tb.reset()
+            tb.run_for(21.0)
+    lines = [r.getMessage() for r in caplog.records if r.name == "hils.status"]
+    assert len(lines) == 4 and "20.0 s  IDLE" in lines[-1] and "polls 200 answered, 0 failed" in lines[-1]
