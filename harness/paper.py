@@ -16,11 +16,6 @@ import json
 from pathlib import Path
 from typing import Any
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
-
 from harness import machine
 from hils import config as config_mod
 from hils.actions import ActionType
@@ -28,7 +23,7 @@ from hils.agents import Observation
 from hils.config import IntersectionConfig
 from hils.events import Kind
 from hils.latency import PAPER_LATENCY_MS, Stats, internal_latencies_ms, transition_holds
-from hils.plots import COLORS, signal_intervals
+from hils.plots import COLORS, pyplot, signal_intervals
 from hils.testbed import RunSpec, run_spec
 
 OUT = Path("reports/paper")
@@ -116,6 +111,7 @@ def _pair_spans(records, t0: float, start: float, end: float):
 
 def trajectory_figure(records: list[dict[str, Any]], t0: float, path: Path) -> None:
     start, end = -2.0, 29.0
+    plt = pyplot()
     fig, (ax_ev, ax_sig) = plt.subplots(2, 1, figsize=(11, 5.6), sharex=True, height_ratios=[1.1, 1.4])
     commands = [r for r in records if r["kind"] == Kind.ACTION_RECEIVED and r["t"] >= t0 - 1e-9][:3]
     for i, cmd in enumerate(commands, start=1):
@@ -170,6 +166,7 @@ def trajectory_zoom_figure(records: list[dict[str, Any]], t0: float, path: Path)
     verified = end_events[0]
     end_events += [r for r in records if r["kind"] == Kind.STATE and r["t"] == verified["t"] and r["to"] == "idle"]
     answered = next(r for r in records if r["kind"] == Kind.SET_ANSWERED and r.get("command_id") == cid)
+    plt = pyplot()
     fig, (ax_start, ax_mid, ax_end) = plt.subplots(3, 1, figsize=(10, 6.4), height_ratios=[1, 1.3, 1])
     _event_strip(ax_start, start_events, "wall clock since the agent's output (us)",
                  "Start of Command 1: agent output to SET dispatch")
@@ -230,6 +227,7 @@ def holds_by_rate(cfg: IntersectionConfig, rates: tuple[float, ...], seed: int, 
 
 
 def holds_figure(holds: dict[float, Stats], clearance: float, path: Path) -> None:
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(8, 3.6))
     labels = [f"{r:g} Hz" for r in holds]
     excess = [(st.mean - clearance) * 1e3 for st in holds.values()]

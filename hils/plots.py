@@ -6,15 +6,21 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
-
 from hils.config import IntersectionConfig
 from hils.events import Kind
 
 COLORS = {"G": "#2ca02c", "Y": "#ffbf00", "r": "#d62728"}
+
+
+def pyplot() -> Any:
+    """matplotlib's pyplot on the file-only Agg backend, imported when a picture is first drawn: a
+    command that draws nothing (``hils --help``, a benchmark) does not pay for it."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
 
 
 def signal_intervals(records: Sequence[dict[str, Any]], phases: Sequence[int], start: float, end: float
@@ -41,6 +47,7 @@ def signal_timeline(records: Sequence[dict[str, Any]], config: IntersectionConfi
                     start: float = 0.0, end: float = 120.0, title: str | None = None) -> Path:
     phases = list(config.phase_numbers)
     spans = signal_intervals(records, phases, start, end)
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(11, 0.45 * len(phases) + 1.6))
     for row, p in enumerate(phases):
         ax.broken_barh([(t0, t1 - t0) for t0, t1, _ in spans[p]], (row - 0.4, 0.8),
@@ -69,6 +76,7 @@ def queues(samples: Sequence[tuple[float, Mapping[str, int]]], path: Path, *, ti
         row = bins.setdefault(int(t // bin_s), {})
         for name in names:
             row[name] = max(row.get(name, 0), q.get(name, 0))
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(11, 3.6))
     starts = sorted(bins)
     for name in names:
