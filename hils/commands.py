@@ -18,6 +18,7 @@ from hils import plots, summary
 from hils.actions import ActionType
 from hils.agents import AgentError
 from hils.runner import DEFAULT_AGENTS, RunSpec, Simulation, run_virtual
+from hils.webster import webster_plan
 
 log = logging.getLogger(__name__)
 
@@ -45,7 +46,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="action design: selection (pick a pair), switch (0 keep / 1 advance), duration "
                         "(green time of the next pair); default: selection")
     p.add_argument("--agent", metavar="NAME|MODULE:CLASS",
-                   help="built-in agent (random, fixed-cycle, max-pressure, queue-proportional) or your own "
+                   help="built-in agent (random, fixed-cycle, max-pressure, queue-proportional, webster) or your own "
                         "package.module:Class; default: " + ", ".join(f"{k.value} -> {v}"
                                                                       for k, v in DEFAULT_AGENTS.items()))
     p.add_argument("--duration", type=float, default=3600.0, metavar="S", help="simulated seconds (3600)")
@@ -86,6 +87,8 @@ def run_command(args: argparse.Namespace) -> int:
     spec = RunSpec(cfg, ActionType(args.action_type), agent=args.agent, duration=args.duration, seed=args.seed,
                    log_path=args.log or out / "events.jsonl",
                    recover_after=None if args.recover_after < 0 else args.recover_after, sumo=not args.no_sumo)
+    if spec.agent_spec == "webster":
+        print(webster_plan(cfg).describe())
     simulation = None if args.no_sumo else _sumo(cfg, args)
     try:
         if args.target:
@@ -108,6 +111,8 @@ def run_command(args: argparse.Namespace) -> int:
     if result.run.traffic_samples:
         plots.queues(result.run.traffic_samples, out / "queues.png", title=f"Queues per approach, {cfg.name}")
     print(summary.render(s))
+    for warning in summary.warnings(s):
+        print(warning)
     print(f"Outputs in {out}/: {spec.log_path.name if spec.log_path.parent == out else spec.log_path}, "
           "summary.json, signal_timeline.png" + (", queues.png" if result.run.traffic_samples else ""))
     return 0

@@ -213,6 +213,13 @@ def test_queues_build_on_red_and_discharge_on_green(config) -> None:
     assert summary.mean_time_loss is not None and summary.mean_time_loss > 30  # they all waited a red
     assert summary.max_queue["west"] >= red.movements[6].upstream_queue
     assert summary.collisions == 0
+    every_vehicle = summary.approaches.values()
+    assert sum(a.arrived for a in every_vehicle) == summary.arrived
+    assert sum(a.running for a in every_vehicle) == summary.running
+    assert sum(a.waiting_to_enter for a in every_vehicle) == summary.waiting_to_enter
+    # the north and south approaches saw red for three minutes: their delay so far is at least a minute
+    assert summary.approaches["north"].mean_delay > 60 and summary.approaches["south"].mean_delay > 60
+    assert summary.mean_delay > summary.mean_time_loss  # it counts those still waiting at the red
 
 
 def test_same_seed_same_run_and_restart_in_one_process(config) -> None:
