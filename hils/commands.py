@@ -109,7 +109,9 @@ def run_command(args: argparse.Namespace) -> int:
     summary.write(s, out / "summary.json")
     plots.signal_timeline(records, cfg, out / "signal_timeline.png", start=window[0], end=window[1])
     if result.run.traffic_samples:
-        plots.queues(result.run.traffic_samples, out / "queues.png", title=f"Queues per approach, {cfg.name}")
+        plots.queues(result.run.traffic_samples, out / "queues.png", title=f"Queues per approach, {cfg.name}",
+                     storage={a: v["storage"] for a, v in s["traffic"]["approaches"].items()} if s.get("traffic")
+                     else None)
     print(summary.render(s))
     for warning in summary.warnings(s):
         print(warning)
