@@ -10,6 +10,7 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
+from matplotlib.transforms import offset_copy
 
 from hils.config import IntersectionConfig
 from hils.events import Kind
@@ -137,14 +138,16 @@ def queues(samples: Sequence[tuple[float, Mapping[str, int]]], path: Path, *, ti
     fig, ax = plt.subplots(figsize=(11, 3.8))
     minutes = [e / 60.0 for e in edges]
     spilled = False
-    for name, values in tops.items():
+    for index, (name, values) in enumerate(tops.items()):
         line = ax.stairs(values, minutes, label=name, linewidth=1.4, baseline=None)
         cap = storage.get(name)
         full = [(minutes[i] + minutes[i + 1]) / 2 for i, v in enumerate(values) if cap and v >= cap]
         if full:
             spilled = True
+            # stacked 7 points apart so that approaches with the same storage do not hide each other
             ax.plot(full, [cap] * len(full), linestyle="none", marker="^", color=line.get_edgecolor(),
-                    markersize=7)
+                    markersize=6, clip_on=False,
+                    transform=offset_copy(ax.transData, fig=fig, y=4 + 7 * index, units="points"))
     if storage:
         note = ("triangles: queue reached the approach's storage (spillback)" if spilled else
                 "no approach's queue reached its storage")
@@ -153,7 +156,8 @@ def queues(samples: Sequence[tuple[float, Mapping[str, int]]], path: Path, *, ti
                 fontsize="small")
     ax.set_xlabel("simulation time (min)")
     ax.set_ylabel(f"longest queue per {bin_s:g} s (veh)")
-    ax.set_ylim(bottom=0)
+    highest = max((v for values in tops.values() for v in values), default=0)
+    ax.set_ylim(0, max(1.0, highest) * (1.3 if spilled else 1.08))  # room for the stacked spillback marks
     ax.set_title(title)
     if tops:
         ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small", title="approach")
