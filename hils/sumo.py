@@ -30,6 +30,7 @@ import libsumo
 from hils.config import IntersectionConfig, load
 from hils.ntcip import SignalState
 from hils.sumo_net import SUMO_CONFIG, TLS_ID, PhaseMap, data_path, derive_phase_map, read_net
+from hils.webster import webster_plan
 
 
 class SumoError(RuntimeError):
@@ -378,13 +379,15 @@ class SumoSimulation:
 
 
 def fixed_time_states(config: IntersectionConfig) -> list[tuple[float, SignalState]]:
-    """One cycle of the config's sequence at maximum green: (duration, state) per interval."""
+    """One cycle of Webster's plan for the shipped demand (:mod:`hils.webster`), the fixed-time
+    baseline: (duration, state) per interval."""
     phases = config.phases
     every = frozenset(phases)
+    plan = webster_plan(config)
     out: list[tuple[float, SignalState]] = []
     for pair in config.sequence:
         on = frozenset(pair)
-        green = max(phases[p].max_green for p in pair)
+        green = plan.green_of(pair)
         yellow = max(phases[p].yellow for p in pair)
         red_clear = max(phases[p].red_clear for p in pair)
         out.append((green, SignalState(every - on, frozenset(), on)))
@@ -411,7 +414,7 @@ def time_bare_sumo(seconds: float = 3600.0, *, seed: int = 0, config: Intersecti
     """Wall seconds libsumo alone takes to step the scenario for ``seconds`` of simulated time.
 
     The same network, demand and SUMO options as :class:`SumoSimulation`, with SUMO running
-    the config's fixed cycle itself and no middleware: the baseline of the overhead benchmark.
+    the fixed-time (Webster) cycle itself and no middleware: the baseline of the overhead benchmark.
     Start-up is not timed.
     """
     sim = SumoSimulation(config, seed=seed, step_length=step_length, sumo_config=sumo_config, end=seconds)

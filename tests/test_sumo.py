@@ -23,6 +23,7 @@ from hils.sumo_net import (
     derive_phase_map,
     read_net,
 )
+from hils.webster import webster_plan
 
 STEP = 0.25
 
@@ -259,15 +260,16 @@ def test_quiet_simulation_prints_nothing(config, capfd: pytest.CaptureFixture[st
     assert out == "" and err == ""
 
 
-def test_fixed_time_baseline_runs_the_configured_cycle(config) -> None:
+def test_fixed_time_baseline_runs_the_webster_cycle(config) -> None:
     every = frozenset(config.phases)
+    green = webster_plan(config).green_of((1, 5))  # yellow 3 s and red clearance 2 s follow it
     with SumoSimulation(config) as sim:
         sim.run_fixed_time()
         pm = sim.phase_map
-        checks = {10.0: SignalState(every - {1, 5}, frozenset(), frozenset({1, 5})),
-                  21.0: SignalState(every - {1, 5}, frozenset({1, 5}), frozenset()),
-                  24.0: SignalState(every, frozenset(), frozenset()),
-                  26.0: SignalState(every - {2, 6}, frozenset(), frozenset({2, 6}))}
+        checks = {green - 1.0: SignalState(every - {1, 5}, frozenset(), frozenset({1, 5})),
+                  green + 1.5: SignalState(every - {1, 5}, frozenset({1, 5}), frozenset()),
+                  green + 4.0: SignalState(every, frozenset(), frozenset()),
+                  green + 6.0: SignalState(every - {2, 6}, frozenset(), frozenset({2, 6}))}
         for at, state in checks.items():
             while sim.time < at:
                 sim.step()
