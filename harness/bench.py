@@ -22,6 +22,7 @@ import simpy
 from harness import machine
 from harness.processes import snmpd, start_emulator
 from hils import config as config_mod
+from hils import jsonout
 from hils.actions import ActionType
 from hils.clock import WallClockDriver
 from hils.events import Kind
@@ -109,7 +110,7 @@ def _latency_command(args: argparse.Namespace) -> int:
                       "paper_over_ours": ratio}
     print("target: mean < 50 us, p99 < 200 us")
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps({"machine": info, "latency": rows}, indent=2) + "\n", encoding="utf-8")
+    args.out.write_text(jsonout.dumps({"machine": info, "latency": rows}) + "\n", encoding="utf-8")
     print(f"written: {args.out}")
     return 0
 
@@ -213,7 +214,7 @@ def _overhead_command(args: argparse.Namespace) -> int:
     print(f"  for the record, libsumo running a fixed cycle at maximum green (other traffic): "
           f"{f['fixed_cycle_median_s']:.2f} s, ratio {f['ratio_vs_fixed_cycle_at_max_green']:.2f}")
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps({"machine": info, "overhead": f}, indent=2) + "\n", encoding="utf-8")
+    args.out.write_text(jsonout.dumps({"machine": info, "overhead": f}) + "\n", encoding="utf-8")
     print(f"written: {args.out}")
     return 0
 
@@ -318,6 +319,6 @@ def _wire_command(args: argparse.Namespace) -> int:
               f"rate {st['rate_per_s']:.0f}/s")
     print(f"  ratio (ours / snmpd, mean): {out['get_rtt_ms']['ratio_mean']:.2f}")
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(out, indent=2) + "\n", encoding="utf-8")
+    args.out.write_text(jsonout.dumps(out) + "\n", encoding="utf-8")
     print(f"written: {args.out}")
     return 0

@@ -10,7 +10,6 @@ proxy`` relays UDP to an SNMP agent with faults on a schedule (:mod:`harness.pro
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import sys
 import time
@@ -21,6 +20,7 @@ from tqdm import tqdm
 
 from harness.proxy import register_proxy
 from harness.scenarios import Scenario, ScenarioResult, default_suite, discover, load_scenario, run_scenario
+from hils import jsonout
 
 RUN_HELP = """\
 Run fault scenarios in virtual time and check their expected outcomes.
@@ -177,5 +177,5 @@ def write_reports(results: Sequence[ScenarioResult], report_dir: Path, wall_s: f
         "wall_s": round(wall_s, 3),
         "scenarios": [r.to_json() for r in results],
     }
-    js.write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
+    js.write_text(jsonout.dumps(doc) + "\n", encoding="utf-8")
     return md, js

@@ -12,12 +12,12 @@ default agents); the event logs are the only source of the figures.
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 from typing import Any
 
 from harness import machine
 from hils import config as config_mod
+from hils import jsonout
 from hils.actions import ActionType
 from hils.agents import Observation
 from hils.config import IntersectionConfig
@@ -298,13 +298,13 @@ polling removes the second part.
 ![holds](holds.png)
 """
     (out / "README.md").write_text(text, encoding="utf-8")
-    (out / "results.json").write_text(json.dumps({
+    (out / "results.json").write_text(jsonout.dumps({
         "machine": info,
         "latency_ms": {k: v.as_dict() for k, v in latency.items()},
         "paper_latency_ms": {k: {"n": n, "mean": m, "std": s} for k, (n, m, s) in PAPER_LATENCY_MS.items()},
         "trajectory": zoom,
         "holds_s": {f"{k:g}": v.as_dict() for k, v in holds.items()},
-    }, indent=2) + "\n", encoding="utf-8")
+    }) + "\n", encoding="utf-8")
     print(_latency_markdown(latency))
     print(hold_rows)
     print(f"written: {out}/README.md, results.json, trajectory.png, trajectory_zoom.png, holds.png")

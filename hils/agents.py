@@ -18,6 +18,7 @@ from hils.actions import ActionType
 from hils.config import IntersectionConfig, Pair
 from hils.errors import UserError
 from hils.ntcip import SignalState
+from hils.webster import webster_plan
 
 
 @dataclass(frozen=True, slots=True)
@@ -116,8 +117,41 @@ class QueueProportionalAgent:
         return min(1.0, queue / self.saturation)
 
 
+class WebsterAgent:
+    """The fixed-time baseline: Webster's plan for the shipped demand, run through phase durations.
+
+    The plan (:func:`hils.webster.webster_plan`) puts each route-file flow on the phase that
+    serves it, takes flow ratios y = q / (lanes x 1800 veh/h), the larger y of each pair of the
+    sequence as the stage's critical ratio (sum Y), the yellow plus red clearance of every stage
+    as lost time L, the optimal cycle C0 = (1.5 L + 5) / (1 - Y), and splits C0 - L in proportion
+    to the critical ratios, each green clipped to the pair's [min_green, max_green]. At each
+    decision the agent asks for the next pair's planned green: x = (green - min) / (max - min),
+    which the middleware turns back into exactly that green. The demand, not the traffic state,
+    sets the plan, so the agent also runs without SUMO.
+    """
+
+    action_type = ActionType.DURATION
+
+    def __init__(self, config: IntersectionConfig, action_type: ActionType | str = ActionType.DURATION,
+                 seed: int = 0) -> None:
+        if ActionType(action_type) is not ActionType.DURATION:
+            raise AgentError("the webster agent issues phase duration actions only (--action-type duration)")
+        self.config = config
+        self.plan = webster_plan(config)
+
+    def act(self, observation: Observation) -> float:
+        if observation.next_pair is None:
+            raise AgentError("the webster agent needs the pair a duration action serves next")
+        pair = observation.next_pair
+        g_min = max(self.config.phases[p].min_green for p in pair)
+        g_max = max(g_min, min(self.config.phases[p].max_green for p in pair))
+        if g_max == g_min:
+            return 0.0
+        return (self.plan.green_of(pair) - g_min) / (g_max - g_min)
+
+
 BUILTIN: dict[str, type] = {"random": RandomAgent, "fixed-cycle": FixedCycleAgent, "max-pressure": MaxPressureAgent,
-                            "queue-proportional": QueueProportionalAgent}
+                            "queue-proportional": QueueProportionalAgent, "webster": WebsterAgent}
 
 
 def load_agent(spec: str, config: IntersectionConfig, action_type: ActionType | str, seed: int = 0) -> Agent:

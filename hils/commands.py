@@ -24,6 +24,7 @@ from hils.actions import ActionType
 from hils.errors import UserError
 from hils.status import StatusLine
 from hils.testbed import DEFAULT_AGENTS, VIRTUAL, AgentFailed, RunInterrupted, RunSpec, Testbed
+from hils.webster import webster_plan
 
 log = logging.getLogger(__name__)
 
@@ -51,7 +52,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="action design: selection (pick a pair), switch (0 keep / 1 advance), duration "
                         "(green time of the next pair); default: selection")
     p.add_argument("--agent", metavar="NAME|MODULE:CLASS",
-                   help="built-in agent (random, fixed-cycle, max-pressure, queue-proportional) or your own "
+                   help="built-in agent (random, fixed-cycle, max-pressure, queue-proportional, webster) or your own "
                         "package.module:Class; default: " + ", ".join(f"{k.value} -> {v}"
                                                                       for k, v in DEFAULT_AGENTS.items()))
     p.add_argument("--duration", type=float, default=3600.0, metavar="S", help="simulated seconds (3600)")
@@ -94,6 +95,8 @@ def run_command(args: argparse.Namespace) -> int:
     spec = RunSpec(cfg, ActionType(args.action_type), agent=args.agent, duration=args.duration, seed=args.seed,
                    log_path=log_path, recover_after=None if args.recover_after < 0 else args.recover_after,
                    sumo=not args.no_sumo)
+    if spec.agent_spec == "webster":
+        print(webster_plan(cfg).describe())
     # A wall-clock run is never silent: a live status line (periodic log lines when not on a terminal).
     status = StatusLine() if args.target and not args.no_progress else None
     tb = Testbed(cfg, action_type=spec.action_type, target=args.target or VIRTUAL, sumo=spec.sumo, seed=spec.seed,
@@ -127,9 +130,13 @@ def run_command(args: argparse.Namespace) -> int:
         plots.signal_timeline(records, cfg, out / "signal_timeline.png", start=window[0], end=window[1])
         outputs.append("signal_timeline.png")
     if tb.traffic_samples:
-        plots.queues(tb.traffic_samples, out / "queues.png", title=f"Queues per approach, {cfg.name}")
+        plots.queues(tb.traffic_samples, out / "queues.png", title=f"Queues per approach, {cfg.name}",
+                     storage={a: v["storage"] for a, v in s["traffic"]["approaches"].items()} if s.get("traffic")
+                     else None)
         outputs.append("queues.png")
     print(summary.render(s))
+    for warning in summary.warnings(s):
+        print(warning)
     print(f"Outputs in {out}/: {', '.join(outputs)}")
     return _ending(tb.end_reason, error)
 

@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-import json
 from collections import Counter
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, is_dataclass
 from pathlib import Path
 from typing import Any
 
+from hils import jsonout
 from hils.config import IntersectionConfig
 from hils.events import Kind
 from hils.latency import Stats, internal_latencies_ms, transition_holds
@@ -55,15 +55,7 @@ def render(summary: Mapping[str, Any]) -> str:
                                                      else "")]
     t = s.get("traffic")
     if t:
-        delay = "n/a" if t["mean_time_loss"] is None else f"{t['mean_time_loss']:.1f} s"
-        wait = "n/a" if t["mean_waiting_time"] is None else f"{t['mean_waiting_time']:.1f} s"
-        lines += [
-            "Traffic",
-            f"  vehicles served      {t['arrived']} of {t['departed']} departed ({t['running']} still in the network)",
-            f"  mean delay           {delay} (time loss per vehicle)",
-            f"  mean waiting time    {wait}",
-            "  max queue (veh)      " + ", ".join(f"{a} {q}" for a, q in sorted(t["max_queue"].items())),
-        ]
+        lines += _traffic_lines(t)
     h = s["hold_s"]
     lines += [
         "Signal control",
@@ -82,5 +74,40 @@ def render(summary: Mapping[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def _fmt(value: float | None, unit: str = " s") -> str:
+    return "n/a" if value is None else f"{value:.1f}{unit}"
+
+
+def _traffic_lines(t: Mapping[str, Any]) -> list[str]:
+    """Every vehicle due to enter, where it is now, and the delay each approach suffered."""
+    lines = [
+        "Traffic (every vehicle due to enter by the end)",
+        f"  departed             {t['departed']}: {t['arrived']} arrived, {t['running']} still in the network",
+        f"  waiting to enter     {t['waiting_to_enter']} (SUMO's insertion backlog: no room on the entry lane)",
+        f"  mean delay           {_fmt(t['mean_delay'])} over departed and waiting vehicles "
+        "(departure delay + time loss, so far for those not arrived)",
+        f"  arrived only         time loss {_fmt(t['mean_time_loss'])}, waiting time {_fmt(t['mean_waiting_time'])}"
+        " (SUMO trip statistics)",
+        "  per approach         arrived  running  waiting  mean delay  max queue / storage (veh)",
+    ]
+    for name, a in t["approaches"].items():
+        spill = "  spillback" if a["storage"] and a["max_queue"] >= a["storage"] else ""
+        lines.append(f"    {name:<18} {a['arrived']:>7}  {a['running']:>7}  {a['waiting_to_enter']:>7}  "
+                     f"{_fmt(a['mean_delay']):>10}  {a['max_queue']:>5} / {a['storage']}{spill}")
+    return lines
+
+
+def warnings(summary: Mapping[str, Any]) -> list[str]:
+    """What a reader must not miss: vehicles that could not enter, naming their approaches."""
+    t = summary.get("traffic")
+    if not t or not t["waiting_to_enter"]:
+        return []
+    blocked = [f"{name} {a['waiting_to_enter']}" for name, a in t["approaches"].items() if a["waiting_to_enter"]]
+    return [f"WARNING: {t['waiting_to_enter']} vehicles could not enter the network by the end "
+            f"({', '.join(blocked)}): their approaches were not served enough; their delay so far is "
+            "in the mean delay"]
+
+
 def write(summary: Mapping[str, Any], path: Path) -> None:
-    path.write_text(json.dumps(summary, indent=2, default=str) + "\n", encoding="utf-8")
+    """summary.json, without NaN (see :mod:`hils.jsonout`)."""
+    path.write_text(jsonout.dumps(summary) + "\n", encoding="utf-8")

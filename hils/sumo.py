@@ -18,6 +18,7 @@ import os
 import sys
 import tempfile
 import time
+from collections import Counter
 from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -30,6 +31,7 @@ from hils.config import IntersectionConfig, load
 from hils.errors import UserError
 from hils.ntcip import SignalState
 from hils.sumo_net import SUMO_CONFIG, TLS_ID, PhaseMap, data_path, derive_phase_map, read_net
+from hils.webster import webster_plan
 
 
 class SumoError(UserError, RuntimeError):
@@ -72,19 +74,51 @@ class TrafficState:
 
 
 @dataclass(frozen=True)
+class ApproachSummary:
+    """End-of-run figures of one approach (the side vehicles come from). ``mean_delay`` is
+    over every vehicle of the approach that was due to enter (None when none was)."""
+
+    departed: int
+    arrived: int
+    running: int
+    waiting_to_enter: int
+    mean_delay: float | None
+    max_queue: int
+    storage: int  # vehicles the approach lanes hold end to end (lane length / (vehicle length + gap))
+
+
+@dataclass(frozen=True)
 class RunSummary:
-    """End-of-run figures. Delays are means over the vehicles that arrived (None before any did)."""
+    """End-of-run figures that count every vehicle due to enter by the end.
+
+    ``mean_delay`` is over every vehicle that departed or is ``waiting_to_enter`` (SUMO's
+    insertion backlog): departure delay (desired to actual insertion, or so far for those still
+    waiting) plus time loss (travel time lost to driving below the desired speed, so far for
+    those still running). Time loss is read from libsumo once per ``queue_sample_period``, so
+    an arrived vehicle's last period before it left is not counted. ``mean_time_loss`` and
+    ``mean_waiting_time`` are SUMO's own trip statistics over the arrived vehicles only (None
+    before any arrived). ``notes`` says what each figure counts and why any is None.
+    """
 
     sim_time: float
     departed: int
     arrived: int
     running: int
-    pending: int
+    waiting_to_enter: int
+    mean_delay: float | None
     mean_time_loss: float | None
     mean_waiting_time: float | None
     max_queue: Mapping[str, int]
+    approaches: Mapping[str, ApproachSummary]
     collisions: int
     teleports: int
+    notes: tuple[str, ...]
+
+
+DELAY_NOTE = ("mean_delay: per vehicle that departed or is waiting to enter, departure delay (desired to actual "
+              "insertion, so far for those waiting) plus SUMO time loss (so far for those still running)")
+ARRIVED_NOTE = ("mean_time_loss, mean_waiting_time: SUMO trip statistics over arrived vehicles only; null when "
+                "no vehicle arrived")
 
 
 _active: SumoSimulation | None = None
@@ -123,6 +157,11 @@ class SumoSimulation:
         self._max_queue: dict[str, int] = {}
         self._lanes: tuple[str, ...] = ()
         self._movement_lanes: tuple[tuple[int, tuple[str, ...], tuple[str, ...]], ...] = ()
+        self._approach_of_edge: dict[str, str] = {}
+        self._storage: dict[str, int] = {}
+        # per vehicle seen in the network: approach, departure delay, last sampled time loss
+        self._running: dict[str, tuple[str, float, float]] = {}
+        self._finished: dict[str, list[float]] = {}
 
     # --- life cycle ----------------------------------------------------------------------
 
@@ -173,6 +212,12 @@ class SumoSimulation:
         self._until_sample = self._sample_every
         self._approach_lanes = tuple(pm.approach_lanes.items())
         self._max_queue = {approach: 0 for approach, _ in self._approach_lanes}
+        self._approach_of_edge = {link.from_lane.rsplit("_", 1)[0]: link.approach for link in pm.links}
+        spacing = _vehicle_spacing()
+        self._storage = {approach: sum(int(libsumo.lane.getLength(lane) // spacing) for lane in lanes)
+                         for approach, lanes in self._approach_lanes}
+        self._running = {}
+        self._finished = {approach: [] for approach, _ in self._approach_lanes}
         self._movement_lanes = tuple((p, pm.incoming_lanes(p), pm.outgoing_lanes(p)) for p in pm.phases)
         lanes = [lane for _, inc, out in self._movement_lanes for lane in (*inc, *out)]
         self._lanes = tuple(dict.fromkeys(lanes))
@@ -241,6 +286,26 @@ class SumoSimulation:
             queue = sum(halting(lane) for lane in lanes)
             if queue > top[approach]:
                 top[approach] = queue
+        self._sample_vehicles()
+
+    def _sample_vehicles(self) -> None:
+        """Bring the per-vehicle delays up to date: new vehicles get their approach and departure
+        delay, vehicles gone since the last sample are finished with their last time loss."""
+        vehicle = libsumo.vehicle
+        present = set(vehicle.getIDList())
+        running = self._running
+        for vid in running.keys() - present:
+            approach, depart_delay, time_loss = running.pop(vid)
+            self._finished[approach].append(depart_delay + time_loss)
+        for vid in present:
+            known = running.get(vid)
+            if known is None:
+                running[vid] = (self._approach(vid), vehicle.getDepartDelay(vid), vehicle.getTimeLoss(vid))
+            else:
+                running[vid] = (known[0], known[1], vehicle.getTimeLoss(vid))
+
+    def _approach(self, vid: str) -> str:
+        return self._approach_of_edge.get(libsumo.vehicle.getRoute(vid)[0], "other")
 
     # --- observation ---------------------------------------------------------------------
 
@@ -259,20 +324,47 @@ class SumoSimulation:
                             int(departed - _stat("stats.vehicles.running")))
 
     def summary(self) -> RunSummary:
+        """Every vehicle counted: arrived, running, waiting to enter, with delays so far (see
+        :class:`RunSummary` for what each figure counts)."""
+        self._sample_vehicles()
         departed = int(_stat("stats.vehicles.inserted"))
         running = int(_stat("stats.vehicles.running"))
         arrived = departed - running
+        delays = {a: list(done) for a, done in self._finished.items()}
+        counts = {a: Counter() for a in delays}
+        for a, done in self._finished.items():
+            counts[a]["arrived"] = len(done)
+        for approach, depart_delay, time_loss in self._running.values():
+            delays.setdefault(approach, []).append(depart_delay + time_loss)
+            counts.setdefault(approach, Counter())["running"] += 1
+        pending = libsumo.simulation.getPendingVehicles()
+        for vid in pending:
+            approach = self._approach(vid)
+            delays.setdefault(approach, []).append(libsumo.vehicle.getDepartDelay(vid))
+            counts.setdefault(approach, Counter())["waiting"] += 1
+        approaches = {a: ApproachSummary(
+            departed=counts[a]["arrived"] + counts[a]["running"], arrived=counts[a]["arrived"],
+            running=counts[a]["running"], waiting_to_enter=counts[a]["waiting"],
+            mean_delay=sum(d) / len(d) if d else None, max_queue=self._max_queue.get(a, 0),
+            storage=self._storage.get(a, 0)) for a, d in sorted(delays.items())}
+        every = [x for d in delays.values() for x in d]
+        notes = [DELAY_NOTE, ARRIVED_NOTE]
+        if not every:
+            notes.append("mean_delay: null because no vehicle was due to enter yet")
         return RunSummary(
             sim_time=self.time,
             departed=departed,
             arrived=arrived,
             running=running,
-            pending=len(libsumo.simulation.getPendingVehicles()),
+            waiting_to_enter=len(pending),
+            mean_delay=sum(every) / len(every) if every else None,
             mean_time_loss=_stat("device.tripinfo.vehicleTripStatistics.timeLoss") if arrived else None,
             mean_waiting_time=_stat("device.tripinfo.vehicleTripStatistics.waitingTime") if arrived else None,
             max_queue=dict(self._max_queue),
+            approaches=approaches,
             collisions=int(_stat("stats.safety.collisions")),
             teleports=int(_stat("stats.teleports.total")),
+            notes=tuple(notes),
         )
 
     def run_fixed_time(self) -> None:
@@ -288,19 +380,29 @@ class SumoSimulation:
 
 
 def fixed_time_states(config: IntersectionConfig) -> list[tuple[float, SignalState]]:
-    """One cycle of the config's sequence at maximum green: (duration, state) per interval."""
+    """One cycle of Webster's plan for the shipped demand (:mod:`hils.webster`), the fixed-time
+    baseline: (duration, state) per interval."""
     phases = config.phases
     every = frozenset(phases)
+    plan = webster_plan(config)
     out: list[tuple[float, SignalState]] = []
     for pair in config.sequence:
         on = frozenset(pair)
-        green = max(phases[p].max_green for p in pair)
+        green = plan.green_of(pair)
         yellow = max(phases[p].yellow for p in pair)
         red_clear = max(phases[p].red_clear for p in pair)
         out.append((green, SignalState(every - on, frozenset(), on)))
         out.append((yellow, SignalState(every - on, on, frozenset())))
         out.append((red_clear, SignalState(every, frozenset(), frozenset())))
     return out
+
+
+def _vehicle_spacing() -> float:
+    """Metres a queued vehicle takes (length plus minimum gap), over the loaded vehicle types
+    other than SUMO's defaults (which every network has), or the default car's when none."""
+    vtype = libsumo.vehicletype
+    types = [t for t in vtype.getIDList() if not t.startswith("DEFAULT_")] or ["DEFAULT_VEHTYPE"]
+    return sum(vtype.getLength(t) + vtype.getMinGap(t) for t in types) / len(types)
 
 
 def _stat(key: str) -> float:
@@ -313,7 +415,7 @@ def time_bare_sumo(seconds: float = 3600.0, *, seed: int = 0, config: Intersecti
     """Wall seconds libsumo alone takes to step the scenario for ``seconds`` of simulated time.
 
     The same network, demand and SUMO options as :class:`SumoSimulation`, with SUMO running
-    the config's fixed cycle itself and no middleware: the baseline of the overhead benchmark.
+    the fixed-time (Webster) cycle itself and no middleware: the baseline of the overhead benchmark.
     Start-up is not timed.
     """
     sim = SumoSimulation(config, seed=seed, step_length=step_length, sumo_config=sumo_config, end=seconds)

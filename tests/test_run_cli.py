@@ -28,7 +28,52 @@ def test_hils_run_300_s_writes_every_output(tmp_path, capsys, action_type):
     assert summary["internal_latency_ms"][action_type]["n"] == summary["commands_dispatched"]
     records = list(read(out / "events.jsonl"))
     assert records[0]["kind"] == Kind.RUN_STARTED and records[-1]["kind"] == Kind.RUN_ENDED
-    assert "vehicles served" in printed and "internal latency" in printed
+    assert "waiting to enter" in printed and "mean delay" in printed and "internal latency" in printed
+
+
+STARVING = """
+class EastWestOnly:
+    action_type = "selection"
+
+    def __init__(self, config, action_type, seed):
+        self.turn = 0
+
+    def act(self, observation):
+        self.turn += 1
+        return (1, 5) if self.turn % 3 == 0 else (2, 6)
+"""
+
+
+def test_a_starving_agent_shows_who_could_not_enter(tmp_path, capsys, monkeypatch):
+    monkeypatch.syspath_prepend(str(tmp_path))
+    (tmp_path / "starving.py").write_text(STARVING)
+    out = tmp_path / "run"
+    code = main(["run", "--duration", "1500", "--agent", "starving:EastWestOnly", "--out", str(out), "--no-progress"])
+    printed = capsys.readouterr().out
+    assert code == 0
+    traffic = json.loads((out / "summary.json").read_text())["traffic"]
+    north, south = traffic["approaches"]["north"], traffic["approaches"]["south"]
+    assert traffic["waiting_to_enter"] > 20
+    assert north["waiting_to_enter"] + south["waiting_to_enter"] == traffic["waiting_to_enter"]
+    assert north["arrived"] == south["arrived"] == 0
+    assert north["mean_delay"] > 300 and south["mean_delay"] > 300
+    assert traffic["mean_delay"] > 3 * traffic["mean_time_loss"]  # the arrived alone would hide the starving
+    warning = next(line for line in printed.splitlines() if line.startswith("WARNING"))
+    assert "could not enter" in warning and "north" in warning and "south" in warning
+    assert "east" not in warning and "west" not in warning
+
+
+def test_no_nan_in_the_summary_of_a_run_where_nothing_arrived(tmp_path):
+    out = tmp_path / "run"
+    assert main(["run", "--duration", "20", "--out", str(out), "--no-progress"]) == 0
+
+    def refuse(name):
+        raise AssertionError(f"{name} in summary.json")
+
+    summary = json.loads((out / "summary.json").read_text(), parse_constant=refuse)
+    assert summary["traffic"]["arrived"] == 0
+    assert summary["traffic"]["mean_time_loss"] is None
+    assert any("arrived vehicles only" in note for note in summary["traffic"]["notes"])
 
 
 def test_hils_run_refuses_an_agent_that_does_not_fit(tmp_path, capsys, monkeypatch):

@@ -23,6 +23,7 @@ from hils.sumo_net import (
     derive_phase_map,
     read_net,
 )
+from hils.webster import webster_plan
 
 STEP = 0.25
 
@@ -213,6 +214,13 @@ def test_queues_build_on_red_and_discharge_on_green(config) -> None:
     assert summary.mean_time_loss is not None and summary.mean_time_loss > 30  # they all waited a red
     assert summary.max_queue["west"] >= red.movements[6].upstream_queue
     assert summary.collisions == 0
+    every_vehicle = summary.approaches.values()
+    assert sum(a.arrived for a in every_vehicle) == summary.arrived
+    assert sum(a.running for a in every_vehicle) == summary.running
+    assert sum(a.waiting_to_enter for a in every_vehicle) == summary.waiting_to_enter
+    # the north and south approaches saw red for three minutes: their delay so far is at least a minute
+    assert summary.approaches["north"].mean_delay > 60 and summary.approaches["south"].mean_delay > 60
+    assert summary.mean_delay > summary.mean_time_loss  # it counts those still waiting at the red
 
 
 def test_same_seed_same_run_and_restart_in_one_process(config) -> None:
@@ -252,15 +260,16 @@ def test_quiet_simulation_prints_nothing(config, capfd: pytest.CaptureFixture[st
     assert out == "" and err == ""
 
 
-def test_fixed_time_baseline_runs_the_configured_cycle(config) -> None:
+def test_fixed_time_baseline_runs_the_webster_cycle(config) -> None:
     every = frozenset(config.phases)
+    green = webster_plan(config).green_of((1, 5))  # yellow 3 s and red clearance 2 s follow it
     with SumoSimulation(config) as sim:
         sim.run_fixed_time()
         pm = sim.phase_map
-        checks = {10.0: SignalState(every - {1, 5}, frozenset(), frozenset({1, 5})),
-                  21.0: SignalState(every - {1, 5}, frozenset({1, 5}), frozenset()),
-                  24.0: SignalState(every, frozenset(), frozenset()),
-                  26.0: SignalState(every - {2, 6}, frozenset(), frozenset({2, 6}))}
+        checks = {green - 1.0: SignalState(every - {1, 5}, frozenset(), frozenset({1, 5})),
+                  green + 1.5: SignalState(every - {1, 5}, frozenset({1, 5}), frozenset()),
+                  green + 4.0: SignalState(every, frozenset(), frozenset()),
+                  green + 6.0: SignalState(every - {2, 6}, frozenset(), frozenset({2, 6}))}
         for at, state in checks.items():
             while sim.time < at:
                 sim.step()

@@ -1,0 +1,44 @@
+"""Pictures that do not mislead: the timeline stops at the run's end, queues keep their last bin."""
+
+from __future__ import annotations
+
+from hils import config as config_mod
+from hils import plots
+from hils.events import Kind
+
+CFG = config_mod.load()
+
+
+def polls(until: float, period: float = 0.1) -> list[dict]:
+    out = []
+    for i in range(round(until / period) + 1):
+        t = i * period
+        greens = [2, 6] if (t // 20) % 2 == 0 else [4, 8]
+        out.append({"kind": Kind.POLL, "t": t, "greens": greens, "yellows": []})
+    return out
+
+
+def test_the_timeline_never_draws_past_the_end_of_the_run(tmp_path):
+    records = [*polls(50.0), {"kind": Kind.RUN_ENDED, "t": 50.0}]
+    start, end = plots.timeline_window(records, 0.0, 180.0)
+    assert (start, end) == (0.0, 50.0)
+    spans = plots.signal_intervals(records, CFG.phase_numbers, start, end)
+    assert max(t1 for row in spans.values() for _, t1, _ in row) == 50.0
+    assert plots.timeline_window(records, 100.0, 180.0) == (0.0, 50.0)  # a window after the end shows the end
+    assert plots.signal_timeline(records, CFG, tmp_path / "t.png", start=0, end=180).stat().st_size > 0
+
+
+def test_rows_are_grouped_by_ring_and_barrier_and_labelled_with_their_movement():
+    rows = plots.phase_rows(CFG)
+    assert [p for p, _, _ in rows] == [1, 2, 3, 4, 5, 6, 7, 8]
+    assert [(ring, barrier) for _, ring, barrier in rows] == [(1, 1), (1, 1), (1, 2), (1, 2),
+                                                              (2, 1), (2, 1), (2, 2), (2, 2)]
+    assert plots.movement_label(CFG, 2) == "2  east through"
+
+
+def test_a_partial_last_bin_joins_the_one_before_instead_of_dropping(tmp_path):
+    samples = [(float(t), {"west": 10 if t < 3600 else 1}) for t in range(0, 3601)]
+    edges, tops = plots.queue_bins(samples, 60.0)
+    assert edges[0] == 0.0 and edges[-1] == 3600.0 and len(edges) == 61
+    assert tops["west"] == [10] * 60
+    assert plots.queues(samples, tmp_path / "q.png", storage={"west": 10}).stat().st_size > 0
