@@ -3,9 +3,9 @@
 A wall-clock `hils run --dashboard` against `hils emulator serve`: the page shows the phases change
 and the manager's state; the emulator is then stopped (SIGSTOP), the page shows TIMEOUT with its
 reason, the emulator continues and the page's Recover button brings the manager back to IDLE. The
-finished run is then replayed with `hils view`. Screenshots are kept in the test's tmp dir
-(``live.png``, ``timeout.png``, ``replay.png``). Nothing downloads a browser: chromium comes from
-the Makefile's deps target.
+finished run is then replayed with `hils view`: the slider moves it, Play runs it at --realtime.
+Screenshots are kept in the test's tmp dir (``live.png``, ``timeout.png``, ``replay.png``). Nothing
+downloads a browser: chromium comes from the Makefile's deps target.
 """
 
 from __future__ import annotations
@@ -115,7 +115,7 @@ def test_live_page_shows_phases_change_timeout_and_recovery(tmp_path: Path, brow
     assert '"kind":"recovered"' in records and '"reason":"communication"' in records
 
     # The same run replayed: the slider moves the page to an instant of the run.
-    view, url = start_view(str(run_dir))
+    view, url = start_view(str(run_dir), "--realtime", "10")
     page = browser.new_page(viewport={"width": 1280, "height": 860})
     try:
         page.goto(url)
@@ -124,6 +124,15 @@ def test_live_page_shows_phases_change_timeout_and_recovery(tmp_path: Path, brow
         watch(page, lambda: page.locator("[data-testid=clock]").inner_text() == "t = 5.0 s", 10, "t = 5.0 s")
         assert state(page) in {"IDLE", "ON_HOLD"}
         page.screenshot(path=str(tmp_path / "replay.png"), full_page=True)
+        # Play at the --realtime factor, 10 sim seconds a wall second, runs to the end of the run and stops there.
+        assert page.locator("#speed").input_value() == "10"
+        end = float(page.locator("[data-testid=slider]").get_attribute("max"))
+        assert end > 10.0
+        started = time.monotonic()
+        page.locator("#play").click()
+        watch(page, lambda: float(page.locator("body").get_attribute("data-t")) >= end - 0.1, 5, "the replay's end")
+        assert time.monotonic() - started >= (end - 5.0) / 10 * 0.8  # paced, not a jump to the end
+        watch(page, lambda: page.locator("#play").inner_text() == "Play", 2, "Play again at the end")
     finally:
         page.close()
         view.terminate()
