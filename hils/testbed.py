@@ -639,12 +639,6 @@ class RunResult:
         return self.testbed.records
 
     @property
-    def driver(self) -> Any:
-        """Wall-clock runs: the :class:`hils.clock.WallClockDriver` (its ``loop`` is the run's asyncio loop,
-        where servers of the run such as the dashboard run as tasks); None in virtual time."""
-        return self._driver
-
-    @property
     def lateness(self) -> Any:
         return self.testbed.lateness
 
