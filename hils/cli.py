@@ -13,6 +13,7 @@ import sys
 from collections.abc import Sequence
 from importlib.metadata import PackageNotFoundError, entry_points, version
 
+from hils.dashboard import cli as view
 from hils.errors import UserError
 
 log = logging.getLogger("hils")
@@ -41,6 +42,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"hils {_version()}")
     parser.add_argument("-q", "--quiet", action="store_true", help="only warnings and errors in the log")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    view.register(sub)
     for ep in sorted(entry_points(group="hils.commands"), key=lambda e: e.name):
         try:
             register = ep.load()

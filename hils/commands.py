@@ -72,6 +72,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--plot-window", default="0:180", metavar="START:END",
                    help="simulated seconds shown in the signal timeline (0:180)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--dashboard", type=int, metavar="PORT",
+                   help="serve a live dashboard of the run on http://127.0.0.1:PORT/ (wall-clock runs; 0: any "
+                        "free port); watch a finished or virtual-time run with `hils view RUN_DIR`")
+    p.add_argument("--dashboard-control", action="store_true",
+                   help="let the dashboard's page recover the manager from TIMEOUT (default: read-only)")
     p.set_defaults(func=run_command)
 
 
@@ -90,6 +95,7 @@ def run_command(args: argparse.Namespace) -> int:
     window = _window(args.plot_window)
     if not args.duration > 0:
         raise UsageError(f"--duration must be positive seconds, got {args.duration:g}")
+    dashboard = _dashboard(args)
     out = _run_folder(args.out, args.action_type)
     log_path = args.log or out / "events.jsonl"
     spec = RunSpec(cfg, ActionType(args.action_type), agent=args.agent, duration=args.duration, seed=args.seed,
@@ -101,9 +107,9 @@ def run_command(args: argparse.Namespace) -> int:
     status = StatusLine() if args.target and not args.no_progress else None
     tb = Testbed(cfg, action_type=spec.action_type, target=args.target or VIRTUAL, sumo=spec.sumo, seed=spec.seed,
                  agent=spec.agent, duration=spec.duration, log_path=log_path, recover_after=spec.recover_after,
-                 on_reset=status.start if status else None)
+                 on_reset=_hooks(status.start if status else None, dashboard.attach if dashboard else None))
     error: BaseException | None = None
-    with _terminate_as_interrupt(), tb:
+    with _terminate_as_interrupt(), tb, _served(dashboard):
         try:
             tb.reset()
             if tb.mode == VIRTUAL and not args.no_progress:
@@ -139,6 +145,45 @@ def run_command(args: argparse.Namespace) -> int:
         print(warning)
     print(f"Outputs in {out}/: {', '.join(outputs)}")
     return _ending(tb.end_reason, error)
+
+
+def _dashboard(args: argparse.Namespace) -> Any:
+    """The live dashboard asked for (None without --dashboard)."""
+    if args.dashboard is None:
+        if args.dashboard_control:
+            raise UsageError("--dashboard-control needs --dashboard PORT")
+        return None
+    if not args.target:
+        raise UsageError("--dashboard serves wall-clock runs (--target snmp://...); watch a virtual-time run "
+                         "afterwards with `hils view RUN_DIR --realtime 10`")
+    if not 0 <= args.dashboard <= 65535:
+        raise UsageError(f"--dashboard must be a TCP port from 0 to 65535, got {args.dashboard}")
+    from hils.dashboard.live import LiveDashboard
+
+    return LiveDashboard(args.dashboard, control=args.dashboard_control)
+
+
+@contextlib.contextmanager
+def _served(dashboard: Any) -> Iterator[None]:
+    """Stop the dashboard's server when the run is over, before the Testbed closes its loop."""
+    try:
+        yield
+    finally:
+        if dashboard is not None:
+            dashboard.stop()
+
+
+def _hooks(*hooks: Any) -> Any:
+    """One ``on_reset`` hook calling each of ``hooks`` that is given (None when none is)."""
+    given = [h for h in hooks if h is not None]
+    if not given:
+        return None
+
+    def on_reset(testbed: Testbed, target: Any) -> None:
+        for hook in given:
+            hook(testbed, target)
+
+    return on_reset
 
 
 class UsageError(UserError):

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from enum import StrEnum
 from pathlib import Path
 from typing import IO, Any
@@ -49,6 +49,7 @@ class Kind(StrEnum):
     RECOVERED = "recovered"                    # greens
     STATE = "state"                            # from, to: the paper's names (idle, on_hold, timeout)
     RUN_ENDED = "run_ended"                    # reason (duration|closed|interrupted|terminated|agent_error|error)
+    QUEUES = "queues"                          # queues {approach: vehicles queued upstream} (SUMO runs, every 5 s)
     NOTE = "note"                              # free text for harness faults and components
 
 
@@ -66,10 +67,15 @@ class EventLog:
         self.keep = keep
         self._seq = 0
         self._clock = clock
+        self._subscribers: list[Callable[[dict[str, Any]], None]] = []
 
     def bind(self, clock) -> None:
         """Give the log the simulation clock: a callable returning the current sim time."""
         self._clock = clock
+
+    def subscribe(self, fn: Callable[[dict[str, Any]], None]) -> None:
+        """Call ``fn(record)`` with every record emitted from now on (the live dashboard folds them)."""
+        self._subscribers.append(fn)
 
     def emit(self, kind: Kind, **fields: Any) -> dict[str, Any]:
         rec = {"seq": self._seq, "t": self._clock() if self._clock else 0.0, "wall_ns": time.monotonic_ns(),
@@ -79,6 +85,8 @@ class EventLog:
             self.records.append(rec)
         if self._file is not None:
             self._file.write(orjson.dumps(rec, default=_jsonable, option=orjson.OPT_APPEND_NEWLINE))
+        for fn in self._subscribers:
+            fn(rec)
         return rec
 
     def of(self, *kinds: Kind) -> list[dict[str, Any]]:

@@ -236,6 +236,12 @@ class Testbed:
         return log_.records if log_.keep else list(read_events(log_.path))
 
     @property
+    def driver(self) -> Any:
+        """Wall-clock runs: the :class:`hils.clock.WallClockDriver` (its ``loop`` is the run's asyncio loop,
+        where servers of the run such as the dashboard run as tasks); None in virtual time."""
+        return self._driver
+
+    @property
     def lateness(self) -> Any:
         """Wall-clock runs: the driver's lateness summary; None in virtual time."""
         return None if self._driver is None else self._driver.lateness.summary()
@@ -559,6 +565,7 @@ class Testbed:
                 name = phases[p].approach or f"phase {p}"
                 per_approach[name] = per_approach.get(name, 0) + m.upstream_queue
             self.traffic_samples.append((self._env.now, per_approach))
+            self.events.emit(Kind.QUEUES, queues=per_approach)
 
     def _auto_recover(self) -> Generator[simpy.Event, Any, None]:
         mw = self.middleware
