@@ -4,7 +4,8 @@ Rules of this file
 ------------------
 - pysnmp is the SNMP implementation: messages are decoded and built with its
   protocol API (``pysnmp.proto.api``) and pyasn1's BER codec. Nothing here
-  writes BER by hand.
+  writes BER by hand; only the message header is read by hand, in
+  :mod:`emulator.ber`.
 - The agent is a plain asyncio datagram endpoint rather than a pysnmp
   ``SnmpEngine`` with MIB instrumentation: that keeps the error mapping per
   version, the dropping of foreign datagrams and the per-request latency in
@@ -17,11 +18,17 @@ Rules of this file
 
 Theory of operation
 -------------------
-A datagram that is not a well-formed SNMPv1/v2c message (garbage, truncated,
-trailing bytes, SNMPv3), that names neither community, or that carries no
-request PDU (a response, trap or report) is dropped and counted per
-:class:`DropReason`, as RFC 3416 and RFC 1157 ask for authentication failures
-and parse errors. Everything else gets exactly one response.
+A datagram is checked in order of cost, so that hostile traffic costs little:
+its length against ``max_message_size`` (nothing read), then its version and
+community from the first bytes (:func:`emulator.ber.read_header`), and only
+then is the whole message decoded by pyasn1. A datagram longer than the
+maximum, not a well-formed SNMPv1/v2c message (garbage, truncated, trailing
+bytes, SNMPv3), that names neither community, or that carries no request PDU
+(a response, trap or report) is dropped and counted per :class:`DropReason`,
+as RFC 3416 and RFC 1157 ask for authentication failures and parse errors.
+Everything else gets exactly one response, never longer than
+``max_message_size``: a request is no longer than that, so the SNMPv1 tooBig
+answer that echoes its varbinds fits too.
 
 The MIB view (:class:`emulator.mib.MibView`) refuses with four statuses; the
 agent refines them into SNMPv2 terms (RFC 3416 section 4.2.5), then maps them
@@ -65,6 +72,7 @@ from pyasn1.codec.ber import decoder, encoder
 from pyasn1.type import univ
 from pysnmp.proto import api, rfc1905
 
+from emulator.ber import HeaderError, read_header
 from emulator.mib import MibView, Value
 from hils.ntcip import Access, ErrorStatus, Oid, SnmpError, object_for, oid_str
 from hils.transport import Latency
@@ -101,6 +109,7 @@ _V1_STATUS: dict[ErrorStatus, ErrorStatus] = {
 class DropReason(Enum):
     """Why a datagram got no answer."""
 
+    TOO_LARGE = "too large"  # longer than the maximum message size: dropped unread
     MALFORMED = "malformed"  # not a complete BER-encoded SNMP message
     VERSION = "unsupported version"  # SNMPv3 or an unknown version number
     COMMUNITY = "unknown community"
@@ -242,18 +251,25 @@ class SnmpAgent:
         return handler(request, source)
 
     def _decode(self, datagram: bytes) -> _Request:
+        if len(datagram) > self.max_message_size:
+            raise _Drop(DropReason.TOO_LARGE, f"{len(datagram)} bytes, more than {self.max_message_size}")
+        try:
+            header = read_header(datagram)
+        except HeaderError as exc:
+            raise _Drop(DropReason.MALFORMED, str(exc)) from None
+        if header.community is None:
+            raise _Drop(DropReason.VERSION, f"SNMP version number {header.version}")
+        writable = self.communities.get(header.community)
+        if writable is None:
+            raise _Drop(DropReason.COMMUNITY, f"community {header.community!r}")
+        return self._decode_message(datagram, header.version, api.PROTOCOL_MODULES[header.version], writable)
+
+    @staticmethod
+    def _decode_message(datagram: bytes, version: int, module: ModuleType, writable: bool) -> _Request:
         # pyasn1 fails on hostile input with more than its own exception types (a TypeError
         # for some garbage), and any failure here only means "not a message we can read".
         try:
-            version = int(api.decodeMessageVersion(datagram))
-        except Exception as exc:
-            raise _Drop(DropReason.MALFORMED, f"no SNMP version: {exc}") from None
-        module = api.PROTOCOL_MODULES.get(version)
-        if module is None:
-            raise _Drop(DropReason.VERSION, f"SNMP version number {version}")
-        try:
             message, rest = decoder.decode(datagram, asn1Spec=module.Message())
-            community = bytes(module.apiMessage.get_community(message))
             pdu = module.apiMessage.get_pdu(message)
             varbinds = module.apiPDU.get_varbinds(pdu)
             oids = tuple(tuple(oid) for oid, _ in varbinds)
@@ -261,9 +277,6 @@ class SnmpAgent:
             raise _Drop(DropReason.MALFORMED, str(exc)) from None
         if rest:
             raise _Drop(DropReason.MALFORMED, f"{len(rest)} bytes after the message")
-        writable = self.communities.get(community)
-        if writable is None:
-            raise _Drop(DropReason.COMMUNITY, f"community {community!r}")
         return _Request(version, module, message, pdu, oids, tuple(v for _, v in varbinds), writable)
 
     # --- the requests -------------------------------------------------------------------------
