@@ -20,9 +20,17 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
+#: SNMPv3 users of the snmpd below: one with authentication and privacy, one with authentication only.
+SNMPD_V3_USERS = {"hilspriv": ("authPriv", "hils-auth-key", "hils-priv-key"),
+                  "hilsauth": ("authNoPriv", "hils-auth-key", "")}
+
 SNMPD_CONF = """\
 rocommunity public 127.0.0.1
 rwcommunity private 127.0.0.1
+createUser hilspriv SHA "hils-auth-key" AES "hils-priv-key"
+createUser hilsauth SHA "hils-auth-key"
+rwuser hilspriv priv
+rwuser hilsauth auth
 """
 
 
