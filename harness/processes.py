@@ -57,7 +57,7 @@ def start_emulator(log: Path, *args: str, verbose: bool = False) -> Served:
         proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=err, text=True)
     ready, _, _ = select.select([proc.stdout], [], [], 20)
     line = proc.stdout.readline() if ready else ""
-    match = re.fullmatch(r"serving (.+) on udp:127\.0\.0\.1:(\d+) \(ro=(\S+) rw=(\S+)\)\n", line)
+    match = re.fullmatch(r"serving (.+) on udp:127\.0\.0\.1:(\d+) \(ro=(\S+) rw=(\S+)( v3=\S+)?\)\n", line)
     if match is None:
         proc.kill()
         proc.wait()

@@ -72,7 +72,7 @@ from pysnmp.hlapi.v3arch.asyncio import (
 from pysnmp.proto import errind
 
 from hils.clock import WallClockDriver
-from hils.ntcip import ErrorStatus, Oid, SnmpError, oid_str
+from hils.ntcip import AUTH_KEY_ENV, PRIV_KEY_ENV, ErrorStatus, Oid, SnmpError, oid_str
 from hils.transport import CommunicationTimeout, TransportError, Value, VarBind
 
 __all__ = ["AUTH_KEY_ENV", "PRIV_KEY_ENV", "AuthProtocol", "PrivProtocol", "SnmpTarget", "SnmpTransport", "SnmpVersion"]
@@ -112,10 +112,6 @@ class PrivProtocol(Enum):
     AES = "AES"  # AES-128 in CFB mode
 
 
-#: Where SNMPv3 keys are read from when the target URL does not give them (keeps them out of
-#: shell history and process lists).
-AUTH_KEY_ENV = "HILS_SNMP_AUTH_KEY"
-PRIV_KEY_ENV = "HILS_SNMP_PRIV_KEY"
 #: RFC 3414 (11.2) asks for pass phrases of at least 8 characters; net-snmp refuses shorter ones.
 MIN_KEY_LENGTH = 8
 
