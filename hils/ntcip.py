@@ -35,6 +35,12 @@ class Access(Enum):
     READ_WRITE = "read-write"
 
 
+#: Environment variables holding SNMPv3 keys (pass phrases) when a target URL or
+#: `hils emulator serve` does not give them: keeps keys out of shell history and process lists.
+AUTH_KEY_ENV = "HILS_SNMP_AUTH_KEY"
+PRIV_KEY_ENV = "HILS_SNMP_PRIV_KEY"
+
+
 class ErrorStatus(IntEnum):
     """SNMP error-status values (RFC 3416); v1 uses the first six."""
 
