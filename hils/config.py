@@ -57,6 +57,9 @@ class Phase:
     startup: PhaseStartup = PhaseStartup.PHASE_NOT_ON
     approach: str | None = None
     turn: str | None = None
+    # Turns of the same approach that run permissive (yielding) while this phase is green,
+    # e.g. the lefts of a four-phase plan without protected lefts.
+    permissive: tuple[str, ...] = ()
 
     @property
     def clearance(self) -> float:
@@ -205,7 +208,8 @@ def _phase(number: int, raw: Any, defaults: Mapping[str, Any], ring: int, source
     w = f"phases.{number}."
     if not isinstance(raw, dict):
         raise ConfigError(source, f"phases.{number}", "must be a table of phase settings")
-    _unknown(raw, ("min_green", "max_green", "yellow", "red_clear", "startup", "approach", "turn"), w, source)
+    _unknown(raw, ("min_green", "max_green", "yellow", "red_clear", "startup", "approach", "turn", "permissive"),
+             w, source)
     merged = {**defaults, **raw}
 
     def where(key: str) -> str:
@@ -228,8 +232,12 @@ def _phase(number: int, raw: Any, defaults: Mapping[str, Any], ring: int, source
         raise ConfigError(source, f"{w}approach", f"is {approach!r}; allowed: {', '.join(APPROACHES)}")
     if turn is not None and turn not in TURNS:
         raise ConfigError(source, f"{w}turn", f"is {turn!r}; allowed: {', '.join(TURNS)}")
+    permissive = raw.get("permissive", [])
+    if not isinstance(permissive, list) or any(t not in TURNS or t == turn for t in permissive):
+        raise ConfigError(source, f"{w}permissive", f"is {permissive!r}; allowed: a list of turns other than the "
+                          f"phase's own turn, from {', '.join(TURNS)}")
     return Phase(number, ring, float(min_green), float(max_green), float(yellow), float(red_clear),
-                 _STARTUP_NAMES[startup], approach, turn)
+                 _STARTUP_NAMES[startup], approach, turn, tuple(permissive))
 
 
 def _pairs(raw: Any, name: str, phases: Mapping[int, Phase], compatible: frozenset[frozenset[int]],
