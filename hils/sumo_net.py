@@ -198,7 +198,7 @@ def derive_phase_map(config: IntersectionConfig, net: Any, controlled_links: Con
             raise NetworkError(f"traffic light {tls_id}: link index {index} controls no connection")
         phases_here = set()
         for from_lane, to_lane, via in triples:
-            link = _link(net, index, from_lane, to_lane, via, served, permissive_of, tls_id)
+            link = _link(net, index, from_lane, to_lane, via, served, permissive_of, tls_id, config.source)
             phases_here.add(link.phase)
             links.append(link)
         if len(phases_here) > 1:
@@ -216,7 +216,7 @@ def derive_phase_map(config: IntersectionConfig, net: Any, controlled_links: Con
 
 def _link(net: Any, index: int, from_lane: str, to_lane: str, via: str,
           served: Mapping[tuple[str, str], int], permissive_of: Mapping[tuple[str, str], int],
-          tls_id: str) -> Link:
+          tls_id: str, source: str) -> Link:
     where = f"traffic light {tls_id}: link {index} ({from_lane} -> {to_lane})"
     try:
         lane = net.getLane(from_lane)
@@ -238,9 +238,9 @@ def _link(net: Any, index: int, from_lane: str, to_lane: str, via: str,
     phase = served.get((approach, turn))
     if phase is None:
         raise NetworkError(
-            f"{where}: no phase serves the {turn} movement of the {approach} approach; fix the config: add a "
-            f'phase with approach = "{approach}", turn = "{turn}", or let the phase of another turn of that '
-            f'approach carry it permissive (permissive = ["{turn}"])')
+            f"{where}: no phase serves the {turn} movement of the {approach} approach; fix the config "
+            f'{source}: add a phase with approach = "{approach}", turn = "{turn}", or let the phase of another '
+            f'turn of that approach carry it permissive (permissive = ["{turn}"])')
     return Link(index, from_lane, to_lane, via, approach, direction, phase,
                 permissive=(approach, turn) in permissive_of)
 

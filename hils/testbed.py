@@ -295,13 +295,14 @@ class Testbed:
 
     def _assemble_simulation(self) -> None:
         sumo = self._sumo_spec
-        self._owns_sumo = sumo is True
+        self._owns_sumo = False
         if sumo is True:
             from hils.sumo import SumoSimulation
 
             sim = SumoSimulation(self.config, seed=self.seed, end=self.duration, sumo_config=self.sumo_config)
-            sim.start()
+            sim.start()  # a SUMO that fails to start (e.g. a network the config does not fit) closes itself
             self.simulation = sim
+            self._owns_sumo = True
         elif sumo is False:
             self.simulation = NoSimulation()
         else:
