@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+import time
 import warnings
 from pathlib import Path
 
@@ -14,6 +15,7 @@ from gymnasium.utils.env_checker import check_env
 from gymnasium.vector import AsyncVectorEnv
 
 import hils
+from harness.processes import start_emulator
 from hils.agents import Observation
 from hils.config import ConfigError, load
 from hils.envs import ENV_ID
@@ -179,6 +181,28 @@ def test_sumo_step_and_control_interval_options() -> None:
         assert env.unwrapped.config.middleware.sumo_step == 0.5
     finally:
         env.close()
+
+
+def test_the_same_env_runs_at_wall_clock_against_the_served_emulator(tmp_path: Path) -> None:
+    served = start_emulator(tmp_path / "serve.log")
+    url = f"snmp://127.0.0.1:{served.port}?community=private&version=2c"
+    try:
+        env = make("selection", target=url, control_interval=2.0, episode_length=30.0)
+        try:
+            obs, _ = env.reset(seed=0)
+            assert env.unwrapped.testbed.mode == "wall-clock"
+            start = time.monotonic()
+            for _ in range(3):
+                obs, _, terminated, truncated, info = env.step(np.int64(2))  # pair (3, 7)
+                assert not terminated and not truncated and not info["timeout"]
+            assert time.monotonic() - start == pytest.approx(6.0, abs=0.6), "each step lasts its control interval"
+            n = len(env.unwrapped.phases)
+            greens = {p for p, v in zip(env.unwrapped.phases, obs[2 * n:3 * n], strict=True) if v == 1.0}
+            assert greens == {3, 7}
+        finally:
+            env.close()
+    finally:
+        served.stop()
 
 
 def test_import_hils_does_not_import_gymnasium_and_registers_when_it_is_loaded() -> None:
