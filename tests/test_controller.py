@@ -196,16 +196,30 @@ def test_one_ring_changes_alone_inside_a_barrier_group(controller: Controller) -
     assert runs(trace, 8) == [("r", YELLOW + RED), ("G", 1000 - YELLOW - RED)]
 
 
-def test_going_back_in_a_ring_restarts_the_barrier_group(controller: Controller) -> None:
+def test_a_ring_backs_into_an_earlier_phase_while_the_other_times(controller: Controller) -> None:
     controller.backup_time = 0
     serve(controller, {3, 8})
-    # 7 precedes 8 in ring 2: it is served when both rings have cleared and the group starts over.
+    # 7 precedes 8 in ring 2: ring 2 backs into it while 3 stays green (no trip round the cycle).
     controller.set_control(CALL, {3, 7})
     trace = record(controller, MAX + 2 * (YELLOW + RED))
-    assert runs(trace, 8) == [("Y", YELLOW), ("r", MAX - 1 + 2 * RED + YELLOW + 1)]
-    assert runs(trace, 3) == [("G", MAX - 1), ("Y", YELLOW), ("r", RED), ("G", YELLOW + RED + 1)]
-    assert runs(trace, 7)[-1] == ("G", YELLOW + RED + 1)
-    assert all(s[0] == "r" and s[4] == "r" for s in trace)  # no side trip to 1 or 5 without a call
+    assert runs(trace, 8) == [("Y", YELLOW), ("r", MAX + 2 * RED + YELLOW)]
+    assert runs(trace, 7) == [("r", YELLOW + RED), ("G", MAX + RED + YELLOW)]
+    assert runs(trace, 3) == [("G", MAX + 2 * (YELLOW + RED))]
+
+
+def test_backup_prevent_keeps_the_ring_from_backing(paper_toml: str) -> None:
+    config = variant(paper_toml, replace={'8 = { approach = "south", turn = "through" }':
+                                          '8 = { approach = "south", turn = "through", backup_prevent = true }'})
+    c = Controller(config)
+    c.backup_time = 0
+    serve(c, {3, 8})
+    c.set_control(CALL, {3, 7})
+    # 8 may not back into 7, so 7 needs the group to start over: 3 (with its call) maxes out, timed from the
+    # call on 7, and both rings clear together and restart the group.
+    trace = record(c, MAX + YELLOW + RED)
+    assert runs(trace, 8) == [("G", MAX - 1), ("Y", YELLOW), ("r", RED + 1)]
+    assert runs(trace, 3) == [("G", MAX - 1), ("Y", YELLOW), ("r", RED), ("G", 1)]
+    assert runs(trace, 7) == [("r", MAX - 1 + YELLOW + RED), ("G", 1)]
 
 
 @pytest.mark.parametrize("calls", [set(), {2}, {2, 6}])
@@ -246,11 +260,12 @@ def test_maximum_timing_restarts_when_the_conflicting_call_goes_away(controller:
     assert runs(trace, 2) == [("G", MAX - 1), ("Y", 1)]
 
 
-def test_a_green_without_its_own_call_gaps_out_at_minimum(controller: Controller) -> None:
+def test_a_gapped_out_green_waits_at_the_barrier_for_the_other_ring(controller: Controller) -> None:
     controller.set_control(CALL, {6, 4})
     trace = record(controller, MAX + 1)
-    assert runs(trace, 2) == [("G", MIN - 1), ("Y", YELLOW), ("r", MAX + 1 - MIN + 1 - YELLOW)]
-    # 6 has its call but 4 waits beyond the barrier: 6 maxes out.
+    # 2 gaps out at its minimum but its next service (4) is across the barrier: it keeps its green until
+    # 6, which has its call, maxes out (timed from the call on 4); both clear together.
+    assert runs(trace, 2) == [("G", MAX - 1), ("Y", 2)]
     assert runs(trace, 6) == [("G", MAX - 1), ("Y", 2)]
 
 
@@ -272,9 +287,12 @@ def test_hold_on_one_ring_holds_the_barrier(controller: Controller) -> None:
     controller.set_control(CALL, {2, 6, 4, 8})
     controller.set_control(HOLD, {2})
     trace = record(controller, 2 * MAX)
-    assert runs(trace, 2) == [("G", 2 * MAX)]
-    assert runs(trace, 6) == [("G", MAX - 1), ("Y", YELLOW), ("r", 2 * MAX - MAX + 1 - YELLOW)]
+    # 6 maxes out, but 4 and 8 lie across the barrier: 6 waits there with 2.
+    assert runs(trace, 2) == runs(trace, 6) == [("G", 2 * MAX)]
     assert runs(trace, 4) == [("r", 2 * MAX)]
+    controller.set_control(HOLD, set())
+    controller.step()
+    assert controller.yellows == {2, 6}
 
 
 def test_force_off_ends_the_green_right_after_minimum(controller: Controller) -> None:
@@ -301,8 +319,8 @@ def test_force_off_one_ring_the_other_maxes_out(controller: Controller) -> None:
     controller.set_control(CALL, {2, 6, 4, 8})
     controller.set_control(FORCE_OFF, {2})
     trace = record(controller, MAX)
-    assert runs(trace, 2) == [("G", MIN - 1), ("Y", YELLOW), ("r", MAX - MIN + 1 - YELLOW)]
-    assert runs(trace, 6) == [("G", MAX - 1), ("Y", 1)]
+    # 2 is forced off at its minimum and waits at the barrier until 6 maxes out: they cross together.
+    assert runs(trace, 2) == runs(trace, 6) == [("G", MAX - 1), ("Y", 1)]
     assert controller.control[FORCE_OFF] == frozenset()
 
 
