@@ -498,3 +498,161 @@ def test_reset_powers_up_again(controller: Controller) -> None:
     controller.reset()
     assert (controller.tick, controller.greens, controller.calls) == (0, {2, 6}, frozenset())
     assert controller.control_status is UnitControlStatus.OTHER
+
+
+# --- NEMA semantics (issue 9), in ticks ---------------------------------------------------------
+
+PED_CALL, PED_OMIT = ControlColumn.PED_CALL, ControlColumn.PED_OMIT
+
+
+def with_options(paper_toml: str, options: dict[int, str]) -> Controller:
+    """A controller on the paper intersection with extra settings on some phases."""
+    text = paper_toml
+    for p, extra in options.items():
+        start = text.index(f"\n{p} = {{ ") + 1
+        end = text.index("}", start)
+        text = text[:start] + text[start:end].rstrip() + f", {extra} " + text[end:]
+    c = Controller(parse(text, "variant.toml"))
+    c.backup_time = 0
+    return c
+
+
+def onsets(c: Controller, ticks: int, calls: dict[int, set[int]] | None = None) -> dict[tuple[int, str], int]:
+    """Step ``ticks`` ticks, SETting the calls due at each tick; the first tick each phase showed each colour."""
+    out: dict[tuple[int, str], int] = {}
+    for _ in range(ticks):
+        if calls and c.tick in calls:
+            c.set_control(CALL, calls[c.tick])
+        c.step()
+        for p, letter in zip(sorted(c.config.phases), show(c), strict=True):
+            out.setdefault((p, letter), c.tick)
+    return out
+
+
+def test_both_rings_cross_the_barrier_together(controller: Controller) -> None:
+    # 2+6 green, 4 and 8 called; 2's call drops at 15 s and 6's at 18 s: 2 and 6 turn yellow together at 18 s.
+    controller.backup_time = 0
+    seen = onsets(controller, 300, {0: {2, 6, 4, 8}, 150: {6, 4, 8}, 180: {4, 8}})
+    assert seen[(2, "Y")] == seen[(6, "Y")] == 181
+    assert seen[(4, "G")] == seen[(8, "G")] == 181 + YELLOW + RED
+
+
+def test_a_max_out_of_one_ring_waits_for_the_other_at_the_barrier(controller: Controller) -> None:
+    controller.backup_time = 0
+    seen = onsets(controller, 400, {0: {2, 6}, 100: {2, 6, 8}, 140: {6, 8}})
+    assert seen[(2, "Y")] == seen[(6, "Y")] == 100 + MAX  # 6 maxes out 20 s after the call on 8; 2 waited
+
+
+def test_phase_next_is_committed_at_yellow_and_not_redirected(controller: Controller) -> None:
+    controller.backup_time = 0
+    controller.set_control(CALL, {4, 8})
+    onsets(controller, MIN)
+    assert controller.yellows == {2, 6} and controller.phase_nexts == {4, 8}
+    controller.set_control(CALL, {3, 4, 8})  # 3 precedes 4 in ring 1, but 4 is committed
+    seen = onsets(controller, YELLOW + RED + 10)
+    assert controller.phase_nexts == frozenset()
+    assert seen[(4, "G")] == seen[(8, "G")] == MIN + YELLOW + RED and (3, "G") not in seen
+
+
+def test_a_committed_phase_that_loses_its_call_is_still_served(controller: Controller) -> None:
+    controller.backup_time = 0
+    seen = onsets(controller, 300, {0: {4, 8}, MIN + 5: set()})
+    assert seen[(4, "G")] == seen[(8, "G")] == MIN + YELLOW + RED
+    assert (4, "Y") not in seen  # served, then resting in green without other demand
+
+
+def test_a_committed_phase_omitted_during_clearance_is_dropped(controller: Controller) -> None:
+    controller.backup_time = 0
+    controller.set_control(CALL, {4, 8})
+    onsets(controller, MIN + 5)
+    controller.set_control(OMIT, {4})
+    seen = onsets(controller, 200)
+    assert (4, "G") not in seen and seen[(8, "G")] == MIN + YELLOW + RED
+
+
+def test_a_ring_backs_into_its_earlier_phase_while_the_other_rests(controller: Controller) -> None:
+    controller.backup_time = 0
+    seen = onsets(controller, 200, {0: {2, 6}, 140: {2, 5}})
+    assert seen[(6, "Y")] == 141 and seen[(5, "G")] == 141 + YELLOW + RED
+    assert (2, "Y") not in seen  # 2 stays green all along
+
+
+def test_dual_entry_serves_the_other_ring_with_the_called_one(paper_toml: str) -> None:
+    c = with_options(paper_toml, {p: "dual_entry = true" for p in (2, 4, 6, 8)})
+    seen = onsets(c, 200, {0: {4}})
+    assert seen[(4, "G")] == seen[(8, "G")] == MIN + YELLOW + RED
+    plain = with_options(paper_toml, {})
+    seen = onsets(plain, 200, {0: {4}})
+    assert seen[(4, "G")] == MIN + YELLOW + RED and (8, "G") not in seen
+
+
+def test_passage_extends_the_green_after_the_call_drops(paper_toml: str) -> None:
+    c = with_options(paper_toml, {2: "passage = 2.5"})
+    seen = onsets(c, 300, {0: {2, 6, 4, 8}, 100: {4, 8}})
+    # 6 gaps out at once and waits at the barrier; 2 extends 2.5 s past its last call, then both cross.
+    assert seen[(2, "Y")] == seen[(6, "Y")] == 100 + 25
+
+
+def test_a_held_call_extends_to_the_maximum_despite_passage(paper_toml: str) -> None:
+    c = with_options(paper_toml, {2: "passage = 2.5", 6: "passage = 2.5"})
+    seen = onsets(c, 300, {0: {2, 6}, 50: {2, 6, 4}})
+    assert seen[(2, "Y")] == seen[(6, "Y")] == 50 + MAX
+
+
+def test_min_and_max_recall(paper_toml: str) -> None:
+    c = with_options(paper_toml, {4: 'recall = "min"', 8: 'recall = "max"'})
+    seen = onsets(c, 300, {100: {2}})
+    # Served by recall without any call; once 2 is called, 4 (min recall) is ready at once and waits
+    # at the barrier while 8 (max recall) extends to its maximum, timed from the call on 2.
+    assert seen[(4, "G")] == seen[(8, "G")] == MIN + YELLOW + RED
+    assert seen[(4, "Y")] == seen[(8, "Y")] == 100 + MAX
+
+
+def test_soft_recall_yields_to_any_other_demand(paper_toml: str) -> None:
+    soft = with_options(paper_toml, {4: 'recall = "soft"'})
+    seen = onsets(soft, 400, {0: {2}})
+    assert (4, "G") not in seen
+    seen = onsets(soft, 400, {400: set()})
+    assert seen[(4, "G")] == 401 + YELLOW + RED
+
+
+def test_a_pedestrian_call_is_served_with_walk_and_clearance(paper_toml: str) -> None:
+    c = with_options(paper_toml, {4: "walk = 7, ped_clear = 9"})
+    c.set_control(PED_CALL, {4})
+    assert c.ped_calls == set()  # latched at the next tick
+    c.step()
+    assert c.ped_calls == {4}
+    walks, clears = [], []
+    for _ in range(400):
+        c.step()
+        walks.append(4 in c.walks)
+        clears.append(4 in c.ped_clears)
+        assert (4 in c.dont_walks) == (4 not in c.walks | c.ped_clears)
+    start = walks.index(True)
+    assert sum(walks) == 70 and sum(clears) == 90 and clears.index(True) == start + 70
+    assert c.ped_calls == set()
+
+
+def test_the_green_lasts_at_least_walk_plus_ped_clear(paper_toml: str) -> None:
+    c = with_options(paper_toml, {4: "walk = 7, ped_clear = 9"})
+    c.set_control(PED_CALL, {4})
+    seen = onsets(c, 400, {60: {1}})
+    assert seen[(4, "Y")] - seen[(4, "G")] == 160
+
+
+def test_ped_omit_keeps_the_walk_from_being_served(paper_toml: str) -> None:
+    c = with_options(paper_toml, {4: "walk = 7, ped_clear = 9"})
+    c.set_control(PED_CALL, {4})
+    c.set_control(PED_OMIT, {4})
+    seen = onsets(c, 300)
+    assert (4, "G") not in seen and c.ped_calls == set()
+
+
+def test_red_revert_delays_the_return_of_a_phase(paper_toml: str) -> None:
+    c = with_options(paper_toml, {8: "backup_prevent = true", 3: "red_revert = 5.0"})
+    onsets(c, 200, {0: {3, 8}})
+    c.set_control(CALL, {3, 7})
+    trace = record(c, MAX + YELLOW + 60)
+    # The group restarts for 7 (8 may not back up); 3 returns after 5 s of red, not its 2 s red clearance.
+    assert runs(trace, 3) == [("G", MAX - 1), ("Y", YELLOW), ("r", 50), ("G", 11)]
+    assert runs(trace, 7) == [("r", MAX - 1 + YELLOW + RED), ("G", 41)]
