@@ -656,3 +656,17 @@ def test_red_revert_delays_the_return_of_a_phase(paper_toml: str) -> None:
     # The group restarts for 7 (8 may not back up); 3 returns after 5 s of red, not its 2 s red clearance.
     assert runs(trace, 3) == [("G", MAX - 1), ("Y", YELLOW), ("r", 50), ("G", 11)]
     assert runs(trace, 7) == [("r", MAX - 1 + YELLOW + RED), ("G", 41)]
+
+
+def test_the_demo_shows_pedestrian_intervals_and_phase_next(paper_config: IntersectionConfig) -> None:
+    from emulator import demo
+
+    config = demo.with_pedestrians(paper_config)
+    rows = demo.run(config)
+    walk = next(r for r in rows if r.walks)
+    clear = next(r for r in rows if r.ped_clears)
+    assert walk.walks == clear.ped_clears == {4}
+    assert round(clear.t - walk.t, 1) == demo.DEMO_WALK
+    assert any(r.yellows == {2, 6} and r.nexts == {3, 7} for r in rows)
+    text = demo.render(rows, config)
+    assert " W " in text and " P " in text and "[3,7]" in text
