@@ -390,7 +390,11 @@ class Controller:
         if not across or not all(ready[r.number] and (wish[r.number] is None or r.number in across)
                                  for r in self.rings):
             return  # the ring wishing across waits at the barrier
-        self.group = self._barrier[next(iter(across.values()))]
+        # Cross to the nearest group (cyclically) that a wish lies in; restart the group only when every
+        # wish beyond it is a backing that backup_prevent forbids (crossing serves those on the way back).
+        groups = {self._barrier[q] for q in across.values()}
+        n = len(self.config.barriers)
+        self.group = next(g for g in ((self.group + k) % n for k in range(1, n + 1)) if g in groups)
         for r in self.rings:
             target = across.get(r.number)
             if target is None or self._barrier[target] != self.group:
