@@ -235,7 +235,7 @@ def test_every_called_phase_is_served_within_the_bound(config: IntersectionConfi
         monitor.apply(operation)
     c.backup_time = 0
     c.set_control(ControlColumn.HOLD, ())
-    c.set_control(ControlColumn.PHASE_OMIT, omit)
+    monitor.apply((ControlColumn.PHASE_OMIT, omit))
     c.set_control(ControlColumn.FORCE_OFF, force_off)
     c.set_control(ControlColumn.VEH_CALL, calls)
     waiting = set(calls - omit)
