@@ -27,7 +27,9 @@ def _register_demo(commands: argparse._SubParsersAction) -> None:
     demo = commands.add_parser(
         "demo", help="run the controller model in virtual time and print its interval timeline",
         description="Run the controller model for a minute of virtual time, place vehicle calls on "
-                    "[3,7], [4,8], [1,5] and [1,6], and print every change of the signal display.")
+                    "[3,7], [4,8], [1,5] and [1,6] and a pedestrian call on 4 (the throughs get a 4 s walk and "
+                    "5 s pedestrian clearance unless the config gives them their own), and print every change "
+                    "of the signal display, the pedestrian intervals and the committed next phases.")
     demo.add_argument("--config", metavar="FILE", help="intersection config (TOML); default: the shipped four-leg")
     demo.add_argument("--duration", type=float, default=60.0, metavar="S", help="virtual seconds to run (60)")
     demo.set_defaults(func=_demo)
@@ -36,8 +38,9 @@ def _register_demo(commands: argparse._SubParsersAction) -> None:
 def _demo(args: argparse.Namespace) -> int:
     from emulator import demo
 
-    cfg = config_mod.load(args.config)
-    print(f"{cfg.name}: calls at " + ", ".join(f"{t:g} s {list(p)}" for t, p in demo.DEFAULT_CALLS))
+    cfg = demo.with_pedestrians(config_mod.load(args.config))
+    print(f"{cfg.name}: calls at " + ", ".join(f"{t:g} s {list(p)}" for t, p in demo.DEFAULT_CALLS)
+          + "; pedestrian calls at " + ", ".join(f"{t:g} s {list(p)}" for t, p in demo.DEFAULT_PED_CALLS))
     print(demo.render(demo.run(cfg, duration=args.duration), cfg))
     return 0
 

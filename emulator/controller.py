@@ -1,64 +1,75 @@
-"""A dual-ring NEMA TS2 actuated controller in free mode, ticking every 0.1 s.
+"""A dual-ring NEMA actuated controller in free mode, ticking every 0.1 s.
 
 Rules of this file
 ------------------
-- Time is an integer count of ticks (tenths of a second), as in a real controller; no float time
-  is compared anywhere in here.
-- :meth:`Controller.step` is the only thing that advances timing. It reads the control objects
-  (calls, holds, force-offs, omits) as they are at that tick.
-- A ring's timed intervals follow ``_NEXT`` (yellow, then red clearance) and nothing else; a ring
-  leaves GREEN only by ``_clear`` (the start of its yellow, where its next phase is committed) and
-  starts a phase only by ``_start``. The decisions of a tick are made in ``_decide`` from the rings'
-  readiness and wishes, in the order of the rules below.
+- Time is an integer count of ticks (tenths of a second), as in a real
+  controller; no float time is compared anywhere in here.
+- :meth:`Controller.step` is the only thing that advances timing. It reads the
+  control objects (calls, holds, force-offs, omits) as they are at that tick.
+- Interval changes of a ring follow ``_NEXT`` below and nothing else; a green
+  ends only by ``_decide`` committing the ring's next phase (or none), and a
+  ring leaves DWELL only by ``_enter_target`` starting its committed phase.
+- An interval takes its lengths when it starts (``Timing`` copied into the
+  ring), so a SET of the phase table acts from the next interval on.
 
 Theory of operation
 -------------------
-Each ring times one phase at a time: GREEN, YELLOW, RED_CLEAR; a ring whose committed next phase
-lies across the barrier then WAITs in red for the other ring; a ring with nothing to serve in the
-barrier group DWELLs in red. Both rings always work inside one barrier group, so any two phases they
-show are concurrent by the ring-and-barrier structure. The rules, per tick (aligned with SUMO's NEMA
-controller, which its authors validated against Econolite software-in-the-loop; see
-docs/nema_differences.md for where and why we differ):
+Each ring times one phase at a time through GREEN, YELLOW and RED_CLEAR, then
+DWELLs at red until its committed next phase may start. Both rings work inside
+one barrier group (``group``) at a time, so any two phases they show are
+concurrent by the ring-and-barrier structure.
 
-1. Timing a green. Conflicting demand for a green is a call on another phase of its ring or on any
-   phase across the barrier; Maximum1 times only while it exists (max-out). The phase's own call
-   extends the green by its passage time after the call was last seen (gap-out when it has not been
-   seen for ``passage``; a middleware's presence call is a constant actuation). A green that has
-   timed its minimum and gapped out while conflicting demand exists stays gapped out (its call
-   coming back does not extend it again) until it ends or the conflicting demand goes away.
-2. A green is ready to end when it is not held and has timed its minimum, and it gapped out, maxed
-   out or is forced off (ForceOff acts only while conflicting demand exists).
-3. A ready ring wishes for the nearest called phase after its own in ring order (cyclically), its
-   own excluded. A phase with ``backup_prevent`` is not backed into (served from a later phase of
-   its barrier group): the ring reaches it through a barrier cycle, as if it lay across the barrier
-   (both rings clear and re-enter the group), and for the other ring that call is conflicting
-   demand, as a call across the barrier is.
-4. A wish within the barrier group is served at once: the ring clears (yellow, red clearance) and
-   enters the wished phase; backing into an earlier phase of the group waits while both rings are
-   ready and one of them wishes across the barrier (the crossing goes first).
-5. Barrier crossing. While a ring wishes across the barrier, it keeps its green (waits at the
-   barrier) until every ring is ready, with a wish across or none; then all rings clear together
-   and, when every one has finished its red clearance, enter the other group together. A ring with
-   no call there serves its ``dual_entry`` phase of that group, if it has one, else it dwells in red.
-6. Without a wish a ready green rests in green. A ring that dwells starts a called phase of the
-   group at once. With no green and nothing called anywhere the controller rests in red.
+*Demand* on a phase is a vehicle call, a latched pedestrian call, or a recall
+(min, max, ped; soft only while no other phase has demand), never on an omitted
+phase. A green is *ready to end* when it has timed its minimum (and Walk plus
+pedestrian clearance if it served a walk), is not held, and has gapped out
+(no vehicle call for its passage time), maxed out (Maximum1, or Maximum2 when
+ringControlGroupMax2 selects it for the ring, timed while *conflicting demand*
+waits: demand in its own ring or across the barrier) or been forced off. Once a
+ready, gapped-out green sees conflicting demand it stays gapped out until it
+ends (NEMA "simultaneous gap disable": a call coming back does not re-extend
+it). A green without anywhere to go rests in green.
 
-The next phase of a ring is decided at the start of its yellow (PhaseNext, reported from then) and
-a call that appears during the clearance does not redirect it. A committed next phase whose call
-drops during the clearance is served anyway, for its minimum green (as SUMO's NEMA controller does:
-NEMAController.cpp, NEMAPhase::exit enters the last transition decision at the end of red without
-re-checking its call; NEMA TS2 commits PhaseNext at the end of green). A committed next phase that is
-omitted during the clearance is not served (an omitted phase "shall not be serviced", NTCIP 1202
-phaseControlGroupPhaseOmit): at the end of the clearance the ring decides again among the calls it
-may serve, or dwells.
+A ready ring *wishes* for the nearest phase with demand in its ring order after
+its own (1, 2, 3, 4, 1, ...). Within the barrier group it goes there at once:
+forward, or backing into an earlier phase of the group while the other ring
+still times (not when both rings are ready and a ring wishes across the
+barrier: crossing goes first). A ring may not back from a phase with
+``backup_prevent``: that demand counts as lying beyond the barrier, so both
+rings clear and restart the group for it. A wish beyond the barrier is served
+only when every ring is ready (or idle in red) and wishes beyond or nowhere:
+then all rings clear together into the new group,
+a ring without demand there taking its ``dual_entry`` phase if it has one and
+resting in red otherwise. Until then the ring wishing across keeps its green
+(it waits at the barrier).
 
-Recalls: ``min`` and ``max`` recall call the phase whenever it is not green (``max`` also keeps
-calling it while green, so it extends to its maximum); ``soft`` recall calls it only while no other
-phase is called. Omitted phases never start. ForceOff bits clear themselves when that phase's green
-ends. unitBackupTime is armed by the first SET of a control object; when it passes without another,
-the controller reports backupMode and clears every control object. A conflict monitor, like an MMU,
-checks every change that no two phases showing green or yellow are incompatible under the
-configured matrix; if they are, the controller goes to flash (all red) and stops timing.
+The next phase is *committed at the start of yellow* (shown in
+phaseStatusGroupPhaseNexts from then) and a call arriving during the clearance
+does not redirect it. A committed phase that loses its call during the
+clearance is still served (its minimum green, then it ends as usual): NEMA TS 2
+commits Phase Next at the end of the green, and SUMO's NEMA controller, validated
+against Econolite SIL, does the same (NEMAController.cpp, NEMAPhase::exit enters
+``lastTransitionDecision`` at the end of red without re-checking its call). A
+committed phase that is *omitted* during the clearance is dropped: the ring ends
+its clearance in red with nothing committed and chooses again at the next tick,
+because phaseControlGroupPhaseOmit (NTCIP 1202) says an omitted phase is not
+serviced. A committed phase starts when its ring's clearance is over, no other
+ring still shows a phase of another barrier group (both rings enter a new group
+together) and its red revert since its own last yellow has passed.
+
+A walk is served when the phase's green starts with a pedestrian call (latched
+from phaseControlGroupPedCall or ped recall, not on a PedOmit phase); a call
+arriving later in the green waits for the next service (no recycling). PedOmit
+stops new walks only; a walk being timed completes.
+
+Omitted phases never start. ForceOff bits clear themselves when that phase's
+green ends. unitBackupTime is armed by the first SET of a control object; when
+it passes without another, the controller reports backupMode and clears every
+control object. After power-up the controller flashes for unitStartUpFlash
+seconds, then starts its start-up intervals. A conflict monitor, like an MMU,
+checks every tick that no two phases showing green or yellow are incompatible
+under the configured matrix; if they are, the controller goes to flash (all
+red) and stops timing.
 """
 
 from __future__ import annotations
@@ -70,7 +81,7 @@ from enum import Enum
 
 import simpy
 
-from hils.config import IntersectionConfig, Recall
+from hils.config import IntersectionConfig, Phase, Recall
 from hils.ntcip import ControlColumn, PhaseStartup, UnitControlStatus, UnitFlashStatus
 
 log = logging.getLogger(__name__)
@@ -82,14 +93,13 @@ class Interval(Enum):
     GREEN = "green"
     YELLOW = "yellow"
     RED_CLEAR = "red_clear"
-    WAIT = "wait"  # red, clearance done, waiting for the other ring to cross the barrier together
-    DWELL = "dwell"  # red, nothing to serve in this barrier group
+    DWELL = "dwell"
 
 
-# What a timed clearance interval becomes when it has run its length.
+# What a timed interval becomes when it has run its length.
 _NEXT: dict[Interval, Interval] = {
     Interval.YELLOW: Interval.RED_CLEAR,
-    Interval.RED_CLEAR: Interval.WAIT,
+    Interval.RED_CLEAR: Interval.DWELL,
 }
 
 _STARTUP_INTERVAL = {
@@ -105,18 +115,45 @@ def tenths(seconds: float) -> int:
 
 
 @dataclass(slots=True)
+class Timing:
+    """One phase's timings in ticks; mutable so the phase table can be retimed over SNMP."""
+
+    min_green: int
+    max1: int
+    max2: int
+    passage: int
+    walk: int
+    ped_clear: int
+    yellow: int
+    red_clear: int
+    red_revert: int
+
+    @classmethod
+    def of(cls, ph: Phase) -> Timing:
+        return cls(tenths(ph.min_green), tenths(ph.max_green), tenths(ph.maximum2), tenths(ph.passage),
+                   tenths(ph.walk), tenths(ph.ped_clear), tenths(ph.yellow), tenths(ph.red_clear),
+                   tenths(ph.red_revert))
+
+
+@dataclass(slots=True)
 class Ring:
     """Timing state of one ring (mutable: the controller's working memory)."""
 
     number: int
     order: tuple[int, ...]
-    phase: int | None = None  # the phase timing now, or last timed while in WAIT or DWELL
+    phase: int | None = None  # the phase timing now, or last timed while in DWELL
     interval: Interval = Interval.DWELL
     ticks: int = 0  # ticks completed in the current interval
+    length: int = 0  # ticks the current yellow / red clearance lasts, fixed when it starts
+    minimum: int = 0  # ticks the current green lasts at least (minimum green, or walk + ped clear)
+    maximum: int = 0  # max-out ticks of the current green (Maximum1 or Maximum2)
+    passage: int = 0  # passage ticks of the current green
+    walk: int = 0  # walk ticks served in the current green (0: no walk)
+    ped_clear: int = 0
     max_ticks: int = 0  # ticks of conflicting demand during this green
-    since_call: int = 0  # ticks since the green's own call was last seen
-    gapped_out: bool = False  # rule 1: gapped out under conflicting demand, until it ends or the demand goes
-    target: int | None = None  # the next phase, committed at the start of yellow
+    gap: int = 0  # ticks since the green's own vehicle call was last present
+    gapped: bool = False  # gapped out with conflicting demand: latched until the green ends
+    target: int | None = None  # the committed next phase (PhaseNext), from the start of yellow
 
 
 @dataclass(frozen=True, slots=True)
@@ -135,41 +172,41 @@ class Controller:
     def __init__(self, config: IntersectionConfig, *, on_change: Callable[[Change], None] | None = None) -> None:
         self.config = config
         self.on_change = on_change
-        phases = config.phases
-        self._min = {p: tenths(ph.min_green) for p, ph in phases.items()}
-        self._max = {p: tenths(ph.max_green) for p, ph in phases.items()}
-        self._passage = {p: max(1, tenths(ph.passage)) for p, ph in phases.items()}
-        self._length = {p: {Interval.YELLOW: tenths(ph.yellow), Interval.RED_CLEAR: tenths(ph.red_clear)}
-                        for p, ph in phases.items()}
-        self._barrier = {p: config.barrier_of(p) for p in phases}
+        self.timing = {p: Timing.of(ph) for p, ph in config.phases.items()}
+        self._barrier = {p: config.barrier_of(p) for p in config.phases}
         self._order = {p: ring.index(p) for ring in config.rings for p in ring}
-        self._ring_of = {p: ph.ring for p, ph in phases.items()}
-        self._recall = {p: ph.recall for p, ph in phases.items() if ph.recall is not Recall.NONE}
-        self._dual_entry = {(ph.ring, self._barrier[p]): p for p, ph in phases.items() if ph.dual_entry}
-        self._backup_prevent = frozenset(p for p, ph in phases.items() if ph.backup_prevent)
+        self._ring_of = {p: config.ring_of(p) for p in config.phases}
+        self._recall = {rc: frozenset(p for p, ph in config.phases.items() if ph.recall is rc) for rc in Recall}
         self.backup_time = config.middleware.backup_time
+        self.startup_flash = config.startup_flash
         self.pattern = 254  # free
         self.reset()
 
-    # --- lifecycle -------------------------------------------------------------------------------
+    # --- lifecycle -------------------------------------------------------------------
 
     def reset(self) -> None:
-        """Power-up: start-up intervals, control objects cleared, not under system control."""
+        """Power-up: start-up flash, then start-up intervals; control objects cleared, not under system control."""
         self.tick = 0
         self.control: dict[ControlColumn, frozenset[int]] = {c: frozenset() for c in ControlColumn}
+        self.max2_rings: frozenset[int] = frozenset()
         self.control_status = UnitControlStatus.OTHER
-        self.flash_status = UnitFlashStatus.NOT_FLASH
-        self._changed = True
-        self._quiet: tuple[frozenset[int], ...] | None = None
+        self.flash_status = UnitFlashStatus.STARTUP if self.startup_flash else UnitFlashStatus.NOT_FLASH
+        self.ped_calls: frozenset[int] = frozenset()  # latched pedestrian calls
+        self._yellow_end: dict[int, int] = {}  # tick each phase's last yellow ended (red revert)
         self._since_set: int | None = None  # ticks since the last control SET; None = backup timer disarmed
         self.rings = [Ring(i + 1, order) for i, order in enumerate(self.config.rings)]
+        self.group = 0
+        if not self.flashing:
+            self._power_up()
+        self._refresh_status()
+
+    def _power_up(self) -> None:
         started = [p for p, ph in self.config.phases.items() if ph.startup in _STARTUP_INTERVAL]
         self.group = self._barrier[started[0]] if started else 0
         for p in started:
             ring = self.rings[self._ring_of[p] - 1]
-            ring.phase, ring.interval = p, _STARTUP_INTERVAL[self.config.phases[p].startup]
-        self._crossing_to: int | None = None  # the barrier group every ring is clearing toward
-        self._refresh_status()
+            ring.phase = p
+            self._enter(ring, _STARTUP_INTERVAL[self.config.phases[p].startup], notify=False)
 
     def process(self, env: simpy.Environment, phase: float = 0.0):
         """SimPy process ticking the controller every 0.1 s, without accumulating float error.
@@ -182,90 +219,81 @@ class Controller:
             yield env.timeout(max(0.0, due - env.now))
             self.step()
 
-    # --- control objects -----------------------------------------------------------------------------
+    # --- control objects ----------------------------------------------------------------
 
     def set_control(self, column: ControlColumn, phases: Iterable[int]) -> None:
         """A SET of one control object: replaces its phases and restarts the backup timer."""
         self.control[column] = frozenset(phases)
+        self._system_set()
+
+    def set_max2(self, rings: Iterable[int]) -> None:
+        """A SET of ringControlGroupMax2: these rings time Maximum 2 from their next green."""
+        self.max2_rings = frozenset(rings)
+        self._system_set()
+
+    def _system_set(self) -> None:
         self._since_set = 0
-        if self.control_status is not UnitControlStatus.SYSTEM_CONTROL:
-            self.control_status = UnitControlStatus.SYSTEM_CONTROL
+        self.control_status = UnitControlStatus.SYSTEM_CONTROL
 
     @property
     def calls(self) -> frozenset[int]:
-        """Vehicle calls the controller acts on: called or recalled, configured and not omitted."""
-        omitted = self.control[ControlColumn.PHASE_OMIT]
-        called = self.control[ControlColumn.VEH_CALL].intersection(self.config.phases) - omitted
-        if self._recall:
-            greens = self.greens
-            hard = {p for p, r in self._recall.items()
-                    if r is Recall.MAX or (r is Recall.MIN and p not in greens)} - omitted
-            called |= hard
-            if not called:  # soft recall: only while nothing else is called
-                called = frozenset(p for p, r in self._recall.items()
-                                   if r is Recall.SOFT and p not in greens) - omitted
-        return frozenset(called)
+        """Vehicle calls the controller acts on: called, configured and not omitted."""
+        return self.control[ControlColumn.VEH_CALL].intersection(self.config.phases) - self.control[
+            ControlColumn.PHASE_OMIT]
 
-    # --- status --------------------------------------------------------------------------------------
+    # --- status -------------------------------------------------------------------------
 
     @property
     def flashing(self) -> bool:
         return self.flash_status is not UnitFlashStatus.NOT_FLASH
 
     def _refresh_status(self) -> None:
-        greens, yellows, ons = set(), set(), set()
+        greens, yellows, ons, walks, clears, nexts = set(), set(), set(), set(), set(), set()
         if not self.flashing:
             for r in self.rings:
                 if r.interval is Interval.GREEN:
                     greens.add(r.phase)
+                    if r.ticks < r.walk:
+                        walks.add(r.phase)
+                    elif r.ticks < r.walk + r.ped_clear:
+                        clears.add(r.phase)
                 elif r.interval is Interval.YELLOW:
                     yellows.add(r.phase)
-                if r.interval in (Interval.GREEN, Interval.YELLOW, Interval.RED_CLEAR):
+                if r.interval is not Interval.DWELL:
                     ons.add(r.phase)
+                if r.target is not None:
+                    nexts.add(r.target)
         self.greens = frozenset(greens)
         self.yellows = frozenset(yellows)
         self.phase_ons = frozenset(ons)
         self.reds = frozenset(self.config.phases) - self.greens - self.yellows
+        self.walks = frozenset(walks)
+        self.ped_clears = frozenset(clears)
+        self.dont_walks = frozenset(self.config.phases) - self.walks - self.ped_clears
+        # The phase each clearing ring has committed to serve next (decided at the start of its yellow).
+        self.phase_nexts = frozenset(nexts)
 
-    @property
-    def phase_nexts(self) -> frozenset[int]:
-        """The phase each clearing (or waiting) ring has committed to serve next."""
-        if self.flashing:
-            return frozenset()  # a flashing controller times nothing, so nothing comes next
-        return frozenset(r.target for r in self.rings
-                         if r.target is not None and r.interval in (Interval.YELLOW, Interval.RED_CLEAR,
-                                                                    Interval.WAIT))
-
-    # --- the tick ------------------------------------------------------------------------------------
+    # --- the tick -------------------------------------------------------------------------
 
     def step(self) -> None:
         """Advance one tick (0.1 s)."""
         self.tick += 1
         self._backup_timer()
+        if self.flash_status is UnitFlashStatus.STARTUP and self.tick >= self.startup_flash * 10:
+            self.flash_status = UnitFlashStatus.NOT_FLASH
+            self._power_up()
+            self._refresh_status()
+            return
         if self.flashing:
             return
-        calls = self.calls
-        inputs = (calls, self.control[ControlColumn.HOLD], self.control[ControlColumn.FORCE_OFF])
-        if inputs == self._quiet:
-            # Nothing is timing and the inputs are as they were: only the greens' counters move.
-            for r in self.rings:
-                if r.interval is Interval.GREEN:
-                    r.ticks += 1
-                    if r.phase not in calls:
-                        r.since_call += 1
-            return
+        demand = self._demand()
         for r in self.rings:
-            self._time(r, calls)
-        if self._crossing_to is not None and all(r.interval in (Interval.WAIT, Interval.DWELL) for r in self.rings):
-            self._enter_group()
-        self._decide(calls)
-        changed, self._changed = self._changed, False
-        if changed:
-            self._refresh_status()
-            self._monitor()
-        resting = all((r.interval is Interval.GREEN and not r.max_ticks and not self._ready(r, calls))
-                      or (r.interval is Interval.DWELL and not calls) for r in self.rings)
-        self._quiet = inputs if resting and not changed else None
+            self._time(r, demand)
+        self._decide(demand)
+        for r in self.rings:
+            self._enter_target(r)
+        self._refresh_status()
+        self._monitor()
 
     def _backup_timer(self) -> None:
         if self._since_set is None or self.backup_time == 0:
@@ -275,146 +303,144 @@ class Controller:
             log.warning("backup time %d s passed without a control SET: backup mode, control objects cleared",
                         self.backup_time)
             self.control = {c: frozenset() for c in ControlColumn}
+            self.max2_rings = frozenset()
             self.control_status = UnitControlStatus.BACKUP_MODE
             self._since_set = None
 
-    def _conflicting(self, r: Ring, calls: frozenset[int]) -> bool:
-        p = r.phase
-        return any(q != p and (self._ring_of[q] == r.number or self._barrier[q] != self._barrier[p]
-                               or self._needs_cycle(q)) for q in calls)
+    def _demand(self) -> frozenset[int]:
+        """Phases wanting service this tick; latches pedestrian calls of phases not showing green."""
+        omit = self.control[ControlColumn.PHASE_OMIT]
+        ped_omit = omit | self.control[ControlColumn.PED_OMIT]
+        greens = {r.phase for r in self.rings if r.interval is Interval.GREEN}
+        peds = (self.control[ControlColumn.PED_CALL].intersection(self.config.phases) | self._recall[Recall.PED])
+        self.ped_calls = (self.ped_calls | (peds - greens)) - ped_omit
+        demand = self.calls | self.ped_calls | ((self._recall[Recall.MIN] | self._recall[Recall.MAX]) - omit)
+        soft = self._recall[Recall.SOFT] - omit
+        if soft and not demand - soft:
+            demand |= soft
+        return frozenset(demand)
 
-    def _needs_cycle(self, q: int) -> bool:
-        """A backup-prevented phase behind its ring's current phase in this group: served after a barrier cycle."""
-        if q not in self._backup_prevent or self._barrier[q] != self.group:
-            return False
-        current = self.rings[self._ring_of[q] - 1].phase
-        return (current is not None and self._barrier[current] == self.group
-                and self._order[q] < self._order[current])
+    def _beyond(self, q: int) -> bool:
+        """True when a phase with demand cannot be served in this visit of the barrier group: it lies across
+        the barrier, or its ring would have to back into it from a green with ``backup_prevent``."""
+        if self._barrier[q] != self.group:
+            return True
+        r = self.rings[self._ring_of[q] - 1]
+        return (r.interval is Interval.GREEN and self.config.phases[r.phase].backup_prevent
+                and self._order[q] < self._order[r.phase])
 
-    def _time(self, r: Ring, calls: frozenset[int]) -> None:
-        """Rule 1, and the clearance intervals."""
-        if r.interval in (Interval.WAIT, Interval.DWELL):
+    def _conflicting(self, r: Ring, demand: frozenset[int]) -> bool:
+        return any(q != r.phase and (self._ring_of[q] == r.number or self._beyond(q)) for q in demand)
+
+    def _time(self, r: Ring, demand: frozenset[int]) -> None:
+        if r.interval is Interval.DWELL:
             return
         r.ticks += 1
-        p = r.phase
-        if r.interval is Interval.GREEN:
-            r.since_call = 0 if p in calls else r.since_call + 1
-            if self._conflicting(r, calls):
-                r.max_ticks += 1
-                if r.ticks >= self._min[p] and r.since_call >= self._passage[p]:
-                    r.gapped_out = True
-            else:
-                r.max_ticks, r.gapped_out = 0, False
-        elif r.ticks >= self._length[p][r.interval]:
-            self._enter(r, _NEXT[r.interval])
-            if r.interval is Interval.WAIT:
-                self._end_clearance(r, calls)
-
-    def _end_clearance(self, r: Ring, calls: frozenset[int]) -> None:
-        """At the end of red: enter the committed phase if it is in this group, else wait at the barrier."""
-        target = r.target
-        if target is not None and target in self.control[ControlColumn.PHASE_OMIT]:
-            target = r.target = None  # omitted during the clearance: decide again
-        if self._crossing_to is not None:
-            return  # a crossing is under way: wait for every ring to finish its clearance
-        if target is not None and self._barrier[target] == self.group:
-            self._start(r, target)
-        else:
-            self._enter(r, Interval.DWELL)  # nothing committed here
-
-    def _ready(self, r: Ring, calls: frozenset[int]) -> bool:
-        """Rule 2."""
         if r.interval is not Interval.GREEN:
-            return r.interval is Interval.DWELL
+            if r.ticks >= r.length:
+                if r.interval is Interval.YELLOW:
+                    self._yellow_end[r.phase] = self.tick
+                self._enter(r, _NEXT[r.interval])
+            return
         p = r.phase
-        if p in self.control[ControlColumn.HOLD] or r.ticks < self._min[p]:
-            return False
-        forced = p in self.control[ControlColumn.FORCE_OFF] and self._conflicting(r, calls)
-        return r.gapped_out or r.since_call >= self._passage[p] or r.max_ticks >= self._max[p] or forced
+        extending = p in self.calls or p in self._recall[Recall.MAX]
+        r.gap = 0 if extending else r.gap + 1
+        conflict = self._conflicting(r, demand)
+        r.max_ticks = r.max_ticks + 1 if conflict else 0
+        if not conflict:
+            r.gapped = False
+        elif r.ticks >= r.minimum and r.gap > 0 and r.gap >= r.passage:
+            r.gapped = True
 
-    def _wish(self, r: Ring, calls: frozenset[int]) -> int | None:
-        """Rule 3: the nearest called phase after the ring's own, in ring order."""
-        order = r.order
-        here = self._order[r.phase] if r.phase is not None else -1
-        for k in range(1, len(order) + (r.interval is Interval.DWELL)):
-            q = order[(here + k) % len(order)]
-            if q in calls and (q != r.phase or r.interval is Interval.DWELL):
+    def _ready(self, r: Ring) -> bool:
+        """A green that may end now, or a ring resting in red with nothing committed."""
+        if r.interval is Interval.DWELL:
+            return r.target is None
+        if r.interval is not Interval.GREEN or r.ticks < r.minimum or r.phase in self.control[ControlColumn.HOLD]:
+            return False
+        gapped = r.gapped or (r.gap > 0 and r.gap >= r.passage)
+        return gapped or r.max_ticks >= r.maximum or r.phase in self.control[ControlColumn.FORCE_OFF]
+
+    def _wish(self, r: Ring, demand: frozenset[int]) -> int | None:
+        """The nearest phase with demand after the ring's own, in ring order.
+
+        A ring resting in red may re-serve its own phase (last in the order)."""
+        n = len(r.order)
+        i = 0 if r.phase is None else self._order[r.phase]
+        stop = n + 1 if r.interval is Interval.DWELL else n
+        for k in range(1, stop):
+            q = r.order[(i + k) % n]
+            if q in demand:
                 return q
         return None
 
-    def _decide(self, calls: frozenset[int]) -> None:
-        """Rules 3 to 6 for this tick."""
-        if not calls or self._crossing_to is not None:
-            return
-        ready = {r.number: self._ready(r, calls) for r in self.rings}
-        wishes = {r.number: self._wish(r, calls) for r in self.rings if ready[r.number]}
-        across = {n: q for n, q in wishes.items() if q is not None and (self._crosses(q) or self._needs_cycle(q))}
+    def _decide(self, demand: frozenset[int]) -> None:
+        ready = {r.number: self._ready(r) for r in self.rings}
+        wish = {r.number: self._wish(r, demand) for r in self.rings if ready[r.number]}
+        across = {n: q for n, q in wish.items() if q is not None and self._beyond(q)}
         all_ready = all(ready.values())
-        # Rules 4 and 6: within the group.
         for r in self.rings:
-            q = wishes.get(r.number)
+            q = wish.get(r.number)
             if q is None or r.number in across:
                 continue
-            backing = r.phase is not None and self._order[q] < self._order[r.phase]
-            if backing and across and all_ready:
-                wishes[r.number] = None  # the crossing goes first; the ring comes back to it after
+            if r.interval is Interval.GREEN and self._order[q] < self._order[r.phase] and all_ready and across:
+                wish[r.number] = None  # both rings could cross: crossing goes before backing
                 continue
-            if r.interval is Interval.DWELL:
-                self._start(r, q)
-            else:
-                self._clear(r, q)
-        # Rule 5: crossing, once every ring is ready with a wish across or none.
-        if across and all(ready[r.number] and (wishes.get(r.number) is None or r.number in across)
-                          for r in self.rings):
-            # The next barrier group in sequence that a ring wishes to enter; the same group again
-            # (a barrier cycle) when only backup-prevented phases are wished for.
-            wished = {self._barrier[q] for q in across.values()}
-            n = len(self.config.barriers)
-            group = next(g for g in ((self.group + k) % n for k in range(1, n + 1)) if g in wished)
-            self._crossing_to = group
-            for r in self.rings:
-                wish = across.get(r.number)
-                target = wish if wish is not None and self._barrier[wish] == group else self._dual_entry.get(
-                    (r.number, group))
-                if r.interval is Interval.GREEN:
-                    self._clear(r, target)
-                else:
-                    r.target = target
-                    self._enter(r, Interval.WAIT)
-            if all(r.interval is Interval.WAIT for r in self.rings):
-                self._enter_group()
-
-    def _crosses(self, q: int) -> bool:
-        return self._barrier[q] != self.group
-
-    def _enter_group(self) -> None:
-        """Every ring has finished its clearance: enter the new group's committed phases together."""
-        self.group, self._crossing_to = self._crossing_to, None
+            self._commit(r, q)
+        if not across or not all(ready[r.number] and (wish[r.number] is None or r.number in across)
+                                 for r in self.rings):
+            return  # the ring wishing across waits at the barrier
+        # Cross to the nearest group (cyclically) that a wish lies in; restart the group only when every
+        # wish beyond it is a backing that backup_prevent forbids (crossing serves those on the way back).
+        groups = {self._barrier[q] for q in across.values()}
+        n = len(self.config.barriers)
+        self.group = next(g for g in ((self.group + k) % n for k in range(1, n + 1)) if g in groups)
         for r in self.rings:
-            target = r.target
-            if target is not None and target in self.control[ControlColumn.PHASE_OMIT]:
-                target = None  # omitted during the clearance: the ring decides again from red
-            if target is not None:
-                self._start(r, target)
-            elif r.interval is not Interval.DWELL:
-                r.target = None
-                self._enter(r, Interval.DWELL)
+            target = across.get(r.number)
+            if target is None or self._barrier[target] != self.group:
+                # Nearest demand of the ring in the new group; a restarted group serves its own phase again.
+                target = next((q for q in r.order if q in demand and self._barrier[q] == self.group), None)
+            if target is None:
+                omit = self.control[ControlColumn.PHASE_OMIT]
+                target = next((q for q in r.order if self._barrier[q] == self.group
+                               and self.config.phases[q].dual_entry and q not in omit), None)
+            self._commit(r, target)
 
-    def _clear(self, r: Ring, target: int | None) -> None:
-        """End a green: yellow now, the next phase committed (PhaseNext) from now on."""
-        self.control[ControlColumn.FORCE_OFF] -= {r.phase}
+    def _commit(self, r: Ring, target: int | None) -> None:
+        """Commit the ring's next phase: a green ends (yellow starts), a resting red ring takes it."""
         r.target = target
-        self._enter(r, Interval.YELLOW)
+        if r.interval is Interval.GREEN:
+            self.control[ControlColumn.FORCE_OFF] -= {r.phase}
+            self._enter(r, Interval.YELLOW)
 
-    def _start(self, r: Ring, phase: int) -> None:
-        r.phase, r.target = phase, None
-        r.since_call = 0
+    def _enter_target(self, r: Ring) -> None:
+        if r.interval is not Interval.DWELL or r.target is None:
+            return
+        t = r.target
+        if t in self.control[ControlColumn.PHASE_OMIT]:
+            r.target = None  # omitted during the clearance: not serviced, choose again
+            return
+        others_elsewhere = any(o is not r and o.interval is not Interval.DWELL
+                               and self._barrier[o.phase] != self._barrier[t] for o in self.rings)
+        revert = self._yellow_end.get(t)
+        if others_elsewhere or (revert is not None and self.tick - revert < self.timing[t].red_revert):
+            return
+        r.phase, r.target = t, None
         self._enter(r, Interval.GREEN)
 
-    def _enter(self, r: Ring, interval: Interval) -> None:
-        r.interval, r.ticks, r.max_ticks, r.gapped_out = interval, 0, 0, False
-        self._changed = True
-        if self.on_change is not None:
+    def _enter(self, r: Ring, interval: Interval, *, notify: bool = True) -> None:
+        r.interval, r.ticks, r.max_ticks, r.gap, r.gapped = interval, 0, 0, 0, False
+        tm = self.timing[r.phase]
+        if interval is Interval.GREEN:
+            served = r.phase in self.ped_calls and tm.walk > 0
+            self.ped_calls -= {r.phase}
+            r.walk, r.ped_clear = (tm.walk, tm.ped_clear) if served else (0, 0)
+            r.minimum = max(tm.min_green, r.walk + r.ped_clear)
+            r.maximum = tm.max2 if r.number in self.max2_rings else tm.max1
+            r.passage = tm.passage
+        else:
+            r.length = {Interval.YELLOW: tm.yellow, Interval.RED_CLEAR: tm.red_clear}.get(interval, 0)
+        if notify and self.on_change is not None:
             self.on_change(Change(self.tick, r.number, r.phase, interval))
 
     def _monitor(self) -> None:

@@ -7,8 +7,12 @@ value of the wrong type ``WRONG_TYPE`` and one out of range ``WRONG_VALUE``; the
 agent maps these to each SNMP version's codes. A multi-varbind SET is checked
 whole before anything is applied, so a refused SET changes nothing.
 
-The phase timing table is read-only here: timings come from the intersection
-config, and changing them live is not something the middleware does.
+The phase table's timing columns are writable with NTCIP 1202's ranges, as on
+a real controller, so a lab can retime the emulator live; a SET acts from the
+next interval of that phase on (a green or clearance being timed keeps the
+lengths it started with). Start-up, options, ring and concurrency are read-only
+here: they come from the intersection config. ringControlGroupMax2 selects
+Maximum 2 per ring (bit 0 = ring 1) from the ring's next green.
 """
 
 from __future__ import annotations
@@ -18,7 +22,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import lru_cache
 
-from emulator.controller import Controller, tenths
+from emulator.controller import Controller, Timing
 from hils.config import Phase, Recall
 from hils.ntcip import (
     CHANNEL_TABLE,
@@ -26,12 +30,14 @@ from hils.ntcip import (
     MAX_PHASE_GROUPS,
     MAX_PHASES,
     PHASE_TABLE,
+    RING_CONTROL_MAX2,
     SEQUENCE_DATA,
     STATUS_TABLE,
     SYSTEM_PATTERN_CONTROL,
     UNIT_BACKUP_TIME,
     UNIT_CONTROL_STATUS,
     UNIT_FLASH_STATUS,
+    UNIT_STARTUP_FLASH,
     Access,
     ChannelColumn,
     ControlColumn,
@@ -48,6 +54,34 @@ from hils.ntcip import (
     phases_to_groups,
     sequence_oid,
 )
+
+# Writable phase timing columns: the Timing field each sets, and ticks per unit of the NTCIP value.
+_TIMING_COLUMNS: dict[PhaseColumn, tuple[str, int]] = {
+    PhaseColumn.WALK: ("walk", 10),
+    PhaseColumn.PEDESTRIAN_CLEAR: ("ped_clear", 10),
+    PhaseColumn.MINIMUM_GREEN: ("min_green", 10),
+    PhaseColumn.PASSAGE: ("passage", 1),
+    PhaseColumn.MAXIMUM1: ("max1", 10),
+    PhaseColumn.MAXIMUM2: ("max2", 10),
+    PhaseColumn.YELLOW_CHANGE: ("yellow", 1),
+    PhaseColumn.RED_CLEAR: ("red_clear", 1),
+    PhaseColumn.RED_REVERT: ("red_revert", 1),
+}
+
+_RECALL_BITS = {
+    Recall.NONE: PhaseOption(0),
+    Recall.MIN: PhaseOption.MIN_VEHICLE_RECALL,
+    Recall.MAX: PhaseOption.MAX_VEHICLE_RECALL,
+    Recall.PED: PhaseOption.PED_RECALL,
+    Recall.SOFT: PhaseOption.SOFT_VEHICLE_RECALL,
+}
+
+
+def phase_options(ph: Phase) -> PhaseOption:
+    """phaseOptions of a configured phase. Simultaneous gap disable is always on: a gapped-out green
+    does not re-extend while it waits at the barrier (see emulator/controller.py)."""
+    bits = PhaseOption.ENABLED | PhaseOption.SIMULTANEOUS_GAP_DISABLE | _RECALL_BITS[ph.recall]
+    return bits | PhaseOption.DUAL_ENTRY if ph.dual_entry else bits
 
 
 @dataclass(frozen=True, slots=True)
@@ -124,6 +158,8 @@ class MibView:
         out = [
             Instance(MAX_PHASES.instance(), MAX_PHASES, lambda: max(cfg.phases)),
             Instance(MAX_PHASE_GROUPS.instance(), MAX_PHASE_GROUPS, lambda: groups),
+            Instance(UNIT_STARTUP_FLASH.instance(), UNIT_STARTUP_FLASH, lambda: c.startup_flash,
+                     lambda v: setattr(c, "startup_flash", v)),
             Instance(UNIT_BACKUP_TIME.instance(), UNIT_BACKUP_TIME, lambda: c.backup_time,
                      lambda v: setattr(c, "backup_time", v)),
             Instance(UNIT_CONTROL_STATUS.instance(), UNIT_CONTROL_STATUS, lambda: int(c.control_status)),
@@ -133,32 +169,28 @@ class MibView:
         ]
         for p, ph in cfg.phases.items():
             concurrent = bytes(sorted(q for q in cfg.phases if cfg.compatible(p, q)))
-            values: dict[PhaseColumn, Value] = {
-                PhaseColumn.WALK: 0,  # no pedestrian service modeled yet: 0 says so, as the standard has it
-                PhaseColumn.PEDESTRIAN_CLEAR: 0,
-                PhaseColumn.MINIMUM_GREEN: int(ph.min_green),
-                PhaseColumn.PASSAGE: tenths(ph.passage),
-                PhaseColumn.MAXIMUM1: int(ph.max_green),
-                PhaseColumn.MAXIMUM2: int(ph.max_green),
-                PhaseColumn.YELLOW_CHANGE: tenths(ph.yellow),
-                PhaseColumn.RED_CLEAR: tenths(ph.red_clear),
-                PhaseColumn.RED_REVERT: 0,
+            fixed: dict[PhaseColumn, Value] = {
                 PhaseColumn.STARTUP: int(ph.startup),
-                PhaseColumn.OPTIONS: phase_options(ph),
+                PhaseColumn.OPTIONS: int(phase_options(ph)),
                 PhaseColumn.RING: ph.ring,
                 PhaseColumn.CONCURRENCY: concurrent,
             }
             out += [Instance(PHASE_TABLE[col].instance(p), PHASE_TABLE[col], lambda v=v: v)
-                    for col, v in values.items()]
+                    for col, v in fixed.items()]
+            out += [Instance(PHASE_TABLE[col].instance(p), PHASE_TABLE[col], *_timing_access(c.timing[p], name, unit))
+                    for col, (name, unit) in _TIMING_COLUMNS.items()]
+        out.append(Instance(RING_CONTROL_MAX2.instance(1), RING_CONTROL_MAX2,
+                            lambda: sum(1 << (r - 1) for r in c.max2_rings),
+                            lambda v: c.set_max2(k + 1 for k in range(8) if v >> k & 1)))
         status: dict[StatusColumn, Callable[[], frozenset[int]]] = {
             StatusColumn.REDS: lambda: c.reds,
             StatusColumn.YELLOWS: lambda: c.yellows,
             StatusColumn.GREENS: lambda: c.greens,
-            StatusColumn.DONT_WALKS: lambda: frozenset(cfg.phases),
-            StatusColumn.PED_CLEARS: frozenset,
-            StatusColumn.WALKS: frozenset,
+            StatusColumn.DONT_WALKS: lambda: c.dont_walks,
+            StatusColumn.PED_CLEARS: lambda: c.ped_clears,
+            StatusColumn.WALKS: lambda: c.walks,
             StatusColumn.VEH_CALLS: lambda: c.calls,
-            StatusColumn.PED_CALLS: lambda: c.control[ControlColumn.PED_CALL] - c.control[ControlColumn.PED_OMIT],
+            StatusColumn.PED_CALLS: lambda: c.ped_calls,
             StatusColumn.PHASE_ONS: lambda: c.phase_ons,
             StatusColumn.PHASE_NEXTS: lambda: c.phase_nexts,
         }
@@ -178,21 +210,13 @@ class MibView:
         return out
 
 
-_RECALL_BITS = {Recall.MIN: PhaseOption.MIN_RECALL, Recall.MAX: PhaseOption.MAX_RECALL,
-                Recall.SOFT: PhaseOption.SOFT_RECALL}
-
-
-def phase_options(phase: Phase) -> int:
-    """phaseOptions of a configured phase: enabled, its recall, dual entry (backup prevent has no
-    standard bit; it is vendor-specific)."""
-    bits = {PhaseOption.ENABLED} | ({PhaseOption.DUAL_ENTRY} if phase.dual_entry else set())
-    if phase.recall in _RECALL_BITS:
-        bits.add(_RECALL_BITS[phase.recall])
-    return sum(1 << b for b in bits)
-
-
 # Status is read at 10-100 Hz and takes few distinct values: convert each phase set once.
 _masks = lru_cache(maxsize=1024)(phases_to_groups)
+
+
+def _timing_access(timing: Timing, name: str, unit: int) -> tuple[Callable[[], int], Callable[[int], None]]:
+    """Read and write one timing field in NTCIP units (seconds or tenths); the controller counts ticks."""
+    return lambda: getattr(timing, name) // unit, lambda v: setattr(timing, name, v * unit)
 
 
 def _group_reader(read: Callable[[], frozenset[int]], group: int, groups: int) -> Callable[[], int]:

@@ -34,7 +34,21 @@ _STARTUP_NAMES = {
     "red_clear": PhaseStartup.RED_CLEAR,
 }
 APPROACHES = ("north", "south", "east", "west")
-_PHASE_OPTIONS = ("passage", "recall", "dual_entry", "backup_prevent")
+
+
+class Recall(StrEnum):
+    """A phase's recall (NTCIP 1202 phaseOptions bits 6-9)."""
+
+    NONE = "none"
+    MIN = "min"    # a vehicle call whenever the phase is not green; extension only by real calls
+    MAX = "max"    # a vehicle call that also extends the green to its maximum
+    PED = "ped"    # a pedestrian call whenever the phase is not green
+    SOFT = "soft"  # a vehicle call only while no other phase has demand
+
+
+# Per-phase timings and options a phase may set itself or inherit from [timing].
+_PHASE_OPTIONS = ("min_green", "max_green", "max2", "passage", "walk", "ped_clear", "yellow", "red_clear",
+                  "red_revert", "recall", "dual_entry", "backup_prevent")
 TURNS = ("left", "through")
 
 
@@ -48,15 +62,6 @@ class ConfigError(UserError, ValueError):
         self.message = message
 
 
-class Recall(StrEnum):
-    """A phase's recall: a call the controller places on it by itself."""
-
-    NONE = "none"
-    MIN = "min"  # called whenever it is not green: served at least for its minimum every cycle
-    MAX = "max"  # called always, green included: served to its maximum when others wait
-    SOFT = "soft"  # called only while no other phase is: where the controller goes when idle
-
-
 @dataclass(frozen=True, slots=True)
 class Phase:
     number: int
@@ -68,13 +73,21 @@ class Phase:
     startup: PhaseStartup = PhaseStartup.PHASE_NOT_ON
     approach: str | None = None
     turn: str | None = None
-    passage: float = 0.0  # s a green extends after its call was last seen (gap time); 0: gap out at once
+    passage: float = 0.0          # s the green extends after its vehicle call drops (0: gap out at once)
+    max2: float | None = None     # Maximum 2 (s), chosen per ring by ringControlGroupMax2; None = max_green
+    walk: float = 0.0             # s of Walk when a pedestrian call is served (0: no pedestrian service)
+    ped_clear: float = 0.0        # s of pedestrian clearance (flashing Don't Walk) after the walk
+    red_revert: float = 0.0       # s of red at least between this phase's yellow and its next green
     recall: Recall = Recall.NONE
-    dual_entry: bool = False  # served beside a lone call of the other ring entering its barrier group
-    backup_prevent: bool = False  # not served again from a later phase of its group before the barrier
+    dual_entry: bool = False      # served with the other ring's entry into its barrier group
+    backup_prevent: bool = False  # its ring may not back from it into an earlier phase of its group
     # Turns of the same approach that run permissive (yielding) while this phase is green,
     # e.g. the lefts of a four-phase plan without protected lefts.
     permissive: tuple[str, ...] = ()
+
+    @property
+    def maximum2(self) -> float:
+        return self.max_green if self.max2 is None else self.max2
 
     @property
     def clearance(self) -> float:
@@ -116,6 +129,7 @@ class IntersectionConfig:
     compatibility: frozenset[frozenset[int]]
     middleware: MiddlewareParams = field(default_factory=MiddlewareParams)
     source: str = "<memory>"
+    startup_flash: int = 0  # s of start-up flash after power-up (unitStartUpFlash)
 
     @property
     def groups(self) -> int:
@@ -142,7 +156,7 @@ class IntersectionConfig:
         raw = {f: getattr(self.middleware, f) for f in MiddlewareParams.__dataclass_fields__} | changes
         params = _middleware(raw, self.source)
         return IntersectionConfig(self.name, self.phases, self.rings, self.barriers, self.sequence,
-                                  self.pairs, self.compatibility, params, self.source)
+                                  self.pairs, self.compatibility, params, self.source, self.startup_flash)
 
 
 def load(path: str | Path | None = None) -> IntersectionConfig:
@@ -223,9 +237,7 @@ def _phase(number: int, raw: Any, defaults: Mapping[str, Any], ring: int, source
     w = f"phases.{number}."
     if not isinstance(raw, dict):
         raise ConfigError(source, f"phases.{number}", "must be a table of phase settings")
-    _unknown(raw, ("min_green", "max_green", "yellow", "red_clear", "startup", "approach", "turn", "permissive",
-                    *_PHASE_OPTIONS),
-             w, source)
+    _unknown(raw, (*_PHASE_OPTIONS, "startup", "approach", "turn", "permissive"), w, source)
     merged = {**defaults, **raw}
 
     def where(key: str) -> str:
@@ -243,32 +255,49 @@ def _phase(number: int, raw: Any, defaults: Mapping[str, Any], ring: int, source
     startup = merged.get("startup", "off")
     if startup not in _STARTUP_NAMES:
         raise ConfigError(source, f"{w}startup", f"is {startup!r}; allowed: {', '.join(_STARTUP_NAMES)}")
+    tenth = {"low": 0, "high": 25.5, "step": 0.1}
+    passage = _number(merged, "passage", where("passage"), source, 0, **tenth)
+    walk = _number(merged, "walk", where("walk"), source, 0, integer=True, low=0, high=255)
+    ped_clear = _number(merged, "ped_clear", where("ped_clear"), source, 0, integer=True, low=0, high=255)
+    red_revert = _number(merged, "red_revert", where("red_revert"), source, 0, **tenth)
+    max2 = merged.get("max2")
+    if max2 is not None:
+        max2 = _number(merged, "max2", where("max2"), source, integer=True, low=min_green, high=255)
+    if passage > max_green:
+        raise ConfigError(source, f"{where('passage')}passage",
+                          f"is {passage} s, beyond max_green {max_green} s; allowed: passage <= max_green")
+    if (walk == 0) != (ped_clear == 0):
+        raise ConfigError(source, f"{where('walk')}walk", f"walk {walk} s with ped_clear {ped_clear} s; allowed: "
+                          "both 0 (no pedestrian service) or both > 0")
+    if walk + ped_clear > max_green:
+        raise ConfigError(source, f"{where('walk')}walk",
+                          f"walk + ped_clear = {walk + ped_clear} s, beyond max_green {max_green} s; "
+                          "allowed: walk + ped_clear <= max_green")
+    recall = merged.get("recall", "none")
+    if recall not in tuple(Recall):
+        raise ConfigError(source, f"{where('recall')}recall",
+                          f"is {recall!r}; allowed: {', '.join(r.value for r in Recall)}")
+    if recall == Recall.PED and walk == 0:
+        raise ConfigError(source, f"{where('recall')}recall", "is 'ped' on a phase without walk; allowed: a walk > 0 "
+                          "for ped recall")
+    flags = {}
+    for key in ("dual_entry", "backup_prevent"):
+        flags[key] = merged.get(key, False)
+        if not isinstance(flags[key], bool):
+            raise ConfigError(source, f"{where(key)}{key}", f"is {flags[key]!r}; allowed: true, false")
     approach, turn = raw.get("approach"), raw.get("turn")
     if approach is not None and approach not in APPROACHES:
         raise ConfigError(source, f"{w}approach", f"is {approach!r}; allowed: {', '.join(APPROACHES)}")
     if turn is not None and turn not in TURNS:
         raise ConfigError(source, f"{w}turn", f"is {turn!r}; allowed: {', '.join(TURNS)}")
-    passage = _number(merged, "passage", where("passage"), source, 0.0, low=0, high=25.5, step=0.1)
-    if passage > max_green:
-        raise ConfigError(source, f"{where('passage')}passage",
-                          f"is {passage} s, beyond max_green {max_green} s; allowed: passage <= max_green")
-    recall = merged.get("recall", Recall.NONE.value)
-    if recall not in {r.value for r in Recall}:
-        raise ConfigError(source, f"{where('recall')}recall",
-                          f"is {recall!r}; allowed: {', '.join(r.value for r in Recall)}")
-    flags = {}
-    for key in ("dual_entry", "backup_prevent"):
-        value = merged.get(key, False)
-        if not isinstance(value, bool):
-            raise ConfigError(source, f"{where(key)}{key}", f"must be true or false, got {value!r}")
-        flags[key] = value
     permissive = raw.get("permissive", [])
     if not isinstance(permissive, list) or any(t not in TURNS or t == turn for t in permissive):
         raise ConfigError(source, f"{w}permissive", f"is {permissive!r}; allowed: a list of turns other than the "
                           f"phase's own turn, from {', '.join(TURNS)}")
     return Phase(number, ring, float(min_green), float(max_green), float(yellow), float(red_clear),
-                 _STARTUP_NAMES[startup], approach, turn, float(passage), Recall(recall),
-                 permissive=tuple(permissive), **flags)
+                 _STARTUP_NAMES[startup], approach, turn, float(passage), None if max2 is None else float(max2),
+                 float(walk), float(ped_clear), float(red_revert), Recall(recall), flags["dual_entry"],
+                 flags["backup_prevent"], tuple(permissive))
 
 
 def _pairs(raw: Any, name: str, phases: Mapping[int, Phase], compatible: frozenset[frozenset[int]],
@@ -360,8 +389,10 @@ def from_dict(raw: Mapping[str, Any], source: str = "<memory>") -> IntersectionC
     timing = raw.get("timing", {})
     if not isinstance(timing, dict):
         raise ConfigError(source, "timing", "must be a table of default phase timings")
-    _unknown(timing, ("min_green", "max_green", "yellow", "red_clear", *_PHASE_OPTIONS), "timing.", source)
-    phases = {p: _phase(p, raw_phases[str(p)], timing, ring_of[p], source) for p in numbers}
+    _unknown(timing, (*_PHASE_OPTIONS, "startup_flash"), "timing.", source)
+    startup_flash = _number(timing, "startup_flash", "timing.", source, 0, integer=True, low=0, high=255)
+    phase_timing = {k: v for k, v in timing.items() if k != "startup_flash"}
+    phases = {p: _phase(p, raw_phases[str(p)], phase_timing, ring_of[p], source) for p in numbers}
 
     barriers_raw = structure.get("barriers")
     if not isinstance(barriers_raw, list) or not barriers_raw:
@@ -398,18 +429,6 @@ def from_dict(raw: Mapping[str, Any], source: str = "<memory>") -> IntersectionC
                                   f"phase {b} cannot start together with phase {a}; allowed: one phase per ring, "
                                   "all in one barrier group")
 
-    for p in numbers:
-        if phases[p].dual_entry and not any(frozenset((p, q)) in compatibility for q in numbers
-                                            if ring_of[q] != ring_of[p]):
-            raise ConfigError(source, f"phases.{p}.dual_entry",
-                              f"phase {p} has no concurrent phase in the other ring to enter beside; allowed: "
-                              "dual_entry on a phase with a concurrent partner")
-        twin = next((q for q in numbers if q < p and phases[q].dual_entry and ring_of[q] == ring_of[p]
-                     and barrier_of[q] == barrier_of[p]), None)
-        if phases[p].dual_entry and twin is not None:
-            raise ConfigError(source, f"phases.{p}.dual_entry",
-                              f"phase {twin} is already the dual-entry phase of ring {ring_of[p]} in this barrier "
-                              "group; allowed: one dual-entry phase per ring and barrier group")
     pairs = _pairs(structure.get("pairs"), "structure.pairs", phases, compatibility, source)
     sequence = _pairs(structure.get("sequence"), "structure.sequence", phases, compatibility, source)
     for key, listed in (("pairs", pairs), ("sequence", sequence)):
@@ -418,6 +437,11 @@ def from_dict(raw: Mapping[str, Any], source: str = "<memory>") -> IntersectionC
                 raise ConfigError(source, f"structure.{key}[{i}]",
                                   f"phases {a} and {b} are in different barrier groups, so the controller never "
                                   "shows them together; allowed: pairs within one barrier group")
+    for p in numbers:
+        if phases[p].dual_entry and not any(frozenset((p, q)) in compatibility for q in numbers):
+            raise ConfigError(source, f"phases.{p}.dual_entry",
+                              f"phase {p} has no concurrent phase in the other ring; allowed: dual_entry on a phase "
+                              "that runs beside some phase of the other ring")
     middleware = raw.get("middleware", {})
     if not isinstance(middleware, dict):
         raise ConfigError(source, "middleware", "must be a table of middleware parameters")
@@ -431,4 +455,5 @@ def from_dict(raw: Mapping[str, Any], source: str = "<memory>") -> IntersectionC
         compatibility=compatibility,
         middleware=_middleware(middleware, source),
         source=source,
+        startup_flash=startup_flash,
     )

@@ -15,7 +15,7 @@ from __future__ import annotations
 import random
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from enum import Enum, IntEnum
+from enum import Enum, IntEnum, IntFlag
 
 Oid = tuple[int, ...]
 Value = int | bytes  # what an NTCIP object holds: INTEGER or OCTET STRING
@@ -98,15 +98,23 @@ class PhaseColumn(IntEnum):
     CONCURRENCY = 23
 
 
-class PhaseOption(IntEnum):
-    """Bits of phaseOptions (NTCIP 1202 v02, 2.2.2.21)."""
+class PhaseOption(IntFlag):
+    """Bits of phaseOptions (NTCIP 1202 phaseOptions, REFERENCE NEMA TS 2 clause 3.5)."""
 
-    ENABLED = 0
-    MIN_RECALL = 6
-    MAX_RECALL = 7
-    PED_RECALL = 8
-    SOFT_RECALL = 9
-    DUAL_ENTRY = 10
+    ENABLED = 1 << 0
+    AUTO_FLASH_ENTRY = 1 << 1
+    AUTO_FLASH_EXIT = 1 << 2
+    NON_ACTUATED_1 = 1 << 3
+    NON_ACTUATED_2 = 1 << 4
+    NON_LOCK_MEMORY = 1 << 5
+    MIN_VEHICLE_RECALL = 1 << 6
+    MAX_VEHICLE_RECALL = 1 << 7
+    PED_RECALL = 1 << 8
+    SOFT_VEHICLE_RECALL = 1 << 9
+    DUAL_ENTRY = 1 << 10
+    SIMULTANEOUS_GAP_DISABLE = 1 << 11
+    GUARANTEED_PASSAGE = 1 << 12
+    ACTUATED_REST_IN_WALK = 1 << 13
 
 
 class StatusColumn(IntEnum):
@@ -200,28 +208,32 @@ def _o(name: str, suffix: Oid, syntax: Syntax = Syntax.INTEGER, access: Access =
 
 MAX_PHASES = _o("maxPhases", (1, 1))
 MAX_PHASE_GROUPS = _o("maxPhaseGroups", (1, 3))
+UNIT_STARTUP_FLASH = _o("unitStartUpFlash", (3, 1), access=Access.READ_WRITE)
 UNIT_BACKUP_TIME = _o("unitBackupTime", (3, 3), access=Access.READ_WRITE, high=65535)
 UNIT_CONTROL_STATUS = _o("unitControlStatus", (3, 5), low=1, high=8)
 UNIT_FLASH_STATUS = _o("unitFlashStatus", (3, 6), low=1, high=8)
 SYSTEM_PATTERN_CONTROL = _o("systemPatternControl", (4, 14), access=Access.READ_WRITE)
 
-_PHASE_NAMES = {
-    PhaseColumn.WALK: ("phaseWalk", Syntax.INTEGER),
-    PhaseColumn.PEDESTRIAN_CLEAR: ("phasePedestrianClear", Syntax.INTEGER),
-    PhaseColumn.MINIMUM_GREEN: ("phaseMinimumGreen", Syntax.INTEGER),
-    PhaseColumn.PASSAGE: ("phasePassage", Syntax.INTEGER),
-    PhaseColumn.MAXIMUM1: ("phaseMaximum1", Syntax.INTEGER),
-    PhaseColumn.MAXIMUM2: ("phaseMaximum2", Syntax.INTEGER),
-    PhaseColumn.YELLOW_CHANGE: ("phaseYellowChange", Syntax.INTEGER),
-    PhaseColumn.RED_CLEAR: ("phaseRedClear", Syntax.INTEGER),
-    PhaseColumn.RED_REVERT: ("phaseRedRevert", Syntax.INTEGER),
-    PhaseColumn.STARTUP: ("phaseStartup", Syntax.INTEGER),
-    PhaseColumn.OPTIONS: ("phaseOptions", Syntax.INTEGER),
-    PhaseColumn.RING: ("phaseRing", Syntax.INTEGER),
-    PhaseColumn.CONCURRENCY: ("phaseConcurrency", Syntax.OCTET_STRING),
+# The timing columns are writable with NTCIP 1202's ranges (seconds, or tenths for passage and clearances).
+_RW = Access.READ_WRITE
+_PHASE_NAMES: dict[PhaseColumn, tuple[str, Syntax, Access, int, int]] = {
+    PhaseColumn.WALK: ("phaseWalk", Syntax.INTEGER, _RW, 0, 255),
+    PhaseColumn.PEDESTRIAN_CLEAR: ("phasePedestrianClear", Syntax.INTEGER, _RW, 0, 255),
+    PhaseColumn.MINIMUM_GREEN: ("phaseMinimumGreen", Syntax.INTEGER, _RW, 0, 255),
+    PhaseColumn.PASSAGE: ("phasePassage", Syntax.INTEGER, _RW, 0, 255),
+    PhaseColumn.MAXIMUM1: ("phaseMaximum1", Syntax.INTEGER, _RW, 0, 255),
+    PhaseColumn.MAXIMUM2: ("phaseMaximum2", Syntax.INTEGER, _RW, 0, 255),
+    PhaseColumn.YELLOW_CHANGE: ("phaseYellowChange", Syntax.INTEGER, _RW, 30, 255),
+    PhaseColumn.RED_CLEAR: ("phaseRedClear", Syntax.INTEGER, _RW, 0, 255),
+    PhaseColumn.RED_REVERT: ("phaseRedRevert", Syntax.INTEGER, _RW, 0, 255),
+    PhaseColumn.STARTUP: ("phaseStartup", Syntax.INTEGER, Access.READ_ONLY, 1, 6),
+    PhaseColumn.OPTIONS: ("phaseOptions", Syntax.INTEGER, Access.READ_ONLY, 0, 65535),
+    PhaseColumn.RING: ("phaseRing", Syntax.INTEGER, Access.READ_ONLY, 0, 255),
+    PhaseColumn.CONCURRENCY: ("phaseConcurrency", Syntax.OCTET_STRING, Access.READ_ONLY, 0, 255),
 }
 PHASE_TABLE: dict[PhaseColumn, ObjectDef] = {
-    col: _o(name, (1, 2, 1, int(col)), syntax, high=65535) for col, (name, syntax) in _PHASE_NAMES.items()
+    col: _o(name, (1, 2, 1, int(col)), syntax, access, low, high)
+    for col, (name, syntax, access, low, high) in _PHASE_NAMES.items()
 }
 STATUS_TABLE: dict[StatusColumn, ObjectDef] = {
     col: _o("phaseStatusGroup" + col.name.title().replace("_", ""), (1, 4, 1, int(col))) for col in StatusColumn
@@ -234,10 +246,12 @@ CHANNEL_TABLE: dict[ChannelColumn, ObjectDef] = {
     col: _o("channelStatusGroup" + col.name.title().replace("_", ""), (8, 4, 1, int(col))) for col in ChannelColumn
 }
 SEQUENCE_DATA = _o("sequenceData", (7, 3, 1, 3), Syntax.OCTET_STRING)
+# ringControlGroupMax2 (A.1.7.5.1.4.g): bit k-1 of group 1 selects Maximum 2 for ring k.
+RING_CONTROL_MAX2 = _o("ringControlGroupMax2", (7, 5, 1, 4), access=Access.READ_WRITE)
 
 ALL_OBJECTS: tuple[ObjectDef, ...] = (
-    MAX_PHASES, MAX_PHASE_GROUPS, UNIT_BACKUP_TIME, UNIT_CONTROL_STATUS, UNIT_FLASH_STATUS,
-    SYSTEM_PATTERN_CONTROL, SEQUENCE_DATA,
+    MAX_PHASES, MAX_PHASE_GROUPS, UNIT_STARTUP_FLASH, UNIT_BACKUP_TIME, UNIT_CONTROL_STATUS, UNIT_FLASH_STATUS,
+    SYSTEM_PATTERN_CONTROL, SEQUENCE_DATA, RING_CONTROL_MAX2,
     *PHASE_TABLE.values(), *STATUS_TABLE.values(), *CONTROL_TABLE.values(), *CHANNEL_TABLE.values(),
 )
 

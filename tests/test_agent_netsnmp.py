@@ -42,6 +42,7 @@ from hils.ntcip import (
     ErrorStatus,
     Oid,
     PhaseColumn,
+    PhaseOption,
     StatusColumn,
     control_oid,
     oid_str,
@@ -199,6 +200,32 @@ def test_get_of_a_missing_object_v1_is_no_such_name_at_its_index(server: Served)
     assert f"Failed object: .{UNKNOWN}" in done.stderr
     # snmpget drops the failed varbind and asks again: the error index pointed at the right one.
     assert values(done.stdout) == {MAX_PHASES_0: "INTEGER: 8"}
+
+
+def test_walk_of_the_phase_table_gives_every_column_and_the_options(server: Served) -> None:
+    table = oid_str(phase_oid(PhaseColumn.WALK, 1))[: -len(".2.1")]  # phaseEntry
+    done = run("snmpwalk", "2c", "public", server.port, table)
+    assert done.returncode == 0, done.stderr
+    got = values(done.stdout)
+    columns = sorted({int(oid.split(".")[-2]) for oid in got})
+    assert columns == [2, 3, 4, 5, 6, 7, 8, 9, 10, 20, 21, 22, 23]
+    assert len(got) == 13 * 8
+    options = int(PhaseOption.ENABLED | PhaseOption.SIMULTANEOUS_GAP_DISABLE)
+    assert {got[oid_str(phase_oid(PhaseColumn.OPTIONS, p))] for p in range(1, 9)} == {f"INTEGER: {options}"}
+    assert got[oid_str(phase_oid(PhaseColumn.PASSAGE, 4))] == "INTEGER: 0"
+    assert got[oid_str(phase_oid(PhaseColumn.WALK, 4))] == "INTEGER: 0"
+
+
+def test_a_phase_timing_set_is_range_checked_and_read_back(server: Served) -> None:
+    minimum = oid_str(phase_oid(PhaseColumn.MINIMUM_GREEN, 7))
+    yellow = oid_str(phase_oid(PhaseColumn.YELLOW_CHANGE, 7))
+    done = run("snmpset", "2c", "private", server.port, yellow, "i", "29")
+    assert "wrongValue" in done.stderr and integers(server.port, yellow) == [30]
+    done = run("snmpset", "2c", "private", server.port, minimum, "i", "5")
+    assert done.returncode == 0, done.stderr
+    assert integers(server.port, minimum) == [5]
+    done = run("snmpset", "2c", "private", server.port, minimum, "i", "3")  # as the other tests expect it
+    assert done.returncode == 0, done.stderr
 
 
 # --- writing -------------------------------------------------------------------------------------

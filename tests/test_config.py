@@ -348,6 +348,7 @@ def test_a_missing_timing_is_rejected() -> None:
 @pytest.mark.parametrize(("text", "field"), [
     (toml(top_extra="colour = 1"), "colour"),
     (toml(timing="min_green = 3\nmax_green = 20\nyellow = 3.0\nred_clear = 2.0\nall_red = 1"), "timing.all_red"),
+    (toml(phases={2: "{ gap_time = 2 }"}), "phases.2.gap_time"),
     (toml(structure_extra="offset = 3"), "structure.offset"),
     (toml(middleware="poll = 10"), "middleware.poll"),
 ])
@@ -422,3 +423,60 @@ def test_with_middleware_validates(paper_config: IntersectionConfig, changes: di
 
 def test_the_shipped_config_keeps_its_name() -> None:
     assert load().name == "paper four-leg intersection"
+
+
+# --- phase options (issue 9) -------------------------------------------------------------------
+
+
+def test_phase_options_are_read_per_phase_and_from_timing() -> None:
+    from hils.config import Recall
+
+    cfg = parse(toml(timing="min_green = 3\nmax_green = 20\nyellow = 3.0\nred_clear = 2.0\npassage = 1.5\n"
+                            "startup_flash = 6",
+                     phases={4: '{ walk = 5, ped_clear = 8, recall = "ped", dual_entry = true, max2 = 35 }',
+                             8: '{ recall = "soft", backup_prevent = true, red_revert = 4.5, passage = 0 }'}),
+                SOURCE)
+    four, eight, one = cfg.phases[4], cfg.phases[8], cfg.phases[1]
+    assert (four.walk, four.ped_clear, four.recall, four.dual_entry, four.maximum2) == (5, 8, Recall.PED, True, 35)
+    assert (eight.recall, eight.backup_prevent, eight.red_revert, eight.passage) == (Recall.SOFT, True, 4.5, 0)
+    assert (one.passage, one.maximum2, one.recall, one.dual_entry, one.walk) == (1.5, 20, Recall.NONE, False, 0)
+    assert cfg.startup_flash == 6
+
+
+def test_the_paper_config_keeps_the_paper_behaviour(paper_config) -> None:
+    from hils.config import Recall
+
+    for ph in paper_config.phases.values():
+        assert (ph.passage, ph.recall, ph.walk, ph.ped_clear, ph.dual_entry, ph.backup_prevent, ph.red_revert) == (
+            0, Recall.NONE, 0, 0, False, False, 0)
+    assert paper_config.startup_flash == 0
+
+
+@pytest.mark.parametrize(("phases", "timing_extra", "field", "allowed"), [
+    ({4: "{ walk = 12, ped_clear = 9 }"}, "", "phases.4.walk", "walk + ped_clear <= max_green"),
+    ({4: "{ walk = 5 }"}, "", "phases.4.walk", "both 0"),
+    ({4: "{ passage = 21.0 }"}, "", "phases.4.passage", "passage <= max_green"),
+    ({4: "{ passage = 0.05 }"}, "", "phases.4.passage", "multiples of 0.1"),
+    ({4: '{ recall = "always" }'}, "", "phases.4.recall", "none, min, max, ped, soft"),
+    ({4: '{ recall = "ped" }'}, "", "phases.4.recall", "walk > 0"),
+    ({4: "{ max2 = 2 }"}, "", "phases.4.max2", ">= 3"),
+    ({4: '{ dual_entry = "yes" }'}, "", "phases.4.dual_entry", "true, false"),
+    ({}, "\nbackup_prevent = 1", "timing.backup_prevent", "true, false"),
+    ({}, "\nstartup_flash = 300", "timing.startup_flash", "<= 255"),
+    ({}, "\nwalk = 30\nped_clear = 5", "timing.walk", "walk + ped_clear <= max_green"),
+])
+def test_contradicting_phase_options_are_rejected(phases: dict[int, str], timing_extra: str, field: str,
+                                                  allowed: str) -> None:
+    err = rejected(toml(timing="min_green = 3\nmax_green = 20\nyellow = 3.0\nred_clear = 2.0" + timing_extra,
+                        phases=phases))
+    assert err.field == field
+    assert allowed in err.message
+
+
+def test_dual_entry_on_a_phase_without_a_concurrent_partner_is_rejected() -> None:
+    allowed = {(1, 5), (2, 6), (3, 7), (3, 8), (4, 7), (4, 8), (1, 6), (2, 5)}
+    text = toml(phases={6: "{ dual_entry = true }"},
+                structure_extra=f"compatibility = {matrix(allowed - {(1, 6), (2, 6)})}",
+                pairs="[[1, 5], [3, 7], [4, 8]]", sequence="[[1, 5], [3, 7], [4, 8]]")
+    err = rejected(text)
+    assert err.field == "phases.6.dual_entry" and "concurrent" in err.message

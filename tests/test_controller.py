@@ -196,30 +196,30 @@ def test_one_ring_changes_alone_inside_a_barrier_group(controller: Controller) -
     assert runs(trace, 8) == [("r", YELLOW + RED), ("G", 1000 - YELLOW - RED)]
 
 
-def test_backing_into_an_earlier_phase_while_the_other_ring_times(controller: Controller) -> None:
+def test_a_ring_backs_into_an_earlier_phase_while_the_other_times(controller: Controller) -> None:
     controller.backup_time = 0
     serve(controller, {3, 8})
-    # 7 precedes 8 in ring 2: ring 2 backs into it within the barrier group while 3 stays green.
+    # 7 precedes 8 in ring 2: ring 2 backs into it while 3 stays green (no trip round the cycle).
     controller.set_control(CALL, {3, 7})
-    trace = record(controller, YELLOW + RED + 10)
-    assert runs(trace, 8) == [("Y", YELLOW), ("r", RED + 10)]
-    assert runs(trace, 7) == [("r", YELLOW + RED), ("G", 10)]
-    assert runs(trace, 3) == [("G", YELLOW + RED + 10)]
-    assert all(s[0] == "r" and s[4] == "r" for s in trace)  # no side trip to 1 or 5 without a call
+    trace = record(controller, MAX + 2 * (YELLOW + RED))
+    assert runs(trace, 8) == [("Y", YELLOW), ("r", MAX + 2 * RED + YELLOW)]
+    assert runs(trace, 7) == [("r", YELLOW + RED), ("G", MAX + RED + YELLOW)]
+    assert runs(trace, 3) == [("G", MAX + 2 * (YELLOW + RED))]
 
 
-def test_backup_prevent_keeps_the_ring_from_backing_until_the_barrier(paper_toml: str) -> None:
-    cfg = variant(paper_toml, replace={"7 = { approach": "7 = { backup_prevent = true, approach"})
-    c = Controller(cfg)
+def test_backup_prevent_keeps_the_ring_from_backing(paper_toml: str) -> None:
+    config = variant(paper_toml, replace={'8 = { approach = "south", turn = "through" }':
+                                          '8 = { approach = "south", turn = "through", backup_prevent = true }'})
+    c = Controller(config)
     c.backup_time = 0
     serve(c, {3, 8})
     c.set_control(CALL, {3, 7})
-    trace = record(c, MAX + YELLOW + RED + 10)
-    # Ring 2 may not back into 7: it gets there through a barrier cycle. For 3 (which has its call)
-    # the call on 7 is conflicting demand: 3 maxes out, then both rings clear and re-enter the group.
-    assert runs(trace, 8) == [("G", MAX - 1), ("Y", YELLOW), ("r", RED + 11)]
-    assert runs(trace, 3)[:2] == [("G", MAX - 1), ("Y", YELLOW)]
-    assert runs(trace, 7) == [("r", MAX - 1 + YELLOW + RED), ("G", 11)]
+    # 8 may not back into 7, so 7 needs the group to start over: 3 (with its call) maxes out, timed from the
+    # call on 7, and both rings clear together and restart the group.
+    trace = record(c, MAX + YELLOW + RED)
+    assert runs(trace, 8) == [("G", MAX - 1), ("Y", YELLOW), ("r", RED + 1)]
+    assert runs(trace, 3) == [("G", MAX - 1), ("Y", YELLOW), ("r", RED), ("G", 1)]
+    assert runs(trace, 7) == [("r", MAX - 1 + YELLOW + RED), ("G", 1)]
 
 
 @pytest.mark.parametrize("calls", [set(), {2}, {2, 6}])
@@ -260,11 +260,11 @@ def test_maximum_timing_restarts_when_the_conflicting_call_goes_away(controller:
     assert runs(trace, 2) == [("G", MAX - 1), ("Y", 1)]
 
 
-def test_a_green_without_its_own_call_gaps_out_at_minimum(controller: Controller) -> None:
+def test_a_gapped_out_green_waits_at_the_barrier_for_the_other_ring(controller: Controller) -> None:
     controller.set_control(CALL, {6, 4})
     trace = record(controller, MAX + 1)
-    # 2 gapped out at its minimum, but its next service (4) lies across the barrier: it waits there,
-    # green, until 6 (which has its call) maxes out; then both clear together.
+    # 2 gaps out at its minimum but its next service (4) is across the barrier: it keeps its green until
+    # 6, which has its call, maxes out (timed from the call on 4); both clear together.
     assert runs(trace, 2) == [("G", MAX - 1), ("Y", 2)]
     assert runs(trace, 6) == [("G", MAX - 1), ("Y", 2)]
 
@@ -287,10 +287,12 @@ def test_hold_on_one_ring_holds_the_barrier(controller: Controller) -> None:
     controller.set_control(CALL, {2, 6, 4, 8})
     controller.set_control(HOLD, {2})
     trace = record(controller, 2 * MAX)
-    assert runs(trace, 2) == [("G", 2 * MAX)]
-    # 6 maxes out, but the barrier is crossed by both rings together: 6 waits green with held 2.
-    assert runs(trace, 6) == [("G", 2 * MAX)]
+    # 6 maxes out, but 4 and 8 lie across the barrier: 6 waits there with 2.
+    assert runs(trace, 2) == runs(trace, 6) == [("G", 2 * MAX)]
     assert runs(trace, 4) == [("r", 2 * MAX)]
+    controller.set_control(HOLD, set())
+    controller.step()
+    assert controller.yellows == {2, 6}
 
 
 def test_force_off_ends_the_green_right_after_minimum(controller: Controller) -> None:
@@ -317,9 +319,8 @@ def test_force_off_one_ring_the_other_maxes_out(controller: Controller) -> None:
     controller.set_control(CALL, {2, 6, 4, 8})
     controller.set_control(FORCE_OFF, {2})
     trace = record(controller, MAX)
-    # 2 is forced off at its minimum, yet waits at the barrier for 6, which maxes out: both clear together.
-    assert runs(trace, 2) == [("G", MAX - 1), ("Y", 1)]
-    assert runs(trace, 6) == [("G", MAX - 1), ("Y", 1)]
+    # 2 is forced off at its minimum and waits at the barrier until 6 maxes out: they cross together.
+    assert runs(trace, 2) == runs(trace, 6) == [("G", MAX - 1), ("Y", 1)]
     assert controller.control[FORCE_OFF] == frozenset()
 
 
@@ -479,7 +480,7 @@ def test_on_change_reports_every_interval_change(paper_config: IntersectionConfi
     assert changes == [
         Change(MIN, 1, 2, Interval.YELLOW), Change(MIN, 2, 6, Interval.YELLOW),
         Change(MIN + YELLOW, 1, 2, Interval.RED_CLEAR), Change(MIN + YELLOW, 2, 6, Interval.RED_CLEAR),
-        Change(MIN + YELLOW + RED, 1, 2, Interval.WAIT), Change(MIN + YELLOW + RED, 2, 6, Interval.WAIT),
+        Change(MIN + YELLOW + RED, 1, 2, Interval.DWELL), Change(MIN + YELLOW + RED, 2, 6, Interval.DWELL),
         Change(MIN + YELLOW + RED, 1, 3, Interval.GREEN), Change(MIN + YELLOW + RED, 2, 7, Interval.GREEN),
     ]
 
@@ -497,3 +498,175 @@ def test_reset_powers_up_again(controller: Controller) -> None:
     controller.reset()
     assert (controller.tick, controller.greens, controller.calls) == (0, {2, 6}, frozenset())
     assert controller.control_status is UnitControlStatus.OTHER
+
+
+# --- NEMA semantics (issue 9), in ticks ---------------------------------------------------------
+
+PED_CALL, PED_OMIT = ControlColumn.PED_CALL, ControlColumn.PED_OMIT
+
+
+def with_options(paper_toml: str, options: dict[int, str]) -> Controller:
+    """A controller on the paper intersection with extra settings on some phases."""
+    text = paper_toml
+    for p, extra in options.items():
+        start = text.index(f"\n{p} = {{ ") + 1
+        end = text.index("}", start)
+        text = text[:start] + text[start:end].rstrip() + f", {extra} " + text[end:]
+    c = Controller(parse(text, "variant.toml"))
+    c.backup_time = 0
+    return c
+
+
+def onsets(c: Controller, ticks: int, calls: dict[int, set[int]] | None = None) -> dict[tuple[int, str], int]:
+    """Step ``ticks`` ticks, SETting the calls due at each tick; the first tick each phase showed each colour."""
+    out: dict[tuple[int, str], int] = {}
+    for _ in range(ticks):
+        if calls and c.tick in calls:
+            c.set_control(CALL, calls[c.tick])
+        c.step()
+        for p, letter in zip(sorted(c.config.phases), show(c), strict=True):
+            out.setdefault((p, letter), c.tick)
+    return out
+
+
+def test_both_rings_cross_the_barrier_together(controller: Controller) -> None:
+    # 2+6 green, 4 and 8 called; 2's call drops at 15 s and 6's at 18 s: 2 and 6 turn yellow together at 18 s.
+    controller.backup_time = 0
+    seen = onsets(controller, 300, {0: {2, 6, 4, 8}, 150: {6, 4, 8}, 180: {4, 8}})
+    assert seen[(2, "Y")] == seen[(6, "Y")] == 181
+    assert seen[(4, "G")] == seen[(8, "G")] == 181 + YELLOW + RED
+
+
+def test_a_max_out_of_one_ring_waits_for_the_other_at_the_barrier(controller: Controller) -> None:
+    controller.backup_time = 0
+    seen = onsets(controller, 400, {0: {2, 6}, 100: {2, 6, 8}, 140: {6, 8}})
+    assert seen[(2, "Y")] == seen[(6, "Y")] == 100 + MAX  # 6 maxes out 20 s after the call on 8; 2 waited
+
+
+def test_phase_next_is_committed_at_yellow_and_not_redirected(controller: Controller) -> None:
+    controller.backup_time = 0
+    controller.set_control(CALL, {4, 8})
+    onsets(controller, MIN)
+    assert controller.yellows == {2, 6} and controller.phase_nexts == {4, 8}
+    controller.set_control(CALL, {3, 4, 8})  # 3 precedes 4 in ring 1, but 4 is committed
+    seen = onsets(controller, YELLOW + RED + 10)
+    assert controller.phase_nexts == frozenset()
+    assert seen[(4, "G")] == seen[(8, "G")] == MIN + YELLOW + RED and (3, "G") not in seen
+
+
+def test_a_committed_phase_that_loses_its_call_is_still_served(controller: Controller) -> None:
+    controller.backup_time = 0
+    seen = onsets(controller, 300, {0: {4, 8}, MIN + 5: set()})
+    assert seen[(4, "G")] == seen[(8, "G")] == MIN + YELLOW + RED
+    assert (4, "Y") not in seen  # served, then resting in green without other demand
+
+
+def test_a_committed_phase_omitted_during_clearance_is_dropped(controller: Controller) -> None:
+    controller.backup_time = 0
+    controller.set_control(CALL, {4, 8})
+    onsets(controller, MIN + 5)
+    controller.set_control(OMIT, {4})
+    seen = onsets(controller, 200)
+    assert (4, "G") not in seen and seen[(8, "G")] == MIN + YELLOW + RED
+
+
+def test_a_ring_backs_into_its_earlier_phase_while_the_other_rests(controller: Controller) -> None:
+    controller.backup_time = 0
+    seen = onsets(controller, 200, {0: {2, 6}, 140: {2, 5}})
+    assert seen[(6, "Y")] == 141 and seen[(5, "G")] == 141 + YELLOW + RED
+    assert (2, "Y") not in seen  # 2 stays green all along
+
+
+def test_dual_entry_serves_the_other_ring_with_the_called_one(paper_toml: str) -> None:
+    c = with_options(paper_toml, {p: "dual_entry = true" for p in (2, 4, 6, 8)})
+    seen = onsets(c, 200, {0: {4}})
+    assert seen[(4, "G")] == seen[(8, "G")] == MIN + YELLOW + RED
+    plain = with_options(paper_toml, {})
+    seen = onsets(plain, 200, {0: {4}})
+    assert seen[(4, "G")] == MIN + YELLOW + RED and (8, "G") not in seen
+
+
+def test_passage_extends_the_green_after_the_call_drops(paper_toml: str) -> None:
+    c = with_options(paper_toml, {2: "passage = 2.5"})
+    seen = onsets(c, 300, {0: {2, 6, 4, 8}, 100: {4, 8}})
+    # 6 gaps out at once and waits at the barrier; 2 extends 2.5 s past its last call, then both cross.
+    assert seen[(2, "Y")] == seen[(6, "Y")] == 100 + 25
+
+
+def test_a_held_call_extends_to_the_maximum_despite_passage(paper_toml: str) -> None:
+    c = with_options(paper_toml, {2: "passage = 2.5", 6: "passage = 2.5"})
+    seen = onsets(c, 300, {0: {2, 6}, 50: {2, 6, 4}})
+    assert seen[(2, "Y")] == seen[(6, "Y")] == 50 + MAX
+
+
+def test_min_and_max_recall(paper_toml: str) -> None:
+    c = with_options(paper_toml, {4: 'recall = "min"', 8: 'recall = "max"'})
+    seen = onsets(c, 300, {100: {2}})
+    # Served by recall without any call; once 2 is called, 4 (min recall) is ready at once and waits
+    # at the barrier while 8 (max recall) extends to its maximum, timed from the call on 2.
+    assert seen[(4, "G")] == seen[(8, "G")] == MIN + YELLOW + RED
+    assert seen[(4, "Y")] == seen[(8, "Y")] == 100 + MAX
+
+
+def test_soft_recall_yields_to_any_other_demand(paper_toml: str) -> None:
+    soft = with_options(paper_toml, {4: 'recall = "soft"'})
+    seen = onsets(soft, 400, {0: {2}})
+    assert (4, "G") not in seen
+    seen = onsets(soft, 400, {400: set()})
+    assert seen[(4, "G")] == 401 + YELLOW + RED
+
+
+def test_a_pedestrian_call_is_served_with_walk_and_clearance(paper_toml: str) -> None:
+    c = with_options(paper_toml, {4: "walk = 7, ped_clear = 9"})
+    c.set_control(PED_CALL, {4})
+    assert c.ped_calls == set()  # latched at the next tick
+    c.step()
+    assert c.ped_calls == {4}
+    walks, clears = [], []
+    for _ in range(400):
+        c.step()
+        walks.append(4 in c.walks)
+        clears.append(4 in c.ped_clears)
+        assert (4 in c.dont_walks) == (4 not in c.walks | c.ped_clears)
+    start = walks.index(True)
+    assert sum(walks) == 70 and sum(clears) == 90 and clears.index(True) == start + 70
+    assert c.ped_calls == set()
+
+
+def test_the_green_lasts_at_least_walk_plus_ped_clear(paper_toml: str) -> None:
+    c = with_options(paper_toml, {4: "walk = 7, ped_clear = 9"})
+    c.set_control(PED_CALL, {4})
+    seen = onsets(c, 400, {60: {1}})
+    assert seen[(4, "Y")] - seen[(4, "G")] == 160
+
+
+def test_ped_omit_keeps_the_walk_from_being_served(paper_toml: str) -> None:
+    c = with_options(paper_toml, {4: "walk = 7, ped_clear = 9"})
+    c.set_control(PED_CALL, {4})
+    c.set_control(PED_OMIT, {4})
+    seen = onsets(c, 300)
+    assert (4, "G") not in seen and c.ped_calls == set()
+
+
+def test_red_revert_delays_the_return_of_a_phase(paper_toml: str) -> None:
+    c = with_options(paper_toml, {8: "backup_prevent = true", 3: "red_revert = 5.0"})
+    onsets(c, 200, {0: {3, 8}})
+    c.set_control(CALL, {3, 7})
+    trace = record(c, MAX + YELLOW + 60)
+    # The group restarts for 7 (8 may not back up); 3 returns after 5 s of red, not its 2 s red clearance.
+    assert runs(trace, 3) == [("G", MAX - 1), ("Y", YELLOW), ("r", 50), ("G", 11)]
+    assert runs(trace, 7) == [("r", MAX - 1 + YELLOW + RED), ("G", 41)]
+
+
+def test_the_demo_shows_pedestrian_intervals_and_phase_next(paper_config: IntersectionConfig) -> None:
+    from emulator import demo
+
+    config = demo.with_pedestrians(paper_config)
+    rows = demo.run(config)
+    walk = next(r for r in rows if r.walks)
+    clear = next(r for r in rows if r.ped_clears)
+    assert walk.walks == clear.ped_clears == {4}
+    assert round(clear.t - walk.t, 1) == demo.DEMO_WALK
+    assert any(r.yellows == {2, 6} and r.nexts == {3, 7} for r in rows)
+    text = demo.render(rows, config)
+    assert " W " in text and " P " in text and "[3,7]" in text

@@ -1,9 +1,13 @@
 """Safety and liveness of the controller model over random configs and random control SETs.
 
-Every tick of every run is checked against what a conflict monitor and a
-timing engineer would demand: no two conflicting phases shown together, every
-green at least its minimum, every change to a conflicting green through the
-full yellow and red clearance of the ending phase, and no flash. With calls
+Configs draw every phase option (passage, recalls, Max2, pedestrians, red
+revert, dual entry, backup prevent); SETs draw calls, pedestrian calls, omits,
+holds, force-offs and Max2 selection. Every tick of every run is checked
+against what a conflict monitor and a timing engineer would demand: no two
+conflicting phases shown together, every green at least its minimum (and walk
+plus pedestrian clearance when it served a walk), every change to a conflicting
+green through the full yellow and red clearance of the ending phase, red revert
+respected, both rings crossing every barrier together, and no flash. With calls
 held constant and no holds, every called phase that is not omitted is served
 within a bound derived from the timings.
 """
@@ -25,14 +29,28 @@ SETTINGS = settings(max_examples=60, deadline=None)
 
 
 @st.composite
-def timings(draw: st.DrawFn) -> dict[str, float]:
+def timings(draw: st.DrawFn) -> dict[str, object]:
     min_green = draw(st.integers(1, 10))
-    return {
+    max_green = draw(st.integers(min_green, 30))
+    out: dict[str, object] = {
         "min_green": min_green,
-        "max_green": draw(st.integers(min_green, 30)),
+        "max_green": max_green,
         "yellow": draw(st.integers(30, 60)) / 10,
         "red_clear": draw(st.integers(5, 30)) / 10,
+        "passage": draw(st.integers(0, min(30, 10 * max_green))) / 10,
+        "recall": draw(st.sampled_from(["none", "none", "min", "max", "soft"])),
+        "red_revert": draw(st.integers(0, 60)) / 10,
+        "dual_entry": draw(st.booleans()),
+        "backup_prevent": draw(st.booleans()),
     }
+    if draw(st.booleans()):
+        out["max2"] = draw(st.integers(min_green, 40))
+    if max_green >= 2 and draw(st.booleans()):
+        walk = draw(st.integers(1, max_green - 1))
+        out |= {"walk": walk, "ped_clear": draw(st.integers(1, max_green - walk))}
+        if draw(st.booleans()):
+            out["recall"] = "ped"
+    return out
 
 
 @st.composite
@@ -49,18 +67,6 @@ def configs(draw: st.DrawFn) -> IntersectionConfig:
     startup = draw(st.none() | st.sampled_from(compatible))
     for p in startup or ():
         phases[str(p)]["startup"] = "green"
-    # The phase options, at random: passage (within the maximum), recalls, backup prevent, and at most
-    # one dual-entry phase per ring and barrier group.
-    for p in ALL_PHASES:
-        ph = phases[str(p)] = dict(phases[str(p)])
-        ph["passage"] = min(draw(st.sampled_from([0.0, 0.0, 0.5, 2.0])), ph["max_green"])
-        ph["recall"] = draw(st.sampled_from(["none", "none", "none", "min", "max", "soft"]))
-        ph["backup_prevent"] = draw(st.booleans())
-    for ring in (RING1, RING2):
-        for group in barriers:
-            members = [p for p in ring if p in group]
-            if members and draw(st.booleans()):
-                phases[str(draw(st.sampled_from(members)))]["dual_entry"] = True
     raw = {
         "name": "random",
         "phases": phases,
@@ -76,11 +82,12 @@ def configs(draw: st.DrawFn) -> IntersectionConfig:
 
 # Calls are listed twice: they are what the middleware SETs most, and what moves the controller.
 SETTABLE = (ControlColumn.VEH_CALL, ControlColumn.VEH_CALL, ControlColumn.HOLD, ControlColumn.FORCE_OFF,
-            ControlColumn.PHASE_OMIT)
+            ControlColumn.PHASE_OMIT, ControlColumn.PED_CALL, ControlColumn.PED_OMIT)
 phase_sets = st.frozensets(st.sampled_from(sorted(ALL_PHASES)))
 operations = st.lists(
     st.one_of(st.tuples(st.just("tick"), st.integers(1, 400)),
-              st.tuples(st.sampled_from(SETTABLE), phase_sets)),
+              st.tuples(st.sampled_from(SETTABLE), phase_sets),
+              st.tuples(st.just("max2"), st.frozensets(st.sampled_from([1, 2])))),
     max_size=20,
 )
 
@@ -94,10 +101,16 @@ class Monitor:
     yellow_since: dict[int, int] = field(default_factory=dict)
     clear_at: dict[int, int] = field(default_factory=dict)  # first tick a conflicting green may start
     shown: dict[int, str] = field(default_factory=dict)
+    walked: set[int] = field(default_factory=set)  # greens that showed a walk
+    yellow_end: dict[int, int] = field(default_factory=dict)
+    last_green: dict[int, tuple[int, int]] = field(default_factory=dict)  # ring -> (start, end) in this group
+    group: int | None = None
+    omitted_in_visit: bool = False  # an omit can drop a committed phase: a ring then rests in red
 
     def __post_init__(self) -> None:
         self.shown = self._display()
         self.green_since = {p: 0 for p in self.c.greens}
+        self.group = next((self.c.config.barrier_of(p) for p in self.c.greens), None)
         self.check_instant()
 
     def _display(self) -> dict[int, str]:
@@ -127,15 +140,21 @@ class Monitor:
         now = self._display()
         t = c.tick
         self.check_instant()
-        for p in ALL_PHASES:
+        self.walked |= c.walks | c.ped_clears
+        for p in sorted(ALL_PHASES, key=lambda p: now[p] == "G"):  # endings before starts
             before, after = self.shown[p], now[p]
             if before == after:
                 continue
             if before == "G":
                 assert after == "Y", f"phase {p} went from green to {after} at tick {t}"
-                self._check_crossing(p, t)
-                served = t - self.green_since.pop(p)
+                since = self.green_since.pop(p)
+                served = t - since
                 assert served >= tenths(phases[p].min_green), f"phase {p} green {served} ticks at tick {t}"
+                if p in self.walked:
+                    self.walked.discard(p)
+                    least = tenths(phases[p].walk) + tenths(phases[p].ped_clear)
+                    assert served >= least, f"phase {p} green {served} ticks after a walk at tick {t}"
+                self.last_green[phases[p].ring] = (since, t)
                 self.yellow_since[p] = t
                 self.clear_at[p] = t + tenths(phases[p].yellow) + tenths(phases[p].red_clear)
             elif before == "Y":
@@ -143,32 +162,38 @@ class Monitor:
                 timed = t - self.yellow_since.pop(p)
                 assert timed >= tenths(phases[p].yellow), f"phase {p} yellow {timed} ticks at tick {t}"
                 self.clear_at[p] = max(self.clear_at[p], t + tenths(phases[p].red_clear))
+                self.yellow_end[p] = t
             else:
                 assert after == "G", f"phase {p} went from red to {after} at tick {t}"
+                if p in self.yellow_end:
+                    red = t - self.yellow_end[p]
+                    assert red >= tenths(phases[p].red_revert), f"phase {p} back to green after {red} ticks of red"
+                self.enter_group(c.config.barrier_of(p))
                 for q, ready in self.clear_at.items():
                     if self.conflicting(p, q):
                         assert t >= ready, f"phase {p} green at tick {t} before {q} cleared at {ready}"
                 self.green_since[p] = t
         self.shown = now
 
-    def _check_crossing(self, p: int, t: int) -> None:
-        """Both rings cross a barrier together: a green ending toward the other barrier group ends on the
-        same tick as the other ring's green (a ring without a green, in red, does not hold it back)."""
-        c = self.c
-        ring = c.rings[c.config.ring_of(p) - 1]
-        if ring.target is None or c.config.barrier_of(ring.target) == c.config.barrier_of(p):
-            return
-        for other in c.rings:
-            if other is not ring:
-                assert other.phase not in self.green_since or other.phase in c.yellows, (
-                    f"phase {p} clears toward {ring.target} across the barrier at tick {t}, "
-                    f"but {other.phase} stays green")
+    def enter_group(self, group: int) -> None:
+        """A green starts in ``group``: if that crosses a barrier, the rings' last greens, when they overlapped,
+        must have ended together (a ring ready to cross waits at the barrier for the other)."""
+        if group != self.group:
+            spans = list(self.last_green.values())
+            if len(spans) == 2 and not self.omitted_in_visit and self.group is not None:
+                (s1, e1), (s2, e2) = spans
+                if s1 < e2 and s2 < e1:
+                    assert e1 == e2, f"rings left barrier group {self.group} at ticks {e1} and {e2}"
+            self.group, self.last_green, self.omitted_in_visit = group, {}, False
 
     def apply(self, operation: tuple[object, object]) -> None:
         kind, arg = operation
         if kind == "tick":
             self.step(arg)
+        elif kind == "max2":
+            self.c.set_max2(arg)
         else:
+            self.omitted_in_visit |= kind is ControlColumn.PHASE_OMIT
             self.c.set_control(kind, arg)
 
 
@@ -182,7 +207,8 @@ def service_bound(config: IntersectionConfig) -> int:
     visit of every group: at most one cycle of every phase at maximum, plus the
     green already running when the calls were placed.
     """
-    per_phase = [tenths(ph.max_green) + tenths(ph.yellow) + tenths(ph.red_clear) for ph in config.phases.values()]
+    per_phase = [tenths(max(ph.max_green, ph.maximum2)) + tenths(ph.yellow) + max(tenths(ph.red_clear),
+                 tenths(ph.red_revert)) for ph in config.phases.values()]
     return sum(per_phase) + max(per_phase) + 10
 
 
@@ -209,7 +235,7 @@ def test_every_called_phase_is_served_within_the_bound(config: IntersectionConfi
         monitor.apply(operation)
     c.backup_time = 0
     c.set_control(ControlColumn.HOLD, ())
-    c.set_control(ControlColumn.PHASE_OMIT, omit)
+    monitor.apply((ControlColumn.PHASE_OMIT, omit))
     c.set_control(ControlColumn.FORCE_OFF, force_off)
     c.set_control(ControlColumn.VEH_CALL, calls)
     waiting = set(calls - omit)

@@ -6,19 +6,22 @@ import pytest
 
 from emulator.controller import Controller
 from emulator.mib import MibView
-from hils.config import IntersectionConfig, from_dict
+from hils.config import IntersectionConfig, from_dict, parse
 from hils.ntcip import (
     CHANNEL_TABLE,
     MAX_PHASE_GROUPS,
     MAX_PHASES,
+    RING_CONTROL_MAX2,
     SYSTEM_PATTERN_CONTROL,
     UNIT_BACKUP_TIME,
     UNIT_CONTROL_STATUS,
     UNIT_FLASH_STATUS,
+    UNIT_STARTUP_FLASH,
     ChannelColumn,
     ControlColumn,
     ErrorStatus,
     PhaseColumn,
+    PhaseOption,
     PhaseStartup,
     SnmpError,
     StatusColumn,
@@ -164,7 +167,7 @@ def test_set_of_writable_unit_objects(mib: MibView, controller: Controller) -> N
 
 @pytest.mark.parametrize("oid", [
     GREENS_1, MAX_PHASES.instance(), UNIT_CONTROL_STATUS.instance(), UNIT_FLASH_STATUS.instance(),
-    phase_oid(PhaseColumn.MINIMUM_GREEN, 1), sequence_oid(1, 1), CHANNEL_TABLE[ChannelColumn.GREENS].instance(1),
+    phase_oid(PhaseColumn.OPTIONS, 1), sequence_oid(1, 1), CHANNEL_TABLE[ChannelColumn.GREENS].instance(1),
 ])
 def test_set_of_a_read_only_object_is_not_writable(mib: MibView, oid) -> None:
     before = mib.get(oid)
@@ -256,22 +259,9 @@ def test_next_oid_walks_every_instance_in_increasing_order(mib: MibView) -> None
     assert walked == mib.oids
     assert len(set(walked)) == len(walked)
     assert all(object_for(o) is not None for o in walked)
-    # 6 scalars, 13 phase columns x 8 phases, 10 status + 3 channel + 6 control columns x 1 group, 2 rings.
-    assert len(walked) == 6 + 13 * 8 + 19 + 2
-
-
-def test_phase_options_and_passage_show_the_configured_options(paper_toml: str) -> None:
-    from hils.config import parse
-    from hils.ntcip import PhaseColumn, phase_oid
-
-    text = paper_toml.replace('2 = { approach', '2 = { passage = 2.5, recall = "min", dual_entry = true, approach')
-    text = text.replace('4 = { approach', '4 = { recall = "soft", approach')
-    view = MibView(Controller(parse(text)))
-    assert view.get(phase_oid(PhaseColumn.PASSAGE, 2)) == 25
-    assert view.get(phase_oid(PhaseColumn.OPTIONS, 2)) == 1 | 1 << 6 | 1 << 10  # enabled, min recall, dual entry
-    assert view.get(phase_oid(PhaseColumn.OPTIONS, 4)) == 1 | 1 << 9  # enabled, soft recall
-    assert view.get(phase_oid(PhaseColumn.OPTIONS, 1)) == 1
-    assert view.get(phase_oid(PhaseColumn.WALK, 1)) == 0 and view.get(phase_oid(PhaseColumn.RED_REVERT, 1)) == 0
+    # 7 scalars, 13 phase columns x 8 phases, 10 status + 3 channel + 6 control columns x 1 group, 2 rings,
+    # ringControlGroupMax2 of group 1.
+    assert len(walked) == 7 + 13 * 8 + 19 + 2 + 1
 
 
 def test_next_oid_from_an_object_prefix_gives_its_first_instance(mib: MibView) -> None:
@@ -310,3 +300,94 @@ def test_a_set_of_one_group_keeps_the_calls_of_the_other() -> None:
     assert controller.calls == {10}
     assert mib.get_many([VEH_CALL_1, control_oid(ControlColumn.VEH_CALL, 2)]) == (0, 0b10)
     assert mib.get(status_oid(StatusColumn.REDS, 2)) == 0b11
+
+
+# --- the phase table as a lab retimes it -----------------------------------------------------
+
+
+def test_phase_options_carry_the_configured_recall_and_dual_entry(paper_toml: str) -> None:
+    text = paper_toml.replace('2 = { approach = "east", turn = "through", startup = "green" }',
+                              '2 = { approach = "east", turn = "through", startup = "green", recall = "max", '
+                              'dual_entry = true, walk = 5, ped_clear = 7, passage = 2.5, max2 = 30 }')
+    c = Controller(parse(text, "variant.toml"))
+    mib = MibView(c)
+    options = mib.get(phase_oid(PhaseColumn.OPTIONS, 2))
+    assert options == PhaseOption.ENABLED | PhaseOption.MAX_VEHICLE_RECALL | PhaseOption.DUAL_ENTRY | (
+        PhaseOption.SIMULTANEOUS_GAP_DISABLE)
+    assert mib.get(phase_oid(PhaseColumn.OPTIONS, 1)) == PhaseOption.ENABLED | PhaseOption.SIMULTANEOUS_GAP_DISABLE
+    values = {col: mib.get(phase_oid(col, 2)) for col in (PhaseColumn.WALK, PhaseColumn.PEDESTRIAN_CLEAR,
+                                                           PhaseColumn.PASSAGE, PhaseColumn.MAXIMUM2,
+                                                           PhaseColumn.RED_REVERT)}
+    assert values == {PhaseColumn.WALK: 5, PhaseColumn.PEDESTRIAN_CLEAR: 7, PhaseColumn.PASSAGE: 25,
+                      PhaseColumn.MAXIMUM2: 30, PhaseColumn.RED_REVERT: 0}
+
+
+@pytest.mark.parametrize(("column", "value"), [
+    (PhaseColumn.MINIMUM_GREEN, 256), (PhaseColumn.YELLOW_CHANGE, 29), (PhaseColumn.PASSAGE, -1),
+    (PhaseColumn.WALK, 300),
+])
+def test_a_phase_timing_out_of_range_is_a_wrong_value(mib: MibView, column: PhaseColumn, value: int) -> None:
+    before = mib.get(phase_oid(column, 4))
+    refused(mib, [(phase_oid(PhaseColumn.MAXIMUM1, 4), 30), (phase_oid(column, 4), value)],
+            ErrorStatus.WRONG_VALUE, 2)
+    assert mib.get(phase_oid(column, 4)) == before
+    assert mib.get(phase_oid(PhaseColumn.MAXIMUM1, 4)) == 20  # the whole SET was refused
+
+
+def test_a_retimed_yellow_acts_from_the_next_interval(mib: MibView, controller: Controller) -> None:
+    controller.backup_time = 0
+    controller.set_control(ControlColumn.VEH_CALL, {1, 5})
+    for _ in range(30):  # 2 and 6 gap out at their minimum: yellow 3 s starts at tick 30
+        controller.step()
+    assert controller.yellows == {2, 6}
+    mib.set_many([(phase_oid(PhaseColumn.YELLOW_CHANGE, 2), 50)])
+    assert mib.get(phase_oid(PhaseColumn.YELLOW_CHANGE, 2)) == 50
+    for _ in range(30):
+        controller.step()
+    assert controller.yellows == set()  # the yellow being timed kept its 3 s
+    controller.set_control(ControlColumn.VEH_CALL, {2, 6})
+    while controller.yellows != {1, 5}:
+        controller.step()
+    ticks = 0
+    while 2 not in controller.greens:
+        controller.step()
+        ticks += 1
+    assert ticks == 30 + 20  # 1's clearance (3 s + 2 s) then 2: 2's new yellow is for its own next end
+    controller.set_control(ControlColumn.VEH_CALL, {1, 5})
+    yellow = 0
+    while 2 not in controller.reds or yellow == 0:
+        controller.step()
+        yellow += 2 in controller.yellows
+    assert yellow == 50
+
+
+def test_ring_control_max2_selects_maximum_2_per_ring(paper_toml: str) -> None:
+    text = paper_toml.replace("red_clear = 2.0     # s", "red_clear = 2.0\nmax2 = 40")
+    c = Controller(parse(text, "variant.toml"))
+    c.backup_time = 0
+    mib = MibView(c)
+    mib.set_many([(RING_CONTROL_MAX2.instance(1), 0b10)])  # ring 2 times Maximum 2
+    assert c.max2_rings == {2} and c.control_status is UnitControlStatus.SYSTEM_CONTROL
+    c.set_control(ControlColumn.VEH_CALL, {1, 5})
+    while c.greens != {1, 5}:
+        c.step()
+    c.set_control(ControlColumn.VEH_CALL, {1, 5, 2, 6})
+    ends = {}
+    for tick in range(1, 500):
+        c.step()
+        for p in c.yellows:
+            ends.setdefault(p, tick)
+    # Both rings' next phases are in the same barrier group, so each ends at its own maximum.
+    assert (ends[1], ends[5]) == (200, 400)
+
+
+def test_unit_start_up_flash_over_the_mib_and_at_power_up(mib: MibView, controller: Controller) -> None:
+    assert mib.get(UNIT_STARTUP_FLASH.instance()) == 0
+    mib.set_many([(UNIT_STARTUP_FLASH.instance(), 3)])
+    controller.reset()
+    assert controller.flash_status is UnitFlashStatus.STARTUP and controller.greens == set()
+    for _ in range(29):
+        controller.step()
+    assert controller.flash_status is UnitFlashStatus.STARTUP
+    controller.step()
+    assert controller.flash_status is UnitFlashStatus.NOT_FLASH and controller.greens == {2, 6}

@@ -14,17 +14,20 @@ from hils.ntcip import (
     MAX_PHASE_GROUPS,
     MAX_PHASES,
     PHASE_TABLE,
+    RING_CONTROL_MAX2,
     SEQUENCE_DATA,
     STATUS_TABLE,
     SYSTEM_PATTERN_CONTROL,
     UNIT_BACKUP_TIME,
     UNIT_CONTROL_STATUS,
     UNIT_FLASH_STATUS,
+    UNIT_STARTUP_FLASH,
     Access,
     ChannelColumn,
     ControlColumn,
     ErrorStatus,
     PhaseColumn,
+    PhaseOption,
     PhaseStartup,
     SignalState,
     SnmpError,
@@ -76,22 +79,39 @@ def test_scalar_ranges() -> None:
     assert (SYSTEM_PATTERN_CONTROL.low, SYSTEM_PATTERN_CONTROL.high) == (0, 255)
 
 
-@pytest.mark.parametrize(("column", "number", "name"), [
-    (PhaseColumn.MINIMUM_GREEN, 4, "phaseMinimumGreen"),
-    (PhaseColumn.PASSAGE, 5, "phasePassage"),
-    (PhaseColumn.MAXIMUM1, 6, "phaseMaximum1"),
-    (PhaseColumn.MAXIMUM2, 7, "phaseMaximum2"),
-    (PhaseColumn.YELLOW_CHANGE, 8, "phaseYellowChange"),
-    (PhaseColumn.RED_CLEAR, 9, "phaseRedClear"),
-    (PhaseColumn.STARTUP, 20, "phaseStartup"),
-    (PhaseColumn.OPTIONS, 21, "phaseOptions"),
-    (PhaseColumn.RING, 22, "phaseRing"),
-    (PhaseColumn.CONCURRENCY, 23, "phaseConcurrency"),
+def test_unit_start_up_flash_and_ring_control_max2_oids() -> None:
+    assert oid_str(UNIT_STARTUP_FLASH.instance()) == f"{A}.3.1.0"
+    assert oid_str(RING_CONTROL_MAX2.instance(1)) == f"{A}.7.5.1.4.1"
+    assert UNIT_STARTUP_FLASH.access is RING_CONTROL_MAX2.access is Access.READ_WRITE
+
+
+def test_phase_option_bits_follow_ntcip_1202() -> None:
+    assert [int(b).bit_length() - 1 for b in (PhaseOption.MIN_VEHICLE_RECALL, PhaseOption.MAX_VEHICLE_RECALL,
+                                               PhaseOption.PED_RECALL, PhaseOption.SOFT_VEHICLE_RECALL,
+                                               PhaseOption.DUAL_ENTRY, PhaseOption.SIMULTANEOUS_GAP_DISABLE)] == [
+        6, 7, 8, 9, 10, 11]
+    assert PhaseOption.ENABLED == 1
+
+
+@pytest.mark.parametrize(("column", "number", "name", "access"), [
+    (PhaseColumn.WALK, 2, "phaseWalk", Access.READ_WRITE),
+    (PhaseColumn.PEDESTRIAN_CLEAR, 3, "phasePedestrianClear", Access.READ_WRITE),
+    (PhaseColumn.MINIMUM_GREEN, 4, "phaseMinimumGreen", Access.READ_WRITE),
+    (PhaseColumn.PASSAGE, 5, "phasePassage", Access.READ_WRITE),
+    (PhaseColumn.MAXIMUM1, 6, "phaseMaximum1", Access.READ_WRITE),
+    (PhaseColumn.MAXIMUM2, 7, "phaseMaximum2", Access.READ_WRITE),
+    (PhaseColumn.YELLOW_CHANGE, 8, "phaseYellowChange", Access.READ_WRITE),
+    (PhaseColumn.RED_CLEAR, 9, "phaseRedClear", Access.READ_WRITE),
+    (PhaseColumn.RED_REVERT, 10, "phaseRedRevert", Access.READ_WRITE),
+    (PhaseColumn.STARTUP, 20, "phaseStartup", Access.READ_ONLY),
+    (PhaseColumn.OPTIONS, 21, "phaseOptions", Access.READ_ONLY),
+    (PhaseColumn.RING, 22, "phaseRing", Access.READ_ONLY),
+    (PhaseColumn.CONCURRENCY, 23, "phaseConcurrency", Access.READ_ONLY),
 ])
-def test_phase_table_oids(column: PhaseColumn, number: int, name: str) -> None:
+def test_phase_table_oids(column: PhaseColumn, number: int, name: str, access: Access) -> None:
     assert oid_str(phase_oid(column, 7)) == f"{A}.1.2.1.{number}.7"
     assert PHASE_TABLE[column].name == name
-    assert PHASE_TABLE[column].access is Access.READ_ONLY
+    assert PHASE_TABLE[column].access is access
     expected_syntax = Syntax.OCTET_STRING if column is PhaseColumn.CONCURRENCY else Syntax.INTEGER
     assert PHASE_TABLE[column].syntax is expected_syntax
 
