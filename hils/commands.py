@@ -110,8 +110,8 @@ def run_command(args: argparse.Namespace) -> int:
     plots.signal_timeline(records, cfg, out / "signal_timeline.png", start=window[0], end=window[1])
     if result.run.traffic_samples:
         plots.queues(result.run.traffic_samples, out / "queues.png", title=f"Queues per approach, {cfg.name}",
-                     storage={a: v["storage"] for a, v in s["traffic"]["approaches"].items()} if s.get("traffic")
-                     else None)
+                     spillback={a: [60.0 * m for m in v["spillback_minutes"]]
+                                for a, v in s["traffic"]["approaches"].items()} if s.get("traffic") else None)
     print(summary.render(s))
     for warning in summary.warnings(s):
         print(warning)

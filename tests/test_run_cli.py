@@ -56,6 +56,8 @@ def test_a_starving_agent_shows_who_could_not_enter(tmp_path, capsys, monkeypatc
     assert traffic["waiting_to_enter"] > 20
     assert north["waiting_to_enter"] + south["waiting_to_enter"] == traffic["waiting_to_enter"]
     assert north["arrived"] == south["arrived"] == 0
+    assert north["spillback_minutes"] and south["spillback_minutes"]  # their lanes filled up before the backlog
+    assert not any(traffic["approaches"][a]["spillback_minutes"] for a in ("east", "west"))
     assert north["mean_delay"] > 300 and south["mean_delay"] > 300
     assert traffic["mean_delay"] > 3 * traffic["mean_time_loss"]  # the arrived alone would hide the starving
     warning = next(line for line in printed.splitlines() if line.startswith("WARNING"))
