@@ -1,14 +1,20 @@
-"""The emulator's SNMP agent: a live controller's NTCIP 1202 objects over SNMPv1 and v2c on UDP.
+"""The emulator's SNMP agent: a live controller's NTCIP 1202 objects over SNMPv1, v2c and v3 on UDP.
 
 Rules of this file
 ------------------
 - pysnmp is the SNMP implementation: messages are decoded and built with its
   protocol API (``pysnmp.proto.api``) and pyasn1's BER codec. Nothing here
-  writes BER by hand.
+  writes BER by hand; only the message header is read by hand, in
+  :mod:`emulator.ber`.
 - The agent is a plain asyncio datagram endpoint rather than a pysnmp
   ``SnmpEngine`` with MIB instrumentation: that keeps the error mapping per
   version, the dropping of foreign datagrams and the per-request latency in
   this file, exact and testable.
+- SNMPv3 (one USM user, HMAC-SHA-96 with or without AES-128) goes through
+  pysnmp's own message processing and user-based security (:class:`_Usm`):
+  nothing of v3 is decoded here. Its PDUs are SNMPv2 PDUs and are answered
+  by the same handlers as v2c; a request below the user's security level is
+  dropped, discovery and authentication failures get pysnmp's Reports.
 - :meth:`SnmpAgent.respond` turns one datagram into one answer (or None for a
   dropped datagram) synchronously and without I/O; it applies a SET to the MIB
   view at once. Only the endpoint sends, on an asyncio timer at the arrival
@@ -17,11 +23,17 @@ Rules of this file
 
 Theory of operation
 -------------------
-A datagram that is not a well-formed SNMPv1/v2c message (garbage, truncated,
-trailing bytes, SNMPv3), that names neither community, or that carries no
-request PDU (a response, trap or report) is dropped and counted per
-:class:`DropReason`, as RFC 3416 and RFC 1157 ask for authentication failures
-and parse errors. Everything else gets exactly one response.
+A datagram is checked in order of cost, so that hostile traffic costs little:
+its length against ``max_message_size`` (nothing read), then its version and
+community from the first bytes (:func:`emulator.ber.read_header`), and only
+then is the whole message decoded by pyasn1. A datagram longer than the
+maximum, not a well-formed SNMPv1/v2c message (garbage, truncated, trailing
+bytes, SNMPv3 when no v3 user is configured), that names neither community, or that carries no request PDU
+(a response, trap or report) is dropped and counted per :class:`DropReason`,
+as RFC 3416 and RFC 1157 ask for authentication failures and parse errors.
+Everything else gets exactly one response, never longer than
+``max_message_size``: a request is no longer than that, so the SNMPv1 tooBig
+answer that echoes its varbinds fits too.
 
 The MIB view (:class:`emulator.mib.MibView`) refuses with four statuses; the
 agent refines them into SNMPv2 terms (RFC 3416 section 4.2.5), then maps them
@@ -63,13 +75,24 @@ from typing import Any
 
 from pyasn1.codec.ber import decoder, encoder
 from pyasn1.type import univ
+from pysnmp.carrier.asyncio.dgram import udp
+from pysnmp.entity import config
+from pysnmp.entity.engine import SnmpEngine
+from pysnmp.error import PySnmpError
 from pysnmp.proto import api, rfc1905
 
+from emulator.ber import Header, HeaderError, encode_response, read_get, read_header
 from emulator.mib import MibView, Value
-from hils.ntcip import Access, ErrorStatus, Oid, SnmpError, object_for, oid_str
-from hils.transport import Latency
+from hils.ntcip import Access, ErrorStatus, Latency, Oid, SnmpError, object_for, oid_str
 
 log = logging.getLogger(__name__)
+
+#: The version field of an SNMPv3 message (RFC 3412); pysnmp's message processing model number too.
+SNMP_VERSION_3 = 3
+#: Seconds between two ticks of USM's timer (see :meth:`_Usm.tick`).
+USM_TICK = 1.0
+# The dispatcher wants a transport address to answer to; ours answers the datagram's sender itself.
+_NOWHERE = ("0.0.0.0", 0)
 
 #: Largest answer sent: one Ethernet frame of UDP payload, so answers are never fragmented.
 DEFAULT_MAX_MESSAGE_SIZE = 1472
@@ -101,10 +124,12 @@ _V1_STATUS: dict[ErrorStatus, ErrorStatus] = {
 class DropReason(Enum):
     """Why a datagram got no answer."""
 
+    TOO_LARGE = "too large"  # longer than the maximum message size: dropped unread
     MALFORMED = "malformed"  # not a complete BER-encoded SNMP message
     VERSION = "unsupported version"  # SNMPv3 or an unknown version number
     COMMUNITY = "unknown community"
     NOT_A_REQUEST = "not a request"  # a response, trap, inform or report PDU
+    AUTHENTICATION = "refused by USM"  # SNMPv3 below the user's security level, or USM dropped it silently
 
 
 class RequestKind(Enum):
@@ -136,6 +161,7 @@ class AgentStats:
     requests: Counter[RequestKind] = field(default_factory=Counter)
     errors: int = 0  # answers with a non-zero error status
     dropped: Counter[DropReason] = field(default_factory=Counter)
+    reports: int = 0  # SNMPv3 Reports sent: engine discovery, unknown user, wrong digest, out of time window
 
     @property
     def answered(self) -> int:
@@ -161,6 +187,7 @@ class _Request:
     oids: tuple[Oid, ...]
     values: tuple[Any, ...]  # the request's varbind values, pyasn1 objects
     writable: bool  # came with the read-write community
+    usm: _UsmRequest | None = None  # how to answer an SNMPv3 request; None for v1/v2c
 
 
 # One varbind of an answer: a value of the view, or an SNMPv2 exception value.
@@ -168,14 +195,15 @@ _Result = tuple[Oid, Value | Missing]
 
 
 class SnmpAgent:
-    """SNMPv1/v2c command responder over one MIB view, on the running asyncio loop."""
+    """SNMPv1/v2c (and, with ``v3_user``, SNMPv3) command responder over one MIB view, on the running loop."""
 
     def __init__(self, view: MibView, *, ro_community: str = "public", rw_community: str = "private",
                  latency: Latency | None = None, seed: int | None = None,
-                 max_message_size: int = DEFAULT_MAX_MESSAGE_SIZE) -> None:
+                 max_message_size: int = DEFAULT_MAX_MESSAGE_SIZE, v3_user: V3User | None = None) -> None:
         if ro_community == rw_community:
             raise ValueError("the read-only and read-write communities must differ")
         self.view = view
+        self._usm = _Usm(v3_user) if v3_user is not None else None
         self.communities = {ro_community.encode(): False, rw_community.encode(): True}
         self.latency = latency or Latency(0.0)
         self.max_message_size = max_message_size
@@ -189,6 +217,8 @@ class SnmpAgent:
             api.SNMP_VERSION_2C: {v2c.GetRequestPDU.tagSet: self._get, v2c.GetNextRequestPDU.tagSet: self._get_next,
                                   v2c.GetBulkRequestPDU.tagSet: self._get_bulk, v2c.SetRequestPDU.tagSet: self._set},
         }
+        # SNMPv3 carries SNMPv2 PDUs (RFC 3416) and answers as v2c does.
+        self._handlers[SNMP_VERSION_3] = self._handlers[api.SNMP_VERSION_2C]
 
     # --- serving ----------------------------------------------------------------------------
 
@@ -196,7 +226,14 @@ class SnmpAgent:
         """Bind the UDP socket (port 0 picks a free one) and answer from now on; returns the bound address."""
         loop = asyncio.get_running_loop()
         self._transport, _ = await loop.create_datagram_endpoint(lambda: _Endpoint(self), local_addr=(host, port))
+        if self._usm is not None:
+            self._usm_tick()
         return self.address
+
+    def _usm_tick(self) -> None:
+        if self._usm is not None and self._transport is not None and not self._transport.is_closing():
+            self._usm.tick()
+            asyncio.get_running_loop().call_later(USM_TICK, self._usm_tick)
 
     @property
     def address(self) -> tuple[str, int]:
@@ -228,7 +265,13 @@ class SnmpAgent:
     def respond(self, datagram: bytes, source: str = "") -> bytes | None:
         """The encoded answer to one datagram, or None when it is dropped (and counted)."""
         try:
-            request = self._decode(datagram)
+            header, writable = self._screen(datagram)
+            if header.community is None:
+                return self._respond_v3(datagram, source)
+            answer = self._fast_get(datagram, header)
+            if answer is not None:
+                return answer
+            request = self._decode_message(datagram, header.version, api.PROTOCOL_MODULES[header.version], writable)
         except _Drop as drop:
             self.stats.dropped[drop.reason] += 1
             log.debug("dropped a %d-byte datagram from %s: %s (%s)", len(datagram), source or "?",
@@ -241,19 +284,61 @@ class SnmpAgent:
             return None
         return handler(request, source)
 
-    def _decode(self, datagram: bytes) -> _Request:
+    def _screen(self, datagram: bytes) -> tuple[Header, bool]:
+        """The header of a datagram worth decoding, and whether its community may write."""
+        if len(datagram) > self.max_message_size:
+            raise _Drop(DropReason.TOO_LARGE, f"{len(datagram)} bytes, more than {self.max_message_size}")
+        try:
+            header = read_header(datagram)
+        except HeaderError as exc:
+            raise _Drop(DropReason.MALFORMED, str(exc)) from None
+        if header.community is None:
+            if header.version != SNMP_VERSION_3 or self._usm is None:
+                raise _Drop(DropReason.VERSION, f"SNMP version number {header.version}")
+            return header, True
+        writable = self.communities.get(header.community)
+        if writable is None:
+            raise _Drop(DropReason.COMMUNITY, f"community {header.community!r}")
+        return header, writable
+
+    def _respond_v3(self, datagram: bytes, source: str) -> bytes | None:
+        """An SNMPv3 message through pysnmp's message processing and USM: a discovery or an
+        authentication failure gets pysnmp's Report, a request at the user's level our answer."""
+        assert self._usm is not None
+        reports, received = self._usm.receive(datagram)
+        if received is None:
+            if not reports:
+                raise _Drop(DropReason.AUTHENTICATION, "refused by the user-based security model")
+            self.stats.reports += 1
+            return reports[0]
+        pdu = received.pdu
+        handler = self._handlers[SNMP_VERSION_3].get(pdu.tagSet)
+        if handler is None:
+            raise _Drop(DropReason.NOT_A_REQUEST, f"a {type(pdu).__name__} PDU")
+        varbinds = api.v2c.apiPDU.get_varbinds(pdu)
+        # The user may write: like the read-write community, it is the middleware's.
+        request = _Request(SNMP_VERSION_3, api.v2c, None, pdu, tuple(tuple(oid) for oid, _ in varbinds),
+                           tuple(value for _, value in varbinds), True, received)
+        return handler(request, source)
+
+    def _fast_get(self, datagram: bytes, header: Header) -> bytes | None:
+        """The answer to a plain GET of objects that all exist, written by hand; None leaves the
+        datagram to the general path (any other PDU, a missing object, an answer too large)."""
+        request = read_get(datagram, header)
+        if request is None or not all(oid in self.view for oid in request.oids):
+            return None
+        answer = encode_response(request, [self.view.get(oid) for oid in request.oids])
+        if len(answer) > self.max_message_size:
+            return None
+        self.stats.requests[RequestKind.GET] += 1
+        return answer
+
+    @staticmethod
+    def _decode_message(datagram: bytes, version: int, module: ModuleType, writable: bool) -> _Request:
         # pyasn1 fails on hostile input with more than its own exception types (a TypeError
         # for some garbage), and any failure here only means "not a message we can read".
         try:
-            version = int(api.decodeMessageVersion(datagram))
-        except Exception as exc:
-            raise _Drop(DropReason.MALFORMED, f"no SNMP version: {exc}") from None
-        module = api.PROTOCOL_MODULES.get(version)
-        if module is None:
-            raise _Drop(DropReason.VERSION, f"SNMP version number {version}")
-        try:
             message, rest = decoder.decode(datagram, asn1Spec=module.Message())
-            community = bytes(module.apiMessage.get_community(message))
             pdu = module.apiMessage.get_pdu(message)
             varbinds = module.apiPDU.get_varbinds(pdu)
             oids = tuple(tuple(oid) for oid, _ in varbinds)
@@ -261,9 +346,6 @@ class SnmpAgent:
             raise _Drop(DropReason.MALFORMED, str(exc)) from None
         if rest:
             raise _Drop(DropReason.MALFORMED, f"{len(rest)} bytes after the message")
-        writable = self.communities.get(community)
-        if writable is None:
-            raise _Drop(DropReason.COMMUNITY, f"community {community!r}")
         return _Request(version, module, message, pdu, oids, tuple(v for _, v in varbinds), writable)
 
     # --- the requests -------------------------------------------------------------------------
@@ -369,6 +451,8 @@ class SnmpAgent:
 
     @staticmethod
     def _encode(req: _Request, status: ErrorStatus, index: int, varbinds: list[tuple[Oid, Any]]) -> bytes:
+        if req.usm is not None:
+            return req.usm.answer(status, index, varbinds)
         module = req.module
         message = module.apiMessage.get_response(req.message)
         pdu = module.apiMessage.get_pdu(message)
@@ -376,6 +460,107 @@ class SnmpAgent:
         module.apiPDU.set_error_index(pdu, index)
         module.apiPDU.set_varbinds(pdu, varbinds)
         return encoder.encode(message)
+
+
+@dataclass(frozen=True, slots=True)
+class V3User:
+    """The SNMPv3 user the agent accepts: HMAC-SHA-96 authentication, and AES-128 privacy with a
+    ``priv_key`` (authPriv) or none without (authNoPriv). Keys are pass phrases (RFC 3414 A.2)."""
+
+    name: str
+    auth_key: str = field(repr=False)
+    priv_key: str = field(default="", repr=False)
+
+    def __post_init__(self) -> None:
+        if not self.name:
+            raise ValueError("the SNMPv3 user needs a name")
+        for what, key in (("auth", self.auth_key), ("priv", self.priv_key)):
+            if (key or what == "auth") and len(key) < 8:
+                raise ValueError(f"the SNMPv3 {what} key must have at least 8 characters (RFC 3414)")
+
+    @property
+    def security_level(self) -> int:
+        """The lowest level accepted (RFC 3411 securityLevel: 2 authNoPriv, 3 authPriv)."""
+        return 3 if self.priv_key else 2
+
+
+@dataclass(frozen=True, slots=True)
+class _UsmRequest:
+    """One SNMPv3 request as pysnmp's dispatcher handed it over, and how to send its answer."""
+
+    usm: _Usm
+    context: tuple[Any, ...]  # the dispatcher's arguments before the PDU
+    pdu: Any
+    tail: tuple[Any, ...]  # maxSizeResponseScopedPDU, stateReference
+
+    def answer(self, status: ErrorStatus, index: int, varbinds: list[tuple[Oid, Any]]) -> bytes:
+        response = api.v2c.apiPDU.get_response(self.pdu)
+        api.v2c.apiPDU.set_error_status(response, int(status))
+        api.v2c.apiPDU.set_error_index(response, index)
+        api.v2c.apiPDU.set_varbinds(response, varbinds)
+        return self.usm.encode(self.context, response, self.tail)
+
+
+class _Usm:
+    """pysnmp's SNMPv3 message processing and user-based security (RFC 3412, 3414, 3826), used without
+    its transport and MIB instrumentation: a datagram goes in, Reports and requests come out, and an
+    answer PDU goes back in to be secured and encoded."""
+
+    def __init__(self, user: V3User) -> None:
+        self.user = user
+        self.engine = SnmpEngine()
+        priv = config.USM_PRIV_CFB128_AES if user.priv_key else config.USM_PRIV_NONE
+        config.add_v3_user(self.engine, user.name, config.USM_AUTH_HMAC96_SHA, user.auth_key, priv,
+                           user.priv_key or None)
+        # The dispatcher only ever calls send_message on its transport: collect what it sends.
+        self.engine.transport_dispatcher = self  # type: ignore[assignment]
+        self._sent: list[bytes] = []
+        self._received: list[_UsmRequest] = []
+        self.engine.message_dispatcher.register_context_engine_id(
+            b"", (rfc1905.GetRequestPDU.tagSet, rfc1905.GetNextRequestPDU.tagSet, rfc1905.GetBulkRequestPDU.tagSet,
+                  rfc1905.SetRequestPDU.tagSet), self._process_pdu)
+
+    def receive(self, datagram: bytes) -> tuple[list[bytes], _UsmRequest | None]:
+        """The Reports pysnmp sent for ``datagram`` and the request it carried at the user's level, if any."""
+        self._sent, self._received = [], []
+        try:
+            self.engine.message_dispatcher.receive_message(self.engine, udp.DOMAIN_NAME, _NOWHERE, datagram)
+        except Exception as exc:
+            raise _Drop(DropReason.MALFORMED, f"SNMPv3: {exc}") from None
+        request = self._received[0] if self._received else None
+        if request is not None and (request.context[0] != SNMP_VERSION_3
+                                    or int(request.context[3]) < self.user.security_level):
+            raise _Drop(DropReason.AUTHENTICATION, f"security level {int(request.context[3])}, the user needs "
+                                                   f"{self.user.security_level}")
+        return self._sent, request
+
+    def encode(self, context: tuple[Any, ...], pdu: Any, tail: tuple[Any, ...]) -> bytes:
+        self._sent = []
+        try:
+            self.engine.message_dispatcher.return_response_pdu(self.engine, *context, pdu, *tail, {})
+        except PySnmpError as exc:
+            raise _Drop(DropReason.AUTHENTICATION, f"SNMPv3 answer not sent: {exc}") from None
+        return self._sent[0]
+
+    # --- what pysnmp asks of a transport dispatcher --------------------------------------------
+
+    def send_message(self, message: bytes, _domain: Any, _address: Any) -> None:
+        self._sent.append(bytes(message))
+
+    @staticmethod
+    def get_timer_resolution() -> float:
+        """Seconds per :meth:`tick`: USM keeps each peer's time line for 300 of them."""
+        return USM_TICK
+
+    def tick(self) -> None:
+        """Expire USM's time lines as a dispatcher's timer would (pysnmp keeps one entry per message until then)."""
+        for model in self.engine.security_models.values():
+            model.receive_timer_tick(self.engine, 0)
+
+    def _process_pdu(self, _engine: Any, *args: Any) -> None:
+        # (mpModel, securityModel, securityName, securityLevel, contextEngineId, contextName, pduVersion,
+        #  PDU, maxSizeResponseScopedPDU, stateReference), RFC 3412 4.2.2.1.3.
+        self._received.append(_UsmRequest(self, args[:7], args[7], args[8:]))
 
 
 class _Endpoint(asyncio.DatagramProtocol):

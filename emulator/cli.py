@@ -3,10 +3,16 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from hils import config as config_mod
+from hils.ntcip import AUTH_KEY_ENV, PRIV_KEY_ENV
+
+if TYPE_CHECKING:
+    from emulator.agent import V3User
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -40,8 +46,8 @@ def _register_serve(commands: argparse._SubParsersAction) -> None:
     serve = commands.add_parser(
         "serve", help="serve the controller model as an SNMP agent at wall-clock time",
         description="Run the controller model at wall-clock time (one tick per 0.1 s) behind an SNMPv1/v2c "
-                    "agent on UDP until Ctrl-C or SIGTERM. Every SET is logged; on exit the counts of "
-                    "requests answered and datagrams dropped are printed.")
+                    "(and, with --v3-user, SNMPv3) agent on UDP until Ctrl-C or SIGTERM. Every SET is logged; "
+                    "on exit the counts of requests answered and datagrams dropped are printed.")
     serve.add_argument("--config", metavar="FILE", help="intersection config (TOML); default: the shipped four-leg")
     serve.add_argument("--host", default="127.0.0.1", help="address to bind (127.0.0.1)")
     serve.add_argument("--port", type=int, default=1161, help="UDP port; 0 picks a free one (1161)")
@@ -50,30 +56,57 @@ def _register_serve(commands: argparse._SubParsersAction) -> None:
     serve.add_argument("--latency-ms", type=float, default=0.0, metavar="MS", help="mean response delay (0)")
     serve.add_argument("--jitter-ms", type=float, default=0.0, metavar="MS",
                        help="uniform jitter of the response delay, +/- MS (0)")
+    serve.add_argument("--v3-user", metavar="NAME",
+                       help="also accept SNMPv3 from this user (USM, HMAC-SHA-96; read-write); keys are pass "
+                            "phrases of 8 characters or more")
+    serve.add_argument("--v3-auth-key", metavar="KEY",
+                       help=f"the user's authentication key (SHA); default: ${AUTH_KEY_ENV}")
+    serve.add_argument("--v3-priv-key", metavar="KEY",
+                       help=f"the user's privacy key (AES-128): requests must be authPriv; default: ${PRIV_KEY_ENV}, "
+                            "and without either authNoPriv is enough")
     serve.add_argument("--trace", type=Path, metavar="FILE",
                        help="write every interval change as JSON Lines, stamped with the monotonic clock")
     serve.set_defaults(func=_serve)
+
+
+def _v3_user(args: argparse.Namespace) -> V3User | None:
+    from emulator.agent import V3User
+
+    auth_key = args.v3_auth_key or os.environ.get(AUTH_KEY_ENV, "")
+    priv_key = args.v3_priv_key or os.environ.get(PRIV_KEY_ENV, "")
+    if args.v3_user is None:
+        if args.v3_auth_key or args.v3_priv_key:
+            raise SystemExit("hils emulator serve: --v3-auth-key and --v3-priv-key need --v3-user")
+        return None
+    if not auth_key:
+        raise SystemExit(f"hils emulator serve: --v3-user needs --v3-auth-key (or ${AUTH_KEY_ENV})")
+    try:
+        return V3User(args.v3_user, auth_key, priv_key)
+    except ValueError as exc:
+        raise SystemExit(f"hils emulator serve: {exc}") from None
 
 
 def _serve(args: argparse.Namespace) -> int:
     import asyncio
 
     from emulator.serve import ServeOptions, serve_until_signalled
-    from hils.transport import Latency
+    from hils.ntcip import Latency
 
     if args.ro_community == args.rw_community:
         raise SystemExit("hils emulator serve: --ro-community and --rw-community must differ")
     if args.latency_ms < 0 or args.jitter_ms < 0:
         raise SystemExit("hils emulator serve: --latency-ms and --jitter-ms must not be negative")
+    v3_user = _v3_user(args)
     cfg = config_mod.load(args.config)
     options = ServeOptions(host=args.host, port=args.port, ro_community=args.ro_community,
                            rw_community=args.rw_community, latency=Latency(args.latency_ms / 1e3, args.jitter_ms / 1e3),
-                           trace=args.trace)
+                           trace=args.trace, v3_user=v3_user)
 
     def ready(address: tuple[str, int]) -> None:
         # Scripts and tests wait for this line: it is printed only once requests are answered.
+        v3 = f" v3={v3_user.name}/{'authPriv' if v3_user.priv_key else 'authNoPriv'}" if v3_user else ""
         print(f"serving {cfg.name} on udp:{address[0]}:{address[1]} "
-              f"(ro={options.ro_community} rw={options.rw_community})", flush=True)
+              f"(ro={options.ro_community} rw={options.rw_community}{v3})", flush=True)
 
     try:
         summary = asyncio.run(serve_until_signalled(cfg, options, ready))

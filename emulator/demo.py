@@ -20,6 +20,7 @@ class Row:
     greens: frozenset[int]
     yellows: frozenset[int]
     reds: frozenset[int]
+    nexts: frozenset[int] = frozenset()  # PhaseNext: committed at the start of yellow
 
 
 DEFAULT_CALLS: tuple[tuple[float, tuple[int, ...]], ...] = (
@@ -35,15 +36,16 @@ def run(config: IntersectionConfig, calls: Iterable[tuple[float, Iterable[int]]]
     """Run the model for ``duration`` s, SET VehCall at the given times; return the display changes."""
     env = simpy.Environment()
     controller = Controller(config)
-    rows = [Row(0.0, controller.greens, controller.yellows, controller.reds)]
+    rows = [Row(0.0, controller.greens, controller.yellows, controller.reds, controller.phase_nexts)]
 
     def ticking():
         for _ in controller.process(env):
             yield _
             last = rows[-1]
-            if (controller.greens, controller.yellows) != (last.greens, last.yellows):
+            if (controller.greens, controller.yellows, controller.phase_nexts) != (last.greens, last.yellows,
+                                                                                     last.nexts):
                 rows.append(Row(round(controller.tick / 10, 1), controller.greens, controller.yellows,
-                                controller.reds))
+                                controller.reds, controller.phase_nexts))
 
     def caller():
         for at, phases in sorted(calls):
@@ -58,11 +60,11 @@ def run(config: IntersectionConfig, calls: Iterable[tuple[float, Iterable[int]]]
 
 def render(rows: list[Row], config: IntersectionConfig) -> str:
     phases = config.phase_numbers
-    head = "     t (s)  " + " ".join(f"{p:>2}" for p in phases) + "   green    yellow"
+    head = "     t (s)  " + " ".join(f"{p:>2}" for p in phases) + "   green    yellow   next"
     lines = [head, "-" * len(head)]
     for r in rows:
         cells = " ".join(f"{'G' if p in r.greens else 'Y' if p in r.yellows else 'r':>2}" for p in phases)
-        lines.append(f"{r.t:10.1f}  {cells}   {_fmt(r.greens):8} {_fmt(r.yellows)}")
+        lines.append(f"{r.t:10.1f}  {cells}   {_fmt(r.greens):8} {_fmt(r.yellows):8} {_fmt(r.nexts)}")
     return "\n".join(lines)
 
 

@@ -1,9 +1,10 @@
 """The emulator reached in process, for virtual-time runs.
 
-:class:`VirtualTarget` puts a controller model on the run's SimPy environment
-(ticking every 0.1 s) and hands the middleware a :class:`hils.transport.LocalTransport`
-to its MIB view. It is what `hils run` uses when no --target is given (found
-through the ``hils.targets`` entry point, so the middleware never imports it).
+:class:`VirtualTarget` puts a controller model on the run's SimPy environment (ticking every
+0.1 s) and offers its MIB view as the object surface the middleware's in-process transport reaches,
+with the latencies a controller's answers take. It is what a virtual-time Testbed uses (found
+through the ``hils.targets`` entry point, so the middleware never imports it); the Testbed builds
+the transport, so this package needs nothing of the middleware.
 """
 
 from __future__ import annotations
@@ -15,20 +16,24 @@ import simpy
 from emulator.controller import TICK, Controller
 from emulator.mib import MibView
 from hils.config import IntersectionConfig
-from hils.transport import Latency, LocalTransport
+from hils.ntcip import Latency
+
+#: Modeled answer times of the in-process controller: a GET of the signal state, and a SET (the
+#: paper measured 7.5 ms for a SET to a Cobalt).
+GET_LATENCY = Latency(0.002)
+SET_LATENCY = Latency(0.0075)
 
 
 class VirtualTarget:
-    """Controller model + MIB view + in-process transport on one environment."""
+    """Controller model + MIB view on one environment; the MIB view is the transport's surface."""
 
-    def __init__(self, env: simpy.Environment, config: IntersectionConfig, *, seed: int = 0,
-                 get_latency: Latency | None = None, set_latency: Latency | None = None,
-                 loss: float = 0.0) -> None:
+    def __init__(self, env: simpy.Environment, config: IntersectionConfig, *, seed: int = 0) -> None:
         self.env = env
         self.controller = Controller(config)
         self.mib = MibView(self.controller)
-        self.transport = LocalTransport(env, self.mib, tau_udp=config.middleware.tau_udp,
-                                        get_latency=get_latency, set_latency=set_latency, loss=loss, seed=seed)
+        self.surface = self.mib
+        self.get_latency = GET_LATENCY
+        self.set_latency = SET_LATENCY
         # The controller powered up at some instant of its own: its tick grid has a phase, drawn from
         # the seed, against the middleware's poll and decision times.
         self.tick_phase = random.Random(f"tick-phase-{seed}").uniform(0.0, TICK)

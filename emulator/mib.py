@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 from emulator.controller import Controller, tenths
+from hils.config import Phase, Recall
 from hils.ntcip import (
     CHANNEL_TABLE,
     CONTROL_TABLE,
@@ -38,15 +39,15 @@ from hils.ntcip import (
     ObjectDef,
     Oid,
     PhaseColumn,
+    PhaseOption,
     SnmpError,
     StatusColumn,
     Syntax,
+    Value,
     groups_to_phases,
     phases_to_groups,
     sequence_oid,
 )
-
-Value = int | bytes
 
 
 @dataclass(frozen=True, slots=True)
@@ -133,14 +134,17 @@ class MibView:
         for p, ph in cfg.phases.items():
             concurrent = bytes(sorted(q for q in cfg.phases if cfg.compatible(p, q)))
             values: dict[PhaseColumn, Value] = {
+                PhaseColumn.WALK: 0,  # no pedestrian service modeled yet: 0 says so, as the standard has it
+                PhaseColumn.PEDESTRIAN_CLEAR: 0,
                 PhaseColumn.MINIMUM_GREEN: int(ph.min_green),
-                PhaseColumn.PASSAGE: 0,
+                PhaseColumn.PASSAGE: tenths(ph.passage),
                 PhaseColumn.MAXIMUM1: int(ph.max_green),
                 PhaseColumn.MAXIMUM2: int(ph.max_green),
                 PhaseColumn.YELLOW_CHANGE: tenths(ph.yellow),
                 PhaseColumn.RED_CLEAR: tenths(ph.red_clear),
+                PhaseColumn.RED_REVERT: 0,
                 PhaseColumn.STARTUP: int(ph.startup),
-                PhaseColumn.OPTIONS: 1,  # bit 0: phase enabled
+                PhaseColumn.OPTIONS: phase_options(ph),
                 PhaseColumn.RING: ph.ring,
                 PhaseColumn.CONCURRENCY: concurrent,
             }
@@ -172,6 +176,19 @@ class MibView:
         for r, order in enumerate(cfg.rings, start=1):
             out.append(Instance(sequence_oid(1, r), SEQUENCE_DATA, lambda o=order: bytes(o)))
         return out
+
+
+_RECALL_BITS = {Recall.MIN: PhaseOption.MIN_RECALL, Recall.MAX: PhaseOption.MAX_RECALL,
+                Recall.SOFT: PhaseOption.SOFT_RECALL}
+
+
+def phase_options(phase: Phase) -> int:
+    """phaseOptions of a configured phase: enabled, its recall, dual entry (backup prevent has no
+    standard bit; it is vendor-specific)."""
+    bits = {PhaseOption.ENABLED} | ({PhaseOption.DUAL_ENTRY} if phase.dual_entry else set())
+    if phase.recall in _RECALL_BITS:
+        bits.add(_RECALL_BITS[phase.recall])
+    return sum(1 << b for b in bits)
 
 
 # Status is read at 10-100 Hz and takes few distinct values: convert each phase set once.

@@ -27,11 +27,11 @@ from dataclasses import dataclass
 from enum import Enum
 from pathlib import Path
 
-from emulator.agent import AgentStats, DropReason, RequestKind, SnmpAgent
+from emulator.agent import AgentStats, DropReason, RequestKind, SnmpAgent, V3User
 from emulator.controller import TICK, Change, Controller
 from emulator.mib import MibView
 from hils.config import IntersectionConfig
-from hils.transport import Latency
+from hils.ntcip import Latency
 
 log = logging.getLogger(__name__)
 
@@ -84,6 +84,7 @@ class ServeOptions:
     latency: Latency = NO_LATENCY
     seed: int | None = None
     trace: Path | None = None  # JSON Lines of every interval change, stamped with time.monotonic_ns()
+    v3_user: V3User | None = None  # the SNMPv3 user accepted besides the communities; None: v1/v2c only
 
 
 @dataclass(frozen=True, slots=True)
@@ -98,8 +99,9 @@ class ServeSummary:
             return ", ".join(f"{k.value} {counts[k]}" for k in kinds if counts[k]) or "none"
 
         t, k = self.traffic, self.ticks
+        reports = f", {t.reports} SNMPv3 reports" if t.reports else ""
         return (f"served {t.answered} requests ({parts(t.requests, RequestKind)}), {t.errors} answered with an "
-                f"error; dropped {t.total_dropped} datagrams ({parts(t.dropped, DropReason)}); "
+                f"error{reports}; dropped {t.total_dropped} datagrams ({parts(t.dropped, DropReason)}); "
                 f"{k.ticks} ticks, {k.late} late (max {k.max_lateness * 1e3:.1f} ms)")
 
 
@@ -114,7 +116,7 @@ class EmulatorServer:
         self.view = MibView(self.controller)
         self.agent = SnmpAgent(self.view, ro_community=self.options.ro_community,
                                rw_community=self.options.rw_community, latency=self.options.latency,
-                               seed=self.options.seed)
+                               seed=self.options.seed, v3_user=self.options.v3_user)
         self.ticker = WallClockTicker(self.controller)
         self._ticking: asyncio.Task[None] | None = None
 

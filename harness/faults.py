@@ -49,7 +49,7 @@ from hils.agents import Agent, Observation
 from hils.config import IntersectionConfig
 from hils.manager import State
 from hils.ntcip import CONTROL_TABLE, ControlColumn, ErrorStatus, Oid, SnmpError, UnitControlStatus, UnitFlashStatus
-from hils.runner import Run, StepCost
+from hils.testbed import StepCost, Testbed
 from hils.transport import CommunicationTimeout, LocalTransport, ObjectSurface, Transport, Value, VarBind
 
 __all__ = [
@@ -144,7 +144,7 @@ class Fault:
         """The object surface the transport should reach; unchanged unless the fault sits there."""
         return surface
 
-    def on_run(self, run: Run, target: FaultTarget) -> None:
+    def on_run(self, run: Testbed, target: FaultTarget) -> None:
         """Called before the run starts (agent, step-cost and middleware faults install here)."""
 
     def describe(self) -> str:
@@ -483,7 +483,7 @@ class SlowSteps(Fault):
         self.gap = gap
         self._offset = 0  # steps seen since the window opened
 
-    def on_run(self, run: Run, target: FaultTarget) -> None:
+    def on_run(self, run: Testbed, target: FaultTarget) -> None:
         run.step_cost = self.wrap(run.step_cost, lambda: run.env.now)
 
     def wrap(self, inner: StepCost, clock: Callable[[], float]) -> StepCost:
@@ -561,7 +561,7 @@ class WrappedAgent:
         return self._hook(self.inner, observation)
 
 
-def _observation(run: Run) -> Observation:
+def _observation(run: Testbed) -> Observation:
     return Observation(run.env.now, run.middleware.cache.state, run.simulation.traffic_state())
 
 
@@ -575,7 +575,7 @@ class BadActions(Fault):
         super().__init__(name, window=window, count=count)
         self.action = action
 
-    def on_run(self, run: Run, target: FaultTarget) -> None:
+    def on_run(self, run: Testbed, target: FaultTarget) -> None:
         value = bad_value(self.action, run.spec.action_type, run.spec.config)
 
         def act(inner: Agent, observation: Observation) -> Any:
@@ -604,7 +604,7 @@ class ActionBurst(Fault):
         super().__init__(name, window=window, count=count)
         self.size = size
 
-    def on_run(self, run: Run, target: FaultTarget) -> None:
+    def on_run(self, run: Testbed, target: FaultTarget) -> None:
         def burst(inner: Agent) -> Generator[simpy.Event, Any, None]:
             # Started from act(), this process runs once the agent loop has submitted the action.
             yield run.env.timeout(0)
@@ -636,10 +636,10 @@ class ActionsDuringTimeout(Fault):
         super().__init__(name, window=window, count=count)
         self.period = 1.0 / rate_hz
 
-    def on_run(self, run: Run, target: FaultTarget) -> None:
+    def on_run(self, run: Testbed, target: FaultTarget) -> None:
         run.env.process(self._act(run))
 
-    def _act(self, run: Run) -> Generator[simpy.Event, Any, None]:
+    def _act(self, run: Testbed) -> Generator[simpy.Event, Any, None]:
         env, mw = run.env, run.middleware
         yield env.timeout(self.window.start)
         while env.now < self.window.end:
@@ -664,10 +664,10 @@ class KeepaliveSuppressed(Fault):
 
     kind = "keepalive_off"
 
-    def on_run(self, run: Run, target: FaultTarget) -> None:
+    def on_run(self, run: Testbed, target: FaultTarget) -> None:
         run.env.process(self._suppress(run))
 
-    def _suppress(self, run: Run) -> Generator[simpy.Event, Any, None]:
+    def _suppress(self, run: Testbed) -> Generator[simpy.Event, Any, None]:
         env, mw = run.env, run.middleware
         end = self.window.end
         yield env.timeout(self.window.start)
@@ -715,11 +715,8 @@ class FaultTarget:
         surface: ObjectSurface = self.mib
         for fault in faults:
             surface = fault.wrap_surface(surface, env)
-        inner: Transport = self.base.transport
-        if surface is not self.mib:
-            wire = self.base.transport
-            inner = LocalTransport(env, surface, tau_udp=wire.tau_udp, get_latency=wire.get_latency,
-                                   set_latency=wire.set_latency, loss=wire.loss, seed=seed)
+        inner = LocalTransport(env, surface, tau_udp=config.middleware.tau_udp, get_latency=self.base.get_latency,
+                               set_latency=self.base.set_latency, seed=seed)
         self.transport = FaultyTransport(env, inner, tau_udp=config.middleware.tau_udp)
         self._ticking = self.base.process
         for fault in faults:

@@ -1,7 +1,7 @@
 """`hils faults ...`: run and list the fault scenarios.
 
 ``hils faults run [PATH ...]`` runs every scenario (default: the shipped suite
-in ``fault_scenarios/``), prints a results table, writes ``faults.md`` and
+in ``harness/fault_scenarios/``), prints a results table, writes ``faults.md`` and
 ``faults.json`` to the report directory and exits 1 if any expectation failed.
 ``hils faults list [PATH ...]`` prints one line per scenario. ``hils faults
 proxy`` relays UDP to an SNMP agent with faults on a schedule (:mod:`harness.proxy`).

@@ -15,11 +15,6 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
-
 from harness import machine
 from hils import config as config_mod
 from hils import jsonout
@@ -28,8 +23,8 @@ from hils.agents import Observation
 from hils.config import IntersectionConfig
 from hils.events import Kind
 from hils.latency import PAPER_LATENCY_MS, Stats, internal_latencies_ms, transition_holds
-from hils.plots import COLORS, signal_intervals
-from hils.runner import RunSpec, run_virtual
+from hils.plots import COLORS, pyplot, signal_intervals
+from hils.testbed import RunSpec, run_spec
 
 OUT = Path("reports/paper")
 PAPER_HOLD = (5.18, 5.20)  # seconds, the paper's range of holds per transition at 10 Hz polling
@@ -64,17 +59,9 @@ class ScriptedSwitchAgent:
 
 
 def latency_table(cfg: IntersectionConfig, duration: float, seed: int) -> dict[str, Stats]:
-    from hils.sumo import SumoSimulation
-
     out = {}
     for action_type in ActionType:
-        sim = SumoSimulation(cfg, seed=seed, end=duration)
-        sim.start()
-        try:
-            result = run_virtual(RunSpec(cfg, action_type, duration=duration, seed=seed, sumo=True), simulation=sim,
-                                 chunk=duration)
-        finally:
-            sim.close()
+        result = run_spec(RunSpec(cfg, action_type, duration=duration, seed=seed, sumo=True))
         out[action_type.value] = Stats.of(internal_latencies_ms(result.records).get(action_type.value, []))
     return out
 
@@ -100,7 +87,7 @@ def trajectory_run(cfg: IntersectionConfig, seed: int) -> tuple[list[dict[str, A
     def configure(run, target):
         run.agent = ScriptedSwitchAgent([1, 0, 1, 0, 1])
 
-    records = run_virtual(spec, configure=configure).records
+    records = run_spec(spec, configure=configure).records
     received = [r for r in records if r["kind"] == Kind.ACTION_RECEIVED]
     return records, received[2]["t"]
 
@@ -124,6 +111,7 @@ def _pair_spans(records, t0: float, start: float, end: float):
 
 def trajectory_figure(records: list[dict[str, Any]], t0: float, path: Path) -> None:
     start, end = -2.0, 29.0
+    plt = pyplot()
     fig, (ax_ev, ax_sig) = plt.subplots(2, 1, figsize=(11, 5.6), sharex=True, height_ratios=[1.1, 1.4])
     commands = [r for r in records if r["kind"] == Kind.ACTION_RECEIVED and r["t"] >= t0 - 1e-9][:3]
     for i, cmd in enumerate(commands, start=1):
@@ -178,6 +166,7 @@ def trajectory_zoom_figure(records: list[dict[str, Any]], t0: float, path: Path)
     verified = end_events[0]
     end_events += [r for r in records if r["kind"] == Kind.STATE and r["t"] == verified["t"] and r["to"] == "idle"]
     answered = next(r for r in records if r["kind"] == Kind.SET_ANSWERED and r.get("command_id") == cid)
+    plt = pyplot()
     fig, (ax_start, ax_mid, ax_end) = plt.subplots(3, 1, figsize=(10, 6.4), height_ratios=[1, 1.3, 1])
     _event_strip(ax_start, start_events, "wall clock since the agent's output (us)",
                  "Start of Command 1: agent output to SET dispatch")
@@ -232,12 +221,13 @@ def holds_by_rate(cfg: IntersectionConfig, rates: tuple[float, ...], seed: int, 
         holds: list[float] = []
         for k in range(runs):
             spec = RunSpec(cfg.with_middleware(poll_hz=rate), ActionType.SWITCH, duration=300.0, seed=seed + k)
-            holds += transition_holds(run_virtual(spec, chunk=300.0).records)[2:]
+            holds += transition_holds(run_spec(spec).records)[2:]
         out[rate] = Stats.of(holds)
     return out
 
 
 def holds_figure(holds: dict[float, Stats], clearance: float, path: Path) -> None:
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(8, 3.6))
     labels = [f"{r:g} Hz" for r in holds]
     excess = [(st.mean - clearance) * 1e3 for st in holds.values()]

@@ -20,9 +20,17 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
+#: SNMPv3 users of the snmpd below: one with authentication and privacy, one with authentication only.
+SNMPD_V3_USERS = {"hilspriv": ("authPriv", "hils-auth-key", "hils-priv-key"),
+                  "hilsauth": ("authNoPriv", "hils-auth-key", "")}
+
 SNMPD_CONF = """\
 rocommunity public 127.0.0.1
 rwcommunity private 127.0.0.1
+createUser hilspriv SHA "hils-auth-key" AES "hils-priv-key"
+createUser hilsauth SHA "hils-auth-key"
+rwuser hilspriv priv
+rwuser hilsauth auth
 """
 
 
@@ -49,7 +57,7 @@ def start_emulator(log: Path, *args: str, verbose: bool = False) -> Served:
         proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=err, text=True)
     ready, _, _ = select.select([proc.stdout], [], [], 20)
     line = proc.stdout.readline() if ready else ""
-    match = re.fullmatch(r"serving (.+) on udp:127\.0\.0\.1:(\d+) \(ro=(\S+) rw=(\S+)\)\n", line)
+    match = re.fullmatch(r"serving (.+) on udp:127\.0\.0\.1:(\d+) \(ro=(\S+) rw=(\S+)( v3=\S+)?\)\n", line)
     if match is None:
         proc.kill()
         proc.wait()

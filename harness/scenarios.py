@@ -59,6 +59,7 @@ import time
 import tomllib
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import asdict, dataclass, field
+from importlib import resources
 from pathlib import Path
 from typing import Any
 
@@ -90,7 +91,7 @@ from hils.config import ConfigError, IntersectionConfig, MiddlewareParams
 from hils.events import Kind
 from hils.manager import TimeoutReason
 from hils.ntcip import UnitControlStatus
-from hils.runner import Run, RunSpec, run_virtual
+from hils.testbed import RunSpec, Testbed, run_spec
 
 __all__ = [
     "FAULT_TYPES",
@@ -118,8 +119,8 @@ class ScenarioError(ConfigError):
 
 
 def default_suite() -> Path:
-    """The shipped suite: ``fault_scenarios/`` beside the ``harness`` package."""
-    return Path(__file__).resolve().parents[1] / "fault_scenarios"
+    """The shipped suite: ``harness/fault_scenarios/``, package data, so it is there however hils was installed."""
+    return Path(str(resources.files("harness") / "fault_scenarios"))
 
 
 # --- validation helpers -----------------------------------------------------------------------------
@@ -618,11 +619,11 @@ def run_scenario(scenario: Scenario, *, log_path: Path | None = None) -> Scenari
         monitors.append(IndicationMonitor(env, target.controller, config))
         return target
 
-    def configure(run: Run, target: FaultTarget) -> None:
+    def configure(run: Testbed, target: FaultTarget) -> None:
         for fault in faults:
             fault.on_run(run, target)
 
-    result = run_virtual(scenario.spec(log_path), target_factory=target_factory, configure=configure)
+    result = run_spec(scenario.spec(log_path), target=target_factory, configure=configure)
     return evaluate(scenario, result.records, faults, monitors[0], wall_s=time.perf_counter() - t0)
 
 

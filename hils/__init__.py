@@ -1,0 +1,46 @@
+"""hils: a hardware-in-the-loop testbed for real-time traffic-signal phase control over NTCIP 1202.
+
+The public API: :class:`Testbed` assembles and drives a run (virtual time against the built-in
+emulator, or wall-clock time against a real controller); :class:`ActionType` names the three action
+designs; :class:`Observation` is what an agent sees; :class:`ActionError` is the typed refusal of an
+action that cannot be served; :func:`load_config` reads an intersection config.
+
+The names are loaded when first used, so that importing the shared layer (``hils.ntcip``,
+``hils.config``), as the emulator does, does not load the middleware.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+_EXPORTS = {
+    "ActionError": ("hils.actions", "ActionError"),
+    "ActionType": ("hils.actions", "ActionType"),
+    "Agent": ("hils.agents", "Agent"),
+    "AgentFailed": ("hils.testbed", "AgentFailed"),
+    "ConfigError": ("hils.config", "ConfigError"),
+    "IntersectionConfig": ("hils.config", "IntersectionConfig"),
+    "Observation": ("hils.agents", "Observation"),
+    "RunInterrupted": ("hils.testbed", "RunInterrupted"),
+    "State": ("hils.manager", "State"),
+    "Testbed": ("hils.testbed", "Testbed"),
+    "UserError": ("hils.errors", "UserError"),
+    "load_config": ("hils.config", "load"),
+}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str) -> Any:
+    try:
+        module, attribute = _EXPORTS[name]
+    except KeyError:
+        raise AttributeError(f"module 'hils' has no attribute {name!r}") from None
+    value = getattr(importlib.import_module(module), attribute)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted([*globals(), *_EXPORTS])

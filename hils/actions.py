@@ -58,6 +58,12 @@ class DurationRangeError(ActionError):
     reason = "duration_out_of_range"
 
 
+def _short(value: object) -> str:
+    """repr() of an action value, cut short: a refusal message stays one readable line."""
+    text = repr(value)
+    return text if len(text) <= 80 else text[:77] + "..."
+
+
 class ConflictMatrix:
     """Which phases may show green together: the config's matrix, derived from
     the ring-and-barrier structure unless the config overrides it."""
@@ -78,15 +84,38 @@ def _is_int(value: object) -> bool:
     return isinstance(value, numbers.Integral) and not isinstance(value, bool)
 
 
+def _unwrap(value: object) -> object:
+    """The number inside what RL libraries hand over: a numpy 0-d array or a one-element array."""
+    shape = getattr(value, "shape", None)
+    if shape is not None and hasattr(value, "item") and (shape == () or shape == (1,)):
+        return value.reshape(()).item() if shape else value.item()
+    return value
+
+
+def _integral(value: object) -> int | None:
+    """An integer value given as an int or as a float with an integral value (numpy's too); else None."""
+    value = _unwrap(value)
+    if isinstance(value, bool) or (getattr(value, "dtype", None) is not None and value.dtype.kind == "b"):
+        return None
+    if _is_int(value):
+        return int(value)
+    if isinstance(value, numbers.Real):
+        x = float(value)
+        if math.isfinite(x) and x == int(x):
+            return int(x)
+    return None
+
+
 class ActionConverter:
-    """Converts one action type to commands; keeps the position in the cyclic sequence."""
+    """Converts one action type to commands. Switch and duration actions depend on the position in the
+    cyclic sequence (the index of the pair last commanded or shown, -1 before any): the manager keeps
+    it and passes it in, so the converter holds no state of the run."""
 
     def __init__(self, config: IntersectionConfig, action_type: ActionType) -> None:
         self.config = config
         self.action_type = ActionType(action_type)
         self.matrix = ConflictMatrix(config)
         self.sequence = config.sequence
-        self.position = -1  # index in the sequence of the pair last commanded; -1 before the first
         self._pairs = frozenset(config.pairs)
         self._convert = {
             ActionType.SELECTION: self._selection,
@@ -94,39 +123,29 @@ class ActionConverter:
             ActionType.DURATION: self._duration,
         }[self.action_type]
 
-    def sync(self, greens: frozenset[int]) -> None:
-        """Align the sequence position with the pair the controller shows (start-up, recovery)."""
-        for i, pair in enumerate(self.sequence):
-            if set(pair) <= greens:
-                self.position = i
-                return
+    def convert(self, value: object, position: int = -1) -> Command:
+        """The command for an action value at sequence ``position``, or an :class:`ActionError`."""
+        return self._convert(value, position)
 
-    def convert(self, value: object) -> Command:
-        """The command for an action value, or an :class:`ActionError`."""
-        return self._convert(value)
+    def pair_after(self, position: int) -> Pair:
+        """The pair a switch (1) or duration action serves next from ``position``."""
+        return self.sequence[(position + 1) % len(self.sequence)]
 
-    def commit(self, command: Command) -> None:
-        """Record that a command was accepted, so the cyclic position follows it."""
-        if command.phases in self.sequence:
-            self.position = self.sequence.index(command.phases)
+    def pair_at(self, position: int) -> Pair | None:
+        return self.sequence[position] if position >= 0 else None
 
-    @property
-    def next_pair(self) -> Pair:
-        return self.sequence[(self.position + 1) % len(self.sequence)]
-
-    @property
-    def current_pair(self) -> Pair | None:
-        return self.sequence[self.position] if self.position >= 0 else None
-
-    def _selection(self, value: object) -> Command:
-        if isinstance(value, (str, bytes)) or not hasattr(value, "__len__") or len(value) != 2 or not all(
-                _is_int(p) for p in value):
-            raise ActionTypeError(f"phase selection takes a pair of phase numbers, got {value!r}; "
+    def _selection(self, value: object, position: int) -> Command:
+        # A pair is ordered: a set or a mapping is not one, whatever its size.
+        ordered = not isinstance(value, (str, bytes, set, frozenset, dict)) and hasattr(value, "__len__")
+        numbers_ = [_integral(p) for p in value] if ordered and len(value) == 2 else None
+        if numbers_ is None or None in numbers_:
+            raise ActionTypeError(f"phase selection takes a pair of phase numbers, got {_short(value)}; "
                                   f"allowed: one of {list(self.config.pairs)}")
-        a, b = (int(p) for p in value)
+        a, b = numbers_
         for p in (a, b):
             if p not in self.config.phases:
-                raise UnknownPhaseError(f"unknown phase {p} in {[a, b]}; allowed phases: {list(self.matrix.phases)}")
+                raise UnknownPhaseError(f"unknown phase {_short(p)} in {_short([a, b])}; "
+                                        f"allowed phases: {list(self.matrix.phases)}")
         if a == b or self.matrix.conflict(a, b):
             raise ConflictError(f"phases {a} and {b} conflict and are never commanded together; "
                                 f"allowed: one of {list(self.config.pairs)}")
@@ -136,21 +155,27 @@ class ActionConverter:
                                       f"allowed: one of {list(self.config.pairs)}")
         return Command(pair)
 
-    def _switch(self, value: object) -> Command:
-        if not _is_int(value) or int(value) not in (0, 1):
-            raise ActionTypeError(f"phase switch takes 0 (keep) or 1 (advance), got {value!r}")
-        if int(value) == 0:
-            return Command(self.current_pair or self.next_pair, keep=self.current_pair is not None)
-        return Command(self.next_pair)
+    def _switch(self, value: object, position: int) -> Command:
+        number = None if isinstance(value, (list, tuple)) else _integral(value)
+        if number not in (0, 1):
+            raise ActionTypeError(f"phase switch takes 0 (keep) or 1 (advance), got {_short(value)}")
+        current = self.pair_at(position)
+        if number == 0:
+            return Command(current or self.pair_after(position), keep=current is not None)
+        return Command(self.pair_after(position))
 
-    def _duration(self, value: object) -> Command:
-        if isinstance(value, bool) or not isinstance(value, numbers.Real):
-            raise ActionTypeError(f"phase duration takes a number x in [0, 1], got {value!r}")
-        x = float(value)
+    def _duration(self, value: object, position: int) -> Command:
+        number = _unwrap(value)
+        if isinstance(number, bool) or not isinstance(number, numbers.Real):
+            raise ActionTypeError(f"phase duration takes a number x in [0, 1], got {_short(value)}")
+        try:
+            x = float(number)
+        except OverflowError:
+            raise DurationRangeError(f"phase duration x = {_short(value)} is outside [0, 1]") from None
         if math.isnan(x) or not 0.0 <= x <= 1.0:
             raise DurationRangeError(f"phase duration x = {x} is outside [0, 1]; allowed: 0 <= x <= 1 "
                                      "(0 = minimum green, 1 = maximum green)")
-        pair = self.next_pair
+        pair = self.pair_after(position)
         g_min, g_max = self.green_range(pair)
         return Command(pair, green=g_min + x * (g_max - g_min))
 

@@ -16,6 +16,7 @@ from typing import Any, Protocol, runtime_checkable
 
 from hils.actions import ActionType
 from hils.config import IntersectionConfig, Pair
+from hils.errors import UserError
 from hils.ntcip import SignalState
 from hils.webster import webster_plan
 
@@ -28,6 +29,7 @@ class Observation:
     signal: SignalState | None
     traffic: Any = None  # the simulation's traffic state (hils.sumo.TrafficState), when a simulation runs
     next_pair: Pair | None = None  # the pair a switch or duration action would serve next
+    state: Any = None  # the manager's state (hils.manager.State): idle, on_hold or timeout
 
 
 @runtime_checkable
@@ -37,7 +39,7 @@ class Agent(Protocol):
     def act(self, observation: Observation) -> Any: ...
 
 
-class AgentError(TypeError):
+class AgentError(UserError, TypeError):
     """A class that cannot serve as an agent, or an agent spec that does not load."""
 
 

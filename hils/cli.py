@@ -11,9 +11,10 @@ import argparse
 import logging
 import sys
 from collections.abc import Sequence
-from importlib.metadata import entry_points
+from importlib.metadata import PackageNotFoundError, entry_points, version
 
-from hils.config import ConfigError
+from hils.dashboard import cli as view
+from hils.errors import UserError
 
 log = logging.getLogger("hils")
 
@@ -27,12 +28,21 @@ virtual time (default) or, with --target snmp://HOST:PORT, a real controller or
 """
 
 
+def _version() -> str:
+    try:
+        return version("hils")
+    except PackageNotFoundError:
+        return "unknown (not installed)"
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="hils", description=DESCRIPTION,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("-v", "--verbose", action="store_true", help="debug log output")
+    parser.add_argument("-v", "--verbose", action="store_true", help="debug log output, tracebacks of errors")
+    parser.add_argument("--version", action="version", version=f"hils {_version()}")
     parser.add_argument("-q", "--quiet", action="store_true", help="only warnings and errors in the log")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    view.register(sub)
     for ep in sorted(entry_points(group="hils.commands"), key=lambda e: e.name):
         try:
             register = ep.load()
@@ -50,8 +60,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     logging.basicConfig(level=level, format="%(asctime)s %(levelname)-7s %(name)s: %(message)s")
     try:
         return int(args.func(args) or 0)
-    except ConfigError as exc:
-        print(f"hils: configuration error: {exc}", file=sys.stderr)
+    except UserError as exc:
+        print(f"hils: {exc}", file=sys.stderr)
+        if args.verbose:
+            log.debug("traceback", exc_info=exc)
         return 2
     except KeyboardInterrupt:
         print("hils: interrupted", file=sys.stderr)

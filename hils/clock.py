@@ -159,6 +159,8 @@ class WallClockDriver:
         self._running = False
         self._stop_requested = False
         self._waiter: asyncio.Future[None] | None = None
+        #: The signal (SIGINT or SIGTERM) that stopped :meth:`run_sync`, until its caller clears it.
+        self.signalled: signal.Signals | None = None
 
     @property
     def running(self) -> bool:
@@ -213,18 +215,23 @@ class WallClockDriver:
 
         With ``handle_signals`` (main thread only), SIGINT and SIGTERM call
         :meth:`stop` for the duration of the run, so Ctrl-C ends the run
-        between two SimPy steps instead of inside one.
+        between two SimPy steps instead of inside one; :attr:`signalled`
+        then says which signal it was.
         """
         installed: list[signal.Signals] = []
         if handle_signals:
             for sig in (signal.SIGINT, signal.SIGTERM):
-                self.loop.add_signal_handler(sig, self.stop)
+                self.loop.add_signal_handler(sig, self._on_signal, sig)
                 installed.append(sig)
         try:
             self.loop.run_until_complete(self.run(until))
         finally:
             for sig in installed:
                 self.loop.remove_signal_handler(sig)
+
+    def _on_signal(self, sig: signal.Signals) -> None:
+        self.signalled = sig
+        self.stop()
 
     def stop(self) -> None:
         """Make :meth:`run` return after the event being processed; safe from a signal handler."""

@@ -9,15 +9,21 @@ there: `hils emulator serve`, or a real controller.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
+import signal
+import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 from hils import config as config_mod
 from hils import plots, summary
 from hils.actions import ActionType
-from hils.agents import AgentError
-from hils.runner import DEFAULT_AGENTS, RunSpec, Simulation, run_virtual
+from hils.errors import UserError
+from hils.status import StatusLine
+from hils.testbed import DEFAULT_AGENTS, VIRTUAL, AgentFailed, RunInterrupted, RunSpec, Testbed
 from hils.webster import webster_plan
 
 log = logging.getLogger(__name__)
@@ -66,6 +72,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--plot-window", default="0:180", metavar="START:END",
                    help="simulated seconds shown in the signal timeline (0:180)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--dashboard", type=int, metavar="PORT",
+                   help="serve a live dashboard of the run on http://127.0.0.1:PORT/ (wall-clock runs; 0: any "
+                        "free port); watch a finished or virtual-time run with `hils view RUN_DIR`")
+    p.add_argument("--dashboard-control", action="store_true",
+                   help="let the dashboard's page recover the manager from TIMEOUT (default: read-only)")
     p.set_defaults(func=run_command)
 
 
@@ -73,7 +84,7 @@ def _window(text: str) -> tuple[float, float]:
     try:
         a, b = (float(x) for x in text.split(":"))
     except ValueError:
-        raise SystemExit(f"hils run: --plot-window must be START:END in seconds, got {text!r}") from None
+        raise UsageError(f"--plot-window must be START:END in seconds, got {text!r}") from None
     return a, b
 
 
@@ -82,55 +93,158 @@ def run_command(args: argparse.Namespace) -> int:
     if args.poll_hz is not None:
         cfg = cfg.with_middleware(poll_hz=args.poll_hz)
     window = _window(args.plot_window)
-    out = args.out or Path("reports/runs") / f"{time.strftime('%Y%m%d-%H%M%S')}-{args.action_type}"
-    out.mkdir(parents=True, exist_ok=True)
+    if not args.duration > 0:
+        raise UsageError(f"--duration must be positive seconds, got {args.duration:g}")
+    dashboard = _dashboard(args)
+    out = _run_folder(args.out, args.action_type)
+    log_path = args.log or out / "events.jsonl"
     spec = RunSpec(cfg, ActionType(args.action_type), agent=args.agent, duration=args.duration, seed=args.seed,
-                   log_path=args.log or out / "events.jsonl",
-                   recover_after=None if args.recover_after < 0 else args.recover_after, sumo=not args.no_sumo)
+                   log_path=log_path, recover_after=None if args.recover_after < 0 else args.recover_after,
+                   sumo=not args.no_sumo)
     if spec.agent_spec == "webster":
         print(webster_plan(cfg).describe())
-    simulation = None if args.no_sumo else _sumo(cfg, args)
-    try:
-        if args.target:
-            from hils.wire import run_wire
-
-            result = run_wire(spec, args.target, simulation=simulation)
-        else:
-            result = _run_with_progress(spec, simulation, args.no_progress)
-    except AgentError as exc:
-        print(f"hils run: {exc}")
-        return 2
-    finally:
-        if simulation is not None:
-            traffic = simulation.summary()
-            simulation.close()
-    records = result.records
-    s = summary.summarize(records, cfg, traffic=None if simulation is None else traffic, wall_s=result.wall_s)
+    # A wall-clock run is never silent: a live status line (periodic log lines when not on a terminal).
+    status = StatusLine() if args.target and not args.no_progress else None
+    tb = Testbed(cfg, action_type=spec.action_type, target=args.target or VIRTUAL, sumo=spec.sumo, seed=spec.seed,
+                 agent=spec.agent, duration=spec.duration, log_path=log_path, recover_after=spec.recover_after,
+                 on_reset=_hooks(status.start if status else None, dashboard.attach if dashboard else None))
+    error: BaseException | None = None
+    with _terminate_as_interrupt(), tb, _served(dashboard):
+        try:
+            tb.reset()
+            if tb.mode == VIRTUAL and not args.no_progress:
+                with _progress(spec) as bar:
+                    tb.run(progress=lambda t: bar.update(t - bar.n))
+            else:
+                tb.run()
+        except (AgentFailed, RunInterrupted, KeyboardInterrupt) as exc:
+            error = exc
+        except UserError:
+            raise
+        except Exception as exc:  # an error inside the run: the run is finished, say so and keep what it logged
+            if args.verbose:
+                raise
+            error = exc
+        finally:
+            if status is not None:
+                status.close()
+    records = tb.records
+    s = summary.summarize(records, cfg, traffic=tb.traffic, wall_s=tb.wall_s)
     summary.write(s, out / "summary.json")
-    plots.signal_timeline(records, cfg, out / "signal_timeline.png", start=window[0], end=window[1])
-    if result.run.traffic_samples:
-        plots.queues(result.run.traffic_samples, out / "queues.png", title=f"Queues per approach, {cfg.name}",
+    outputs = [log_path.name if log_path.parent == out else str(log_path), "summary.json"]
+    if records:
+        plots.signal_timeline(records, cfg, out / "signal_timeline.png", start=window[0], end=window[1])
+        outputs.append("signal_timeline.png")
+    if tb.traffic_samples:
+        plots.queues(tb.traffic_samples, out / "queues.png", title=f"Queues per approach, {cfg.name}",
                      spillback={a: [60.0 * m for m in v["spillback_minutes"]]
                                 for a, v in s["traffic"]["approaches"].items()} if s.get("traffic") else None)
+        outputs.append("queues.png")
     print(summary.render(s))
     for warning in summary.warnings(s):
         print(warning)
-    print(f"Outputs in {out}/: {spec.log_path.name if spec.log_path.parent == out else spec.log_path}, "
-          "summary.json, signal_timeline.png" + (", queues.png" if result.run.traffic_samples else ""))
-    return 0
+    print(f"Outputs in {out}/: {', '.join(outputs)}")
+    return _ending(tb.end_reason, error)
 
 
-def _sumo(cfg: config_mod.IntersectionConfig, args: argparse.Namespace) -> Simulation:
-    from hils.sumo import SumoSimulation
+def _dashboard(args: argparse.Namespace) -> Any:
+    """The live dashboard asked for (None without --dashboard)."""
+    if args.dashboard is None:
+        if args.dashboard_control:
+            raise UsageError("--dashboard-control needs --dashboard PORT")
+        return None
+    if not args.target:
+        raise UsageError("--dashboard serves wall-clock runs (--target snmp://...); watch a virtual-time run "
+                         "afterwards with `hils view RUN_DIR --realtime 10`")
+    if not 0 <= args.dashboard <= 65535:
+        raise UsageError(f"--dashboard must be a TCP port from 0 to 65535, got {args.dashboard}")
+    from hils.dashboard.live import LiveDashboard
 
-    sim = SumoSimulation(cfg, seed=args.seed, end=args.duration)
-    sim.start()
-    return sim
+    return LiveDashboard(args.dashboard, control=args.dashboard_control)
 
 
-def _run_with_progress(spec: RunSpec, simulation: Simulation | None, quiet: bool):
+@contextlib.contextmanager
+def _served(dashboard: Any) -> Iterator[None]:
+    """Stop the dashboard's server when the run is over, before the Testbed closes its loop."""
+    try:
+        yield
+    finally:
+        if dashboard is not None:
+            dashboard.stop()
+
+
+def _hooks(*hooks: Any) -> Any:
+    """One ``on_reset`` hook calling each of ``hooks`` that is given (None when none is)."""
+    given = [h for h in hooks if h is not None]
+    if not given:
+        return None
+
+    def on_reset(testbed: Testbed, target: Any) -> None:
+        for hook in given:
+            hook(testbed, target)
+
+    return on_reset
+
+
+class UsageError(UserError):
+    """A command-line mistake: one line on stderr, exit status 2."""
+
+
+#: Exit status per way a run ends (0 only for a normal end).
+EXIT_STATUS = {"duration": 0, "interrupted": 130, "terminated": 143, "agent_error": 1, "error": 1}
+
+
+def _ending(reason: str | None, error: BaseException | None) -> int:
+    """Say how the run ended (one line, stderr for anything but a normal end) and return the exit status."""
+    if reason == "duration" and error is None:
+        print("Run ended: its duration passed.")
+        return 0
+    cause = error.__cause__ if isinstance(error, AgentFailed) and error.__cause__ else error
+    how = {"interrupted": "interrupted (Ctrl-C)", "terminated": "terminated (SIGTERM)",
+           "agent_error": f"the agent failed: {error}", }.get(reason or "error", f"error: {cause}")
+    print(f"hils run: run ended early, {how}; calls cleared, outputs written (use -v for a traceback)",
+          file=sys.stderr)
+    if isinstance(error, AgentFailed) and cause is not error:
+        log.debug("agent traceback", exc_info=cause)
+    return EXIT_STATUS.get(reason or "error", 1)
+
+
+def _run_folder(given: Path | None, action_type: str) -> Path:
+    """The run's folder: the one given, or a new one under reports/runs/ that no other run uses."""
+    if given is not None:
+        try:
+            given.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise UsageError(f"cannot create the output folder {given}: {exc.strerror}") from None
+        return given
+    base = Path("reports/runs") / f"{time.strftime('%Y%m%d-%H%M%S')}-{action_type}"
+    for n in range(1, 1000):
+        candidate = base if n == 1 else base.with_name(f"{base.name}-{n}")
+        try:
+            candidate.mkdir(parents=True, exist_ok=False)
+        except FileExistsError:
+            continue  # another run started in the same second: take the next name
+        except OSError as exc:
+            raise UsageError(f"cannot create the output folder {candidate}: {exc.strerror}") from None
+        return candidate
+    raise UsageError(f"no free run folder name beside {base}")
+
+
+@contextlib.contextmanager
+def _terminate_as_interrupt() -> Iterator[None]:
+    """SIGTERM ends a virtual-time run like Ctrl-C does (the wall-clock driver handles both itself)."""
+    def handler(signum: int, frame: Any) -> None:
+        raise RunInterrupted("terminated")
+
+    previous = signal.signal(signal.SIGTERM, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _progress(spec: RunSpec):
     from tqdm import tqdm
 
-    with tqdm(total=spec.duration, unit="sim s", disable=quiet, desc=f"{spec.action_type.value}",
-              bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f} sim s [{elapsed}<{remaining}]") as bar:
-        return run_virtual(spec, simulation=simulation, progress=lambda t: bar.update(t - bar.n))
+    return tqdm(total=spec.duration, unit="sim s", desc=f"{spec.action_type.value}",
+                bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f} sim s [{elapsed}<{remaining}]")

@@ -15,10 +15,12 @@ import math
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from enum import StrEnum
 from importlib import resources
 from pathlib import Path
 from typing import Any
 
+from hils.errors import UserError
 from hils.ntcip import PhaseStartup, group_count
 
 Pair = tuple[int, int]
@@ -32,10 +34,11 @@ _STARTUP_NAMES = {
     "red_clear": PhaseStartup.RED_CLEAR,
 }
 APPROACHES = ("north", "south", "east", "west")
+_PHASE_OPTIONS = ("passage", "recall", "dual_entry", "backup_prevent")
 TURNS = ("left", "through")
 
 
-class ConfigError(ValueError):
+class ConfigError(UserError, ValueError):
     """A configuration that cannot be used; says where and what is allowed."""
 
     def __init__(self, source: str, field_name: str, message: str) -> None:
@@ -43,6 +46,15 @@ class ConfigError(ValueError):
         self.source = source
         self.field = field_name
         self.message = message
+
+
+class Recall(StrEnum):
+    """A phase's recall: a call the controller places on it by itself."""
+
+    NONE = "none"
+    MIN = "min"  # called whenever it is not green: served at least for its minimum every cycle
+    MAX = "max"  # called always, green included: served to its maximum when others wait
+    SOFT = "soft"  # called only while no other phase is: where the controller goes when idle
 
 
 @dataclass(frozen=True, slots=True)
@@ -56,6 +68,10 @@ class Phase:
     startup: PhaseStartup = PhaseStartup.PHASE_NOT_ON
     approach: str | None = None
     turn: str | None = None
+    passage: float = 0.0  # s a green extends after its call was last seen (gap time); 0: gap out at once
+    recall: Recall = Recall.NONE
+    dual_entry: bool = False  # served beside a lone call of the other ring entering its barrier group
+    backup_prevent: bool = False  # not served again from a later phase of its group before the barrier
 
     @property
     def clearance(self) -> float:
@@ -204,7 +220,8 @@ def _phase(number: int, raw: Any, defaults: Mapping[str, Any], ring: int, source
     w = f"phases.{number}."
     if not isinstance(raw, dict):
         raise ConfigError(source, f"phases.{number}", "must be a table of phase settings")
-    _unknown(raw, ("min_green", "max_green", "yellow", "red_clear", "startup", "approach", "turn"), w, source)
+    _unknown(raw, ("min_green", "max_green", "yellow", "red_clear", "startup", "approach", "turn", *_PHASE_OPTIONS),
+             w, source)
     merged = {**defaults, **raw}
 
     def where(key: str) -> str:
@@ -227,8 +244,22 @@ def _phase(number: int, raw: Any, defaults: Mapping[str, Any], ring: int, source
         raise ConfigError(source, f"{w}approach", f"is {approach!r}; allowed: {', '.join(APPROACHES)}")
     if turn is not None and turn not in TURNS:
         raise ConfigError(source, f"{w}turn", f"is {turn!r}; allowed: {', '.join(TURNS)}")
+    passage = _number(merged, "passage", where("passage"), source, 0.0, low=0, high=25.5, step=0.1)
+    if passage > max_green:
+        raise ConfigError(source, f"{where('passage')}passage",
+                          f"is {passage} s, beyond max_green {max_green} s; allowed: passage <= max_green")
+    recall = merged.get("recall", Recall.NONE.value)
+    if recall not in {r.value for r in Recall}:
+        raise ConfigError(source, f"{where('recall')}recall",
+                          f"is {recall!r}; allowed: {', '.join(r.value for r in Recall)}")
+    flags = {}
+    for key in ("dual_entry", "backup_prevent"):
+        value = merged.get(key, False)
+        if not isinstance(value, bool):
+            raise ConfigError(source, f"{where(key)}{key}", f"must be true or false, got {value!r}")
+        flags[key] = value
     return Phase(number, ring, float(min_green), float(max_green), float(yellow), float(red_clear),
-                 _STARTUP_NAMES[startup], approach, turn)
+                 _STARTUP_NAMES[startup], approach, turn, float(passage), Recall(recall), **flags)
 
 
 def _pairs(raw: Any, name: str, phases: Mapping[int, Phase], compatible: frozenset[frozenset[int]],
@@ -320,7 +351,7 @@ def from_dict(raw: Mapping[str, Any], source: str = "<memory>") -> IntersectionC
     timing = raw.get("timing", {})
     if not isinstance(timing, dict):
         raise ConfigError(source, "timing", "must be a table of default phase timings")
-    _unknown(timing, ("min_green", "max_green", "yellow", "red_clear"), "timing.", source)
+    _unknown(timing, ("min_green", "max_green", "yellow", "red_clear", *_PHASE_OPTIONS), "timing.", source)
     phases = {p: _phase(p, raw_phases[str(p)], timing, ring_of[p], source) for p in numbers}
 
     barriers_raw = structure.get("barriers")
@@ -358,6 +389,18 @@ def from_dict(raw: Mapping[str, Any], source: str = "<memory>") -> IntersectionC
                                   f"phase {b} cannot start together with phase {a}; allowed: one phase per ring, "
                                   "all in one barrier group")
 
+    for p in numbers:
+        if phases[p].dual_entry and not any(frozenset((p, q)) in compatibility for q in numbers
+                                            if ring_of[q] != ring_of[p]):
+            raise ConfigError(source, f"phases.{p}.dual_entry",
+                              f"phase {p} has no concurrent phase in the other ring to enter beside; allowed: "
+                              "dual_entry on a phase with a concurrent partner")
+        twin = next((q for q in numbers if q < p and phases[q].dual_entry and ring_of[q] == ring_of[p]
+                     and barrier_of[q] == barrier_of[p]), None)
+        if phases[p].dual_entry and twin is not None:
+            raise ConfigError(source, f"phases.{p}.dual_entry",
+                              f"phase {twin} is already the dual-entry phase of ring {ring_of[p]} in this barrier "
+                              "group; allowed: one dual-entry phase per ring and barrier group")
     pairs = _pairs(structure.get("pairs"), "structure.pairs", phases, compatibility, source)
     sequence = _pairs(structure.get("sequence"), "structure.sequence", phases, compatibility, source)
     for key, listed in (("pairs", pairs), ("sequence", sequence)):

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from enum import StrEnum
 from pathlib import Path
 from typing import IO, Any
@@ -35,7 +35,8 @@ class Kind(StrEnum):
     ACTION_REFUSED = "action_refused"          # action_id, error, reason
     ACTION_DROPPED = "action_dropped"          # action_id, state
     COMMAND_DISPATCHED = "command_dispatched"  # action_id, command_id, command, green
-    SET_SENT = "set_sent"                      # command_id, phases, purpose (command|retry|keepalive|recovery|clear)
+    SET_SENT = "set_sent"                      # command_id, phases, purpose: startup|command|retry|keepalive|
+    #                                                        recovery|clear (startup: all six objects at 0)
     SET_ANSWERED = "set_answered"              # command_id, purpose
     SET_FAILED = "set_failed"                  # command_id, purpose, error
     POLL = "poll"                              # poll_id, greens, yellows, reds (on change only), changed
@@ -46,8 +47,9 @@ class Kind(StrEnum):
     TIMEOUT_ENTERED = "timeout_entered"        # reason (communication|transition|drift), command_id, detail
     RECOVERY_STARTED = "recovery_started"      # -
     RECOVERED = "recovered"                    # greens
-    STATE = "state"                            # from, to (manager state changes)
-    RUN_ENDED = "run_ended"                    # reason, t_end
+    STATE = "state"                            # from, to: the paper's names (idle, on_hold, timeout)
+    RUN_ENDED = "run_ended"                    # reason (duration|closed|interrupted|terminated|agent_error|error)
+    QUEUES = "queues"                          # queues {approach: vehicles queued upstream} (SUMO runs, every 5 s)
     NOTE = "note"                              # free text for harness faults and components
 
 
@@ -65,10 +67,15 @@ class EventLog:
         self.keep = keep
         self._seq = 0
         self._clock = clock
+        self._subscribers: list[Callable[[dict[str, Any]], None]] = []
 
     def bind(self, clock) -> None:
         """Give the log the simulation clock: a callable returning the current sim time."""
         self._clock = clock
+
+    def subscribe(self, fn: Callable[[dict[str, Any]], None]) -> None:
+        """Call ``fn(record)`` with every record emitted from now on (the live dashboard folds them)."""
+        self._subscribers.append(fn)
 
     def emit(self, kind: Kind, **fields: Any) -> dict[str, Any]:
         rec = {"seq": self._seq, "t": self._clock() if self._clock else 0.0, "wall_ns": time.monotonic_ns(),
@@ -78,6 +85,8 @@ class EventLog:
             self.records.append(rec)
         if self._file is not None:
             self._file.write(orjson.dumps(rec, default=_jsonable, option=orjson.OPT_APPEND_NEWLINE))
+        for fn in self._subscribers:
+            fn(rec)
         return rec
 
     def of(self, *kinds: Kind) -> list[dict[str, Any]]:

@@ -1,83 +1,126 @@
-"""The middleware: the manager's SimPy shell, the poller, keepalive, drift and recovery.
+"""The middleware: the manager's SimPy shell and the poller.
 
-The manager (:mod:`hils.manager`) decides; this module does. It turns agent
-actions into manager events, carries out the effects the manager returns (SET
-the call, start timers, halt polling, log), and feeds back timer expiries and
-signal observations. It runs unchanged in virtual and wall-clock time: only the
-environment's driver and the transport differ.
+The manager (:mod:`hils.manager`) decides; this module does, and decides nothing. It turns agent
+actions into manager events, carries out the effects the manager returns (SET the call, start
+timers, halt or resume polling, re-read the controller, log) and feeds back what happened: timer
+expiries, signal observations, the answers to SETs, the cost of simulation steps. It runs unchanged
+in virtual and wall-clock time: only the environment's driver and the transport differ.
 """
 
 from __future__ import annotations
 
 import logging
 from collections.abc import Generator
+from dataclasses import dataclass
 from typing import Any
 
 import simpy
 
-from hils.actions import ActionConverter, ActionError, ActionType, Command
-from hils.config import IntersectionConfig
-from hils.drift import DriftMonitor
+from hils.actions import ActionConverter, ActionError, ActionType
+from hils.config import IntersectionConfig, Pair
 from hils.events import EventLog, Kind
 from hils.manager import (
+    CloseRequested,
     CommandEnded,
     CommandRequested,
+    ControllerRead,
+    ControllerUnreadable,
     Dispatch,
+    DriftSeen,
     Dropped,
     Effect,
+    Event,
     FailureDetected,
+    HaltPolling,
+    KeepaliveSwitched,
     Manager,
+    Mode,
+    Note,
+    Purpose,
+    ReadController,
     Recovered,
-    RecoveryCompleted,
+    RecoveryRequested,
+    RecoveryStarted,
+    ResumePolling,
+    SendCall,
+    SetAnswered,
+    SetFailed,
     SignalObserved,
-    Stage,
+    Started,
     StartTimer,
     State,
+    StepTimed,
     TimeoutEntered,
     TimeoutReason,
     TimerExpired,
     Verified,
 )
-from hils.ntcip import UNIT_BACKUP_TIME, ControlColumn, SnmpError, control_oid, phases_to_groups
+from hils.ntcip import (
+    SYSTEM_PATTERN_CONTROL,
+    UNIT_BACKUP_TIME,
+    UNIT_FLASH_STATUS,
+    ControlColumn,
+    ErrorStatus,
+    SignalState,
+    SnmpError,
+    control_oid,
+    groups_to_phases,
+    phases_to_groups,
+)
 from hils.poller import Poller, SignalCache, Snapshot
+from hils.preflight import ControllerReading, Verdict, judge
 from hils.transport import CommunicationTimeout, Transport, TransportError
 
 log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True, slots=True)
+class Submission:
+    """What became of an action handed to :meth:`Middleware.submit`."""
+
+    action_id: int
+    error: ActionError | None = None  # refused by the converter: nothing was sent
+    dropped: bool = False  # converted, but the manager was not IDLE
 
 
 class Middleware:
     """Everything between the agent and the transport, on one SimPy environment."""
 
     def __init__(self, env: simpy.Environment, transport: Transport, config: IntersectionConfig,
-                 action_type: ActionType | str, events: EventLog) -> None:
+                 action_type: ActionType | str, events: EventLog, *, where: str = "the controller",
+                 community: str | None = None) -> None:
         params = config.middleware
+        self.where = where  # how messages name the controller (HOST:PORT)
+        self.community = community
+        self.startup_error: str | None = None  # why the start-up read or write failed, if it did
+        self.verdict = Verdict((), ())  # the start-up checks' refusals and warnings
         self.env = env
         self.transport = transport
         self.config = config
         self.log = events
         events.bind(lambda: env.now)
-        self.manager = Manager(params.tau_trans)
+        self.manager = Manager(params.tau_trans, sequence=config.sequence, n_drift=params.n_drift,
+                               keepalive_period=params.keepalive_period or 0.0)
         self.converter = ActionConverter(config, ActionType(action_type))
         self.cache = SignalCache()
         self.poller = Poller(env, transport, self.cache, events, groups=config.groups,
                              rate_hz=params.poll_hz, n_timeout=params.n_timeout,
                              on_failure=lambda why: self._fail(TimeoutReason.COMMUNICATION, why))
-        self.drift = DriftMonitor(params.n_drift, events, lambda why: self._fail(TimeoutReason.DRIFT, why))
         # Every poll, not only changes: a command for phases already green is verified by the
         # next poll, which shows no change.
         self.cache.subscribe(self._on_signal, every_poll=True)
-        self.keepalive_enabled = True
-        self.keepalive_period = params.keepalive_period
-        self.call: frozenset[int] = frozenset()  # the VehCall last SET
-        self.last_set = float("-inf")
         self.ready = env.event()
         self._entering: dict[State, simpy.Event] = {}  # events of processes waiting for a state
+        self._leaving_recovery: simpy.Event | None = None
+        self._clearing: simpy.Event | None = None
         self._actions = 0
+        self.last_hold: float | None = None  # s from dispatch to verification of the last verified transition
 
     # --- public API -------------------------------------------------------------------------
 
     @property
-    def state(self) -> State:
+    def state(self) -> State | None:
+        """The manager's state by the paper's names (None once the run has closed)."""
         return self.manager.state
 
     @property
@@ -85,31 +128,57 @@ class Middleware:
         """The system-wide timeout event flag: set in TIMEOUT until recovery."""
         return self.manager.state is State.TIMEOUT
 
+    @property
+    def next_pair(self) -> Pair:
+        """The pair a switch or duration action would serve next."""
+        return self.converter.pair_after(self.manager.position)
+
+    @property
+    def call(self) -> frozenset[int]:
+        """VehCall as last SET."""
+        return self.manager.call
+
+    @property
+    def last_set(self) -> float:
+        return self.manager.last_set
+
+    @property
+    def keepalive_period(self) -> float:
+        return self.manager.keepalive_period
+
+    @property
+    def keepalive_enabled(self) -> bool:
+        return self.manager.keepalive_on
+
+    @keepalive_enabled.setter
+    def keepalive_enabled(self, on: bool) -> None:
+        self._feed(KeepaliveSwitched(self.env.now, on))
+
     def start(self) -> simpy.Process:
-        """Read the controller, then start polling and the keepalive; ``ready`` fires when done."""
+        """Read the controller, then start polling; ``ready`` fires when done."""
         return self.env.process(self._startup())
 
-    def submit(self, value: Any) -> int:
-        """An agent's action value, converted and handed to the manager; returns the action id."""
+    def submit(self, value: Any) -> Submission:
+        """An agent's action value, converted and handed to the manager."""
         self._actions += 1
         action_id = self._actions
         self.log.emit(Kind.ACTION_RECEIVED, action_id=action_id, action_type=self.converter.action_type.value,
                       value=_plain(value))
         try:
-            command = self.converter.convert(value)
+            command = self.converter.convert(value, self.manager.position)
         except ActionError as exc:
             self.log.emit(Kind.ACTION_REFUSED, action_id=action_id, error=type(exc).__name__, reason=exc.reason,
                           message=str(exc))
-            return action_id
+            return Submission(action_id, error=exc)
         self.log.emit(Kind.ACTION_CONVERTED, action_id=action_id, command=command.phases, green=command.green,
                       keep=command.keep)
-        self._feed(CommandRequested(self.env.now, action_id, command))
-        return action_id
+        shown = self.cache.state.greens if self.cache.state is not None else frozenset()
+        effects = self._feed(CommandRequested(self.env.now, action_id, command, shown))
+        return Submission(action_id, dropped=any(isinstance(e, Dropped) for e in effects))
 
     def observe_step(self, step: float, took: float) -> None:
-        """Report one simulation step's cost to drift detection (ignored while in TIMEOUT)."""
-        if not self.timeout_flag:
-            self.drift.observe(step, took)
+        """Report one simulation step's cost to drift detection."""
+        self._feed(StepTimed(self.env.now, step, took))
 
     def wait_for(self, state: State) -> simpy.Event:
         """An event that fires when the manager is (or next becomes) in ``state``."""
@@ -117,168 +186,218 @@ class Middleware:
             ev = self.env.event()
             ev.succeed()
             return ev
+        return self.entering(state)
+
+    def entering(self, state: State) -> simpy.Event:
+        """An event that fires the next time the manager enters ``state`` (not if it is there now)."""
         return self._entering.setdefault(state, self.env.event())
 
     def wait_idle(self) -> simpy.Event:
         return self.wait_for(State.IDLE)
 
     def recover(self) -> simpy.Process:
-        """Manual recovery: re-read the controller, align the call with what it shows, return to IDLE."""
+        """Recovery from TIMEOUT: re-read the controller, align the call with what it shows, return to
+        IDLE. The process's value is True when the manager is not in TIMEOUT afterwards."""
         return self.env.process(self._recover())
 
     def close(self) -> simpy.Process:
-        """Clear the calls this run placed."""
-        return self.env.process(self._clear())
+        """Clear the calls this run placed and stop polling and the keepalive for good."""
+        return self.env.process(self._close())
 
     # --- processes ----------------------------------------------------------------------------
 
     def _startup(self) -> Generator[simpy.Event, Any, None]:
         # Like the poller, give up only after n_timeout consecutive failures: one lost datagram
         # at start-up is no reason to halt.
-        for attempt in range(1, self.config.middleware.n_timeout + 1):
+        n = self.config.middleware.n_timeout
+        for attempt in range(1, n + 1):
             try:
-                state = yield from self.poller.read_once()
-                (backup,) = yield self.transport.get([UNIT_BACKUP_TIME.instance()])
-            except (TransportError, SnmpError) as exc:
+                state, reading = yield from self._read_controller_setup()
+                # The control objects are ours while we run: whatever someone else left is cleared,
+                # and this harmless SET shows whether the community may write.
+                yield self._send_direct(_cleared_control(self.config.groups), "startup")
+            except SnmpError as exc:
+                self.startup_error = _refusal_text(exc, self.where)
+                self.log.emit(Kind.NOTE, message=f"start-up: {self.startup_error}")
+                self._fail(TimeoutReason.COMMUNICATION, self.startup_error)
+                break
+            except TransportError as exc:
                 self.log.emit(Kind.POLL_FAILED, poll_id=0, error=f"start-up read: {type(exc).__name__}: {exc}",
                               consecutive=attempt)
-                if attempt == self.config.middleware.n_timeout:
+                if attempt == n:
+                    self.startup_error = (f"no answer from {self.where} within {n} x tau_udp = "
+                                          f"{n * self.config.middleware.tau_udp:g} s: is the controller there, "
+                                          "at that address and port, and is the community right?")
                     self._fail(TimeoutReason.COMMUNICATION, f"controller unreachable at start-up: {exc}")
                 continue
+            self.verdict = judge(reading, where=self.where, community=self.community,
+                                 keepalive_period=self.manager.keepalive_period)
+            for line in (*self.verdict.refusals, *self.verdict.warnings):
+                self.log.emit(Kind.NOTE, message=f"start-up: {line}")
             self.cache.update(state, self.env.now, 0)
-            self.converter.sync(state.greens)
-            if backup:
-                limit = backup / 3.0  # the controller's own backup time rules
-                self.keepalive_period = min(self.keepalive_period, limit) if self.keepalive_period else limit
+            self._feed(Started(self.env.now, state.greens, reading.backup_time))
             break
         self.env.process(self.poller.run())
-        self.env.process(self._keepalive())
         self.ready.succeed()
 
-    def _keepalive(self) -> Generator[simpy.Event, Any, None]:
-        # Any SET of a control object restarts the controller's backup timer, so only
-        # refresh when no command has been SET within the period.
-        period = self.keepalive_period
-        if not period:
-            return  # neither the config nor the controller has a backup time: nothing to refresh
-        while True:
-            due = self.last_set + period
-            if self.env.now < due:
-                yield self.env.timeout(due - self.env.now)
-                continue
-            if self.keepalive_enabled and self.call and not self.timeout_flag:
-                self._send(self.call, "keepalive")
+    def _read_controller_setup(self) -> Generator[simpy.Event, Any, tuple[SignalState, ControllerReading]]:
+        state = yield from self.poller.read_once()
+        backup, pattern, flash = yield self.transport.get(
+            [UNIT_BACKUP_TIME.instance(), SYSTEM_PATTERN_CONTROL.instance(), UNIT_FLASH_STATUS.instance()])
+        groups = self.config.groups
+        masks = yield self.transport.get([control_oid(c, g) for c in ControlColumn for g in range(1, groups + 1)])
+        control = {c: groups_to_phases(masks[i * groups:(i + 1) * groups]) for i, c in enumerate(ControlColumn)}
+        return state, ControllerReading(int(backup), int(pattern), int(flash), control)
+
+    def _send_direct(self, varbinds: list[tuple[Any, int]], purpose: str) -> simpy.Event:
+        """A SET outside the state machine (start-up only): logged like the others."""
+        self.log.emit(Kind.SET_SENT, command_id=None, phases=frozenset(), purpose=purpose)
+        done = self.transport.set(varbinds)
+
+        def answered(ev: simpy.Event) -> None:
+            if ev.ok:
+                self.log.emit(Kind.SET_ANSWERED, command_id=None, purpose=purpose)
             else:
-                yield self.env.timeout(period)
+                self.log.emit(Kind.SET_FAILED, command_id=None, purpose=purpose,
+                              error=f"{type(ev.value).__name__}: {ev.value}")
+
+        done.callbacks.append(answered)
+        return done
 
     def _recover(self) -> Generator[simpy.Event, Any, bool]:
-        if not self.timeout_flag:
-            # Outside TIMEOUT there is nothing to recover, and re-SETting the call to the greens
-            # shown would cancel a command in transition.
-            self.log.emit(Kind.NOTE, message=f"recover() in {self.manager.state.value}: nothing to recover")
-            return True
-        self.log.emit(Kind.RECOVERY_STARTED, state=self.manager.state.value)
+        self._feed(RecoveryRequested(self.env.now))
+        if self.manager.mode is Mode.RECOVERING:
+            yield self._leaving_recovery
+        return not self.timeout_flag
+
+    def _read_controller(self) -> Generator[simpy.Event, Any, None]:
         try:
             state = yield from self.poller.read_once()
-            yield self._send(state.greens, "recovery")
         except (TransportError, SnmpError) as exc:
-            self.log.emit(Kind.NOTE, message=f"recovery failed, still in TIMEOUT: {exc}")
-            return False
+            self._feed(ControllerUnreadable(self.env.now, str(exc)))
+            return
         self.cache.update(state, self.env.now, self.poller.polls)
-        self.converter.sync(state.greens)
-        self.drift.reset()
-        self._feed(RecoveryCompleted(self.env.now, state.greens))
-        return True
+        self._feed(ControllerRead(self.env.now, state.greens))
 
-    def _clear(self) -> Generator[simpy.Event, Any, None]:
-        try:
-            yield self._send(frozenset(), "clear")
-        except (TransportError, SnmpError) as exc:
-            log.warning("could not clear the calls at the end of the run: %s", exc)
+    def _close(self) -> Generator[simpy.Event, Any, None]:
+        self._feed(CloseRequested(self.env.now))
+        if self._clearing is not None:
+            try:
+                yield self._clearing
+            except (TransportError, SnmpError) as exc:
+                log.warning("could not clear the calls at the end of the run: %s", exc)
 
     # --- the manager's shell ----------------------------------------------------------------------
 
-    def _feed(self, event) -> None:
-        before = self.manager.state
+    def _feed(self, event: Event) -> list[Effect]:
+        before = self.manager.mode
         effects = self.manager.handle(event)
         for effect in effects:
             self._carry_out(effect)
-        after = self.manager.state
-        if after is not before:
-            self.log.emit(Kind.STATE, **{"from": before.value, "to": after.value})
-            waiting = self._entering.pop(after, None)
+        after = self.manager.mode
+        if before.paper is not after.paper and after.paper is not None:
+            self.log.emit(Kind.STATE, **{"from": before.log_name, "to": after.log_name})
+            waiting = self._entering.pop(after.paper, None)
             if waiting is not None:
                 waiting.succeed()
+        if before is Mode.RECOVERING and after is not Mode.RECOVERING and self._leaving_recovery is not None:
+            leaving, self._leaving_recovery = self._leaving_recovery, None
+            leaving.succeed()
+        return effects
 
     def _carry_out(self, effect: Effect) -> None:
         match effect:
             case Dispatch(command_id, action_id, command):
-                self._dispatch(command_id, action_id, command)
+                self.log.emit(Kind.COMMAND_DISPATCHED, action_id=action_id, command_id=command_id,
+                              command=command.phases, green=command.green)
+            case SendCall(phases, purpose, command_id):
+                self._send(phases, purpose, command_id)
             case StartTimer(kind, delay, token):
                 self.env.timeout(delay).callbacks.append(
                     lambda _ev, kind=kind, token=token: self._feed(TimerExpired(self.env.now, kind, token)))
             case Dropped(action_id, state):
-                self.log.emit(Kind.ACTION_DROPPED, action_id=action_id, state=state.value)
+                self.log.emit(Kind.ACTION_DROPPED, action_id=action_id, state=state)
             case Verified(command_id, command, poll_id, hold):
+                self.last_hold = hold
                 self.log.emit(Kind.TRANSITION_VERIFIED, command_id=command_id, command=command.phases,
                               poll_id=poll_id, hold_s=hold)
             case CommandEnded(command_id, outcome, hold):
                 self.log.emit(Kind.HOLD_RELEASED, command_id=command_id, reason=outcome, hold_s=hold)
             case TimeoutEntered(reason, detail, command_id):
                 self.log.emit(Kind.TIMEOUT_ENTERED, reason=reason.value, detail=detail, command_id=command_id)
+            case DriftSeen(step, took, consecutive):
+                self.log.emit(Kind.DRIFT, step_s=step, took_s=took, consecutive=consecutive)
+            case HaltPolling():
                 self.poller.halt()
+            case ResumePolling():
+                self.poller.resume()
+            case RecoveryStarted():
+                self.log.emit(Kind.RECOVERY_STARTED, state=State.TIMEOUT.value)
+                self._leaving_recovery = self.env.event()
+            case ReadController():
+                self.env.process(self._read_controller())
             case Recovered(greens):
                 self.log.emit(Kind.RECOVERED, greens=greens)
-                self.poller.resume()
+            case Note(message):
+                self.log.emit(Kind.NOTE, message=message)
 
-    def _dispatch(self, command_id: int, action_id: int, command: Command) -> None:
-        self.log.emit(Kind.COMMAND_DISPATCHED, action_id=action_id, command_id=command_id,
-                      command=command.phases, green=command.green)
-        self.converter.commit(command)
-        self._send(frozenset(command.phases), "command", command_id)
-
-    def _send(self, phases: frozenset[int], purpose: str, command_id: int | None = None) -> simpy.Event:
-        """SET VehCall to ``phases``; logs the SET and its answer. Returns the transport's event."""
+    def _send(self, phases: frozenset[int], purpose: Purpose, command_id: int | None) -> None:
+        """SET VehCall to ``phases``; logs the SET and its answer, and feeds the answer back."""
         masks = phases_to_groups(phases, self.config.groups)
         varbinds = [(control_oid(ControlColumn.VEH_CALL, g), m) for g, m in enumerate(masks, start=1)]
-        self.call = phases
-        self.last_set = self.env.now
-        self.log.emit(Kind.SET_SENT, command_id=command_id, phases=phases, purpose=purpose)
+        self.log.emit(Kind.SET_SENT, command_id=command_id, phases=phases, purpose=purpose.value)
         done = self.transport.set(varbinds)
         done.callbacks.append(lambda ev: self._answered(ev, purpose, command_id))
-        return done
+        if purpose is Purpose.CLEAR:
+            self._clearing = done
 
-    def _answered(self, ev: simpy.Event, purpose: str, command_id: int | None) -> None:
+    def _answered(self, ev: simpy.Event, purpose: Purpose, command_id: int | None) -> None:
         if ev.ok:
-            self.log.emit(Kind.SET_ANSWERED, command_id=command_id, purpose=purpose)
-        else:
-            ev.defused = True  # a failed SET is logged; what follows is decided here or by the timers
-            self.log.emit(Kind.SET_FAILED, command_id=command_id, purpose=purpose,
-                          error=f"{type(ev.value).__name__}: {ev.value}")
-            pending = self.manager.pending
-            if (isinstance(ev.value, CommunicationTimeout) and purpose in ("command", "retry")
-                    and pending is not None and pending.command_id == command_id
-                    and pending.stage is Stage.TRANSITION):
-                # No answer: the call may never have reached the controller. SET it again (it is
-                # idempotent) while the command waits for its transition; tau_trans still bounds the
-                # wait, and each try takes tau_udp. A refusal (an SNMP error) is not retried.
-                self._send(frozenset(pending.command.phases), "retry", command_id)
+            self.log.emit(Kind.SET_ANSWERED, command_id=command_id, purpose=purpose.value)
+            self._feed(SetAnswered(self.env.now, purpose, command_id))
+            return
+        if purpose is not Purpose.CLEAR:
+            ev.defused = True  # a failed SET is logged and fed back: the manager decides what follows
+        self.log.emit(Kind.SET_FAILED, command_id=command_id, purpose=purpose.value,
+                      error=f"{type(ev.value).__name__}: {ev.value}")
+        self._feed(SetFailed(self.env.now, purpose, command_id, isinstance(ev.value, CommunicationTimeout)))
 
     def _on_signal(self, snap: Snapshot, changed: bool) -> None:
         # ON_HOLD verifies on every poll (a command may target what is already shown); otherwise
         # an unchanged poll tells the manager nothing new.
-        if changed or self.manager.state is State.ON_HOLD:
+        if changed or self.manager.mode is Mode.IN_TRANSITION:
             self._feed(SignalObserved(snap.t, snap.state.greens, snap.seq))
 
     def _fail(self, reason: TimeoutReason, detail: str) -> None:
         self._feed(FailureDetected(self.env.now, reason, detail))
 
 
+_NOT_WRITABLE = {ErrorStatus.NO_ACCESS, ErrorStatus.NOT_WRITABLE, ErrorStatus.READ_ONLY, ErrorStatus.NO_SUCH_NAME,
+                 ErrorStatus.AUTHORIZATION_ERROR}
+
+
+def _cleared_control(groups: int) -> list[tuple[Any, int]]:
+    """Every control object of every group at 0."""
+    return [(control_oid(c, g), 0) for c in ControlColumn for g in range(1, groups + 1)]
+
+
+def _refusal_text(exc: SnmpError, where: str) -> str:
+    if exc.status in _NOT_WRITABLE:
+        return (f"the controller at {where} refuses to be written ({exc.status.name.lower()}): the community "
+                "can read but not write; use the controller's read-write community (Cobalt: its user name)")
+    return f"the controller at {where} refused the start-up read or write: {exc}"
+
+
 def _plain(value: Any) -> Any:
-    """A JSON-friendly copy of an action value for the log."""
+    """A JSON-friendly copy of an action value for the log (whatever the agent returned)."""
+    if hasattr(value, "tolist"):
+        value = value.tolist()  # numpy arrays and scalars
     if isinstance(value, (list, tuple)):
         return [_plain(v) for v in value]
-    if isinstance(value, (int, float, str, bool)) or value is None:
+    if isinstance(value, int) and not isinstance(value, bool):
+        # The log's encoder takes 64-bit integers only: a larger one is logged as its text.
+        return value if -(2**63) <= value < 2**64 else repr(value)[:40]
+    if isinstance(value, (float, str, bool)) or value is None:
         return value
     try:
         return float(value)

@@ -1,4 +1,5 @@
-"""NTCIP 1202 v02 object model shared by the middleware and the emulator.
+"""NTCIP 1202 v02 object model, SNMP value types and the latency model: what the middleware and
+the emulator share (the emulator imports nothing else of hils but the intersection config).
 
 This is the only module that spells an OID. Everything else names objects by
 the definitions below and builds instance OIDs with the helpers here, so an
@@ -11,11 +12,13 @@ phase numbers; :func:`phases_to_groups` and :func:`groups_to_phases` convert.
 
 from __future__ import annotations
 
+import random
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from enum import Enum, IntEnum
 
 Oid = tuple[int, ...]
+Value = int | bytes  # what an NTCIP object holds: INTEGER or OCTET STRING
 
 #: 1.3.6.1.4.1.1206.4.2.1: the NTCIP 1202 actuated signal controller node.
 ASC: Oid = (1, 3, 6, 1, 4, 1, 1206, 4, 2, 1)
@@ -30,6 +33,12 @@ class Syntax(Enum):
 class Access(Enum):
     READ_ONLY = "read-only"
     READ_WRITE = "read-write"
+
+
+#: Environment variables holding SNMPv3 keys (pass phrases) when a target URL or
+#: `hils emulator serve` does not give them: keeps keys out of shell history and process lists.
+AUTH_KEY_ENV = "HILS_SNMP_AUTH_KEY"
+PRIV_KEY_ENV = "HILS_SNMP_PRIV_KEY"
 
 
 class ErrorStatus(IntEnum):
@@ -74,16 +83,30 @@ class SnmpError(Exception):
 class PhaseColumn(IntEnum):
     """Columns of phaseTable (A.1.2.1.c.p)."""
 
+    WALK = 2
+    PEDESTRIAN_CLEAR = 3
     MINIMUM_GREEN = 4
     PASSAGE = 5
     MAXIMUM1 = 6
     MAXIMUM2 = 7
     YELLOW_CHANGE = 8
     RED_CLEAR = 9
+    RED_REVERT = 10
     STARTUP = 20
     OPTIONS = 21
     RING = 22
     CONCURRENCY = 23
+
+
+class PhaseOption(IntEnum):
+    """Bits of phaseOptions (NTCIP 1202 v02, 2.2.2.21)."""
+
+    ENABLED = 0
+    MIN_RECALL = 6
+    MAX_RECALL = 7
+    PED_RECALL = 8
+    SOFT_RECALL = 9
+    DUAL_ENTRY = 10
 
 
 class StatusColumn(IntEnum):
@@ -183,12 +206,15 @@ UNIT_FLASH_STATUS = _o("unitFlashStatus", (3, 6), low=1, high=8)
 SYSTEM_PATTERN_CONTROL = _o("systemPatternControl", (4, 14), access=Access.READ_WRITE)
 
 _PHASE_NAMES = {
+    PhaseColumn.WALK: ("phaseWalk", Syntax.INTEGER),
+    PhaseColumn.PEDESTRIAN_CLEAR: ("phasePedestrianClear", Syntax.INTEGER),
     PhaseColumn.MINIMUM_GREEN: ("phaseMinimumGreen", Syntax.INTEGER),
     PhaseColumn.PASSAGE: ("phasePassage", Syntax.INTEGER),
     PhaseColumn.MAXIMUM1: ("phaseMaximum1", Syntax.INTEGER),
     PhaseColumn.MAXIMUM2: ("phaseMaximum2", Syntax.INTEGER),
     PhaseColumn.YELLOW_CHANGE: ("phaseYellowChange", Syntax.INTEGER),
     PhaseColumn.RED_CLEAR: ("phaseRedClear", Syntax.INTEGER),
+    PhaseColumn.RED_REVERT: ("phaseRedRevert", Syntax.INTEGER),
     PhaseColumn.STARTUP: ("phaseStartup", Syntax.INTEGER),
     PhaseColumn.OPTIONS: ("phaseOptions", Syntax.INTEGER),
     PhaseColumn.RING: ("phaseRing", Syntax.INTEGER),
@@ -303,3 +329,16 @@ class SignalState:
     def indication(self, phase: int) -> str:
         """'G', 'Y' or 'r' for one phase (SUMO's letters)."""
         return "G" if phase in self.greens else "Y" if phase in self.yellows else "r"
+
+
+@dataclass(frozen=True, slots=True)
+class Latency:
+    """Modeled response time of a request: mean and uniform jitter, in seconds."""
+
+    mean: float = 0.0075
+    jitter: float = 0.0
+
+    def draw(self, rng: random.Random) -> float:
+        if self.jitter <= 0.0:
+            return self.mean
+        return max(0.0, self.mean + rng.uniform(-self.jitter, self.jitter))

@@ -6,16 +6,21 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
-from matplotlib.transforms import offset_copy
-
 from hils.config import IntersectionConfig
 from hils.events import Kind
 
 COLORS = {"G": "#2ca02c", "Y": "#ffbf00", "r": "#d62728"}
+
+
+def pyplot() -> Any:
+    """matplotlib's pyplot on the file-only Agg backend, imported when a picture is first drawn: a
+    command that draws nothing (``hils --help``, a benchmark) does not pay for it."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
 
 
 def signal_intervals(records: Sequence[dict[str, Any]], phases: Sequence[int], start: float, end: float
@@ -77,6 +82,7 @@ def signal_timeline(records: Sequence[dict[str, Any]], config: IntersectionConfi
     rows = phase_rows(config)
     phases = [p for p, _, _ in rows]
     spans = signal_intervals(records, phases, start, end)
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(11, 0.45 * len(phases) + 1.9))
     for row, p in enumerate(phases):
         ax.broken_barh([(t0, t1 - t0) for t0, t1, _ in spans[p]], (row - 0.4, 0.8),
@@ -135,6 +141,9 @@ def queues(samples: Sequence[tuple[float, Mapping[str, int]]], path: Path, *, ti
     marked: the queue reached back beyond the modelled lanes."""
     spillback = spillback or {}
     edges, tops = queue_bins(samples, bin_s)
+    plt = pyplot()
+    from matplotlib.transforms import offset_copy
+
     fig, ax = plt.subplots(figsize=(11, 3.8))
     minutes = [e / 60.0 for e in edges]
     spilled = False

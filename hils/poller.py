@@ -80,6 +80,7 @@ class Poller:
         self.on_failure = on_failure
         self.consecutive_failures = 0
         self.polls = 0
+        self.failed = 0  # polls that got no usable answer, over the run
         self.halted = False
         self._resume = env.event()
         self._decoded: dict[tuple, _Decoded] = {}
@@ -125,6 +126,7 @@ class Poller:
                 decoded = yield from self._read()
             except (TransportError, SnmpError, ValueError) as exc:
                 self.consecutive_failures += 1
+                self.failed += 1
                 self.log.emit(Kind.POLL_FAILED, poll_id=poll_id, error=f"{type(exc).__name__}: {exc}",
                               consecutive=self.consecutive_failures)
                 if self.consecutive_failures == self.n_timeout:

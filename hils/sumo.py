@@ -28,12 +28,13 @@ from types import TracebackType
 import libsumo
 
 from hils.config import IntersectionConfig, load
+from hils.errors import UserError
 from hils.ntcip import SignalState
 from hils.sumo_net import SUMO_CONFIG, TLS_ID, PhaseMap, data_path, derive_phase_map, read_net
 from hils.webster import webster_plan
 
 
-class SumoError(RuntimeError):
+class SumoError(UserError, RuntimeError):
     """SUMO could not be started or used as asked."""
 
 

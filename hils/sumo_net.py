@@ -28,6 +28,7 @@ import sumo
 import sumolib
 
 from hils.config import IntersectionConfig
+from hils.errors import UserError
 from hils.ntcip import SignalState
 
 TLS_ID = "C"
@@ -46,7 +47,7 @@ ControlledLinks = Sequence[Sequence[tuple[str, str, str]]]
 ``libsumo.trafficlight.getControlledLinks`` returns them."""
 
 
-class NetworkError(ValueError):
+class NetworkError(UserError, ValueError):
     """The network and the intersection config do not fit together."""
 
 

@@ -15,14 +15,12 @@ from __future__ import annotations
 
 import random
 from collections.abc import Sequence
-from dataclasses import dataclass
 from typing import Protocol
 
 import simpy
 
-from hils.ntcip import Oid, SnmpError
+from hils.ntcip import Latency, Oid, SnmpError, Value
 
-Value = int | bytes
 VarBind = tuple[Oid, int]
 
 __all__ = [
@@ -64,19 +62,6 @@ class ObjectSurface(Protocol):
     def get_many(self, oids: Sequence[Oid]) -> tuple[Value, ...]: ...
 
     def set_many(self, varbinds: Sequence[VarBind]) -> None: ...
-
-
-@dataclass(frozen=True, slots=True)
-class Latency:
-    """Modeled response time of a request: mean and uniform jitter, in seconds."""
-
-    mean: float = 0.0075
-    jitter: float = 0.0
-
-    def draw(self, rng: random.Random) -> float:
-        if self.jitter <= 0.0:
-            return self.mean
-        return max(0.0, self.mean + rng.uniform(-self.jitter, self.jitter))
 
 
 class LocalTransport:

@@ -34,11 +34,30 @@ PAPER_MATRIX = [
 ]
 
 
+class Positioned:
+    """A converter at a position of the cyclic sequence, moved as the manager moves it."""
+
+    def __init__(self, config: IntersectionConfig, action_type: ActionType, greens: frozenset[int] | None) -> None:
+        self.conv = ActionConverter(config, action_type)
+        self.sequence = config.sequence
+        self.position = next((i for i, pair in enumerate(self.sequence) if greens and set(pair) <= greens), -1)
+
+    def convert(self, value: object) -> Command:
+        return self.conv.convert(value, self.position)
+
+    def commit(self, command: Command) -> None:
+        self.position = self.sequence.index(command.phases)
+
+    @property
+    def current_pair(self) -> tuple[int, int] | None:
+        return self.conv.pair_at(self.position)
+
+    def green_range(self, pair: tuple[int, int]) -> tuple[float, float]:
+        return self.conv.green_range(pair)
+
+
 def converter(config: IntersectionConfig, action_type: ActionType, greens: frozenset[int] | None = None):
-    conv = ActionConverter(config, action_type)
-    if greens is not None:
-        conv.sync(greens)
-    return conv
+    return Positioned(config, action_type, greens)
 
 
 # --- conflict matrix -------------------------------------------------------------------------
@@ -59,6 +78,8 @@ def test_derived_conflict_matrix_is_the_papers_matrix_inverted(paper_config: Int
 @pytest.mark.parametrize(("value", "pair"), [
     ((1, 5), (1, 5)), ([2, 6], (2, 6)), ((7, 3), (3, 7)), ([8, 4], (4, 8)),
     (np.array([5, 1]), (1, 5)), ((np.int64(2), np.int32(6)), (2, 6)),
+    # What RL libraries hand over: float arrays with integral values, numpy scalars of either kind.
+    (np.array([2.0, 6.0], dtype=np.float32), (2, 6)), ([1.0, 5.0], (1, 5)), ((np.float64(4), np.int8(8)), (4, 8)),
 ])
 def test_selection_is_normalised_to_ring1_ring2(paper_config, value, pair) -> None:
     cmd = converter(paper_config, ActionType.SELECTION).convert(value)
@@ -77,7 +98,12 @@ def test_selection_is_normalised_to_ring1_ring2(paper_config, value, pair) -> No
     ([5, 2], NotInActionSetError, ["[2, 5]", "not in the configured set"]),
     ((1, 5, 2), ActionTypeError, ["pair of phase numbers", "(1, 5, 2)", "allowed"]),
     ("15", ActionTypeError, ["pair of phase numbers", "'15'"]),
-    ([1.0, 5.0], ActionTypeError, ["pair of phase numbers"]),
+    ([1.5, 5.0], ActionTypeError, ["pair of phase numbers"]),
+    ({1, 5}, ActionTypeError, ["pair of phase numbers", "{1, 5}"]),
+    ({1: 5, 2: 6}, ActionTypeError, ["pair of phase numbers"]),
+    (np.array([[1, 5]]), ActionTypeError, ["pair of phase numbers"]),
+    ([float("inf"), 5], ActionTypeError, ["pair of phase numbers"]),
+    ([2**70, 5], UnknownPhaseError, ["unknown phase 1180591620717411303424"]),
     ([True, 5], ActionTypeError, ["pair of phase numbers"]),
     (None, ActionTypeError, ["pair of phase numbers", "None"]),
     (3, ActionTypeError, ["pair of phase numbers", "got 3"]),
@@ -120,12 +146,32 @@ def test_switch_keep_stays_on_the_current_pair(paper_config) -> None:
     assert conv.position == paper_config.sequence.index((4, 8)), "converting alone must not move the position"
 
 
+@pytest.mark.parametrize("value", [np.float32(1.0), 1.0, np.array(1), np.array([1]), np.array([1.0], dtype=np.float32),
+                                   np.uint8(1)])
+def test_switch_accepts_what_rl_libraries_hand_over(paper_config, value) -> None:
+    assert converter(paper_config, ActionType.SWITCH, frozenset({2, 6})).convert(value) == Command((3, 7))
+
+
+@pytest.mark.parametrize(("value", "green"), [(np.array([0.5], dtype=np.float32), 11.5), (np.array(0.0), 3.0),
+                                              (np.array([1.0]), 20.0)])
+def test_duration_accepts_box_actions(paper_config, value, green) -> None:
+    assert converter(paper_config, ActionType.DURATION, frozenset({2, 6})).convert(value).green == green
+
+
+@pytest.mark.parametrize(("value", "error"), [(10**400, DurationRangeError), (np.array([0.5, 0.5]), ActionTypeError),
+                                              ("0.5", ActionTypeError)])
+def test_duration_refuses_overflow_and_wrong_shapes(paper_config, value, error) -> None:
+    with pytest.raises(error):
+        converter(paper_config, ActionType.DURATION, frozenset({2, 6})).convert(value)
+
+
 def test_switch_keep_before_any_pair_is_known_commands_the_first(paper_config) -> None:
     # Nothing of the sequence is green (all red at start-up): "keep" cannot keep anything.
     assert converter(paper_config, ActionType.SWITCH, frozenset()).convert(0) == Command((1, 5))
 
 
-@pytest.mark.parametrize("value", [2, -1, True, False, 0.0, 1.0, "1", None, [1]])
+@pytest.mark.parametrize("value", [2, -1, True, False, np.bool_(True), 0.5, "1", None, [1], 2**80,
+                                   np.array([1, 0]), float("nan")])
 def test_switch_refuses_anything_but_0_or_1(paper_config, value) -> None:
     with pytest.raises(ActionTypeError) as info:
         converter(paper_config, ActionType.SWITCH, frozenset({2, 6})).convert(value)

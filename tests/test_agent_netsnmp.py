@@ -371,8 +371,22 @@ def agent(paper_config: IntersectionConfig) -> SnmpAgent:
 
 def test_answers_too_large_are_too_big_and_bulk_answers_are_cut_short(agent: SnmpAgent) -> None:
     everything = agent.view.oids
-    answer = parse(agent.respond(request(api.SNMP_VERSION_2C, "public", RequestKind.GET, everything)))
+    # The most objects one request may name: their answer is larger than the request.
+    fitting = max(n for n in range(1, len(everything))
+                  if len(request(api.SNMP_VERSION_2C, "public", RequestKind.GET, everything[:n]))
+                  <= DEFAULT_MAX_MESSAGE_SIZE)
+    answer = parse(agent.respond(request(api.SNMP_VERSION_2C, "public", RequestKind.GET, everything[:fitting])))
     assert (answer.status, answer.index, answer.varbinds) == (ErrorStatus.TOO_BIG, 0, [])
+    # SNMPv1 echoes the request's varbinds (RFC 1157 4.1.2): no larger than the request, so within the maximum.
+    v1_request = request(api.SNMP_VERSION_1, "public", RequestKind.GET, everything[:fitting])
+    v1_datagram = agent.respond(v1_request)
+    assert v1_datagram is not None and len(v1_datagram) <= DEFAULT_MAX_MESSAGE_SIZE
+    v1 = parse(v1_datagram)
+    assert (v1.status, v1.index, [oid for oid, _ in v1.varbinds]) == (ErrorStatus.TOO_BIG, 0,
+                                                                       list(everything[:fitting]))
+    # A request beyond the maximum is dropped unread.
+    assert agent.respond(request(api.SNMP_VERSION_2C, "public", RequestKind.GET, everything)) is None
+    assert agent.stats.dropped == {DropReason.TOO_LARGE: 1}
     datagram = agent.respond(request(api.SNMP_VERSION_2C, "public", RequestKind.GET_BULK, [ASC],
                                      max_repetitions=2**31 - 1))
     assert datagram is not None

@@ -348,7 +348,6 @@ def test_a_missing_timing_is_rejected() -> None:
 @pytest.mark.parametrize(("text", "field"), [
     (toml(top_extra="colour = 1"), "colour"),
     (toml(timing="min_green = 3\nmax_green = 20\nyellow = 3.0\nred_clear = 2.0\nall_red = 1"), "timing.all_red"),
-    (toml(phases={2: "{ passage = 2 }"}), "phases.2.passage"),
     (toml(structure_extra="offset = 3"), "structure.offset"),
     (toml(middleware="poll = 10"), "middleware.poll"),
 ])

@@ -196,16 +196,30 @@ def test_one_ring_changes_alone_inside_a_barrier_group(controller: Controller) -
     assert runs(trace, 8) == [("r", YELLOW + RED), ("G", 1000 - YELLOW - RED)]
 
 
-def test_going_back_in_a_ring_restarts_the_barrier_group(controller: Controller) -> None:
+def test_backing_into_an_earlier_phase_while_the_other_ring_times(controller: Controller) -> None:
     controller.backup_time = 0
     serve(controller, {3, 8})
-    # 7 precedes 8 in ring 2: it is served when both rings have cleared and the group starts over.
+    # 7 precedes 8 in ring 2: ring 2 backs into it within the barrier group while 3 stays green.
     controller.set_control(CALL, {3, 7})
-    trace = record(controller, MAX + 2 * (YELLOW + RED))
-    assert runs(trace, 8) == [("Y", YELLOW), ("r", MAX - 1 + 2 * RED + YELLOW + 1)]
-    assert runs(trace, 3) == [("G", MAX - 1), ("Y", YELLOW), ("r", RED), ("G", YELLOW + RED + 1)]
-    assert runs(trace, 7)[-1] == ("G", YELLOW + RED + 1)
+    trace = record(controller, YELLOW + RED + 10)
+    assert runs(trace, 8) == [("Y", YELLOW), ("r", RED + 10)]
+    assert runs(trace, 7) == [("r", YELLOW + RED), ("G", 10)]
+    assert runs(trace, 3) == [("G", YELLOW + RED + 10)]
     assert all(s[0] == "r" and s[4] == "r" for s in trace)  # no side trip to 1 or 5 without a call
+
+
+def test_backup_prevent_keeps_the_ring_from_backing_until_the_barrier(paper_toml: str) -> None:
+    cfg = variant(paper_toml, replace={"7 = { approach": "7 = { backup_prevent = true, approach"})
+    c = Controller(cfg)
+    c.backup_time = 0
+    serve(c, {3, 8})
+    c.set_control(CALL, {3, 7})
+    trace = record(c, MAX + YELLOW + RED + 10)
+    # Ring 2 may not back into 7: it gets there through a barrier cycle. For 3 (which has its call)
+    # the call on 7 is conflicting demand: 3 maxes out, then both rings clear and re-enter the group.
+    assert runs(trace, 8) == [("G", MAX - 1), ("Y", YELLOW), ("r", RED + 11)]
+    assert runs(trace, 3)[:2] == [("G", MAX - 1), ("Y", YELLOW)]
+    assert runs(trace, 7) == [("r", MAX - 1 + YELLOW + RED), ("G", 11)]
 
 
 @pytest.mark.parametrize("calls", [set(), {2}, {2, 6}])
@@ -249,8 +263,9 @@ def test_maximum_timing_restarts_when_the_conflicting_call_goes_away(controller:
 def test_a_green_without_its_own_call_gaps_out_at_minimum(controller: Controller) -> None:
     controller.set_control(CALL, {6, 4})
     trace = record(controller, MAX + 1)
-    assert runs(trace, 2) == [("G", MIN - 1), ("Y", YELLOW), ("r", MAX + 1 - MIN + 1 - YELLOW)]
-    # 6 has its call but 4 waits beyond the barrier: 6 maxes out.
+    # 2 gapped out at its minimum, but its next service (4) lies across the barrier: it waits there,
+    # green, until 6 (which has its call) maxes out; then both clear together.
+    assert runs(trace, 2) == [("G", MAX - 1), ("Y", 2)]
     assert runs(trace, 6) == [("G", MAX - 1), ("Y", 2)]
 
 
@@ -273,7 +288,8 @@ def test_hold_on_one_ring_holds_the_barrier(controller: Controller) -> None:
     controller.set_control(HOLD, {2})
     trace = record(controller, 2 * MAX)
     assert runs(trace, 2) == [("G", 2 * MAX)]
-    assert runs(trace, 6) == [("G", MAX - 1), ("Y", YELLOW), ("r", 2 * MAX - MAX + 1 - YELLOW)]
+    # 6 maxes out, but the barrier is crossed by both rings together: 6 waits green with held 2.
+    assert runs(trace, 6) == [("G", 2 * MAX)]
     assert runs(trace, 4) == [("r", 2 * MAX)]
 
 
@@ -301,7 +317,8 @@ def test_force_off_one_ring_the_other_maxes_out(controller: Controller) -> None:
     controller.set_control(CALL, {2, 6, 4, 8})
     controller.set_control(FORCE_OFF, {2})
     trace = record(controller, MAX)
-    assert runs(trace, 2) == [("G", MIN - 1), ("Y", YELLOW), ("r", MAX - MIN + 1 - YELLOW)]
+    # 2 is forced off at its minimum, yet waits at the barrier for 6, which maxes out: both clear together.
+    assert runs(trace, 2) == [("G", MAX - 1), ("Y", 1)]
     assert runs(trace, 6) == [("G", MAX - 1), ("Y", 1)]
     assert controller.control[FORCE_OFF] == frozenset()
 
@@ -462,7 +479,7 @@ def test_on_change_reports_every_interval_change(paper_config: IntersectionConfi
     assert changes == [
         Change(MIN, 1, 2, Interval.YELLOW), Change(MIN, 2, 6, Interval.YELLOW),
         Change(MIN + YELLOW, 1, 2, Interval.RED_CLEAR), Change(MIN + YELLOW, 2, 6, Interval.RED_CLEAR),
-        Change(MIN + YELLOW + RED, 1, 2, Interval.DWELL), Change(MIN + YELLOW + RED, 2, 6, Interval.DWELL),
+        Change(MIN + YELLOW + RED, 1, 2, Interval.WAIT), Change(MIN + YELLOW + RED, 2, 6, Interval.WAIT),
         Change(MIN + YELLOW + RED, 1, 3, Interval.GREEN), Change(MIN + YELLOW + RED, 2, 7, Interval.GREEN),
     ]
 

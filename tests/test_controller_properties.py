@@ -49,6 +49,18 @@ def configs(draw: st.DrawFn) -> IntersectionConfig:
     startup = draw(st.none() | st.sampled_from(compatible))
     for p in startup or ():
         phases[str(p)]["startup"] = "green"
+    # The phase options, at random: passage (within the maximum), recalls, backup prevent, and at most
+    # one dual-entry phase per ring and barrier group.
+    for p in ALL_PHASES:
+        ph = phases[str(p)] = dict(phases[str(p)])
+        ph["passage"] = min(draw(st.sampled_from([0.0, 0.0, 0.5, 2.0])), ph["max_green"])
+        ph["recall"] = draw(st.sampled_from(["none", "none", "none", "min", "max", "soft"]))
+        ph["backup_prevent"] = draw(st.booleans())
+    for ring in (RING1, RING2):
+        for group in barriers:
+            members = [p for p in ring if p in group]
+            if members and draw(st.booleans()):
+                phases[str(draw(st.sampled_from(members)))]["dual_entry"] = True
     raw = {
         "name": "random",
         "phases": phases,
@@ -121,6 +133,7 @@ class Monitor:
                 continue
             if before == "G":
                 assert after == "Y", f"phase {p} went from green to {after} at tick {t}"
+                self._check_crossing(p, t)
                 served = t - self.green_since.pop(p)
                 assert served >= tenths(phases[p].min_green), f"phase {p} green {served} ticks at tick {t}"
                 self.yellow_since[p] = t
@@ -137,6 +150,19 @@ class Monitor:
                         assert t >= ready, f"phase {p} green at tick {t} before {q} cleared at {ready}"
                 self.green_since[p] = t
         self.shown = now
+
+    def _check_crossing(self, p: int, t: int) -> None:
+        """Both rings cross a barrier together: a green ending toward the other barrier group ends on the
+        same tick as the other ring's green (a ring without a green, in red, does not hold it back)."""
+        c = self.c
+        ring = c.rings[c.config.ring_of(p) - 1]
+        if ring.target is None or c.config.barrier_of(ring.target) == c.config.barrier_of(p):
+            return
+        for other in c.rings:
+            if other is not ring:
+                assert other.phase not in self.green_since or other.phase in c.yellows, (
+                    f"phase {p} clears toward {ring.target} across the barrier at tick {t}, "
+                    f"but {other.phase} stays green")
 
     def apply(self, operation: tuple[object, object]) -> None:
         kind, arg = operation

@@ -13,8 +13,8 @@ from hils import config as config_mod
 from hils.actions import ActionType
 from hils.events import Kind
 from hils.ntcip import SignalState
-from hils.runner import RunSpec, run_virtual
 from hils.sumo import SumoSimulation
+from hils.testbed import RunSpec, run_spec
 
 CFG = config_mod.load()
 
@@ -59,7 +59,7 @@ def test_sumo_shows_the_controllers_state_and_nobody_crosses_on_red():
     sim.start()
     watched = Watched(sim)
     try:
-        result = run_virtual(RunSpec(CFG, ActionType.SELECTION, duration=400.0, seed=5, sumo=True),
+        result = run_spec(RunSpec(CFG, ActionType.SELECTION, duration=400.0, seed=5, sumo=True),
                              simulation=watched)
     finally:
         sim.close()

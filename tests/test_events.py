@@ -12,7 +12,7 @@ import pytest
 from hils.actions import ActionType
 from hils.agents import Observation
 from hils.events import EventLog, Kind, read
-from hils.runner import Run, RunSpec, run_virtual
+from hils.testbed import AgentFailed, RunSpec, Testbed, run_spec
 
 
 def _without_wall(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -27,7 +27,7 @@ def _as_written(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
 
 def test_every_record_has_the_common_keys_and_a_gapless_seq(paper_config, tmp_path: Path) -> None:
     path = tmp_path / "run.jsonl"
-    run_virtual(RunSpec(paper_config, ActionType.SWITCH, agent="random", duration=120.0, seed=2,
+    run_spec(RunSpec(paper_config, ActionType.SWITCH, agent="random", duration=120.0, seed=2,
                                  log_path=path))
     records = list(read(path))
     assert len(records) > 1000
@@ -78,11 +78,11 @@ class CrashingAgent:
         return 1
 
 
-def test_a_crashed_run_keeps_every_record_emitted_before_the_crash(paper_config, tmp_path: Path) -> None:
+def test_a_run_whose_agent_crashes_keeps_every_record_and_ends_cleanly(paper_config, tmp_path: Path) -> None:
     path = tmp_path / "crash.jsonl"
     emitted: list[dict[str, Any]] = []
 
-    def configure(run: Run, target: Any) -> None:
+    def configure(run: Testbed, target: Any) -> None:
         run.agent = CrashingAgent(crash_after=3)
         emit = run.events.emit
 
@@ -92,16 +92,19 @@ def test_a_crashed_run_keeps_every_record_emitted_before_the_crash(paper_config,
 
         run.events.emit = spy
 
-    with pytest.raises(RuntimeError, match="agent crashed"):
-        run_virtual(RunSpec(paper_config, ActionType.SWITCH, duration=600.0, seed=1, log_path=path),
-                    configure=configure)
+    with pytest.raises(AgentFailed, match="agent crashed") as caught:
+        run_spec(RunSpec(paper_config, ActionType.SWITCH, duration=600.0, seed=1, log_path=path),
+                 configure=configure)
+    assert isinstance(caught.value.__cause__, RuntimeError)
     on_disk = list(read(path))
     assert len(emitted) > 100
     assert on_disk == _as_written(emitted)
     assert len([r for r in on_disk if r["kind"] == "action_received"]) == 3
     assert len([r for r in on_disk if r["kind"] == "transition_verified"]) == 3
     assert on_disk[-1]["t"] >= 20.0, "the run went on until the fourth decision"
-    assert not [r for r in on_disk if r["kind"] == "run_ended"]
+    clear = [r for r in on_disk if r["kind"] == "set_sent" and r["purpose"] == "clear"]
+    assert len(clear) == 1 and clear[0]["phases"] == [], "the calls are cleared"
+    assert on_disk[-1]["kind"] == "run_ended" and on_disk[-1]["reason"] == "agent_error"
 
 
 def test_read_ignores_a_torn_last_line(tmp_path: Path) -> None:
@@ -116,7 +119,7 @@ def test_read_ignores_a_torn_last_line(tmp_path: Path) -> None:
 
 
 def _log_of(config, action_type: ActionType, seed: int, path: Path) -> list[dict[str, Any]]:
-    run_virtual(RunSpec(config, action_type, agent="random", duration=600.0, seed=seed, log_path=path))
+    run_spec(RunSpec(config, action_type, agent="random", duration=600.0, seed=seed, log_path=path))
     return _without_wall(list(read(path)))
 
 

@@ -43,7 +43,7 @@ from hils.ntcip import (
     control_oid,
     signal_oids,
 )
-from hils.runner import RunSpec, modeled_cost, run_virtual
+from hils.testbed import RunSpec, modeled_cost, run_spec
 from hils.transport import CommunicationTimeout, Latency, LocalTransport
 
 TAU = 1.0
@@ -255,24 +255,24 @@ def run_with(config: IntersectionConfig, faults, *, action_type=ActionType.SELEC
         for f in faults:
             f.on_run(run, target)
 
-    return run_virtual(RunSpec(config, action_type, agent, duration, seed=1), target_factory=factory,
+    return run_spec(RunSpec(config, action_type, agent, duration, seed=1), target=factory,
                        configure=configure)
 
 
 def test_slow_steps_raise_drift_records_isolated_or_consecutive(paper_config):
     isolated = SlowSteps("isolated", start=10.0, count=4, cost=0.5, consecutive=1, gap=2)
     run = run_with(paper_config, [isolated])
-    drifts = run.run.events.of(Kind.DRIFT)
+    drifts = run.testbed.events.of(Kind.DRIFT)
     assert len(drifts) == 4 == isolated.fired
     assert [d["consecutive"] for d in drifts] == [1, 1, 1, 1]
     assert [d["t"] for d in drifts] == pytest.approx([10.0, 10.75, 11.5, 12.25])
     assert all(d["took_s"] == 0.5 for d in drifts)
-    assert not run.run.events.of(Kind.TIMEOUT_ENTERED)
+    assert not run.testbed.events.of(Kind.TIMEOUT_ENTERED)
 
     consecutive = SlowSteps("run", start=10.0, count=5, cost=0.5, consecutive=5)
     run = run_with(paper_config, [consecutive])
-    assert [d["consecutive"] for d in run.run.events.of(Kind.DRIFT)] == [1, 2, 3, 4, 5]
-    (timeout,) = run.run.events.of(Kind.TIMEOUT_ENTERED)
+    assert [d["consecutive"] for d in run.testbed.events.of(Kind.DRIFT)] == [1, 2, 3, 4, 5]
+    (timeout,) = run.testbed.events.of(Kind.TIMEOUT_ENTERED)
     assert timeout["reason"] == "drift" and timeout["t"] == pytest.approx(11.0)
 
 
@@ -306,19 +306,19 @@ def test_the_conflict_pair_is_really_conflicting(paper_config):
 def test_bad_actions_replace_the_agents_actions_and_are_refused(paper_config):
     bad = BadActions("bad", action=BadActionKind.CONFLICT, window=Window(5.0), count=2)
     run = run_with(paper_config, [bad])
-    refused = run.run.events.of(Kind.ACTION_REFUSED)
+    refused = run.testbed.events.of(Kind.ACTION_REFUSED)
     assert bad.fired == 2 and [r["reason"] for r in refused] == ["conflict", "conflict"]
-    received = {r["action_id"]: r["value"] for r in run.run.events.of(Kind.ACTION_RECEIVED)}
+    received = {r["action_id"]: r["value"] for r in run.testbed.events.of(Kind.ACTION_RECEIVED)}
     assert [received[r["action_id"]] for r in refused] == [[1, 7], [1, 7]]
 
 
 def test_action_bursts_arrive_while_on_hold_and_are_dropped(paper_config):
     burst = ActionBurst("burst", size=3, window=Window(0.0, 25.0))
     run = run_with(paper_config, [burst], action_type=ActionType.SWITCH, agent="fixed-cycle")
-    dropped = run.run.events.of(Kind.ACTION_DROPPED)
+    dropped = run.testbed.events.of(Kind.ACTION_DROPPED)
     assert burst.fired == 9  # commands at 0, 10 and 20 s, 3 extra actions each
     assert len(dropped) == 9 and {d["state"] for d in dropped} == {"on_hold"}
-    assert len(run.run.events.of(Kind.COMMAND_DISPATCHED)) == 6
+    assert len(run.testbed.events.of(Kind.COMMAND_DISPATCHED)) == 6
 
 
 def test_keepalive_suppressed_lets_the_backup_time_run_out(paper_config):
@@ -328,11 +328,12 @@ def test_keepalive_suppressed_lets_the_backup_time_run_out(paper_config):
         monitors = []
         run = run_with(config, faults, action_type=ActionType.SWITCH, agent="fixed-cycle", duration=45.0,
                        monitors=monitors)
-        return monitors[0].status_first_seen, run.run.events.of(Kind.SET_SENT)
+        return monitors[0].status_first_seen, run.testbed.events.of(Kind.SET_SENT)
 
     seen, sets = statuses([])
     assert UnitControlStatus.BACKUP_MODE not in seen
-    assert [r["t"] for r in sets if r["purpose"] == "keepalive"] == pytest.approx([10.004, 20.004, 30.004, 40.004])
+    t0 = next(r["t"] for r in sets if r["purpose"] == "command")  # the command's SET, right after start-up
+    assert [r["t"] for r in sets if r["purpose"] == "keepalive"] == pytest.approx([t0 + 10, t0 + 20, t0 + 30, t0 + 40])
     off = KeepaliveSuppressed("off")
     seen, sets = statuses([off])
     assert 30.0 <= seen[UnitControlStatus.BACKUP_MODE] <= 30.25  # 30 s after the command's SET, to a tick
@@ -341,7 +342,7 @@ def test_keepalive_suppressed_lets_the_backup_time_run_out(paper_config):
     short = KeepaliveSuppressed("short", window=Window(0.0, 15.0))
     seen, sets = statuses([short])
     assert UnitControlStatus.BACKUP_MODE not in seen  # switched back on in time
-    assert [r["t"] for r in sets if r["purpose"] == "keepalive"] == pytest.approx([20.004, 30.004, 40.004])
+    assert [r["t"] for r in sets if r["purpose"] == "keepalive"] == pytest.approx([t0 + 20, t0 + 30, t0 + 40])
     assert short.fired == 1
 
 

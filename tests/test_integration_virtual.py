@@ -8,7 +8,7 @@ from hils import config as config_mod
 from hils.actions import ActionType
 from hils.events import Kind
 from hils.ntcip import ControlColumn
-from hils.runner import RunSpec, run_virtual
+from hils.testbed import RunSpec, run_spec
 
 CFG = config_mod.load()
 CLEARANCE = 5.0  # yellow 3 s + red clearance 2 s, every phase of the paper's intersection
@@ -24,7 +24,7 @@ def _kinds(records, kind):
 
 @pytest.mark.parametrize("action_type", list(ActionType))
 def test_one_hour_every_transition_verified_within_clearance_plus_one_poll(action_type):
-    result = run_virtual(RunSpec(CFG, action_type, duration=3600.0, seed=3))
+    result = run_spec(RunSpec(CFG, action_type, duration=3600.0, seed=3))
     records = result.records
     dispatched = _kinds(records, Kind.COMMAND_DISPATCHED)
     verified = _kinds(records, Kind.TRANSITION_VERIFIED)
@@ -60,12 +60,12 @@ def test_loss_of_n_timeout_polls_enters_timeout_and_recovery_resumes_service():
     def configure(run, target):
         def outage():
             yield run.env.timeout(100.0)
-            target.transport.loss = 1.0
+            run.transport.loss = 1.0
             yield run.env.timeout(7.0)
-            target.transport.loss = 0.0
+            run.transport.loss = 0.0
         run.env.process(outage())
 
-    result = run_virtual(RunSpec(CFG, ActionType.SWITCH, duration=300.0, seed=1, recover_after=5.0),
+    result = run_spec(RunSpec(CFG, ActionType.SWITCH, duration=300.0, seed=1, recover_after=5.0),
                          configure=configure)
     records = result.records
     (timeout,) = _kinds(records, Kind.TIMEOUT_ENTERED)
@@ -94,7 +94,7 @@ def test_transition_never_seen_enters_timeout_after_tau_trans():
             target.controller.set_control(ControlColumn.PHASE_OMIT, CFG.phase_numbers)
         run.env.process(stuck())
 
-    result = run_virtual(RunSpec(CFG, ActionType.SWITCH, duration=120.0, seed=1, recover_after=None),
+    result = run_spec(RunSpec(CFG, ActionType.SWITCH, duration=120.0, seed=1, recover_after=None),
                          configure=configure)
     records = result.records
     (timeout,) = _kinds(records, Kind.TIMEOUT_ENTERED)
@@ -124,12 +124,12 @@ def test_n_drift_consecutive_slow_steps_enter_timeout_and_isolated_ones_do_not()
             run.step_cost = cost
         return configure
 
-    isolated = run_virtual(RunSpec(CFG, ActionType.SWITCH, duration=60.0, seed=1),
+    isolated = run_spec(RunSpec(CFG, ActionType.SWITCH, duration=60.0, seed=1),
                            configure=slow_steps({40, 42, 44, 46, 48, 50, 52, 54}))
     assert len(_kinds(isolated.records, Kind.DRIFT)) == 8
     assert not _kinds(isolated.records, Kind.TIMEOUT_ENTERED)
 
-    five = run_virtual(RunSpec(CFG, ActionType.SWITCH, duration=60.0, seed=1),
+    five = run_spec(RunSpec(CFG, ActionType.SWITCH, duration=60.0, seed=1),
                        configure=slow_steps({40, 41, 42, 43, 44}))
     (timeout,) = _kinds(five.records, Kind.TIMEOUT_ENTERED)
     assert timeout["reason"] == "drift"
@@ -142,8 +142,8 @@ def test_same_seed_same_log_apart_from_wall_clock():
     def strip(records):
         return [{k: v for k, v in r.items() if k != "wall_ns"} for r in records]
 
-    a = run_virtual(RunSpec(CFG, ActionType.SELECTION, duration=600.0, seed=7))
-    b = run_virtual(RunSpec(CFG, ActionType.SELECTION, duration=600.0, seed=7))
-    c = run_virtual(RunSpec(CFG, ActionType.SELECTION, duration=600.0, seed=8))
+    a = run_spec(RunSpec(CFG, ActionType.SELECTION, duration=600.0, seed=7))
+    b = run_spec(RunSpec(CFG, ActionType.SELECTION, duration=600.0, seed=7))
+    c = run_spec(RunSpec(CFG, ActionType.SELECTION, duration=600.0, seed=8))
     assert strip(a.records) == strip(b.records)
     assert strip(a.records) != strip(c.records)

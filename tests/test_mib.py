@@ -256,8 +256,22 @@ def test_next_oid_walks_every_instance_in_increasing_order(mib: MibView) -> None
     assert walked == mib.oids
     assert len(set(walked)) == len(walked)
     assert all(object_for(o) is not None for o in walked)
-    # 6 scalars, 10 phase columns x 8 phases, 10 status + 3 channel + 6 control columns x 1 group, 2 rings.
-    assert len(walked) == 6 + 10 * 8 + 19 + 2
+    # 6 scalars, 13 phase columns x 8 phases, 10 status + 3 channel + 6 control columns x 1 group, 2 rings.
+    assert len(walked) == 6 + 13 * 8 + 19 + 2
+
+
+def test_phase_options_and_passage_show_the_configured_options(paper_toml: str) -> None:
+    from hils.config import parse
+    from hils.ntcip import PhaseColumn, phase_oid
+
+    text = paper_toml.replace('2 = { approach', '2 = { passage = 2.5, recall = "min", dual_entry = true, approach')
+    text = text.replace('4 = { approach', '4 = { recall = "soft", approach')
+    view = MibView(Controller(parse(text)))
+    assert view.get(phase_oid(PhaseColumn.PASSAGE, 2)) == 25
+    assert view.get(phase_oid(PhaseColumn.OPTIONS, 2)) == 1 | 1 << 6 | 1 << 10  # enabled, min recall, dual entry
+    assert view.get(phase_oid(PhaseColumn.OPTIONS, 4)) == 1 | 1 << 9  # enabled, soft recall
+    assert view.get(phase_oid(PhaseColumn.OPTIONS, 1)) == 1
+    assert view.get(phase_oid(PhaseColumn.WALK, 1)) == 0 and view.get(phase_oid(PhaseColumn.RED_REVERT, 1)) == 0
 
 
 def test_next_oid_from_an_object_prefix_gives_its_first_instance(mib: MibView) -> None:

@@ -15,8 +15,7 @@ from harness.proxy import Action, ProxyRule, UdpFaultProxy, parse_delay, parse_d
 from hils import config as config_mod
 from hils.actions import ActionType
 from hils.events import Kind
-from hils.runner import RunSpec
-from hils.wire import run_wire
+from hils.testbed import RunSpec, run_spec
 
 LOCAL = ("127.0.0.1", 0)
 
@@ -102,7 +101,7 @@ def test_communication_failure_over_real_udp_at_wall_clock_time(tmp_path):
     try:
         spec = RunSpec(config, ActionType.SELECTION, duration=14.0, seed=1, recover_after=1.0,
                        log_path=tmp_path / "events.jsonl")
-        result = run_wire(spec, f"snmp://127.0.0.1:{port}?community=private&version=2c")
+        result = run_spec(spec, target=f"snmp://127.0.0.1:{port}?community=private&version=2c")
     finally:
         proxy.send_signal(signal.SIGTERM)
         proxy_out, _ = proxy.communicate(timeout=10)

@@ -84,7 +84,7 @@ def test_hils_run_refuses_an_agent_that_does_not_fit(tmp_path, capsys, monkeypat
     code = main(["run", "--no-sumo", "--duration", "30", "--agent", "my_agents:NotAnAgent", "--out",
                  str(tmp_path / "run"), "--no-progress"])
     assert code == 2
-    assert "does not fit the agent protocol: it has no act(observation) method" in capsys.readouterr().out
+    assert "does not fit the agent protocol: it has no act(observation) method" in capsys.readouterr().err
 
 
 def test_a_wrong_config_names_file_field_and_allowed(tmp_path, capsys):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import pytest
@@ -11,7 +12,7 @@ from harness.faults import FaultTarget, IndicationMonitor
 from harness.scenarios import ScenarioError, default_suite, evaluate, load_scenario, parse_scenario, run_scenario
 from hils.cli import main
 from hils.events import Kind
-from hils.runner import run_virtual
+from hils.testbed import run_spec
 
 SUITE = default_suite()
 
@@ -71,7 +72,7 @@ def test_a_wrong_expectation_fails_saying_which_and_what_happened(tmp_path):
     (failure,) = result.failures
     assert failure.expectation == "detect_within"
     assert "TIMEOUT within 1 s after fault 'link-down' first fired" in failure.message
-    assert "got TIMEOUT (communication) at 25.004 s, 5.000 s after" in failure.message
+    assert re.search(r"got TIMEOUT \(communication\) at 25\.0\d\d s, 5\.000 s after", failure.message)
 
 
 def test_a_scenario_expecting_no_timeout_fails_when_one_happens(tmp_path, capsys):
@@ -80,7 +81,7 @@ def test_a_scenario_expecting_no_timeout_fails_when_one_happens(tmp_path, capsys
     code = main(["faults", "run", str(path), "--report-dir", str(tmp_path / "rep"), "--no-progress"])
     out = capsys.readouterr().out
     assert code == 1
-    assert "FAIL ride: timeout: expected no TIMEOUT; got TIMEOUT: communication at 25.004 s" in out
+    assert re.search(r"FAIL ride: timeout: expected no TIMEOUT; got TIMEOUT: communication at 25\.0\d\d s", out)
     assert json.loads((tmp_path / "rep" / "faults.json").read_text())["failed"] == 1
 
 
@@ -106,7 +107,7 @@ def test_the_implicit_checks_catch_a_conflicting_command_and_a_lost_record():
         monitors.append(IndicationMonitor(env, target.controller, config))
         return target
 
-    records = run_virtual(scenario.spec(), target_factory=factory).records
+    records = run_spec(scenario.spec(), target=factory).records
     sent = next(i for i, r in enumerate(records) if r["kind"] == Kind.SET_SENT)
     records[sent] = {**records[sent], "phases": frozenset({1, 7})}
     del records[sent + 1]
@@ -183,5 +184,5 @@ def test_a_config_path_is_resolved_beside_the_scenario(tmp_path, paper_toml):
 
 
 def test_the_suite_is_found_beside_the_harness_package():
-    assert Path(__file__).resolve().parents[1] / "fault_scenarios" == SUITE
+    assert Path(__file__).resolve().parents[1] / "harness" / "fault_scenarios" == SUITE
     assert SUITE.is_dir()

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import re
 import socket
+import subprocess
 import time
 from collections.abc import Iterator
 
@@ -21,11 +22,11 @@ import numpy as np
 import pytest
 import simpy
 
-from harness.processes import snmpd
+from harness.processes import SNMPD_V3_USERS, snmpd, tool
 from hils.clock import WallClockDriver
 from hils.ntcip import ErrorStatus, SnmpError
-from hils.snmp import SnmpTarget, SnmpTransport, SnmpVersion
-from hils.transport import CommunicationTimeout
+from hils.snmp import AUTH_KEY_ENV, PRIV_KEY_ENV, AuthProtocol, PrivProtocol, SnmpTarget, SnmpTransport, SnmpVersion
+from hils.transport import CommunicationTimeout, TransportError
 
 SYS_DESCR = (1, 3, 6, 1, 2, 1, 1, 1, 0)
 SYS_UPTIME = (1, 3, 6, 1, 2, 1, 1, 3, 0)
@@ -313,8 +314,19 @@ def test_target_url_parsing(url, expected):
     ("snmp://10.0.0.5:port", "port must be a number"),
     ("snmp://10.0.0.5:70000", "port must be a number"),
     ("snmp://10.0.0.5:0", "outside 1..65535"),
-    ("snmp://10.0.0.5?version=3", "version '3' is not one of 1, 2c"),
-    ("snmp://10.0.0.5?retries=2", "unknown option 'retries'; allowed: community, version"),
+    ("snmp://10.0.0.5?version=4", "version '4' is not one of 1, 2c, 3"),
+    ("snmp://10.0.0.5?retries=2", "unknown option 'retries'; allowed: community, version, user"),
+    ("snmp://10.0.0.5?user=u", "option 'user' does not go with version 2c; allowed: community, version"),
+    ("snmp://10.0.0.5?version=3&community=c", "option 'community' does not go with version 3"),
+    ("snmp://10.0.0.5?version=3&auth=SHA&auth_key=12345678", "needs a user"),
+    ("snmp://10.0.0.5?version=3&user=u", "needs auth=SHA"),
+    ("snmp://10.0.0.5?version=3&user=u&auth=MD5&auth_key=12345678", "auth 'MD5' is not supported; allowed: SHA"),
+    ("snmp://10.0.0.5?version=3&user=u&auth=SHA&auth_key=12345678&priv=DES&priv_key=12345678",
+     "priv 'DES' is not supported; allowed: AES"),
+    ("snmp://10.0.0.5?version=3&user=u&auth=SHA", "auth=SHA needs a key: give auth_key=K or set HILS_SNMP_AUTH_KEY"),
+    ("snmp://10.0.0.5?version=3&user=u&auth=SHA&auth_key=12345678&priv=AES",
+     "priv=AES needs a key: give priv_key=K or set HILS_SNMP_PRIV_KEY"),
+    ("snmp://10.0.0.5?version=3&user=u&auth=SHA&auth_key=short", "auth_key must have at least 8 characters"),
     ("snmp://10.0.0.5?community=a&community=b", "given twice"),
     ("snmp://10.0.0.5?community=", "community is empty"),
     ("snmp://10.0.0.5?community", "not KEY=VALUE"),
@@ -324,4 +336,79 @@ def test_target_url_parsing(url, expected):
 ])
 def test_target_url_errors_say_what_is_wrong(url, message):
     with pytest.raises(ValueError, match=re.escape(message)):
-        SnmpTarget.parse(url)
+        SnmpTarget.parse(url, environ={})
+
+
+# --- SNMPv3 -------------------------------------------------------------------------------------------
+
+def v3_url(port: int, user: str, auth_key: str, priv_key: str) -> str:
+    url = f"snmp://127.0.0.1:{port}?version=3&user={user}&auth=SHA&auth_key={auth_key}"
+    return url + (f"&priv=AES&priv_key={priv_key}" if priv_key else "")
+
+
+def test_v3_keys_from_the_environment_and_never_in_the_repr():
+    environ = {AUTH_KEY_ENV: "auth-from-env", PRIV_KEY_ENV: "priv-from-env"}
+    target = SnmpTarget.parse("snmp://10.0.0.5?version=3&user=ops&auth=sha&priv=aes", environ=environ)
+    assert (target.version, target.user, target.auth, target.priv) == (SnmpVersion.V3, "ops", AuthProtocol.SHA,
+                                                                       PrivProtocol.AES)
+    assert (target.auth_key, target.priv_key, target.security_level) == ("auth-from-env", "priv-from-env",
+                                                                         "authPriv")
+    assert "from-env" not in repr(target)
+    # A key in the URL wins over the environment.
+    url = "snmp://10.0.0.5?version=3&user=ops&auth=SHA&auth_key=auth-in-url"
+    target = SnmpTarget.parse(url, environ=environ)
+    assert (target.auth_key, target.priv, target.security_level) == ("auth-in-url", None, "authNoPriv")
+
+
+@pytest.mark.parametrize("user", sorted(SNMPD_V3_USERS))
+def test_v3_get_and_set_against_snmpd(driver, snmpd_port, user):
+    level, auth_key, priv_key = SNMPD_V3_USERS[user]
+    target = SnmpTarget.parse(v3_url(snmpd_port, user, auth_key, priv_key))
+    assert target.security_level == level
+    transport = SnmpTransport(driver.env, driver, target, tau_udp=1.0)
+
+    def scenario():
+        first = yield transport.get([SNMP_IN_PKTS, SYS_DESCR])
+        yield transport.set([(DO_DEBUGGING, 0), (AUTHEN_TRAPS, 2)])
+        second = yield transport.get([SNMP_IN_PKTS, AUTHEN_TRAPS])
+        try:
+            yield transport.get([SYS_UPTIME, MISSING])
+        except SnmpError as exc:
+            return first, second, exc
+        pytest.fail("GET of a missing object succeeded")
+
+    try:
+        first, second, refusal = run_process(driver, scenario())
+    finally:
+        transport.close()
+    assert isinstance(first[1], bytes) and first[1]
+    assert second[0] > first[0] and second[1] == 2
+    assert (refusal.status, refusal.index) == (ErrorStatus.NO_SUCH_NAME, 2)
+    # net-snmp's own client reads what we wrote, with the same user.
+    out = subprocess.run([tool("snmpget"), "-v3", "-l", level, "-u", user, "-a", "SHA", "-A", auth_key,
+                          *(["-x", "AES", "-X", priv_key] if priv_key else []), "-On", "-t", "1", "-r", "0",
+                          f"127.0.0.1:{snmpd_port}", ".1.3.6.1.2.1.11.30.0"], capture_output=True, text=True,
+                         timeout=10)
+    assert out.stdout.strip() == ".1.3.6.1.2.1.11.30.0 = INTEGER: 2", out.stderr
+
+
+@pytest.mark.parametrize("wrong", ["auth", "priv"])
+def test_v3_wrong_key_fails_the_request(driver, snmpd_port, wrong):
+    _, auth_key, priv_key = SNMPD_V3_USERS["hilspriv"]
+    keys = {"auth": ("not-the-auth-key", priv_key), "priv": (auth_key, "not-the-priv-key")}[wrong]
+    transport = SnmpTransport(driver.env, driver, SnmpTarget.parse(v3_url(snmpd_port, "hilspriv", *keys)),
+                              tau_udp=0.5)
+
+    def scenario():
+        try:
+            yield transport.get([SYS_UPTIME])
+        except TransportError as exc:
+            return exc
+        pytest.fail("a GET with a wrong key succeeded")
+
+    try:
+        failure = run_process(driver, scenario())
+    finally:
+        transport.close()
+    # A wrong authentication key is reported by the agent; a wrong privacy key leaves it unable to read us.
+    assert isinstance(failure, TransportError)

@@ -1,0 +1,7 @@
+"""``python -m hils``: the same as the ``hils`` command."""
+
+import sys
+
+from hils.cli import main
+
+sys.exit(main())

@@ -1,0 +1,278 @@
+"""The board: what the dashboard shows, folded from the event log one record at a time.
+
+Rules of this file
+------------------
+- The event log is the only input. A live run feeds each record as it is emitted (an
+  :class:`hils.events.EventLog` subscriber); a replay feeds the records of a finished run's log. Both
+  go through :meth:`Board.feed`, so a replayed instant shows exactly what the live page showed then.
+- No I/O, no clock, no SimPy: time is the records' ``t`` (sim seconds).
+- Feeding a record is O(1) apart from trimming the strip: a wall-clock run feeds it on the SimPy hot
+  path. :meth:`Board.snapshot` (the JSON the page draws) is where the work is done.
+
+Theory of operation
+-------------------
+Each kind of record updates one part of the board (see ``_HANDLERS``):
+
+- ``poll``: the indication of every phase (green, yellow, else red); a change opens a segment of the
+  strip, which keeps the last :data:`STRIP_S` seconds. Walk, flashing don't walk and PhaseNext are
+  not polled by the middleware, so the board has no field for them until the poll reads them.
+- ``set_sent``: VehCall as last SET (the calls the middleware places), and the SET counts.
+- ``command_dispatched`` / ``hold_released`` / ``transition_verified``: the last commands with their
+  hold times; a command kept without a SET (``keep``) appears when its hold is released.
+- ``state``, ``timeout_entered``, ``recovery_started``, ``recovered``: the manager's state and, in
+  TIMEOUT, its reason and detail.
+- ``poll_failed``, ``drift``, ``queues``, ``run_started``, ``run_ended``: counters, queues per
+  approach, what the run is and how it ended.
+"""
+
+from __future__ import annotations
+
+import bisect
+import copy
+from collections import deque
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from hils.config import IntersectionConfig
+
+#: Seconds of signal history in the strip.
+STRIP_S = 120.0
+#: Commands listed.
+LAST_COMMANDS = 8
+
+GREEN, YELLOW, RED = "G", "Y", "r"
+
+
+@dataclass
+class CommandRow:
+    """One command in the list of the last commands."""
+
+    command_id: int | None
+    phases: list[int]
+    t: float
+    green: float | None = None  # the prescribed green of a duration command
+    verified_s: float | None = None  # dispatch to the poll that showed it
+    hold_s: float | None = None  # dispatch to the release of the hold
+    outcome: str | None = None  # verified, served, timeout, keep; None while held
+
+
+@dataclass
+class Board:
+    """The dashboard's view of one intersection's run."""
+
+    config: IntersectionConfig
+    t: float = 0.0
+    run: dict[str, Any] = field(default_factory=dict)  # the run_started record's fields
+    ended: str | None = None  # run_ended's reason
+    polled: bool = False
+    shown: dict[int, str] = field(default_factory=dict)  # phase -> G / Y / r
+    vehcall: list[int] = field(default_factory=list)
+    state: str = "idle"
+    timeout_reason: str | None = None
+    timeout_detail: str | None = None
+    recovering: bool = False
+    commands: deque[CommandRow] = field(default_factory=lambda: deque(maxlen=LAST_COMMANDS))
+    polls_ok: int = 0
+    polls_failed: int = 0
+    failing: int = 0  # consecutive failed polls
+    sets: dict[str, int] = field(default_factory=lambda: {"sent": 0, "answered": 0, "failed": 0})
+    dropped: int = 0
+    refused: int = 0
+    drifts: int = 0
+    last_lag: float | None = None  # the last transition's dispatch-to-verification time
+    queues: dict[str, int] | None = None
+    strip: deque[tuple[float, dict[int, str]]] = field(default_factory=deque)  # (start, indications)
+    records: int = 0
+    _pending: list[int] = field(default_factory=list)  # the last converted command, for a keep
+
+    def feed(self, record: Mapping[str, Any]) -> None:
+        """Fold one event-log record into the board."""
+        self.records += 1
+        self.t = max(self.t, float(record["t"]))
+        handler = _HANDLERS.get(record["kind"])
+        if handler is not None:
+            handler(self, record)
+
+    def feed_all(self, records: Iterable[Mapping[str, Any]]) -> Board:
+        for record in records:
+            self.feed(record)
+        return self
+
+    # --- handlers -------------------------------------------------------------------------------
+
+    def _run_started(self, r: Mapping[str, Any]) -> None:
+        self.run = {k: r.get(k) for k in ("config", "mode", "action_type", "agent", "seed", "duration")}
+
+    def _run_ended(self, r: Mapping[str, Any]) -> None:
+        self.ended = r["reason"]
+
+    def _poll(self, r: Mapping[str, Any]) -> None:
+        self.polls_ok += 1
+        self.failing = 0
+        greens, yellows = set(r["greens"]), set(r["yellows"])
+        shown = {p: GREEN if p in greens else YELLOW if p in yellows else RED for p in self.config.phase_numbers}
+        if shown != self.shown or not self.polled:
+            self.shown = shown
+            self.strip.append((float(r["t"]), shown))
+            self._trim()
+        self.polled = True
+
+    def _poll_failed(self, r: Mapping[str, Any]) -> None:
+        if r.get("poll_id"):  # poll 0 is the start-up read
+            self.polls_failed += 1
+        self.failing = int(r.get("consecutive", 0))
+
+    def _set_sent(self, r: Mapping[str, Any]) -> None:
+        self.sets["sent"] += 1
+        self.vehcall = sorted(r["phases"])
+
+    def _set_answered(self, r: Mapping[str, Any]) -> None:
+        self.sets["answered"] += 1
+
+    def _set_failed(self, r: Mapping[str, Any]) -> None:
+        self.sets["failed"] += 1
+
+    def _converted(self, r: Mapping[str, Any]) -> None:
+        self._pending = list(r["command"])
+
+    def _dispatched(self, r: Mapping[str, Any]) -> None:
+        self.commands.append(CommandRow(r["command_id"], list(r["command"]), float(r["t"]), r.get("green")))
+
+    def _verified(self, r: Mapping[str, Any]) -> None:
+        self.last_lag = float(r["hold_s"])
+        row = self._row(r["command_id"])
+        if row is not None:
+            row.verified_s = self.last_lag
+
+    def _released(self, r: Mapping[str, Any]) -> None:
+        row = self._row(r["command_id"])
+        if row is None:  # kept without a SET: never dispatched
+            row = CommandRow(r["command_id"], self._pending, float(r["t"]))
+            self.commands.append(row)
+        row.hold_s, row.outcome = float(r["hold_s"]), r["reason"]
+
+    def _dropped(self, r: Mapping[str, Any]) -> None:
+        self.dropped += 1
+
+    def _refused(self, r: Mapping[str, Any]) -> None:
+        self.refused += 1
+
+    def _state(self, r: Mapping[str, Any]) -> None:
+        self.state = r["to"]
+        if self.state != "timeout":
+            self.timeout_reason = self.timeout_detail = None
+            self.recovering = False
+
+    def _timeout(self, r: Mapping[str, Any]) -> None:
+        self.timeout_reason, self.timeout_detail = r["reason"], r.get("detail")
+
+    def _recovery_started(self, r: Mapping[str, Any]) -> None:
+        self.recovering = True
+
+    def _recovered(self, r: Mapping[str, Any]) -> None:
+        self.recovering = False
+
+    def _drift(self, r: Mapping[str, Any]) -> None:
+        self.drifts += 1
+
+    def _queues(self, r: Mapping[str, Any]) -> None:
+        self.queues = dict(r["queues"])
+
+    # --- helpers ----------------------------------------------------------------------------------
+
+    def _row(self, command_id: int | None) -> CommandRow | None:
+        return next((row for row in reversed(self.commands) if row.command_id == command_id), None)
+
+    def _trim(self) -> None:
+        # Drop segments that ended before the strip's window (a segment ends where the next starts).
+        horizon = self.t - STRIP_S
+        while len(self.strip) > 1 and self.strip[1][0] <= horizon:
+            self.strip.popleft()
+
+    # --- what the page draws ------------------------------------------------------------------------
+
+    def snapshot(self) -> dict[str, Any]:
+        """The board as JSON for the page (see ``static/app.js``)."""
+        cfg = self.config
+        self._trim()
+        return {
+            "t": round(self.t, 3),
+            "run": self.run,
+            "ended": self.ended,
+            "phases": [{"phase": p, "ring": ph.ring, "barrier": cfg.barrier_of(p), "approach": ph.approach,
+                        "turn": ph.turn, "shown": self.shown.get(p) if self.polled else None,
+                        "vehcall": p in self.vehcall} for p, ph in sorted(cfg.phases.items())],
+            "rings": [list(r) for r in cfg.rings],
+            "barriers": len(cfg.barriers),
+            "state": self.state,
+            "timeout": {"reason": self.timeout_reason, "detail": self.timeout_detail,
+                        "recovering": self.recovering} if self.state == "timeout" else None,
+            "commands": [{"id": c.command_id, "phases": c.phases, "t": round(c.t, 3), "green": c.green,
+                          "verified_s": _r(c.verified_s), "hold_s": _r(c.hold_s), "outcome": c.outcome}
+                         for c in reversed(self.commands)],
+            "comms": {"polls_ok": self.polls_ok, "polls_failed": self.polls_failed, "failing": self.failing,
+                      "sets": dict(self.sets), "dropped": self.dropped, "refused": self.refused,
+                      "drifts": self.drifts, "last_lag_s": _r(self.last_lag)},
+            "queues": self.queues,
+            "strip": {"window_s": STRIP_S,
+                      "segments": [[round(t0, 3), {str(p): s for p, s in shown.items() if s != RED}]
+                                   for t0, shown in self.strip]},
+        }
+
+
+def _r(x: float | None) -> float | None:
+    return None if x is None else round(x, 3)
+
+
+_HANDLERS: dict[str, Callable[[Board, Mapping[str, Any]], None]] = {
+    "run_started": Board._run_started,
+    "run_ended": Board._run_ended,
+    "poll": Board._poll,
+    "poll_failed": Board._poll_failed,
+    "set_sent": Board._set_sent,
+    "set_answered": Board._set_answered,
+    "set_failed": Board._set_failed,
+    "action_converted": Board._converted,
+    "action_dropped": Board._dropped,
+    "action_refused": Board._refused,
+    "command_dispatched": Board._dispatched,
+    "transition_verified": Board._verified,
+    "hold_released": Board._released,
+    "state": Board._state,
+    "timeout_entered": Board._timeout,
+    "recovery_started": Board._recovery_started,
+    "recovered": Board._recovered,
+    "drift": Board._drift,
+    "queues": Board._queues,
+}
+
+
+class Replay:
+    """A finished run's board at any instant: the records folded up to it, from the nearest checkpoint."""
+
+    def __init__(self, config: IntersectionConfig, records: Iterable[Mapping[str, Any]], *,
+                 every: int = 2000) -> None:
+        self.config = config
+        self.records = list(records)
+        if not self.records:
+            raise ValueError("the event log has no records")
+        self.times = [float(r["t"]) for r in self.records]
+        self.end = self.times[-1]
+        # Checkpoint k is the board after the first k * every records.
+        self._every = every
+        self._checkpoints = [Board(config)]
+        board = Board(config)
+        for i, record in enumerate(self.records, start=1):
+            board.feed(record)
+            if i % every == 0:
+                self._checkpoints.append(copy.deepcopy(board))
+
+    def at(self, t: float) -> Board:
+        """The board once every record with ``t`` at or before ``t`` has been fed."""
+        n = bisect.bisect_right(self.times, t)
+        k = min(n // self._every, len(self._checkpoints) - 1)
+        board = copy.deepcopy(self._checkpoints[k])
+        board.feed_all(self.records[k * self._every:n])
+        board.t = max(board.t, min(t, self.end))
+        return board

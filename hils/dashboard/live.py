@@ -1,0 +1,59 @@
+"""The live dashboard of a wall-clock run: a board fed by the run's event log, served on the run's loop.
+
+:func:`attach` is given to :class:`hils.Testbed` as its ``on_reset`` hook: the run is then assembled
+(its event log and its wall-clock driver exist) and nothing has started, so the board sees every
+record from ``run_started`` on. The server is a task on ``driver.loop``; a recovery asked for from
+the page is delivered to SimPy as an event through the driver, so it runs between two SimPy steps
+like every other completion.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from hils.dashboard import DashboardError
+from hils.dashboard.board import Board
+from hils.dashboard.server import Live, LiveServer, bind
+
+
+@dataclass
+class LiveDashboard:
+    """``hils run --dashboard PORT``: where to listen and whether the page may recover the manager."""
+
+    port: int
+    control: bool = False
+    host: str = "127.0.0.1"
+    server: LiveServer | None = field(default=None, init=False)
+
+    def attach(self, testbed: Any, _target: Any = None) -> None:
+        """The Testbed's ``on_reset`` hook: start serving this run's board."""
+        driver = testbed.driver
+        if driver is None:
+            raise DashboardError("--dashboard needs a wall-clock run (--target snmp://...); watch a virtual-time "
+                                 "run afterwards with `hils view RUN_FOLDER --realtime 10`")
+        if self.server is not None:
+            self.stop()
+        board = Board(testbed.config)
+        testbed.events.subscribe(board.feed)
+        live = Live(board, recover=(lambda: _request_recovery(testbed)) if self.control else None)
+        self.server = LiveServer(live, bind(self.host, self.port), driver.loop)
+        print(f"dashboard: {self.server.url}", flush=True)
+
+    def stop(self) -> None:
+        if self.server is not None:
+            self.server.stop()
+            self.server = None
+
+
+def _request_recovery(testbed: Any) -> str:
+    """Ask the manager to recover; runs as a SimPy event delivered at the wall-mapped present."""
+    mw = testbed.middleware
+    if testbed.ended or mw is None:
+        return "the run has ended"
+    if not mw.timeout_flag:
+        return f"nothing to recover: the manager is {mw.state.name}"
+    event = testbed.env.event()
+    event.callbacks.append(lambda _ev: mw.recover())
+    testbed.driver.deliver(event)
+    return "requested"

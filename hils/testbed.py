@@ -1,0 +1,674 @@
+"""The Testbed: the one way to assemble a run and drive it, from Python or from the CLI.
+
+A :class:`Testbed` owns the run's one SimPy environment, the clock that drives it, the transport
+to the controller, the middleware (whose manager is the state machine), the traffic simulation and
+the event log. Everything else is a client of it: ``hils run``, the fault harness, the benchmarks,
+the tests and your own code::
+
+    from hils import Testbed
+
+    with Testbed(action_type="selection", sumo=True, seed=1) as tb:
+        obs = tb.reset()
+        for _ in range(30):
+            obs, info = tb.step((2, 6))   # runs to the next decision point
+
+Rules of this module
+--------------------
+- This is the only place that creates the SimPy environment of a run.
+- Virtual time and wall-clock time go through the same code: only the clock (``_advance``) and the
+  transport differ. ``target="virtual"`` (the default) is the in-process emulator, found through
+  the ``hils.targets`` entry point so that ``hils`` never imports it; ``target="snmp://..."`` is a
+  real controller, or ``hils emulator serve``, at wall-clock time; a callable target is a factory
+  ``(env, config, seed=...) -> target`` whose target has a ``transport``, or a ``surface`` (with
+  ``get_latency`` and ``set_latency``) that an in-process transport reaches (the fault harness puts
+  its faults there).
+- A decision point is the end of the control interval for selection and switch actions, the end of
+  the served green for duration actions, and, earlier, the manager entering TIMEOUT or the end of
+  the run's ``duration``.
+- Every way a run ends goes through :meth:`Testbed.finish`: the calls placed are cleared,
+  ``run_ended`` is logged with its reason and the log is closed. :meth:`Testbed.run` finishes the run
+  before it re-raises whatever ended it (an agent's exception, Ctrl-C, SIGTERM, an error).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import gc
+import logging
+import math
+import signal
+import time
+from collections.abc import Callable, Generator
+from importlib.metadata import entry_points
+from pathlib import Path
+from types import TracebackType
+from typing import Any, Protocol
+
+import simpy
+
+from hils import config as config_mod
+from hils.actions import ActionError, ActionType
+from hils.agents import Agent, Observation, load_agent
+from hils.config import IntersectionConfig
+from hils.errors import UserError
+from hils.events import EventLog, Kind
+from hils.events import read as read_events
+from hils.manager import State
+from hils.middleware import Middleware
+from hils.ntcip import SignalState
+from hils.preflight import ControllerCheckFailed
+from hils.transport import LocalTransport, Transport
+
+log = logging.getLogger(__name__)
+
+StepCost = Callable[[Callable[[], Any]], float]
+TargetFactory = Callable[..., Any]
+
+#: Agents used when none is named: with traffic to observe, and without (no SUMO).
+DEFAULT_AGENTS = {ActionType.SELECTION: "max-pressure", ActionType.SWITCH: "fixed-cycle",
+                  ActionType.DURATION: "queue-proportional"}
+BLIND_AGENTS = {ActionType.SELECTION: "random", ActionType.SWITCH: "fixed-cycle", ActionType.DURATION: "random"}
+
+VIRTUAL = "virtual"
+
+
+class Simulation(Protocol):
+    """What the run steps: SUMO, or nothing (:class:`NoSimulation`)."""
+
+    def apply(self, state: SignalState) -> None: ...
+
+    def step(self) -> Any: ...
+
+    def traffic_state(self) -> Any: ...
+
+
+class NoSimulation:
+    """Stands in for SUMO in middleware-only runs: steps cost nothing and there is no traffic."""
+
+    def apply(self, state: SignalState) -> None:
+        """No lights to set."""
+
+    def step(self) -> None:
+        """No traffic to move."""
+
+    def traffic_state(self) -> None:
+        return None
+
+
+class RunInterrupted(Exception):
+    """The run was stopped from outside (Ctrl-C or SIGTERM); ``reason`` is what ``run_ended`` logs."""
+
+    def __init__(self, reason: str) -> None:
+        super().__init__(reason)
+        self.reason = reason
+
+
+class AgentFailed(Exception):
+    """The agent's ``act()`` raised; the original exception is the cause."""
+
+
+class NotStarted(RuntimeError):
+    """A Testbed used before :meth:`Testbed.reset` or after :meth:`Testbed.close`."""
+
+
+def modeled_cost(step: Callable[[], Any]) -> float:
+    """Virtual time: a step costs no simulated time (faults may model otherwise)."""
+    step()
+    return 0.0
+
+
+def measured_cost(step: Callable[[], Any]) -> float:
+    """Wall-clock time: a step costs the wall time it took."""
+    t0 = time.perf_counter()
+    step()
+    return time.perf_counter() - t0
+
+
+def virtual_target_factory() -> TargetFactory:
+    """The in-process emulator, found through the ``hils.targets`` entry point."""
+    found = [ep for ep in entry_points(group="hils.targets") if ep.name == VIRTUAL]
+    if not found:
+        raise RuntimeError("no virtual target installed: the emulator package is needed for virtual-time runs "
+                           "(or give target='snmp://HOST:PORT')")
+    return found[0].load()
+
+
+@dataclasses.dataclass(frozen=True)
+class RunSpec:
+    """What a run is, as the CLI and the harness describe it (see :class:`Testbed` for the fields)."""
+
+    config: IntersectionConfig
+    action_type: ActionType = ActionType.SELECTION
+    agent: str | None = None  # built-in name or package.module:Class; None = the default of the action type
+    duration: float = 3600.0
+    seed: int = 0
+    log_path: Path | None = None
+    recover_after: float | None = 5.0  # call recover() this long after entering TIMEOUT; None: never
+    sumo: bool = False  # whether a traffic simulation runs (decides the default agent)
+
+    @property
+    def agent_spec(self) -> str:
+        return self.agent or (DEFAULT_AGENTS if self.sumo else BLIND_AGENTS)[self.action_type]
+
+
+class Testbed:
+    __test__ = False  # pytest: a class named Test* here is not a test
+    """One intersection's run: controller (virtual or real), middleware, optional SUMO, event log.
+
+    ``config``: an :class:`IntersectionConfig`, a TOML path, or None for the shipped four-leg.
+    ``action_type``: selection, switch or duration. ``target``: ``"virtual"``, an ``snmp://`` URL or a
+    target factory. ``sumo``: True to run the shipped SUMO scenario (started at each reset), or a
+    simulation object the caller started. ``seed``: every virtual-time run is reproducible from it.
+    ``agent``: what :meth:`run` uses when given none (a built-in name, ``package.module:Class`` or an
+    instance). ``duration``: simulated seconds after which the run is done (None: no end).
+    ``log_path``: the JSON Lines event log (None: kept in memory only). ``recover_after``: seconds in
+    TIMEOUT before recover() is called (None: never). ``on_reset(testbed, target)`` runs after
+    assembly, before anything starts: the fault harness wraps parts of the run there.
+    """
+
+    def __init__(self, config: IntersectionConfig | str | Path | None = None, *,
+                 action_type: ActionType | str = ActionType.SELECTION, target: str | TargetFactory = VIRTUAL,
+                 sumo: bool | Simulation = False, seed: int = 0, agent: str | Agent | None = None,
+                 duration: float | None = None, log_path: str | Path | None = None,
+                 recover_after: float | None = 5.0,
+                 on_reset: Callable[[Testbed, Any], None] | None = None) -> None:
+        self.config = config if isinstance(config, IntersectionConfig) else config_mod.load(config)
+        self.action_type = ActionType(action_type)
+        if isinstance(target, str) and target != VIRTUAL:
+            _check_target(target)
+        if duration is not None and not duration > 0:
+            raise ValueError(f"duration must be positive seconds or None, got {duration!r}")
+        self._target_spec = target
+        self._sumo_spec = sumo
+        self.seed = seed
+        self._agent_spec = agent
+        self.duration = duration
+        self.log_path = Path(log_path) if log_path is not None else None
+        self.recover_after = recover_after
+        self.on_reset = on_reset
+        self.spec = RunSpec(self.config, self.action_type, agent if isinstance(agent, str) else None,
+                            math.inf if duration is None else duration, seed, self.log_path, recover_after,
+                            sumo=bool(sumo))
+        self.env: simpy.Environment | None = None
+        self.middleware: Middleware | None = None
+        self.events: EventLog | None = None
+        self.target: Any = None
+        self.transport: Transport | None = None
+        self.simulation: Simulation = NoSimulation()
+        self.agent: Agent | None = None
+        self.step_cost: StepCost = modeled_cost
+        self.ended = False
+        self.end_reason: str | None = None
+        self.traffic: Any = None  # the simulation's end-of-run summary, once finished
+        self.traffic_samples: list[tuple[float, dict[str, int]]] = []
+        self.wall_s = 0.0
+        self._driver: Any = None
+        self._owns_sumo = False
+        self._wall_t0 = 0.0
+
+    # --- properties ---------------------------------------------------------------------------
+
+    @property
+    def mode(self) -> str:
+        """``virtual`` or ``wall-clock``."""
+        return "wall-clock" if isinstance(self._target_spec, str) and self._target_spec != VIRTUAL else VIRTUAL
+
+    @property
+    def now(self) -> float:
+        return self._env.now
+
+    @property
+    def state(self) -> State:
+        """The manager's state."""
+        return self._mw.state
+
+    @property
+    def done(self) -> bool:
+        """True once the run has ended or its ``duration`` has passed."""
+        return self.ended or (self.duration is not None and self._env.now >= self.duration - 1e-9)
+
+    @property
+    def records(self) -> list[dict[str, Any]]:
+        """The event log's records (read back from the file when the log is not kept in memory)."""
+        log_ = self.events
+        if log_ is None:
+            return []
+        return log_.records if log_.keep else list(read_events(log_.path))
+
+    @property
+    def driver(self) -> Any:
+        """Wall-clock runs: the :class:`hils.clock.WallClockDriver` (its ``loop`` is the run's asyncio loop,
+        where servers of the run such as the dashboard run as tasks); None in virtual time."""
+        return self._driver
+
+    @property
+    def lateness(self) -> Any:
+        """Wall-clock runs: the driver's lateness summary; None in virtual time."""
+        return None if self._driver is None else self._driver.lateness.summary()
+
+    # --- life cycle -----------------------------------------------------------------------------
+
+    def reset(self, seed: int | None = None) -> Observation:
+        """Start (or restart, with a new seed) the run; returns the first observation."""
+        if self.env is not None:
+            self.close()
+        if seed is not None:
+            self.seed = seed
+            self.spec = dataclasses.replace(self.spec, seed=seed)
+        self._wall_t0 = time.perf_counter()
+        self.ended, self.end_reason, self.traffic = False, None, None
+        self.traffic_samples = []
+        env = self.env = simpy.Environment()
+        self._assemble_target(env)
+        # A run that writes its log to a file does not also keep it in memory: a long run's records
+        # would grow the heap that every full garbage collection walks, in the middle of the hot path.
+        self.events = EventLog(self.log_path, keep=self.log_path is None)
+        where, community = ("the in-process emulator", None) if self.mode == VIRTUAL else (
+            f"{self.target.host}:{self.target.port}", getattr(self.target, "community", None))
+        self.middleware = Middleware(env, self.transport, self.config, self.action_type, self.events, where=where,
+                                     community=community)
+        self._assemble_simulation()
+        self.agent = self._load_agent()
+        if self.on_reset is not None:
+            self.on_reset(self, self.target)
+        self._start()
+        self._advance(None, self.middleware.ready)
+        self._check_controller()
+        return self.observe()
+
+    def _check_controller(self) -> None:
+        """The start-up checks: refuse a controller unfit for a run (one line each), warn about the rest."""
+        mw = self.middleware
+        refusals = ([mw.startup_error] if mw.startup_error else []) + list(mw.verdict.refusals)
+        for line in mw.verdict.warnings:
+            log.warning("%s", line)
+        if refusals:
+            self.finish("error")
+            raise ControllerCheckFailed("; ".join(refusals))
+
+    def _assemble_target(self, env: simpy.Environment) -> None:
+        spec = self._target_spec
+        if self.mode == VIRTUAL:
+            factory = virtual_target_factory() if spec == VIRTUAL else spec
+            target = self.target = factory(env, self.config, seed=self.seed)
+            # A target brings its transport, or an object surface that an in-process transport reaches.
+            self.transport = getattr(target, "transport", None) or LocalTransport(
+                env, target.surface, tau_udp=self.config.middleware.tau_udp, get_latency=target.get_latency,
+                set_latency=target.set_latency, seed=self.seed)
+            self.step_cost = modeled_cost
+            self._driver = None
+            return
+        from hils.clock import WallClockDriver
+        from hils.snmp import SnmpTarget, SnmpTransport
+
+        self.target = SnmpTarget.parse(spec)
+        driver = self._driver = WallClockDriver(env)
+        self.transport = SnmpTransport(env, driver, self.target, tau_udp=self.config.middleware.tau_udp)
+
+        def wall_cost(step: Callable[[], Any]) -> float:
+            # What a step cost at the wall clock: its own time plus how late it started.
+            return max(0.0, driver.sim_now() - env.now) + measured_cost(step)
+
+        self.step_cost = wall_cost
+
+    def _assemble_simulation(self) -> None:
+        sumo = self._sumo_spec
+        self._owns_sumo = sumo is True
+        if sumo is True:
+            from hils.sumo import SumoSimulation
+
+            sim = SumoSimulation(self.config, seed=self.seed, end=self.duration)
+            sim.start()
+            self.simulation = sim
+        elif sumo is False:
+            self.simulation = NoSimulation()
+        else:
+            self.simulation = sumo
+
+    def _load_agent(self) -> Agent | None:
+        spec = self._agent_spec
+        if spec is None or isinstance(spec, str):
+            return load_agent(self.spec.agent_spec, self.config, self.action_type, self.seed)
+        return spec
+
+    def _start(self) -> None:
+        # Everything loaded so far (SUMO, numpy, the config) lives for the whole run: keep it out of
+        # the collector's way so that collections during the run stay short.
+        gc.freeze()
+        cfg = self.config
+        self.events.emit(Kind.RUN_STARTED, config=cfg.name, source=cfg.source, seed=self.seed, mode=self.mode,
+                         action_type=self.action_type.value, agent=_agent_name(self._agent_spec, self.spec),
+                         duration=self.duration)
+        self.middleware.start()
+        self.env.process(self._simulation_loop())
+        if self.recover_after is not None:
+            self.env.process(self._auto_recover())
+        if not isinstance(self.simulation, NoSimulation):
+            self.env.process(self._sample_traffic())
+
+    def finish(self, reason: str | None = None) -> None:
+        """End the run: clear the calls placed, log ``run_ended`` with ``reason``, close the log.
+
+        ``reason`` defaults to ``duration`` once the duration has passed, else ``closed``.
+        Idempotent; bounded in wall-clock time (the clearing SET answers or fails within tau_udp)."""
+        if self.env is None or self.ended:
+            return
+        if reason is None:
+            reason = "duration" if self.done else "closed"
+        self.ended = True
+        self.end_reason = reason
+        mw = self.middleware
+
+        def ending() -> Generator[simpy.Event, Any, None]:
+            yield mw.close()
+            self.events.emit(Kind.RUN_ENDED, reason=reason)
+            self.events.close()
+
+        done = self.env.process(ending())
+        try:
+            # Bounded: the clearing SET answers or fails within tau_udp.
+            self._advance(self.env.now + self.config.middleware.tau_udp + 1.0, done)
+            if self._driver is not None:
+                self._advance(self.env.now + 0.05)  # let answers already on their way land before closing
+        except RunInterrupted:
+            log.warning("interrupted again while clearing the calls; they may stay until the backup time")
+        finally:
+            if not done.triggered:
+                self.events.emit(Kind.RUN_ENDED, reason=reason)
+                self.events.close()
+            self.wall_s = time.perf_counter() - self._wall_t0
+            self._collect_traffic()
+
+    def _collect_traffic(self) -> None:
+        summary = getattr(self.simulation, "summary", None)
+        if summary is not None and getattr(self.simulation, "running", False):
+            self.traffic = summary()
+
+    def close(self) -> None:
+        """Finish the run if it is still going, then release the transport, the clock and SUMO."""
+        if self.env is None:
+            return
+        try:
+            self.finish()
+        finally:
+            if self.transport is not None:
+                self.transport.close()
+            if self._driver is not None:
+                self._driver.close()
+            if self._owns_sumo:
+                self.simulation.close()
+            self.env = None
+
+    def __enter__(self) -> Testbed:
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        if self.env is not None and not self.ended:
+            self.finish(_reason_of(exc) if exc is not None else None)
+        self.close()
+
+    # --- stepping ---------------------------------------------------------------------------------
+
+    def observe(self) -> Observation:
+        """What an agent sees now."""
+        mw = self._mw
+        return Observation(self._env.now, mw.cache.state, self.simulation.traffic_state(), mw.next_pair, mw.state)
+
+    def step(self, action: Any) -> tuple[Observation, dict[str, Any]]:
+        """Submit ``action`` and run to the next decision point; returns the observation and an info mapping.
+
+        An action that cannot be served is refused with a typed :class:`hils.actions.ActionError`
+        (logged; nothing is sent, no time passes). ``info`` says what happened: ``action_id``,
+        ``dropped`` (the manager was not IDLE), ``state``, ``timeout`` (the manager entered TIMEOUT
+        during the step) and ``timeout_reason``, ``ended`` (the run's duration has passed)."""
+        self._check_running()
+        mw = self._mw
+        submitted = mw.submit(action)
+        if submitted.error is not None:
+            raise submitted.error
+        return self._to_decision(submitted.action_id, submitted.dropped)
+
+    def wait(self) -> tuple[Observation, dict[str, Any]]:
+        """Run to the next decision point without acting (e.g. after a refused action)."""
+        self._check_running()
+        return self._to_decision(None, False, acted=False)
+
+    def run_for(self, seconds: float) -> Observation:
+        """Let ``seconds`` of run time pass without acting; returns the observation then."""
+        self._check_running()
+        self._advance(self._env.now + seconds)
+        return self.observe()
+
+    def recover(self) -> bool:
+        """Recover from TIMEOUT now: re-read the controller and return to IDLE; False if it failed."""
+        self._check_running()
+        proc = self._mw.recover()
+        self._advance(None, proc)
+        return bool(proc.value)
+
+    def run(self, agent: Agent | None = None, progress: Callable[[float], None] | None = None) -> str:
+        """Let ``agent`` (default: the Testbed's) act at every decision point until the run is done.
+
+        Returns the end reason (``duration``). Whatever else ends the run (the agent raising:
+        :class:`AgentFailed`; Ctrl-C or SIGTERM: :class:`RunInterrupted` or KeyboardInterrupt; an
+        error) first finishes the run cleanly, then propagates."""
+        if self.env is None:
+            self.reset()
+        agent = agent or self.agent
+        if agent is None:
+            raise NotStarted("no agent: pass one to run() or to the Testbed")
+        obs = self.observe()
+        try:
+            while not self.done:
+                try:
+                    value = agent.act(obs)
+                except Exception as exc:
+                    raise AgentFailed(f"the agent's act() raised {type(exc).__name__}: {exc}") from exc
+                try:
+                    obs, _ = self.step(value)
+                except ActionError:
+                    obs, _ = self.wait()  # refused and logged: the agent is asked again at the next decision
+                if progress is not None:
+                    progress(self._env.now)
+        except BaseException as exc:
+            self.finish(_reason_of(exc))
+            raise
+        self.finish("duration")
+        return "duration"
+
+    def _to_decision(self, action_id: int | None, dropped: bool, *, acted: bool = True
+                     ) -> tuple[Observation, dict[str, Any]]:
+        env, mw, params = self._env, self._mw, self.config.middleware
+        timeout_entered = mw.entering(State.TIMEOUT)
+        deadline: float | None = None
+        if self.action_type is not ActionType.DURATION:
+            deadline, waits = env.now + params.control_interval, [timeout_entered]
+        elif mw.state is State.ON_HOLD:
+            waits = [mw.entering(State.IDLE), timeout_entered]  # the prescribed green is being served
+        elif mw.state is State.TIMEOUT:
+            deadline, waits = env.now + params.control_interval, [mw.entering(State.IDLE)]
+        else:
+            # Nothing to serve: do not ask again at the same instant.
+            deadline, waits = env.now + params.sumo_step, []
+        if self.duration is not None:
+            deadline = self.duration if deadline is None else min(deadline, self.duration)
+        self._advance(deadline, *waits)
+        info = {"t": env.now, "action_id": action_id, "acted": acted, "dropped": dropped,
+                "state": mw.state.value, "timeout": timeout_entered.triggered,
+                "timeout_reason": mw.manager.timeout_reason.value if mw.manager.timeout_reason else None,
+                "ended": self.done}
+        return self.observe(), info
+
+    # --- the clock ----------------------------------------------------------------------------------
+
+    def _advance(self, until: float | None, *events: simpy.Event) -> None:
+        """Run the environment until one of ``events`` has been processed, or to ``until``.
+
+        The one place time moves. ``until`` follows SimPy's ``run(until=t)`` rule in both clocks:
+        events due exactly at ``t`` stay queued, so an agent deciding at ``t`` acts before them."""
+        env = self._env
+        if any(ev.processed for ev in events) or (until is not None and until <= env.now):
+            return
+        virtual = self._driver is None
+        if virtual and until is not None:
+            events = (*events, _deadline(env, until))
+        stop = simpy.core.StopSimulation.callback if virtual else self._stop_driver
+        for ev in events:
+            ev.callbacks.append(stop)
+        try:
+            if virtual:
+                env.run()  # until one of the events stops it
+            else:
+                self._driver.run_sync(until=until)
+        finally:
+            for ev in events:
+                if ev.callbacks is not None and stop in ev.callbacks:
+                    ev.callbacks.remove(stop)
+        driver = self._driver
+        if driver is not None and driver.signalled is not None:
+            signalled, driver.signalled = driver.signalled, None
+            raise RunInterrupted("interrupted" if signalled == signal.SIGINT else "terminated")
+
+    def _stop_driver(self, _event: simpy.Event) -> None:
+        self._driver.stop()
+
+    # --- processes ---------------------------------------------------------------------------------
+
+    def _simulation_loop(self) -> Generator[simpy.Event, Any, None]:
+        env = self._env
+        step = self.config.middleware.sumo_step
+        sim = self.simulation
+        cache = self.middleware.cache
+        k = 0
+        start = env.now
+
+        def one_step() -> None:
+            if cache.snapshot is not None:
+                sim.apply(cache.snapshot.state)
+            sim.step()
+
+        while not self.ended:
+            took = self.step_cost(one_step)
+            self.middleware.observe_step(step, took)
+            k += 1
+            yield env.timeout(max(0.0, start + k * step - env.now))
+
+    def _sample_traffic(self, period: float = 5.0) -> Generator[simpy.Event, Any, None]:
+        """Queue per approach every ``period`` s, for the queue plot."""
+        phases = self.config.phases
+        while not self.ended:
+            yield self._env.timeout(period)
+            traffic = self.simulation.traffic_state()
+            per_approach: dict[str, int] = {}
+            for p, m in traffic.movements.items():
+                name = phases[p].approach or f"phase {p}"
+                per_approach[name] = per_approach.get(name, 0) + m.upstream_queue
+            self.traffic_samples.append((self._env.now, per_approach))
+            self.events.emit(Kind.QUEUES, queues=per_approach)
+
+    def _auto_recover(self) -> Generator[simpy.Event, Any, None]:
+        mw = self.middleware
+        while not self.ended:
+            yield mw.wait_for(State.TIMEOUT)
+            yield self._env.timeout(self.recover_after)
+            while mw.timeout_flag and not self.ended:
+                ok = yield mw.recover()
+                if not ok:
+                    yield self._env.timeout(self.recover_after)
+
+    # --- helpers ----------------------------------------------------------------------------------------
+
+    @property
+    def _env(self) -> simpy.Environment:
+        if self.env is None:
+            raise NotStarted("the Testbed is not started: call reset() first")
+        return self.env
+
+    @property
+    def _mw(self) -> Middleware:
+        if self.middleware is None or self.env is None:
+            raise NotStarted("the Testbed is not started: call reset() first")
+        return self.middleware
+
+    def _check_running(self) -> None:
+        if self.env is None:
+            raise NotStarted("the Testbed is not started: call reset() first")
+        if self.ended:
+            raise NotStarted(f"the run has ended ({self.end_reason}): call reset() to start another")
+
+
+def _deadline(env: simpy.Environment, at: float) -> simpy.Event:
+    """An event due at ``at`` that runs before every other event due then, as ``env.run(until=at)``'s own.
+
+    Built as SimPy builds that one; unlike it, a deadline that another event beat to the stop is left
+    without callbacks, so it cannot stop a later run."""
+    event = simpy.Event(env)
+    event._ok, event._value = True, None
+    env.schedule(event, simpy.core.URGENT, at - env.now)
+    return event
+
+
+class TargetError(UserError, ValueError):
+    """A target that is neither ``virtual`` nor a usable ``snmp://`` URL."""
+
+
+def _check_target(url: str) -> None:
+    if not url.startswith("snmp://"):
+        raise TargetError(f"target {url!r}: allowed: 'virtual' or snmp://HOST[:PORT][?community=NAME&version=1|2c]")
+    from hils.snmp import SnmpTarget
+
+    try:
+        SnmpTarget.parse(url)
+    except ValueError as exc:
+        raise TargetError(str(exc)) from None
+
+
+def _agent_name(given: str | Agent | None, spec: RunSpec) -> str:
+    """How the log names the agent: its spec, or the class of an agent object handed in."""
+    return spec.agent_spec if given is None or isinstance(given, str) else type(given).__name__
+
+
+def _reason_of(exc: BaseException) -> str:
+    """The ``run_ended`` reason for what ended a run."""
+    if isinstance(exc, RunInterrupted):
+        return exc.reason
+    if isinstance(exc, KeyboardInterrupt):
+        return "interrupted"
+    if isinstance(exc, AgentFailed):
+        return "agent_error"
+    return "error"
+
+
+@dataclasses.dataclass
+class RunResult:
+    """A finished run: the Testbed (its records, traffic summary, lateness) and the wall time."""
+
+    testbed: Testbed
+    target: Any
+    wall_s: float
+    end_reason: str
+
+    @property
+    def records(self) -> list[dict[str, Any]]:
+        return self.testbed.records
+
+    @property
+    def lateness(self) -> Any:
+        return self.testbed.lateness
+
+
+def run_spec(spec: RunSpec, *, target: str | TargetFactory = VIRTUAL, simulation: Simulation | None = None,
+             configure: Callable[[Testbed, Any], None] | None = None,
+             progress: Callable[[float], None] | None = None) -> RunResult:
+    """Build a Testbed from ``spec``, run its agent for ``spec.duration`` s and close it.
+
+    ``simulation``: a simulation the caller started (and closes); default: SUMO when ``spec.sumo``."""
+    tb = Testbed(spec.config, action_type=spec.action_type, target=target,
+                 sumo=simulation if simulation is not None else spec.sumo, seed=spec.seed, agent=spec.agent,
+                 duration=spec.duration, log_path=spec.log_path, recover_after=spec.recover_after,
+                 on_reset=configure)
+    with tb:
+        tb.reset()
+        reason = tb.run(progress=progress)
+        return RunResult(tb, tb.target, tb.wall_s, reason)
