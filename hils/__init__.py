@@ -7,11 +7,16 @@ action that cannot be served; :func:`load_config` reads an intersection config.
 
 The names are loaded when first used, so that importing the shared layer (``hils.ntcip``,
 ``hils.config``), as the emulator does, does not load the middleware.
+
+The gymnasium environment ``hils/Intersection-v0`` (:mod:`hils.envs`) is registered here when
+gymnasium is already imported, without importing it otherwise (``import hils.envs`` registers it
+in any order).
 """
 
 from __future__ import annotations
 
 import importlib
+import sys
 from typing import Any
 
 _EXPORTS = {
@@ -30,6 +35,9 @@ _EXPORTS = {
 }
 
 __all__ = sorted(_EXPORTS)
+
+if "gymnasium" in sys.modules:
+    importlib.import_module("hils.envs")
 
 
 def __getattr__(name: str) -> Any:

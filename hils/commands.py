@@ -23,6 +23,7 @@ from hils import plots, summary
 from hils.actions import ActionType
 from hils.errors import UserError
 from hils.status import StatusLine
+from hils.sumo_net import scenario_config
 from hils.testbed import DEFAULT_AGENTS, VIRTUAL, AgentFailed, RunInterrupted, RunSpec, Testbed
 from hils.webster import webster_plan
 
@@ -65,6 +66,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--log", metavar="FILE", type=Path, help="JSON Lines event log (default: RUN_DIR/events.jsonl)")
     p.add_argument("--out", metavar="RUN_DIR", type=Path,
                    help="run folder (default: reports/runs/<time>-<action type>)")
+    p.add_argument("--net", metavar="FILE", help="your own SUMO network (.net.xml; with --routes): the phase of each "
+                   "signal link is derived from it and the config's approach and turn of each phase")
+    p.add_argument("--routes", metavar="FILE", help="the demand (.rou.xml) for --net")
+    p.add_argument("--sumocfg", metavar="FILE", help="your own SUMO scenario (.sumocfg) instead of --net/--routes")
     p.add_argument("--no-sumo", action="store_true", help="middleware and controller only, no traffic simulation")
     p.add_argument("--poll-hz", type=float, metavar="HZ", help="signal-state polling rate (default: config, 10)")
     p.add_argument("--recover-after", type=float, default=5.0, metavar="S",
@@ -98,6 +103,7 @@ def run_command(args: argparse.Namespace) -> int:
     dashboard = _dashboard(args)
     out = _run_folder(args.out, args.action_type)
     log_path = args.log or out / "events.jsonl"
+    sumo_config = scenario_config(sumocfg=args.sumocfg, net=args.net, routes=args.routes, directory=out)
     spec = RunSpec(cfg, ActionType(args.action_type), agent=args.agent, duration=args.duration, seed=args.seed,
                    log_path=log_path, recover_after=None if args.recover_after < 0 else args.recover_after,
                    sumo=not args.no_sumo)
@@ -107,7 +113,8 @@ def run_command(args: argparse.Namespace) -> int:
     status = StatusLine() if args.target and not args.no_progress else None
     tb = Testbed(cfg, action_type=spec.action_type, target=args.target or VIRTUAL, sumo=spec.sumo, seed=spec.seed,
                  agent=spec.agent, duration=spec.duration, log_path=log_path, recover_after=spec.recover_after,
-                 on_reset=_hooks(status.start if status else None, dashboard.attach if dashboard else None))
+                 on_reset=_hooks(status.start if status else None, dashboard.attach if dashboard else None),
+                 sumo_config=sumo_config)
     error: BaseException | None = None
     with _terminate_as_interrupt(), tb, _served(dashboard):
         try:

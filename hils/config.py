@@ -72,6 +72,9 @@ class Phase:
     recall: Recall = Recall.NONE
     dual_entry: bool = False  # served beside a lone call of the other ring entering its barrier group
     backup_prevent: bool = False  # not served again from a later phase of its group before the barrier
+    # Turns of the same approach that run permissive (yielding) while this phase is green,
+    # e.g. the lefts of a four-phase plan without protected lefts.
+    permissive: tuple[str, ...] = ()
 
     @property
     def clearance(self) -> float:
@@ -220,7 +223,8 @@ def _phase(number: int, raw: Any, defaults: Mapping[str, Any], ring: int, source
     w = f"phases.{number}."
     if not isinstance(raw, dict):
         raise ConfigError(source, f"phases.{number}", "must be a table of phase settings")
-    _unknown(raw, ("min_green", "max_green", "yellow", "red_clear", "startup", "approach", "turn", *_PHASE_OPTIONS),
+    _unknown(raw, ("min_green", "max_green", "yellow", "red_clear", "startup", "approach", "turn", "permissive",
+                    *_PHASE_OPTIONS),
              w, source)
     merged = {**defaults, **raw}
 
@@ -258,8 +262,13 @@ def _phase(number: int, raw: Any, defaults: Mapping[str, Any], ring: int, source
         if not isinstance(value, bool):
             raise ConfigError(source, f"{where(key)}{key}", f"must be true or false, got {value!r}")
         flags[key] = value
+    permissive = raw.get("permissive", [])
+    if not isinstance(permissive, list) or any(t not in TURNS or t == turn for t in permissive):
+        raise ConfigError(source, f"{w}permissive", f"is {permissive!r}; allowed: a list of turns other than the "
+                          f"phase's own turn, from {', '.join(TURNS)}")
     return Phase(number, ring, float(min_green), float(max_green), float(yellow), float(red_clear),
-                 _STARTUP_NAMES[startup], approach, turn, float(passage), Recall(recall), **flags)
+                 _STARTUP_NAMES[startup], approach, turn, float(passage), Recall(recall),
+                 permissive=tuple(permissive), **flags)
 
 
 def _pairs(raw: Any, name: str, phases: Mapping[int, Phase], compatible: frozenset[frozenset[int]],

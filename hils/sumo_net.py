@@ -7,9 +7,13 @@ so the committed file is always reproducible from its sources.
 The phase of each traffic-light link is derived, never typed: the approach of a link is the
 compass side of the junction its incoming edge comes from (geometry), its turn is SUMO's
 connection direction (right turns run with the through of their approach), and the
-intersection config says which phase serves each (approach, turn). A link that no phase
-serves, or a phase that serves no link, is an error: either would leave a movement on red
-for good or a commanded phase without effect.
+intersection config says which phase serves each (approach, turn), protected, or permissive
+(``permissive = ["left"]`` on a through phase: the left yields, SUMO's lower-case 'g'). A
+link that no phase serves, or a phase that serves no link, is an error: either would leave a
+movement on red for good or a commanded phase without effect.
+
+A scenario of your own is a ``.sumocfg``, or a network and a demand file, resolved by
+:func:`scenario_config` into the ``.sumocfg`` SUMO starts with.
 """
 
 from __future__ import annotations
@@ -18,6 +22,7 @@ import argparse
 import math
 import subprocess
 import sys
+import tempfile
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from importlib import resources
@@ -35,7 +40,8 @@ TLS_ID = "C"
 NET_FILE = "four_leg.net.xml"
 ROUTE_FILE = "four_leg.rou.xml"
 SUMO_CONFIG = "four_leg.sumocfg"
-NETCONVERT_CONFIG = "four_leg.netccfg"
+#: The shipped networks, each with its .nod/.edg/.con/.netccfg sources, demand, .sumocfg and config (.toml).
+NETWORKS = ("four_leg", "four_phase")
 
 # SUMO's connection directions: l/L (partly) left, s straight, r/R (partly) right, t turnaround.
 _TURN_OF_DIRECTION = {"l": "left", "L": "left", "s": "through", "r": "through", "R": "through"}
@@ -62,6 +68,7 @@ class Link:
     approach: str
     direction: str
     phase: int
+    permissive: bool = False
 
     @property
     def turn(self) -> str:
@@ -75,6 +82,7 @@ class PhaseMap:
     tls_id: str
     links: tuple[Link, ...]
     link_phases: tuple[int, ...]
+    link_permissive: tuple[bool, ...] = ()
 
     @property
     def phases(self) -> tuple[int, ...]:
@@ -102,11 +110,13 @@ class PhaseMap:
     def state_string(self, state: SignalState) -> str:
         """SUMO's per-link state for a controller state: G green, y yellow, r red (also dark).
 
-        Green is the protected 'G': the configured pairs never show conflicting movements
-        green together, so no link has to yield.
+        Green is the protected 'G': the configured pairs never show conflicting protected movements
+        green together. A permissive link shows 'g' and yields to the movements it crosses.
         """
         greens, yellows = state.greens, state.yellows
-        return "".join("G" if p in greens else "y" if p in yellows else "r" for p in self.link_phases)
+        permissive = self.link_permissive or (False,) * len(self.link_phases)
+        return "".join(("g" if yields else "G") if p in greens else "y" if p in yellows else "r"
+                       for p, yields in zip(self.link_phases, permissive, strict=True))
 
 
 def _unique(items: Iterable[str]) -> tuple[str, ...]:
@@ -170,31 +180,43 @@ def derive_phase_map(config: IntersectionConfig, net: Any, controlled_links: Con
             raise NetworkError(f"{config.source}: phases {served[key]} and {number} both serve the "
                                f"{phase.turn} movement of the {phase.approach} approach")
         served[key] = number
+    for number, phase in config.phases.items():
+        for turn in phase.permissive:
+            key = (phase.approach, turn)
+            if key in served:
+                raise NetworkError(f"{config.source}: phase {number} lists {turn} as permissive, but phase "
+                                   f"{served[key]} already serves the {turn} movement of the {phase.approach} "
+                                   "approach")
+            served[key] = number
+    permissive_of = {(config.phases[n].approach, t): n for n in config.phases for t in config.phases[n].permissive}
 
     links: list[Link] = []
     link_phases: list[int] = []
+    link_permissive: list[bool] = []
     for index, triples in enumerate(controlled_links):
         if not triples:
             raise NetworkError(f"traffic light {tls_id}: link index {index} controls no connection")
         phases_here = set()
         for from_lane, to_lane, via in triples:
-            link = _link(net, index, from_lane, to_lane, via, served, tls_id)
+            link = _link(net, index, from_lane, to_lane, via, served, permissive_of, tls_id, config.source)
             phases_here.add(link.phase)
             links.append(link)
         if len(phases_here) > 1:
             raise NetworkError(f"traffic light {tls_id}: link index {index} carries movements of phases "
                                f"{sorted(phases_here)}; one signal index can show only one phase")
         link_phases.append(phases_here.pop())
+        link_permissive.append(all(link.permissive for link in links if link.index == index))
 
     idle = sorted(set(config.phases) - set(link_phases))
     if idle:
         raise NetworkError(f"traffic light {tls_id}: phase(s) {idle} serve no link of the network "
                            f"({', '.join(f'{p}: {config.phases[p].approach} {config.phases[p].turn}' for p in idle)})")
-    return PhaseMap(tls_id, tuple(links), tuple(link_phases))
+    return PhaseMap(tls_id, tuple(links), tuple(link_phases), tuple(link_permissive))
 
 
 def _link(net: Any, index: int, from_lane: str, to_lane: str, via: str,
-          served: Mapping[tuple[str, str], int], tls_id: str) -> Link:
+          served: Mapping[tuple[str, str], int], permissive_of: Mapping[tuple[str, str], int],
+          tls_id: str, source: str) -> Link:
     where = f"traffic light {tls_id}: link {index} ({from_lane} -> {to_lane})"
     try:
         lane = net.getLane(from_lane)
@@ -215,8 +237,42 @@ def _link(net: Any, index: int, from_lane: str, to_lane: str, via: str,
     turn = _TURN_OF_DIRECTION[direction]
     phase = served.get((approach, turn))
     if phase is None:
-        raise NetworkError(f"{where}: no phase serves the {turn} movement of the {approach} approach")
-    return Link(index, from_lane, to_lane, via, approach, direction, phase)
+        raise NetworkError(
+            f"{where}: no phase serves the {turn} movement of the {approach} approach; fix the config "
+            f'{source}: add a phase with approach = "{approach}", turn = "{turn}", or let the phase of another '
+            f'turn of that approach carry it permissive (permissive = ["{turn}"])')
+    return Link(index, from_lane, to_lane, via, approach, direction, phase,
+                permissive=(approach, turn) in permissive_of)
+
+
+def scenario_config(*, sumocfg: str | Path | None = None, net: str | Path | None = None,
+                    routes: str | Path | Sequence[str | Path] | None = None,
+                    directory: str | Path | None = None) -> Path | None:
+    """The ``.sumocfg`` of a scenario: ``sumocfg`` as given, or one written into ``directory`` for
+    ``net`` and ``routes`` (both needed); None for the shipped four-leg scenario."""
+    if sumocfg is not None:
+        if net is not None or routes is not None:
+            raise NetworkError("give either a .sumocfg or a network and routes, not both")
+        path = Path(sumocfg)
+        if not path.is_file():
+            raise NetworkError(f"SUMO configuration {path} does not exist")
+        return path.resolve()
+    if net is None and routes is None:
+        return None
+    if net is None or routes is None:
+        raise NetworkError(f"a network needs its demand and a demand its network: got net={net!r}, "
+                           f"routes={routes!r}; give both (or a .sumocfg)")
+    route_files = [Path(routes)] if isinstance(routes, (str, Path)) else [Path(r) for r in routes]
+    for path in (Path(net), *route_files):
+        if not path.is_file():
+            raise NetworkError(f"{path} does not exist")
+    out = Path(directory if directory is not None else tempfile.mkdtemp(prefix="hils-sumo-")) / "scenario.sumocfg"
+    out.write_text(
+        '<?xml version="1.0" encoding="UTF-8"?>\n<sumoConfiguration>\n    <input>\n'
+        f'        <net-file value="{Path(net).resolve()}"/>\n'
+        f'        <route-files value="{",".join(str(r.resolve()) for r in route_files)}"/>\n'
+        '    </input>\n</sumoConfiguration>\n', encoding="utf-8")
+    return out
 
 
 def netconvert_binary() -> str:
@@ -224,13 +280,17 @@ def netconvert_binary() -> str:
     return str(Path(sumo.SUMO_HOME) / "bin" / "netconvert")
 
 
-def build_network(output: str | Path | None = None) -> Path:
-    """Run netconvert on the shipped plain-XML sources; writes the shipped network by default."""
-    config = data_path(NETCONVERT_CONFIG)
-    target = Path(output).resolve() if output is not None else data_path(NET_FILE)
+def build_network(output: str | Path | None = None, name: str = "four_leg") -> Path:
+    """Run netconvert on the plain-XML sources of the shipped network ``name`` (``four_leg`` or
+    ``four_phase``); writes the shipped network by default."""
+    if name not in NETWORKS:
+        raise NetworkError(f"no shipped network {name!r}; allowed: {', '.join(NETWORKS)}")
+    config = data_path(f"{name}.netccfg")
+    net_file = f"{name}.net.xml"
+    target = Path(output).resolve() if output is not None else data_path(net_file)
     # netconvert resolves the input paths relative to the config file; running it beside the
     # sources keeps the header of the generated file free of machine-specific paths.
-    cmd = [netconvert_binary(), "-c", config.name, "--output-file", str(target) if output is not None else NET_FILE]
+    cmd = [netconvert_binary(), "-c", config.name, "--output-file", str(target) if output is not None else net_file]
     result = subprocess.run(cmd, cwd=config.parent, capture_output=True, text=True, check=False)
     if result.returncode != 0:
         raise NetworkError(f"netconvert failed ({result.returncode}): {result.stderr.strip() or result.stdout.strip()}")
@@ -240,10 +300,11 @@ def build_network(output: str | Path | None = None) -> Path:
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m hils.sumo_net",
                                      description="Rebuild the shipped SUMO network from its plain-XML sources.")
-    parser.add_argument("-o", "--output", type=Path, help=f"write here instead of hils/data/{NET_FILE}")
+    parser.add_argument("name", nargs="?", default="four_leg", choices=NETWORKS, help="which network (four_leg)")
+    parser.add_argument("-o", "--output", type=Path, help="write here instead of hils/data/NAME.net.xml")
     args = parser.parse_args(argv)
     try:
-        path = build_network(args.output)
+        path = build_network(args.output, args.name)
     except NetworkError as exc:
         print(f"hils.sumo_net: {exc}", file=sys.stderr)
         return 1

@@ -158,7 +158,8 @@ class Testbed:
     ``config``: an :class:`IntersectionConfig`, a TOML path, or None for the shipped four-leg.
     ``action_type``: selection, switch or duration. ``target``: ``"virtual"``, an ``snmp://`` URL or a
     target factory. ``sumo``: True to run the shipped SUMO scenario (started at each reset), or a
-    simulation object the caller started. ``seed``: every virtual-time run is reproducible from it.
+    simulation object the caller started; ``sumo_config``: the ``.sumocfg`` SUMO starts with (default: the
+    shipped four-leg scenario). ``seed``: every virtual-time run is reproducible from it.
     ``agent``: what :meth:`run` uses when given none (a built-in name, ``package.module:Class`` or an
     instance). ``duration``: simulated seconds after which the run is done (None: no end).
     ``log_path``: the JSON Lines event log (None: kept in memory only). ``recover_after``: seconds in
@@ -171,7 +172,8 @@ class Testbed:
                  sumo: bool | Simulation = False, seed: int = 0, agent: str | Agent | None = None,
                  duration: float | None = None, log_path: str | Path | None = None,
                  recover_after: float | None = 5.0,
-                 on_reset: Callable[[Testbed, Any], None] | None = None) -> None:
+                 on_reset: Callable[[Testbed, Any], None] | None = None,
+                 sumo_config: str | Path | None = None) -> None:
         self.config = config if isinstance(config, IntersectionConfig) else config_mod.load(config)
         self.action_type = ActionType(action_type)
         if isinstance(target, str) and target != VIRTUAL:
@@ -180,6 +182,7 @@ class Testbed:
             raise ValueError(f"duration must be positive seconds or None, got {duration!r}")
         self._target_spec = target
         self._sumo_spec = sumo
+        self.sumo_config = sumo_config
         self.seed = seed
         self._agent_spec = agent
         self.duration = duration
@@ -313,13 +316,14 @@ class Testbed:
 
     def _assemble_simulation(self) -> None:
         sumo = self._sumo_spec
-        self._owns_sumo = sumo is True
+        self._owns_sumo = False
         if sumo is True:
             from hils.sumo import SumoSimulation
 
-            sim = SumoSimulation(self.config, seed=self.seed, end=self.duration)
-            sim.start()
+            sim = SumoSimulation(self.config, seed=self.seed, end=self.duration, sumo_config=self.sumo_config)
+            sim.start()  # a SUMO that fails to start (e.g. a network the config does not fit) closes itself
             self.simulation = sim
+            self._owns_sumo = True
         elif sumo is False:
             self.simulation = NoSimulation()
         else:

@@ -1,0 +1,199 @@
+"""One signalised intersection as a gymnasium environment, built on :class:`hils.Testbed`.
+
+The controller (the built-in emulator in virtual time, or a real one with ``target="snmp://..."``
+at wall-clock time) enforces minimum green, yellow and red clearance itself: an action chooses
+what to serve next, never a colour. ``step`` runs to the next decision point of the Testbed.
+
+Observation (a ``Box`` of float32; ``n`` = number of phases, in phase-number order; a phase's
+movement is the approach and turn(s) it serves):
+
+=================  ==========  ==================================================================
+slice              size        value
+=================  ==========  ==================================================================
+``[0, n)``         n           queue of each phase's movement: halting vehicles on its incoming lanes
+``[n, 2n)``        n           pressure of each phase's movement: incoming minus outgoing halting
+``[2n, 3n)``       n           signal of each phase: 0 red, 0.5 yellow, 1 green
+``3n``             1           seconds since the signal last changed (time in the current interval)
+``3n+1 .. 3n+4``   3           the manager's state, one-hot: idle, on_hold, timeout
+=================  ==========  ==================================================================
+
+Rewards (``reward=``): ``"queue"`` minus the total queue, ``"pressure"`` minus the summed pressure,
+``"wait"`` the decrease of the waiting time accumulated by the vehicles on the signal's lanes, or
+any callable ``(previous, current) -> float`` of two :class:`hils.Observation` s.
+
+Rules
+-----
+- An episode is ``episode_length`` simulated seconds (one hour by default) and is *truncated* at its
+  end; it is never *terminated*: a TIMEOUT of the manager is reported in ``info["timeout"]`` and the
+  Testbed recovers from it (``recover_after``) while training goes on.
+- Seeding: ``reset(seed=s)`` seeds SUMO, the latency model and the agent-facing RNG; a reset without
+  a seed draws the next seed from ``np_random``, so a seeded sequence of episodes is reproducible.
+"""
+
+from __future__ import annotations
+
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any, ClassVar
+
+import gymnasium
+import numpy as np
+from gymnasium import spaces
+
+from hils import config as config_mod
+from hils.actions import ActionError, ActionType
+from hils.agents import Observation
+from hils.config import IntersectionConfig
+from hils.errors import UserError
+from hils.manager import State
+from hils.poller import Snapshot
+from hils.sumo_net import TLS_ID, derive_phase_map, read_net, scenario_config
+from hils.testbed import VIRTUAL, Testbed
+
+Reward = Callable[[Observation, Observation], float]
+STATES = (State.IDLE, State.ON_HOLD, State.TIMEOUT)
+
+
+class EnvOptionError(UserError, ValueError):
+    """An option of the environment that cannot be used; names the option and what is allowed."""
+
+
+def queue_reward(previous: Observation, current: Observation) -> float:
+    """Minus the vehicles halting on the incoming lanes of every movement."""
+    return -float(sum(m.upstream_queue for m in current.traffic.movements.values()))
+
+
+def pressure_reward(previous: Observation, current: Observation) -> float:
+    """Minus the summed pressure (incoming minus outgoing halting vehicles) of every movement."""
+    return -float(sum(m.pressure for m in current.traffic.movements.values()))
+
+
+def _waiting(obs: Observation) -> float:
+    return sum(lane.waiting_time for lane in obs.traffic.lanes.values())
+
+
+def wait_reward(previous: Observation, current: Observation) -> float:
+    """The decrease of the waiting time accumulated by the vehicles on the signal's lanes."""
+    return _waiting(previous) - _waiting(current)
+
+
+REWARDS: dict[str, Reward] = {"queue": queue_reward, "pressure": pressure_reward, "wait": wait_reward}
+
+
+class IntersectionEnv(gymnasium.Env):
+    """``gymnasium.make("hils/Intersection-v0", action_type="selection" | "switch" | "duration", ...)``.
+
+    ``config``: an intersection config (object or TOML path; default: the shipped four-leg).
+    ``net``/``routes`` or ``sumocfg``: your own SUMO scenario (default: the shipped one).
+    ``target``: ``"virtual"`` or ``"snmp://HOST:PORT"`` (wall clock). ``sumo_step``,
+    ``control_interval``: override the config's. ``episode_length``: simulated seconds.
+    ``reward``: a name of :data:`REWARDS` or a callable. ``recover_after``: seconds in TIMEOUT
+    before the Testbed recovers. ``log_path``: the event log of each episode (overwritten).
+    """
+
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": []}
+
+    def __init__(self, action_type: ActionType | str = ActionType.SELECTION, *,
+                 config: IntersectionConfig | str | Path | None = None, net: str | Path | None = None,
+                 routes: str | Path | None = None, sumocfg: str | Path | None = None, target: str = VIRTUAL,
+                 sumo_step: float | None = None, control_interval: float | None = None,
+                 episode_length: float = 3600.0, reward: str | Reward = "queue", recover_after: float = 5.0,
+                 log_path: str | Path | None = None) -> None:
+        try:
+            self.action_type = ActionType(action_type)
+        except ValueError:
+            raise EnvOptionError(f"action_type {action_type!r}: allowed: "
+                                 f"{', '.join(t.value for t in ActionType)}") from None
+        cfg = config if isinstance(config, IntersectionConfig) else config_mod.load(config)
+        changes = {k: v for k, v in (("sumo_step", sumo_step), ("control_interval", control_interval))
+                   if v is not None}
+        self.config = cfg.with_middleware(**changes) if changes else cfg
+        if isinstance(reward, str) and reward not in REWARDS:
+            raise EnvOptionError(f"reward {reward!r}: allowed: {', '.join(REWARDS)} or a callable "
+                                 "(previous, current) -> float")
+        if not callable(reward) and not isinstance(reward, str):
+            raise EnvOptionError(f"reward {reward!r}: allowed: {', '.join(REWARDS)} or a callable")
+        self.reward_fn: Reward = REWARDS[reward] if isinstance(reward, str) else reward
+        self._scenario_dir = tempfile.TemporaryDirectory(prefix="hils-env-") if net is not None else None
+        self.sumo_config = scenario_config(sumocfg=sumocfg, net=net, routes=routes,
+                                           directory=self._scenario_dir.name if self._scenario_dir else None)
+        if net is not None:
+            derive_phase_map(self.config, read_net(net), tls_id=TLS_ID)  # refuse an unmappable movement now
+        self.phases = self.config.phase_numbers
+        self.testbed = Testbed(self.config, action_type=self.action_type, target=target, sumo=True,
+                               duration=episode_length, recover_after=recover_after, log_path=log_path,
+                               sumo_config=self.sumo_config)
+        n = len(self.phases)
+        if self.action_type is ActionType.SELECTION:
+            self.action_space: spaces.Space = spaces.Discrete(len(self.config.pairs))
+        elif self.action_type is ActionType.SWITCH:
+            self.action_space = spaces.Discrete(2)
+        else:
+            self.action_space = spaces.Box(0.0, 1.0, (1,), np.float32)
+        low = np.concatenate([np.zeros(n), np.full(n, -np.inf), np.zeros(n), [0.0], np.zeros(len(STATES))])
+        high = np.concatenate([np.full(n, np.inf), np.full(n, np.inf), np.ones(n), [np.inf], np.ones(len(STATES))])
+        self.observation_space = spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32)
+        self._last: Observation | None = None
+        self._changed_at = 0.0
+
+    # --- gymnasium API ----------------------------------------------------------------------
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None
+              ) -> tuple[np.ndarray, dict[str, Any]]:
+        super().reset(seed=seed)
+        run_seed = seed if seed is not None else int(self.np_random.integers(0, 2**31 - 1))
+        obs = self.testbed.reset(seed=run_seed)
+        cache = self.testbed.middleware.cache
+        self._changed_at = cache.snapshot.t if cache.snapshot is not None else obs.t
+        cache.subscribe(self._on_signal_change)
+        self._last = obs
+        return self._vector(obs), {"t": obs.t, "seed": run_seed, "state": obs.state.value}
+
+    def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        tb = self.testbed
+        try:
+            obs, info = tb.step(self._action_value(action))
+            info["refused"] = None
+        except ActionError as exc:
+            obs, info = tb.wait()
+            info["refused"] = str(exc)
+        reward = float(self.reward_fn(self._last, obs))
+        self._last = obs
+        truncated = tb.done
+        if truncated:
+            tb.finish()
+        return self._vector(obs), reward, False, truncated, info
+
+    def close(self) -> None:
+        self.testbed.close()
+        if self._scenario_dir is not None:
+            self._scenario_dir.cleanup()
+            self._scenario_dir = None
+
+    # --- conversion ----------------------------------------------------------------------------
+
+    def _action_value(self, action: Any) -> Any:
+        """What the Testbed takes: a pair for selection, 0/1 for switch, x in [0, 1] for duration."""
+        value = np.asarray(action)
+        if self.action_type is ActionType.SELECTION:
+            if value.size != 1 or not np.issubdtype(value.dtype, np.integer) \
+                    or not 0 <= int(value.reshape(())) < len(self.config.pairs):
+                raise EnvOptionError(f"selection action {action!r}: allowed: an integer in "
+                                     f"[0, {len(self.config.pairs)}) indexing {list(self.config.pairs)}")
+            return self.config.pairs[int(value.reshape(()))]
+        if self.action_type is ActionType.SWITCH:
+            return int(value.reshape(())) if value.size == 1 else action
+        return float(np.clip(value.reshape(-1)[0], 0.0, 1.0)) if value.size == 1 else action
+
+    def _on_signal_change(self, snapshot: Snapshot, changed: bool) -> None:
+        self._changed_at = snapshot.t
+
+    def _vector(self, obs: Observation) -> np.ndarray:
+        traffic, signal = obs.traffic, obs.signal
+        queue = [traffic.movements[p].upstream_queue for p in self.phases]
+        pressure = [traffic.movements[p].pressure for p in self.phases]
+        lights = [0.0 if signal is None else 1.0 if p in signal.greens else 0.5 if p in signal.yellows else 0.0
+                  for p in self.phases]
+        state = [float(obs.state is s) for s in STATES]
+        return np.array([*queue, *pressure, *lights, max(0.0, obs.t - self._changed_at), *state], dtype=np.float32)
