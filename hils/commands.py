@@ -108,6 +108,9 @@ def run_command(args: argparse.Namespace) -> int:
                    log_path=log_path, recover_after=None if args.recover_after < 0 else args.recover_after,
                    sumo=not args.no_sumo)
     if spec.agent_spec == "webster":
+        if sumo_config is not None:
+            raise UsageError("--agent webster plans from the shipped four-leg network and demand; it cannot "
+                             "plan for --net/--routes/--sumocfg yet: run it without them")
         print(webster_plan(cfg).describe())
     # A wall-clock run is never silent: a live status line (periodic log lines when not on a terminal).
     status = StatusLine() if args.target and not args.no_progress else None
