@@ -108,6 +108,9 @@ def run_command(args: argparse.Namespace) -> int:
                    log_path=log_path, recover_after=None if args.recover_after < 0 else args.recover_after,
                    sumo=not args.no_sumo)
     if spec.agent_spec == "webster":
+        if sumo_config is not None:
+            raise UsageError("--agent webster plans from the shipped four-leg network and demand; it cannot "
+                             "plan for --net/--routes/--sumocfg yet: run it without them")
         print(webster_plan(cfg).describe())
     # A wall-clock run is never silent: a live status line (periodic log lines when not on a terminal).
     status = StatusLine() if args.target and not args.no_progress else None
@@ -144,8 +147,8 @@ def run_command(args: argparse.Namespace) -> int:
         outputs.append("signal_timeline.png")
     if tb.traffic_samples:
         plots.queues(tb.traffic_samples, out / "queues.png", title=f"Queues per approach, {cfg.name}",
-                     storage={a: v["storage"] for a, v in s["traffic"]["approaches"].items()} if s.get("traffic")
-                     else None)
+                     spillback={a: [60.0 * m for m in v["spillback_minutes"]]
+                                for a, v in s["traffic"]["approaches"].items()} if s.get("traffic") else None)
         outputs.append("queues.png")
     print(summary.render(s))
     for warning in summary.warnings(s):

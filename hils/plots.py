@@ -134,12 +134,12 @@ def queue_bins(samples: Sequence[tuple[float, Mapping[str, int]]], bin_s: float
 
 
 def queues(samples: Sequence[tuple[float, Mapping[str, int]]], path: Path, *, title: str = "Queues",
-           bin_s: float = 60.0, storage: Mapping[str, int] | None = None) -> Path:
+           bin_s: float = 60.0, spillback: Mapping[str, Sequence[float]] | None = None) -> Path:
     """Longest queue per approach in each ``bin_s`` window: samples every few seconds are too
-    jagged to read, and the longest queue is what a traffic engineer looks for. Bins where an
-    approach's queue reached its ``storage`` (the vehicles its lanes hold) are marked: the
-    queue spilled back beyond the modelled lanes."""
-    storage = storage or {}
+    jagged to read, and the longest queue is what a traffic engineer looks for. ``spillback``
+    gives, per approach, times at which one of its lanes was full; the bins holding them are
+    marked: the queue reached back beyond the modelled lanes."""
+    spillback = spillback or {}
     edges, tops = queue_bins(samples, bin_s)
     plt = pyplot()
     from matplotlib.transforms import offset_copy
@@ -149,20 +149,17 @@ def queues(samples: Sequence[tuple[float, Mapping[str, int]]], path: Path, *, ti
     spilled = False
     for index, (name, values) in enumerate(tops.items()):
         line = ax.stairs(values, minutes, label=name, linewidth=1.4, baseline=None)
-        cap = storage.get(name)
-        full = [(minutes[i] + minutes[i + 1]) / 2 for i, v in enumerate(values) if cap and v >= cap]
+        full = sorted({min(int(t // bin_s), len(values) - 1) for t in spillback.get(name, ())})
         if full:
             spilled = True
-            # stacked 7 points apart so that approaches with the same storage do not hide each other
-            ax.plot(full, [cap] * len(full), linestyle="none", marker="^", color=line.get_edgecolor(),
-                    markersize=6, clip_on=False,
-                    transform=offset_copy(ax.transData, fig=fig, y=4 + 7 * index, units="points"))
-    if storage:
-        note = ("triangles: queue reached the approach's storage (spillback)" if spilled else
-                "no approach's queue reached its storage")
-        ax.text(0.0, -0.28, f"{note}; storage (veh): "
-                + ", ".join(f"{k} {v}" for k, v in sorted(storage.items())), transform=ax.transAxes,
-                fontsize="small")
+            # above the bin's queue, stacked 7 points apart so that approaches do not hide each other
+            ax.plot([(minutes[b] + minutes[b + 1]) / 2 for b in full], [values[b] for b in full], linestyle="none",
+                    marker="^", color=line.get_edgecolor(), markersize=6, clip_on=False,
+                    transform=offset_copy(ax.transData, fig=fig, y=6 + 7 * index, units="points"))
+    if spillback:
+        ax.text(0.0, -0.28, "triangles: a lane of the approach was full (spillback: the queue reaches back "
+                "beyond the network)" if spilled else "no lane was full (no spillback)",
+                transform=ax.transAxes, fontsize="small")
     ax.set_xlabel("simulation time (min)")
     ax.set_ylabel(f"longest queue per {bin_s:g} s (veh)")
     highest = max((v for values in tops.values() for v in values), default=0)

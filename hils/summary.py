@@ -88,12 +88,13 @@ def _traffic_lines(t: Mapping[str, Any]) -> list[str]:
         "(departure delay + time loss, so far for those not arrived)",
         f"  arrived only         time loss {_fmt(t['mean_time_loss'])}, waiting time {_fmt(t['mean_waiting_time'])}"
         " (SUMO trip statistics)",
-        "  per approach         arrived  running  waiting  mean delay  max queue / storage (veh)",
+        "  per approach         arrived  running  waiting  mean delay  max queue  minutes with a lane full",
     ]
     for name, a in t["approaches"].items():
-        spill = "  spillback" if a["storage"] and a["max_queue"] >= a["storage"] else ""
+        spill = len(a["spillback_minutes"])
         lines.append(f"    {name:<18} {a['arrived']:>7}  {a['running']:>7}  {a['waiting_to_enter']:>7}  "
-                     f"{_fmt(a['mean_delay']):>10}  {a['max_queue']:>5} / {a['storage']}{spill}")
+                     f"{_fmt(a['mean_delay']):>10}  {a['max_queue']:>9}  "
+                     + (f"{spill} (spillback; a lane holds {a['lane_storage']})" if spill else "0"))
     return lines
 
 

@@ -84,7 +84,8 @@ class ApproachSummary:
     waiting_to_enter: int
     mean_delay: float | None
     max_queue: int
-    storage: int  # vehicles the approach lanes hold end to end (lane length / (vehicle length + gap))
+    lane_storage: int  # vehicles its shortest lane holds end to end (lane length / (vehicle length + gap))
+    spillback_minutes: tuple[int, ...]  # minutes of the run in which one of its lanes was full (spillback)
 
 
 @dataclass(frozen=True)
@@ -158,7 +159,8 @@ class SumoSimulation:
         self._lanes: tuple[str, ...] = ()
         self._movement_lanes: tuple[tuple[int, tuple[str, ...], tuple[str, ...]], ...] = ()
         self._approach_of_edge: dict[str, str] = {}
-        self._storage: dict[str, int] = {}
+        self._lane_storage: dict[str, tuple[tuple[str, int], ...]] = {}
+        self._spill_minutes: dict[str, set[int]] = {}
         # per vehicle seen in the network: approach, departure delay, last sampled time loss
         self._running: dict[str, tuple[str, float, float]] = {}
         self._finished: dict[str, list[float]] = {}
@@ -214,8 +216,9 @@ class SumoSimulation:
         self._max_queue = {approach: 0 for approach, _ in self._approach_lanes}
         self._approach_of_edge = {link.from_lane.rsplit("_", 1)[0]: link.approach for link in pm.links}
         spacing = _vehicle_spacing()
-        self._storage = {approach: sum(int(libsumo.lane.getLength(lane) // spacing) for lane in lanes)
-                         for approach, lanes in self._approach_lanes}
+        self._lane_storage = {approach: tuple((lane, int(libsumo.lane.getLength(lane) // spacing)) for lane in lanes)
+                              for approach, lanes in self._approach_lanes}
+        self._spill_minutes = {approach: set() for approach, _ in self._approach_lanes}
         self._running = {}
         self._finished = {approach: [] for approach, _ in self._approach_lanes}
         self._movement_lanes = tuple((p, pm.incoming_lanes(p), pm.outgoing_lanes(p)) for p in pm.phases)
@@ -286,6 +289,11 @@ class SumoSimulation:
             queue = sum(halting(lane) for lane in lanes)
             if queue > top[approach]:
                 top[approach] = queue
+        # a lane holding as many vehicles as fit on it: the queue reaches back beyond the network
+        vehicles = libsumo.lane.getLastStepVehicleNumber
+        for approach, lanes in self._lane_storage.items():
+            if any(vehicles(lane) >= cap for lane, cap in lanes):
+                self._spill_minutes[approach].add(int(self.time // 60.0))
         self._sample_vehicles()
 
     def _sample_vehicles(self) -> None:
@@ -346,7 +354,8 @@ class SumoSimulation:
             departed=counts[a]["arrived"] + counts[a]["running"], arrived=counts[a]["arrived"],
             running=counts[a]["running"], waiting_to_enter=counts[a]["waiting"],
             mean_delay=sum(d) / len(d) if d else None, max_queue=self._max_queue.get(a, 0),
-            storage=self._storage.get(a, 0)) for a, d in sorted(delays.items())}
+            lane_storage=min((cap for _, cap in self._lane_storage.get(a, ())), default=0),
+            spillback_minutes=tuple(sorted(self._spill_minutes.get(a, ())))) for a, d in sorted(delays.items())}
         every = [x for d in delays.values() for x in d]
         notes = [DELAY_NOTE, ARRIVED_NOTE]
         if not every:

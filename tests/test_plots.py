@@ -41,4 +41,4 @@ def test_a_partial_last_bin_joins_the_one_before_instead_of_dropping(tmp_path):
     edges, tops = plots.queue_bins(samples, 60.0)
     assert edges[0] == 0.0 and edges[-1] == 3600.0 and len(edges) == 61
     assert tops["west"] == [10] * 60
-    assert plots.queues(samples, tmp_path / "q.png", storage={"west": 10}).stat().st_size > 0
+    assert plots.queues(samples, tmp_path / "q.png", spillback={"west": [120.0, 3599.0]}).stat().st_size > 0

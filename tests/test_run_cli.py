@@ -8,6 +8,7 @@ import pytest
 
 from hils.cli import main
 from hils.events import Kind, read
+from hils.sumo_net import NET_FILE, ROUTE_FILE, data_path
 
 
 @pytest.mark.parametrize("action_type", ["selection", "switch", "duration"])
@@ -56,6 +57,8 @@ def test_a_starving_agent_shows_who_could_not_enter(tmp_path, capsys, monkeypatc
     assert traffic["waiting_to_enter"] > 20
     assert north["waiting_to_enter"] + south["waiting_to_enter"] == traffic["waiting_to_enter"]
     assert north["arrived"] == south["arrived"] == 0
+    assert north["spillback_minutes"] and south["spillback_minutes"]  # their lanes filled up before the backlog
+    assert not any(traffic["approaches"][a]["spillback_minutes"] for a in ("east", "west"))
     assert north["mean_delay"] > 300 and south["mean_delay"] > 300
     assert traffic["mean_delay"] > 3 * traffic["mean_time_loss"]  # the arrived alone would hide the starving
     warning = next(line for line in printed.splitlines() if line.startswith("WARNING"))
@@ -93,3 +96,11 @@ def test_a_wrong_config_names_file_field_and_allowed(tmp_path, capsys):
     assert main(["run", "--no-sumo", "--config", str(bad), "--duration", "10", "--no-progress"]) == 2
     err = capsys.readouterr().err
     assert str(bad) in err and "timing.max_green" in err and "max_green >= min_green" in err
+
+
+def test_webster_refuses_a_network_it_did_not_plan_for(tmp_path, capsys):
+    code = main(["run", "--agent", "webster", "--action-type", "duration", "--net", str(data_path(NET_FILE)),
+                 "--routes", str(data_path(ROUTE_FILE)), "--out", str(tmp_path / "run"), "--no-progress"])
+    captured = capsys.readouterr()
+    assert code == 2
+    assert "--agent webster plans from the shipped four-leg network" in captured.out + captured.err
