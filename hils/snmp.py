@@ -80,8 +80,8 @@ __all__ = ["AUTH_KEY_ENV", "PRIV_KEY_ENV", "AuthProtocol", "PrivProtocol", "Snmp
 DEFAULT_PORT = 161
 DEFAULT_COMMUNITY = "public"
 
-# pysnmp's own timeout is only a backstop behind our deadline (see module doc).
-_PYSNMP_TIMEOUT_MARGIN = 1.0
+# The libraries' own timeouts are only a backstop behind our deadline (see module doc).
+_LIBRARY_TIMEOUT_MARGIN = 1.0
 # Distinct requests whose varbinds are kept; a run uses a handful (poll, calls).
 _VARBIND_CACHE_SIZE = 1024
 _EXCEPTION_VALUES = (NoSuchObject, NoSuchInstance, EndOfMibView)
@@ -117,7 +117,7 @@ MIN_KEY_LENGTH = 8
 
 _COMMUNITY_KEYS = ("community", "version")
 _V3_KEYS = ("version", "user", "auth", "auth_key", "priv", "priv_key")
-_QUERY_KEYS = ("community", "version", "user", "auth", "auth_key", "priv", "priv_key")
+_QUERY_KEYS = tuple(dict.fromkeys(_COMMUNITY_KEYS + _V3_KEYS))
 _FORM = ("snmp://HOST[:PORT][?community=NAME&version=1|2c] or "
          "snmp://HOST[:PORT]?version=3&user=U&auth=SHA[&auth_key=K][&priv=AES[&priv_key=K]]")
 
@@ -364,8 +364,7 @@ class SnmpTransport:
     async def _new_session(self) -> SnmpSession:
         host, port = self._address
         target = self.target
-        # gufo's own timeout is a backstop behind our deadline, like pysnmp's.
-        timeout = self.tau_udp + _PYSNMP_TIMEOUT_MARGIN
+        timeout = self.tau_udp + _LIBRARY_TIMEOUT_MARGIN
         if target.version is not SnmpVersion.V3:
             return SnmpSession(host, port, community=target.community, version=GufoVersion.v2c, timeout=timeout,
                                allow_bulk=False)
@@ -386,7 +385,7 @@ class SnmpTransport:
     async def _open(self) -> _ResolvedUdpTarget:
         # create() does not suspend (the address is already resolved), so no
         # other request can interleave here and open a second target.
-        udp = await _ResolvedUdpTarget.create(self._address, timeout=self.tau_udp + _PYSNMP_TIMEOUT_MARGIN,
+        udp = await _ResolvedUdpTarget.create(self._address, timeout=self.tau_udp + _LIBRARY_TIMEOUT_MARGIN,
                                               retries=0)
         self._udp = udp
         return udp
