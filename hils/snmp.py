@@ -8,8 +8,8 @@ touched from the loop's thread only.
 Rules of this module:
 
 - SNMPv2c GETs (the poller's hot path) go through gufo-snmp, whose BER codec
-  is compiled: a GET costs the client a few tens of microseconds instead of
-  pysnmp's two milliseconds. gufo-snmp keeps one request in flight per
+  is compiled: a poll costs the client about 0.1 ms of CPU, event loop and
+  driver included, instead of about 2 ms through pysnmp. gufo-snmp keeps one request in flight per
   socket, so the transport keeps a pool of sessions: a GET takes an idle one
   or opens another, and a session whose request timed out is dropped (a late
   answer must not be read as the next request's). SNMPv1 GETs stay with
@@ -24,11 +24,14 @@ Rules of this module:
   a phase call's groups in one SET (INTEGER values).
 - No retries: one datagram per request, and no answer within ``tau_udp``
   fails the event with :class:`CommunicationTimeout`. The deadline is our own
-  asyncio timer started when :meth:`get`/:meth:`set` is called; pysnmp's own
-  timeout is set later than it, because pysnmp checks timeouts on a 0.1 s tick
-  and could fire up to one tick early.
+  asyncio timer started when :meth:`get`/:meth:`set` is called; the libraries'
+  own timeouts are set later than it (pysnmp checks timeouts on a 0.1 s tick
+  and could fire up to one tick early).
 - A refusal (error-status, or a v2c varbind exception) fails the event with
   :class:`hils.ntcip.SnmpError`; values come back as ``int`` or ``bytes``.
+  Through gufo-snmp a missing object is NO_SUCH_NAME at its index, and any
+  other error-status of a GET a :class:`TransportError` naming it (gufo-snmp
+  does not report the status as a number).
 - Varbinds are built once per distinct request and reused: pysnmp resolves an
   ``ObjectType`` against its MIB view on first use (about 0.14 ms a varbind)
   and skips that for an object it has already resolved.
