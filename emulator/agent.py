@@ -89,6 +89,8 @@ log = logging.getLogger(__name__)
 
 #: The version field of an SNMPv3 message (RFC 3412); pysnmp's message processing model number too.
 SNMP_VERSION_3 = 3
+# Length fields of an SNMPv3 answer may take a few more bytes than its request's.
+_V3_LENGTH_MARGIN = 8
 #: Seconds between two ticks of USM's timer (see :meth:`_Usm.tick`).
 USM_TICK = 1.0
 # The dispatcher wants a transport address to answer to; ours answers the datagram's sender itself.
@@ -319,7 +321,8 @@ class SnmpAgent:
         # The user may write: like the read-write community, it is the middleware's.
         request = _Request(SNMP_VERSION_3, api.v2c, None, pdu, tuple(tuple(oid) for oid, _ in varbinds),
                            tuple(value for _, value in varbinds), True, received)
-        return handler(request, source)
+        handler(request, source)
+        return received.finish()
 
     def _fast_get(self, datagram: bytes, header: Header) -> bytes | None:
         """The answer to a plain GET of objects that all exist, written by hand; None leaves the
@@ -484,21 +487,34 @@ class V3User:
         return 3 if self.priv_key else 2
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)
 class _UsmRequest:
-    """One SNMPv3 request as pysnmp's dispatcher handed it over, and how to send its answer."""
+    """One SNMPv3 request as pysnmp's dispatcher handed it over, and how to send its answer.
+
+    pysnmp secures and encodes an answer once per request (it releases the request's state as it
+    does), while the handlers may encode several candidates to fit ``max_message_size``. So
+    :meth:`answer` keeps the latest candidate and returns a stand-in of its size (the request's
+    own security overhead plus the answer PDU, and a margin for length fields); :meth:`finish`
+    has pysnmp encode the candidate the handler settled on.
+    """
 
     usm: _Usm
     context: tuple[Any, ...]  # the dispatcher's arguments before the PDU
     pdu: Any
     tail: tuple[Any, ...]  # maxSizeResponseScopedPDU, stateReference
+    overhead: int  # bytes of the request's message around its PDU
+    candidate: Any = None
 
     def answer(self, status: ErrorStatus, index: int, varbinds: list[tuple[Oid, Any]]) -> bytes:
         response = api.v2c.apiPDU.get_response(self.pdu)
         api.v2c.apiPDU.set_error_status(response, int(status))
         api.v2c.apiPDU.set_error_index(response, index)
         api.v2c.apiPDU.set_varbinds(response, varbinds)
-        return self.usm.encode(self.context, response, self.tail)
+        self.candidate = response
+        return bytes(self.overhead + len(encoder.encode(response)) + _V3_LENGTH_MARGIN)
+
+    def finish(self) -> bytes:
+        return self.usm.encode(self.context, self.candidate, self.tail)
 
 
 class _Usm:
@@ -516,13 +532,14 @@ class _Usm:
         self.engine.transport_dispatcher = self  # type: ignore[assignment]
         self._sent: list[bytes] = []
         self._received: list[_UsmRequest] = []
+        self._datagram = b""
         self.engine.message_dispatcher.register_context_engine_id(
             b"", (rfc1905.GetRequestPDU.tagSet, rfc1905.GetNextRequestPDU.tagSet, rfc1905.GetBulkRequestPDU.tagSet,
                   rfc1905.SetRequestPDU.tagSet), self._process_pdu)
 
     def receive(self, datagram: bytes) -> tuple[list[bytes], _UsmRequest | None]:
         """The Reports pysnmp sent for ``datagram`` and the request it carried at the user's level, if any."""
-        self._sent, self._received = [], []
+        self._sent, self._received, self._datagram = [], [], datagram
         try:
             self.engine.message_dispatcher.receive_message(self.engine, udp.DOMAIN_NAME, _NOWHERE, datagram)
         except Exception as exc:
@@ -560,7 +577,8 @@ class _Usm:
     def _process_pdu(self, _engine: Any, *args: Any) -> None:
         # (mpModel, securityModel, securityName, securityLevel, contextEngineId, contextName, pduVersion,
         #  PDU, maxSizeResponseScopedPDU, stateReference), RFC 3412 4.2.2.1.3.
-        self._received.append(_UsmRequest(self, args[:7], args[7], args[8:]))
+        self._received.append(_UsmRequest(self, args[:7], args[7], args[8:],
+                                          len(self._datagram) - len(encoder.encode(args[7]))))
 
 
 class _Endpoint(asyncio.DatagramProtocol):

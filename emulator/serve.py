@@ -50,10 +50,12 @@ class TickStats:
 class WallClockTicker:
     """Steps a controller at the wall-clock deadlines of its 0.1 s tick, on the running loop."""
 
-    def __init__(self, controller: Controller, *, period: float = TICK, late_after: float = TICK / 2) -> None:
+    def __init__(self, controller: Controller, *, period: float = TICK, late_after: float = TICK / 2,
+                 observe: Callable[[float], None] | None = None) -> None:
         self.controller = controller
         self.period = period
         self.late_after = late_after
+        self.observe = observe  # gets each tick's lateness (s), for benchmarks
         self.stats = TickStats()
 
     async def run(self) -> None:
@@ -69,6 +71,8 @@ class WallClockTicker:
                 self.controller.step()
                 self.stats.ticks += 1
                 self.stats.max_lateness = max(self.stats.max_lateness, lateness)
+                if self.observe is not None:
+                    self.observe(lateness)
                 if lateness > self.late_after:
                     self.stats.late += 1
                     log.debug("tick %d ran %.1f ms late", self.controller.tick, lateness * 1e3)

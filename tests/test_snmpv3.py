@@ -144,3 +144,10 @@ def test_serve_v3_option_errors(args: list[str], message: str) -> None:
     assert done.returncode != 0
     assert message in done.stderr
     assert "Traceback" not in done.stderr
+
+
+def test_v3_bulk_answers_are_cut_to_the_maximum_message_size(served: Served) -> None:
+    # 200 repetitions would be far more than one datagram: the answer is cut short, still secured.
+    bulk = net_snmp("snmpbulkget", served.port, "authPriv", "-Cr200", ".1.3.6.1.4.1.1206")
+    assert bulk.returncode == 0, bulk.stderr
+    assert 40 < len(bulk.stdout.splitlines()) < 200
