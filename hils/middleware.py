@@ -215,7 +215,7 @@ class Middleware:
                 state, reading = yield from self._read_controller_setup()
                 # The control objects are ours while we run: whatever someone else left is cleared,
                 # and this harmless SET shows whether the community may write.
-                yield self._send_direct(_cleared_control(self.config.groups), "startup")
+                yield self._logged_set(_cleared_control(self.config.groups), frozenset(), "startup", None)
             except SnmpError as exc:
                 self.startup_error = _refusal_text(exc, self.where)
                 self.log.emit(Kind.NOTE, message=f"start-up: {self.startup_error}")
@@ -248,21 +248,6 @@ class Middleware:
         masks = yield self.transport.get([control_oid(c, g) for c in ControlColumn for g in range(1, groups + 1)])
         control = {c: groups_to_phases(masks[i * groups:(i + 1) * groups]) for i, c in enumerate(ControlColumn)}
         return state, ControllerReading(int(backup), int(pattern), int(flash), control)
-
-    def _send_direct(self, varbinds: list[tuple[Any, int]], purpose: str) -> simpy.Event:
-        """A SET outside the state machine (start-up only): logged like the others."""
-        self.log.emit(Kind.SET_SENT, command_id=None, phases=frozenset(), purpose=purpose)
-        done = self.transport.set(varbinds)
-
-        def answered(ev: simpy.Event) -> None:
-            if ev.ok:
-                self.log.emit(Kind.SET_ANSWERED, command_id=None, purpose=purpose)
-            else:
-                self.log.emit(Kind.SET_FAILED, command_id=None, purpose=purpose,
-                              error=f"{type(ev.value).__name__}: {ev.value}")
-
-        done.callbacks.append(answered)
-        return done
 
     def _recover(self) -> Generator[simpy.Event, Any, bool]:
         self._feed(RecoveryRequested(self.env.now))
@@ -345,21 +330,34 @@ class Middleware:
         """SET VehCall to ``phases``; logs the SET and its answer, and feeds the answer back."""
         masks = phases_to_groups(phases, self.config.groups)
         varbinds = [(control_oid(ControlColumn.VEH_CALL, g), m) for g, m in enumerate(masks, start=1)]
-        self.log.emit(Kind.SET_SENT, command_id=command_id, phases=phases, purpose=purpose.value)
-        done = self.transport.set(varbinds)
+        done = self._logged_set(varbinds, phases, purpose.value, command_id)
         done.callbacks.append(lambda ev: self._answered(ev, purpose, command_id))
         if purpose is Purpose.CLEAR:
             self._clearing = done
 
+    def _logged_set(self, varbinds: list[tuple[Any, int]], phases: frozenset[int], purpose: str,
+                    command_id: int | None) -> simpy.Event:
+        """One SET, logged when sent and when answered or failed; every SET of the run goes through here."""
+        self.log.emit(Kind.SET_SENT, command_id=command_id, phases=phases, purpose=purpose)
+        done = self.transport.set(varbinds)
+
+        def logged(ev: simpy.Event) -> None:
+            if ev.ok:
+                self.log.emit(Kind.SET_ANSWERED, command_id=command_id, purpose=purpose)
+            else:
+                self.log.emit(Kind.SET_FAILED, command_id=command_id, purpose=purpose,
+                              error=f"{type(ev.value).__name__}: {ev.value}")
+
+        done.callbacks.append(logged)
+        return done
+
     def _answered(self, ev: simpy.Event, purpose: Purpose, command_id: int | None) -> None:
+        """Feed a VehCall SET's answer back to the manager, which decides what follows a failure."""
         if ev.ok:
-            self.log.emit(Kind.SET_ANSWERED, command_id=command_id, purpose=purpose.value)
             self._feed(SetAnswered(self.env.now, purpose, command_id))
             return
         if purpose is not Purpose.CLEAR:
-            ev.defused = True  # a failed SET is logged and fed back: the manager decides what follows
-        self.log.emit(Kind.SET_FAILED, command_id=command_id, purpose=purpose.value,
-                      error=f"{type(ev.value).__name__}: {ev.value}")
+            ev.defused = True
         self._feed(SetFailed(self.env.now, purpose, command_id, isinstance(ev.value, CommunicationTimeout)))
 
     def _on_signal(self, snap: Snapshot, changed: bool) -> None:
