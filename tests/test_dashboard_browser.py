@@ -132,7 +132,7 @@ def test_live_page_shows_phases_change_timeout_and_recovery(tmp_path: Path, brow
         page.locator("#play").click()
         watch(page, lambda: float(page.locator("body").get_attribute("data-t")) >= end - 0.1, 5, "the replay's end")
         assert time.monotonic() - started >= (end - 5.0) / 10 * 0.8  # paced, not a jump to the end
-        watch(page, lambda: page.locator("#play").inner_text() == "Play", 2, "Play again at the end")
+        watch(page, lambda: page.locator("#play").inner_text() == "Play", 5, "Play again at the end")
     finally:
         page.close()
         view.terminate()

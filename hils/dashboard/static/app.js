@@ -170,10 +170,12 @@ function replay() {
     last = performance.now();
     timer = setInterval(() => {
       const now = performance.now();
-      slider.value = Math.min(meta.end, Number(slider.value) + ((now - last) / 1000) * Number(speed.value));
+      const t = Math.min(meta.end, Number(slider.value) + ((now - last) / 1000) * Number(speed.value));
+      slider.value = t;
       last = now;
+      // Stop on the time asked for, not on the slider's value, which the browser may round.
+      if (t >= meta.end) play.onclick();
       show();
-      if (Number(slider.value) >= meta.end) play.onclick();
     }, 200);
   };
   show();
