@@ -50,6 +50,8 @@ class Kind(StrEnum):
     STATE = "state"                            # from, to: the paper's names (idle, on_hold, timeout)
     RUN_ENDED = "run_ended"                    # reason (duration|closed|interrupted|terminated|agent_error|error)
     QUEUES = "queues"                          # queues {approach: vehicles queued upstream} (SUMO runs, every 5 s)
+    CABINET = "cabinet"                        # walks, ped_clears, veh_calls, ped_calls, nexts: phases
+    #                                                        (dashboard runs, on change, read every 1 s)
     NOTE = "note"                              # free text for harness faults and components
 
 

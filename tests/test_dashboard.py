@@ -15,6 +15,7 @@ import sys
 import urllib.error
 import urllib.request
 from collections.abc import Iterator
+from itertools import pairwise
 from pathlib import Path
 from typing import Any
 
@@ -22,9 +23,11 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from hils.config import IntersectionConfig
+from hils.config import IntersectionConfig, parse
 from hils.dashboard.board import STRIP_S, Board, Replay
-from hils.events import read
+from hils.dashboard.cabinet import COLUMNS as CABINET_COLUMNS
+from hils.dashboard.cabinet import read_cabinet
+from hils.events import Kind, read
 from hils.testbed import Testbed
 
 
@@ -125,6 +128,49 @@ def test_a_kept_command_is_listed_with_its_phases(paper_config: IntersectionConf
     assert newest["phases"] == [4, 8] and newest["verified_s"] == 5.1 and newest["outcome"] is None
     assert board.snapshot()["comms"]["last_lag_s"] == 5.1
     assert [p["phase"] for p in board.snapshot()["phases"] if p["vehcall"]] == [4, 8]
+
+
+def test_the_cabinet_read_shows_walks_clearances_calls_and_next(paper_toml: str) -> None:
+    """Phase 4 with pedestrian timing and ped recall: the page shows its WALK, then FDW, and PhaseNext."""
+    start = paper_toml.index("\n4 = { ") + 1
+    end = paper_toml.index("}", start)
+    config = parse(paper_toml[:start] + paper_toml[start:end].rstrip() + ', walk = 6, ped_clear = 8, recall = "ped" '
+                   + paper_toml[end:], "peds.toml")
+    boards: list[Board] = []
+
+    def attach(tb: Testbed, _target: Any) -> None:
+        boards.append(Board(tb.config))
+        tb.events.subscribe(boards[0].feed)
+        tb.env.process(read_cabinet(tb.env, tb.transport, tb.events, tb.config.groups))
+
+    peds: dict[str, set[float]] = {"walk": set(), "ped_clear": set()}
+    nexts: set[int] = set()
+    with Testbed(config, sumo=False, seed=2, duration=240.0, on_reset=attach) as tb:
+        tb.reset()
+        while not tb.done:
+            tb.run_for(1.0)
+            for ph in boards[0].snapshot()["phases"]:
+                if ph["ped"] in peds:
+                    assert ph["phase"] == 4  # the only phase with pedestrian timing
+                    peds[ph["ped"]].add(tb.env.now)
+                if ph["next"]:
+                    nexts.add(ph["phase"])
+        records = tb.events.of(Kind.CABINET)
+    # Walk, then flashing don't walk, each for about its time (reads are 1 s apart), while 4 is green.
+    assert len(peds["walk"]) >= 5 and len(peds["ped_clear"]) >= 7
+    first_walk = min(peds["walk"])
+    assert first_walk < min(t for t in peds["ped_clear"] if t > first_walk) <= first_walk + 7
+    assert nexts and nexts <= set(config.phases)  # PhaseNext shows during clearances
+    assert any(4 in r["ped_calls"] for r in records)  # the ped recall is a call the controller holds
+    # Logged on change only: no two consecutive records alike.
+    fields = [{k: r[k] for k in CABINET_COLUMNS} for r in records]
+    assert all(a != b for a, b in pairwise(fields))
+
+
+def test_a_board_without_cabinet_reads_claims_nothing(paper_config: IntersectionConfig) -> None:
+    snap = Board(paper_config).feed_all([_poll(0.0, [2, 6])]).snapshot()
+    assert snap["cabinet_read"] is False
+    assert all(p["ped"] is None and p["next"] is None and p["call"] is None for p in snap["phases"])
 
 
 # --- the command line and the server -----------------------------------------------------------------

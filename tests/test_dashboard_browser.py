@@ -81,14 +81,19 @@ def test_live_page_shows_phases_change_timeout_and_recovery(tmp_path: Path, brow
         first = shown(page)
         greens_seen = {tuple(sorted(p for p, s in first.items() if s == "G"))}
         states_seen = {state(page)}
+        nexts_seen: set[str] = set()
 
         def changed() -> bool:
             now = shown(page)
             greens_seen.add(tuple(sorted(p for p, s in now.items() if s == "G")))
             states_seen.add(state(page))
-            return len(greens_seen) > 1 and "ON_HOLD" in states_seen and "IDLE" in states_seen
+            # PhaseNext, read from the controller every second, shows while a ring clears.
+            nexts_seen.update(page.eval_on_selector_all("[data-next]", "els => els.map(e => e.closest("
+                                                        "'[data-phase]').dataset.phase)"))
+            return len(greens_seen) > 1 and "ON_HOLD" in states_seen and "IDLE" in states_seen and bool(nexts_seen)
 
-        watch(page, changed, 40, "the greens change and the manager go ON_HOLD and back to IDLE")
+        watch(page, changed, 40, "the greens change, PhaseNext show and the manager go ON_HOLD and back to IDLE")
+        assert page.locator("[data-testid=cabinet-note]").inner_text().startswith("WALK, FDW")
         assert "Y" in {*shown(page).values()} or len(greens_seen) > 1
         assert page.locator("#run").inner_text().startswith("paper four-leg intersection · wall-clock")
         assert page.locator("#commands tbody tr").count() >= 1

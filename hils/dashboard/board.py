@@ -14,8 +14,10 @@ Theory of operation
 Each kind of record updates one part of the board (see ``_HANDLERS``):
 
 - ``poll``: the indication of every phase (green, yellow, else red); a change opens a segment of the
-  strip, which keeps the last :data:`STRIP_S` seconds. Walk, flashing don't walk and PhaseNext are
-  not polled by the middleware, so the board has no field for them until the poll reads them.
+  strip, which keeps the last :data:`STRIP_S` seconds.
+- ``cabinet`` (dashboard runs only, :mod:`hils.dashboard.cabinet`): walks, pedestrian clearances
+  (flashing don't walk), the controller's vehicle and pedestrian calls and PhaseNext; a run logged
+  without a dashboard has none, and the page says so.
 - ``set_sent``: VehCall as last SET (the calls the middleware places), and the SET counts.
 - ``command_dispatched`` / ``hold_released`` / ``transition_verified``: the last commands with their
   hold times; a command kept without a SET (``keep``) appears when its hold is released.
@@ -35,6 +37,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from hils.config import IntersectionConfig
+from hils.dashboard.cabinet import COLUMNS as CABINET_COLUMNS
 
 #: Seconds of signal history in the strip.
 STRIP_S = 120.0
@@ -82,6 +85,7 @@ class Board:
     drifts: int = 0
     last_lag: float | None = None  # the last transition's dispatch-to-verification time
     queues: dict[str, int] | None = None
+    cabinet: dict[str, list[int]] | None = None  # the last cabinet record's phase lists
     strip: deque[tuple[float, dict[int, str]]] = field(default_factory=deque)  # (start, indications)
     records: int = 0
     _pending: list[int] = field(default_factory=list)  # the last converted command, for a keep
@@ -179,10 +183,22 @@ class Board:
     def _queues(self, r: Mapping[str, Any]) -> None:
         self.queues = dict(r["queues"])
 
+    def _cabinet(self, r: Mapping[str, Any]) -> None:
+        self.cabinet = {name: list(r[name]) for name in CABINET_COLUMNS}
+
     # --- helpers ----------------------------------------------------------------------------------
 
     def _row(self, command_id: int | None) -> CommandRow | None:
         return next((row for row in reversed(self.commands) if row.command_id == command_id), None)
+
+    def _cabinet_of(self, phase: int) -> dict[str, Any]:
+        """The phase's pedestrian indication, calls and PhaseNext as last read (None before a read)."""
+        c = self.cabinet
+        if c is None:
+            return {"ped": None, "call": None, "ped_call": None, "next": None}
+        ped = "walk" if phase in c["walks"] else "ped_clear" if phase in c["ped_clears"] else "dont_walk"
+        return {"ped": ped, "call": phase in c["veh_calls"], "ped_call": phase in c["ped_calls"],
+                "next": phase in c["nexts"]}
 
     def _trim(self) -> None:
         # Drop segments that ended before the strip's window (a segment ends where the next starts).
@@ -202,7 +218,8 @@ class Board:
             "ended": self.ended,
             "phases": [{"phase": p, "ring": ph.ring, "barrier": cfg.barrier_of(p), "approach": ph.approach,
                         "turn": ph.turn, "shown": self.shown.get(p) if self.polled else None,
-                        "vehcall": p in self.vehcall} for p, ph in sorted(cfg.phases.items())],
+                        "vehcall": p in self.vehcall, **self._cabinet_of(p)} for p, ph in sorted(cfg.phases.items())],
+            "cabinet_read": self.cabinet is not None,
             "rings": [list(r) for r in cfg.rings],
             "barriers": len(cfg.barriers),
             "state": self.state,
@@ -245,6 +262,7 @@ _HANDLERS: dict[str, Callable[[Board, Mapping[str, Any]], None]] = {
     "recovered": Board._recovered,
     "drift": Board._drift,
     "queues": Board._queues,
+    "cabinet": Board._cabinet,
 }
 
 

@@ -2,7 +2,8 @@
 
 :func:`attach` is given to :class:`hils.Testbed` as its ``on_reset`` hook: the run is then assembled
 (its event log and its wall-clock driver exist) and nothing has started, so the board sees every
-record from ``run_started`` on. The server is a task on ``driver.loop``; a recovery asked for from
+record from ``run_started`` on; the cabinet's walks, calls and PhaseNext are read from then on too
+(:mod:`hils.dashboard.cabinet`). The server is a task on ``driver.loop``; a recovery asked for from
 the page is delivered to SimPy as an event through the driver, so it runs between two SimPy steps
 like every other completion.
 """
@@ -14,6 +15,7 @@ from typing import Any
 
 from hils.dashboard import DashboardError
 from hils.dashboard.board import Board
+from hils.dashboard.cabinet import read_cabinet
 from hils.dashboard.server import Live, LiveServer, bind
 
 
@@ -36,6 +38,7 @@ class LiveDashboard:
             self.stop()
         board = Board(testbed.config)
         testbed.events.subscribe(board.feed)
+        testbed.env.process(read_cabinet(testbed.env, testbed.transport, testbed.events, testbed.config.groups))
         live = Live(board, recover=(lambda: _request_recovery(testbed)) if self.control else None)
         self.server = LiveServer(live, bind(self.host, self.port), driver.loop)
         print(f"dashboard: {self.server.url}", flush=True)

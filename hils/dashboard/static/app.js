@@ -34,13 +34,24 @@ function drawRings(snap) {
           el("div", { class: "num" }, `Φ${n}`),
           el("div", { class: "what" }, [p.approach, p.turn].filter(Boolean).join(" ") || " "),
           el("div", { class: "what" }, NAMES[p.shown] || "not polled"));
-        if (p.vehcall) box.append(el("span", { class: "chip call" }, "call"));
+        if (p.ped === "walk") box.append(el("span", { class: "chip walk", "data-ped": "walk" }, "WALK"));
+        if (p.ped === "ped_clear") box.append(el("span", { class: "chip fdw", "data-ped": "ped_clear" }, "FDW"));
+        if (p.next) box.append(el("span", { class: "chip next", "data-next": "1" }, "next"));
+        if (p.call) box.append(el("span", { class: "chip call" }, "call"));
+        if (p.ped_call) box.append(el("span", { class: "chip call" }, "ped call"));
+        if (p.vehcall) box.append(el("span", { class: "chip set" }, "VehCall SET"));
         cell.append(box);
       }
       row.append(cell);
     }
     root.append(row);
   });
+}
+
+function drawCabinetNote(snap) {
+  $("cabinet-note").textContent = snap.cabinet_read
+    ? "WALK, FDW (flashing don't walk), calls and next (PhaseNext) as the controller showed them at its last read (every 1 s)."
+    : "Walks, calls and PhaseNext were not read in this run (they are read during dashboard runs).";
 }
 
 function drawStrip(snap) {
@@ -129,7 +140,7 @@ function draw(snap) {
   $("clock").textContent = `t = ${fmt(snap.t, 1)} s`;
   $("status").textContent = snap.ended ? `run ended: ${snap.ended}` : meta.mode === "live" ? "live" : "replay";
   document.body.dataset.t = snap.t;
-  drawRings(snap); drawManager(snap); drawCommands(snap); drawComms(snap); drawQueues(snap); drawStrip(snap);
+  drawRings(snap); drawCabinetNote(snap); drawManager(snap); drawCommands(snap); drawComms(snap); drawQueues(snap); drawStrip(snap);
 }
 
 function live() {
