@@ -30,13 +30,21 @@ States (:class:`Mode`), with the paper's names (:class:`State`) that the log and
   If the transition timer expires first: TIMEOUT.
 - SERVING (paper ON_HOLD): the prescribed green is being served; back to IDLE when it has passed.
 - TIMEOUT (paper TIMEOUT): entered on a transition not seen within tau_trans, a communication
-  failure (n_timeout consecutive failed polls, reported by the poller) or n_drift consecutive
-  drifted steps. Polling halts; commands and keepalives are not sent. A recovery request re-reads
-  the controller (RECOVERING).
+  failure (n_timeout consecutive failed polls, reported by the poller), n_drift consecutive
+  drifted steps, or a control object changed by someone else (FOREIGN_CONTROL, below). Polling
+  halts; commands and keepalives are not sent. A recovery request re-reads the controller
+  (RECOVERING).
 - RECOVERING (paper TIMEOUT): the controller was re-read; the call is SET to the pair it shows (so
   no transition follows that nobody commanded) and the sequence position follows it. When that SET
   is answered: IDLE, polling resumes and the drift count restarts. A failed read or SET: TIMEOUT.
 - CLOSED: the run has ended; the calls were cleared and nothing else is sent.
+
+The control objects are ours while we run. The shell reads them back at a low rate
+(:class:`ControlsRead`). In IDLE, IN_TRANSITION and SERVING, any of PhaseOmit, PedOmit, Hold,
+ForceOff or PedCall set is a control object changed by someone else (the run never sets them):
+TIMEOUT (FOREIGN_CONTROL). VehCall is not judged: it is ours, re-SET by every command and
+keepalive, and a read of it races with our own SETs in flight. The recovery's SET and the
+close's clear set every control object.
 
 Commands arriving anywhere but IDLE are dropped. Every dispatched command ends exactly once
 (:class:`CommandEnded`: verified, served or timeout), except the one pending when the run closes.
@@ -92,6 +100,7 @@ class TimeoutReason(StrEnum):
     COMMUNICATION = "communication"
     TRANSITION = "transition"
     DRIFT = "drift"
+    FOREIGN_CONTROL = "foreign_control"
 
 
 class TimerKind(StrEnum):
@@ -195,6 +204,14 @@ class ControllerUnreadable:
 
 
 @dataclass(frozen=True, slots=True)
+class ControlsRead:
+    """The read-back of the control objects the run never sets (all but VehCall): the phases each holds."""
+
+    t: float
+    held: tuple[tuple[str, frozenset[int]], ...]  # (name, phases): PhaseOmit, PedOmit, Hold, ForceOff, PedCall
+
+
+@dataclass(frozen=True, slots=True)
 class KeepaliveSwitched:
     t: float
     on: bool
@@ -206,7 +223,8 @@ class CloseRequested:
 
 
 Event = (Started | CommandRequested | SignalObserved | TimerExpired | FailureDetected | StepTimed | SetAnswered
-         | SetFailed | RecoveryRequested | ControllerRead | ControllerUnreadable | KeepaliveSwitched | CloseRequested)
+         | SetFailed | RecoveryRequested | ControllerRead | ControllerUnreadable | KeepaliveSwitched | CloseRequested
+         | ControlsRead)
 
 # --- effects --------------------------------------------------------------------------------------
 
@@ -341,6 +359,8 @@ class Ev(Enum):
     CONTROLLER_UNREADABLE = auto()
     KEEPALIVE_SWITCHED = auto()
     CLOSE = auto()
+    CONTROLS_OURS = auto()
+    FOREIGN_CONTROL = auto()
 
 
 class Manager:
@@ -414,7 +434,13 @@ class Manager:
                         and p is not None and p.command_id == command_id):
                     return Ev.COMMAND_SET_LOST
                 return Ev.SET_RESULT
+            case ControlsRead():
+                return Ev.FOREIGN_CONTROL if self._foreign(ev) else Ev.CONTROLS_OURS
         return _PLAIN_KINDS[type(ev)]
+
+    def _foreign(self, ev: ControlsRead) -> str:
+        """What of the read-back is not ours ('' when all of it is)."""
+        return "; ".join(f"{name} on phases {sorted(phases)}" for name, phases in ev.held if phases)
 
     # --- handlers: effects only ------------------------------------------------------------------
 
@@ -520,6 +546,9 @@ class Manager:
         what = ev.error if isinstance(ev, ControllerUnreadable) else "the recovery SET got no answer"
         out.append(Note(f"recovery failed, still in TIMEOUT: {what}"))
 
+    def _foreign_control(self, ev: ControlsRead, out: list[Effect]) -> None:
+        self._enter_timeout(ev.t, TimeoutReason.FOREIGN_CONTROL, f"set by someone else: {self._foreign(ev)}", out)
+
     def _close(self, ev: CloseRequested, out: list[Effect]) -> None:
         out.append(HaltPolling())
         if self.last_set > float("-inf"):  # a run that never SET a call has none to clear
@@ -578,6 +607,7 @@ M = Mode
 # Every state: events that change nothing, or that every state handles alike.
 _EVERYWHERE: dict[Ev, _Handler] = {
     Ev.STALE_TIMER: None, Ev.SET_RESULT: None, Ev.KEEPALIVE_SWITCHED: Manager._switch_keepalive,
+    Ev.CONTROLS_OURS: None,
 }
 # The states in which the machine works normally (commands, keepalive, drift).
 _RUNNING = (M.IDLE, M.IN_TRANSITION, M.SERVING)
@@ -612,6 +642,8 @@ _TRANSITIONS: dict[tuple[Mode, Ev], tuple[Mode, _Handler]] = {
     **{(s, Ev.DRIFT_LIMIT): (M.TIMEOUT, Manager._drift_limit) for s in _RUNNING},
     **{(s, ev): (s, None) for s in (*_DOWN, M.CLOSED) for ev in (Ev.ON_TIME, Ev.DRIFTED, Ev.DRIFT_LIMIT)},
     **{(s, Ev.RECOVERY_REQUESTED): (s, Manager._nothing_to_recover) for s in _RUNNING},
+    **{(s, Ev.FOREIGN_CONTROL): (M.TIMEOUT, Manager._foreign_control) for s in _RUNNING},
+    **{(s, Ev.FOREIGN_CONTROL): (s, None) for s in (*_DOWN, M.CLOSED)},  # halted: the recovery clears them
     **{(s, Ev.CLOSE): (M.CLOSED, Manager._close) for s in (*_RUNNING, *_DOWN)},
     **{(s, ev): (s, None) for s in (*_RUNNING, M.TIMEOUT, M.CLOSED)
        for ev in (Ev.RECOVERY_SET_ANSWERED, Ev.RECOVERY_SET_FAILED)},  # a recovery overtaken by a close

@@ -25,6 +25,7 @@ from hils.manager import (
     CommandRequested,
     ControllerRead,
     ControllerUnreadable,
+    ControlsRead,
     Dispatch,
     DriftSeen,
     Dropped,
@@ -56,6 +57,7 @@ from hils.manager import (
     Verified,
 )
 from hils.ntcip import (
+    CONTROL_TABLE,
     SYSTEM_PATTERN_CONTROL,
     UNIT_BACKUP_TIME,
     UNIT_FLASH_STATUS,
@@ -72,6 +74,12 @@ from hils.preflight import ControllerReading, Verdict, judge
 from hils.transport import CommunicationTimeout, Transport, TransportError
 
 log = logging.getLogger(__name__)
+
+#: Seconds between read-backs of the control objects: a change by someone else is noticed within this.
+READBACK_PERIOD = 2.0
+#: The control objects the run never sets, read back to see whether someone else did (VehCall is ours,
+#: re-SET by every command and keepalive, and its read races with our own SETs in flight).
+FOREIGN_COLUMNS = tuple(c for c in ControlColumn if c is not ControlColumn.VEH_CALL)
 
 
 @dataclass(frozen=True, slots=True)
@@ -238,6 +246,7 @@ class Middleware:
             self._feed(Started(self.env.now, state.greens, reading.backup_time))
             break
         self.env.process(self.poller.run())
+        self.env.process(self._read_back())
         self.ready.succeed()
 
     def _read_controller_setup(self) -> Generator[simpy.Event, Any, tuple[SignalState, ControllerReading]]:
@@ -248,6 +257,26 @@ class Middleware:
         masks = yield self.transport.get([control_oid(c, g) for c in ControlColumn for g in range(1, groups + 1)])
         control = {c: groups_to_phases(masks[i * groups:(i + 1) * groups]) for i, c in enumerate(ControlColumn)}
         return state, ControllerReading(int(backup), int(pattern), int(flash), control)
+
+    def _read_back(self) -> Generator[simpy.Event, Any, None]:
+        """Read the control objects back every READBACK_PERIOD s; the manager judges whose they are."""
+        groups = self.config.groups
+        oids = [control_oid(c, g) for c in FOREIGN_COLUMNS for g in range(1, groups + 1)]
+        # Half a poll period off the poll grid, so that a read-back and a poll do not go out together.
+        yield self.env.timeout(self.poller.period / 2)
+        while self.manager.mode is not Mode.CLOSED:
+            yield self.env.timeout(READBACK_PERIOD)
+            if self.poller.halted or self.poller.consecutive_failures:
+                continue  # in TIMEOUT only recovery sends; while polls fail, the poller counts them
+            try:
+                values = yield self.transport.get(oids)
+            except (TransportError, SnmpError):
+                continue  # the poller counts communication failures
+            if self.manager.mode is Mode.CLOSED:
+                return
+            self._feed(ControlsRead(self.env.now, tuple(
+                (CONTROL_TABLE[c].name, groups_to_phases([int(v) for v in values[i * groups:(i + 1) * groups]]))
+                for i, c in enumerate(FOREIGN_COLUMNS))))
 
     def _recover(self) -> Generator[simpy.Event, Any, bool]:
         self._feed(RecoveryRequested(self.env.now))
@@ -309,6 +338,8 @@ class Middleware:
             case CommandEnded(command_id, outcome, hold):
                 self.log.emit(Kind.HOLD_RELEASED, command_id=command_id, reason=outcome, hold_s=hold)
             case TimeoutEntered(reason, detail, command_id):
+                if reason is TimeoutReason.FOREIGN_CONTROL:
+                    log.warning("control objects %s: TIMEOUT (foreign_control)", detail)
                 self.log.emit(Kind.TIMEOUT_ENTERED, reason=reason.value, detail=detail, command_id=command_id)
             case DriftSeen(step, took, consecutive):
                 self.log.emit(Kind.DRIFT, step_s=step, took_s=took, consecutive=consecutive)
@@ -330,6 +361,9 @@ class Middleware:
         """SET VehCall to ``phases``; logs the SET and its answer, and feeds the answer back."""
         masks = phases_to_groups(phases, self.config.groups)
         varbinds = [(control_oid(ControlColumn.VEH_CALL, g), m) for g, m in enumerate(masks, start=1)]
+        if purpose is Purpose.RECOVERY:
+            # Taking the controller back: what someone else set (a foreign control's TIMEOUT) goes too.
+            varbinds += [(control_oid(c, g), 0) for c in FOREIGN_COLUMNS for g in range(1, self.config.groups + 1)]
         done = self._logged_set(varbinds, phases, purpose.value, command_id)
         done.callbacks.append(lambda ev: self._answered(ev, purpose, command_id))
         if purpose is Purpose.CLEAR:

@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import math
+
 import pytest
 
+from harness.faults import FaultTarget, StuckController, Window
 from hils import config as config_mod
 from hils.actions import ActionType
 from hils.events import Kind
@@ -87,15 +90,10 @@ def test_loss_of_n_timeout_polls_enters_timeout_and_recovery_resumes_service():
 
 
 def test_transition_never_seen_enters_timeout_after_tau_trans():
-    def configure(run, target):
-        def stuck():
-            yield run.env.timeout(50.0)
-            # Omitting every phase: the controller never serves a new call (a transition that never comes).
-            target.controller.set_control(ControlColumn.PHASE_OMIT, CFG.phase_numbers)
-        run.env.process(stuck())
-
+    # From 50 s the controller acknowledges calls and ignores them: a transition that never comes.
+    stuck = StuckController("stuck", window=Window(50.0, math.inf))
     result = run_spec(RunSpec(CFG, ActionType.SWITCH, duration=120.0, seed=1, recover_after=None),
-                         configure=configure)
+                      target=lambda env, cfg, seed=0: FaultTarget(env, cfg, seed=seed, faults=[stuck]))
     records = result.records
     (timeout,) = _kinds(records, Kind.TIMEOUT_ENTERED)
     assert timeout["reason"] == "transition"

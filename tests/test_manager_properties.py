@@ -29,6 +29,7 @@ from hils.manager import (
     CommandRequested,
     ControllerRead,
     ControllerUnreadable,
+    ControlsRead,
     Dispatch,
     DriftSeen,
     Dropped,
@@ -243,6 +244,8 @@ class ManagerMachine(RuleBasedStateMachine):
                         assert reason is ev.reason
                     elif isinstance(ev, StepTimed):
                         assert reason is TimeoutReason.DRIFT and self.drifted + 1 == N_DRIFT
+                    elif isinstance(ev, ControlsRead):
+                        assert reason is TimeoutReason.FOREIGN_CONTROL
                     else:
                         assert isinstance(ev, TimerExpired) and ev.kind is TimerKind.TRANSITION
                         assert reason is TimeoutReason.TRANSITION
@@ -260,6 +263,13 @@ class ManagerMachine(RuleBasedStateMachine):
                 case _:
                     raise AssertionError(f"unknown effect {eff!r}")
 
+        # A control object the run never sets, found set while running, is a TIMEOUT; else nothing happens.
+        if isinstance(ev, ControlsRead):
+            foreign = any(phases for _name, phases in ev.held)
+            if before in RUNNING and foreign:
+                assert after is Mode.TIMEOUT and any(isinstance(e, TimeoutEntered) for e in effects)
+            else:
+                assert after is before and effects == []
         # Drift is counted while running and only then; an on-time step resets the count.
         if isinstance(ev, StepTimed) and before in RUNNING:
             self.drifted = self.drifted + 1 if ev.took > ev.step else 0
@@ -395,7 +405,8 @@ class ManagerMachine(RuleBasedStateMachine):
     # Failures, recovery requests, keepalive switching and stale timers share one rule, so that they
     # come rarely enough for commands to run their course in between.
     @rule(data=st.data(), dt=DT,
-          what=st.sampled_from(["failure", "recovery", "recovery", "keepalive_switch", "stale_timer"]))
+          what=st.sampled_from(["failure", "recovery", "recovery", "keepalive_switch", "stale_timer", "controls_read",
+                                "controls_read"]))
     def disturbance(self, data: st.DataObject, dt: float, what: str) -> None:
         t = self._tick(dt)
         mode = self.manager.mode
@@ -406,6 +417,13 @@ class ManagerMachine(RuleBasedStateMachine):
             effects = self.feed(RecoveryRequested(t))
             if mode is not Mode.TIMEOUT:
                 assert self.manager.mode is mode and not any(isinstance(e, SendCall) for e in effects)
+        elif what == "controls_read":
+            names = ("phaseControlGroupPhaseOmit", "phaseControlGroupPedOmit", "phaseControlGroupHold",
+                     "phaseControlGroupForceOff", "phaseControlGroupPedCall")
+            # Mostly clear (as a run sees them), sometimes one set by someone else.
+            foreign = data.draw(st.sampled_from([frozenset()] * 3 + [frozenset({p}) for p in PHASES]), label="held")
+            which = data.draw(st.sampled_from(names), label="object")
+            self.feed(ControlsRead(t, tuple((n, foreign if n == which else frozenset()) for n in names)))
         elif what == "keepalive_switch":
             on = data.draw(st.booleans(), label="on")
             assert self.feed(KeepaliveSwitched(t, on)) == []

@@ -14,6 +14,7 @@ from hils.actions import ActionType
 from hils.config import IntersectionConfig
 from hils.events import Kind
 from hils.manager import State
+from hils.middleware import READBACK_PERIOD
 from hils.ntcip import ControlColumn, UnitControlStatus
 from hils.testbed import RunSpec, Testbed, run_spec
 from hils.transport import CommunicationTimeout, LocalTransport
@@ -246,9 +247,12 @@ def test_recover_while_on_hold_does_not_disturb_the_transition(paper_config) -> 
     assert rig.mw.manager.position == paper_config.sequence.index((3, 7))
 
 
-def test_transition_not_shown_within_tau_trans_enters_timeout_and_recovery_resumes(paper_config) -> None:
+def test_transition_not_shown_within_tau_trans_enters_timeout_and_recovery_resumes(paper_config,
+                                                                                     monkeypatch) -> None:
     rig = Rig(paper_config)
-    rig.controller.control[ControlColumn.PHASE_OMIT] = frozenset({3, 7})  # the controller will not serve them
+    # The controller takes the call for 3 and 7 and will not serve it (an omit would be a foreign control).
+    calls = type(rig.controller).calls
+    monkeypatch.setattr(type(rig.controller), "calls", property(lambda c: calls.fget(c) - {3, 7}))
     rig.submit((3, 7))
     rig.run(paper_config.middleware.tau_trans + 1.0)
     assert rig.mw.state is State.TIMEOUT
@@ -265,13 +269,31 @@ def test_transition_not_shown_within_tau_trans_enters_timeout_and_recovery_resum
     # Recovery aligns the call with what the controller shows, so the stale call is gone.
     assert rig.sets("recovery")[-1]["phases"] == frozenset({2, 6})
     assert rig.veh_call == frozenset({2, 6})
-    rig.controller.control[ControlColumn.PHASE_OMIT] = frozenset()
+    monkeypatch.undo()
     rig.run(8.0)
     assert rig.controller.greens == frozenset({2, 6})
     rig.submit((4, 8))
     rig.run(8.0)
     assert rig.controller.greens == frozenset({4, 8})
     assert [r["reason"] for r in rig.kinds(Kind.HOLD_RELEASED)] == ["timeout", "verified"]
+
+
+@pytest.mark.parametrize("column", [c for c in ControlColumn if c is not ControlColumn.VEH_CALL])
+def test_a_control_object_set_by_someone_else_is_a_timeout_and_recovery_clears_it(paper_config, column) -> None:
+    rig = Rig(paper_config)
+    rig.run(3.0)
+    assert rig.kinds(Kind.TIMEOUT_ENTERED) == []  # our own call is not foreign
+    rig.controller.set_control(column, frozenset({4}))
+    set_at = rig.env.now
+    rig.run(READBACK_PERIOD + 0.1)
+    (entered,) = rig.kinds(Kind.TIMEOUT_ENTERED)
+    assert entered["reason"] == "foreign_control" and set_at < entered["t"] <= set_at + READBACK_PERIOD + 0.05
+    name = "phaseControlGroup" + column.name.title().replace("_", "")
+    assert entered["detail"] == f"set by someone else: {name} on phases [4]"
+    assert rig.env.run(until=rig.mw.recover()) is True
+    assert rig.controller.control[column] == frozenset(), "the recovery SET takes every control object back"
+    rig.run(2 * READBACK_PERIOD)
+    assert len(rig.kinds(Kind.TIMEOUT_ENTERED)) == 1 and rig.mw.state is State.IDLE
 
 
 def test_drift_needs_n_drift_consecutive_steps(paper_config) -> None:
