@@ -169,6 +169,8 @@ def load(path: str | Path | None = None) -> IntersectionConfig:
         text = p.read_text(encoding="utf-8")
     except OSError as exc:
         raise ConfigError(str(p), "<file>", f"cannot be read ({exc.strerror})") from None
+    except UnicodeDecodeError:
+        raise ConfigError(str(p), "<file>", "is not UTF-8 text; allowed: a TOML file") from None
     return parse(text, str(p))
 
 

@@ -2,16 +2,26 @@
 
 One SimPy process reads reds, yellows and greens in a single GET at a fixed
 rate and pushes the result to :class:`SignalCache`, which every other part
-reads (the manager to verify transitions, SUMO to show the lights). Polls are
-scheduled on a fixed grid (start + k * period) so the rate does not drift with
-response times; a poll that takes longer than a period is followed at once by
-the next. After n_timeout consecutive failed polls the poller reports a
-communication failure. While halted (the manager in TIMEOUT) it does not poll.
+reads (the manager to verify transitions, SUMO to show the lights).
+
+Rules of this module:
+
+- Polls go out on a fixed grid (start + k * period), whatever the answers do:
+  a poll that has not been answered does not hold the next one back, so a lost
+  datagram costs one poll, not tau_udp of them. Requests overlap, each with
+  its own request id (the transport's sessions keep them apart).
+- Answers are applied in poll order: an answer older than the newest one
+  applied is late and is discarded (counted, not logged: it says nothing new).
+- Communication failure is n_timeout consecutive unanswered polls, as the
+  paper defines it: failed polls newer than the newest answered one are
+  counted; an answer resets the count. With overlapping polls a dead link is
+  therefore seen about (n_timeout - 1) periods + tau_udp after it dies.
+- While halted (the manager in TIMEOUT) no poll goes out, and answers to
+  polls sent before the halt are ignored: recovery reads the controller itself.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -81,12 +91,16 @@ class Poller:
         self.consecutive_failures = 0
         self.polls = 0
         self.failed = 0  # polls that got no usable answer, over the run
+        self.late = 0  # answers that came after a newer poll's, discarded
         self.halted = False
+        self._newest = 0  # the newest poll whose answer was applied
+        self._epoch = 0  # polling periods between halts; answers from an earlier one are ignored
         self._resume = env.event()
         self._decoded: dict[tuple, _Decoded] = {}
 
     def halt(self) -> None:
         self.halted = True
+        self._epoch += 1
 
     def resume(self) -> None:
         self.halted = False
@@ -121,23 +135,38 @@ class Poller:
                 yield self._resume
                 start, k = self.env.now, 0
             self.polls += 1
-            poll_id = self.polls
-            try:
-                decoded = yield from self._read()
-            except (TransportError, SnmpError, ValueError) as exc:
-                self.consecutive_failures += 1
-                self.failed += 1
-                self.log.emit(Kind.POLL_FAILED, poll_id=poll_id, error=f"{type(exc).__name__}: {exc}",
-                              consecutive=self.consecutive_failures)
-                if self.consecutive_failures == self.n_timeout:
-                    self.on_failure(f"{self.n_timeout} consecutive polls failed (last: {type(exc).__name__})")
-            else:
-                self.consecutive_failures = 0
-                state = decoded.state
-                changed = self.cache.snapshot is None or state != self.cache.snapshot.state
-                self.log.emit(Kind.POLL, poll_id=poll_id, greens=decoded.greens, yellows=decoded.yellows,
-                              changed=changed)
-                self.cache.update(state, self.env.now, poll_id)
-            # Next slot on the fixed grid; if this poll overran, go at once on the next free slot.
-            k = max(k + 1, math.ceil((self.env.now - start) / self.period - 1e-9))
+            self.transport.get(self.oids).callbacks.append(
+                lambda ev, poll_id=self.polls, epoch=self._epoch: self._settled(ev, poll_id, epoch))
+            k += 1
             yield self.env.timeout(max(0.0, start + k * self.period - self.env.now))
+
+    def _settled(self, ev: simpy.Event, poll_id: int, epoch: int) -> None:
+        """One poll's answer or failure, in whatever order the polls settle."""
+        ev.defused = True
+        if self.halted or epoch != self._epoch:
+            return  # sent before a halt: recovery reads the controller itself
+        try:
+            if not ev.ok:
+                raise ev.value
+            decoded = self._decode(ev.value)
+        except (TransportError, SnmpError, ValueError) as exc:
+            self.failed += 1
+            # A poll overtaken by a newer answer is not part of a run of failures: it is logged with the
+            # count as it stands.
+            overtaken = poll_id < self._newest
+            if not overtaken:
+                self.consecutive_failures += 1
+            self.log.emit(Kind.POLL_FAILED, poll_id=poll_id, error=f"{type(exc).__name__}: {exc}",
+                          consecutive=self.consecutive_failures)
+            if not overtaken and self.consecutive_failures == self.n_timeout:
+                self.on_failure(f"{self.n_timeout} consecutive polls failed (last: {type(exc).__name__})")
+            return
+        if poll_id < self._newest:
+            self.late += 1
+            return
+        self._newest = poll_id
+        self.consecutive_failures = 0
+        state = decoded.state
+        changed = self.cache.snapshot is None or state != self.cache.snapshot.state
+        self.log.emit(Kind.POLL, poll_id=poll_id, greens=decoded.greens, yellows=decoded.yellows, changed=changed)
+        self.cache.update(state, self.env.now, poll_id)

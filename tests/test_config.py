@@ -102,6 +102,14 @@ def test_missing_file_names_the_file(tmp_path: Path) -> None:
     assert "cannot be read" in info.value.message
 
 
+def test_a_binary_file_is_refused_naming_it(tmp_path: Path) -> None:
+    binary = tmp_path / "config.toml"
+    binary.write_bytes(bytes(range(256)))
+    with pytest.raises(ConfigError) as info:
+        load(binary)
+    assert str(binary) in str(info.value) and "not UTF-8 text; allowed: a TOML file" in info.value.message
+
+
 def test_the_builder_makes_a_valid_config() -> None:
     cfg = parse(toml(), SOURCE)
     assert cfg.compatibility == {frozenset(p) for p in PAPER_COMPATIBLE}

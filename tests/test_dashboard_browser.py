@@ -132,7 +132,7 @@ def test_live_page_shows_phases_change_timeout_and_recovery(tmp_path: Path, brow
         # Play at the --realtime factor, 10 sim seconds a wall second, runs to the end of the run and stops there.
         assert page.locator("#speed").input_value() == "10"
         end = float(page.locator("[data-testid=slider]").get_attribute("max"))
-        assert end > 10.0
+        assert end > 7.0  # the slider was put at 5 s: something is left to play
         started = time.monotonic()
         page.locator("#play").click()
         watch(page, lambda: float(page.locator("body").get_attribute("data-t")) >= end - 0.1, 5, "the replay's end")

@@ -118,9 +118,10 @@ def test_n_timeout_lost_polls_report_one_failure(paper_config) -> None:
     rig = Rig(paper_config, loss=1.0)
     poller = rig.poller(n_timeout=5)
     rig.env.run(until=20.0)
-    # Each lost GET fails after tau_udp (1 s); the fifth one reports, and only that one.
+    # Each lost GET fails tau_udp (1 s) after it went out; polls keep their grid meanwhile, so the fifth
+    # one, sent 4 periods after the first, reports, and only that one.
     assert len(rig.failures) == 1
-    assert math.isclose(rig.failures[0][0], 5 * paper_config.middleware.tau_udp)
+    assert math.isclose(rig.failures[0][0], 4 * 0.1 + paper_config.middleware.tau_udp)
     assert "5 consecutive polls failed" in rig.failures[0][1]
     assert poller.consecutive_failures >= 19
     failed = rig.log.of(Kind.POLL_FAILED)
@@ -184,3 +185,47 @@ def test_transition_is_verified_on_the_first_poll_that_shows_it(paper_config) ->
     # Yellow 3 s + red clearance 2 s, seen within one poll period.
     assert 5.0 <= verified["hold_s"] <= 5.0 + 0.1 + 0.01
     assert mw.state is State.IDLE
+
+
+def test_lost_polls_do_not_hold_the_next_back(paper_config) -> None:
+    rig = Rig(paper_config, loss=0.2)
+    poller = rig.poller(n_timeout=50)  # count failures without reporting one
+    rig.env.run(until=60.0)
+    # Every slot of the grid got its poll, lost ones included (a lost GET does not wait tau_udp).
+    assert poller.polls == 600
+    answered = rig.log.of(Kind.POLL)
+    # (lost polls of the last second have not timed out yet)
+    assert 0.7 * 600 < len(answered) < 0.9 * 600 and 590 <= len(answered) + poller.failed <= 600
+    assert all(math.isclose(r["t"], (r["poll_id"] - 1) / 10 + 0.002, abs_tol=1e-3) for r in answered)
+    assert not rig.failures
+
+
+class Reordering:
+    """A transport whose GETs answer after the latency given per request (in order of the requests)."""
+
+    def __init__(self, env: simpy.Environment, mib: MibView, latencies: list[float]) -> None:
+        self.env, self.mib, self.latencies = env, mib, latencies
+
+    def get(self, oids: Sequence[Oid]) -> simpy.Event:
+        answer = self.env.event()
+        values = self.mib.get_many(oids)
+        self.env.timeout(self.latencies.pop(0) if self.latencies else 0.002).callbacks.append(
+            lambda _ev: answer.succeed(values))
+        return answer
+
+
+def test_an_answer_older_than_the_newest_applied_is_discarded(paper_config) -> None:
+    env = simpy.Environment()
+    controller = Controller(paper_config)
+    env.process(controller.process(env))
+    log = EventLog()
+    log.bind(lambda: env.now)
+    # Poll 2 answers after 0.25 s, after polls 3 and 4 have answered.
+    transport = Reordering(env, MibView(controller), [0.002, 0.25])
+    poller = Poller(env, transport, SignalCache(), log, groups=1, rate_hz=10.0, n_timeout=5,
+                    on_failure=lambda why: None)
+    env.process(poller.run())
+    env.run(until=1.0)
+    applied = [r["poll_id"] for r in log.of(Kind.POLL)]
+    assert 2 not in applied and applied == sorted(applied) and applied[:3] == [1, 3, 4]
+    assert poller.late == 1 and poller.cache.snapshot.seq == applied[-1]
