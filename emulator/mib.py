@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 from emulator.controller import Controller, tenths
+from emulator.delays import DelayedController
 from hils.ntcip import (
     CHANNEL_TABLE,
     CONTROL_TABLE,
@@ -58,9 +59,9 @@ class Instance:
 
 
 class MibView:
-    """get/set/next by OID over one controller."""
+    """get/set/next by OID over one controller (bare, or behind its delays)."""
 
-    def __init__(self, controller: Controller) -> None:
+    def __init__(self, controller: Controller | DelayedController) -> None:
         self.controller = controller
         self.set_count = 0
         instances = self._build()
@@ -182,7 +183,7 @@ def _group_reader(read: Callable[[], frozenset[int]], group: int, groups: int) -
     return lambda: _masks(read(), groups)[group - 1]
 
 
-def _group_writer(c: Controller, column: ControlColumn, group: int) -> Callable[[int], None]:
+def _group_writer(c: Controller | DelayedController, column: ControlColumn, group: int) -> Callable[[int], None]:
     base = 8 * (group - 1)
 
     def write(mask: int) -> None:
