@@ -32,12 +32,13 @@ NTCIP agent sharing a database. Three things stand between a SET of
    tick, read ``status_update_ticks`` behind (without a lag, the live status).
 
 Calibration. The paper measured holds of 5.18-5.20 s per transition against a
-Cobalt at 10 Hz (nominal 5 s), verifying from dispatch every 0.1 s. Its
-verification loop slept 0.1 s *after* each poll, so its polls came every
-~0.1037 s, and the verifying poll was its 50th (5.18-5.20 s): the green was not
-yet visible at the 49th (~5.08-5.10 s) and was at the 50th. With the tick
-wait in (0, 0.1] s that bounds the controller's own extra latency to about
-0.08-0.1 s: one tick. The defaults (``[emulator]`` in the intersection config)
+Cobalt at 10 Hz (nominal 5 s), its verification thread polling "every 0.1 s"
+from the dispatch. It does not say how that loop was timed; our reading (an
+inference, not the paper's words): it slept 0.1 s after each poll of three
+GETs, so its polls came every ~0.1036-0.104 s and the verifying poll was the
+50th (5.18-5.20 s), the green not yet visible at the 49th (~5.08-5.10 s).
+With the tick wait in (0, 0.1] s that puts the controller's own extra latency
+at about 0.08-0.1 s: one tick. The defaults (``[emulator]`` in the intersection config)
 are therefore one tick of call processing and none of status update; only
 their sum shows in a hold, and the split follows the pipeline in 2.
 
@@ -48,9 +49,9 @@ defaults, 5.2 s + 2 ms at 10 Hz for every transition (0.1 s tick wait + 0.1 s
 call processing + 5 s clearance, seen at the next poll). Per-transition jitter
 inside the controller (where a SET lands in the tick, when the status scan
 runs) cannot spread that: it only moves a hold by a whole poll period
-(to 5.1 or 5.3 s), far outside the paper's 20 ms band, so none is drawn. The
-paper's 20 ms spread came from its own poll loop's drift, which a fixed grid
-does not have. At 50 and 100 Hz the tick phase does show: holds spread over
+(to 5.1 or 5.3 s), far outside the paper's 20 ms band, so none is drawn. By
+the reading above, the paper's 20 ms spread came from its own poll loop's
+drift, which a fixed grid does not have. At 50 and 100 Hz the tick phase does show: holds spread over
 one poll period across seeds.
 """
 

@@ -350,8 +350,8 @@ call processing ({delays.call_processing_ticks} tick) and status update ({delays
 the wait for the next poll and the GET's response time (`[emulator]` in the config; the model and its
 calibration: `emulator/delays.py`). At 10 Hz the poll grid, which the agent's decisions share, turns all
 of that into one figure: every transition is seen at the poll 5.2 s after its dispatch. The paper's
-own 20 ms spread came from its verification loop, which slept 0.1 s after each poll and so drifted
-by a few ms per poll; our poller keeps a fixed grid. Faster polling shows the tick's phase against
+own 20 ms spread most likely came from its verification loop (our inference: sleeping 0.1 s after
+each poll makes 50 polls last 5.18-5.20 s); our poller keeps a fixed grid. Faster polling shows the tick's phase against
 the polls (drawn per seed), so holds spread over one poll period across the seeds.
 
 ![holds](holds.png)
