@@ -160,6 +160,8 @@ class DelayedController:
 
     def __getattr__(self, name: str) -> Any:
         # Only reached for attributes not defined above: status from the image, the rest from the controller.
+        if name.startswith("_"):
+            raise AttributeError(name)  # own state not set up yet (copy, pickle): never the controller's
         if name in STATUS_ATTRIBUTES and self._images.maxlen:
             return self._images[0].values[name]
         return getattr(self.controller, name)

@@ -16,7 +16,15 @@ from emulator.serve import EmulatorServer
 from hils.actions import ActionType
 from hils.config import ConfigError, EmulatorParams, IntersectionConfig, parse
 from hils.latency import transition_holds
-from hils.ntcip import ControlColumn, StatusColumn, control_oid, phases_to_groups, status_oid
+from hils.ntcip import (
+    CHANNEL_TABLE,
+    ChannelColumn,
+    ControlColumn,
+    StatusColumn,
+    control_oid,
+    phases_to_groups,
+    status_oid,
+)
 from hils.runner import RunSpec, run_virtual
 
 PAPER_HOLD = (5.18, 5.20)  # s, the paper's holds per transition at 10 Hz against a Cobalt
@@ -76,6 +84,7 @@ def test_the_unit_is_the_bare_controller_fed_late_and_seen_late(paper_config, ca
     bare = Controller(paper_config)
     unit = DelayedController(Controller(paper_config), EmulatorParams(call, status))
     mib, greens_oid = MibView(unit), status_oid(StatusColumn.GREENS, 1)
+    channel_greens_oid = CHANNEL_TABLE[ChannelColumn.GREENS].instance(1)
     sets_at = dict(sets)
     history = [mask(*bare.greens)]
     for tick in range(330):
@@ -87,7 +96,8 @@ def test_the_unit_is_the_bare_controller_fed_late_and_seen_late(paper_config, ca
         unit.step()
         history.append(mask(*bare.greens))
         assert unit.controller.greens == bare.greens and unit.controller.yellows == bare.yellows, tick
-        assert mib.get(greens_oid) == history[max(0, len(history) - 1 - status)], tick
+        seen = history[max(0, len(history) - 1 - status)]
+        assert mib.get_many([greens_oid, channel_greens_oid]) == (seen, seen), tick
 
 
 def test_power_up_loses_the_sets_not_yet_processed_and_shows_the_start_up_state(paper_config) -> None:
