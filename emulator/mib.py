@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 from emulator.controller import Controller, Timing
+from emulator.delays import DelayedController
 from hils.config import Phase, Recall
 from hils.ntcip import (
     CHANNEL_TABLE,
@@ -93,9 +94,9 @@ class Instance:
 
 
 class MibView:
-    """get/set/next by OID over one controller."""
+    """get/set/next by OID over one controller (bare, or behind its delays)."""
 
-    def __init__(self, controller: Controller) -> None:
+    def __init__(self, controller: Controller | DelayedController) -> None:
         self.controller = controller
         self.set_count = 0
         instances = self._build()
@@ -223,7 +224,7 @@ def _group_reader(read: Callable[[], frozenset[int]], group: int, groups: int) -
     return lambda: _masks(read(), groups)[group - 1]
 
 
-def _group_writer(c: Controller, column: ControlColumn, group: int) -> Callable[[int], None]:
+def _group_writer(c: Controller | DelayedController, column: ControlColumn, group: int) -> Callable[[int], None]:
     base = 8 * (group - 1)
 
     def write(mask: int) -> None:

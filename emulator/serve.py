@@ -3,7 +3,9 @@
 Both run on one asyncio loop and no thread: the ticker sleeps until each
 tick's deadline and steps the controller, the agent answers datagrams between
 ticks. A request therefore always sees the controller between two whole ticks,
-and a SET takes effect at the next tick, as in a real controller.
+and a SET takes effect after the controller's call-processing delay, counted
+from the next tick; status answers lag by the status-update delay
+(:mod:`emulator.delays`, the same model as in virtual time).
 
 Deadlines are computed from the start time (``start + k * period``), never by
 adding periods up, so they do not drift. When the loop was held up past one or
@@ -29,6 +31,7 @@ from pathlib import Path
 
 from emulator.agent import AgentStats, DropReason, RequestKind, SnmpAgent, V3User
 from emulator.controller import TICK, Change, Controller
+from emulator.delays import DelayedController
 from emulator.mib import MibView
 from hils.config import IntersectionConfig
 from hils.ntcip import Latency
@@ -50,8 +53,8 @@ class TickStats:
 class WallClockTicker:
     """Steps a controller at the wall-clock deadlines of its 0.1 s tick, on the running loop."""
 
-    def __init__(self, controller: Controller, *, period: float = TICK, late_after: float = TICK / 2,
-                 observe: Callable[[float], None] | None = None) -> None:
+    def __init__(self, controller: Controller | DelayedController, *, period: float = TICK,
+                 late_after: float = TICK / 2, observe: Callable[[float], None] | None = None) -> None:
         self.controller = controller
         self.period = period
         self.late_after = late_after
@@ -110,18 +113,19 @@ class ServeSummary:
 
 
 class EmulatorServer:
-    """A controller model, its MIB view, the SNMP agent over it and the wall-clock ticker."""
+    """A controller model behind its delays, its MIB view, the SNMP agent over it and the wall-clock ticker."""
 
     def __init__(self, config: IntersectionConfig, options: ServeOptions | None = None) -> None:
         self.config = config
         self.options = options or ServeOptions()
         self._trace = self.options.trace.open("w", buffering=1) if self.options.trace else None
         self.controller = Controller(config, on_change=self._on_change)
-        self.view = MibView(self.controller)
+        self.unit = DelayedController(self.controller, config.emulator)
+        self.view = MibView(self.unit)
         self.agent = SnmpAgent(self.view, ro_community=self.options.ro_community,
                                rw_community=self.options.rw_community, latency=self.options.latency,
                                seed=self.options.seed, v3_user=self.options.v3_user)
-        self.ticker = WallClockTicker(self.controller)
+        self.ticker = WallClockTicker(self.unit)
         self._ticking: asyncio.Task[None] | None = None
 
     async def start(self) -> tuple[str, int]:

@@ -726,9 +726,9 @@ class FaultTarget:
         """Power the controller down and up: reset it and restart its tick from now."""
         self._ticking.defused = True  # the interrupted tick process ends here on purpose
         self._ticking.interrupt("power cycle")
-        self.controller.reset()
+        self.base.unit.reset()
         # Its new tick grid starts at power-up, wherever that falls against the middleware's times.
-        self._ticking = self.env.process(self.controller.process(self.env))
+        self._ticking = self.env.process(self.base.unit.process(self.env))
 
 
 @dataclass(frozen=True, slots=True)

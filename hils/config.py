@@ -118,6 +118,17 @@ class MiddlewareParams:
         return self.backup_time / 3.0 if self.backup_time else None
 
 
+@dataclass(frozen=True, slots=True)
+class EmulatorParams:
+    """How the emulator models a real controller's own latency (``[emulator]``), in 0.1 s ticks.
+
+    A real controller has these delays without any table: they only tell the emulator how late to be.
+    The defaults are calibrated on the paper's Cobalt (see :mod:`emulator.delays`)."""
+
+    call_processing_ticks: int = 1  # a SET reaches the phase logic this many ticks after the next tick
+    status_update_ticks: int = 0  # status objects lag the lamps by this many ticks
+
+
 @dataclass(frozen=True)
 class IntersectionConfig:
     name: str
@@ -130,6 +141,7 @@ class IntersectionConfig:
     middleware: MiddlewareParams = field(default_factory=MiddlewareParams)
     source: str = "<memory>"
     startup_flash: int = 0  # s of start-up flash after power-up (unitStartUpFlash)
+    emulator: EmulatorParams = field(default_factory=EmulatorParams)
 
     @property
     def groups(self) -> int:
@@ -156,7 +168,8 @@ class IntersectionConfig:
         raw = {f: getattr(self.middleware, f) for f in MiddlewareParams.__dataclass_fields__} | changes
         params = _middleware(raw, self.source)
         return IntersectionConfig(self.name, self.phases, self.rings, self.barriers, self.sequence,
-                                  self.pairs, self.compatibility, params, self.source, self.startup_flash)
+                                  self.pairs, self.compatibility, params, self.source, self.startup_flash,
+                                  self.emulator)
 
 
 def load(path: str | Path | None = None) -> IntersectionConfig:
@@ -232,6 +245,21 @@ def _middleware(raw: Mapping[str, Any], source: str) -> MiddlewareParams:
         control_interval=float(_number(raw, "control_interval", w, source, d.control_interval,
                                        low=0, low_open=True, high=3600)),
         backup_time=_number(raw, "backup_time", w, source, d.backup_time, integer=True, low=0, high=65535),
+    )
+
+
+def _emulator(raw: Any, source: str) -> EmulatorParams:
+    if not isinstance(raw, dict):
+        raise ConfigError(source, "emulator", "must be a table of emulator parameters")
+    d = EmulatorParams()
+    w = "emulator."
+    _unknown(raw, tuple(EmulatorParams.__dataclass_fields__), w, source)
+    # Beyond 10 ticks (1 s) a controller is broken rather than slow.
+    return EmulatorParams(
+        call_processing_ticks=_number(raw, "call_processing_ticks", w, source, d.call_processing_ticks,
+                                      integer=True, low=0, high=10),
+        status_update_ticks=_number(raw, "status_update_ticks", w, source, d.status_update_ticks,
+                                    integer=True, low=0, high=10),
     )
 
 
@@ -349,7 +377,7 @@ def _matrix(raw: Mapping[str, Any], numbers: list[int], source: str) -> frozense
 
 
 def from_dict(raw: Mapping[str, Any], source: str = "<memory>") -> IntersectionConfig:
-    _unknown(raw, ("name", "timing", "phases", "structure", "middleware"), "", source)
+    _unknown(raw, ("name", "timing", "phases", "structure", "middleware", "emulator"), "", source)
     name = raw.get("name", Path(source).stem)
     if not isinstance(name, str):
         raise ConfigError(source, "name", "must be a string")
@@ -458,4 +486,5 @@ def from_dict(raw: Mapping[str, Any], source: str = "<memory>") -> IntersectionC
         middleware=_middleware(middleware, source),
         source=source,
         startup_flash=startup_flash,
+        emulator=_emulator(raw.get("emulator", {}), source),
     )

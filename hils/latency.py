@@ -33,14 +33,17 @@ class Stats:
     p99: float
     min: float
     max: float
+    p5: float
+    p95: float
 
     @classmethod
     def of(cls, values: Sequence[float]) -> Stats:
         if not values:
-            return cls(0, *[float("nan")] * 6)
+            return cls(0, *[float("nan")] * 8)
         a = np.asarray(values, dtype=float)
-        return cls(len(a), float(a.mean()), float(a.std(ddof=1)) if len(a) > 1 else 0.0,
-                   float(np.percentile(a, 50)), float(np.percentile(a, 99)), float(a.min()), float(a.max()))
+        p5, p50, p95, p99 = (float(x) for x in np.percentile(a, [5, 50, 95, 99]))
+        return cls(len(a), float(a.mean()), float(a.std(ddof=1)) if len(a) > 1 else 0.0, p50, p99,
+                   float(a.min()), float(a.max()), p5, p95)
 
     def as_dict(self) -> dict[str, float]:
         return asdict(self)

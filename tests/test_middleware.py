@@ -45,7 +45,8 @@ class Rig:
 
     @property
     def veh_call(self) -> frozenset[int]:
-        return self.controller.control[ControlColumn.VEH_CALL]
+        # As the NTCIP database holds it: the phase logic takes a SET one tick of call processing later.
+        return self.target.unit.control[ControlColumn.VEH_CALL]
 
     def sets(self, purpose: str | None = None) -> list[dict[str, Any]]:
         """The SETs since start-up (whose one SET clears the control objects)."""
@@ -162,9 +163,10 @@ def test_duration_holds_for_transition_plus_prescribed_green(paper_config, x, gr
     assert released["reason"] == "served"
     assert math.isclose(released["t"] - verified["t"], green, abs_tol=1e-9)
     transition = verified["t"] - dispatched_t
-    # Yellow and red clearance, then up to one controller tick to act on the call, one poll period to
-    # see the green and the GET's answer time (2 ms).
-    assert 5.0 <= transition <= 5.0 + 0.1 + 0.1 + 0.002 + 1e-9
+    # Clearance and the controller's call processing, after up to one tick until the tick that reads the
+    # call, then up to one poll period to see the green and the GET's answer time (2 ms).
+    call_processing = paper_config.emulator.call_processing_ticks * 0.1
+    assert 5.0 + call_processing <= transition <= 5.0 + call_processing + 0.1 + 0.1 + 0.002 + 1e-9
     assert math.isclose(released["hold_s"], transition + green, abs_tol=1e-9)
     assert rig.controller.greens == frozenset({3, 7}), "the pair must still be green when its time is served"
 
@@ -202,13 +204,16 @@ def test_keepalive_keeps_the_controller_out_of_backup_mode(paper_config, keepali
     else:
         assert rig.sets("keepalive") == []
         first = statuses.index(UnitControlStatus.BACKUP_MODE)
-        assert first == 6 - 1, "backup mode must come backup_time after the last SET"
+        # The SET at 5 s reaches the phase logic at the tick after next (call processing), a little after
+        # 5.1 s; backup_time later is just after 11 s, first seen by the sample at 12 s.
+        assert first == 6, "backup mode must come backup_time after the last SET took effect"
         assert rig.veh_call == frozenset()
 
 
 def test_calls_are_cleared_at_the_end_of_a_run(paper_config) -> None:
     result = run_spec(RunSpec(paper_config, ActionType.SELECTION, agent="random", duration=60.0, seed=3))
-    assert result.target.controller.control[ControlColumn.VEH_CALL] == frozenset()
+    # In the controller's database at the end; its phase logic takes it a tick of call processing later.
+    assert result.target.unit.control[ControlColumn.VEH_CALL] == frozenset()
     records = result.records
     sets = [r for r in records if r["kind"] == "set_sent"]
     assert any(r["purpose"] == "command" for r in sets)
@@ -269,6 +274,7 @@ def test_transition_not_shown_within_tau_trans_enters_timeout_and_recovery_resum
     # Recovery aligns the call with what the controller shows, so the stale call is gone.
     assert rig.sets("recovery")[-1]["phases"] == frozenset({2, 6})
     assert rig.veh_call == frozenset({2, 6})
+    rig.run(0.3)  # the recovery's SET reaches the phase logic after the controller's call processing
     monkeypatch.undo()
     rig.run(8.0)
     assert rig.controller.greens == frozenset({2, 6})
@@ -291,7 +297,7 @@ def test_a_control_object_set_by_someone_else_is_a_timeout_and_recovery_clears_i
     name = "phaseControlGroup" + column.name.title().replace("_", "")
     assert entered["detail"] == f"set by someone else: {name} on phases [4]"
     assert rig.env.run(until=rig.mw.recover()) is True
-    assert rig.controller.control[column] == frozenset(), "the recovery SET takes every control object back"
+    assert rig.target.unit.control[column] == frozenset(), "the recovery SET takes every control object back"
     rig.run(2 * READBACK_PERIOD)
     assert len(rig.kinds(Kind.TIMEOUT_ENTERED)) == 1 and rig.mw.state is State.IDLE
 
@@ -381,5 +387,7 @@ def test_a_command_set_without_answer_is_sent_again_and_the_transition_completes
     assert [p for p, _ in sent] == ["command", "retry"]
     assert sent[1][1] - sent[0][1] == pytest.approx(paper_config.middleware.tau_udp)
     (verified,) = log.of(Kind.TRANSITION_VERIFIED)
-    assert verified["hold_s"] == pytest.approx(paper_config.middleware.tau_udp + 5.0, abs=0.2)
+    # The retry's transition: clearance plus the controller's call processing, within a tick and a poll.
+    call_processing = paper_config.emulator.call_processing_ticks * 0.1
+    assert verified["hold_s"] == pytest.approx(paper_config.middleware.tau_udp + 5.0 + call_processing, abs=0.2)
     assert not log.of(Kind.TIMEOUT_ENTERED)

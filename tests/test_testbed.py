@@ -258,7 +258,7 @@ def test_an_error_inside_the_run_finishes_it_before_it_propagates() -> None:
         tb.run()
     assert tb.records[-1]["kind"] == Kind.RUN_ENDED and tb.records[-1]["reason"] == "error"
     assert [r["phases"] for r in kinds(tb, Kind.SET_SENT)][-1] == frozenset()
-    assert tb.target.controller.control[ControlColumn.VEH_CALL] == frozenset(), "the calls are cleared"
+    assert tb.target.unit.control[ControlColumn.VEH_CALL] == frozenset(), "the calls are cleared"
     tb.close()
 
 
