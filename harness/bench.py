@@ -79,6 +79,20 @@ def register(sub: argparse._SubParsersAction) -> None:
                            "second with a wrong community (20)")
     wire.add_argument("--out", type=Path, default=REPORT_DIR / "wire.json", metavar="FILE")
     wire.set_defaults(func=_wire_command)
+    env = commands.add_parser("env", help="the gymnasium environment's speed beside sumo-rl's (same network, demand)",
+                              description="Environment steps per second and wall time per simulated hour of "
+                                          "hils/Intersection-v0 beside sumo-rl's SumoEnvironment on the shipped "
+                                          "four-leg network and demand: 0.25 s SUMO steps, a decision every 10 s, "
+                                          "a seeded random policy, each episode in a fresh process, alternately. "
+                                          "hils' controller enforces minimum green, yellow and red clearance; "
+                                          "sumo-rl inserts its own yellow and no all-red, so the same demand makes "
+                                          "different traffic (vehicles inserted and arrived are shown). Needs "
+                                          "sumo-rl: pip install 'hils[bench]'.")
+    env.add_argument("--duration", type=float, default=3600.0, metavar="S", help="simulated seconds per episode (3600)")
+    env.add_argument("--repeat", type=int, default=3, help="alternating episodes of each (3)")
+    env.add_argument("--seed", type=int, default=0)
+    env.add_argument("--out", type=Path, default=REPORT_DIR / "env.json", metavar="FILE")
+    env.set_defaults(func=_env_command)
 
 
 def measure_latency(samples: int, seed: int = 0) -> dict[str, Stats]:
@@ -424,3 +438,36 @@ def _wire_command(args: argparse.Namespace) -> int:
     args.out.write_text(jsonout.dumps(out) + "\n", encoding="utf-8")
     print(f"written: {args.out}")
     return 0
+
+
+# --- env -------------------------------------------------------------------------------------------
+
+
+def _env_command(args: argparse.Namespace) -> int:
+    from harness.bench_env import measure_env
+
+    try:
+        import sumo_rl  # noqa: F401
+    except ImportError as exc:
+        if "SUMO_HOME" not in str(exc):
+            raise SystemExit("hils bench env compares with sumo-rl: pip install 'hils[bench]'") from None
+    info = machine.describe()
+    f = measure_env(args.repeat, args.seed, args.duration)
+    print(machine.header(info))
+    print(f"one {f['episode_s']:g} s episode, {f['sumo_step_s']} s SUMO steps, a decision every {f['decision_s']:g} s, "
+          f"random policy; {args.repeat} alternating episodes each, medians:")
+    print(f"  {'':10} {'steps':>6} {'steps/s':>8} {'wall s / sim h':>15} {'inserted':>9} {'arrived':>8}")
+    for side in ("hils", "sumo_rl"):
+        r = f[side]
+        print(f"  {side:10} {r['steps']:>6} {r['steps_per_s']:>8.1f} {r['wall_per_sim_hour_s']:>15.2f} "
+              f"{_or_dash(r['inserted']):>9} {_or_dash(r['arrived']):>8}")
+    print(f"  hils / sumo-rl speed: {f['speed_ratio_hils_to_sumo_rl']:.2f} (goal >= 1; hils' controller enforces "
+          "the clearances, sumo-rl's does not: other signals, other traffic)")
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(jsonout.dumps({"machine": info, "env": f}) + "\n", encoding="utf-8")
+    print(f"written: {args.out}")
+    return 0
+
+
+def _or_dash(x: Any) -> str:
+    return "-" if x is None else str(x)
