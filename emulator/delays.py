@@ -112,6 +112,12 @@ class DelayedController:
     # The controller's own tick loop, driving this object's step (0.1 s grid, optional phase).
     process = Controller.process
 
+    @property
+    def status(self) -> Controller | DelayedController:
+        """Where status objects are read: the published image when it lags, else the controller itself
+        (status is read at up to 100 Hz; the lookup through this wrapper is not free)."""
+        return self if self._images.maxlen else self.controller
+
     def reset(self) -> None:
         """Power-up: the controller resets, SETs not yet processed are lost, the image starts afresh."""
         self.controller.reset()

@@ -183,17 +183,18 @@ class MibView:
         out.append(Instance(RING_CONTROL_MAX2.instance(1), RING_CONTROL_MAX2,
                             lambda: sum(1 << (r - 1) for r in c.max2_rings),
                             lambda v: c.set_max2(k + 1 for k in range(8) if v >> k & 1)))
+        st = c.status if isinstance(c, DelayedController) else c
         status: dict[StatusColumn, Callable[[], frozenset[int]]] = {
-            StatusColumn.REDS: lambda: c.reds,
-            StatusColumn.YELLOWS: lambda: c.yellows,
-            StatusColumn.GREENS: lambda: c.greens,
-            StatusColumn.DONT_WALKS: lambda: c.dont_walks,
-            StatusColumn.PED_CLEARS: lambda: c.ped_clears,
-            StatusColumn.WALKS: lambda: c.walks,
-            StatusColumn.VEH_CALLS: lambda: c.calls,
-            StatusColumn.PED_CALLS: lambda: c.ped_calls,
-            StatusColumn.PHASE_ONS: lambda: c.phase_ons,
-            StatusColumn.PHASE_NEXTS: lambda: c.phase_nexts,
+            StatusColumn.REDS: lambda: st.reds,
+            StatusColumn.YELLOWS: lambda: st.yellows,
+            StatusColumn.GREENS: lambda: st.greens,
+            StatusColumn.DONT_WALKS: lambda: st.dont_walks,
+            StatusColumn.PED_CLEARS: lambda: st.ped_clears,
+            StatusColumn.WALKS: lambda: st.walks,
+            StatusColumn.VEH_CALLS: lambda: st.calls,
+            StatusColumn.PED_CALLS: lambda: st.ped_calls,
+            StatusColumn.PHASE_ONS: lambda: st.phase_ons,
+            StatusColumn.PHASE_NEXTS: lambda: st.phase_nexts,
         }
         channels = {ChannelColumn.REDS: status[StatusColumn.REDS], ChannelColumn.YELLOWS: status[StatusColumn.YELLOWS],
                     ChannelColumn.GREENS: status[StatusColumn.GREENS]}
