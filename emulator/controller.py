@@ -177,6 +177,7 @@ class Controller:
         self._order = {p: ring.index(p) for ring in config.rings for p in ring}
         self._ring_of = {p: config.ring_of(p) for p in config.phases}
         self._recall = {rc: frozenset(p for p, ph in config.phases.items() if ph.recall is rc) for rc in Recall}
+        self._detector_phase = config.detectors
         self.backup_time = config.middleware.backup_time
         self.startup_flash = config.startup_flash
         self.pattern = 254  # free
@@ -192,6 +193,7 @@ class Controller:
         self.control_status = UnitControlStatus.OTHER
         self.flash_status = UnitFlashStatus.STARTUP if self.startup_flash else UnitFlashStatus.NOT_FLASH
         self.ped_calls: frozenset[int] = frozenset()  # latched pedestrian calls
+        self.actuations: frozenset[int] = frozenset()  # vehicle detectors actuated now
         self._yellow_end: dict[int, int] = {}  # tick each phase's last yellow ended (red revert)
         self._since_set: int | None = None  # ticks since the last control SET; None = backup timer disarmed
         self.rings = [Ring(i + 1, order) for i, order in enumerate(self.config.rings)]
@@ -235,10 +237,20 @@ class Controller:
         self._since_set = 0
         self.control_status = UnitControlStatus.SYSTEM_CONTROL
 
+    def set_actuations(self, detectors: Iterable[int]) -> None:
+        """The vehicle detectors actuated now (a cabinet's detector inputs, or NTCIP's remote actuation).
+
+        A detector calls its phase while actuated (non-locking: the call goes when the vehicle does) and,
+        on a green, restarts the phase's passage timer; it is an input, not a system command, so it does
+        not restart the backup timer."""
+        self.actuations = frozenset(detectors)
+
     @property
     def calls(self) -> frozenset[int]:
-        """Vehicle calls the controller acts on: called, configured and not omitted."""
-        return self.control[ControlColumn.VEH_CALL].intersection(self.config.phases) - self.control[
+        """Vehicle calls the controller acts on: SET (VehCall) or from an actuated detector, configured and
+        not omitted."""
+        detected = {self._detector_phase[d] for d in self.actuations if d in self._detector_phase}
+        return (self.control[ControlColumn.VEH_CALL] | detected).intersection(self.config.phases) - self.control[
             ControlColumn.PHASE_OMIT]
 
     # --- status -------------------------------------------------------------------------

@@ -28,8 +28,11 @@ from hils.config import Phase, Recall
 from hils.ntcip import (
     CHANNEL_TABLE,
     CONTROL_TABLE,
+    DETECTOR_ACTUATION,
+    DETECTOR_STATUS_ACTIVE,
     MAX_PHASE_GROUPS,
     MAX_PHASES,
+    MAX_VEHICLE_DETECTORS,
     PHASE_TABLE,
     RING_CONTROL_MAX2,
     SEQUENCE_DATA,
@@ -39,6 +42,8 @@ from hils.ntcip import (
     UNIT_CONTROL_STATUS,
     UNIT_FLASH_STATUS,
     UNIT_STARTUP_FLASH,
+    VEHICLE_DETECTOR_CALL_PHASE,
+    VEHICLE_DETECTOR_OPTIONS,
     Access,
     ChannelColumn,
     ControlColumn,
@@ -209,6 +214,18 @@ class MibView:
                     for col in ControlColumn]
         for r, order in enumerate(cfg.rings, start=1):
             out.append(Instance(sequence_oid(1, r), SEQUENCE_DATA, lambda o=order: bytes(o)))
+        detectors = cfg.detectors
+        out.append(Instance(MAX_VEHICLE_DETECTORS.instance(), MAX_VEHICLE_DETECTORS, lambda: max(detectors)))
+        for d, phase in detectors.items():
+            out.append(Instance(VEHICLE_DETECTOR_OPTIONS.instance(d), VEHICLE_DETECTOR_OPTIONS, lambda: 0))
+            out.append(Instance(VEHICLE_DETECTOR_CALL_PHASE.instance(d), VEHICLE_DETECTOR_CALL_PHASE,
+                                lambda phase=phase: phase))
+        detector_groups = (max(detectors) + 7) // 8
+        for g in range(1, detector_groups + 1):
+            read = _group_reader(lambda: c.actuations, g, detector_groups)
+            out.append(Instance(DETECTOR_STATUS_ACTIVE.instance(g), DETECTOR_STATUS_ACTIVE, read))
+            out.append(Instance(DETECTOR_ACTUATION.instance(g), DETECTOR_ACTUATION, read,
+                                _actuation_writer(c, g)))
         return out
 
 
@@ -231,5 +248,15 @@ def _group_writer(c: Controller | DelayedController, column: ControlColumn, grou
     def write(mask: int) -> None:
         others = {p for p in c.control[column] if not base < p <= base + 8}
         c.set_control(column, others | {base + p for p in groups_to_phases((mask,))})
+
+    return write
+
+
+def _actuation_writer(c: Controller | DelayedController, group: int) -> Callable[[int], None]:
+    base = 8 * (group - 1)
+
+    def write(mask: int) -> None:
+        others = {d for d in c.actuations if not base < d <= base + 8}
+        c.set_actuations(others | {base + d for d in groups_to_phases((mask,))})
 
     return write

@@ -150,8 +150,21 @@ class WebsterAgent:
         return (self.plan.green_of(pair) - g_min) / (g_max - g_min)
 
 
+class ActuatedAgent:
+    """No agent: the controller runs fully actuated on its detectors (SUMO's stop-bar presence, see
+    :mod:`hils.detectors`) with the config's recalls; the middleware only observes. Never acts."""
+
+    def __init__(self, config: IntersectionConfig, action_type: ActionType | str = ActionType.SELECTION,
+                 seed: int = 0) -> None:
+        self.action_type = ActionType(action_type)
+
+    def act(self, observation: Observation) -> None:
+        return None
+
+
 BUILTIN: dict[str, type] = {"random": RandomAgent, "fixed-cycle": FixedCycleAgent, "max-pressure": MaxPressureAgent,
-                            "queue-proportional": QueueProportionalAgent, "webster": WebsterAgent}
+                            "queue-proportional": QueueProportionalAgent, "webster": WebsterAgent,
+                            "actuated": ActuatedAgent}
 
 
 def load_agent(spec: str, config: IntersectionConfig, action_type: ActionType | str, seed: int = 0) -> Agent:

@@ -53,7 +53,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="action design: selection (pick a pair), switch (0 keep / 1 advance), duration "
                         "(green time of the next pair); default: selection")
     p.add_argument("--agent", metavar="NAME|MODULE:CLASS",
-                   help="built-in agent (random, fixed-cycle, max-pressure, queue-proportional, webster) or your own "
+                   help="built-in agent (random, fixed-cycle, max-pressure, queue-proportional, webster; actuated: "
+                        "none, the controller runs on its detectors) or your own "
                         "package.module:Class; default: " + ", ".join(f"{k.value} -> {v}"
                                                                       for k, v in DEFAULT_AGENTS.items()))
     p.add_argument("--duration", type=float, default=3600.0, metavar="S", help="simulated seconds (3600)")

@@ -144,6 +144,12 @@ class IntersectionConfig:
     emulator: EmulatorParams = field(default_factory=EmulatorParams)
 
     @property
+    def detectors(self) -> dict[int, int]:
+        """Vehicle detector number -> the phase it calls: one detector per phase, numbered as the phase (the
+        stop-bar loops of a phase's approach lanes wired to one input, as in many cabinets)."""
+        return {p: p for p in self.phases}
+
+    @property
     def groups(self) -> int:
         """Number of NTCIP phase groups (8 phases each) this intersection needs."""
         return group_count(max(self.phases))

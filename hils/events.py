@@ -53,6 +53,8 @@ class Kind(StrEnum):
     QUEUES = "queues"                          # queues {approach: vehicles queued upstream} (SUMO runs, every 5 s)
     CABINET = "cabinet"                        # walks, ped_clears, veh_calls, ped_calls, nexts: phases
     #                                                        (dashboard runs, on change, read every 1 s)
+    DETECTORS = "detectors"                    # active: vehicle detectors actuated now (on change;
+    #                                                        runs on detectors, e.g. --agent actuated)
     NOTE = "note"                              # free text for harness faults and components
 
 

@@ -249,9 +249,19 @@ SEQUENCE_DATA = _o("sequenceData", (7, 3, 1, 3), Syntax.OCTET_STRING)
 # ringControlGroupMax2 (A.1.7.5.1.4.g): bit k-1 of group 1 selects Maximum 2 for ring k.
 RING_CONTROL_MAX2 = _o("ringControlGroupMax2", (7, 5, 1, 4), access=Access.READ_WRITE)
 
+# Vehicle detectors (A.1.2): the detector table (call phase, options), the active detectors by group of 8
+# (vehicleDetectorStatusGroupActive) and NTCIP 1202 v03's remote actuation by group of 8
+# (vehicleDetectorControlGroupActuation: a set bit forces that detector's actuation, as a cabinet input would).
+MAX_VEHICLE_DETECTORS = _o("maxVehicleDetectors", (2, 1))
+VEHICLE_DETECTOR_OPTIONS = _o("vehicleDetectorOptions", (2, 2, 1, 2))
+VEHICLE_DETECTOR_CALL_PHASE = _o("vehicleDetectorCallPhase", (2, 2, 1, 4))
+DETECTOR_STATUS_ACTIVE = _o("vehicleDetectorStatusGroupActive", (2, 4, 1, 2))
+DETECTOR_ACTUATION = _o("vehicleDetectorControlGroupActuation", (2, 12, 1, 2), access=Access.READ_WRITE)
+
 ALL_OBJECTS: tuple[ObjectDef, ...] = (
     MAX_PHASES, MAX_PHASE_GROUPS, UNIT_STARTUP_FLASH, UNIT_BACKUP_TIME, UNIT_CONTROL_STATUS, UNIT_FLASH_STATUS,
-    SYSTEM_PATTERN_CONTROL, SEQUENCE_DATA, RING_CONTROL_MAX2,
+    SYSTEM_PATTERN_CONTROL, SEQUENCE_DATA, RING_CONTROL_MAX2, MAX_VEHICLE_DETECTORS, VEHICLE_DETECTOR_OPTIONS,
+    VEHICLE_DETECTOR_CALL_PHASE, DETECTOR_STATUS_ACTIVE, DETECTOR_ACTUATION,
     *PHASE_TABLE.values(), *STATUS_TABLE.values(), *CONTROL_TABLE.values(), *CHANNEL_TABLE.values(),
 )
 

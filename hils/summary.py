@@ -10,6 +10,7 @@ from typing import Any
 
 from hils import jsonout
 from hils.config import IntersectionConfig
+from hils.detectors import actuations_per_phase
 from hils.events import Kind
 from hils.latency import Stats, internal_latencies_ms, transition_holds
 
@@ -43,6 +44,8 @@ def summarize(records: Sequence[dict[str, Any]], config: IntersectionConfig, *,
         "drifted_steps": kinds[Kind.DRIFT],
         "internal_latency_ms": latency,
     }
+    if kinds[Kind.DETECTORS]:
+        out["detector_actuations"] = actuations_per_phase(records, config)
     if traffic is not None:
         out["traffic"] = asdict(traffic) if is_dataclass(traffic) else traffic
     return out
@@ -68,6 +71,9 @@ def render(summary: Mapping[str, Any]) -> str:
                  + (f" ({s['recoveries']} recovered)" if s["timeouts"] else ""))
     lines.append(f"  polls                {s['polls']} ({s['polls_failed']} failed); "
                  f"drifted steps {s['drifted_steps']}")
+    if s.get("detector_actuations"):
+        per_phase = ", ".join(f"phase {p} {n}" for p, n in s["detector_actuations"].items())
+        lines.append(f"  detector actuations  {per_phase} (stop-bar presence in SUMO, NTCIP remote actuation)")
     for action_type, st in s["internal_latency_ms"].items():
         lines.append(f"  internal latency     {action_type}: N {st['n']}, mean {st['mean'] * 1000:.1f} us, "
                      f"p99 {st['p99'] * 1000:.1f} us")

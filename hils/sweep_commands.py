@@ -46,8 +46,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def _grid_options(p: argparse.ArgumentParser, *, scenarios: bool) -> None:
     p.add_argument("--agents", required=True, metavar="A,B,...",
-                   help="built-in agent names (random, fixed-cycle, max-pressure, queue-proportional, webster) or "
-                        "package.module:Class, comma-separated")
+                   help="built-in agent names (random, fixed-cycle, max-pressure, queue-proportional, webster, "
+                        "actuated) or package.module:Class, comma-separated")
     p.add_argument("--seeds", default="0-2", metavar="0-4|0,3,7", help="seeds (0-2)")
     if scenarios:
         p.add_argument("--scenarios", default="four_leg", metavar="S,...",

@@ -50,6 +50,7 @@ from hils import config as config_mod
 from hils.actions import ActionError, ActionType
 from hils.agents import Agent, Observation, load_agent
 from hils.config import IntersectionConfig
+from hils.detectors import DetectorFeed
 from hils.errors import UserError
 from hils.events import EventLog, Kind
 from hils.events import read as read_events
@@ -173,7 +174,7 @@ class Testbed:
                  duration: float | None = None, log_path: str | Path | None = None,
                  recover_after: float | None = 5.0,
                  on_reset: Callable[[Testbed, Any], None] | None = None,
-                 sumo_config: str | Path | None = None) -> None:
+                 sumo_config: str | Path | None = None, detectors: bool | None = None) -> None:
         self.config = config if isinstance(config, IntersectionConfig) else config_mod.load(config)
         self.action_type = ActionType(action_type)
         if isinstance(target, str) and target != VIRTUAL:
@@ -185,6 +186,8 @@ class Testbed:
         self.sumo_config = sumo_config
         self.seed = seed
         self._agent_spec = agent
+        # Detector actuations from SUMO feed the controller when asked, and by default for the actuated agent.
+        self.detectors = agent == "actuated" if detectors is None else detectors
         self.duration = duration
         self.log_path = Path(log_path) if log_path is not None else None
         self.recover_after = recover_after
@@ -470,7 +473,8 @@ class Testbed:
                 except Exception as exc:
                     raise AgentFailed(f"the agent's act() raised {type(exc).__name__}: {exc}") from exc
                 try:
-                    obs, _ = self.step(value)
+                    # None: no action this time, the controller runs on its own until the next decision.
+                    obs, _ = self.wait() if value is None else self.step(value)
                 except ActionError:
                     obs, _ = self.wait()  # refused and logged: the agent is asked again at the next decision
                 if progress is not None:
@@ -547,10 +551,14 @@ class Testbed:
         k = 0
         start = env.now
 
+        feed = DetectorFeed(self.transport, self.config, self.events) if self.detectors else None
+
         def one_step() -> None:
             if cache.snapshot is not None:
                 sim.apply(cache.snapshot.state)
             sim.step()
+            if feed is not None:
+                feed.feed(sim.present())
 
         while not self.ended:
             took = self.step_cost(one_step)
