@@ -276,3 +276,18 @@ def test_fixed_time_baseline_runs_the_webster_cycle(config) -> None:
             assert sim.indications() == pm.state_string(state), at
     wall = time_bare_sumo(60.0, config=config)
     assert 0.0 < wall < 10.0
+
+
+def test_a_vehicle_standing_at_the_stop_bar_is_present_on_its_phase_only(config) -> None:
+    with SumoSimulation(config, seed=2) as sim:
+        pm = sim.phase_map
+        phase_of_lane = {lane: p for p in pm.phases for lane in pm.incoming_lanes(p)}
+        sim.apply(SignalState(frozenset(config.phases), frozenset(), frozenset()))  # all red: queues form
+        while sim.time < 60.0:
+            sim.step()
+        present = sim.present()
+        # After a minute of red, a lane with a halted queue has its first vehicle at the stop bar: exactly the
+        # phases of such lanes are present.
+        queued = {phase_of_lane[lane] for lane in phase_of_lane if libsumo.lane.getLastStepHaltingNumber(lane)}
+        assert present == queued and len(present) >= 4
+        assert sim.present(zone=0.5) <= present
