@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 import tomllib
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from enum import StrEnum
 from importlib import resources
 from pathlib import Path
@@ -142,12 +142,14 @@ class IntersectionConfig:
     source: str = "<memory>"
     startup_flash: int = 0  # s of start-up flash after power-up (unitStartUpFlash)
     emulator: EmulatorParams = field(default_factory=EmulatorParams)
+    detector_phases: Mapping[int, int] = field(default_factory=dict)  # the [detectors] table, if any
 
     @property
     def detectors(self) -> dict[int, int]:
-        """Vehicle detector number -> the phase it calls: one detector per phase, numbered as the phase (the
-        stop-bar loops of a phase's approach lanes wired to one input, as in many cabinets)."""
-        return {p: p for p in self.phases}
+        """Vehicle detector number -> the phase it calls (``vehicleDetectorCallPhase``): the ``[detectors]``
+        table, or one detector per phase numbered as the phase (the stop-bar loops of a phase's approach lanes
+        wired to one input, as in many cabinets)."""
+        return dict(self.detector_phases) or {p: p for p in self.phases}
 
     @property
     def groups(self) -> int:
@@ -173,9 +175,7 @@ class IntersectionConfig:
         """A copy with some middleware parameters replaced (validated)."""
         raw = {f: getattr(self.middleware, f) for f in MiddlewareParams.__dataclass_fields__} | changes
         params = _middleware(raw, self.source)
-        return IntersectionConfig(self.name, self.phases, self.rings, self.barriers, self.sequence,
-                                  self.pairs, self.compatibility, params, self.source, self.startup_flash,
-                                  self.emulator)
+        return replace(self, middleware=params)
 
 
 def load(path: str | Path | None = None) -> IntersectionConfig:
@@ -383,7 +383,7 @@ def _matrix(raw: Mapping[str, Any], numbers: list[int], source: str) -> frozense
 
 
 def from_dict(raw: Mapping[str, Any], source: str = "<memory>") -> IntersectionConfig:
-    _unknown(raw, ("name", "timing", "phases", "structure", "middleware", "emulator"), "", source)
+    _unknown(raw, ("name", "timing", "phases", "structure", "middleware", "emulator", "detectors"), "", source)
     name = raw.get("name", Path(source).stem)
     if not isinstance(name, str):
         raise ConfigError(source, "name", "must be a string")
@@ -493,4 +493,20 @@ def from_dict(raw: Mapping[str, Any], source: str = "<memory>") -> IntersectionC
         source=source,
         startup_flash=startup_flash,
         emulator=_emulator(raw.get("emulator", {}), source),
+        detector_phases=_detectors(raw.get("detectors", {}), phases, source),
     )
+
+
+def _detectors(raw: Any, phases: Mapping[int, Phase], source: str) -> dict[int, int]:
+    """``[detectors]``: vehicle detector number (1-64) = the phase it calls."""
+    if not isinstance(raw, dict):
+        raise ConfigError(source, "detectors", "must be a table: detector number = phase it calls, e.g. 1 = 2")
+    out = {}
+    for key, phase in raw.items():
+        if not (key.isdigit() and 1 <= int(key) <= 64):
+            raise ConfigError(source, f"detectors.{key}", "unknown detector; allowed: detector numbers 1-64")
+        if isinstance(phase, bool) or phase not in phases:
+            raise ConfigError(source, f"detectors.{key}", f"calls phase {phase!r}; allowed: the configured phases "
+                                                          f"{', '.join(map(str, phases))}")
+        out[int(key)] = phase
+    return out

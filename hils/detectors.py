@@ -3,7 +3,8 @@
 A cabinet wires its loops to the controller's detector inputs; the controller places calls and extends
 greens from them by its passage timer. Here every SUMO step reads which phases have a vehicle in their
 stop-bar presence zone (:meth:`hils.sumo.SumoSimulation.present`), maps them to vehicle detector numbers
-(:attr:`hils.config.IntersectionConfig.detectors`: one detector per phase, numbered as the phase) and,
+(:attr:`hils.config.IntersectionConfig.detectors`: the config's ``[detectors]`` table, by default one
+detector per phase numbered as the phase; every detector of a present phase is actuated) and,
 when that set changes, SETs NTCIP 1202 v03's ``vehicleDetectorControlGroupActuation`` (a set bit forces
 that detector's actuation) through the run's transport: the same object in virtual time and against a
 controller that accepts remote actuation at wall clock. A controller that does not (the standard marks
@@ -36,13 +37,15 @@ class DetectorFeed:
     def __init__(self, transport: Transport, config: IntersectionConfig, events: EventLog) -> None:
         self.transport = transport
         self.events = events
-        self.detector_of = {phase: d for d, phase in config.detectors.items()}
+        self.detectors_of: dict[int, list[int]] = {}
+        for d, phase in config.detectors.items():
+            self.detectors_of.setdefault(phase, []).append(d)
         self.groups = (max(config.detectors) + 7) // 8
         self.actuated: frozenset[int] = frozenset()
 
     def feed(self, present: Iterable[int]) -> None:
         """The phases with a vehicle on their stop-bar zone now; SET the actuations when they changed."""
-        actuated = frozenset(self.detector_of[p] for p in present if p in self.detector_of)
+        actuated = frozenset(d for p in present for d in self.detectors_of.get(p, ()))
         if actuated == self.actuated:
             return
         self.actuated = actuated

@@ -14,11 +14,12 @@ from test_preflight import snmp
 from emulator.controller import Controller
 from emulator.mib import MibView
 from harness.processes import start_emulator
-from hils.config import IntersectionConfig
+from hils.config import ConfigError, IntersectionConfig, parse
 from hils.events import Kind, read
 from hils.ntcip import (
     DETECTOR_ACTUATION,
     DETECTOR_STATUS_ACTIVE,
+    MAX_VEHICLE_DETECTORS,
     VEHICLE_DETECTOR_CALL_PHASE,
     StatusColumn,
     oid_str,
@@ -89,3 +90,25 @@ def test_the_actuated_controller_serves_every_approach_with_greens_that_follow_d
     assert set(summary["detector_actuations"]) == {str(p) for p in range(1, 9)}
     assert all(n > 0 for n in summary["detector_actuations"].values())
     assert summary["traffic"]["waiting_to_enter"] == 0
+
+
+def test_the_detectors_table_maps_detectors_to_phases_and_is_read_over_ntcip(paper_toml: str) -> None:
+    config = parse(paper_toml + "\n[detectors]\n1 = 2\n9 = 2\n4 = 4\n", "det.toml")
+    assert config.detectors == {1: 2, 9: 2, 4: 4}
+    mib = MibView(Controller(config))
+    assert mib.get_many([VEHICLE_DETECTOR_CALL_PHASE.instance(9), MAX_VEHICLE_DETECTORS.instance()]) == (2, 9)
+    mib.set_many([(DETECTOR_ACTUATION.instance(2), 0b1)])  # detector 9, in the second group of eight
+    assert mib.controller.calls == frozenset({2})
+
+
+@pytest.mark.parametrize(("table", "field", "allowed"), [
+    ("[detectors]\n70 = 2", "detectors.70", "allowed: detector numbers 1-64"),
+    ("[detectors]\n3 = 12", "detectors.3", "allowed: the configured phases 1, 2, 3, 4, 5, 6, 7, 8"),
+    ("detectors = 3", "detectors", "must be a table"),
+])
+def test_a_bad_detectors_table_is_refused_naming_file_field_and_what_is_allowed(paper_toml: str, table: str,
+                                                                               field: str, allowed: str) -> None:
+    with pytest.raises(ConfigError) as info:
+        # A table goes at the end; a plain key at the top, where it is not inside another table.
+        parse(paper_toml + "\n" + table + "\n" if table.startswith("[") else table + "\n" + paper_toml, "det.toml")
+    assert info.value.source == "det.toml" and info.value.field == field and allowed in info.value.message
