@@ -143,6 +143,7 @@ class IntersectionConfig:
     startup_flash: int = 0  # s of start-up flash after power-up (unitStartUpFlash)
     emulator: EmulatorParams = field(default_factory=EmulatorParams)
     detector_phases: Mapping[int, int] = field(default_factory=dict)  # the [detectors] table, if any
+    detector_lanes: Mapping[int, str] = field(default_factory=dict)  # the SUMO lane of a detector given one
 
     @property
     def detectors(self) -> dict[int, int]:
@@ -493,20 +494,33 @@ def from_dict(raw: Mapping[str, Any], source: str = "<memory>") -> IntersectionC
         source=source,
         startup_flash=startup_flash,
         emulator=_emulator(raw.get("emulator", {}), source),
-        detector_phases=_detectors(raw.get("detectors", {}), phases, source),
+        **_detectors(raw.get("detectors", {}), phases, source),
     )
 
 
-def _detectors(raw: Any, phases: Mapping[int, Phase], source: str) -> dict[int, int]:
-    """``[detectors]``: vehicle detector number (1-64) = the phase it calls."""
+def _detectors(raw: Any, phases: Mapping[int, Phase], source: str) -> dict[str, dict[int, Any]]:
+    """``[detectors]``: vehicle detector number (1-64) = the phase it calls, or ``{ phase = P, lane = "ID" }``
+    for a loop on one SUMO lane (without a lane, the detector sees every approach lane of its phase)."""
     if not isinstance(raw, dict):
-        raise ConfigError(source, "detectors", "must be a table: detector number = phase it calls, e.g. 1 = 2")
-    out = {}
-    for key, phase in raw.items():
+        raise ConfigError(source, "detectors", "must be a table: detector number = phase it calls, e.g. 1 = 2, or "
+                                               "1 = { phase = 2, lane = \"E2C_0\" }")
+    out: dict[int, int] = {}
+    lanes: dict[int, str] = {}
+    for key, value in raw.items():
+        where = f"detectors.{key}"
         if not (key.isdigit() and 1 <= int(key) <= 64):
-            raise ConfigError(source, f"detectors.{key}", "unknown detector; allowed: detector numbers 1-64")
+            raise ConfigError(source, where, "unknown detector; allowed: detector numbers 1-64")
+        if isinstance(value, dict):
+            _unknown(value, ("phase", "lane"), f"{where}.", source)
+            phase, lane = value.get("phase"), value.get("lane")
+            if lane is not None and not (isinstance(lane, str) and lane):
+                raise ConfigError(source, f"{where}.lane", "must be a SUMO lane id, e.g. \"E2C_0\"")
+            if lane is not None:
+                lanes[int(key)] = lane
+        else:
+            phase = value
         if isinstance(phase, bool) or phase not in phases:
-            raise ConfigError(source, f"detectors.{key}", f"calls phase {phase!r}; allowed: the configured phases "
-                                                          f"{', '.join(map(str, phases))}")
+            raise ConfigError(source, where, f"calls phase {phase!r}; allowed: the configured phases "
+                                             f"{', '.join(map(str, phases))}")
         out[int(key)] = phase
-    return out
+    return {"detector_phases": out, "detector_lanes": lanes}

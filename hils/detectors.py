@@ -3,8 +3,9 @@
 A cabinet wires its loops to the controller's detector inputs; the controller places calls and extends
 greens from them by its passage timer. Here every SUMO step reads which phases have a vehicle in their
 stop-bar presence zone (:meth:`hils.sumo.SumoSimulation.present`), maps them to vehicle detector numbers
-(:attr:`hils.config.IntersectionConfig.detectors`: the config's ``[detectors]`` table, by default one
-detector per phase numbered as the phase; every detector of a present phase is actuated) and,
+(:attr:`hils.config.IntersectionConfig.detectors`: the config's ``[detectors]`` table, a loop per lane where it
+names the lane, else one loop over every approach lane of the detector's phase; by default one detector per
+phase numbered as the phase) and,
 when that set changes, SETs NTCIP 1202 v03's ``vehicleDetectorControlGroupActuation`` (a set bit forces
 that detector's actuation) through the run's transport: the same object in virtual time and against a
 controller that accepts remote actuation at wall clock. A controller that does not (the standard marks
@@ -17,35 +18,45 @@ not commands: they do not go through the manager and are not ``set_sent`` record
 
 from __future__ import annotations
 
-import logging
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
 import simpy
 
 from hils.config import IntersectionConfig
+from hils.errors import UserError
 from hils.events import EventLog, Kind
 from hils.ntcip import DETECTOR_ACTUATION, phases_to_groups
 from hils.transport import Transport
 
-log = logging.getLogger(__name__)
+
+class DetectorError(UserError):
+    """A detector the network cannot carry: its lane is not an approach lane of its phase."""
 
 
 class DetectorFeed:
-    """Hands the phases SUMO shows present to the controller as detector actuations, on change."""
+    """Hands the lanes SUMO shows occupied at the stop bar to the controller as detector actuations, on change."""
 
-    def __init__(self, transport: Transport, config: IntersectionConfig, events: EventLog) -> None:
+    def __init__(self, transport: Transport, config: IntersectionConfig, events: EventLog,
+                 lanes_of_phase: Mapping[int, Sequence[str]]) -> None:
         self.transport = transport
         self.events = events
-        self.detectors_of: dict[int, list[int]] = {}
-        for d, phase in config.detectors.items():
-            self.detectors_of.setdefault(phase, []).append(d)
+        # Each detector's loop: the lane the config gives it, else every approach lane of its phase.
+        self.lanes_of = {d: frozenset([config.detector_lanes[d]] if d in config.detector_lanes
+                                      else lanes_of_phase.get(phase, ()))
+                         for d, phase in config.detectors.items()}
+        for d, lane in config.detector_lanes.items():
+            phase = config.detectors[d]
+            if lane not in lanes_of_phase.get(phase, ()):
+                raise DetectorError(f"{config.source}: detectors.{d}: lane {lane!r} is not an approach lane of "
+                                    f"phase {phase}; allowed: {', '.join(lanes_of_phase.get(phase, ())) or 'none'}")
         self.groups = (max(config.detectors) + 7) // 8
         self.actuated: frozenset[int] = frozenset()
 
-    def feed(self, present: Iterable[int]) -> None:
-        """The phases with a vehicle on their stop-bar zone now; SET the actuations when they changed."""
-        actuated = frozenset(d for p in present for d in self.detectors_of.get(p, ()))
+    def feed(self, present: Iterable[str]) -> None:
+        """The lanes with a vehicle on their stop-bar zone now; SET the actuations when they changed."""
+        lanes = frozenset(present)
+        actuated = frozenset(d for d, loop in self.lanes_of.items() if loop & lanes)
         if actuated == self.actuated:
             return
         self.actuated = actuated

@@ -231,6 +231,7 @@ class SumoSimulation:
         lanes = [lane for _, inc, out in self._movement_lanes for lane in (*inc, *out)]
         self._lanes = tuple(dict.fromkeys(lanes))
         self._lane_length = {lane: libsumo.lane.getLength(lane) for lane in self._lanes}
+        self._incoming = tuple(dict.fromkeys(lane for _, inc, _ in self._movement_lanes for lane in inc))
 
     def close(self) -> None:
         """End the simulation (idempotent); SUMO's end-of-run report is swallowed when quiet."""
@@ -328,13 +329,13 @@ class SumoSimulation:
         """SUMO's current per-link state string."""
         return libsumo.trafficlight.getRedYellowGreenState(self.tls_id)
 
-    def present(self, zone: float = PRESENCE_ZONE_M) -> frozenset[int]:
-        """Phases with a vehicle within ``zone`` m of the stop bar on one of their approach lanes: the
-        stop-bar presence loops of a cabinet (a vehicle's front is past the zone's start)."""
+    def present(self, zone: float = PRESENCE_ZONE_M) -> frozenset[str]:
+        """Incoming lanes with a vehicle within ``zone`` m of the stop bar: the stop-bar presence loops of a
+        cabinet (a vehicle's front is past the zone's start)."""
         position, vehicles, length = libsumo.vehicle.getLanePosition, libsumo.lane.getLastStepVehicleIDs, \
             self._lane_length
-        return frozenset(p for p, incoming, _ in self._movement_lanes
-                         if any(position(v) >= length[lane] - zone for lane in incoming for v in vehicles(lane)))
+        return frozenset(lane for lane in self._incoming
+                         if any(position(v) >= length[lane] - zone for v in vehicles(lane)))
 
     def traffic_state(self) -> TrafficState:
         lane = libsumo.lane

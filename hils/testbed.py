@@ -343,6 +343,12 @@ class Testbed:
         # the collector's way so that collections during the run stay short.
         gc.freeze()
         cfg = self.config
+        self._detector_feed = None
+        if self.detectors and not isinstance(self.simulation, NoSimulation):
+            # Built before the run starts: a detector on a lane its phase does not have is refused now.
+            pm = self.simulation.phase_map
+            self._detector_feed = DetectorFeed(self.transport, cfg, self.events,
+                                               {p: pm.incoming_lanes(p) for p in pm.phases})
         self.events.emit(Kind.RUN_STARTED, config=cfg.name, source=cfg.source, seed=self.seed, mode=self.mode,
                          action_type=self.action_type.value, agent=_agent_name(self._agent_spec, self.spec),
                          duration=self.duration)
@@ -551,7 +557,7 @@ class Testbed:
         k = 0
         start = env.now
 
-        feed = DetectorFeed(self.transport, self.config, self.events) if self.detectors else None
+        feed = self._detector_feed
 
         def one_step() -> None:
             if cache.snapshot is not None:

@@ -112,3 +112,40 @@ def test_a_bad_detectors_table_is_refused_naming_file_field_and_what_is_allowed(
         # A table goes at the end; a plain key at the top, where it is not inside another table.
         parse(paper_toml + "\n" + table + "\n" if table.startswith("[") else table + "\n" + paper_toml, "det.toml")
     assert info.value.source == "det.toml" and info.value.field == field and allowed in info.value.message
+
+
+PER_LANE = """
+[detectors]
+1 = 1
+2 = { phase = 2, lane = "E2C_0" }
+10 = { phase = 2, lane = "E2C_1" }
+3 = 3
+4 = 4
+5 = 5
+6 = 6
+7 = 7
+8 = 8
+"""
+
+
+def test_loops_per_lane_actuate_their_own_detector(paper_toml: str, tmp_path: Path) -> None:
+    config = tmp_path / "lanes.toml"
+    config.write_text(paper_toml + PER_LANE)
+    done = subprocess.run([sys.executable, "-m", "hils", "run", "--agent", "actuated", "--config", str(config),
+                           "--duration", "300", "--no-progress", "--out", str(tmp_path / "run")],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    active = [set(r["active"]) for r in read(tmp_path / "run" / "events.jsonl") if r["kind"] == Kind.DETECTORS]
+    # The two through lanes of phase 2 have their own loops: each is seen actuated without the other.
+    assert any(2 in a and 10 not in a for a in active) and any(10 in a and 2 not in a for a in active)
+
+
+def test_a_loop_on_a_lane_its_phase_does_not_have_is_refused_in_one_line(paper_toml: str, tmp_path: Path) -> None:
+    config = tmp_path / "wrong.toml"
+    config.write_text(paper_toml + PER_LANE.replace('lane = "E2C_1"', 'lane = "N2C_0"'))
+    done = subprocess.run([sys.executable, "-m", "hils", "run", "--agent", "actuated", "--config", str(config),
+                           "--duration", "60", "--no-progress", "--out", str(tmp_path / "run")],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2
+    assert "detectors.10: lane 'N2C_0' is not an approach lane of phase 2; allowed: E2C_0, E2C_1" in done.stderr
+    assert "Traceback" not in done.stderr

@@ -278,7 +278,7 @@ def test_fixed_time_baseline_runs_the_webster_cycle(config) -> None:
     assert 0.0 < wall < 10.0
 
 
-def test_a_vehicle_standing_at_the_stop_bar_is_present_on_its_phase_only(config) -> None:
+def test_a_vehicle_standing_at_the_stop_bar_is_present_on_its_lane(config) -> None:
     with SumoSimulation(config, seed=2) as sim:
         pm = sim.phase_map
         phase_of_lane = {lane: p for p in pm.phases for lane in pm.incoming_lanes(p)}
@@ -286,8 +286,8 @@ def test_a_vehicle_standing_at_the_stop_bar_is_present_on_its_phase_only(config)
         while sim.time < 60.0:
             sim.step()
         present = sim.present()
-        # After a minute of red, a lane with a halted queue has its first vehicle at the stop bar: exactly the
-        # phases of such lanes are present.
-        queued = {phase_of_lane[lane] for lane in phase_of_lane if libsumo.lane.getLastStepHaltingNumber(lane)}
-        assert present == queued and len(present) >= 4
+        # After a minute of red, a lane with a halted queue has its first vehicle at the stop bar: exactly those
+        # lanes are present.
+        queued = {lane for lane in phase_of_lane if libsumo.lane.getLastStepHaltingNumber(lane)}
+        assert present == queued and len({phase_of_lane[lane] for lane in present}) >= 4
         assert sim.present(zone=0.5) <= present
