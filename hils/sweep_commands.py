@@ -36,7 +36,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description=SWEEP_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
     _grid_options(p, scenarios=True)
     p.set_defaults(func=sweep_command)
-    p = sub.add_parser("compare", help="agents over seeds: a table with 95 % confidence intervals, and a plot",
+    p = sub.add_parser("compare", help="agents over seeds: a table with 95 %% confidence intervals, and a plot",
                        description=COMPARE_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
     _grid_options(p, scenarios=False)
     p.add_argument("--scenario", default="four_leg", metavar="NAME|CONFIG.toml[@SCENARIO.sumocfg]",
