@@ -210,7 +210,9 @@ class MibView:
             out += [Instance(CHANNEL_TABLE[col].instance(g), CHANNEL_TABLE[col], _group_reader(read, g, groups))
                     for col, read in channels.items()]
             out += [Instance(CONTROL_TABLE[col].instance(g), CONTROL_TABLE[col],
-                             _group_reader(lambda col=col: c.control[col], g, groups), _group_writer(c, col, g))
+                             _group_reader(lambda col=col: c.control[col], g, groups),
+                             _group_writer(lambda col=col: c.control[col],
+                                           lambda phases, col=col: c.set_control(col, phases), g))
                     for col in ControlColumn]
         for r, order in enumerate(cfg.rings, start=1):
             out.append(Instance(sequence_oid(1, r), SEQUENCE_DATA, lambda o=order: bytes(o)))
@@ -225,7 +227,7 @@ class MibView:
             read = _group_reader(lambda: c.actuations, g, detector_groups)
             out.append(Instance(DETECTOR_STATUS_ACTIVE.instance(g), DETECTOR_STATUS_ACTIVE, read))
             out.append(Instance(DETECTOR_ACTUATION.instance(g), DETECTOR_ACTUATION, read,
-                                _actuation_writer(c, g)))
+                                _group_writer(lambda: c.actuations, c.set_actuations, g)))
         return out
 
 
@@ -242,21 +244,13 @@ def _group_reader(read: Callable[[], frozenset[int]], group: int, groups: int) -
     return lambda: _masks(read(), groups)[group - 1]
 
 
-def _group_writer(c: Controller | DelayedController, column: ControlColumn, group: int) -> Callable[[int], None]:
+def _group_writer(read: Callable[[], frozenset[int]], write: Callable[[frozenset[int]], None],
+                  group: int) -> Callable[[int], None]:
+    """SET of one group of 8 (phases or detectors): replaces that group's members, keeps the others'."""
     base = 8 * (group - 1)
 
-    def write(mask: int) -> None:
-        others = {p for p in c.control[column] if not base < p <= base + 8}
-        c.set_control(column, others | {base + p for p in groups_to_phases((mask,))})
+    def set_group(mask: int) -> None:
+        others = {n for n in read() if not base < n <= base + 8}
+        write(frozenset(others | {base + n for n in groups_to_phases((mask,))}))
 
-    return write
-
-
-def _actuation_writer(c: Controller | DelayedController, group: int) -> Callable[[int], None]:
-    base = 8 * (group - 1)
-
-    def write(mask: int) -> None:
-        others = {d for d in c.actuations if not base < d <= base + 8}
-        c.set_actuations(others | {base + d for d in groups_to_phases((mask,))})
-
-    return write
+    return set_group

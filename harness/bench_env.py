@@ -33,13 +33,7 @@ def hils_episode(seed: int, duration: float = EPISODE_S) -> dict[str, Any]:
 
     env = gym.make("hils/Intersection-v0", action_type="selection", sumo_step=SUMO_STEP,
                    control_interval=DECISION_S, episode_length=duration)
-    env.reset(seed=seed)
-    env.action_space.seed(seed)
-    steps, done, started = 0, False, time.perf_counter()
-    while not done:
-        _, _, terminated, truncated, _ = env.step(env.action_space.sample())
-        steps, done = steps + 1, terminated or truncated
-    wall = time.perf_counter() - started
+    steps, wall = _random_episode(env, seed)
     traffic = env.unwrapped.testbed.traffic
     env.close()
     return {"steps": steps, "wall_s": wall, "inserted": traffic.departed, "arrived": traffic.arrived}
@@ -58,18 +52,23 @@ def sumo_rl_episode(seed: int, duration: float = EPISODE_S) -> dict[str, Any]:
                                   use_gui=False, num_seconds=int(duration), delta_time=int(DECISION_S), yellow_time=3,
                                   min_green=3, max_green=20, single_agent=True, sumo_seed=seed, sumo_warnings=False,
                                   additional_sumo_cmd=f"--step-length {SUMO_STEP}")
+    steps, wall = _random_episode(env, seed)
+    stats = env.sumo.simulation
+    inserted = int(stats.getParameter("", "stats.vehicles.inserted"))
+    running = int(stats.getParameter("", "stats.vehicles.running"))
+    env.close()
+    return {"steps": steps, "wall_s": wall, "inserted": inserted, "arrived": inserted - running}
+
+
+def _random_episode(env: Any, seed: int) -> tuple[int, float]:
+    """Reset with ``seed`` and step a seeded random policy to the episode's end: (steps, wall seconds)."""
     env.reset(seed=seed)
     env.action_space.seed(seed)
     steps, done, started = 0, False, time.perf_counter()
     while not done:
         _, _, terminated, truncated, _ = env.step(env.action_space.sample())
         steps, done = steps + 1, terminated or truncated
-    wall = time.perf_counter() - started
-    stats = env.sumo.simulation
-    inserted = int(stats.getParameter("", "stats.vehicles.inserted"))
-    running = int(stats.getParameter("", "stats.vehicles.running"))
-    env.close()
-    return {"steps": steps, "wall_s": wall, "inserted": inserted, "arrived": inserted - running}
+    return steps, time.perf_counter() - started
 
 
 def _in_fresh_process(fn: Callable[..., dict[str, Any]], *args: Any) -> dict[str, Any]:

@@ -363,7 +363,7 @@ class Middleware:
         varbinds = [(control_oid(ControlColumn.VEH_CALL, g), m) for g, m in enumerate(masks, start=1)]
         if purpose is Purpose.RECOVERY:
             # Taking the controller back: what someone else set (a foreign control's TIMEOUT) goes too.
-            varbinds += [(control_oid(c, g), 0) for c in FOREIGN_COLUMNS for g in range(1, self.config.groups + 1)]
+            varbinds += _cleared_control(self.config.groups, FOREIGN_COLUMNS)
         done = self._logged_set(varbinds, phases, purpose.value, command_id)
         done.callbacks.append(lambda ev: self._answered(ev, purpose, command_id))
         if purpose is Purpose.CLEAR:
@@ -408,9 +408,9 @@ _NOT_WRITABLE = {ErrorStatus.NO_ACCESS, ErrorStatus.NOT_WRITABLE, ErrorStatus.RE
                  ErrorStatus.AUTHORIZATION_ERROR}
 
 
-def _cleared_control(groups: int) -> list[tuple[Any, int]]:
-    """Every control object of every group at 0."""
-    return [(control_oid(c, g), 0) for c in ControlColumn for g in range(1, groups + 1)]
+def _cleared_control(groups: int, columns: tuple[ControlColumn, ...] = tuple(ControlColumn)) -> list[tuple[Any, int]]:
+    """The given control objects (default: all six) of every group at 0."""
+    return [(control_oid(c, g), 0) for c in columns for g in range(1, groups + 1)]
 
 
 def _refusal_text(exc: SnmpError, where: str) -> str:
