@@ -11,6 +11,9 @@ Rules of this file
   ring leaves DWELL only by ``_enter_target`` starting its committed phase.
 - An interval takes its lengths when it starts (``Timing`` copied into the
   ring), so a SET of the phase table acts from the next interval on.
+- :meth:`Controller.advance` (n ticks) is exactly n calls of :meth:`Controller.step`:
+  it only skips ticks that :meth:`Controller.quiet_ticks` proves change
+  nothing but counters (a property test holds the two together).
 
 Theory of operation
 -------------------
@@ -70,6 +73,22 @@ seconds, then starts its start-up intervals. A conflict monitor, like an MMU,
 checks every tick that no two phases showing green or yellow are incompatible
 under the configured matrix; if they are, the controller goes to flash (all
 red) and stops timing.
+
+Quiet time. Most ticks change nothing but counters: a green resting on its
+call, a yellow timing its length. A tick's discrete effects (intervals,
+targets, the gap latch, the status, latched pedestrian calls, the control
+objects, flash and control status) depend on the inputs, on the discrete
+state and on a few comparisons of counters with thresholds (minimum,
+walk, pedestrian clearance, passage, maximum, clearance lengths, red
+revert, backup time, start-up flash). So once a step has changed nothing
+discrete, every following step with the same inputs changes nothing either
+until a counter reaches its next threshold: :meth:`quiet_ticks` says how
+many steps that is, and :meth:`skip` advances the counters over the quiet
+ones at once. In quiet time a gap counter that runs is above zero (an
+extending green resets it every tick) and a max-out counter that runs is
+above zero (it is zero without conflicting demand), which is all
+:meth:`skip` needs to know. Any input (a SET, a detector, a retiming)
+makes the next step a real one: :meth:`touch`.
 """
 
 from __future__ import annotations
@@ -77,7 +96,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
-from enum import Enum
+from enum import StrEnum
 
 import simpy
 
@@ -89,7 +108,7 @@ log = logging.getLogger(__name__)
 TICK = 0.1  # seconds per controller tick
 
 
-class Interval(Enum):
+class Interval(StrEnum):
     GREEN = "green"
     YELLOW = "yellow"
     RED_CLEAR = "red_clear"
@@ -181,6 +200,11 @@ class Controller:
         self.backup_time = config.middleware.backup_time
         self.startup_flash = config.startup_flash
         self.pattern = 254  # free
+        # Counts changes of the status objects (what a poll reads), across power cycles too.
+        # Inputs count too: they change the calls the status shows.
+        self.status_version = 0
+        self._status_seen: tuple = ()
+        self._images: dict[tuple | None, tuple[frozenset[int], ...]] = {}
         self.reset()
 
     # --- lifecycle -------------------------------------------------------------------
@@ -198,6 +222,8 @@ class Controller:
         self._since_set: int | None = None  # ticks since the last control SET; None = backup timer disarmed
         self.rings = [Ring(i + 1, order) for i, order in enumerate(self.config.rings)]
         self.group = 0
+        self._quiet = False  # the last step changed nothing discrete, and no input came since
+        self._settled: tuple | None = None  # the discrete state the last step left, if nothing changed it since
         if not self.flashing:
             self._power_up()
         self._refresh_status()
@@ -236,6 +262,14 @@ class Controller:
     def _system_set(self) -> None:
         self._since_set = 0
         self.control_status = UnitControlStatus.SYSTEM_CONTROL
+        self.touch()
+
+    def touch(self) -> None:
+        """An input changed (a SET, a detector, a retimed phase, the backup time): the next step is a real one,
+        and the status counts as changed (the calls it shows may have)."""
+        self._quiet = False
+        self._settled = None
+        self.status_version += 1
 
     def set_actuations(self, detectors: Iterable[int]) -> None:
         """The vehicle detectors actuated now (a cabinet's detector inputs, or NTCIP's remote actuation).
@@ -244,6 +278,7 @@ class Controller:
         on a green, restarts the phase's passage timer; it is an input, not a system command, so it does
         not restart the backup timer."""
         self.actuations = frozenset(detectors)
+        self.touch()
 
     @property
     def calls(self) -> frozenset[int]:
@@ -260,6 +295,23 @@ class Controller:
         return self.flash_status is not UnitFlashStatus.NOT_FLASH
 
     def _refresh_status(self) -> None:
+        # A controller shows a handful of distinct status images: each is built once, keyed by what it is
+        # made of (every ring's interval, phase, next phase and pedestrian interval).
+        key = None if self.flashing else tuple(
+            (r.interval, r.phase, r.target,
+             r.interval is Interval.GREEN and (r.ticks < r.walk) + (r.ticks < r.walk + r.ped_clear))
+            for r in self.rings)
+        status = self._images.get(key)
+        if status is None:
+            status = self._images[key] = self._status_image()
+        (self.greens, self.yellows, self.phase_ons, self.reds, self.walks, self.ped_clears, self.dont_walks,
+         self.phase_nexts) = status
+        seen = (status, self.ped_calls)
+        if seen != self._status_seen:
+            self._status_seen = seen
+            self.status_version += 1
+
+    def _status_image(self) -> tuple[frozenset[int], ...]:
         greens, yellows, ons, walks, clears, nexts = set(), set(), set(), set(), set(), set()
         if not self.flashing:
             for r in self.rings:
@@ -275,20 +327,22 @@ class Controller:
                     ons.add(r.phase)
                 if r.target is not None:
                     nexts.add(r.target)
-        self.greens = frozenset(greens)
-        self.yellows = frozenset(yellows)
-        self.phase_ons = frozenset(ons)
-        self.reds = frozenset(self.config.phases) - self.greens - self.yellows
-        self.walks = frozenset(walks)
-        self.ped_clears = frozenset(clears)
-        self.dont_walks = frozenset(self.config.phases) - self.walks - self.ped_clears
-        # The phase each clearing ring has committed to serve next (decided at the start of its yellow).
-        self.phase_nexts = frozenset(nexts)
+        every = frozenset(self.config.phases)
+        # greens, yellows, phase ons, reds, walks, pedestrian clears, don't walks, and the phase each clearing
+        # ring has committed to serve next (decided at the start of its yellow)
+        return (frozenset(greens), frozenset(yellows), frozenset(ons), every - greens - yellows, frozenset(walks),
+                frozenset(clears), every - walks - clears, frozenset(nexts))
 
     # --- the tick -------------------------------------------------------------------------
 
     def step(self) -> None:
         """Advance one tick (0.1 s)."""
+        before = self._settled if self._settled is not None else self._discrete()
+        self._step()
+        self._settled = self._discrete()
+        self._quiet = self._settled == before
+
+    def _step(self) -> None:
         self.tick += 1
         self._backup_timer()
         if self.flash_status is UnitFlashStatus.STARTUP and self.tick >= self.startup_flash * 10:
@@ -298,14 +352,83 @@ class Controller:
             return
         if self.flashing:
             return
-        demand = self._demand()
+        calls = self.calls
+        demand = self._demand(calls)
         for r in self.rings:
-            self._time(r, demand)
+            self._time(r, demand, calls)
         self._decide(demand)
         for r in self.rings:
             self._enter_target(r)
         self._refresh_status()
         self._monitor()
+
+    def _discrete(self) -> tuple:
+        """Everything a step can change but counters (see "Quiet time" above)."""
+        return (self.group, self.flash_status, self.control_status, self.ped_calls, self.status_version,
+                tuple(self.control.values()), tuple((r.phase, r.interval, r.target, r.gapped) for r in self.rings))
+
+    # --- quiet time ----------------------------------------------------------------------
+
+    def quiet_ticks(self) -> int | None:
+        """How many steps from now the next one that may change anything is, inputs staying as they are:
+        1 unless the last step changed nothing discrete and no input came since; None when no step will."""
+        if not self._quiet:
+            return 1
+        ahead: list[int] = []
+
+        def until(counter: int, threshold: int) -> None:
+            if counter < threshold:
+                ahead.append(threshold - counter)
+
+        if self._since_set is not None and self.backup_time:
+            until(self._since_set, self.backup_time * 10)
+        if self.flash_status is UnitFlashStatus.STARTUP:
+            until(self.tick, self.startup_flash * 10)
+        if self.flashing:
+            return min(ahead, default=None)
+        for r in self.rings:
+            if r.interval is Interval.GREEN:
+                for threshold in (r.minimum, r.walk, r.walk + r.ped_clear):
+                    until(r.ticks, threshold)
+                if r.gap:
+                    until(r.gap, r.passage)
+                if r.max_ticks:
+                    until(r.max_ticks, r.maximum)
+            elif r.interval is Interval.DWELL:
+                revert = None if r.target is None else self._yellow_end.get(r.target)
+                if revert is not None:
+                    until(self.tick, revert + self.timing[r.target].red_revert)
+            else:
+                until(r.ticks, r.length)
+        return min(ahead, default=None)
+
+    def skip(self, n: int) -> None:
+        """Advance ``n`` quiet ticks at once; ``n`` must be below :meth:`quiet_ticks` (or any, when None)."""
+        if n <= 0:
+            return
+        self.tick += n
+        if self._since_set is not None and self.backup_time:
+            self._since_set += n
+        if self.flashing:
+            return
+        for r in self.rings:
+            if r.interval is not Interval.DWELL:
+                r.ticks += n
+            if r.gap:
+                r.gap += n
+            if r.max_ticks:
+                r.max_ticks += n
+
+    def advance(self, n: int) -> None:
+        """Exactly ``n`` steps, quiet stretches skipped at once."""
+        while n > 0:
+            quiet = self.quiet_ticks()
+            if quiet is None or quiet > n:
+                self.skip(n)
+                return
+            self.skip(quiet - 1)
+            self.step()
+            n -= quiet
 
     def _backup_timer(self) -> None:
         if self._since_set is None or self.backup_time == 0:
@@ -318,15 +441,16 @@ class Controller:
             self.max2_rings = frozenset()
             self.control_status = UnitControlStatus.BACKUP_MODE
             self._since_set = None
+            self.touch()  # the calls it shows are gone
 
-    def _demand(self) -> frozenset[int]:
+    def _demand(self, calls: frozenset[int]) -> frozenset[int]:
         """Phases wanting service this tick; latches pedestrian calls of phases not showing green."""
         omit = self.control[ControlColumn.PHASE_OMIT]
         ped_omit = omit | self.control[ControlColumn.PED_OMIT]
         greens = {r.phase for r in self.rings if r.interval is Interval.GREEN}
         peds = (self.control[ControlColumn.PED_CALL].intersection(self.config.phases) | self._recall[Recall.PED])
         self.ped_calls = (self.ped_calls | (peds - greens)) - ped_omit
-        demand = self.calls | self.ped_calls | ((self._recall[Recall.MIN] | self._recall[Recall.MAX]) - omit)
+        demand = calls | self.ped_calls | ((self._recall[Recall.MIN] | self._recall[Recall.MAX]) - omit)
         soft = self._recall[Recall.SOFT] - omit
         if soft and not demand - soft:
             demand |= soft
@@ -344,7 +468,7 @@ class Controller:
     def _conflicting(self, r: Ring, demand: frozenset[int]) -> bool:
         return any(q != r.phase and (self._ring_of[q] == r.number or self._beyond(q)) for q in demand)
 
-    def _time(self, r: Ring, demand: frozenset[int]) -> None:
+    def _time(self, r: Ring, demand: frozenset[int], calls: frozenset[int]) -> None:
         if r.interval is Interval.DWELL:
             return
         r.ticks += 1
@@ -355,7 +479,7 @@ class Controller:
                 self._enter(r, _NEXT[r.interval])
             return
         p = r.phase
-        extending = p in self.calls or p in self._recall[Recall.MAX]
+        extending = p in calls or p in self._recall[Recall.MAX]
         r.gap = 0 if extending else r.gap + 1
         conflict = self._conflicting(r, demand)
         r.max_ticks = r.max_ticks + 1 if conflict else 0

@@ -75,12 +75,12 @@ STATUS_ATTRIBUTES = ("reds", "yellows", "greens", "phase_ons", "phase_nexts", "c
 class StatusImage:
     """What the agent answers for status objects: one snapshot of the controller after a tick."""
 
-    tick: int
+    version: int  # the controller's status_version when it was taken
     values: dict[str, frozenset[int]]
 
     @classmethod
     def of(cls, controller: Controller) -> StatusImage:
-        return cls(controller.tick, {name: getattr(controller, name) for name in STATUS_ATTRIBUTES})
+        return cls(controller.status_version, {name: getattr(controller, name) for name in STATUS_ATTRIBUTES})
 
 
 @dataclass(frozen=True, slots=True)
@@ -109,8 +109,9 @@ class DelayedController:
         self._images: deque[StatusImage] = deque(maxlen=delays.status_update_ticks)
         self._fill_images()
 
-    # The controller's own tick loop, driving this object's step (0.1 s grid, optional phase).
+    # The controller's own tick loop and its quiet-time stepping, driving this object's step and skip.
     process = Controller.process
+    advance = Controller.advance
 
     @property
     def status(self) -> Controller | DelayedController:
@@ -134,6 +135,24 @@ class DelayedController:
         if self._images.maxlen:
             self._images.append(StatusImage.of(self.controller))
         self.controller.step()
+
+    @property
+    def status_version(self) -> int:
+        """Counts changes of the status the agent answers (the image's, when it lags)."""
+        return self._images[0].version if self._images.maxlen else self.controller.status_version
+
+    def quiet_ticks(self) -> int | None:
+        """The controller's quiet ticks, but every tick is stepped while a SET waits for its tick or the
+        published image still shows older status."""
+        if self._pending or (self._images.maxlen
+                             and self._images[0].version != self.controller.status_version):
+            return 1
+        return self.controller.quiet_ticks()
+
+    def skip(self, n: int) -> None:
+        """Quiet ticks at once: no SET is due and every image is the current status, so nothing but the
+        controller's counters moves."""
+        self.controller.skip(n)
 
     def set_control(self, column: ControlColumn, phases: Iterable[int]) -> None:
         """A SET of one control object: stored now, processed ``call_processing_ticks`` ticks after the next tick."""

@@ -16,6 +16,7 @@ import simpy
 
 from emulator.controller import TICK, Controller
 from emulator.delays import DelayedController
+from emulator.event_clock import ClockedSurface, EventClock
 from emulator.mib import MibView
 from hils.config import IntersectionConfig
 from hils.ntcip import Latency
@@ -29,17 +30,43 @@ SET_LATENCY = Latency(0.0075)
 class VirtualTarget:
     """Controller model + its delays + MIB view on one environment; the MIB view is the transport's surface.
 
-    ``controller`` is the model itself (its lamps, for monitors); ``unit`` is what the agent talks to."""
+    ``controller`` is the model itself (its lamps, for monitors); ``unit`` is what the agent talks to.
+    The unit's ticks run event by event (:mod:`emulator.event_clock`), and the clock is the change feed
+    that lets the poller skip polls that cannot see a change. ``ticked=True`` is the reference this is
+    tested against: every tick stepped by a SimPy process, no change feed, so every poll is sent.
+    """
 
-    def __init__(self, env: simpy.Environment, config: IntersectionConfig, *, seed: int = 0) -> None:
+    def __init__(self, env: simpy.Environment, config: IntersectionConfig, *, seed: int = 0,
+                 ticked: bool = False) -> None:
         self.env = env
         self.controller = Controller(config)
         self.unit = DelayedController(self.controller, config.emulator)
         self.mib = MibView(self.unit)
-        self.surface = self.mib
         self.get_latency = GET_LATENCY
         self.set_latency = SET_LATENCY
         # The controller powered up at some instant of its own: its tick grid has a phase, drawn from
         # the seed, against the middleware's poll and decision times.
         self.tick_phase = random.Random(f"tick-phase-{seed}").uniform(0.0, TICK)
-        self.process = env.process(self.unit.process(env, self.tick_phase))
+        self.clock: EventClock | None = None
+        self._ticking: simpy.Process | None = None
+        if ticked:
+            self.surface: MibView | ClockedSurface = self.mib
+            self._ticking = env.process(self.unit.process(env, self.tick_phase))
+        else:
+            self.clock = EventClock(env, self.unit, self.tick_phase)
+            self.surface = ClockedSurface(self.mib, self.clock)
+
+    @property
+    def change_feed(self) -> EventClock | None:
+        """What the in-process transport offers its poller (None for the ticked reference)."""
+        return self.clock
+
+    def power_cycle(self) -> None:
+        """Power the controller down and up: reset it and start its tick grid from now."""
+        if self.clock is not None:
+            self.clock.power_cycle()
+            return
+        self._ticking.defused = True  # the interrupted tick process ends here on purpose
+        self._ticking.interrupt("power cycle")
+        self.unit.reset()
+        self._ticking = self.env.process(self.unit.process(self.env))

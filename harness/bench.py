@@ -10,13 +10,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import statistics
 import tempfile
 import time
 from importlib import resources
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import simpy
 
 from harness import machine
@@ -24,7 +24,6 @@ from harness.processes import snmpd, start_emulator
 from hils import config as config_mod
 from hils import jsonout
 from hils.actions import ActionType
-from hils.clock import WallClockDriver
 from hils.events import Kind
 from hils.latency import PAPER_LATENCY_MS, Stats, internal_latencies_ms
 from hils.ntcip import signal_oids
@@ -209,7 +208,7 @@ def measure_overhead(duration: float, repeat: int, seed: int) -> dict[str, Any]:
         traffic = {"hils": {"departed": hils_traffic.departed, "arrived": hils_traffic.arrived},
                    "replay": {"departed": bare_traffic.departed, "arrived": bare_traffic.arrived},
                    "signal_changes": len(recording.changes)}
-    full_s, floor_s, fixed_s = (float(np.median(x)) for x in (full, floor, fixed))
+    full_s, floor_s, fixed_s = (statistics.median(x) for x in (full, floor, fixed))
     return {"duration_s": duration, "hils_s": full, "same_traffic_floor_s": floor, "same_traffic": same_traffic,
             "traffic": traffic, "hils_median_s": full_s, "floor_median_s": floor_s, "ratio": full_s / floor_s,
             "fixed_cycle_at_max_green_s": fixed, "fixed_cycle_median_s": fixed_s,
@@ -247,6 +246,7 @@ SNMPD_OIDS = ((1, 3, 6, 1, 2, 1, 4, 1, 0), (1, 3, 6, 1, 2, 1, 4, 2, 0), (1, 3, 6
 def measure_get_rtt(url: str, oids: tuple, count: int) -> dict[str, float]:
     """Sequential GETs of ``oids`` in one PDU through the middleware's transport at wall-clock time:
     round trip per request (ms) and the request rate sustained."""
+    from hils.clock import WallClockDriver
     from hils.snmp import SnmpTarget, SnmpTransport
 
     env = simpy.Environment()

@@ -210,6 +210,7 @@ class FaultyTransport:
         self.faults: list[TransportFault] = list(faults)
         self.error_latency = error_latency
         self.late_discarded = 0  # answers that came after the request had failed
+        self.change_feed = None  # faults draw per request: every poll is sent
 
     def get(self, oids: Sequence[Oid]) -> simpy.Event:
         return self._request(Op.GET, lambda: self.inner.get(oids))
@@ -712,23 +713,19 @@ class FaultTarget:
         self.base = VirtualTarget(env, config, seed=seed)
         self.controller: Controller = self.base.controller
         self.mib: MibView = self.base.mib
-        surface: ObjectSurface = self.mib
+        surface: ObjectSurface = self.base.surface  # writes go through the controller's clock
         for fault in faults:
             surface = fault.wrap_surface(surface, env)
         inner = LocalTransport(env, surface, tau_udp=config.middleware.tau_udp, get_latency=self.base.get_latency,
                                set_latency=self.base.set_latency, seed=seed)
         self.transport = FaultyTransport(env, inner, tau_udp=config.middleware.tau_udp)
-        self._ticking = self.base.process
         for fault in faults:
             fault.on_target(self)
 
     def power_cycle(self) -> None:
-        """Power the controller down and up: reset it and restart its tick from now."""
-        self._ticking.defused = True  # the interrupted tick process ends here on purpose
-        self._ticking.interrupt("power cycle")
-        self.base.unit.reset()
-        # Its new tick grid starts at power-up, wherever that falls against the middleware's times.
-        self._ticking = self.env.process(self.base.unit.process(self.env))
+        """Power the controller down and up: reset it and restart its tick from now (its new tick grid
+        starts at power-up, wherever that falls against the middleware's times)."""
+        self.base.power_cycle()
 
 
 @dataclass(frozen=True, slots=True)

@@ -139,18 +139,17 @@ def run_command(args: argparse.Namespace) -> int:
         finally:
             if status is not None:
                 status.close()
-    records = tb.records
-    s = summary.summarize(records, cfg, traffic=tb.traffic, wall_s=tb.wall_s)
+    s = summary.summarize(tb.tally, cfg, traffic=tb.traffic, wall_s=tb.wall_s)
     summary.write(s, out / "summary.json")
     outputs = [log_path.name if log_path.parent == out else str(log_path), "summary.json"]
-    if records:
-        plots.signal_timeline(records, cfg, out / "signal_timeline.png", start=window[0], end=window[1])
-        outputs.append("signal_timeline.png")
+    if tb.tally.records:
+        plots.signal_timeline(tb.tally.records, cfg, out / "signal_timeline.svg", start=window[0], end=window[1])
+        outputs.append("signal_timeline.svg")
     if tb.traffic_samples:
-        plots.queues(tb.traffic_samples, out / "queues.png", title=f"Queues per approach, {cfg.name}",
+        plots.queues(tb.traffic_samples, out / "queues.svg", title=f"Queues per approach, {cfg.name}",
                      spillback={a: [60.0 * m for m in v["spillback_minutes"]]
                                 for a, v in s["traffic"]["approaches"].items()} if s.get("traffic") else None)
-        outputs.append("queues.png")
+        outputs.append("queues.svg")
     print(summary.render(s))
     for warning in summary.warnings(s):
         print(warning)

@@ -13,8 +13,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-
 from hils.plots import pyplot
 from hils.sweep import CellResult
 
@@ -41,6 +39,8 @@ class Estimate:
 
     @classmethod
     def of(cls, values: Sequence[float]) -> Estimate:
+        import numpy as np  # here: `hils` registers this command at every start
+
         a = np.asarray([v for v in values if v is not None], dtype=float)
         if a.size == 0:
             return cls(None, None, 0)

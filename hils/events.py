@@ -39,7 +39,8 @@ class Kind(StrEnum):
     #                                                        recovery|clear (startup: all six objects at 0)
     SET_ANSWERED = "set_answered"              # command_id, purpose
     SET_FAILED = "set_failed"                  # command_id, purpose, error
-    POLL = "poll"                              # poll_id, greens, yellows, reds (on change only), changed
+    POLL = "poll"                              # poll_id, greens, yellows: a read that changed the state seen
+    #                                                        (poll 0: the start-up read); counts in run_ended
     POLL_FAILED = "poll_failed"                # poll_id, error, consecutive
     TRANSITION_VERIFIED = "transition_verified"  # command_id, command, poll_id, hold_s
     HOLD_RELEASED = "hold_released"            # command_id, reason (verified|served|timeout|keep), hold_s
@@ -49,7 +50,8 @@ class Kind(StrEnum):
     RECOVERY_STARTED = "recovery_started"      # -
     RECOVERED = "recovered"                    # greens
     STATE = "state"                            # from, to: the paper's names (idle, on_hold, timeout)
-    RUN_ENDED = "run_ended"                    # reason (duration|closed|interrupted|terminated|agent_error|error)
+    RUN_ENDED = "run_ended"                    # reason (duration|closed|interrupted|terminated|agent_error|error),
+    #                                                        polls {polls, elided, answered, failed, late}
     QUEUES = "queues"                          # queues {approach: vehicles queued upstream} (SUMO runs, every 5 s)
     CABINET = "cabinet"                        # walks, ped_clears, veh_calls, ped_calls, nexts: phases
     #                                                        (dashboard runs, on change, read every 1 s)

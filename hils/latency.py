@@ -12,8 +12,6 @@ from collections.abc import Iterable, Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
 
-import numpy as np
-
 from hils.events import Kind
 
 #: The paper's Table (Cobalt, MacBook Pro M1): N, mean ms, std ms per action type.
@@ -40,6 +38,8 @@ class Stats:
     def of(cls, values: Sequence[float]) -> Stats:
         if not values:
             return cls(0, *[float("nan")] * 8)
+        import numpy as np  # here, not at import: a run that needs no statistics does not load numpy
+
         a = np.asarray(values, dtype=float)
         p5, p50, p95, p99 = (float(x) for x in np.percentile(a, [5, 50, 95, 99]))
         return cls(len(a), float(a.mean()), float(a.std(ddof=1)) if len(a) > 1 else 0.0, p50, p99,

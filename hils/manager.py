@@ -390,6 +390,12 @@ class Manager:
         """The paper's name of the current state."""
         return self.mode.paper
 
+    def notices(self, step: float, took: float) -> bool:
+        """Whether a step that took ``took`` s would change anything: a drifted one, or one on time that
+        ends a run of drifted ones. (The shell reports only those: four steps a second are timed, and an
+        on-time step after an on-time step is ON_TIME with nothing to reset.)"""
+        return took > step or self.drifted_in_a_row > 0
+
     def handle(self, event: Event) -> list[Effect]:
         kind = self._classify(event)
         entry = _TRANSITIONS.get((self.mode, kind))

@@ -63,13 +63,12 @@ from hils.ntcip import (
     UNIT_FLASH_STATUS,
     ControlColumn,
     ErrorStatus,
-    SignalState,
     SnmpError,
     control_oid,
     groups_to_phases,
     phases_to_groups,
 )
-from hils.poller import Poller, SignalCache, Snapshot
+from hils.poller import Decoded, Poller, SignalCache, Snapshot
 from hils.preflight import ControllerReading, Verdict, judge
 from hils.transport import CommunicationTimeout, Transport, TransportError
 
@@ -185,8 +184,9 @@ class Middleware:
         return Submission(action_id, dropped=any(isinstance(e, Dropped) for e in effects))
 
     def observe_step(self, step: float, took: float) -> None:
-        """Report one simulation step's cost to drift detection."""
-        self._feed(StepTimed(self.env.now, step, took))
+        """Report one simulation step's cost to drift detection (when the manager would notice it)."""
+        if self.manager.notices(step, took):
+            self._feed(StepTimed(self.env.now, step, took))
 
     def wait_for(self, state: State) -> simpy.Event:
         """An event that fires when the manager is (or next becomes) in ``state``."""
@@ -220,7 +220,7 @@ class Middleware:
         n = self.config.middleware.n_timeout
         for attempt in range(1, n + 1):
             try:
-                state, reading = yield from self._read_controller_setup()
+                seen, reading = yield from self._read_controller_setup()
                 # The control objects are ours while we run: whatever someone else left is cleared,
                 # and this harmless SET shows whether the community may write.
                 yield self._logged_set(_cleared_control(self.config.groups), frozenset(), "startup", None)
@@ -242,41 +242,50 @@ class Middleware:
                                  keepalive_period=self.manager.keepalive_period)
             for line in (*self.verdict.refusals, *self.verdict.warnings):
                 self.log.emit(Kind.NOTE, message=f"start-up: {line}")
-            self.cache.update(state, self.env.now, 0)
-            self._feed(Started(self.env.now, state.greens, reading.backup_time))
+            self.poller.show(seen, 0)
+            self._feed(Started(self.env.now, seen.state.greens, reading.backup_time))
             break
         self.env.process(self.poller.run())
         self.env.process(self._read_back())
         self.ready.succeed()
 
-    def _read_controller_setup(self) -> Generator[simpy.Event, Any, tuple[SignalState, ControllerReading]]:
-        state = yield from self.poller.read_once()
+    def _read_controller_setup(self) -> Generator[simpy.Event, Any, tuple[Decoded, ControllerReading]]:
+        seen = yield from self.poller.read_once()
         backup, pattern, flash = yield self.transport.get(
             [UNIT_BACKUP_TIME.instance(), SYSTEM_PATTERN_CONTROL.instance(), UNIT_FLASH_STATUS.instance()])
         groups = self.config.groups
         masks = yield self.transport.get([control_oid(c, g) for c in ControlColumn for g in range(1, groups + 1)])
         control = {c: groups_to_phases(masks[i * groups:(i + 1) * groups]) for i, c in enumerate(ControlColumn)}
-        return state, ControllerReading(int(backup), int(pattern), int(flash), control)
+        return seen, ControllerReading(int(backup), int(pattern), int(flash), control)
 
     def _read_back(self) -> Generator[simpy.Event, Any, None]:
-        """Read the control objects back every READBACK_PERIOD s; the manager judges whose they are."""
+        """Read the control objects back every READBACK_PERIOD s; the manager judges whose they are.
+
+        Like a poll, a read-back that cannot see a change is not sent: with a change feed, one whose
+        version is the one the last read-back (found ours) read would find them ours again."""
         groups = self.config.groups
         oids = [control_oid(c, g) for c in FOREIGN_COLUMNS for g in range(1, groups + 1)]
+        ours: int | None = None  # the feed's version when a read-back last found the control objects ours
         # Half a poll period off the poll grid, so that a read-back and a poll do not go out together.
         yield self.env.timeout(self.poller.period / 2)
         while self.manager.mode is not Mode.CLOSED:
             yield self.env.timeout(READBACK_PERIOD)
             if self.poller.halted or self.poller.consecutive_failures:
                 continue  # in TIMEOUT only recovery sends; while polls fail, the poller counts them
+            feed = self.transport.change_feed
+            version = feed.version if feed is not None else None
+            if version is not None and version == ours:
+                continue
             try:
                 values = yield self.transport.get(oids)
             except (TransportError, SnmpError):
                 continue  # the poller counts communication failures
             if self.manager.mode is Mode.CLOSED:
                 return
-            self._feed(ControlsRead(self.env.now, tuple(
+            effects = self._feed(ControlsRead(self.env.now, tuple(
                 (CONTROL_TABLE[c].name, groups_to_phases([int(v) for v in values[i * groups:(i + 1) * groups]]))
                 for i, c in enumerate(FOREIGN_COLUMNS))))
+            ours = None if any(isinstance(e, TimeoutEntered) for e in effects) else version
 
     def _recover(self) -> Generator[simpy.Event, Any, bool]:
         self._feed(RecoveryRequested(self.env.now))
@@ -286,12 +295,12 @@ class Middleware:
 
     def _read_controller(self) -> Generator[simpy.Event, Any, None]:
         try:
-            state = yield from self.poller.read_once()
+            seen = yield from self.poller.read_once()
         except (TransportError, SnmpError) as exc:
             self._feed(ControllerUnreadable(self.env.now, str(exc)))
             return
-        self.cache.update(state, self.env.now, self.poller.polls)
-        self._feed(ControllerRead(self.env.now, state.greens))
+        self.poller.show(seen, self.poller.polls)
+        self._feed(ControllerRead(self.env.now, seen.state.greens))
 
     def _close(self) -> Generator[simpy.Event, Any, None]:
         self._feed(CloseRequested(self.env.now))

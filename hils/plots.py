@@ -1,8 +1,16 @@
-"""Plots of a run: the signal timeline of every phase, and queues over time."""
+"""Plots of a run: the signal timeline of every phase, and queues over time.
+
+A run folder's two pictures are SVG written here directly: drawn in milliseconds with nothing to
+import, sharp at any zoom, and opened by any browser. Other commands draw with matplotlib
+(:func:`pyplot`), imported only when they draw.
+"""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from html import escape
 from pathlib import Path
 from typing import Any
 
@@ -77,41 +85,40 @@ def movement_label(config: IntersectionConfig, phase: int) -> str:
 def signal_timeline(records: Sequence[dict[str, Any]], config: IntersectionConfig, path: Path, *,
                     start: float = 0.0, end: float = 120.0, title: str | None = None) -> Path:
     """Green, yellow and red of every phase over [start, end] cut to the run, one row per phase
-    grouped by ring (solid separators) and barrier (dotted), labelled with its movement."""
+    grouped by ring (solid separators) and barrier (dotted), labelled with its movement (SVG)."""
     start, end = timeline_window(records, start, end)
     rows = phase_rows(config)
     phases = [p for p, _, _ in rows]
     spans = signal_intervals(records, phases, start, end)
-    plt = pyplot()
-    fig, ax = plt.subplots(figsize=(11, 0.45 * len(phases) + 1.9))
+    row_h, left, top, width = 40.0, 150.0, 40.0, 780.0
+    chart = Chart(left, top, width, row_h * len(rows), (start, end))
+    svg = Svg(left + width + 90.0, top + chart.height + 60.0)
+    svg.text(svg.width / 2, 22, title or f"Signal timeline, {config.name}: {start:.0f} to {end:.0f} s of a "
+                                         f"{run_end(records):.0f} s run", size=15, anchor="middle")
     for row, p in enumerate(phases):
-        ax.broken_barh([(t0, t1 - t0) for t0, t1, _ in spans[p]], (row - 0.4, 0.8),
-                       facecolors=[COLORS[ind] for _, _, ind in spans[p]], linewidth=0)
+        y = top + row * row_h
+        for t0, t1, ind in spans[p]:
+            svg.rect(chart.x(t0), y + 4, chart.x(t1) - chart.x(t0), row_h - 8, COLORS[ind])
+        svg.text(left - 8, y + row_h / 2 + 4, movement_label(config, p), anchor="end")
     for r in records:
         if r["kind"] == Kind.COMMAND_DISPATCHED and start <= r["t"] <= end:
-            ax.axvline(r["t"], color="black", linewidth=0.8, linestyle="--")
+            svg.line(chart.x(r["t"]), top, chart.x(r["t"]), top + chart.height, dash="4 3", width=0.8)
     for row in range(1, len(rows)):
         (_, ring_a, barrier_a), (_, ring_b, barrier_b) = rows[row - 1], rows[row]
+        y = top + row * row_h
         if ring_a != ring_b:
-            ax.axhline(row - 0.5, color="black", linewidth=1.6)
+            svg.line(left, y, left + width, y, width=1.8)
         elif barrier_a != barrier_b:
-            ax.axhline(row - 0.5, color="black", linewidth=0.9, linestyle=":")
+            svg.line(left, y, left + width, y, dash="1 2", width=1.0)
     groups: dict[tuple[int, int], list[int]] = {}
     for row, (_, ring, barrier) in enumerate(rows):
         groups.setdefault((ring, barrier), []).append(row)
     for (ring, barrier), members in groups.items():
-        ax.text(1.01, 1 - (sum(members) / len(members) + 0.5) / len(rows), f"ring {ring}\nbarrier {barrier}",
-                transform=ax.transAxes, va="center", fontsize="small")
-    ax.set_yticks(range(len(phases)), [movement_label(config, p) for p in phases])
-    ax.set_ylim(len(phases) - 0.5, -0.5)
-    ax.set_xlim(start, end)
-    ax.set_xlabel("simulation time (s); dashed: command dispatched; green, yellow, red as polled")
-    ax.set_title(title or f"Signal timeline, {config.name}: {start:.0f} to {end:.0f} s of a "
-                          f"{run_end(records):.0f} s run")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+        y = top + (sum(members) / len(members) + 0.5) * row_h
+        svg.text(left + width + 8, y - 3, f"ring {ring}", size=11)
+        svg.text(left + width + 8, y + 11, f"barrier {barrier}", size=11)
+    chart.axes(svg, "simulation time (s); dashed: command dispatched; green, yellow, red as polled")
+    return svg.write(path)
 
 
 def queue_bins(samples: Sequence[tuple[float, Mapping[str, int]]], bin_s: float
@@ -135,39 +142,124 @@ def queue_bins(samples: Sequence[tuple[float, Mapping[str, int]]], bin_s: float
 
 def queues(samples: Sequence[tuple[float, Mapping[str, int]]], path: Path, *, title: str = "Queues",
            bin_s: float = 60.0, spillback: Mapping[str, Sequence[float]] | None = None) -> Path:
-    """Longest queue per approach in each ``bin_s`` window: samples every few seconds are too
+    """Longest queue per approach in each ``bin_s`` window (SVG): samples every few seconds are too
     jagged to read, and the longest queue is what a traffic engineer looks for. ``spillback``
     gives, per approach, times at which one of its lanes was full; the bins holding them are
     marked: the queue reached back beyond the modelled lanes."""
     spillback = spillback or {}
     edges, tops = queue_bins(samples, bin_s)
-    plt = pyplot()
-    from matplotlib.transforms import offset_copy
-
-    fig, ax = plt.subplots(figsize=(11, 3.8))
     minutes = [e / 60.0 for e in edges]
-    spilled = False
-    for index, (name, values) in enumerate(tops.items()):
-        line = ax.stairs(values, minutes, label=name, linewidth=1.4, baseline=None)
-        full = sorted({min(int(t // bin_s), len(values) - 1) for t in spillback.get(name, ())})
-        if full:
-            spilled = True
-            # above the bin's queue, stacked 7 points apart so that approaches do not hide each other
-            ax.plot([(minutes[b] + minutes[b + 1]) / 2 for b in full], [values[b] for b in full], linestyle="none",
-                    marker="^", color=line.get_edgecolor(), markersize=6, clip_on=False,
-                    transform=offset_copy(ax.transData, fig=fig, y=6 + 7 * index, units="points"))
-    if spillback:
-        ax.text(0.0, -0.28, "triangles: a lane of the approach was full (spillback: the queue reaches back "
-                "beyond the network)" if spilled else "no lane was full (no spillback)",
-                transform=ax.transAxes, fontsize="small")
-    ax.set_xlabel("simulation time (min)")
-    ax.set_ylabel(f"longest queue per {bin_s:g} s (veh)")
     highest = max((v for values in tops.values() for v in values), default=0)
-    ax.set_ylim(0, max(1.0, highest) * (1.3 if spilled else 1.08))  # room for the stacked spillback marks
-    ax.set_title(title)
-    if tops:
-        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small", title="approach")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    full = {name: sorted({min(int(t // bin_s), len(values) - 1) for t in spillback.get(name, ())})
+            for name, values in tops.items()}
+    spilled = any(full.values())
+    left, top, width, height = 60.0, 40.0, 800.0, 230.0
+    chart = Chart(left, top, width, height, (minutes[0], minutes[-1]) if minutes else (0.0, 1.0),
+                  (0.0, max(1.0, highest) * (1.3 if spilled else 1.08)))  # room for the stacked spillback marks
+    svg = Svg(left + width + 120.0, top + height + (80.0 if spillback else 55.0))
+    svg.text(svg.width / 2, 22, title, size=15, anchor="middle")
+    svg.text(left + width + 14, top + 8, "approach", size=12)
+    for index, (name, values) in enumerate(tops.items()):
+        color = PALETTE[index % len(PALETTE)]
+        points = [(chart.x(minutes[b + k]), chart.y(v)) for b, v in enumerate(values) for k in (0, 1)]
+        svg.polyline(points, color)
+        for b in full[name]:
+            # above the bin's queue, stacked 7 points apart so that approaches do not hide each other
+            x, y = chart.x((minutes[b] + minutes[b + 1]) / 2), chart.y(values[b]) - 8 - 7 * index
+            svg.polyline([(x - 4, y + 3), (x + 4, y + 3), (x, y - 4), (x - 4, y + 3)], color, fill=color)
+        y = top + 26 + 18 * index
+        svg.line(left + width + 14, y - 4, left + width + 34, y - 4, color=color, width=2.0)
+        svg.text(left + width + 40, y, name, size=12)
+    chart.axes(svg, "simulation time (min)", y_label=f"longest queue per {bin_s:g} s (veh)")
+    if spillback:
+        svg.text(left, top + height + 70, "triangles: a lane of the approach was full (spillback: the queue reaches "
+                 "back beyond the network)" if spilled else "no lane was full (no spillback)", size=11)
+    return svg.write(path)
+
+
+# --- a few SVG primitives: the run folder's pictures need no plotting library ------------------------------
+
+#: Line colours of the queue plot (matplotlib's tab10, so they read like the other pictures of hils).
+PALETTE = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f")
+
+
+class Svg:
+    """An SVG document built element by element."""
+
+    def __init__(self, width: float, height: float) -> None:
+        self.width, self.height = width, height
+        self.parts: list[str] = []
+
+    def rect(self, x: float, y: float, w: float, h: float, fill: str) -> None:
+        self.parts.append(f'<rect x="{x:.2f}" y="{y:.2f}" width="{max(w, 0.0):.2f}" height="{h:.2f}" '
+                          f'fill="{fill}"/>')
+
+    def line(self, x1: float, y1: float, x2: float, y2: float, *, color: str = "black", width: float = 1.0,
+             dash: str | None = None) -> None:
+        dashed = f' stroke-dasharray="{dash}"' if dash else ""
+        self.parts.append(f'<line x1="{x1:.2f}" y1="{y1:.2f}" x2="{x2:.2f}" y2="{y2:.2f}" stroke="{color}" '
+                          f'stroke-width="{width}"{dashed}/>')
+
+    def polyline(self, points: Sequence[tuple[float, float]], color: str, *, fill: str = "none") -> None:
+        coords = " ".join(f"{x:.2f},{y:.2f}" for x, y in points)
+        self.parts.append(f'<polyline points="{coords}" fill="{fill}" stroke="{color}" stroke-width="1.6"/>')
+
+    def text(self, x: float, y: float, text: str, *, size: float = 12, anchor: str = "start",
+             rotate: bool = False) -> None:
+        turn = f' transform="rotate(-90 {x:.2f} {y:.2f})"' if rotate else ""
+        self.parts.append(f'<text x="{x:.2f}" y="{y:.2f}" font-size="{size}" text-anchor="{anchor}"{turn}>'
+                          f"{escape(text)}</text>")
+
+    def write(self, path: Path) -> Path:
+        path.write_text(
+            f'<svg xmlns="http://www.w3.org/2000/svg" width="{self.width:.0f}" height="{self.height:.0f}" '
+            f'viewBox="0 0 {self.width:.0f} {self.height:.0f}" font-family="DejaVu Sans, Helvetica, Arial, '
+            f'sans-serif">\n<rect width="100%" height="100%" fill="white"/>\n' + "\n".join(self.parts) + "\n</svg>\n",
+            encoding="utf-8")
+        return path
+
+
+@dataclass(frozen=True)
+class Chart:
+    """A plotting area: data coordinates to SVG coordinates, and its axes with round ticks."""
+
+    left: float
+    top: float
+    width: float
+    height: float
+    xs: tuple[float, float]
+    ys: tuple[float, float] | None = None  # None: rows, no y axis
+
+    def x(self, value: float) -> float:
+        lo, hi = self.xs
+        return self.left + (value - lo) / ((hi - lo) or 1.0) * self.width
+
+    def y(self, value: float) -> float:
+        lo, hi = self.ys or (0.0, 1.0)
+        return self.top + self.height - (value - lo) / ((hi - lo) or 1.0) * self.height
+
+    def axes(self, svg: Svg, x_label: str, *, y_label: str | None = None) -> None:
+        bottom = self.top + self.height
+        svg.parts.append(f'<rect x="{self.left:.2f}" y="{self.top:.2f}" width="{self.width:.2f}" '
+                         f'height="{self.height:.2f}" fill="none" stroke="black"/>')
+        for value in ticks(*self.xs):
+            svg.line(self.x(value), bottom, self.x(value), bottom + 5)
+            svg.text(self.x(value), bottom + 19, f"{value:g}", anchor="middle")
+        svg.text(self.left + self.width / 2, bottom + 38, x_label, anchor="middle")
+        if self.ys is not None:
+            for value in ticks(*self.ys):
+                svg.line(self.left - 5, self.y(value), self.left, self.y(value))
+                svg.text(self.left - 8, self.y(value) + 4, f"{value:g}", anchor="end")
+            if y_label:
+                svg.text(self.left - 38, self.top + self.height / 2, y_label, anchor="middle", rotate=True)
+
+
+def ticks(lo: float, hi: float, most: int = 10) -> list[float]:
+    """Round tick values (1, 2 or 5 times a power of ten apart) covering [lo, hi], at most ``most``."""
+    span = hi - lo
+    if span <= 0:
+        return [lo]
+    step = next(m * 10.0 ** e for e in range(math.floor(math.log10(span / most)), 99) for m in (1, 2, 5)
+                if span / (m * 10.0 ** e) <= most)
+    first = math.ceil(lo / step - 1e-9)
+    return [round(k * step, 10) for k in range(first, math.floor(hi / step + 1e-9) + 1)]

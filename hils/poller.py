@@ -18,10 +18,21 @@ Rules of this module:
   therefore seen about (n_timeout - 1) periods + tau_udp after it dies.
 - While halted (the manager in TIMEOUT) no poll goes out, and answers to
   polls sent before the halt are ignored: recovery reads the controller itself.
+- A poll that cannot see a change costs nothing. When the transport has a
+  change feed (an in-process controller, no random loss or jitter), a poll
+  whose feed version is the one the last answered poll read would get that
+  same answer at the same latency: it is counted on the grid (its poll id is
+  used up) and not sent, and the poller sleeps until the feed moves (a write,
+  a change of status) or polling halts. The next poll on the grid then goes
+  out. What the cache holds, and when the manager sees it, is what polling
+  every period gives (``tests/test_poll_elision.py`` compares the logs).
+- The log keeps a ``poll`` record when the signal state changes; the counts
+  (:attr:`Poller.counts`) say how many polls there were.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -44,7 +55,9 @@ class Snapshot:
 
 
 @dataclass(frozen=True, slots=True)
-class _Decoded:
+class Decoded:
+    """A signal state as a read saw it, with its fields for the log."""
+
     state: SignalState
     greens: tuple[int, ...]
     yellows: tuple[int, ...]
@@ -89,18 +102,35 @@ class Poller:
         self.n_timeout = n_timeout
         self.on_failure = on_failure
         self.consecutive_failures = 0
-        self.polls = 0
+        self.polls = 0  # polls on the grid, sent or not
+        self.elided = 0  # polls not sent: they could not see a change
+        self.answered = 0  # answers applied
         self.failed = 0  # polls that got no usable answer, over the run
         self.late = 0  # answers that came after a newer poll's, discarded
         self.halted = False
         self._newest = 0  # the newest poll whose answer was applied
+        self._sent = 0  # the newest poll sent
+        self._seen: int | None = None  # the feed's version when the newest poll sent read the controller
         self._epoch = 0  # polling periods between halts; answers from an earlier one are ignored
         self._resume = env.event()
-        self._decoded: dict[tuple, _Decoded] = {}
+        self._halting: simpy.Event | None = None  # set during an elided sleep; wakes it when polling halts
+        self._start, self._k = env.now, 0  # the grid: poll k is due at start + k * period
+        self._decoded: dict[tuple, Decoded] = {}
+
+    @property
+    def counts(self) -> dict[str, int]:
+        """Polls on the grid so far, and how each ended (``elided``: not sent, it could not see a change)."""
+        if self._halting is not None:
+            self._pass_quiet_polls()
+        return {"polls": self.polls, "elided": self.elided, "answered": self.answered, "failed": self.failed,
+                "late": self.late}
 
     def halt(self) -> None:
         self.halted = True
         self._epoch += 1
+        self._seen = None  # after a halt the first poll goes out
+        if self._halting is not None and not self._halting.triggered:
+            self._halting.succeed()
 
     def resume(self) -> None:
         self.halted = False
@@ -109,36 +139,64 @@ class Poller:
             self._resume.succeed()
 
     def read_once(self):
-        """One GET of the signal state (a SimPy process body); returns the SignalState or raises."""
-        decoded = yield from self._read()
-        return decoded.state
-
-    def _read(self):
+        """One GET of the signal state (a SimPy process body) outside the grid; returns what it saw (give it
+        to :meth:`show`) or raises."""
         values = yield self.transport.get(self.oids)
         return self._decode(values)
 
-    def _decode(self, values: tuple) -> _Decoded:
+    def _decode(self, values: tuple) -> Decoded:
         # A controller shows a handful of distinct states: decode each once, with its log fields.
         decoded = self._decoded.get(values)
         if decoded is None:
             state = SignalState.from_values(values, self.groups)
-            decoded = self._decoded[tuple(values)] = _Decoded(state, tuple(sorted(state.greens)),
+            decoded = self._decoded[tuple(values)] = Decoded(state, tuple(sorted(state.greens)),
                                                               tuple(sorted(state.yellows)))
         return decoded
 
     def run(self):
-        start = self.env.now
-        k = 0
+        env = self.env
+        self._start, self._k = env.now, 0
         while True:
             if self.halted:
-                self._resume = self.env.event()
+                self._resume = env.event()
                 yield self._resume
-                start, k = self.env.now, 0
+                self._start, self._k = env.now, 0
             self.polls += 1
-            self.transport.get(self.oids).callbacks.append(
-                lambda ev, poll_id=self.polls, epoch=self._epoch: self._settled(ev, poll_id, epoch))
-            k += 1
-            yield self.env.timeout(max(0.0, start + k * self.period - self.env.now))
+            feed = self.transport.change_feed
+            if self._unchanged():
+                self.elided += 1
+            else:
+                self._sent, self._seen = self.polls, feed.version if feed is not None else None
+                self.transport.get(self.oids).callbacks.append(
+                    lambda ev, poll_id=self.polls, epoch=self._epoch: self._settled(ev, poll_id, epoch))
+            self._k += 1
+            if self._unchanged():
+                # Every poll until the feed moves would be this one again: sleep until then; the polls due
+                # meanwhile are counted as they pass (_pass_quiet_polls).
+                self._halting = env.event()
+                yield env.any_of([feed.changed(), self._halting])
+                self._pass_quiet_polls()
+                self._halting = None
+                if self.halted:
+                    continue
+            yield env.timeout(max(0.0, self._start + self._k * self.period - env.now))
+
+    def _pass_quiet_polls(self) -> None:
+        """Count, as elided, the polls of the grid due before now that an elided sleep passed over."""
+        now, start, period = self.env.now, self._start, self.period
+        due = max(self._k, math.ceil((now - start) / period))
+        while due > self._k and start + (due - 1) * period >= now:
+            due -= 1  # the first poll time at or after now, however the division rounded
+        while start + due * period < now:
+            due += 1
+        self.polls += due - self._k
+        self.elided += due - self._k
+        self._k = due
+
+    def _unchanged(self) -> bool:
+        """True when a poll now would get the answer the newest poll got (sent, answered, nothing since)."""
+        feed = self.transport.change_feed
+        return feed is not None and self._seen == feed.version and self._newest == self._sent and not self.halted
 
     def _settled(self, ev: simpy.Event, poll_id: int, epoch: int) -> None:
         """One poll's answer or failure, in whatever order the polls settle."""
@@ -165,8 +223,12 @@ class Poller:
             self.late += 1
             return
         self._newest = poll_id
+        self.answered += 1
         self.consecutive_failures = 0
-        state = decoded.state
-        changed = self.cache.snapshot is None or state != self.cache.snapshot.state
-        self.log.emit(Kind.POLL, poll_id=poll_id, greens=decoded.greens, yellows=decoded.yellows, changed=changed)
-        self.cache.update(state, self.env.now, poll_id)
+        self.show(decoded, poll_id)
+
+    def show(self, decoded: Decoded, poll_id: int) -> None:
+        """Put what a read saw into the cache, with a ``poll`` record when it changes the state."""
+        if self.cache.snapshot is None or decoded.state != self.cache.snapshot.state:
+            self.log.emit(Kind.POLL, poll_id=poll_id, greens=decoded.greens, yellows=decoded.yellows)
+        self.cache.update(decoded.state, self.env.now, poll_id)

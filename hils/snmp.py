@@ -274,6 +274,7 @@ class SnmpTransport:
         self.driver = driver
         self.target = target
         self.tau_udp = tau_udp
+        self.change_feed = None  # over the wire nobody knows when the answer changes: every poll is sent
         self._address = _resolve(target)
         # Built now rather than on the first request: it takes ~50 ms, which
         # would otherwise stall the loop in the middle of a run.

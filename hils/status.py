@@ -40,10 +40,11 @@ class StatusLine:
         state = mw.state.value.upper() if mw.state else "CLOSED"
         if mw.timeout_flag and mw.manager.timeout_reason:
             state += f" ({mw.manager.timeout_reason.value})"
-        polls = mw.poller.polls
+        counts = mw.poller.counts
         hold = mw.last_hold
-        return (f"{tb.env.now:7.1f} s  {state:<22}  {_shown(mw.cache.state):<13}  polls {polls - mw.poller.failed} "
-                f"answered, {mw.poller.failed} failed  last hold {'-' if hold is None else f'{hold:.3f} s'}")
+        return (f"{tb.env.now:7.1f} s  {state:<22}  {_shown(mw.cache.state):<13}  polls "
+                f"{counts['polls'] - counts['failed']} answered, {counts['failed']} failed  "
+                f"last hold {'-' if hold is None else f'{hold:.3f} s'}")
 
     def _show(self) -> Generator[simpy.Event, Any, None]:
         while not self.tb.ended:

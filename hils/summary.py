@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections import Counter
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping
 from dataclasses import asdict, is_dataclass
 from pathlib import Path
 from typing import Any
@@ -15,9 +15,38 @@ from hils.events import Kind
 from hils.latency import Stats, internal_latencies_ms, transition_holds
 
 
-def summarize(records: Sequence[dict[str, Any]], config: IntersectionConfig, *,
-              traffic: Any = None, wall_s: float | None = None) -> dict[str, Any]:
-    kinds = Counter(r["kind"] for r in records)
+class Tally:
+    """What the summary and the run's plots read of its records, kept as they are emitted.
+
+    Subscribed to a run's event log (:meth:`hils.events.EventLog.subscribe`), it counts every kind and
+    keeps the few records the figures come from, so that the end of a run re-reads nothing: a long
+    run's log is mostly polls and SETs, none of which the summary needs one by one."""
+
+    KEPT = frozenset({Kind.RUN_STARTED, Kind.RUN_ENDED, Kind.ACTION_RECEIVED, Kind.COMMAND_DISPATCHED,
+                      Kind.TRANSITION_VERIFIED, Kind.TIMEOUT_ENTERED, Kind.DETECTORS, Kind.POLL})
+
+    def __init__(self) -> None:
+        self.kinds: Counter[str] = Counter()
+        self.records: list[dict[str, Any]] = []
+
+    def __call__(self, record: dict[str, Any]) -> None:
+        kind = record["kind"]
+        self.kinds[kind] += 1
+        if kind in self.KEPT:
+            self.records.append(record)
+
+    @classmethod
+    def of(cls, records: Iterable[dict[str, Any]]) -> Tally:
+        """The tally of a finished log (``hils.events.read``), as it was kept during the run."""
+        tally = cls()
+        for r in records:
+            tally(r)
+        return tally
+
+
+def summarize(tally: Tally, config: IntersectionConfig, *, traffic: Any = None,
+              wall_s: float | None = None) -> dict[str, Any]:
+    kinds, records = tally.kinds, tally.records
     started = next((r for r in records if r["kind"] == Kind.RUN_STARTED), {})
     ended = [r for r in records if r["kind"] == Kind.RUN_ENDED]
     timeouts = Counter(r["reason"] for r in records if r["kind"] == Kind.TIMEOUT_ENTERED)
@@ -39,8 +68,7 @@ def summarize(records: Sequence[dict[str, Any]], config: IntersectionConfig, *,
         "hold_s": Stats.of(holds).as_dict(),
         "timeouts": dict(timeouts),
         "recoveries": kinds[Kind.RECOVERED],
-        "polls": kinds[Kind.POLL],
-        "polls_failed": kinds[Kind.POLL_FAILED],
+        "polls": dict(ended[-1].get("polls", {})) if ended else {},
         "drifted_steps": kinds[Kind.DRIFT],
         "internal_latency_ms": latency,
     }
@@ -69,8 +97,11 @@ def render(summary: Mapping[str, Any]) -> str:
         lines.append(f"  hold per transition  mean {h['mean']:.3f} s, min {h['min']:.3f} s, max {h['max']:.3f} s")
     lines.append("  timeouts             " + (", ".join(f"{k} {v}" for k, v in s["timeouts"].items()) or "none")
                  + (f" ({s['recoveries']} recovered)" if s["timeouts"] else ""))
-    lines.append(f"  polls                {s['polls']} ({s['polls_failed']} failed); "
-                 f"drifted steps {s['drifted_steps']}")
+    polls = s["polls"] or {"polls": 0, "failed": 0, "elided": 0}  # none counted: the run did not end cleanly
+    sent = polls["polls"] - polls["elided"]
+    lines.append(f"  polls                {polls['polls']} ({polls['failed']} failed"
+                 + (f"; {sent} sent, {polls['elided']} could not see a change" if polls["elided"] else "")
+                 + f"); drifted steps {s['drifted_steps']}")
     if s.get("detector_actuations"):
         per_phase = ", ".join(f"phase {p} {n}" for p, n in s["detector_actuations"].items())
         lines.append(f"  detector actuations  {per_phase} (stop-bar presence in SUMO, NTCIP remote actuation)")

@@ -14,6 +14,7 @@ for and, for the end-of-run maximum, sampled once per ``queue_sample_period``.
 
 from __future__ import annotations
 
+import operator
 import os
 import sys
 import tempfile
@@ -128,6 +129,14 @@ ARRIVED_NOTE = ("mean_time_loss, mean_waiting_time: SUMO trip statistics over ar
 #: between vehicles and the mean delay of `--agent actuated` triples.
 PRESENCE_ZONE_M = 20.0
 
+# libsumo's C getters of the samples and of the traffic state, without the Python wrapper each public one is (pinned
+# libsumo version: a change of these names fails at import, in every test).
+_lane_halting = libsumo._libsumo.lane_getLastStepHaltingNumber
+_lane_vehicles = libsumo._libsumo.lane_getLastStepVehicleNumber
+_lane_waiting = libsumo._libsumo.lane_getWaitingTime
+_vehicle_ids = libsumo._libsumo.vehicle_getIDList
+_vehicle_time_loss = libsumo._libsumo.vehicle_getTimeLoss
+
 _active: SumoSimulation | None = None
 
 
@@ -166,9 +175,11 @@ class SumoSimulation:
         self._movement_lanes: tuple[tuple[int, tuple[str, ...], tuple[str, ...]], ...] = ()
         self._approach_of_edge: dict[str, str] = {}
         self._lane_storage: dict[str, tuple[tuple[str, int], ...]] = {}
+        self._storage: tuple[tuple[str, tuple[str, ...], tuple[int, ...]], ...] = ()  # the same, lanes apart
         self._spill_minutes: dict[str, set[int]] = {}
-        # per vehicle seen in the network: approach, departure delay, last sampled time loss
-        self._running: dict[str, tuple[str, float, float]] = {}
+        # per vehicle seen in the network: its approach and departure delay, and its last sampled time loss
+        self._seen: dict[str, tuple[str, float]] = {}
+        self._time_loss: dict[str, float] = {}
         self._finished: dict[str, list[float]] = {}
 
     # --- life cycle ----------------------------------------------------------------------
@@ -224,8 +235,10 @@ class SumoSimulation:
         spacing = _vehicle_spacing()
         self._lane_storage = {approach: tuple((lane, int(libsumo.lane.getLength(lane) // spacing)) for lane in lanes)
                               for approach, lanes in self._approach_lanes}
+        self._storage = tuple((approach, tuple(lane for lane, _ in lanes), tuple(cap for _, cap in lanes))
+                              for approach, lanes in self._lane_storage.items())
         self._spill_minutes = {approach: set() for approach, _ in self._approach_lanes}
-        self._running = {}
+        self._seen, self._time_loss = {}, {}
         self._finished = {approach: [] for approach, _ in self._approach_lanes}
         self._movement_lanes = tuple((p, pm.incoming_lanes(p), pm.outgoing_lanes(p)) for p in pm.phases)
         lanes = [lane for _, inc, out in self._movement_lanes for lane in (*inc, *out)]
@@ -268,7 +281,7 @@ class SumoSimulation:
 
     def apply(self, state: SignalState) -> bool:
         """Show ``state`` on the traffic light; True when SUMO's state had to change."""
-        if state == self._applied_state:
+        if state is self._applied_state or state == self._applied_state:
             return False
         self._applied_state = state
         text = self._state_strings.get(state)
@@ -291,34 +304,31 @@ class SumoSimulation:
         return time.perf_counter() - t0
 
     def _sample_queues(self) -> None:
-        halting = libsumo.lane.getLastStepHaltingNumber
+        # Once a second, for the whole run. The getters are libsumo's own C functions mapped over the lanes
+        # and vehicles: the Python wrappers around them (a frame per call) were most of this sample's cost.
         top = self._max_queue
         for approach, lanes in self._approach_lanes:
-            queue = sum(halting(lane) for lane in lanes)
+            queue = sum(map(_lane_halting, lanes))
             if queue > top[approach]:
                 top[approach] = queue
         # a lane holding as many vehicles as fit on it: the queue reaches back beyond the network
-        vehicles = libsumo.lane.getLastStepVehicleNumber
-        for approach, lanes in self._lane_storage.items():
-            if any(vehicles(lane) >= cap for lane, cap in lanes):
+        for approach, lanes, capacities in self._storage:
+            if any(map(operator.ge, map(_lane_vehicles, lanes), capacities)):
                 self._spill_minutes[approach].add(int(self.time // 60.0))
         self._sample_vehicles()
 
     def _sample_vehicles(self) -> None:
         """Bring the per-vehicle delays up to date: new vehicles get their approach and departure
         delay, vehicles gone since the last sample are finished with their last time loss."""
-        vehicle = libsumo.vehicle
-        present = set(vehicle.getIDList())
-        running = self._running
-        for vid in running.keys() - present:
-            approach, depart_delay, time_loss = running.pop(vid)
-            self._finished[approach].append(depart_delay + time_loss)
-        for vid in present:
-            known = running.get(vid)
-            if known is None:
-                running[vid] = (self._approach(vid), vehicle.getDepartDelay(vid), vehicle.getTimeLoss(vid))
-            else:
-                running[vid] = (known[0], known[1], vehicle.getTimeLoss(vid))
+        ids = _vehicle_ids()
+        time_loss = dict(zip(ids, map(_vehicle_time_loss, ids), strict=True))
+        seen, last = self._seen, self._time_loss
+        for vid in [v for v in last if v not in time_loss]:
+            approach, depart_delay = seen.pop(vid)
+            self._finished[approach].append(depart_delay + last[vid])
+        for vid in [v for v in ids if v not in seen]:
+            seen[vid] = (self._approach(vid), libsumo.vehicle.getDepartDelay(vid))
+        self._time_loss = time_loss
 
     def _approach(self, vid: str) -> str:
         return self._approach_of_edge.get(libsumo.vehicle.getRoute(vid)[0], "other")
@@ -338,9 +348,9 @@ class SumoSimulation:
                          if any(position(v) >= length[lane] - zone for v in vehicles(lane)))
 
     def traffic_state(self) -> TrafficState:
-        lane = libsumo.lane
-        lanes = {name: LaneState(lane.getLastStepHaltingNumber(name), lane.getWaitingTime(name),
-                                 lane.getLastStepVehicleNumber(name)) for name in self._lanes}
+        names = self._lanes
+        lanes = dict(zip(names, map(LaneState, map(_lane_halting, names), map(_lane_waiting, names),
+                                    map(_lane_vehicles, names)), strict=True))
         movements = {p: MovementState(p, sum(lanes[n].halting for n in inc), sum(lanes[n].halting for n in out))
                      for p, inc, out in self._movement_lanes}
         departed = _stat("stats.vehicles.inserted")
@@ -358,8 +368,8 @@ class SumoSimulation:
         counts = {a: Counter() for a in delays}
         for a, done in self._finished.items():
             counts[a]["arrived"] = len(done)
-        for approach, depart_delay, time_loss in self._running.values():
-            delays.setdefault(approach, []).append(depart_delay + time_loss)
+        for vid, (approach, depart_delay) in self._seen.items():
+            delays.setdefault(approach, []).append(depart_delay + self._time_loss[vid])
             counts.setdefault(approach, Counter())["running"] += 1
         pending = libsumo.simulation.getPendingVehicles()
         for vid in pending:

@@ -24,6 +24,7 @@ from hils.ntcip import Latency, Oid, SnmpError, Value
 VarBind = tuple[Oid, int]
 
 __all__ = [
+    "ChangeFeed",
     "CommunicationTimeout",
     "Latency",
     "LocalTransport",
@@ -42,8 +43,25 @@ class CommunicationTimeout(TransportError):
     """No answer within tau_udp."""
 
 
+class ChangeFeed(Protocol):
+    """What an in-process controller can tell its poller: when a GET could start answering differently.
+
+    ``version`` moves whenever it could (a write, a change of the status the controller answers);
+    ``changed()`` is an event that fires when it next moves. Over the wire nobody knows this: a
+    transport without a feed has every poll sent."""
+
+    version: int
+
+    def changed(self) -> simpy.Event: ...
+
+    def bump(self) -> None:
+        """Something besides the controller changed what a GET may answer (a transport's loss, say)."""
+        ...
+
+
 class Transport(Protocol):
     env: simpy.Environment
+    change_feed: ChangeFeed | None
 
     def get(self, oids: Sequence[Oid]) -> simpy.Event:
         """GET of several objects in one PDU; the event's value is a tuple in the same order."""
@@ -70,18 +88,38 @@ class LocalTransport:
     The request reaches the surface at once (the controller sees a SET when it
     is sent); the answer comes back after the drawn latency. A lost request, or
     an answer later than tau_udp, fails the event at tau_udp.
+
+    ``change_feed`` (the surface's, when it has one) is offered to the poller only when a GET
+    draws nothing at random (no loss, no jitter): a poll skipped then is one whose answer, and
+    its time, are known without sending it, and the draws of every other request stay the same.
     """
 
     def __init__(self, env: simpy.Environment, surface: ObjectSurface, *, tau_udp: float = 1.0,
                  get_latency: Latency | None = None, set_latency: Latency | None = None,
-                 loss: float = 0.0, seed: int = 0) -> None:
+                 loss: float = 0.0, seed: int = 0, change_feed: ChangeFeed | None = None) -> None:
         self.env = env
         self.surface = surface
         self.tau_udp = tau_udp
         self.get_latency = get_latency or Latency(0.002)
         self.set_latency = set_latency or Latency(0.0075)
-        self.loss = loss
         self._rng = random.Random(seed)
+        self._feed = change_feed
+        self._loss = loss
+
+    @property
+    def change_feed(self) -> ChangeFeed | None:
+        return self._feed if self._loss == 0.0 and self.get_latency.jitter <= 0.0 else None
+
+    @property
+    def loss(self) -> float:
+        """Probability that a request is lost (settable during a run, e.g. to model an outage)."""
+        return self._loss
+
+    @loss.setter
+    def loss(self, value: float) -> None:
+        self._loss = value
+        if self._feed is not None:
+            self._feed.bump()  # a poller sleeping through quiet time must start sending again
 
     def get(self, oids: Sequence[Oid]) -> simpy.Event:
         return self._request(lambda: self.surface.get_many(oids), self.get_latency)

@@ -389,7 +389,12 @@ class ManagerMachine(RuleBasedStateMachine):
 
     @rule(dt=DT, drifted=st.booleans())
     def step_timed(self, dt: float, drifted: bool) -> None:
-        self.feed(StepTimed(self._tick(dt), STEP, STEP * (1.5 if drifted else 0.5)))
+        m, took = self.manager, STEP * (1.5 if drifted else 0.5)
+        noticed = m.notices(STEP, took)
+        before = (m.mode, m.drifted_in_a_row)
+        effects = self.feed(StepTimed(self._tick(dt), STEP, took))
+        if not noticed:  # the shell does not report such a step: it must change nothing
+            assert effects == [] and (m.mode, m.drifted_in_a_row) == before
 
     @precondition(lambda self: self.read_pending)
     @rule(dt=DT, greens=GREENS, readable=st.booleans())

@@ -15,7 +15,7 @@ from hils.config import IntersectionConfig
 from hils.events import Kind
 from hils.manager import State
 from hils.middleware import READBACK_PERIOD
-from hils.ntcip import ControlColumn, UnitControlStatus
+from hils.ntcip import ControlColumn, UnitControlStatus, control_oid
 from hils.testbed import RunSpec, Testbed, run_spec
 from hils.transport import CommunicationTimeout, LocalTransport
 
@@ -289,7 +289,7 @@ def test_a_control_object_set_by_someone_else_is_a_timeout_and_recovery_clears_i
     rig = Rig(paper_config)
     rig.run(3.0)
     assert rig.kinds(Kind.TIMEOUT_ENTERED) == []  # our own call is not foreign
-    rig.controller.set_control(column, frozenset({4}))
+    rig.target.surface.set_many([(control_oid(column, 1), 0b1000)])  # another manager's SET: phase 4
     set_at = rig.env.now
     rig.run(READBACK_PERIOD + 0.1)
     (entered,) = rig.kinds(Kind.TIMEOUT_ENTERED)
@@ -350,6 +350,7 @@ class _FirstSetLost:
 
     def __init__(self, inner, tau_udp: float) -> None:
         self.inner, self.env, self.tau_udp, self.sets = inner, inner.env, tau_udp, 0
+        self.change_feed = inner.change_feed  # polls pass through untouched
 
     def get(self, oids):
         return self.inner.get(oids)

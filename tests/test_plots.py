@@ -2,11 +2,16 @@
 
 from __future__ import annotations
 
+from xml.etree import ElementTree
+
+import pytest
+
 from hils import config as config_mod
 from hils import plots
 from hils.events import Kind
 
 CFG = config_mod.load()
+SVG = "{http://www.w3.org/2000/svg}"
 
 
 def polls(until: float, period: float = 0.1) -> list[dict]:
@@ -25,7 +30,16 @@ def test_the_timeline_never_draws_past_the_end_of_the_run(tmp_path):
     spans = plots.signal_intervals(records, CFG.phase_numbers, start, end)
     assert max(t1 for row in spans.values() for _, t1, _ in row) == 50.0
     assert plots.timeline_window(records, 100.0, 180.0) == (0.0, 50.0)  # a window after the end shows the end
-    assert plots.signal_timeline(records, CFG, tmp_path / "t.png", start=0, end=180).stat().st_size > 0
+    svg = ElementTree.parse(plots.signal_timeline(records, CFG, tmp_path / "t.svg", start=0, end=180)).getroot()
+    labels = [t.text for t in svg.iter(f"{SVG}text")]
+    assert [plots.movement_label(CFG, p) for p in CFG.phase_numbers] == [t for t in labels if t and t[0].isdigit()
+                                                                        and "  " in t]
+    colours = {r.get("fill") for r in svg.iter(f"{SVG}rect")}
+    assert {plots.COLORS["G"], plots.COLORS["r"]} <= colours
+    right = max(float(r.get("x")) + float(r.get("width")) for r in svg.iter(f"{SVG}rect")
+                if r.get("fill") in plots.COLORS.values())
+    axis = next(r for r in svg.iter(f"{SVG}rect") if r.get("fill") == "none")
+    assert right == pytest.approx(float(axis.get("x")) + float(axis.get("width")))  # 50 s: the axis ends there
 
 
 def test_rows_are_grouped_by_ring_and_barrier_and_labelled_with_their_movement():
@@ -41,4 +55,9 @@ def test_a_partial_last_bin_joins_the_one_before_instead_of_dropping(tmp_path):
     edges, tops = plots.queue_bins(samples, 60.0)
     assert edges[0] == 0.0 and edges[-1] == 3600.0 and len(edges) == 61
     assert tops["west"] == [10] * 60
-    assert plots.queues(samples, tmp_path / "q.png", spillback={"west": [120.0, 3599.0]}).stat().st_size > 0
+    svg = ElementTree.parse(plots.queues(samples, tmp_path / "q.svg", spillback={"west": [120.0, 3599.0]})).getroot()
+    lines = [pl for pl in svg.iter(f"{SVG}polyline") if pl.get("fill") == "none"]
+    marks = [pl for pl in svg.iter(f"{SVG}polyline") if pl.get("fill") != "none"]
+    assert len(lines) == 1 and len(lines[0].get("points").split()) == 2 * 60  # one step per bin
+    assert len(marks) == 2  # the bins with a full lane: the third minute's and the last
+    assert "west" in [t.text for t in svg.iter(f"{SVG}text")]

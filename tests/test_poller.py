@@ -79,7 +79,8 @@ def test_poll_rate_and_one_get_of_reds_yellows_greens_per_poll(paper_config, rat
     assert len(rig.surface.gets) == poller.polls
     assert all(oids == signal_oids(1) for _, oids in rig.surface.gets)
     assert len(signal_oids(1)) == 3
-    assert len(rig.log.of(Kind.POLL)) == poller.polls
+    assert poller.counts["answered"] == poller.polls and poller.elided == 0  # no change feed: every poll is sent
+    assert [r["greens"] for r in rig.log.of(Kind.POLL)] == [(2, 6)]  # one record: the state never changed
     # Polls sit on a fixed grid, so the rate does not drift with the response time.
     for k, (t, _) in enumerate(rig.surface.gets):
         assert math.isclose(t, k / rate_hz, abs_tol=1e-6)
@@ -165,7 +166,7 @@ def test_failures_put_the_manager_in_timeout_and_polling_halts(paper_config) -> 
     assert mw.state is State.IDLE and not mw.poller.halted
     rig.env.run(until=31.0)
     assert len(rig.surface.gets) >= gets + 5, "polling did not resume after recovery"
-    assert rig.log.of(Kind.POLL)[-1]["t"] > 30.0
+    assert mw.cache.snapshot.t > 30.0 and mw.cache.snapshot.seq == mw.poller.polls
 
 
 def test_transition_is_verified_on_the_first_poll_that_shows_it(paper_config) -> None:
@@ -190,13 +191,15 @@ def test_transition_is_verified_on_the_first_poll_that_shows_it(paper_config) ->
 def test_lost_polls_do_not_hold_the_next_back(paper_config) -> None:
     rig = Rig(paper_config, loss=0.2)
     poller = rig.poller(n_timeout=50)  # count failures without reporting one
+    answered: list[Snapshot] = []
+    poller.cache.subscribe(lambda snap, _changed: answered.append(snap), every_poll=True)
     rig.env.run(until=60.0)
     # Every slot of the grid got its poll, lost ones included (a lost GET does not wait tau_udp).
-    assert poller.polls == 600
-    answered = rig.log.of(Kind.POLL)
+    assert poller.polls == 600 and poller.elided == 0
+    assert len(answered) == poller.counts["answered"]
     # (lost polls of the last second have not timed out yet)
     assert 0.7 * 600 < len(answered) < 0.9 * 600 and 590 <= len(answered) + poller.failed <= 600
-    assert all(math.isclose(r["t"], (r["poll_id"] - 1) / 10 + 0.002, abs_tol=1e-3) for r in answered)
+    assert all(math.isclose(snap.t, (snap.seq - 1) / 10 + 0.002, abs_tol=1e-3) for snap in answered)
     assert not rig.failures
 
 
@@ -205,6 +208,7 @@ class Reordering:
 
     def __init__(self, env: simpy.Environment, mib: MibView, latencies: list[float]) -> None:
         self.env, self.mib, self.latencies = env, mib, latencies
+        self.change_feed = None
 
     def get(self, oids: Sequence[Oid]) -> simpy.Event:
         answer = self.env.event()
@@ -224,8 +228,9 @@ def test_an_answer_older_than_the_newest_applied_is_discarded(paper_config) -> N
     transport = Reordering(env, MibView(controller), [0.002, 0.25])
     poller = Poller(env, transport, SignalCache(), log, groups=1, rate_hz=10.0, n_timeout=5,
                     on_failure=lambda why: None)
+    applied: list[int] = []
+    poller.cache.subscribe(lambda snap, _changed: applied.append(snap.seq), every_poll=True)
     env.process(poller.run())
     env.run(until=1.0)
-    applied = [r["poll_id"] for r in log.of(Kind.POLL)]
     assert 2 not in applied and applied == sorted(applied) and applied[:3] == [1, 3, 4]
     assert poller.late == 1 and poller.cache.snapshot.seq == applied[-1]

@@ -17,7 +17,7 @@ def test_hils_run_300_s_writes_every_output(tmp_path, capsys, action_type):
     code = main(["run", "--duration", "300", "--action-type", action_type, "--out", str(out), "--no-progress"])
     printed = capsys.readouterr().out
     assert code == 0
-    for name in ("events.jsonl", "summary.json", "signal_timeline.png", "queues.png"):
+    for name in ("events.jsonl", "summary.json", "signal_timeline.svg", "queues.svg"):
         assert (out / name).stat().st_size > 0, name
     summary = json.loads((out / "summary.json").read_text())
     assert summary["action_type"] == action_type

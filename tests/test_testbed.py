@@ -188,7 +188,7 @@ def ended(run_dir: Path) -> tuple[str, list[dict[str, Any]]]:
     assert records[-1]["kind"] == "run_ended"
     summary = json.loads((run_dir / "summary.json").read_text())
     assert summary["sim_time_s"] == records[-1]["t"]
-    assert (run_dir / "signal_timeline.png").stat().st_size > 0
+    assert (run_dir / "signal_timeline.svg").stat().st_size > 0
     return records[-1]["reason"], records
 
 

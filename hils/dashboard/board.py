@@ -76,9 +76,11 @@ class Board:
     timeout_detail: str | None = None
     recovering: bool = False
     commands: deque[CommandRow] = field(default_factory=lambda: deque(maxlen=LAST_COMMANDS))
-    polls_ok: int = 0
+    last_poll: int = 0  # the newest poll id a record named (poll records come on changes only)
     polls_failed: int = 0
     failing: int = 0  # consecutive failed polls
+    poll_counts: dict[str, int] | None = None  # the poller's own counts: run_ended's, or live (counter)
+    counter: Callable[[], dict[str, int]] | None = None  # a live run's poller counts, read at each snapshot
     sets: dict[str, int] = field(default_factory=lambda: {"sent": 0, "answered": 0, "failed": 0})
     dropped: int = 0
     refused: int = 0
@@ -110,9 +112,10 @@ class Board:
 
     def _run_ended(self, r: Mapping[str, Any]) -> None:
         self.ended = r["reason"]
+        self.poll_counts = r.get("polls")
 
     def _poll(self, r: Mapping[str, Any]) -> None:
-        self.polls_ok += 1
+        self.last_poll = max(self.last_poll, int(r["poll_id"]))
         self.failing = 0
         greens, yellows = set(r["greens"]), set(r["yellows"])
         shown = {p: GREEN if p in greens else YELLOW if p in yellows else RED for p in self.config.phase_numbers}
@@ -125,6 +128,7 @@ class Board:
     def _poll_failed(self, r: Mapping[str, Any]) -> None:
         if r.get("poll_id"):  # poll 0 is the start-up read
             self.polls_failed += 1
+            self.last_poll = max(self.last_poll, int(r["poll_id"]))
         self.failing = int(r.get("consecutive", 0))
 
     def _set_sent(self, r: Mapping[str, Any]) -> None:
@@ -228,7 +232,7 @@ class Board:
             "commands": [{"id": c.command_id, "phases": c.phases, "t": round(c.t, 3), "green": c.green,
                           "verified_s": _r(c.verified_s), "hold_s": _r(c.hold_s), "outcome": c.outcome}
                          for c in reversed(self.commands)],
-            "comms": {"polls_ok": self.polls_ok, "polls_failed": self.polls_failed, "failing": self.failing,
+            "comms": {**self._polls(), "failing": self.failing,
                       "sets": dict(self.sets), "dropped": self.dropped, "refused": self.refused,
                       "drifts": self.drifts, "last_lag_s": _r(self.last_lag)},
             "queues": self.queues,
@@ -236,6 +240,14 @@ class Board:
                       "segments": [[round(t0, 3), {str(p): s for p, s in shown.items() if s != RED}]
                                    for t0, shown in self.strip]},
         }
+
+
+    def _polls(self) -> dict[str, int]:
+        """Polls answered and failed: the poller's counts when known, else as far as the records tell."""
+        counts = self.counter() if self.counter is not None else self.poll_counts
+        if counts is not None:
+            return {"polls_ok": counts["polls"] - counts["failed"], "polls_failed": counts["failed"]}
+        return {"polls_ok": self.last_poll - self.polls_failed, "polls_failed": self.polls_failed}
 
 
 def _r(x: float | None) -> float | None:

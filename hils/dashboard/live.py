@@ -36,7 +36,7 @@ class LiveDashboard:
                                  "run afterwards with `hils view RUN_FOLDER --realtime 10`")
         if self.server is not None:
             self.stop()
-        board = Board(testbed.config)
+        board = Board(testbed.config, counter=lambda: testbed.middleware.poller.counts)
         testbed.events.subscribe(board.feed)
         testbed.env.process(read_cabinet(testbed.env, testbed.transport, testbed.events, testbed.config.groups))
         live = Live(board, recover=(lambda: _request_recovery(testbed)) if self.control else None)

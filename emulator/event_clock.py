@@ -1,0 +1,147 @@
+"""The controller's 0.1 s tick in virtual time, stepping only the ticks that may change something.
+
+Rules of this file
+------------------
+- Tick k of a power-up is due at ``start + k * TICK``, as in the ticked process
+  (:meth:`emulator.controller.Controller.process`); the unit's own integer tick
+  counter is k. No tick is ever dropped: skipped ticks are counted by
+  ``unit.skip``, and the model's state after them is what stepping each would give
+  (``tests/test_controller_events.py``).
+- A real step runs at its own due time, on the environment, so everything that
+  watches the model (interval changes, monitors) sees it when it happens.
+- Every write reaches the unit through :class:`ClockedSurface`: the unit is first
+  brought up to the present (:meth:`EventClock.catch_up`), then written, then its
+  next step is a real one (:meth:`EventClock.touched`).
+
+Theory of operation
+-------------------
+After each real step the unit says how many ticks ahead the next step that may
+change anything is (``quiet_ticks``): the clock schedules one SimPy event there
+and nothing in between. A write in between catches the counters up to the
+present first, so a SET lands on the tick it would have landed on.
+
+The clock is also the change feed of the in-process transport
+(:class:`hils.transport.ChangeFeed`): ``version`` counts the moments a GET could
+start answering differently (every write, every real step that changed the
+status the agent answers or the controller's own status and control objects),
+and ``changed()`` fires at the next one. A poller
+that knows the version it last read needs no GET until the version moves.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import simpy
+
+from emulator.controller import TICK
+from emulator.delays import DelayedController
+from emulator.mib import MibView
+from hils.ntcip import Oid, Value
+
+
+class EventClock:
+    """Runs ``unit``'s ticks on ``env`` from ``phase`` seconds on, event by event."""
+
+    def __init__(self, env: simpy.Environment, unit: DelayedController, phase: float = 0.0) -> None:
+        self.env = env
+        self.unit = unit
+        self.version = 0
+        self.steps = 0  # real steps run (the rest were skipped)
+        self._changed: simpy.Event | None = None
+        self._start = env.now + phase
+        self._due: int | None = None  # tick count after the next scheduled real step
+        self._generation = 0  # an alarm from an older schedule is stale
+        self._schedule(1)
+
+    # --- the change feed ---------------------------------------------------------------------
+
+    def changed(self) -> simpy.Event:
+        """An event that fires when ``version`` next moves."""
+        if self._changed is None:
+            self._changed = self.env.event()
+        return self._changed
+
+    def bump(self) -> None:
+        """What a GET answers may have changed: move ``version`` and wake whoever waits for it."""
+        self.version += 1
+        if self._changed is not None:
+            changed, self._changed = self._changed, None
+            changed.succeed()
+
+    # --- inputs ----------------------------------------------------------------------------------
+
+    def catch_up(self) -> None:
+        """Bring the unit to the present: the real steps due by now, then the quiet ticks since."""
+        now_tick = self._ticks_due()
+        while self._due is not None and self._due <= now_tick:
+            self._step()
+        self.unit.skip(now_tick - self.unit.tick)
+
+    def touched(self) -> None:
+        """The unit was written: what it answers may differ, and its next step is a real one."""
+        self.unit.touch()
+        self.bump()
+        self._schedule(1)
+
+    def power_cycle(self) -> None:
+        """Power down and up: the unit resets and its tick grid starts now."""
+        self.unit.reset()
+        self._start = self.env.now
+        self.bump()
+        self._schedule(1)
+
+    # --- ticking ---------------------------------------------------------------------------------
+
+    def _ticks_due(self) -> int:
+        """The tick count the unit has by now: every tick due at or before the present."""
+        k = max(0, math.floor((self.env.now - self._start) / TICK))
+        while self._start + (k + 1) * TICK <= self.env.now:
+            k += 1
+        while k > 0 and self._start + k * TICK > self.env.now:
+            k -= 1
+        return k
+
+    def _versions(self) -> tuple[int, int]:
+        # The status as the agent answers it, and the controller's own: the control objects (a backup
+        # time expiring, a force-off clearing) change with the latter, whatever the status image lags.
+        return self.unit.status_version, self.unit.controller.status_version
+
+    def _schedule(self, ahead: int | None) -> None:
+        self._generation += 1
+        if ahead is None:
+            self._due = None  # nothing changes until something is written
+            return
+        self._due = due = self.unit.tick + ahead
+        generation = self._generation
+        alarm = self.env.timeout(max(0.0, self._start + due * TICK - self.env.now))
+        alarm.callbacks.append(lambda _ev: generation == self._generation and self._step())
+
+    def _step(self) -> None:
+        unit = self.unit
+        unit.skip(self._due - 1 - unit.tick)
+        versions = self._versions()
+        unit.step()
+        self.steps += 1
+        if self._versions() != versions:
+            self.bump()
+        self._schedule(unit.quiet_ticks())
+
+
+class ClockedSurface:
+    """The MIB view as the in-process transport reaches it: every write goes through the clock."""
+
+    def __init__(self, mib: MibView, clock: EventClock) -> None:
+        self.mib = mib
+        self.clock = clock
+
+    def get_many(self, oids: Sequence[Oid]) -> tuple[Value, ...]:
+        return self.mib.get_many(oids)
+
+    def set_many(self, varbinds: Sequence[tuple[Oid, Value]]) -> None:
+        self.clock.catch_up()
+        try:
+            self.mib.set_many(varbinds)
+        finally:
+            self.clock.touched()

@@ -1,0 +1,77 @@
+"""Virtual time at the speed of SUMO changes no result: the event-driven controller with polls that cannot
+see a change left out runs exactly the reference (every tick stepped, every poll sent).
+
+The two runs share seed, agent and traffic; their event logs must be equal record for record, apart
+from the wall-clock stamps and the per-poll bookkeeping (``poll`` records are compared on their own:
+both log a record when the state seen changes, at the same poll), and their traffic figures equal.
+"""
+
+from __future__ import annotations
+
+from itertools import pairwise
+from typing import Any
+
+import pytest
+
+from emulator.inprocess import VirtualTarget
+from harness.faults import DatagramLoss, FaultTarget, Window
+from hils import Testbed
+from hils.events import Kind
+
+
+def run(*, ticked: bool, seconds: float, agent: str | None, action_type: str, seed: int, sumo: bool
+        ) -> tuple[list[dict[str, Any]], Any, VirtualTarget]:
+    def target(env: Any, config: Any, seed: int = 0) -> VirtualTarget:
+        return VirtualTarget(env, config, seed=seed, ticked=ticked)
+
+    with Testbed(action_type=action_type, target=target, sumo=sumo, seed=seed, duration=seconds, agent=agent) as tb:
+        tb.reset()
+        tb.run()
+        return tb.records, tb.traffic, tb.target
+
+
+def comparable(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    return [{k: v for k, v in r.items() if k not in ("wall_ns", "polls")} for r in records]
+
+
+@pytest.mark.parametrize(("agent", "action_type", "seed"), [
+    (None, "selection", 3),  # max-pressure
+    ("fixed-cycle", "switch", 1),
+    (None, "duration", 2),  # queue-proportional: holds of the served green
+    ("actuated", "selection", 4),  # no commands: the controller on its detectors, SET every change
+])
+def test_the_elided_run_is_the_polled_run_with_sumo(agent: str | None, action_type: str, seed: int) -> None:
+    reference, ref_traffic, _ = run(ticked=True, seconds=400.0, agent=agent, action_type=action_type, seed=seed,
+                                    sumo=True)
+    fast, traffic, target = run(ticked=False, seconds=400.0, agent=agent, action_type=action_type, seed=seed,
+                                sumo=True)
+    assert comparable(fast) == comparable(reference)
+    assert traffic == ref_traffic
+    polls, ref_polls = fast[-1]["polls"], reference[-1]["polls"]
+    assert polls["polls"] == ref_polls["polls"] == 4000 and ref_polls["elided"] == 0
+    assert polls["elided"] > 0.8 * polls["polls"], "most polls could not see a change"
+    assert target.clock.steps < 0.3 * 4000, "most ticks were quiet"
+
+
+def test_the_elided_run_is_the_polled_run_without_traffic() -> None:
+    reference, _, _ = run(ticked=True, seconds=300.0, agent="random", action_type="selection", seed=7, sumo=False)
+    fast, _, _ = run(ticked=False, seconds=300.0, agent="random", action_type="selection", seed=7, sumo=False)
+    assert comparable(fast) == comparable(reference)
+    # One poll record per change of what the polls saw, the first being the start-up read.
+    changes = [r for r in fast if r["kind"] == Kind.POLL]
+    assert changes[0]["poll_id"] == 0
+    assert all((a["greens"], a["yellows"]) != (b["greens"], b["yellows"]) for a, b in pairwise(changes))
+
+
+def test_faults_draw_on_every_poll() -> None:
+    """A fault in the request path sees every poll: nothing is elided where a fault could act."""
+    loss = DatagramLoss("loss", probability=0.1, window=Window(50.0, 60.0), seed=1)
+
+    def target(env: Any, config: Any, seed: int = 0) -> FaultTarget:
+        return FaultTarget(env, config, seed=seed, faults=[loss])
+
+    with Testbed(target=target, seed=1, duration=120.0, agent="random") as tb:
+        tb.reset()
+        tb.run()
+        counts = tb.records[-1]["polls"]
+    assert counts["polls"] == 1200 and counts["elided"] == 0 and counts["failed"] > 0
