@@ -9,7 +9,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from hils import config as config_mod
+from hils.config import IntersectionConfig
 from hils.ntcip import AUTH_KEY_ENV, PRIV_KEY_ENV
+from hils.scenario import SCENARIOS, load_scenario
 
 if TYPE_CHECKING:
     from emulator.agent import V3User
@@ -50,10 +52,20 @@ def _register_serve(commands: argparse._SubParsersAction) -> None:
         "serve", help="serve the controller model as an SNMP agent at wall-clock time",
         description="Run the controller model at wall-clock time (one tick per 0.1 s) behind an SNMPv1/v2c "
                     "(and, with --v3-user, SNMPv3) agent on UDP until Ctrl-C or SIGTERM. Every SET is logged; "
-                    "on exit the counts of requests answered and datagrams dropped are printed.")
-    serve.add_argument("--config", metavar="FILE", help="intersection config (TOML); default: the shipped four-leg")
+                    "on exit the counts of requests answered and datagrams dropped are printed. With --count or "
+                    "--scenario, one process serves many controllers, each its own model and agent on its own "
+                    "port, all ticked together.")
+    which = serve.add_mutually_exclusive_group()
+    which.add_argument("--config", metavar="FILE", help="intersection config (TOML); default: the shipped four-leg")
+    which.add_argument("--scenario", metavar="NAME|FILE",
+                       help=f"serve every intersection of a scenario ({', '.join(SCENARIOS)} or a .scenario.toml), "
+                            "each with its own config, on consecutive ports in the scenario's order")
+    serve.add_argument("--count", type=int, metavar="N",
+                       help="serve N controllers on ports PORT..PORT+N-1 (1, or the scenario's number of "
+                            "intersections)")
     serve.add_argument("--host", default="127.0.0.1", help="address to bind (127.0.0.1)")
-    serve.add_argument("--port", type=int, default=1161, help="UDP port; 0 picks a free one (1161)")
+    serve.add_argument("--port", type=int, default=1161,
+                       help="UDP port (of the first controller); 0 picks a free one for each (1161)")
     serve.add_argument("--ro-community", default="public", metavar="NAME", help="read-only community (public)")
     serve.add_argument("--rw-community", default="private", metavar="NAME", help="read-write community (private)")
     serve.add_argument("--latency-ms", type=float, default=0.0, metavar="MS", help="mean response delay (0)")
@@ -89,6 +101,24 @@ def _v3_user(args: argparse.Namespace) -> V3User | None:
         raise SystemExit(f"hils emulator serve: {exc}") from None
 
 
+def _controllers(args: argparse.Namespace) -> list[tuple[str | None, IntersectionConfig]]:
+    """(tls id or None, config) of each controller to serve, in port order."""
+    from emulator.serve import ServeError
+
+    if args.scenario is None:
+        return [(None, config_mod.load(args.config))] * (1 if args.count is None else args.count)
+    scenario = load_scenario(args.scenario)
+    lights = list(scenario.intersections.items())
+    if args.count is not None and args.count != len(lights):
+        raise ServeError(f"--count {args.count} with --scenario {args.scenario}, which has {len(lights)} "
+                         f"intersections; allowed: --count {len(lights)}, or no --count")
+    return lights
+
+
+def _port_range(ports: list[int]) -> str:
+    return f"{ports[0]}..{ports[-1]}" if ports == list(range(ports[0], ports[-1] + 1)) else ",".join(map(str, ports))
+
+
 def _serve(args: argparse.Namespace) -> int:
     import asyncio
 
@@ -100,21 +130,27 @@ def _serve(args: argparse.Namespace) -> int:
     if args.latency_ms < 0 or args.jitter_ms < 0:
         raise SystemExit("hils emulator serve: --latency-ms and --jitter-ms must not be negative")
     v3_user = _v3_user(args)
-    cfg = config_mod.load(args.config)
+    controllers = _controllers(args)
     options = ServeOptions(host=args.host, port=args.port, ro_community=args.ro_community,
                            rw_community=args.rw_community, latency=Latency(args.latency_ms / 1e3, args.jitter_ms / 1e3),
                            trace=args.trace, v3_user=v3_user)
 
-    def ready(address: tuple[str, int]) -> None:
-        # Scripts and tests wait for this line: it is printed only once requests are answered.
+    def ready(addresses: list[tuple[str, int]]) -> None:
+        # Scripts and tests wait for these lines: they are printed only once requests are answered.
         v3 = f" v3={v3_user.name}/{'authPriv' if v3_user.priv_key else 'authNoPriv'}" if v3_user else ""
-        print(f"serving {cfg.name} on udp:{address[0]}:{address[1]} "
-              f"(ro={options.ro_community} rw={options.rw_community}{v3})", flush=True)
+        for (tls, cfg), (host, port) in zip(controllers, addresses, strict=True):
+            label = f" [{tls}]" if tls is not None else ""
+            print(f"serving {cfg.name}{label} on udp:{host}:{port} "
+                  f"(ro={options.ro_community} rw={options.rw_community}{v3})")
+        if len(addresses) > 1:
+            print(f"serving {len(addresses)} controllers on udp:{addresses[0][0]}:"
+                  f"{_port_range([port for _, port in addresses])}")
+        sys.stdout.flush()
 
     try:
-        summary = asyncio.run(serve_until_signalled(cfg, options, ready))
-    except OSError as exc:  # the only I/O before serving is binding the socket
-        print(f"hils emulator serve: cannot bind udp:{args.host}:{args.port}: {exc.strerror or exc}", file=sys.stderr)
+        summary = asyncio.run(serve_until_signalled([cfg for _, cfg in controllers], options, ready))
+    except OSError as exc:  # binding a socket (BindError names the port) or opening the trace
+        print(f"hils emulator serve: {exc}", file=sys.stderr)
         return 1
     print(summary.describe(), flush=True)
     return 0

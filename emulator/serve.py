@@ -1,11 +1,13 @@
-"""Serving the emulator at wall-clock time: the controller ticks every 0.1 s while the SNMP agent answers.
+"""Serving the emulator at wall-clock time: controllers tick every 0.1 s while their SNMP agents answer.
 
-Both run on one asyncio loop and no thread: the ticker sleeps until each
-tick's deadline and steps the controller, the agent answers datagrams between
-ticks. A request therefore always sees the controller between two whole ticks,
-and a SET takes effect after the controller's call-processing delay, counted
-from the next tick; status answers lag by the status-update delay
-(:mod:`emulator.delays`, the same model as in virtual time).
+One process serves one or more controllers, each its own model, MIB view and
+agent on its own UDP port (consecutive ports from the first, or each a free
+one). All run on one asyncio loop and no thread: one ticker sleeps until each
+tick's deadline and steps every controller, the agents answer datagrams
+between ticks. A request therefore always sees its controller between two
+whole ticks, and a SET takes effect after the controller's call-processing
+delay, counted from the next tick; status answers lag by the status-update
+delay (:mod:`emulator.delays`, the same model as in virtual time).
 
 Deadlines are computed from the start time (``start + k * period``), never by
 adding periods up, so they do not drift. When the loop was held up past one or
@@ -24,21 +26,40 @@ import logging
 import signal
 import time
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from enum import Enum
 from pathlib import Path
+from typing import TextIO
 
 from emulator.agent import AgentStats, DropReason, RequestKind, SnmpAgent, V3User
 from emulator.controller import TICK, Change, Controller
 from emulator.delays import DelayedController
 from emulator.mib import MibView
 from hils.config import IntersectionConfig
+from hils.errors import UserError
 from hils.ntcip import Latency
 
 log = logging.getLogger(__name__)
 
 NO_LATENCY = Latency(0.0)
+MAX_PORT = 65535
+
+
+class ServeError(UserError, ValueError):
+    """Serving options that cannot be used together; says what is allowed."""
+
+
+class BindError(OSError):
+    """A controller's UDP port could not be bound (in use, not permitted, no such address)."""
+
+    def __init__(self, host: str, port: int, cause: OSError) -> None:
+        super().__init__(cause.errno, cause.strerror or str(cause))
+        self.host = host
+        self.port = port
+
+    def __str__(self) -> str:
+        return f"cannot bind udp:{self.host}:{self.port}: {self.strerror}"
 
 
 @dataclass(slots=True)
@@ -51,11 +72,15 @@ class TickStats:
 
 
 class WallClockTicker:
-    """Steps a controller at the wall-clock deadlines of its 0.1 s tick, on the running loop."""
+    """Steps controllers at the wall-clock deadlines of their common 0.1 s tick, on the running loop.
 
-    def __init__(self, controller: Controller | DelayedController, *, period: float = TICK,
+    One ticker steps every controller of the process, each once per deadline and in order: one timer
+    instead of one per controller, and the models stay in step with each other. Lateness is counted
+    per deadline."""
+
+    def __init__(self, *controllers: Controller | DelayedController, period: float = TICK,
                  late_after: float = TICK / 2, observe: Callable[[float], None] | None = None) -> None:
-        self.controller = controller
+        self.controllers = controllers
         self.period = period
         self.late_after = late_after
         self.observe = observe  # gets each tick's lateness (s), for benchmarks
@@ -71,26 +96,27 @@ class WallClockTicker:
             now = loop.time()
             while start + k * self.period <= now:
                 lateness = now - (start + k * self.period)
-                self.controller.step()
+                for controller in self.controllers:
+                    controller.step()
                 self.stats.ticks += 1
                 self.stats.max_lateness = max(self.stats.max_lateness, lateness)
                 if self.observe is not None:
                     self.observe(lateness)
                 if lateness > self.late_after:
                     self.stats.late += 1
-                    log.debug("tick %d ran %.1f ms late", self.controller.tick, lateness * 1e3)
+                    log.debug("tick %d ran %.1f ms late", k, lateness * 1e3)
                 k += 1
 
 
 @dataclass(frozen=True, slots=True)
 class ServeOptions:
     host: str = "127.0.0.1"
-    port: int = 1161
+    port: int = 1161  # of the first controller, the others on the next ports; 0: each on a free port
     ro_community: str = "public"
     rw_community: str = "private"
     latency: Latency = NO_LATENCY
     seed: int | None = None
-    trace: Path | None = None  # JSON Lines of every interval change, stamped with time.monotonic_ns()
+    trace: Path | None = None  # JSON Lines of every interval change, stamped with time.monotonic_ns(); one controller
     v3_user: V3User | None = None  # the SNMPv3 user accepted besides the communities; None: v1/v2c only
 
 
@@ -98,8 +124,9 @@ class ServeOptions:
 class ServeSummary:
     """What one serving session did, for the closing line."""
 
-    traffic: AgentStats  # a copy of the agent's counters at the end
+    traffic: AgentStats  # the agents' counters at the end, summed over the controllers
     ticks: TickStats
+    controllers: int = 1
 
     def describe(self) -> str:
         def parts(counts: Counter, kinds: type[Enum]) -> str:
@@ -107,38 +134,23 @@ class ServeSummary:
 
         t, k = self.traffic, self.ticks
         reports = f", {t.reports} SNMPv3 reports" if t.reports else ""
-        return (f"served {t.answered} requests ({parts(t.requests, RequestKind)}), {t.errors} answered with an "
+        by = f" by {self.controllers} controllers" if self.controllers > 1 else ""
+        return (f"served {t.answered} requests{by} ({parts(t.requests, RequestKind)}), {t.errors} answered with an "
                 f"error{reports}; dropped {t.total_dropped} datagrams ({parts(t.dropped, DropReason)}); "
                 f"{k.ticks} ticks, {k.late} late (max {k.max_lateness * 1e3:.1f} ms)")
 
 
-class EmulatorServer:
-    """A controller model behind its delays, its MIB view, the SNMP agent over it and the wall-clock ticker."""
+class ServedController:
+    """One controller model behind its delays, its MIB view and the SNMP agent over it."""
 
-    def __init__(self, config: IntersectionConfig, options: ServeOptions | None = None) -> None:
+    def __init__(self, config: IntersectionConfig, options: ServeOptions, trace: TextIO | None = None) -> None:
         self.config = config
-        self.options = options or ServeOptions()
-        self._trace = self.options.trace.open("w", buffering=1) if self.options.trace else None
+        self._trace = trace
         self.controller = Controller(config, on_change=self._on_change)
         self.unit = DelayedController(self.controller, config.emulator)
         self.view = MibView(self.unit)
-        self.agent = SnmpAgent(self.view, ro_community=self.options.ro_community,
-                               rw_community=self.options.rw_community, latency=self.options.latency,
-                               seed=self.options.seed, v3_user=self.options.v3_user)
-        self.ticker = WallClockTicker(self.unit)
-        self._ticking: asyncio.Task[None] | None = None
-
-    async def start(self) -> tuple[str, int]:
-        """Bind the agent and start ticking; returns the bound address."""
-        address = await self.agent.start(self.options.host, self.options.port)
-        self._ticking = asyncio.create_task(self.ticker.run(), name="controller-tick")
-        return address
-
-    @property
-    def ticking(self) -> asyncio.Task[None]:
-        if self._ticking is None:
-            raise RuntimeError("the server is not started")
-        return self._ticking
+        self.agent = SnmpAgent(self.view, ro_community=options.ro_community, rw_community=options.rw_community,
+                               latency=options.latency, seed=options.seed, v3_user=options.v3_user)
 
     def _on_change(self, change: Change) -> None:
         log.debug("tick %d: ring %d phase %s %s", change.tick, change.ring, change.phase, change.interval.value)
@@ -148,11 +160,59 @@ class EmulatorServer:
             self._trace.write(json.dumps({"wall_ns": time.monotonic_ns(), "tick": change.tick, "ring": change.ring,
                                           "phase": change.phase, "interval": change.interval.value}) + "\n")
 
-    async def stop(self) -> ServeSummary:
-        """Stop answering and ticking; raises what ended the ticker if it failed."""
-        self.agent.close()
+
+def serve_ports(first: int, count: int) -> list[int]:
+    """The UDP ports of ``count`` controllers from ``first`` on (0: each a free port)."""
+    if count < 1:
+        raise ServeError(f"--count {count}: no controller to serve; allowed: 1 or more")
+    if first == 0:
+        return [0] * count
+    if not 0 < first <= MAX_PORT - count + 1:
+        raise ServeError(f"--port {first} with --count {count} needs ports {first}..{first + count - 1}; allowed: "
+                         f"--port 1..{MAX_PORT - count + 1}, or 0 (each controller on a free port)")
+    return list(range(first, first + count))
+
+
+class EmulatorServer:
+    """Controllers served side by side (see :class:`ServedController`) and the one wall-clock ticker of them all."""
+
+    def __init__(self, configs: Sequence[IntersectionConfig], options: ServeOptions | None = None) -> None:
+        self.options = options or ServeOptions()
+        self.ports = serve_ports(self.options.port, len(configs))
+        if self.options.trace is not None and len(configs) > 1:
+            raise ServeError(f"--trace records one controller, not {len(configs)}; allowed: --trace with --count 1")
+        self._trace = self.options.trace.open("w", buffering=1) if self.options.trace else None
+        self.controllers = tuple(ServedController(config, self.options, self._trace) for config in configs)
+        self.ticker = WallClockTicker(*(served.unit for served in self.controllers))
+        self._ticking: asyncio.Task[None] | None = None
+
+    async def start(self) -> list[tuple[str, int]]:
+        """Bind every agent and start ticking; returns the bound addresses, in order."""
+        addresses = []
+        for served, port in zip(self.controllers, self.ports, strict=True):
+            try:
+                addresses.append(await served.agent.start(self.options.host, port))
+            except OSError as exc:
+                self._close()
+                raise BindError(self.options.host, port, exc) from exc
+        self._ticking = asyncio.create_task(self.ticker.run(), name="controller-tick")
+        return addresses
+
+    @property
+    def ticking(self) -> asyncio.Task[None]:
+        if self._ticking is None:
+            raise RuntimeError("the server is not started")
+        return self._ticking
+
+    def _close(self) -> None:
+        for served in self.controllers:
+            served.agent.close()
         if self._trace is not None:
             self._trace.close()
+
+    async def stop(self) -> ServeSummary:
+        """Stop answering and ticking; raises what ended the ticker if it failed."""
+        self._close()
         if self._ticking is not None:
             self._ticking.cancel()
             with contextlib.suppress(asyncio.CancelledError):
@@ -160,17 +220,29 @@ class EmulatorServer:
         return self.summary()
 
     def summary(self) -> ServeSummary:
-        return ServeSummary(copy.deepcopy(self.agent.stats), copy.copy(self.ticker.stats))
+        return ServeSummary(_total(served.agent.stats for served in self.controllers), copy.copy(self.ticker.stats),
+                            len(self.controllers))
 
 
-async def serve_until_signalled(config: IntersectionConfig, options: ServeOptions,
-                                on_ready: Callable[[tuple[str, int]], None]) -> ServeSummary:
-    """Serve until SIGINT or SIGTERM; ``on_ready`` gets the bound address once requests are answered."""
+def _total(stats: Iterable[AgentStats]) -> AgentStats:
+    """The sum of agents' counters (a new object: the agents keep counting)."""
+    out = AgentStats()
+    for st in stats:
+        out.requests.update(st.requests)
+        out.dropped.update(st.dropped)
+        out.errors += st.errors
+        out.reports += st.reports
+    return out
+
+
+async def serve_until_signalled(configs: Sequence[IntersectionConfig], options: ServeOptions,
+                                on_ready: Callable[[list[tuple[str, int]]], None]) -> ServeSummary:
+    """Serve until SIGINT or SIGTERM; ``on_ready`` gets the bound addresses once requests are answered."""
+    server = EmulatorServer(configs, options)
     loop = asyncio.get_running_loop()
     stop = asyncio.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, stop.set)
-    server = EmulatorServer(config, options)
     try:
         on_ready(await server.start())
         stopping = asyncio.create_task(stop.wait())

@@ -321,9 +321,9 @@ def measure_tick_lateness_under_flood(seconds: float, per_second: int = 20, size
         lateness: list[float] = []
 
         async def session() -> Any:
-            server = EmulatorServer(config_mod.load(), ServeOptions(port=0))
+            server = EmulatorServer([config_mod.load()], ServeOptions(port=0))
             server.ticker.observe = lambda late: lateness.append(late * 1e3)
-            address = await server.start()
+            [address] = await server.start()
             stop = threading.Event()
 
             def sender() -> None:

@@ -8,12 +8,12 @@ from __future__ import annotations
 
 import os
 import re
-import select
 import shutil
 import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -36,12 +36,18 @@ rwuser hilsauth auth
 
 @dataclass
 class Served:
-    """`hils emulator serve` in a subprocess."""
+    """`hils emulator serve` in a subprocess, serving one or more controllers."""
 
     proc: subprocess.Popen[str]
-    port: int
+    ports: tuple[int, ...]  # of each controller, in the order served
+    names: tuple[str, ...]  # of each controller as its ready line gives it: "CONFIG NAME [TLS ID]" in a scenario
     ready_at: float  # time.monotonic() when the ready line was read
     log: Path
+
+    @property
+    def port(self) -> int:
+        """The (first) controller's port."""
+        return self.ports[0]
 
     def stop(self, sig: signal.Signals = signal.SIGTERM) -> tuple[int, str]:
         """Signal the server; its exit code and the rest of its stdout."""
@@ -50,19 +56,31 @@ class Served:
         return self.proc.returncode, out
 
 
-def start_emulator(log: Path, *args: str, verbose: bool = False) -> Served:
-    """Start `hils emulator serve --port 0` and wait for its ready line; stderr goes to ``log``."""
-    cmd = [sys.executable, "-m", "hils.cli", *(["-v"] if verbose else []), "emulator", "serve", "--port", "0", *args]
+_CONTROLLER_LINE = re.compile(r"serving (.+) on udp:127\.0\.0\.1:(\d+) \(ro=(\S+) rw=(\S+)( v3=\S+)?\)\n")
+
+
+def start_emulator(log: Path, *args: str, count: int = 1, verbose: bool = False) -> Served:
+    """Start `hils emulator serve --port 0 --count COUNT` (each controller on a free port) and wait until every
+    controller answers (its ready lines, and with more than one the final line); stderr goes to ``log``."""
+    cmd = [sys.executable, "-m", "hils.cli", *(["-v"] if verbose else []), "emulator", "serve", "--port", "0",
+           "--count", str(count), *args]
     with log.open("w") as err:
         proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=err, text=True)
-    ready, _, _ = select.select([proc.stdout], [], [], 20)
-    line = proc.stdout.readline() if ready else ""
-    match = re.fullmatch(r"serving (.+) on udp:127\.0\.0\.1:(\d+) \(ro=(\S+) rw=(\S+)( v3=\S+)?\)\n", line)
-    if match is None:
+    # The ready lines may come in one read: a select() per line would wait on lines already buffered,
+    # so read them blocking, with a timer that kills a server that never gets ready.
+    watchdog = threading.Timer(20 + 0.1 * count, proc.kill)
+    watchdog.start()
+    try:
+        lines = [proc.stdout.readline() for _ in range(count + (count > 1))]
+    finally:
+        watchdog.cancel()
+    final = rf"serving {count} controllers on udp:127\.0\.0\.1:\S+\n"
+    matches = [_CONTROLLER_LINE.fullmatch(line) for line in lines[:count]]
+    if not (all(matches) and all(re.fullmatch(final, line) for line in lines[count:])):
         proc.kill()
         proc.wait()
-        raise RuntimeError(f"hils emulator serve printed no ready line, got {line!r}; stderr:\n{log.read_text()}")
-    return Served(proc, int(match[2]), time.monotonic(), log)
+        raise RuntimeError(f"hils emulator serve printed no ready line, got {lines!r}; stderr:\n{log.read_text()}")
+    return Served(proc, tuple(int(m[2]) for m in matches), tuple(m[1] for m in matches), time.monotonic(), log)
 
 
 def tool(name: str) -> str:

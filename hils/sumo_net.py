@@ -13,7 +13,8 @@ link that no phase serves, or a phase that serves no link, is an error: either w
 movement on red for good or a commanded phase without effect.
 
 A scenario of your own is a ``.sumocfg``, or a network and a demand file, resolved by
-:func:`scenario_config` into the ``.sumocfg`` SUMO starts with.
+:func:`scenario_config` into the ``.sumocfg`` SUMO starts with. A scenario of many intersections
+(:mod:`hils.scenario`) is checked against its network by :func:`check_scenario`.
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ import math
 import subprocess
 import sys
 import tempfile
+import xml.etree.ElementTree as ET
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from importlib import resources
@@ -35,13 +37,15 @@ import sumolib
 from hils.config import IntersectionConfig
 from hils.errors import UserError
 from hils.ntcip import SignalState
+from hils.scenario import Scenario
 
 TLS_ID = "C"
 NET_FILE = "four_leg.net.xml"
 ROUTE_FILE = "four_leg.rou.xml"
 SUMO_CONFIG = "four_leg.sumocfg"
-#: The shipped networks, each with its .nod/.edg/.con/.netccfg sources, demand, .sumocfg and config (.toml).
-NETWORKS = ("four_leg", "four_phase")
+#: The shipped networks, each with its .nod/.edg/.con/.netccfg sources, demand, .sumocfg and scenario
+#: (.scenario.toml, naming the config of each traffic light).
+NETWORKS = ("four_leg", "four_phase", "corridor", "grid4x4")
 
 # SUMO's connection directions: l/L (partly) left, s straight, r/R (partly) right, t turnaround.
 _TURN_OF_DIRECTION = {"l": "left", "L": "left", "s": "through", "r": "through", "R": "through"}
@@ -275,14 +279,45 @@ def scenario_config(*, sumocfg: str | Path | None = None, net: str | Path | None
     return out
 
 
+def sumocfg_net_file(sumocfg: Path) -> Path:
+    """The network a ``.sumocfg`` names (``input/net-file``), resolved as SUMO does: relative to the file."""
+    try:
+        net = ET.parse(sumocfg).find("input/net-file")
+    except (OSError, ET.ParseError) as exc:
+        raise NetworkError(f"{sumocfg}: cannot be read as a SUMO configuration ({exc})") from None
+    if net is None or not net.get("value"):
+        raise NetworkError(f"{sumocfg}: input/net-file: is missing; allowed: <net-file value=\"NETWORK.net.xml\"/>")
+    return sumocfg.parent / net.get("value", "")
+
+
+def check_scenario(scenario: Scenario) -> dict[str, PhaseMap]:
+    """The phase map of every intersection of ``scenario`` on its network, by tls id.
+
+    Refuses a scenario that names a traffic light the network lacks, or leaves one of the network's lights
+    without a controller (SUMO would run it on its own static program, outside the testbed)."""
+    net_file = sumocfg_net_file(scenario.sumo_config)
+    net = read_net(net_file)
+    lights = sorted(tls.getID() for tls in net.getTrafficLights())
+    for tls in scenario.intersections:
+        if tls not in lights:
+            raise NetworkError(f"{scenario.source}: intersections.{tls}: the network {net_file.name} has no traffic "
+                               f"light {tls!r}; allowed: {', '.join(lights)}")
+    missing = [tls for tls in lights if tls not in scenario.intersections]
+    if missing:
+        raise NetworkError(f"{scenario.source}: intersections: traffic light(s) {', '.join(missing)} of "
+                           f"{net_file.name} have no controller config; allowed: a config for every traffic light "
+                           f"of the network ({', '.join(lights)})")
+    return {tls: derive_phase_map(cfg, net, tls_id=tls) for tls, cfg in scenario.intersections.items()}
+
+
 def netconvert_binary() -> str:
     """netconvert of the installed eclipse-sumo wheel."""
     return str(Path(sumo.SUMO_HOME) / "bin" / "netconvert")
 
 
 def build_network(output: str | Path | None = None, name: str = "four_leg") -> Path:
-    """Run netconvert on the plain-XML sources of the shipped network ``name`` (``four_leg`` or
-    ``four_phase``); writes the shipped network by default."""
+    """Run netconvert on the plain-XML sources of the shipped network ``name`` (one of :data:`NETWORKS`);
+    writes the shipped network by default."""
     if name not in NETWORKS:
         raise NetworkError(f"no shipped network {name!r}; allowed: {', '.join(NETWORKS)}")
     config = data_path(f"{name}.netccfg")
@@ -299,7 +334,7 @@ def build_network(output: str | Path | None = None, name: str = "four_leg") -> P
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m hils.sumo_net",
-                                     description="Rebuild the shipped SUMO network from its plain-XML sources.")
+                                     description="Rebuild a shipped SUMO network from its plain-XML sources.")
     parser.add_argument("name", nargs="?", default="four_leg", choices=NETWORKS, help="which network (four_leg)")
     parser.add_argument("-o", "--output", type=Path, help="write here instead of hils/data/NAME.net.xml")
     args = parser.parse_args(argv)

@@ -114,9 +114,10 @@ def test_power_up_loses_the_sets_not_yet_processed_and_shows_the_start_up_state(
 
 
 def test_the_served_emulator_uses_the_same_delays(paper_config) -> None:
-    server = EmulatorServer(with_delays(paper_config, 2, 1))
-    assert server.view.controller is server.unit and server.ticker.controller is server.unit
-    assert server.unit.delays == EmulatorParams(2, 1) and server.unit.controller is server.controller
+    server = EmulatorServer([with_delays(paper_config, 2, 1)])
+    [served] = server.controllers
+    assert served.view.controller is served.unit and server.ticker.controllers == (served.unit,)
+    assert served.unit.delays == EmulatorParams(2, 1) and served.unit.controller is served.controller
 
 
 # --- config ----------------------------------------------------------------------------------------

@@ -14,7 +14,7 @@ from hils.config import IntersectionConfig, from_dict, load
 from hils.ntcip import SignalState
 from hils.sumo import SumoError, SumoSimulation, time_bare_sumo
 from hils.sumo_net import (
-    NET_FILE,
+    NETWORKS,
     NetworkError,
     build_network,
     compass_side,
@@ -140,13 +140,14 @@ def test_compass_side_of_an_approach() -> None:
         compass_side(100.0, 95.0, "x")
 
 
-def test_shipped_network_is_what_netconvert_makes_of_the_sources(tmp_path: Path) -> None:
+@pytest.mark.parametrize("name", NETWORKS)
+def test_shipped_network_is_what_netconvert_makes_of_the_sources(tmp_path: Path, name: str) -> None:
     def body(text: str) -> str:
         # the leading comment holds the generation date and the output path
         return re.sub(r"\A.*?-->", "", text, count=1, flags=re.S)
 
-    rebuilt = build_network(tmp_path / "rebuilt.net.xml")
-    assert body(rebuilt.read_text()) == body(data_path(NET_FILE).read_text())
+    rebuilt = build_network(tmp_path / "rebuilt.net.xml", name)
+    assert body(rebuilt.read_text()) == body(data_path(f"{name}.net.xml").read_text())
 
 
 # --- the simulation -----------------------------------------------------------------------------

@@ -1,0 +1,109 @@
+"""Scenarios: one SUMO simulation and the controller config of each of its traffic lights.
+
+A scenario file (``NAME.scenario.toml``) names the ``.sumocfg`` SUMO starts with and, under
+``[intersections]``, each traffic light of the network (its SUMO tls id) with the intersection config
+its controller runs; several lights may share one config file. Paths are relative to the scenario file::
+
+    name = "corridor: four signalised intersections on an arterial"
+    sumocfg = "corridor.sumocfg"
+
+    [intersections]
+    J1 = "corridor_arterial.toml"
+    J2 = "corridor_arterial.toml"
+
+The shipped scenarios (:data:`SCENARIOS`) live in ``hils/data``; the single-intersection ones are
+scenarios of one light, "C". This module belongs to the shared layer (it reads files and imports only
+the config and the error base class), so the emulator serves a scenario's controllers without loading
+the middleware or SUMO; :func:`hils.sumo_net.check_scenario` checks a scenario against its network.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from collections.abc import Mapping
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any
+
+from hils.config import ConfigError, IntersectionConfig, load
+
+#: The shipped scenarios, each ``hils/data/NAME.scenario.toml``.
+SCENARIOS = ("four_leg", "four_phase", "corridor", "grid4x4")
+SUFFIX = ".scenario.toml"
+_FIELDS = ("name", "sumocfg", "intersections")
+_ALLOWED = f"a shipped scenario ({', '.join(SCENARIOS)}) or a path to a {SUFFIX} file"
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A SUMO simulation and, per traffic light (SUMO tls id, in the file's order), its controller config."""
+
+    name: str
+    source: str
+    sumo_config: Path
+    intersections: Mapping[str, IntersectionConfig]
+
+    @property
+    def tls_ids(self) -> tuple[str, ...]:
+        return tuple(self.intersections)
+
+
+def scenario_path(name_or_path: str | Path) -> Path:
+    """The file of a shipped scenario's name, or the path given."""
+    if str(name_or_path) in SCENARIOS:
+        return Path(str(resources.files("hils.data") / f"{name_or_path}{SUFFIX}"))
+    path = Path(name_or_path)
+    # A bare word is a misspelt name rather than a file in the working directory.
+    if isinstance(name_or_path, str) and path.suffix != ".toml" and len(path.parts) == 1:
+        raise ConfigError(str(name_or_path), "<scenario>", f"no shipped scenario of that name; allowed: {_ALLOWED}")
+    return path
+
+
+def load_scenario(name_or_path: str | Path) -> Scenario:
+    """Load a shipped scenario by name, or a ``.scenario.toml`` file, with the config of every intersection."""
+    path = scenario_path(name_or_path)
+    source = str(path)
+    try:
+        raw = tomllib.loads(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise ConfigError(source, "<file>", f"cannot be read ({exc.strerror}); allowed: {_ALLOWED}") from None
+    except UnicodeDecodeError:
+        raise ConfigError(source, "<file>", "is not UTF-8 text; allowed: a TOML file") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(source, "<file>", f"is not valid TOML ({exc})") from None
+    for key in raw:
+        if key not in _FIELDS:
+            raise ConfigError(source, key, f"unknown field; allowed: {', '.join(_FIELDS)}")
+    name = raw.get("name", path.name.removesuffix(SUFFIX))
+    if not isinstance(name, str):
+        raise ConfigError(source, "name", f"is {name!r}; allowed: a string")
+    sumocfg = _relative_file(raw.get("sumocfg"), path, source, "sumocfg", "a SUMO configuration (.sumocfg)")
+    return Scenario(name, source, sumocfg, MappingProxyType(_intersections(raw.get("intersections"), path, source)))
+
+
+def _relative_file(value: Any, scenario: Path, source: str, field_name: str, what: str) -> Path:
+    if not isinstance(value, str) or not value:
+        raise ConfigError(source, field_name, f"is {value!r}; allowed: the path of {what}, relative to this file")
+    path = scenario.parent / value
+    if not path.is_file():
+        raise ConfigError(source, field_name, f"{path} does not exist; allowed: the path of {what}, "
+                                              "relative to this file")
+    return path
+
+
+def _intersections(raw: Any, scenario: Path, source: str) -> dict[str, IntersectionConfig]:
+    if not isinstance(raw, dict) or not raw:
+        raise ConfigError(source, "intersections", "is required: a table of traffic light id = intersection config "
+                                                   'file, e.g. J1 = "arterial.toml"')
+    loaded: dict[Path, IntersectionConfig] = {}
+    out = {}
+    for tls, value in raw.items():
+        path = _relative_file(value, scenario, source, f"intersections.{tls}", "an intersection config (.toml)")
+        # Lights that share a file share one (immutable) config.
+        key = path.resolve()
+        if key not in loaded:
+            loaded[key] = load(path)
+        out[tls] = loaded[key]
+    return out
