@@ -155,6 +155,9 @@ class _Recording:
     def traffic_state(self) -> Any:
         return self.sim.traffic_state()
 
+    def queues(self) -> Any:
+        return self.sim.queues()
+
 
 def _replay(cfg: Any, seed: int, duration: float, changes: list[tuple[int, str]]) -> tuple[float, Any]:
     """Bare libsumo stepping the same scenario and seed, showing the recorded state strings at the same

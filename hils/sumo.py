@@ -347,6 +347,11 @@ class SumoSimulation:
         return frozenset(lane for lane in self._incoming
                          if any(position(v) >= length[lane] - zone for v in vehicles(lane)))
 
+    def queues(self) -> dict[int, int]:
+        """Halting vehicles on the incoming lanes of each phase's movement (``upstream_queue`` of the traffic
+        state, read alone: the queue plot samples it every few seconds)."""
+        return {p: sum(map(_lane_halting, inc)) for p, inc, _ in self._movement_lanes}
+
     def traffic_state(self) -> TrafficState:
         names = self._lanes
         lanes = dict(zip(names, map(LaneState, map(_lane_halting, names), map(_lane_waiting, names),

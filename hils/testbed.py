@@ -38,7 +38,7 @@ import logging
 import math
 import signal
 import time
-from collections.abc import Callable, Generator
+from collections.abc import Callable, Generator, Mapping
 from importlib.metadata import entry_points
 from pathlib import Path
 from types import TracebackType
@@ -83,6 +83,8 @@ class Simulation(Protocol):
 
     def traffic_state(self) -> Any: ...
 
+    def queues(self) -> Mapping[int, int]: ...
+
 
 class NoSimulation:
     """Stands in for SUMO in middleware-only runs: steps cost nothing and there is no traffic."""
@@ -95,6 +97,9 @@ class NoSimulation:
 
     def traffic_state(self) -> None:
         return None
+
+    def queues(self) -> Mapping[int, int]:
+        return {}
 
 
 class RunInterrupted(Exception):
@@ -588,11 +593,10 @@ class Testbed:
         phases = self.config.phases
         while not self.ended:
             yield self._env.timeout(period)
-            traffic = self.simulation.traffic_state()
             per_approach: dict[str, int] = {}
-            for p, m in traffic.movements.items():
+            for p, queue in self.simulation.queues().items():
                 name = phases[p].approach or f"phase {p}"
-                per_approach[name] = per_approach.get(name, 0) + m.upstream_queue
+                per_approach[name] = per_approach.get(name, 0) + queue
             self.traffic_samples.append((self._env.now, per_approach))
             self.events.emit(Kind.QUEUES, queues=per_approach)
 

@@ -53,6 +53,9 @@ class Watched:
     def traffic_state(self):
         return self.sim.traffic_state()
 
+    def queues(self):
+        return self.sim.queues()
+
 
 def test_sumo_shows_the_controllers_state_and_nobody_crosses_on_red():
     sim = SumoSimulation(CFG, seed=5, end=400.0)
