@@ -8,7 +8,9 @@ Schema of a record (every key always present, extra keys by kind)::
 - ``t``: simulation time in seconds (the SimPy clock, virtual or wall-mapped);
 - ``wall_ns``: ``time.monotonic_ns()`` when the record was made; the only field
   that differs between two runs of the same seed;
-- ``kind``: one of :class:`Kind`; the other keys are documented there.
+- ``kind``: one of :class:`Kind`; the other keys are documented there;
+- ``intersection``: in a run of several controllers, the traffic light (SUMO tls id) whose
+  controller the record is about; run-wide records (``run_started``, ``run_ended``) have none.
 
 Records are written through (flushed) as they are made, so a run that dies
 keeps every event logged before it.
@@ -122,3 +124,23 @@ def read(path: str | Path) -> Iterator[dict[str, Any]]:
                 yield json.loads(line)
             except json.JSONDecodeError:
                 return
+
+
+class TaggedLog:
+    """One controller's view of a run's log: every record it emits names its intersection.
+
+    In a run of several controllers each middleware, poller and detector feed writes through its own
+    view; the records land in the one log, in one sequence, each with ``intersection``."""
+
+    def __init__(self, log: EventLog, intersection: str) -> None:
+        self.log = log
+        self.intersection = intersection
+
+    def bind(self, clock) -> None:
+        self.log.bind(clock)
+
+    def emit(self, kind: Kind, **fields: Any) -> dict[str, Any]:
+        return self.log.emit(kind, **fields, intersection=self.intersection)
+
+    def of(self, *kinds: Kind) -> list[dict[str, Any]]:
+        return [r for r in self.log.of(*kinds) if r.get("intersection") == self.intersection]

@@ -165,6 +165,11 @@ class Middleware:
         """Read the controller, then start polling; ``ready`` fires when done."""
         return self.env.process(self._startup())
 
+    def check(self, value: Any) -> None:
+        """Raise the :class:`hils.actions.ActionError` that :meth:`submit` would refuse ``value`` with, logging
+        and sending nothing (a run of several controllers checks every action before it submits any)."""
+        self.converter.convert(value, self.manager.position)
+
     def submit(self, value: Any) -> Submission:
         """An agent's action value, converted and handed to the manager."""
         self._actions += 1

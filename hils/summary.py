@@ -25,11 +25,15 @@ class Tally:
     KEPT = frozenset({Kind.RUN_STARTED, Kind.RUN_ENDED, Kind.ACTION_RECEIVED, Kind.COMMAND_DISPATCHED,
                       Kind.TRANSITION_VERIFIED, Kind.TIMEOUT_ENTERED, Kind.DETECTORS, Kind.POLL})
 
-    def __init__(self) -> None:
+    def __init__(self, intersection: str | None = None) -> None:
+        self.intersection = intersection  # in a run of several controllers: the one this tally is of
         self.kinds: Counter[str] = Counter()
         self.records: list[dict[str, Any]] = []
 
     def __call__(self, record: dict[str, Any]) -> None:
+        where = record.get("intersection")
+        if where is not None and self.intersection is not None and where != self.intersection:
+            return
         kind = record["kind"]
         self.kinds[kind] += 1
         if kind in self.KEPT:
@@ -68,7 +72,7 @@ def summarize(tally: Tally, config: IntersectionConfig, *, traffic: Any = None,
         "hold_s": Stats.of(holds).as_dict(),
         "timeouts": dict(timeouts),
         "recoveries": kinds[Kind.RECOVERED],
-        "polls": dict(ended[-1].get("polls", {})) if ended else {},
+        "polls": _polls(ended[-1] if ended else {}, tally.intersection),
         "drifted_steps": kinds[Kind.DRIFT],
         "internal_latency_ms": latency,
     }
@@ -77,6 +81,14 @@ def summarize(tally: Tally, config: IntersectionConfig, *, traffic: Any = None,
     if traffic is not None:
         out["traffic"] = asdict(traffic) if is_dataclass(traffic) else traffic
     return out
+
+
+def _polls(ended: Mapping[str, Any], intersection: str | None) -> dict[str, int]:
+    """The poll counts of ``run_ended``: its own in a run of one controller, the intersection's in one of several."""
+    polls = ended.get("polls") or {}
+    if intersection is not None and intersection in polls:
+        polls = polls[intersection]
+    return dict(polls)
 
 
 def render(summary: Mapping[str, Any]) -> str:

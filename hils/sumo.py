@@ -140,6 +140,78 @@ _vehicle_time_loss = libsumo._libsumo.vehicle_getTimeLoss
 _active: SumoSimulation | None = None
 
 
+class Light:
+    """One traffic light of a running simulation: its phase map, what it shows, and the lanes it serves.
+
+    ``prefix`` names its approaches in the run's summary: nothing in a simulation of one light (``west``),
+    its id in one of several (``J2 north``)."""
+
+    def __init__(self, tls_id: str, config: IntersectionConfig, phase_map: PhaseMap, *, several: bool) -> None:
+        self.tls_id = tls_id
+        self.config = config
+        self.phase_map = phase_map
+        self.prefix = f"{tls_id} " if several else ""
+        self._state_strings: dict[SignalState, str] = {}
+        self._applied_state: SignalState | None = None
+        self._applied = "r" * len(phase_map.link_phases)
+        libsumo.trafficlight.setRedYellowGreenState(tls_id, self._applied)
+        self.approach_lanes = tuple((self.prefix + approach, lanes)
+                                    for approach, lanes in phase_map.approach_lanes.items())
+        self._movement_lanes = tuple((p, phase_map.incoming_lanes(p), phase_map.outgoing_lanes(p))
+                                     for p in phase_map.phases)
+        self._lanes = tuple(dict.fromkeys(lane for _, inc, out in self._movement_lanes for lane in (*inc, *out)))
+        self._lane_length = {lane: libsumo.lane.getLength(lane) for lane in self._lanes}
+        self._incoming = tuple(dict.fromkeys(lane for _, inc, _ in self._movement_lanes for lane in inc))
+
+    def apply(self, state: SignalState) -> bool:
+        """Show ``state`` on the traffic light; True when SUMO's state had to change."""
+        if state is self._applied_state or state == self._applied_state:
+            return False
+        self._applied_state = state
+        text = self._state_strings.get(state)
+        if text is None:
+            text = self._state_strings[state] = self.phase_map.state_string(state)
+        if text == self._applied:
+            return False
+        libsumo.trafficlight.setRedYellowGreenState(self.tls_id, text)
+        self._applied = text
+        return True
+
+    def release(self) -> None:
+        """Forget what was shown: SUMO's own program runs the light from now on."""
+        self._applied_state = None
+        self._applied = ""
+
+    def indications(self) -> str:
+        """SUMO's current per-link state string of this light."""
+        return libsumo.trafficlight.getRedYellowGreenState(self.tls_id)
+
+    def present(self, zone: float = PRESENCE_ZONE_M) -> frozenset[str]:
+        """Incoming lanes with a vehicle within ``zone`` m of the stop bar: the stop-bar presence loops of a
+        cabinet (a vehicle's front is past the zone's start)."""
+        position, vehicles, length = libsumo.vehicle.getLanePosition, libsumo.lane.getLastStepVehicleIDs, \
+            self._lane_length
+        return frozenset(lane for lane in self._incoming
+                         if any(position(v) >= length[lane] - zone for v in vehicles(lane)))
+
+    def queues(self) -> dict[int, int]:
+        """Halting vehicles on the incoming lanes of each phase's movement (``upstream_queue`` of the traffic
+        state, read alone: the queue plot samples it every few seconds)."""
+        return {p: sum(map(_lane_halting, inc)) for p, inc, _ in self._movement_lanes}
+
+    def traffic_state(self) -> TrafficState:
+        names = self._lanes
+        lanes = dict(zip(names, map(LaneState, map(_lane_halting, names), map(_lane_waiting, names),
+                                    map(_lane_vehicles, names)), strict=True))
+        movements = {p: MovementState(p, sum(lanes[n].halting for n in inc), sum(lanes[n].halting for n in out))
+                     for p, inc, out in self._movement_lanes}
+        departed = _stat("stats.vehicles.inserted")
+        return TrafficState(libsumo.simulation.getTime(), lanes, movements, int(departed),
+                            int(departed - _stat("stats.vehicles.running")))
+
+
+
+
 class SumoSimulation:
     """One libsumo run of a network whose traffic light follows :class:`SignalState` s.
 
@@ -153,26 +225,22 @@ class SumoSimulation:
     def __init__(self, config: IntersectionConfig | None = None, *, seed: int = 0, end: float | None = None,
                  step_length: float | None = None, sumo_config: str | Path | None = None,
                  time_to_teleport: float = -1.0, quiet: bool = True, queue_sample_period: float = 1.0,
-                 tls_id: str = TLS_ID, extra_args: Sequence[str] = ()) -> None:
-        self.config = config or load()
+                 tls_id: str = TLS_ID, lights: Mapping[str, IntersectionConfig] | None = None,
+                 extra_args: Sequence[str] = ()) -> None:
+        self.configs: dict[str, IntersectionConfig] = dict(lights) if lights else {tls_id: config or load()}
+        self.config = next(iter(self.configs.values()))
+        self.lights: dict[str, Light] = {}
         self.seed = seed
         self.end = end
         self.step_length = step_length if step_length is not None else self.config.middleware.sumo_step
         self.sumo_config = Path(sumo_config) if sumo_config is not None else data_path(SUMO_CONFIG)
         self.time_to_teleport = time_to_teleport
         self.quiet = quiet
-        self.tls_id = tls_id
         self.extra_args = tuple(extra_args)
         self._sample_every = max(1, round(queue_sample_period / self.step_length))
-        self._phase_map: PhaseMap | None = None
-        self._state_strings: dict[SignalState, str] = {}
-        self._applied_state: SignalState | None = None
-        self._applied: str = ""
         self._until_sample = self._sample_every
-        self._approach_lanes: tuple[tuple[str, tuple[str, ...]], ...] = ()
+        self._approach_lanes: tuple[tuple[str, tuple[str, ...]], ...] = ()  # every light's, named as Light says
         self._max_queue: dict[str, int] = {}
-        self._lanes: tuple[str, ...] = ()
-        self._movement_lanes: tuple[tuple[int, tuple[str, ...], tuple[str, ...]], ...] = ()
         self._approach_of_edge: dict[str, str] = {}
         self._lane_storage: dict[str, tuple[tuple[str, int], ...]] = {}
         self._storage: tuple[tuple[str, tuple[str, ...], tuple[int, ...]], ...] = ()  # the same, lanes apart
@@ -218,20 +286,21 @@ class SumoSimulation:
             raise
 
     def _setup(self) -> None:
-        tls = self.tls_id
-        if tls not in libsumo.trafficlight.getIDList():
-            raise SumoError(f"the network has no traffic light {tls!r}")
+        present = libsumo.trafficlight.getIDList()
+        missing = [tls for tls in self.configs if tls not in present]
+        if missing:
+            raise SumoError(f"the network has no traffic light {', '.join(map(repr, missing))}; it has "
+                            f"{', '.join(map(repr, present)) or 'none'}")
         net = read_net(libsumo.simulation.getOption("net-file"))
-        pm = derive_phase_map(self.config, net, libsumo.trafficlight.getControlledLinks(tls), tls)
-        self._phase_map = pm
-        self._state_strings.clear()
-        self._applied_state = None
-        self._applied = "r" * len(pm.link_phases)
-        libsumo.trafficlight.setRedYellowGreenState(tls, self._applied)
+        several = len(self.configs) > 1
+        self.lights = {tls: Light(tls, cfg, derive_phase_map(cfg, net, libsumo.trafficlight.getControlledLinks(tls),
+                                                             tls), several=several)
+                       for tls, cfg in self.configs.items()}
         self._until_sample = self._sample_every
-        self._approach_lanes = tuple(pm.approach_lanes.items())
+        self._approach_lanes = tuple(item for light in self.lights.values() for item in light.approach_lanes)
         self._max_queue = {approach: 0 for approach, _ in self._approach_lanes}
-        self._approach_of_edge = {link.from_lane.rsplit("_", 1)[0]: link.approach for link in pm.links}
+        self._approach_of_edge = {link.from_lane.rsplit("_", 1)[0]: light.prefix + link.approach
+                                  for light in self.lights.values() for link in light.phase_map.links}
         spacing = _vehicle_spacing()
         self._lane_storage = {approach: tuple((lane, int(libsumo.lane.getLength(lane) // spacing)) for lane in lanes)
                               for approach, lanes in self._approach_lanes}
@@ -240,11 +309,6 @@ class SumoSimulation:
         self._spill_minutes = {approach: set() for approach, _ in self._approach_lanes}
         self._seen, self._time_loss = {}, {}
         self._finished = {approach: [] for approach, _ in self._approach_lanes}
-        self._movement_lanes = tuple((p, pm.incoming_lanes(p), pm.outgoing_lanes(p)) for p in pm.phases)
-        lanes = [lane for _, inc, out in self._movement_lanes for lane in (*inc, *out)]
-        self._lanes = tuple(dict.fromkeys(lanes))
-        self._lane_length = {lane: libsumo.lane.getLength(lane) for lane in self._lanes}
-        self._incoming = tuple(dict.fromkeys(lane for _, inc, _ in self._movement_lanes for lane in inc))
 
     def close(self) -> None:
         """End the simulation (idempotent); SUMO's end-of-run report is swallowed when quiet."""
@@ -270,10 +334,22 @@ class SumoSimulation:
     # --- hot path ------------------------------------------------------------------------
 
     @property
-    def phase_map(self) -> PhaseMap:
-        if self._phase_map is None:
+    def light(self) -> Light:
+        """The simulation's traffic light, when it has one (a network of several: :attr:`lights`)."""
+        if not self.lights:
             raise SumoError("the simulation has not been started")
-        return self._phase_map
+        if len(self.lights) > 1:
+            raise SumoError(f"the simulation has {len(self.lights)} traffic lights ({', '.join(self.lights)}): "
+                            "name one (simulation.lights[TLS])")
+        return next(iter(self.lights.values()))
+
+    @property
+    def tls_id(self) -> str:
+        return next(iter(self.configs))
+
+    @property
+    def phase_map(self) -> PhaseMap:
+        return self.light.phase_map
 
     @property
     def time(self) -> float:
@@ -281,17 +357,7 @@ class SumoSimulation:
 
     def apply(self, state: SignalState) -> bool:
         """Show ``state`` on the traffic light; True when SUMO's state had to change."""
-        if state is self._applied_state or state == self._applied_state:
-            return False
-        self._applied_state = state
-        text = self._state_strings.get(state)
-        if text is None:
-            text = self._state_strings[state] = self.phase_map.state_string(state)
-        if text == self._applied:
-            return False
-        libsumo.trafficlight.setRedYellowGreenState(self.tls_id, text)
-        self._applied = text
-        return True
+        return self.light.apply(state)
 
     def step(self) -> float:
         """Advance one SUMO step; returns the wall seconds it took."""
@@ -336,31 +402,19 @@ class SumoSimulation:
     # --- observation ---------------------------------------------------------------------
 
     def indications(self) -> str:
-        """SUMO's current per-link state string."""
-        return libsumo.trafficlight.getRedYellowGreenState(self.tls_id)
+        """SUMO's current per-link state string of the light."""
+        return self.light.indications()
 
     def present(self, zone: float = PRESENCE_ZONE_M) -> frozenset[str]:
-        """Incoming lanes with a vehicle within ``zone`` m of the stop bar: the stop-bar presence loops of a
-        cabinet (a vehicle's front is past the zone's start)."""
-        position, vehicles, length = libsumo.vehicle.getLanePosition, libsumo.lane.getLastStepVehicleIDs, \
-            self._lane_length
-        return frozenset(lane for lane in self._incoming
-                         if any(position(v) >= length[lane] - zone for v in vehicles(lane)))
+        """The light's incoming lanes with a vehicle within ``zone`` m of the stop bar (:meth:`Light.present`)."""
+        return self.light.present(zone)
 
     def queues(self) -> dict[int, int]:
-        """Halting vehicles on the incoming lanes of each phase's movement (``upstream_queue`` of the traffic
-        state, read alone: the queue plot samples it every few seconds)."""
-        return {p: sum(map(_lane_halting, inc)) for p, inc, _ in self._movement_lanes}
+        """Halting vehicles upstream of each of the light's phases (:meth:`Light.queues`)."""
+        return self.light.queues()
 
     def traffic_state(self) -> TrafficState:
-        names = self._lanes
-        lanes = dict(zip(names, map(LaneState, map(_lane_halting, names), map(_lane_waiting, names),
-                                    map(_lane_vehicles, names)), strict=True))
-        movements = {p: MovementState(p, sum(lanes[n].halting for n in inc), sum(lanes[n].halting for n in out))
-                     for p, inc, out in self._movement_lanes}
-        departed = _stat("stats.vehicles.inserted")
-        return TrafficState(self.time, lanes, movements, int(departed),
-                            int(departed - _stat("stats.vehicles.running")))
+        return self.light.traffic_state()
 
     def summary(self) -> RunSummary:
         """Every vehicle counted: arrived, running, waiting to enter, with delays so far (see
@@ -409,14 +463,13 @@ class SumoSimulation:
 
     def run_fixed_time(self) -> None:
         """Hand the light to SUMO itself, running :func:`fixed_time_states` as a static program."""
-        pm = self.phase_map
-        phases = [libsumo.trafficlight.Phase(duration, pm.state_string(state))
+        light = self.light
+        phases = [libsumo.trafficlight.Phase(duration, light.phase_map.state_string(state))
                   for duration, state in fixed_time_states(self.config)]
         logic = libsumo.trafficlight.Logic("hils-fixed", 0, 0, phases)
-        libsumo.trafficlight.setProgramLogic(self.tls_id, logic)
-        libsumo.trafficlight.setProgram(self.tls_id, "hils-fixed")
-        self._applied_state = None
-        self._applied = ""
+        libsumo.trafficlight.setProgramLogic(light.tls_id, logic)
+        libsumo.trafficlight.setProgram(light.tls_id, "hils-fixed")
+        light.release()
 
 
 def fixed_time_states(config: IntersectionConfig) -> list[tuple[float, SignalState]]:

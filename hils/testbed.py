@@ -52,13 +52,16 @@ from hils.agents import Agent, Observation, load_agent
 from hils.config import IntersectionConfig
 from hils.detectors import DetectorFeed
 from hils.errors import UserError
-from hils.events import EventLog, Kind
+from hils.events import EventLog, Kind, TaggedLog
 from hils.events import read as read_events
+from hils.junction import Junction
 from hils.manager import State
-from hils.middleware import Middleware
+from hils.middleware import Middleware, Submission
 from hils.ntcip import SignalState
 from hils.preflight import ControllerCheckFailed
+from hils.scenario import Scenario, load_scenario
 from hils.summary import Tally
+from hils.sumo_net import TLS_ID
 from hils.transport import LocalTransport, Transport
 
 log = logging.getLogger(__name__)
@@ -118,6 +121,10 @@ class NotStarted(RuntimeError):
     """A Testbed used before :meth:`Testbed.reset` or after :meth:`Testbed.close`."""
 
 
+class SeveralControllers(UserError, ValueError):
+    """A run of several controllers asked for the one controller (name a traffic light instead)."""
+
+
 def modeled_cost(step: Callable[[], Any]) -> float:
     """Virtual time: a step costs no simulated time (faults may model otherwise)."""
     step()
@@ -160,34 +167,52 @@ class RunSpec:
 
 class Testbed:
     __test__ = False  # pytest: a class named Test* here is not a test
-    """One intersection's run: controller (virtual or real), middleware, optional SUMO, event log.
+    """A run of one intersection's controller, or of a scenario's several: controllers (virtual or real),
+    middleware, optional SUMO, event log.
 
-    ``config``: an :class:`IntersectionConfig`, a TOML path, or None for the shipped four-leg.
-    ``action_type``: selection, switch or duration. ``target``: ``"virtual"``, an ``snmp://`` URL or a
-    target factory. ``sumo``: True to run the shipped SUMO scenario (started at each reset), or a
+    ``config``: an :class:`IntersectionConfig`, a TOML path, or None for the shipped four-leg; or, instead,
+    ``scenario``: a shipped scenario's name (``corridor``, ``grid4x4``), a ``.scenario.toml`` path or a
+    :class:`hils.scenario.Scenario`, one controller per traffic light, all in this one run (:attr:`junctions`).
+    ``action_type``: selection, switch or duration. ``target``: ``"virtual"``, an ``snmp://`` URL or a target
+    factory; with several controllers, a mapping from each traffic light to its own (a scenario at wall clock
+    needs a URL for every light). ``sumo``: True to run the SUMO scenario (started at each reset), or a
     simulation object the caller started; ``sumo_config``: the ``.sumocfg`` SUMO starts with (default: the
-    shipped four-leg scenario). ``seed``: every virtual-time run is reproducible from it.
+    scenario's, or the shipped four-leg). ``seed``: every virtual-time run is reproducible from it.
     ``agent``: what :meth:`run` uses when given none (a built-in name, ``package.module:Class`` or an
-    instance). ``duration``: simulated seconds after which the run is done (None: no end).
-    ``log_path``: the JSON Lines event log (None: kept in memory only). ``recover_after``: seconds in
-    TIMEOUT before recover() is called (None: never). ``on_reset(testbed, target)`` runs after
-    assembly, before anything starts: the fault harness wraps parts of the run there.
+    instance; with several controllers each gets its own of a named agent). ``duration``: simulated seconds
+    after which the run is done (None: no end). ``log_path``: the JSON Lines event log (None: kept in memory
+    only). ``recover_after``: seconds in TIMEOUT before recover() is called (None: never).
+    ``on_reset(testbed, target)`` runs after assembly, before anything starts: the fault harness wraps parts
+    of the run there (``target``: the single controller's, or None with several).
+
+    With one controller the Testbed is that controller's: :meth:`step`, :meth:`observe`, :attr:`middleware`,
+    :attr:`config`. With several, :meth:`step_all` and :meth:`observe_all` take and give one value per
+    traffic light, and :attr:`junctions` holds each controller's parts.
     """
 
     def __init__(self, config: IntersectionConfig | str | Path | None = None, *,
-                 action_type: ActionType | str = ActionType.SELECTION, target: str | TargetFactory = VIRTUAL,
+                 action_type: ActionType | str = ActionType.SELECTION,
+                 target: str | TargetFactory | Mapping[str, str | TargetFactory] = VIRTUAL,
                  sumo: bool | Simulation = False, seed: int = 0, agent: str | Agent | None = None,
                  duration: float | None = None, log_path: str | Path | None = None,
                  recover_after: float | None = 5.0,
                  on_reset: Callable[[Testbed, Any], None] | None = None,
-                 sumo_config: str | Path | None = None, detectors: bool | None = None) -> None:
-        self.config = config if isinstance(config, IntersectionConfig) else config_mod.load(config)
+                 sumo_config: str | Path | None = None, detectors: bool | None = None,
+                 scenario: str | Path | Scenario | None = None) -> None:
+        if scenario is not None and config is not None:
+            raise ValueError("give a config (one intersection) or a scenario (its intersections), not both")
+        self.scenario = _scenario(scenario)
+        if self.scenario is not None:
+            self.configs = dict(self.scenario.intersections)
+            sumo_config = sumo_config if sumo_config is not None else self.scenario.sumo_config
+        else:
+            cfg = config if isinstance(config, IntersectionConfig) else config_mod.load(config)
+            self.configs = {TLS_ID: cfg}
+        self.config = next(iter(self.configs.values()))
         self.action_type = ActionType(action_type)
-        if isinstance(target, str) and target != VIRTUAL:
-            _check_target(target)
+        self._targets = _target_specs(target, self.configs)
         if duration is not None and not duration > 0:
             raise ValueError(f"duration must be positive seconds or None, got {duration!r}")
-        self._target_spec = target
         self._sumo_spec = sumo
         self.sumo_config = sumo_config
         self.seed = seed
@@ -202,18 +227,14 @@ class Testbed:
                             math.inf if duration is None else duration, seed, self.log_path, recover_after,
                             sumo=bool(sumo))
         self.env: simpy.Environment | None = None
-        self.middleware: Middleware | None = None
+        self.junctions: dict[str, Junction] = {}
         self.events: EventLog | None = None
         self.tally = Tally()
-        self.target: Any = None
-        self.transport: Transport | None = None
         self.simulation: Simulation = NoSimulation()
-        self.agent: Agent | None = None
         self.step_cost: StepCost = modeled_cost
         self.ended = False
         self.end_reason: str | None = None
         self.traffic: Any = None  # the simulation's end-of-run summary, once finished
-        self.traffic_samples: list[tuple[float, dict[str, int]]] = []
         self.wall_s = 0.0
         self._driver: Any = None
         self._owns_sumo = False
@@ -224,7 +245,46 @@ class Testbed:
     @property
     def mode(self) -> str:
         """``virtual`` or ``wall-clock``."""
-        return "wall-clock" if isinstance(self._target_spec, str) and self._target_spec != VIRTUAL else VIRTUAL
+        return "wall-clock" if any(isinstance(t, str) and t != VIRTUAL for t in self._targets.values()) else VIRTUAL
+
+    @property
+    def several(self) -> bool:
+        """True for a run of more than one controller (a corridor, a grid)."""
+        return len(self.configs) > 1
+
+    @property
+    def junction(self) -> Junction:
+        """The run's one controller (a run of several: :attr:`junctions`)."""
+        if self.several:
+            raise SeveralControllers(f"this run has {len(self.configs)} controllers ({', '.join(self.configs)}): "
+                                     "use testbed.junctions[TLS], step_all() and observe_all()")
+        if not self.junctions:
+            raise NotStarted("the Testbed is not started: call reset() first")
+        return next(iter(self.junctions.values()))
+
+    @property
+    def middleware(self) -> Middleware | None:
+        return self.junction.middleware if self.junctions else None
+
+    @property
+    def transport(self) -> Transport | None:
+        return self.junction.transport if self.junctions else None
+
+    @property
+    def target(self) -> Any:
+        return self.junction.target if self.junctions else None
+
+    @property
+    def agent(self) -> Agent | None:
+        return self.junction.agent if self.junctions else None
+
+    @agent.setter
+    def agent(self, agent: Agent | None) -> None:
+        self.junction.agent = agent
+
+    @property
+    def traffic_samples(self) -> list[tuple[float, dict[str, int]]]:
+        return self.junction.traffic_samples if self.junctions else []
 
     @property
     def now(self) -> float:
@@ -261,8 +321,9 @@ class Testbed:
 
     # --- life cycle -----------------------------------------------------------------------------
 
-    def reset(self, seed: int | None = None) -> Observation:
-        """Start (or restart, with a new seed) the run; returns the first observation."""
+    def reset(self, seed: int | None = None) -> Observation | dict[str, Observation]:
+        """Start (or restart, with a new seed) the run; returns the first observation (one per traffic light
+        in a run of several)."""
         if self.env is not None:
             self.close()
         if seed is not None:
@@ -270,55 +331,40 @@ class Testbed:
             self.spec = dataclasses.replace(self.spec, seed=seed)
         self._wall_t0 = time.perf_counter()
         self.ended, self.end_reason, self.traffic = False, None, None
-        self.traffic_samples = []
         env = self.env = simpy.Environment()
-        self._assemble_target(env)
+        self._assemble_clock(env)
         # A run that writes its log to a file does not also keep it in memory: a long run's records
         # would grow the heap that every full garbage collection walks, in the middle of the hot path.
         self.events = EventLog(self.log_path, keep=self.log_path is None)
         self.tally = Tally()  # the summary's figures, kept as the run goes: its end re-reads nothing
         self.events.subscribe(self.tally)
-        where, community = ("the in-process emulator", None) if self.mode == VIRTUAL else (
-            f"{self.target.host}:{self.target.port}", getattr(self.target, "community", None))
-        self.middleware = Middleware(env, self.transport, self.config, self.action_type, self.events, where=where,
-                                     community=community)
+        self.junctions = {tls: self._assemble_junction(env, tls, index) for index, tls in enumerate(self.configs)}
         self._assemble_simulation()
-        self.agent = self._load_agent()
+        for j in self.junctions.values():
+            j.agent = self._load_agent(j.config)
         if self.on_reset is not None:
-            self.on_reset(self, self.target)
+            self.on_reset(self, None if self.several else self.junction.target)
         self._start()
-        self._advance(None, self.middleware.ready)
-        self._check_controller()
-        return self.observe()
+        self._advance(None, *(j.middleware.ready for j in self.junctions.values()), every=True)
+        self._check_controllers()
+        return self.observe_all() if self.several else self.observe()
 
-    def _check_controller(self) -> None:
+    def _check_controllers(self) -> None:
         """The start-up checks: refuse a controller unfit for a run (one line each), warn about the rest."""
-        mw = self.middleware
-        refusals = ([mw.startup_error] if mw.startup_error else []) + list(mw.verdict.refusals)
-        for line in mw.verdict.warnings:
-            log.warning("%s", line)
+        refusals = [(j.id, line) for j in self.junctions.values() for line in j.refusals()]
         if refusals:
             self.finish("error")
-            raise ControllerCheckFailed("; ".join(refusals))
+            raise ControllerCheckFailed("; ".join(f"{tls}: {line}" if self.several else line
+                                                  for tls, line in refusals))
 
-    def _assemble_target(self, env: simpy.Environment) -> None:
-        spec = self._target_spec
+    def _assemble_clock(self, env: simpy.Environment) -> None:
         if self.mode == VIRTUAL:
-            factory = virtual_target_factory() if spec == VIRTUAL else spec
-            target = self.target = factory(env, self.config, seed=self.seed)
-            # A target brings its transport, or an object surface that an in-process transport reaches.
-            self.transport = getattr(target, "transport", None) or LocalTransport(
-                env, target.surface, tau_udp=self.config.middleware.tau_udp, get_latency=target.get_latency,
-                set_latency=target.set_latency, seed=self.seed, change_feed=getattr(target, "change_feed", None))
             self.step_cost = modeled_cost
             self._driver = None
             return
         from hils.clock import WallClockDriver
-        from hils.snmp import SnmpTarget, SnmpTransport
 
-        self.target = SnmpTarget.parse(spec)
         driver = self._driver = WallClockDriver(env)
-        self.transport = SnmpTransport(env, driver, self.target, tau_udp=self.config.middleware.tau_udp)
 
         def wall_cost(step: Callable[[], Any]) -> float:
             # What a step cost at the wall clock: its own time plus how late it started.
@@ -326,13 +372,38 @@ class Testbed:
 
         self.step_cost = wall_cost
 
+    def _assemble_junction(self, env: simpy.Environment, tls: str, index: int) -> Junction:
+        cfg, spec = self.configs[tls], self._targets[tls]
+        # Every controller of a run has its own seeded draws (its tick phase, its latencies).
+        seed = self.seed if not self.several else self.seed * 1009 + index
+        community = None
+        if self.mode == VIRTUAL:
+            factory = virtual_target_factory() if spec == VIRTUAL else spec
+            target = factory(env, cfg, seed=seed)
+            # A target brings its transport, or an object surface that an in-process transport reaches.
+            transport = getattr(target, "transport", None) or LocalTransport(
+                env, target.surface, tau_udp=cfg.middleware.tau_udp, get_latency=target.get_latency,
+                set_latency=target.set_latency, seed=seed, change_feed=getattr(target, "change_feed", None))
+            where = "the in-process emulator"
+        else:
+            from hils.snmp import SnmpTarget, SnmpTransport
+
+            target = SnmpTarget.parse(spec)
+            transport = SnmpTransport(env, self._driver, target, tau_udp=cfg.middleware.tau_udp)
+            where, community = f"{target.host}:{target.port}", getattr(target, "community", None)
+        events = TaggedLog(self.events, tls) if self.several else self.events
+        tally = Tally(tls if self.several else None)
+        self.events.subscribe(tally)
+        middleware = Middleware(env, transport, cfg, self.action_type, events, where=where, community=community)
+        return Junction(tls, cfg, target, transport, middleware, events, tally)
+
     def _assemble_simulation(self) -> None:
         sumo = self._sumo_spec
         self._owns_sumo = False
         if sumo is True:
             from hils.sumo import SumoSimulation
 
-            sim = SumoSimulation(self.config, seed=self.seed, end=self.duration, sumo_config=self.sumo_config)
+            sim = SumoSimulation(seed=self.seed, end=self.duration, sumo_config=self.sumo_config, lights=self.configs)
             sim.start()  # a SUMO that fails to start (e.g. a network the config does not fit) closes itself
             self.simulation = sim
             self._owns_sumo = True
@@ -340,63 +411,80 @@ class Testbed:
             self.simulation = NoSimulation()
         else:
             self.simulation = sumo
+        if isinstance(self.simulation, NoSimulation):
+            return
+        for j in self.junctions.values():
+            # One light: the simulation itself (a wrapper the caller hands in works); several: each its own.
+            j.view = self.simulation.lights[j.id] if self.several else self.simulation
 
-    def _load_agent(self) -> Agent | None:
+    def _load_agent(self, config: IntersectionConfig) -> Agent | None:
         spec = self._agent_spec
         if spec is None or isinstance(spec, str):
-            return load_agent(self.spec.agent_spec, self.config, self.action_type, self.seed)
+            return load_agent(self.spec.agent_spec, config, self.action_type, self.seed)
+        if self.several:
+            raise SeveralControllers("an agent object drives one controller: name a built-in agent or "
+                                     "package.module:Class, and each controller gets its own")
         return spec
 
     def _start(self) -> None:
         # Everything loaded so far (SUMO, numpy, the config) lives for the whole run: keep it out of
         # the collector's way so that collections during the run stay short.
         gc.freeze()
-        cfg = self.config
-        self._detector_feed = None
-        if self.detectors and not isinstance(self.simulation, NoSimulation):
-            # Built before the run starts: a detector on a lane its phase does not have is refused now.
-            pm = self.simulation.phase_map
-            self._detector_feed = DetectorFeed(self.transport, cfg, self.events,
+        for j in self.junctions.values():
+            if self.detectors and j.view is not None:
+                # Built before the run starts: a detector on a lane its phase does not have is refused now.
+                pm = j.view.phase_map
+                j.detector_feed = DetectorFeed(j.transport, j.config, j.events,
                                                {p: pm.incoming_lanes(p) for p in pm.phases})
-        self.events.emit(Kind.RUN_STARTED, config=cfg.name, source=cfg.source, seed=self.seed, mode=self.mode,
+        cfg = self.config
+        fields = ({"scenario": self.scenario.name, "intersections": list(self.configs)} if self.several else
+                  {"config": cfg.name, "source": cfg.source})
+        self.events.emit(Kind.RUN_STARTED, **fields, seed=self.seed, mode=self.mode,
                          action_type=self.action_type.value, agent=_agent_name(self._agent_spec, self.spec),
                          duration=self.duration)
-        self.middleware.start()
+        ended = lambda: self.ended  # noqa: E731 - the junctions' processes ask it as the run goes
+        for j in self.junctions.values():
+            j.middleware.start()
+            if self.recover_after is not None:
+                self.env.process(j.auto_recover(self.recover_after, ended))
+            if j.view is not None:
+                self.env.process(j.sample_traffic(ended))
         self.env.process(self._simulation_loop())
-        if self.recover_after is not None:
-            self.env.process(self._auto_recover())
-        if not isinstance(self.simulation, NoSimulation):
-            self.env.process(self._sample_traffic())
+
+    def _poll_counts(self) -> dict[str, Any]:
+        if self.several:
+            return {tls: j.middleware.poller.counts for tls, j in self.junctions.items()}
+        return self.junction.middleware.poller.counts
 
     def finish(self, reason: str | None = None) -> None:
         """End the run: clear the calls placed, log ``run_ended`` with ``reason``, close the log.
 
         ``reason`` defaults to ``duration`` once the duration has passed, else ``closed``.
-        Idempotent; bounded in wall-clock time (the clearing SET answers or fails within tau_udp)."""
+        Idempotent; bounded in wall-clock time (the clearing SETs answer or fail within tau_udp)."""
         if self.env is None or self.ended:
             return
         if reason is None:
             reason = "duration" if self.done else "closed"
         self.ended = True
         self.end_reason = reason
-        mw = self.middleware
 
         def ending() -> Generator[simpy.Event, Any, None]:
-            yield mw.close()
-            self.events.emit(Kind.RUN_ENDED, reason=reason, polls=mw.poller.counts)
+            yield simpy.AllOf(self.env, [j.middleware.close() for j in self.junctions.values()])
+            self.events.emit(Kind.RUN_ENDED, reason=reason, polls=self._poll_counts())
             self.events.close()
 
         done = self.env.process(ending())
+        tau_udp = max(cfg.middleware.tau_udp for cfg in self.configs.values())
         try:
-            # Bounded: the clearing SET answers or fails within tau_udp.
-            self._advance(self.env.now + self.config.middleware.tau_udp + 1.0, done)
+            # Bounded: the clearing SETs answer or fail within tau_udp.
+            self._advance(self.env.now + tau_udp + 1.0, done)
             if self._driver is not None:
                 self._advance(self.env.now + 0.05)  # let answers already on their way land before closing
         except RunInterrupted:
             log.warning("interrupted again while clearing the calls; they may stay until the backup time")
         finally:
             if not done.triggered:
-                self.events.emit(Kind.RUN_ENDED, reason=reason, polls=mw.poller.counts)
+                self.events.emit(Kind.RUN_ENDED, reason=reason, polls=self._poll_counts())
                 self.events.close()
             self.wall_s = time.perf_counter() - self._wall_t0
             self._collect_traffic()
@@ -407,14 +495,14 @@ class Testbed:
             self.traffic = summary()
 
     def close(self) -> None:
-        """Finish the run if it is still going, then release the transport, the clock and SUMO."""
+        """Finish the run if it is still going, then release the transports, the clock and SUMO."""
         if self.env is None:
             return
         try:
             self.finish()
         finally:
-            if self.transport is not None:
-                self.transport.close()
+            for j in self.junctions.values():
+                j.transport.close()
             if self._driver is not None:
                 self._driver.close()
             if self._owns_sumo:
@@ -433,9 +521,14 @@ class Testbed:
     # --- stepping ---------------------------------------------------------------------------------
 
     def observe(self) -> Observation:
-        """What an agent sees now."""
-        mw = self._mw
-        return Observation(self._env.now, mw.cache.state, self.simulation.traffic_state(), mw.next_pair, mw.state)
+        """What the agent sees now."""
+        self._started()
+        return self.junction.observe()
+
+    def observe_all(self) -> dict[str, Observation]:
+        """What each traffic light's agent sees now."""
+        self._started()
+        return {tls: j.observe() for tls, j in self.junctions.items()}
 
     def step(self, action: Any) -> tuple[Observation, dict[str, Any]]:
         """Submit ``action`` and run to the next decision point; returns the observation and an info mapping.
@@ -445,53 +538,77 @@ class Testbed:
         ``dropped`` (the manager was not IDLE), ``state``, ``timeout`` (the manager entered TIMEOUT
         during the step) and ``timeout_reason``, ``ended`` (the run's duration has passed)."""
         self._check_running()
-        mw = self._mw
-        submitted = mw.submit(action)
-        if submitted.error is not None:
-            raise submitted.error
-        return self._to_decision(submitted.action_id, submitted.dropped)
+        observations, infos = self.step_all({self.junction.id: action})
+        return observations[self.junction.id], infos[self.junction.id]
+
+    def step_all(self, actions: Mapping[str, Any]) -> tuple[dict[str, Observation], dict[str, dict[str, Any]]]:
+        """One action per traffic light (a light left out, or given None, does not act), then run to the next
+        decision point of any of them; returns the observation and the info (as :meth:`step`'s) of each.
+
+        Every action is converted before any is submitted: one that cannot be served raises its
+        :class:`hils.actions.ActionError` and nothing is sent to any controller."""
+        self._check_running()
+        unknown = sorted(set(actions) - set(self.junctions))
+        if unknown:
+            raise KeyError(f"no traffic light {', '.join(unknown)} in this run; it has {', '.join(self.junctions)}")
+        chosen = {tls: value for tls, value in actions.items() if value is not None}
+        for tls, value in chosen.items():
+            mw = self.junctions[tls].middleware
+            try:
+                mw.check(value)
+            except ActionError:
+                raise mw.submit(value).error from None  # logged as received and refused
+        submitted = {tls: self.junctions[tls].middleware.submit(value) for tls, value in chosen.items()}
+        return self._to_decision(submitted)
 
     def wait(self) -> tuple[Observation, dict[str, Any]]:
         """Run to the next decision point without acting (e.g. after a refused action)."""
         self._check_running()
-        return self._to_decision(None, False, acted=False)
+        observations, infos = self._to_decision({})
+        return observations[self.junction.id], infos[self.junction.id]
 
-    def run_for(self, seconds: float) -> Observation:
+    def run_for(self, seconds: float) -> Observation | dict[str, Observation]:
         """Let ``seconds`` of run time pass without acting; returns the observation then."""
         self._check_running()
         self._advance(self._env.now + seconds)
-        return self.observe()
+        return self.observe_all() if self.several else self.observe()
 
-    def recover(self) -> bool:
-        """Recover from TIMEOUT now: re-read the controller and return to IDLE; False if it failed."""
+    def recover(self, tls: str | None = None) -> bool:
+        """Recover from TIMEOUT now (the controller of traffic light ``tls`` in a run of several): re-read the
+        controller and return to IDLE; False if it failed."""
         self._check_running()
-        proc = self._mw.recover()
+        junction = self.junctions[tls] if tls is not None else self.junction
+        proc = junction.middleware.recover()
         self._advance(None, proc)
         return bool(proc.value)
 
     def run(self, agent: Agent | None = None, progress: Callable[[float], None] | None = None) -> str:
-        """Let ``agent`` (default: the Testbed's) act at every decision point until the run is done.
+        """Let the agents (``agent``, or the Testbed's: one per traffic light) act at every decision point until
+        the run is done.
 
-        Returns the end reason (``duration``). Whatever else ends the run (the agent raising:
+        Returns the end reason (``duration``). Whatever else ends the run (an agent raising:
         :class:`AgentFailed`; Ctrl-C or SIGTERM: :class:`RunInterrupted` or KeyboardInterrupt; an
         error) first finishes the run cleanly, then propagates."""
         if self.env is None:
             self.reset()
-        agent = agent or self.agent
-        if agent is None:
+        agents = {tls: agent or j.agent for tls, j in self.junctions.items()}
+        if any(a is None for a in agents.values()):
             raise NotStarted("no agent: pass one to run() or to the Testbed")
-        obs = self.observe()
+        observations = self.observe_all()
         try:
             while not self.done:
-                try:
-                    value = agent.act(obs)
-                except Exception as exc:
-                    raise AgentFailed(f"the agent's act() raised {type(exc).__name__}: {exc}") from exc
+                actions = {}
+                for tls, a in agents.items():
+                    try:
+                        actions[tls] = a.act(observations[tls])
+                    except Exception as exc:
+                        raise AgentFailed(f"the agent's act() raised {type(exc).__name__}: {exc}") from exc
                 try:
                     # None: no action this time, the controller runs on its own until the next decision.
-                    obs, _ = self.wait() if value is None else self.step(value)
+                    observations, _ = self.step_all(actions)
                 except ActionError:
-                    obs, _ = self.wait()  # refused and logged: the agent is asked again at the next decision
+                    # refused and logged: the agents are asked again at the next decision
+                    observations, _ = self.step_all({})
                 if progress is not None:
                     progress(self._env.now)
         except BaseException as exc:
@@ -500,37 +617,38 @@ class Testbed:
         self.finish("duration")
         return "duration"
 
-    def _to_decision(self, action_id: int | None, dropped: bool, *, acted: bool = True
-                     ) -> tuple[Observation, dict[str, Any]]:
-        env, mw, params = self._env, self._mw, self.config.middleware
-        timeout_entered = mw.entering(State.TIMEOUT)
+    def _to_decision(self, submitted: Mapping[str, Submission]
+                     ) -> tuple[dict[str, Observation], dict[str, dict[str, Any]]]:
+        env = self._env
+        timeouts = {tls: j.middleware.entering(State.TIMEOUT) for tls, j in self.junctions.items()}
         deadline: float | None = None
-        if self.action_type is not ActionType.DURATION:
-            deadline, waits = env.now + params.control_interval, [timeout_entered]
-        elif mw.state is State.ON_HOLD:
-            waits = [mw.entering(State.IDLE), timeout_entered]  # the prescribed green is being served
-        elif mw.state is State.TIMEOUT:
-            deadline, waits = env.now + params.control_interval, [mw.entering(State.IDLE)]
-        else:
-            # Nothing to serve: do not ask again at the same instant.
-            deadline, waits = env.now + params.sumo_step, []
+        waits: list[simpy.Event] = []
+        for j in self.junctions.values():
+            delay, events = j.decision(self.action_type)
+            waits += events
+            if delay is not None:
+                deadline = env.now + delay if deadline is None else min(deadline, env.now + delay)
         if self.duration is not None:
             deadline = self.duration if deadline is None else min(deadline, self.duration)
         self._advance(deadline, *waits)
-        info = {"t": env.now, "action_id": action_id, "acted": acted, "dropped": dropped,
-                "state": mw.state.value, "timeout": timeout_entered.triggered,
-                "timeout_reason": mw.manager.timeout_reason.value if mw.manager.timeout_reason else None,
-                "ended": self.done}
-        return self.observe(), info
+        infos = {}
+        for tls, j in self.junctions.items():
+            done = submitted.get(tls)
+            infos[tls] = j.info(done.action_id if done else None, done is not None,
+                                done.dropped if done else False, timeouts[tls].triggered) | {"ended": self.done}
+        return self.observe_all(), infos
 
     # --- the clock ----------------------------------------------------------------------------------
 
-    def _advance(self, until: float | None, *events: simpy.Event) -> None:
-        """Run the environment until one of ``events`` has been processed, or to ``until``.
+    def _advance(self, until: float | None, *events: simpy.Event, every: bool = False) -> None:
+        """Run the environment until one of ``events`` (all of them with ``every``) has been processed, or to
+        ``until``.
 
         The one place time moves. ``until`` follows SimPy's ``run(until=t)`` rule in both clocks:
         events due exactly at ``t`` stay queued, so an agent deciding at ``t`` acts before them."""
         env = self._env
+        if every and events:
+            events = (simpy.AllOf(env, events),)
         if any(ev.processed for ev in events) or (until is not None and until <= env.now):
             return
         virtual = self._driver is None
@@ -562,71 +680,52 @@ class Testbed:
         env = self._env
         step = self.config.middleware.sumo_step
         sim = self.simulation
-        cache = self.middleware.cache
+        lights = [(j.view, j.middleware.cache) for j in self.junctions.values() if j.view is not None]
+        feeds = [(j.view, j.detector_feed) for j in self.junctions.values() if j.detector_feed is not None]
+        middlewares = [j.middleware for j in self.junctions.values()]
         k = 0
         start = env.now
 
-        feed = self._detector_feed
-
         def one_step() -> None:
-            if cache.snapshot is not None:
-                sim.apply(cache.snapshot.state)
+            for view, cache in lights:
+                if cache.snapshot is not None:
+                    view.apply(cache.snapshot.state)
             sim.step()
-            if feed is not None:
-                feed.feed(sim.present())
+            for view, feed in feeds:
+                feed.feed(view.present())
 
         # Steps that cost no time and act on nothing but SUMO (virtual time, no fault on their cost, no detectors
         # SETting the controller) run back to back while nothing else is due before the next one: what they
         # do and see is the same, without a trip through the event queue for each.
-        back_to_back = self.step_cost is modeled_cost and feed is None
+        back_to_back = self.step_cost is modeled_cost and not feeds
         while not self.ended:
             took = self.step_cost(one_step)
-            self.middleware.observe_step(step, took)
+            for mw in middlewares:
+                mw.observe_step(step, took)
             k += 1
             while back_to_back and env.peek() > start + k * step:
                 one_step()
                 k += 1
             yield env.timeout(max(0.0, start + k * step - env.now))
 
-    def _sample_traffic(self, period: float = 5.0) -> Generator[simpy.Event, Any, None]:
-        """Queue per approach every ``period`` s, for the queue plot."""
-        phases = self.config.phases
-        while not self.ended:
-            yield self._env.timeout(period)
-            per_approach: dict[str, int] = {}
-            for p, queue in self.simulation.queues().items():
-                name = phases[p].approach or f"phase {p}"
-                per_approach[name] = per_approach.get(name, 0) + queue
-            self.traffic_samples.append((self._env.now, per_approach))
-            self.events.emit(Kind.QUEUES, queues=per_approach)
-
-    def _auto_recover(self) -> Generator[simpy.Event, Any, None]:
-        mw = self.middleware
-        while not self.ended:
-            yield mw.wait_for(State.TIMEOUT)
-            yield self._env.timeout(self.recover_after)
-            while mw.timeout_flag and not self.ended:
-                ok = yield mw.recover()
-                if not ok:
-                    yield self._env.timeout(self.recover_after)
-
     # --- helpers ----------------------------------------------------------------------------------------
 
     @property
     def _env(self) -> simpy.Environment:
+        self._started()
+        return self.env
+
+    def _started(self) -> None:
         if self.env is None:
             raise NotStarted("the Testbed is not started: call reset() first")
-        return self.env
 
     @property
     def _mw(self) -> Middleware:
-        if self.middleware is None or self.env is None:
-            raise NotStarted("the Testbed is not started: call reset() first")
-        return self.middleware
+        self._started()
+        return self.junction.middleware
 
     def _check_running(self) -> None:
-        if self.env is None:
-            raise NotStarted("the Testbed is not started: call reset() first")
+        self._started()
         if self.ended:
             raise NotStarted(f"the run has ended ({self.end_reason}): call reset() to start another")
 
@@ -644,6 +743,38 @@ def _deadline(env: simpy.Environment, at: float) -> simpy.Event:
 
 class TargetError(UserError, ValueError):
     """A target that is neither ``virtual`` nor a usable ``snmp://`` URL."""
+
+
+def _scenario(scenario: str | Path | Scenario | None) -> Scenario | None:
+    if scenario is None or isinstance(scenario, Scenario):
+        return scenario
+    return load_scenario(scenario)
+
+
+def _target_specs(target: str | TargetFactory | Mapping[str, str | TargetFactory],
+                  configs: Mapping[str, IntersectionConfig]) -> dict[str, str | TargetFactory]:
+    """Each traffic light's target: one for all, or a mapping naming every light; all in virtual time (the
+    emulator, a factory) or all at the wall clock (URLs), since a run has one clock."""
+    if isinstance(target, Mapping):
+        missing, unknown = sorted(set(configs) - set(target)), sorted(set(target) - set(configs))
+        if missing or unknown:
+            raise TargetError(f"targets: {'no target for ' + ', '.join(missing) if missing else ''}"
+                              f"{'; ' if missing and unknown else ''}"
+                              f"{'no traffic light ' + ', '.join(unknown) if unknown else ''}; allowed: one "
+                              f"target per traffic light of the run ({', '.join(configs)})")
+        specs = {tls: target[tls] for tls in configs}
+    else:
+        if isinstance(target, str) and target != VIRTUAL and len(configs) > 1:
+            raise TargetError(f"target {target!r}: a run of {len(configs)} controllers needs one target per traffic "
+                              f"light ({', '.join(configs)}): a mapping, or a TOML file of TLS = URL lines")
+        specs = dict.fromkeys(configs, target)
+    urls = [spec for spec in specs.values() if isinstance(spec, str) and spec != VIRTUAL]
+    for url in urls:
+        _check_target(url)
+    if urls and len(urls) != len(specs):
+        raise TargetError("targets: either every controller is reached at the wall clock (snmp:// URLs) or none "
+                          "is (virtual): a run has one clock")
+    return specs
 
 
 def _check_target(url: str) -> None:

@@ -1,0 +1,117 @@
+"""One controller of a run: its intersection, the controller it reaches, the middleware and the agent.
+
+A :class:`hils.Testbed` holds one :class:`Junction` per signalised intersection: one for the paper's
+four-leg, four for the corridor, sixteen for the grid. Each has its own transport, manager, poller and
+signal cache (its :class:`hils.middleware.Middleware`), its own agent, and, when SUMO runs, the traffic
+light it drives; they share the Testbed's one SimPy environment, clock and event log (where, in a run of
+several, every record names its intersection). A failure on one controller's link times that controller
+out and leaves the others running: nothing here reaches across junctions.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Generator
+from typing import Any
+
+import simpy
+
+from hils.actions import ActionType
+from hils.agents import Agent, Observation
+from hils.config import IntersectionConfig
+from hils.detectors import DetectorFeed
+from hils.events import EventLog, Kind, TaggedLog
+from hils.manager import State
+from hils.middleware import Middleware
+from hils.summary import Tally
+from hils.transport import Transport
+
+log = logging.getLogger(__name__)
+
+
+class Junction:
+    """One intersection's controller in a run, and everything that acts on it alone.
+
+    ``id`` is its traffic light's SUMO id (``C`` for a single intersection); ``view`` is what it shows in
+    the simulation (a :class:`hils.sumo.Light`, or the simulation itself when it has one light), or None
+    without SUMO."""
+
+    def __init__(self, id: str, config: IntersectionConfig, target: Any, transport: Transport,
+                 middleware: Middleware, events: EventLog | TaggedLog, tally: Tally) -> None:
+        self.id = id
+        self.config = config
+        self.target = target
+        self.transport = transport
+        self.middleware = middleware
+        self.events = events
+        self.tally = tally
+        self.agent: Agent | None = None
+        self.view: Any = None
+        self.detector_feed: DetectorFeed | None = None
+        self.traffic_samples: list[tuple[float, dict[str, int]]] = []
+
+    @property
+    def env(self) -> simpy.Environment:
+        return self.middleware.env
+
+    @property
+    def state(self) -> State | None:
+        return self.middleware.state
+
+    def observe(self) -> Observation:
+        """What this junction's agent sees now."""
+        mw = self.middleware
+        traffic = self.view.traffic_state() if self.view is not None else None
+        return Observation(mw.env.now, mw.cache.state, traffic, mw.next_pair, mw.state)
+
+    def refusals(self) -> list[str]:
+        """The start-up checks' refusals (warnings are logged here)."""
+        mw = self.middleware
+        for line in mw.verdict.warnings:
+            log.warning("%s", line)
+        return ([mw.startup_error] if mw.startup_error else []) + list(mw.verdict.refusals)
+
+    def decision(self, action_type: ActionType) -> tuple[float | None, list[simpy.Event]]:
+        """When this junction next wants a decision: a delay from now (or None) and the events that end the
+        wait earlier (the manager entering TIMEOUT, a served green ending)."""
+        mw, params = self.middleware, self.config.middleware
+        timeout_entered = mw.entering(State.TIMEOUT)
+        if action_type is not ActionType.DURATION:
+            return params.control_interval, [timeout_entered]
+        if mw.state is State.ON_HOLD:
+            return None, [mw.entering(State.IDLE), timeout_entered]  # the prescribed green is being served
+        if mw.state is State.TIMEOUT:
+            return params.control_interval, [mw.entering(State.IDLE)]
+        return params.sumo_step, []  # nothing to serve: do not ask again at the same instant
+
+    def info(self, action_id: int | None, acted: bool, dropped: bool, timed_out: bool) -> dict[str, Any]:
+        mw = self.middleware
+        return {"t": mw.env.now, "action_id": action_id, "acted": acted, "dropped": dropped,
+                "state": mw.state.value, "timeout": timed_out,
+                "timeout_reason": mw.manager.timeout_reason.value if mw.manager.timeout_reason else None}
+
+    # --- processes ---------------------------------------------------------------------------------
+
+    def auto_recover(self, after: float, ended: Any) -> Generator[simpy.Event, Any, None]:
+        """Recover ``after`` s in TIMEOUT, again and again while recovery fails, until ``ended()``."""
+        mw = self.middleware
+        while not ended():
+            yield mw.wait_for(State.TIMEOUT)
+            yield self.env.timeout(after)
+            while mw.timeout_flag and not ended():
+                ok = yield mw.recover()
+                if not ok:
+                    yield self.env.timeout(after)
+
+    def sample_traffic(self, ended: Any, period: float = 5.0) -> Generator[simpy.Event, Any, None]:
+        """Queue per approach every ``period`` s, for the queue plot."""
+        phases = self.config.phases
+        env = self.env
+        while not ended():
+            yield env.timeout(period)
+            per_approach: dict[str, int] = {}
+            for p, queue in self.view.queues().items():
+                name = phases[p].approach or f"phase {p}"
+                per_approach[name] = per_approach.get(name, 0) + queue
+            self.traffic_samples.append((env.now, per_approach))
+            self.events.emit(Kind.QUEUES, queues=per_approach)
