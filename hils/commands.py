@@ -14,7 +14,7 @@ import logging
 import signal
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -22,6 +22,8 @@ from hils import config as config_mod
 from hils import plots, summary
 from hils.actions import ActionType
 from hils.errors import UserError
+from hils.junction import Junction
+from hils.scenario import SCENARIOS, Scenario, load_scenario, load_targets
 from hils.status import StatusLine
 from hils.sumo_net import scenario_config
 from hils.testbed import DEFAULT_AGENTS, VIRTUAL, AgentFailed, RunInterrupted, RunSpec, Testbed
@@ -60,10 +62,15 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--duration", type=float, default=3600.0, metavar="S", help="simulated seconds (3600)")
     p.add_argument("--seed", type=int, default=0, help="seed of SUMO, the emulator's latency model and random "
                                                        "agents; a virtual-time run is reproducible from it (0)")
-    p.add_argument("--target", metavar="URL", help="snmp://HOST:PORT?community=NAME&version=1|2c: run at "
-                                                   "wall-clock time against a real controller or "
-                                                   "`hils emulator serve`; default: in-process emulator, "
-                                                   "virtual time")
+    p.add_argument("--scenario", metavar="NAME|FILE",
+                   help="a scenario of one or several signalised intersections, each controller with its own "
+                        f"config and agent: {', '.join(SCENARIOS)} (corridor: four on an arterial; grid4x4: "
+                        "sixteen) or your own .scenario.toml; default: the shipped four-leg")
+    p.add_argument("--target", metavar="URL|FILE", help="snmp://HOST:PORT?community=NAME&version=1|2c: run at "
+                                                        "wall-clock time against a real controller or "
+                                                        "`hils emulator serve`; for a scenario of several "
+                                                        'controllers a TOML file of TLS = "snmp://..." lines; '
+                                                        "default: in-process emulator, virtual time")
     p.add_argument("--log", metavar="FILE", type=Path, help="JSON Lines event log (default: RUN_DIR/events.jsonl)")
     p.add_argument("--out", metavar="RUN_DIR", type=Path,
                    help="run folder (default: reports/runs/<time>-<action type>)")
@@ -101,6 +108,7 @@ def run_command(args: argparse.Namespace) -> int:
     window = _window(args.plot_window)
     if not args.duration > 0:
         raise UsageError(f"--duration must be positive seconds, got {args.duration:g}")
+    scenario = _scenario(args)
     dashboard = _dashboard(args)
     out = _run_folder(args.out, args.action_type)
     log_path = args.log or out / "events.jsonl"
@@ -109,14 +117,15 @@ def run_command(args: argparse.Namespace) -> int:
                    log_path=log_path, recover_after=None if args.recover_after < 0 else args.recover_after,
                    sumo=not args.no_sumo)
     if spec.agent_spec == "webster":
-        if sumo_config is not None:
+        if sumo_config is not None or scenario is not None:
             raise UsageError("--agent webster plans from the shipped four-leg network and demand; it cannot "
-                             "plan for --net/--routes/--sumocfg yet: run it without them")
+                             "plan for --scenario/--net/--routes/--sumocfg yet: run it without them")
         print(webster_plan(cfg).describe())
     # A wall-clock run is never silent: a live status line (periodic log lines when not on a terminal).
     status = StatusLine() if args.target and not args.no_progress else None
-    tb = Testbed(cfg, action_type=spec.action_type, target=args.target or VIRTUAL, sumo=spec.sumo, seed=spec.seed,
-                 agent=spec.agent, duration=spec.duration, log_path=log_path, recover_after=spec.recover_after,
+    tb = Testbed(None if scenario else cfg, scenario=scenario, action_type=spec.action_type,
+                 target=_targets(args.target, scenario), sumo=spec.sumo, seed=spec.seed, agent=spec.agent,
+                 duration=spec.duration, log_path=log_path, recover_after=spec.recover_after,
                  on_reset=_hooks(status.start if status else None, dashboard.attach if dashboard else None),
                  sumo_config=sumo_config)
     error: BaseException | None = None
@@ -139,22 +148,84 @@ def run_command(args: argparse.Namespace) -> int:
         finally:
             if status is not None:
                 status.close()
-    s = summary.summarize(tb.tally, cfg, traffic=tb.traffic, wall_s=tb.wall_s)
-    summary.write(s, out / "summary.json")
     outputs = [log_path.name if log_path.parent == out else str(log_path), "summary.json"]
-    if tb.tally.records:
-        plots.signal_timeline(tb.tally.records, cfg, out / "signal_timeline.svg", start=window[0], end=window[1])
-        outputs.append("signal_timeline.svg")
-    if tb.traffic_samples:
-        plots.queues(tb.traffic_samples, out / "queues.svg", title=f"Queues per approach, {cfg.name}",
-                     spillback={a: [60.0 * m for m in v["spillback_minutes"]]
-                                for a, v in s["traffic"]["approaches"].items()} if s.get("traffic") else None)
-        outputs.append("queues.svg")
-    print(summary.render(s))
+    if tb.several:
+        s = summary.summarize_network(tb.tally, {tls: (j.tally, j.config) for tls, j in tb.junctions.items()},
+                                      traffic=tb.traffic, wall_s=tb.wall_s)
+        outputs += _network_plots(tb, s, out, window)
+    else:
+        s = summary.summarize(tb.tally, cfg, traffic=tb.traffic, wall_s=tb.wall_s)
+        outputs += _plots(tb.junction, s, out, window, spillback_of=lambda approach: approach)
+    summary.write(s, out / "summary.json")
+    print(summary.render_network(s) if tb.several else summary.render(s))
     for warning in summary.warnings(s):
         print(warning)
     print(f"Outputs in {out}/: {', '.join(outputs)}")
     return _ending(tb.end_reason, error)
+
+
+def _plots(junction: Junction, s: dict[str, Any], folder: Path, window: tuple[float, float], *,
+           spillback_of: Callable[[str], str], name: str | None = None) -> list[str]:
+    """One controller's signal timeline and queue plot in ``folder`` (``name``: the intersection's, default its
+    config's); returns the names of the files written."""
+    written = []
+    name = name or junction.config.name
+    if junction.tally.records:
+        plots.signal_timeline(junction.tally.records, junction.config, folder / "signal_timeline.svg",
+                              start=window[0], end=window[1], label=name)
+        written.append("signal_timeline.svg")
+    if junction.traffic_samples:
+        approaches = s["traffic"]["approaches"] if s.get("traffic") else None
+        spillback = None if approaches is None else {
+            a: [60.0 * m for m in approaches[spillback_of(a)]["spillback_minutes"]]
+            for a in junction.traffic_samples[0][1] if spillback_of(a) in approaches}
+        plots.queues(junction.traffic_samples, folder / "queues.svg", title=f"Queues per approach, {name}",
+                     spillback=spillback)
+        written.append("queues.svg")
+    return written
+
+
+def _network_plots(tb: Testbed, s: dict[str, Any], out: Path, window: tuple[float, float]) -> list[str]:
+    """Per traffic light, a folder with its signal timeline and queues; and the network's queues, one line per
+    light (the queues of its approaches summed)."""
+    per_light: set[str] = set()
+    for tls, j in tb.junctions.items():
+        folder = out / tls
+        folder.mkdir(exist_ok=True)
+        per_light.update(_plots(j, s, folder, window, name=f"{tls} ({j.config.name})",
+                                spillback_of=lambda approach, tls=tls: f"{tls} {approach}"))
+    lights = list(tb.junctions)
+    written = [f"{lights[0]}/ .. {lights[-1]}/ ({', '.join(sorted(per_light, reverse=True))})"] if per_light else []
+    samples = [j.traffic_samples for j in tb.junctions.values()]
+    if all(samples):
+        network = [(at[0][0], {tls: sum(q.values()) for tls, (_, q) in zip(tb.junctions, at, strict=True)})
+                   for at in zip(*samples, strict=False)]
+        plots.queues(network, out / "queues.svg", title=f"Queues per intersection (approaches summed), "
+                                                        f"{tb.scenario.name}", legend="intersection")
+        written.append("queues.svg")
+    return written
+
+
+def _scenario(args: argparse.Namespace) -> Scenario | None:
+    """The scenario asked for; refuses what cannot go with it."""
+    if args.scenario is None:
+        return None
+    clash = [flag for flag, given in (("--config", args.config), ("--net", args.net), ("--routes", args.routes),
+                                      ("--sumocfg", args.sumocfg)) if given]
+    if clash:
+        raise UsageError(f"--scenario brings its own network and configs: drop {', '.join(clash)}")
+    return load_scenario(args.scenario)
+
+
+def _targets(target: str | None, scenario: Scenario | None) -> str | dict[str, str]:
+    """--target: one URL, or (a scenario of several controllers) a TOML file of one URL per traffic light."""
+    if target is None:
+        return VIRTUAL
+    if target.startswith("snmp://"):
+        return target
+    if scenario is None or len(scenario.intersections) == 1:
+        raise UsageError(f"--target {target!r}: allowed: snmp://HOST:PORT?community=NAME&version=1|2c")
+    return load_targets(target)
 
 
 def _dashboard(args: argparse.Namespace) -> Any:

@@ -83,9 +83,10 @@ def movement_label(config: IntersectionConfig, phase: int) -> str:
 
 
 def signal_timeline(records: Sequence[dict[str, Any]], config: IntersectionConfig, path: Path, *,
-                    start: float = 0.0, end: float = 120.0, title: str | None = None) -> Path:
+                    start: float = 0.0, end: float = 120.0, label: str | None = None) -> Path:
     """Green, yellow and red of every phase over [start, end] cut to the run, one row per phase
-    grouped by ring (solid separators) and barrier (dotted), labelled with its movement (SVG)."""
+    grouped by ring (solid separators) and barrier (dotted), labelled with its movement (SVG). ``label`` names
+    the intersection in the title (default: its config's name)."""
     start, end = timeline_window(records, start, end)
     rows = phase_rows(config)
     phases = [p for p, _, _ in rows]
@@ -93,8 +94,8 @@ def signal_timeline(records: Sequence[dict[str, Any]], config: IntersectionConfi
     row_h, left, top, width = 40.0, 150.0, 40.0, 780.0
     chart = Chart(left, top, width, row_h * len(rows), (start, end))
     svg = Svg(left + width + 90.0, top + chart.height + 60.0)
-    svg.text(svg.width / 2, 22, title or f"Signal timeline, {config.name}: {start:.0f} to {end:.0f} s of a "
-                                         f"{run_end(records):.0f} s run", size=15, anchor="middle")
+    svg.text(svg.width / 2, 22, f"Signal timeline, {label or config.name}: {start:.0f} to {end:.0f} s of a "
+                                f"{run_end(records):.0f} s run", size=15, anchor="middle")
     for row, p in enumerate(phases):
         y = top + row * row_h
         for t0, t1, ind in spans[p]:
@@ -141,8 +142,9 @@ def queue_bins(samples: Sequence[tuple[float, Mapping[str, int]]], bin_s: float
 
 
 def queues(samples: Sequence[tuple[float, Mapping[str, int]]], path: Path, *, title: str = "Queues",
-           bin_s: float = 60.0, spillback: Mapping[str, Sequence[float]] | None = None) -> Path:
-    """Longest queue per approach in each ``bin_s`` window (SVG): samples every few seconds are too
+           bin_s: float = 60.0, spillback: Mapping[str, Sequence[float]] | None = None,
+           legend: str = "approach") -> Path:
+    """Longest queue per ``legend`` (approach) in each ``bin_s`` window (SVG): samples every few seconds are too
     jagged to read, and the longest queue is what a traffic engineer looks for. ``spillback``
     gives, per approach, times at which one of its lanes was full; the bins holding them are
     marked: the queue reached back beyond the modelled lanes."""
@@ -158,7 +160,7 @@ def queues(samples: Sequence[tuple[float, Mapping[str, int]]], path: Path, *, ti
                   (0.0, max(1.0, highest) * (1.3 if spilled else 1.08)))  # room for the stacked spillback marks
     svg = Svg(left + width + 120.0, top + height + (80.0 if spillback else 55.0))
     svg.text(svg.width / 2, 22, title, size=15, anchor="middle")
-    svg.text(left + width + 14, top + 8, "approach", size=12)
+    svg.text(left + width + 14, top + 8, legend, size=12)
     for index, (name, values) in enumerate(tops.items()):
         color = PALETTE[index % len(PALETTE)]
         points = [(chart.x(minutes[b + k]), chart.y(v)) for b, v in enumerate(values) for k in (0, 1)]
@@ -179,8 +181,10 @@ def queues(samples: Sequence[tuple[float, Mapping[str, int]]], path: Path, *, ti
 
 # --- a few SVG primitives: the run folder's pictures need no plotting library ------------------------------
 
-#: Line colours of the queue plot (matplotlib's tab10, so they read like the other pictures of hils).
-PALETTE = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f")
+#: Line colours of the queue plot (matplotlib's tab20, so they read like the other pictures of hils; the
+#: grid's sixteen intersections each get their own).
+PALETTE = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f", "#bcbd22",
+           "#17becf", "#aec7e8", "#ffbb78", "#98df8a", "#ff9896", "#c5b0d5", "#c49c94")
 
 
 class Svg:

@@ -107,3 +107,20 @@ def _intersections(raw: Any, scenario: Path, source: str) -> dict[str, Intersect
             loaded[key] = load(path)
         out[tls] = loaded[key]
     return out
+
+
+def load_targets(path: str | Path) -> dict[str, str]:
+    """The controllers of a scenario at the wall clock: a TOML file of ``TLS = "snmp://HOST:PORT?..."`` lines,
+    one per traffic light (``hils run --scenario corridor --target targets.toml``)."""
+    source = str(path)
+    try:
+        raw = tomllib.loads(Path(path).read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise ConfigError(source, "<file>", f"cannot be read ({exc.strerror}); allowed: a TOML file of "
+                                            'TLS = "snmp://HOST:PORT?community=NAME&version=1|2c" lines') from None
+    except (UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+        raise ConfigError(source, "<file>", f"is not a TOML file ({exc})") from None
+    for tls, url in raw.items():
+        if not isinstance(url, str) or not url.startswith("snmp://"):
+            raise ConfigError(source, tls, f"is {url!r}; allowed: an snmp://HOST:PORT URL")
+    return dict(raw)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import logging
 import sys
+from collections import Counter
 from collections.abc import Generator
 from typing import IO, Any
 
@@ -36,6 +37,8 @@ class StatusLine:
 
     def line(self) -> str:
         tb = self.tb
+        if tb.several:
+            return self._network_line()
         mw = tb.middleware
         state = mw.state.value.upper() if mw.state else "CLOSED"
         if mw.timeout_flag and mw.manager.timeout_reason:
@@ -45,6 +48,18 @@ class StatusLine:
         return (f"{tb.env.now:7.1f} s  {state:<22}  {_shown(mw.cache.state):<13}  polls "
                 f"{counts['polls'] - counts['failed']} answered, {counts['failed']} failed  "
                 f"last hold {'-' if hold is None else f'{hold:.3f} s'}")
+
+    def _network_line(self) -> str:
+        """A run of several controllers: how many are in each state (naming those in TIMEOUT), polls summed."""
+        tb = self.tb
+        states = Counter(j.middleware.state.name if j.middleware.state else "CLOSED" for j in tb.junctions.values())
+        timed_out = [tls for tls, j in tb.junctions.items() if j.middleware.timeout_flag]
+        counts = [j.middleware.poller.counts for j in tb.junctions.values()]
+        failed = sum(c["failed"] for c in counts)
+        return (f"{tb.env.now:7.1f} s  {len(tb.junctions)} controllers: "
+                + ", ".join(f"{name} {n}" for name, n in sorted(states.items()))
+                + (f" ({', '.join(timed_out)})" if timed_out else "")
+                + f"  polls {sum(c['polls'] for c in counts) - failed} answered, {failed} failed")
 
     def _show(self) -> Generator[simpy.Event, Any, None]:
         while not self.tb.ended:

@@ -50,26 +50,56 @@ class Tally:
 
 def summarize(tally: Tally, config: IntersectionConfig, *, traffic: Any = None,
               wall_s: float | None = None) -> dict[str, Any]:
-    kinds, records = tally.kinds, tally.records
+    """The summary of a run of one controller: the run, its signal control and its traffic."""
+    out = {"config": config.name, **_run(tally, wall_s), **_control(tally, config)}
+    if traffic is not None:
+        out["traffic"] = _plain(traffic)
+    return out
+
+
+def summarize_network(tally: Tally, junctions: Mapping[str, tuple[Tally, IntersectionConfig]], *,
+                      traffic: Any = None, wall_s: float | None = None) -> dict[str, Any]:
+    """The summary of a run of several controllers: the run, the signal control of each intersection (from its
+    own tally) and the network's traffic (its approaches named by traffic light: ``J2 north``)."""
+    started = next((r for r in tally.records if r["kind"] == Kind.RUN_STARTED), {})
+    out = {"scenario": started.get("scenario"), **_run(tally, wall_s),
+           "intersections": {tls: {"config": cfg.name, **_control(t, cfg)} for tls, (t, cfg) in junctions.items()}}
+    if traffic is not None:
+        out["traffic"] = _plain(traffic)
+    return out
+
+
+def _plain(traffic: Any) -> Any:
+    return asdict(traffic) if is_dataclass(traffic) else traffic
+
+
+def _run(tally: Tally, wall_s: float | None) -> dict[str, Any]:
+    records = tally.records
     started = next((r for r in records if r["kind"] == Kind.RUN_STARTED), {})
     ended = [r for r in records if r["kind"] == Kind.RUN_ENDED]
-    timeouts = Counter(r["reason"] for r in records if r["kind"] == Kind.TIMEOUT_ENTERED)
-    holds = transition_holds(records)
-    latency = {k: Stats.of(v).as_dict() for k, v in internal_latencies_ms(records).items()}
-    out: dict[str, Any] = {
-        "config": config.name,
+    return {
         "mode": started.get("mode"),
         "action_type": started.get("action_type"),
         "agent": started.get("agent"),
         "seed": started.get("seed"),
         "sim_time_s": ended[-1]["t"] if ended else (records[-1]["t"] if records else 0.0),
         "wall_time_s": wall_s,
+    }
+
+
+def _control(tally: Tally, config: IntersectionConfig) -> dict[str, Any]:
+    """One controller's signal control: actions, transitions and their holds, timeouts, polls, latency."""
+    kinds, records = tally.kinds, tally.records
+    ended = [r for r in records if r["kind"] == Kind.RUN_ENDED]
+    timeouts = Counter(r["reason"] for r in records if r["kind"] == Kind.TIMEOUT_ENTERED)
+    latency = {k: Stats.of(v).as_dict() for k, v in internal_latencies_ms(records).items()}
+    out: dict[str, Any] = {
         "actions": kinds[Kind.ACTION_RECEIVED],
         "actions_refused": kinds[Kind.ACTION_REFUSED],
         "actions_dropped": kinds[Kind.ACTION_DROPPED],
         "commands_dispatched": kinds[Kind.COMMAND_DISPATCHED],
         "transitions_verified": kinds[Kind.TRANSITION_VERIFIED],
-        "hold_s": Stats.of(holds).as_dict(),
+        "hold_s": Stats.of(transition_holds(records)).as_dict(),
         "timeouts": dict(timeouts),
         "recoveries": kinds[Kind.RECOVERED],
         "polls": _polls(ended[-1] if ended else {}, tally.intersection),
@@ -78,8 +108,6 @@ def summarize(tally: Tally, config: IntersectionConfig, *, traffic: Any = None,
     }
     if kinds[Kind.DETECTORS]:
         out["detector_actuations"] = actuations_per_phase(records, config)
-    if traffic is not None:
-        out["traffic"] = asdict(traffic) if is_dataclass(traffic) else traffic
     return out
 
 
@@ -120,6 +148,29 @@ def render(summary: Mapping[str, Any]) -> str:
     for action_type, st in s["internal_latency_ms"].items():
         lines.append(f"  internal latency     {action_type}: N {st['n']}, mean {st['mean'] * 1000:.1f} us, "
                      f"p99 {st['p99'] * 1000:.1f} us")
+    return "\n".join(lines)
+
+
+def render_network(summary: Mapping[str, Any]) -> str:
+    """The console summary of a run of several controllers: the network's traffic, then a line per intersection."""
+    s = summary
+    lines = [f"Run summary: {s['scenario']} ({len(s['intersections'])} controllers, {s['mode']}, "
+             f"{s['action_type']} by {s['agent']}, seed {s['seed']})",
+             f"  simulated {s['sim_time_s']:.0f} s" + (f" in {s['wall_time_s']:.1f} s wall" if s.get("wall_time_s")
+                                                     else "")]
+    if s.get("traffic"):
+        lines += _traffic_lines(s["traffic"])
+    lines += ["Signal control per intersection",
+              "  light   transitions  hold mean   timeouts               polls (failed, not sent)   drifted"]
+    for tls, c in s["intersections"].items():
+        h, polls = c["hold_s"], c["polls"] or {"polls": 0, "failed": 0, "elided": 0}
+        timeouts = ", ".join(f"{k} {v}" for k, v in c["timeouts"].items()) or "none"
+        if c["timeouts"]:
+            timeouts += f" ({c['recoveries']} recovered)"
+        lines.append(f"  {tls:<7} {c['transitions_verified']:>5} of {c['commands_dispatched']:<4} "
+                     f"{_fmt(h['mean'] if h['n'] else None):>9}   {timeouts:<22} "
+                     f"{polls['polls']:>6} ({polls['failed']}, {polls['elided']})"
+                     f"{'':>10}{c['drifted_steps']:>3}")
     return "\n".join(lines)
 
 
