@@ -254,6 +254,11 @@ class Controller:
         self.control[column] = frozenset(phases)
         self._system_set()
 
+    def set_timing(self, phase: int, name: str, ticks: int) -> None:
+        """A SET of the phase table: one timing of ``phase``, acting from that phase's next interval on."""
+        setattr(self.timing[phase], name, ticks)
+        self.touch()  # a threshold may have moved (red revert acts at once)
+
     def set_max2(self, rings: Iterable[int]) -> None:
         """A SET of ringControlGroupMax2: these rings time Maximum 2 from their next green."""
         self.max2_rings = frozenset(rings)

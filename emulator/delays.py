@@ -142,12 +142,16 @@ class DelayedController:
         return self._images[0].version if self._images.maxlen else self.controller.status_version
 
     def quiet_ticks(self) -> int | None:
-        """The controller's quiet ticks, but every tick is stepped while a SET waits for its tick or the
-        published image still shows older status."""
-        if self._pending or (self._images.maxlen
-                             and self._images[0].version != self.controller.status_version):
+        """The controller's quiet ticks, up to the step that hands it a waiting SET; every tick is stepped
+        while the published image still shows older status."""
+        if self._images.maxlen and self._images[0].version != self.controller.status_version:
             return 1
-        return self.controller.quiet_ticks()
+        quiet = self.controller.quiet_ticks()
+        if self._pending:
+            # A SET due at tick d is processed by the step that starts at tick d.
+            due = max(1, min(p.due for p in self._pending) - self.controller.tick + 1)
+            quiet = due if quiet is None else min(quiet, due)
+        return quiet
 
     def skip(self, n: int) -> None:
         """Quiet ticks at once: no SET is due and every image is the current status, so nothing but the
@@ -175,6 +179,7 @@ class DelayedController:
     @backup_time.setter
     def backup_time(self, value: int) -> None:
         self.controller.backup_time = value
+        self.controller.touch()  # the backup timer's threshold moved
 
     @property
     def pattern(self) -> int:

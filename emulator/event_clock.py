@@ -11,7 +11,8 @@ Rules of this file
   watches the model (interval changes, monitors) sees it when it happens.
 - Every write reaches the unit through :class:`ClockedSurface`: the unit is first
   brought up to the present (:meth:`EventClock.catch_up`), then written, then its
-  next step is a real one (:meth:`EventClock.touched`).
+  next real step is scheduled anew (:meth:`EventClock.touched`): the unit's own
+  write methods say which steps the write makes real.
 
 Theory of operation
 -------------------
@@ -80,10 +81,10 @@ class EventClock:
         self.unit.skip(now_tick - self.unit.tick)
 
     def touched(self) -> None:
-        """The unit was written: what it answers may differ, and its next step is a real one."""
-        self.unit.touch()
+        """The unit was written: what it answers may differ, and its next step may not be quiet (every write
+        reaches the unit through a method that says so: a SET waiting for its tick, or a touched controller)."""
         self.bump()
-        self._schedule(1)
+        self._schedule(self.unit.quiet_ticks())
 
     def power_cycle(self) -> None:
         """Power down and up: the unit resets and its tick grid starts now."""

@@ -22,7 +22,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import lru_cache
 
-from emulator.controller import Controller, Timing
+from emulator.controller import Controller
 from emulator.delays import DelayedController
 from hils.config import Phase, Recall
 from hils.ntcip import (
@@ -183,7 +183,7 @@ class MibView:
             }
             out += [Instance(PHASE_TABLE[col].instance(p), PHASE_TABLE[col], lambda v=v: v)
                     for col, v in fixed.items()]
-            out += [Instance(PHASE_TABLE[col].instance(p), PHASE_TABLE[col], *_timing_access(c.timing[p], name, unit))
+            out += [Instance(PHASE_TABLE[col].instance(p), PHASE_TABLE[col], *_timing_access(c, p, name, unit))
                     for col, (name, unit) in _TIMING_COLUMNS.items()]
         out.append(Instance(RING_CONTROL_MAX2.instance(1), RING_CONTROL_MAX2,
                             lambda: sum(1 << (r - 1) for r in c.max2_rings),
@@ -235,9 +235,11 @@ class MibView:
 _masks = lru_cache(maxsize=1024)(phases_to_groups)
 
 
-def _timing_access(timing: Timing, name: str, unit: int) -> tuple[Callable[[], int], Callable[[int], None]]:
+def _timing_access(c: Controller | DelayedController, phase: int, name: str, unit: int
+                   ) -> tuple[Callable[[], int], Callable[[int], None]]:
     """Read and write one timing field in NTCIP units (seconds or tenths); the controller counts ticks."""
-    return lambda: getattr(timing, name) // unit, lambda v: setattr(timing, name, v * unit)
+    timing = c.timing[phase]
+    return lambda: getattr(timing, name) // unit, lambda v: c.set_timing(phase, name, v * unit)
 
 
 def _group_reader(read: Callable[[], frozenset[int]], group: int, groups: int) -> Callable[[], int]:

@@ -64,12 +64,11 @@ def apply(unit: Controller | DelayedController, op: str, value: object, *, ticke
     elif op == "detectors":
         unit.set_actuations(value)
     elif op == "retime":
-        phase, name, ticks = value
-        setattr(c.timing[phase], name, ticks)
-        c.touch()
+        unit.set_timing(*value)
     elif op == "backup_time":
         unit.backup_time = value
-        c.touch()
+        if unit is c:
+            c.touch()  # the bare controller's backup time is a plain attribute; its wrapper's setter touches
     elif op == "power_cycle":
         unit.reset()
     else:
