@@ -6,7 +6,9 @@ libsumo per process), alternately and several times; the medians are compared. W
 purpose, is the controller: hils' emulator enforces minimum green, yellow and red clearance itself
 (10 Hz polls, NTCIP objects, the manager), while sumo-rl switches SUMO's program directly and inserts a
 yellow of its own without an all-red. So the two serve different signal sequences and the same demand
-becomes different traffic: each side's vehicles inserted and arrived are reported beside its time.
+becomes different traffic, which SUMO takes longer or shorter to step: each side's vehicles inserted and
+arrived are reported beside its time, and its time is split into SUMO's steps and the environment's own
+work (controller, middleware, observations), the part an environment is answerable for.
 sumo-rl is the `bench` extra (`pip install 'hils[bench]'`).
 """
 
@@ -15,6 +17,7 @@ from __future__ import annotations
 import multiprocessing
 import os
 import statistics
+import sys
 import time
 from collections.abc import Callable
 from importlib import resources
@@ -31,12 +34,14 @@ def hils_episode(seed: int, duration: float = EPISODE_S) -> dict[str, Any]:
 
     import hils  # noqa: F401  (registers the environment)
 
+    sumo_s = _time_sumo_steps()
     env = gym.make("hils/Intersection-v0", action_type="selection", sumo_step=SUMO_STEP,
                    control_interval=DECISION_S, episode_length=duration)
     steps, wall = _random_episode(env, seed)
     traffic = env.unwrapped.testbed.traffic
     env.close()
-    return {"steps": steps, "wall_s": wall, "inserted": traffic.departed, "arrived": traffic.arrived}
+    return {"steps": steps, "wall_s": wall, "sumo_s": sumo_s[0], "inserted": traffic.departed,
+            "arrived": traffic.arrived}
 
 
 def sumo_rl_episode(seed: int, duration: float = EPISODE_S) -> dict[str, Any]:
@@ -46,6 +51,8 @@ def sumo_rl_episode(seed: int, duration: float = EPISODE_S) -> dict[str, Any]:
     os.environ.setdefault("SUMO_HOME", sumo.SUMO_HOME)
     os.environ["LIBSUMO_AS_TRACI"] = "1"
     import sumo_rl
+
+    sumo_s = _time_sumo_steps()  # after sumo_rl's import: it must find libsumo as traci untouched
 
     data = resources.files("hils.data")
     env = sumo_rl.SumoEnvironment(net_file=str(data / "four_leg.net.xml"), route_file=str(data / "four_leg.rou.xml"),
@@ -57,7 +64,30 @@ def sumo_rl_episode(seed: int, duration: float = EPISODE_S) -> dict[str, Any]:
     inserted = int(stats.getParameter("", "stats.vehicles.inserted"))
     running = int(stats.getParameter("", "stats.vehicles.running"))
     env.close()
-    return {"steps": steps, "wall_s": wall, "inserted": inserted, "arrived": inserted - running}
+    return {"steps": steps, "wall_s": wall, "sumo_s": sumo_s[0], "inserted": inserted, "arrived": inserted - running}
+
+
+def _time_sumo_steps() -> list[float]:
+    """From now on in this (fresh) process, the wall seconds libsumo's simulationStep takes are summed into the
+    list returned: both environments step SUMO through it, so what is left of an episode's wall time is the
+    environment's own work, whatever traffic its signals made."""
+    import libsumo
+
+    total = [0.0]
+    step = libsumo.simulationStep
+
+    def timed(*args: Any) -> Any:
+        t0 = time.perf_counter()
+        try:
+            return step(*args)
+        finally:
+            total[0] += time.perf_counter() - t0
+
+    # sumo-rl reaches libsumo through traci, which (LIBSUMO_AS_TRACI) holds libsumo's functions as its own.
+    for module in (libsumo, sys.modules.get("traci")):
+        if module is not None and getattr(module, "simulationStep", None) is step:
+            module.simulationStep = timed
+    return total
 
 
 def _random_episode(env: Any, seed: int) -> tuple[int, float]:
@@ -87,8 +117,12 @@ def measure_env(repeat: int = 3, seed: int = 0, duration: float = EPISODE_S) -> 
     for side, rs in runs.items():
         wall = statistics.median(r["wall_s"] for r in rs)
         steps = rs[0]["steps"]
+        own = statistics.median(r["wall_s"] - r["sumo_s"] for r in rs)
         out[side] = {"steps": steps, "wall_median_s": wall, "steps_per_s": steps / wall,
                      "wall_per_sim_hour_s": wall * 3600.0 / duration,
+                     "sumo_per_sim_hour_s": statistics.median(r["sumo_s"] for r in rs) * 3600.0 / duration,
+                     "own_per_sim_hour_s": own * 3600.0 / duration,
                      "inserted": rs[0]["inserted"], "arrived": rs[0]["arrived"]}
     out["speed_ratio_hils_to_sumo_rl"] = out["hils"]["steps_per_s"] / out["sumo_rl"]["steps_per_s"]
+    out["own_work_ratio_sumo_rl_to_hils"] = out["sumo_rl"]["own_per_sim_hour_s"] / out["hils"]["own_per_sim_hour_s"]
     return out
