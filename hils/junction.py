@@ -49,6 +49,10 @@ class Junction:
         self.view: Any = None
         self.detector_feed: DetectorFeed | None = None
         self.traffic_samples: list[tuple[float, dict[str, int]]] = []
+        # Its own decision schedule: asked now (``due``), or when ``deadline`` passes or one of ``waits`` fires.
+        self.due = True
+        self.deadline: float | None = None
+        self.waits: list[simpy.Event] = []
 
     @property
     def env(self) -> simpy.Environment:
@@ -83,6 +87,16 @@ class Junction:
         if mw.state is State.TIMEOUT:
             return params.control_interval, [mw.entering(State.IDLE)]
         return params.sumo_step, []  # nothing to serve: do not ask again at the same instant
+
+    def schedule(self, action_type: ActionType) -> None:
+        """Start the wait for this junction's next decision point, from now."""
+        delay, self.waits = self.decision(action_type)
+        self.deadline = None if delay is None else self.env.now + delay
+
+    def at_decision(self) -> bool:
+        """True when the wait :meth:`schedule` started is over: its deadline reached, or a wait event fired."""
+        return ((self.deadline is not None and self.env.now >= self.deadline - 1e-9)
+                or any(ev.triggered for ev in self.waits))
 
     def info(self, action_id: int | None, acted: bool, dropped: bool, timed_out: bool) -> dict[str, Any]:
         mw = self.middleware

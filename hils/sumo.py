@@ -119,6 +119,8 @@ class RunSummary:
 
 DELAY_NOTE = ("mean_delay: per vehicle that departed or is waiting to enter, departure delay (desired to actual "
               "insertion, so far for those waiting) plus SUMO time loss (so far for those still running)")
+NOT_MEASURED_NOTE = ("mean_delay, max_queue, approaches: not measured (measure=False: no per-vehicle and "
+                     "per-lane samples every second, as environments run for speed); the counts are SUMO's own")
 ARRIVED_NOTE = ("mean_time_loss, mean_waiting_time: SUMO trip statistics over arrived vehicles only; null when "
                 "no vehicle arrived")
 
@@ -226,7 +228,7 @@ class SumoSimulation:
                  step_length: float | None = None, sumo_config: str | Path | None = None,
                  time_to_teleport: float = -1.0, quiet: bool = True, queue_sample_period: float = 1.0,
                  tls_id: str = TLS_ID, lights: Mapping[str, IntersectionConfig] | None = None,
-                 extra_args: Sequence[str] = ()) -> None:
+                 measure: bool = True, extra_args: Sequence[str] = ()) -> None:
         self.configs: dict[str, IntersectionConfig] = dict(lights) if lights else {tls_id: config or load()}
         self.config = next(iter(self.configs.values()))
         self.lights: dict[str, Light] = {}
@@ -236,6 +238,7 @@ class SumoSimulation:
         self.sumo_config = Path(sumo_config) if sumo_config is not None else data_path(SUMO_CONFIG)
         self.time_to_teleport = time_to_teleport
         self.quiet = quiet
+        self.measure = measure
         self.extra_args = tuple(extra_args)
         self._sample_every = max(1, round(queue_sample_period / self.step_length))
         self._until_sample = self._sample_every
@@ -363,6 +366,8 @@ class SumoSimulation:
         """Advance one SUMO step; returns the wall seconds it took."""
         t0 = time.perf_counter()
         libsumo.simulationStep()
+        if not self.measure:
+            return time.perf_counter() - t0
         self._until_sample -= 1
         if not self._until_sample:
             self._until_sample = self._sample_every
@@ -418,11 +423,15 @@ class SumoSimulation:
 
     def summary(self) -> RunSummary:
         """Every vehicle counted: arrived, running, waiting to enter, with delays so far (see
-        :class:`RunSummary` for what each figure counts)."""
-        self._sample_vehicles()
+        :class:`RunSummary` for what each figure counts); without ``measure``, the counts only."""
         departed = int(_stat("stats.vehicles.inserted"))
         running = int(_stat("stats.vehicles.running"))
         arrived = departed - running
+        if not self.measure:
+            return RunSummary(self.time, departed, arrived, running, len(libsumo.simulation.getPendingVehicles()),
+                              None, None, None, {}, {}, int(_stat("stats.safety.collisions")),
+                              int(_stat("stats.teleports.total")), (NOT_MEASURED_NOTE,))
+        self._sample_vehicles()
         delays = {a: list(done) for a, done in self._finished.items()}
         counts = {a: Counter() for a in delays}
         for a, done in self._finished.items():

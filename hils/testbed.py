@@ -183,7 +183,9 @@ class Testbed:
     after which the run is done (None: no end). ``log_path``: the JSON Lines event log (None: kept in memory
     only). ``recover_after``: seconds in TIMEOUT before recover() is called (None: never).
     ``on_reset(testbed, target)`` runs after assembly, before anything starts: the fault harness wraps parts
-    of the run there (``target``: the single controller's, or None with several).
+    of the run there (``target``: the single controller's, or None with several). ``measure``: False skips
+    what only the end-of-run summary and the queue plot need (per-vehicle delays, queue and spillback samples,
+    ``queues`` records), as environments do for speed.
 
     With one controller the Testbed is that controller's: :meth:`step`, :meth:`observe`, :attr:`middleware`,
     :attr:`config`. With several, :meth:`step_all` and :meth:`observe_all` take and give one value per
@@ -198,7 +200,7 @@ class Testbed:
                  recover_after: float | None = 5.0,
                  on_reset: Callable[[Testbed, Any], None] | None = None,
                  sumo_config: str | Path | None = None, detectors: bool | None = None,
-                 scenario: str | Path | Scenario | None = None) -> None:
+                 scenario: str | Path | Scenario | None = None, measure: bool = True) -> None:
         if scenario is not None and config is not None:
             raise ValueError("give a config (one intersection) or a scenario (its intersections), not both")
         self.scenario = _scenario(scenario)
@@ -223,6 +225,7 @@ class Testbed:
         self.log_path = Path(log_path) if log_path is not None else None
         self.recover_after = recover_after
         self.on_reset = on_reset
+        self.measure = measure
         self.spec = RunSpec(self.config, self.action_type, agent if isinstance(agent, str) else None,
                             math.inf if duration is None else duration, seed, self.log_path, recover_after,
                             sumo=bool(sumo))
@@ -403,7 +406,8 @@ class Testbed:
         if sumo is True:
             from hils.sumo import SumoSimulation
 
-            sim = SumoSimulation(seed=self.seed, end=self.duration, sumo_config=self.sumo_config, lights=self.configs)
+            sim = SumoSimulation(seed=self.seed, end=self.duration, sumo_config=self.sumo_config, lights=self.configs,
+                                 measure=self.measure)
             sim.start()  # a SUMO that fails to start (e.g. a network the config does not fit) closes itself
             self.simulation = sim
             self._owns_sumo = True
@@ -447,7 +451,7 @@ class Testbed:
             j.middleware.start()
             if self.recover_after is not None:
                 self.env.process(j.auto_recover(self.recover_after, ended))
-            if j.view is not None:
+            if j.view is not None and self.measure:
                 self.env.process(j.sample_traffic(ended))
         self.env.process(self._simulation_loop())
 
@@ -542,16 +546,19 @@ class Testbed:
         return observations[self.junction.id], infos[self.junction.id]
 
     def step_all(self, actions: Mapping[str, Any]) -> tuple[dict[str, Observation], dict[str, dict[str, Any]]]:
-        """One action per traffic light (a light left out, or given None, does not act), then run to the next
-        decision point of any of them; returns the observation and the info (as :meth:`step`'s) of each.
+        """One action per traffic light, then run to the next decision point of any of them; returns the
+        observation and the info (as :meth:`step`'s, with ``due``) of each.
 
-        Every action is converted before any is submitted: one that cannot be served raises its
+        Each controller keeps its own decision schedule: only the lights that are ``due`` (at their decision
+        point now, as the last step's infos said; every light after :meth:`reset`) act; the action of a light
+        that is not due, left out or None is not taken (``acted`` False), and its schedule runs on. Every
+        action taken is converted before any is submitted: one that cannot be served raises its
         :class:`hils.actions.ActionError` and nothing is sent to any controller."""
         self._check_running()
         unknown = sorted(set(actions) - set(self.junctions))
         if unknown:
             raise KeyError(f"no traffic light {', '.join(unknown)} in this run; it has {', '.join(self.junctions)}")
-        chosen = {tls: value for tls, value in actions.items() if value is not None}
+        chosen = {tls: value for tls, value in actions.items() if value is not None and self.junctions[tls].due}
         for tls, value in chosen.items():
             mw = self.junctions[tls].middleware
             try:
@@ -599,6 +606,8 @@ class Testbed:
             while not self.done:
                 actions = {}
                 for tls, a in agents.items():
+                    if not self.junctions[tls].due:
+                        continue  # its own decision point has not come: it is not asked
                     try:
                         actions[tls] = a.act(observations[tls])
                     except Exception as exc:
@@ -619,23 +628,22 @@ class Testbed:
 
     def _to_decision(self, submitted: Mapping[str, Submission]
                      ) -> tuple[dict[str, Observation], dict[str, dict[str, Any]]]:
-        env = self._env
+        self._started()
         timeouts = {tls: j.middleware.entering(State.TIMEOUT) for tls, j in self.junctions.items()}
-        deadline: float | None = None
-        waits: list[simpy.Event] = []
         for j in self.junctions.values():
-            delay, events = j.decision(self.action_type)
-            waits += events
-            if delay is not None:
-                deadline = env.now + delay if deadline is None else min(deadline, env.now + delay)
+            if j.due:
+                j.schedule(self.action_type)  # asked now: its next decision point starts from here
+        deadlines = [j.deadline for j in self.junctions.values() if j.deadline is not None]
         if self.duration is not None:
-            deadline = self.duration if deadline is None else min(deadline, self.duration)
-        self._advance(deadline, *waits)
+            deadlines.append(self.duration)
+        self._advance(min(deadlines, default=None), *(ev for j in self.junctions.values() for ev in j.waits))
         infos = {}
         for tls, j in self.junctions.items():
+            j.due = j.at_decision()
             done = submitted.get(tls)
             infos[tls] = j.info(done.action_id if done else None, done is not None,
-                                done.dropped if done else False, timeouts[tls].triggered) | {"ended": self.done}
+                                done.dropped if done else False, timeouts[tls].triggered) | {
+                "ended": self.done, "due": j.due}
         return self.observe_all(), infos
 
     # --- the clock ----------------------------------------------------------------------------------

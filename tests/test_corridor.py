@@ -71,11 +71,14 @@ def test_a_lost_link_times_out_only_its_own_controller() -> None:
     def j2(env: Any, config: Any, seed: int = 0) -> FaultTarget:
         return FaultTarget(env, config, seed=seed, faults=[loss])
 
-    targets = {"J1": "virtual", "J2": j2, "J3": "virtual", "J4": "virtual"}
-    with Testbed(scenario="corridor", target=targets, seed=2, duration=240.0, agent="random") as tb:
-        tb.reset()
-        tb.run()
-        records = tb.records
+    def run(targets: dict[str, Any]) -> list[dict[str, Any]]:
+        with Testbed(scenario="corridor", target=targets, seed=2, duration=240.0, agent="random") as tb:
+            tb.reset()
+            tb.run()
+            return tb.records
+
+    records = run({"J1": "virtual", "J2": j2, "J3": "virtual", "J4": "virtual"})
+    undisturbed = run(dict.fromkeys(LIGHTS, "virtual"))
     timeouts = [r for r in records if r["kind"] == Kind.TIMEOUT_ENTERED]
     assert [(r["intersection"], r["reason"]) for r in timeouts] == [("J2", "communication")]
     assert [r["intersection"] for r in records if r["kind"] == Kind.RECOVERED] == ["J2"]
@@ -83,6 +86,11 @@ def test_a_lost_link_times_out_only_its_own_controller() -> None:
                      if r["kind"] == Kind.TRANSITION_VERIFIED and 100.0 <= r["t"] <= 120.0)
     assert all(during[tls] >= 1 for tls in ("J1", "J3", "J4")) and during["J2"] == 0
     assert loss.fired > 0
+    # Each controller keeps its own decision schedule: J2's TIMEOUT asks J2's agent, not the others'.
+    for tls in ("J1", "J3", "J4"):
+        assert [(r["t"], r["command"]) for r in records if r["kind"] == Kind.COMMAND_DISPATCHED
+                and r["intersection"] == tls] == [(r["t"], r["command"]) for r in undisturbed
+                                                  if r["kind"] == Kind.COMMAND_DISPATCHED and r["intersection"] == tls]
 
 
 def test_a_refused_action_reaches_no_controller() -> None:

@@ -43,7 +43,7 @@ def test_selection_step_runs_one_control_interval() -> None:
         obs, info = tb.step((3, 7))
         assert obs.t == pytest.approx(t0 + CFG.middleware.control_interval)
         assert info == {"t": obs.t, "action_id": 1, "acted": True, "dropped": False, "state": "idle",
-                        "timeout": False, "timeout_reason": None, "ended": False}
+                        "timeout": False, "timeout_reason": None, "ended": False, "due": True}
         assert obs.signal.greens == {3, 7}
         # A numpy pair, as a policy network hands it over, is the same action.
         obs, info = tb.step(np.array([4.0, 8.0], dtype=np.float32))
@@ -286,3 +286,24 @@ def test_the_status_line_on_a_terminal_and_as_log_lines(caplog: pytest.LogCaptur
             tb.run_for(21.0)
     lines = [r.getMessage() for r in caplog.records if r.name == "hils.status"]
     assert len(lines) == 4 and "20.0 s  IDLE" in lines[-1] and "polls 200 answered, 0 failed" in lines[-1]
+
+
+def test_a_run_that_does_not_measure_is_the_same_run_without_the_summary_samples() -> None:
+    """measure=False (what environments use for speed) changes nothing of the run: the same commands at the same
+    times and the same vehicle counts; only the per-vehicle and per-lane samples, and their figures, are gone."""
+    runs = {}
+    for measure in (True, False):
+        with Testbed(sumo=True, seed=4, duration=300.0, agent="max-pressure", measure=measure) as tb:
+            tb.reset()
+            tb.run()
+            runs[measure] = (tb.records, tb.traffic)
+    (measured, traffic), (unmeasured, counts) = runs[True], runs[False]
+    def comparable(records: list[dict]) -> list[dict]:
+        return [{k: v for k, v in r.items() if k not in ("wall_ns", "seq")} for r in records
+                if r["kind"] != Kind.QUEUES]
+
+    assert comparable(unmeasured) == comparable(measured)
+    assert not any(r["kind"] == Kind.QUEUES for r in unmeasured) and any(r["kind"] == Kind.QUEUES for r in measured)
+    assert (counts.departed, counts.arrived, counts.running) == (traffic.departed, traffic.arrived, traffic.running)
+    assert traffic.mean_delay is not None and counts.mean_delay is None and counts.approaches == {}
+    assert "not measured" in counts.notes[0]
