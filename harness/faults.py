@@ -25,8 +25,11 @@ the path: ``middleware -> FaultyTransport -> LocalTransport -> [StuckSurface]
 -> MibView -> Controller``. Each fault is told about the target when it is
 built (:meth:`Fault.on_target`, where transport faults register with the
 :class:`FaultyTransport`) and about the run before it starts
-(:meth:`Fault.on_run`, where agent, step-cost and keepalive faults wrap or
-drive the run's parts). :class:`IndicationMonitor` samples the controller every
+(:meth:`Fault.on_run`, where agent and keepalive faults wrap or drive the
+parts of the junction they are placed on, and step-cost faults the run's one
+simulation). In a run of several controllers each controller has its own
+target with the faults placed on it, so a fault on one controller's link
+leaves the others alone. :class:`IndicationMonitor` samples the controller every
 tick so that scenarios can check what it showed, whatever the middleware saw.
 """
 
@@ -47,7 +50,9 @@ from emulator.mib import MibView
 from hils.actions import ActionType
 from hils.agents import Agent, Observation
 from hils.config import IntersectionConfig
+from hils.junction import Junction
 from hils.manager import State
+from hils.middleware import Middleware
 from hils.ntcip import CONTROL_TABLE, ControlColumn, ErrorStatus, Oid, SnmpError, UnitControlStatus, UnitFlashStatus
 from hils.testbed import StepCost, Testbed
 from hils.transport import CommunicationTimeout, LocalTransport, ObjectSurface, Transport, Value, VarBind
@@ -144,8 +149,11 @@ class Fault:
         """The object surface the transport should reach; unchanged unless the fault sits there."""
         return surface
 
-    def on_run(self, run: Testbed, target: FaultTarget) -> None:
-        """Called before the run starts (agent, step-cost and middleware faults install here)."""
+    def on_run(self, run: Testbed, junction: Junction | None) -> None:
+        """Called before the run starts (agent, step-cost and middleware faults install here).
+
+        ``junction``: the controller the fault is placed on (its agent and middleware); None for a fault
+        of the whole run (slow simulation steps) in a run of several controllers."""
 
     def describe(self) -> str:
         """What the fault does, when, and how often at most (for reports)."""
@@ -484,7 +492,7 @@ class SlowSteps(Fault):
         self.gap = gap
         self._offset = 0  # steps seen since the window opened
 
-    def on_run(self, run: Testbed, target: FaultTarget) -> None:
+    def on_run(self, run: Testbed, junction: Junction | None) -> None:
         run.step_cost = self.wrap(run.step_cost, lambda: run.env.now)
 
     def wrap(self, inner: StepCost, clock: Callable[[], float]) -> StepCost:
@@ -562,10 +570,6 @@ class WrappedAgent:
         return self._hook(self.inner, observation)
 
 
-def _observation(run: Testbed) -> Observation:
-    return Observation(run.env.now, run.middleware.cache.state, run.simulation.traffic_state())
-
-
 class BadActions(Fault):
     """The agent returns invalid actions instead of its own while active."""
 
@@ -576,17 +580,17 @@ class BadActions(Fault):
         super().__init__(name, window=window, count=count)
         self.action = action
 
-    def on_run(self, run: Testbed, target: FaultTarget) -> None:
-        value = bad_value(self.action, run.spec.action_type, run.spec.config)
+    def on_run(self, run: Testbed, junction: Junction) -> None:
+        value = bad_value(self.action, run.action_type, junction.config)
 
         def act(inner: Agent, observation: Observation) -> Any:
-            now = run.env.now
+            now = junction.env.now
             if self.active(now):
                 self.fire(now)
                 return value
             return inner.act(observation)
 
-        run.agent = WrappedAgent(run.agent, act)
+        junction.agent = WrappedAgent(junction.agent, act)
 
     def describe(self) -> str:
         return f"{self.action} actions {self.scope()}"
@@ -605,24 +609,26 @@ class ActionBurst(Fault):
         super().__init__(name, window=window, count=count)
         self.size = size
 
-    def on_run(self, run: Testbed, target: FaultTarget) -> None:
+    def on_run(self, run: Testbed, junction: Junction) -> None:
+        env, mw = junction.env, junction.middleware
+
         def burst(inner: Agent) -> Generator[simpy.Event, Any, None]:
             # Started from act(), this process runs once the agent loop has submitted the action.
-            yield run.env.timeout(0)
+            yield env.timeout(0)
             for _ in range(self.size):
-                now = run.env.now
-                if run.middleware.state is not State.ON_HOLD or not self.active(now):
+                now = env.now
+                if mw.state is not State.ON_HOLD or not self.active(now):
                     return
                 self.fire(now)
-                run.middleware.submit(inner.act(_observation(run)))
+                mw.submit(inner.act(junction.observe()))
 
         def act(inner: Agent, observation: Observation) -> Any:
             value = inner.act(observation)
-            if self.active(run.env.now):
-                run.env.process(burst(inner))
+            if self.active(env.now):
+                env.process(burst(inner))
             return value
 
-        run.agent = WrappedAgent(run.agent, act)
+        junction.agent = WrappedAgent(junction.agent, act)
 
     def describe(self) -> str:
         return f"{self.size} extra actions after each action {self.scope()}"
@@ -637,16 +643,16 @@ class ActionsDuringTimeout(Fault):
         super().__init__(name, window=window, count=count)
         self.period = 1.0 / rate_hz
 
-    def on_run(self, run: Testbed, target: FaultTarget) -> None:
-        run.env.process(self._act(run))
+    def on_run(self, run: Testbed, junction: Junction) -> None:
+        junction.env.process(self._act(run, junction))
 
-    def _act(self, run: Testbed) -> Generator[simpy.Event, Any, None]:
-        env, mw = run.env, run.middleware
+    def _act(self, run: Testbed, junction: Junction) -> Generator[simpy.Event, Any, None]:
+        env, mw = junction.env, junction.middleware
         yield env.timeout(self.window.start)
         while env.now < self.window.end:
             if mw.timeout_flag and self.active(env.now) and not run.ended:
                 self.fire(env.now)
-                mw.submit(run.agent.act(_observation(run)))
+                mw.submit(junction.agent.act(junction.observe()))
             yield env.timeout(self.period)
 
     def describe(self) -> str:
@@ -665,11 +671,11 @@ class KeepaliveSuppressed(Fault):
 
     kind = "keepalive_off"
 
-    def on_run(self, run: Testbed, target: FaultTarget) -> None:
-        run.env.process(self._suppress(run))
+    def on_run(self, run: Testbed, junction: Junction) -> None:
+        junction.env.process(self._suppress(run, junction.middleware))
 
-    def _suppress(self, run: Testbed) -> Generator[simpy.Event, Any, None]:
-        env, mw = run.env, run.middleware
+    def _suppress(self, run: Testbed, mw: Middleware) -> Generator[simpy.Event, Any, None]:
+        env = run.env
         end = self.window.end
         yield env.timeout(self.window.start)
         mw.keepalive_enabled = False

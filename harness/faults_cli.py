@@ -28,6 +28,8 @@ Run fault scenarios in virtual time and check their expected outcomes.
 Each scenario (a TOML file) runs the middleware against the emulator with faults
 injected on a timeline: lost, late or refused datagrams, a stuck or rebooting
 controller, slow simulation steps, a misbehaving agent, a suppressed keepalive.
+A scenario may run several controllers (scenario = "corridor") with a fault on
+one of them; each intersection is then judged on its own.
 Besides its own expectations every scenario checks that each of its faults fired,
 that nothing conflicting was ever sent or shown, and that the event log is whole.
 
@@ -97,7 +99,7 @@ def _run(args: argparse.Namespace) -> int:
     print(render_table(results))
     for r in results:
         for c in r.failures:
-            print(f"FAIL {r.scenario.name}: {c.expectation}: expected {c.message}")
+            print(f"FAIL {r.scenario.name}: {c.label}: expected {c.message}")
     failed = sum(not r.passed for r in results)
     print(f"{len(results) - failed} of {len(results)} scenarios passed in {wall:.1f} s")
     md, js = write_reports(results, args.report_dir, wall)
@@ -111,7 +113,7 @@ def _seconds(t: float | None) -> str:
 
 def _rows(results: Sequence[ScenarioResult]) -> list[list[str]]:
     return [[r.scenario.name, "PASS" if r.passed else "FAIL", _seconds(r.detection_s), _seconds(r.recovery_s),
-             str(len(r.episodes)), r.fired_text(), f"{r.wall_s:.2f}"] for r in results]
+             r.timeouts_text(), r.fired_text(), f"{r.wall_s:.2f}"] for r in results]
 
 
 HEADER = ["scenario", "result", "detection s", "recovery s", "timeouts", "faults fired", "wall s"]
@@ -135,7 +137,9 @@ def render_markdown(results: Sequence[ScenarioResult], wall_s: float) -> str:
         "",
         "Detection: seconds from the fault's first firing (or, where stated, from the dispatch of the command "
         "that timed out) to TIMEOUT. Recovery: the slowest TIMEOUT's seconds from the `recover()` call that "
-        "succeeded back to IDLE. Faults fired: how often each fault actually acted.",
+        "succeeded back to IDLE. Faults fired: how often each fault actually acted. A scenario of several "
+        "controllers is judged at each intersection; its row gives the slowest detection and recovery, and its "
+        "section a table of every intersection's outcome.",
         "",
         "| " + " | ".join(HEADER) + " |",
         "|" + "|".join("---" for _ in HEADER) + "|",
@@ -145,19 +149,38 @@ def render_markdown(results: Sequence[ScenarioResult], wall_s: float) -> str:
         s = r.scenario
         out += ["", f"## {s.name}: {'PASS' if r.passed else 'FAIL'}", "", s.description or "", "",
                 f"`{_display(s.source)}`: {s.action_type.value} actions, agent {s.agent or 'default'}, "
-                f"{s.duration:g} s, seed {s.seed}.", ""]
+                f"{s.duration:g} s, seed {s.seed}"
+                + (f", controllers {', '.join(s.intersections)}." if s.several else "."), ""]
+        if s.several:
+            out += [*_intersection_table(r), ""]
         for f in r.faults:
             details = "".join(f", {k} {v}" for k, v in f.details.items())
             first = "" if f.first_fired is None else f", first at {f.first_fired:.3f} s"
-            out.append(f"- fault `{f.name}` ({f.description}): fired {f.fired} times{first}{details}")
+            where = "" if f.intersection is None else f" at {f.intersection}"
+            out.append(f"- fault `{f.name}`{where} ({f.description}): fired {f.fired} times{first}{details}")
         for e in r.episodes:
             rec = "never recovered" if e.recovered is None else (
                 f"recover() at {e.recovery_called:.3f} s, IDLE at {e.recovered:.3f} s")
-            out.append(f"- TIMEOUT ({e.reason}) at {e.entered:.3f} s; {rec}"
+            where = "" if e.intersection is None else f" at {e.intersection}"
+            out.append(f"- TIMEOUT{where} ({e.reason}) at {e.entered:.3f} s; {rec}"
                        + (f" ({e.failed_recoveries} recover() calls failed before)" if e.failed_recoveries else ""))
         for c in r.checks:
-            out.append(f"- {'ok' if c.ok else '**FAILED**'} {c.expectation}: {c.message}")
+            out.append(f"- {'ok' if c.ok else '**FAILED**'} {c.label}: {c.message}")
     return "\n".join(out) + "\n"
+
+
+def _intersection_table(result: ScenarioResult) -> list[str]:
+    """One row per intersection of a run of several controllers: what acted on it and how it fared."""
+    header = ["intersection", "result", "faults", "timeouts", "detection s", "recovery s", "transitions verified",
+              "longest without one s"]
+    rows = []
+    for o in result.outcomes:
+        start, end = o.longest_unverified
+        rows.append([o.intersection, "PASS" if result.passed_at(o.intersection) else "FAIL",
+                     ", ".join(o.faults) or "-", ", ".join(e.reason for e in o.episodes) or "none",
+                     _seconds(o.detection_s), _seconds(o.recovery_s), str(o.verified),
+                     f"{end - start:.1f} ({start:.1f}-{end:.1f})"])
+    return ["| " + " | ".join(row) + " |" for row in (header, ["---"] * len(header), *rows)]
 
 
 def _display(source: str) -> str:

@@ -1,15 +1,19 @@
 """Declarative fault scenarios: TOML files of faults and expected outcomes, and their runner.
 
-A scenario file says which intersection, agent and action type to run, for how
-long and from which seed, which faults to inject when (:mod:`harness.faults`),
-and what must come out. It is validated whole when loaded; an unknown key or a
-bad value is refused with a :class:`ScenarioError` naming the file and the key.
+A scenario file says which intersection (or which scenario of several
+controllers), agent and action type to run, for how long and from which seed,
+which faults to inject when and on which controller (:mod:`harness.faults`),
+and what must come out, at each intersection. It is validated whole when
+loaded; an unknown key or a bad value is refused with a :class:`ScenarioError`
+naming the file and the key.
 
 The format (only ``duration`` and one ``[[faults]]`` are required)::
 
     name = "communication-loss"         # default: the file name without .toml
     description = "one line shown by `hils faults list`"
     config = "my_intersection.toml"     # relative to this file; default: the shipped four-leg
+    scenario = "corridor"               # instead of config: several controllers, one per traffic light (a
+                                        # shipped scenario's name or a .scenario.toml path), run without SUMO
     action_type = "selection"           # selection | switch | duration
     agent = "random"                    # built-in or package.module:Class; default: the action type's
     duration = 60.0                     # simulated seconds
@@ -22,6 +26,8 @@ The format (only ``duration`` and one ``[[faults]]`` are required)::
     [[faults]]                          # one table per fault; ``type`` picks one of FAULT_TYPES
     type = "drop"
     name = "link-down"                  # default: type#index; shown in reports
+    intersection = "J2"                 # the controller it acts on: required with several (slow_steps
+                                        # takes none: it slows the one simulation they all share)
     start = 20.0                        # most types: a window [start, end) and an optional count
     end = 35.0
 
@@ -39,6 +45,11 @@ The format (only ``duration`` and one ``[[faults]]`` are required)::
     records = { drift = 5 }             # exact number of event records of a kind
     control_status_seen = ["backup_mode"]   # unitControlStatus values the controller must show
     control_status_never = ["backup_mode"] # ... and must never show
+    verified_every = 20.0               # s: never longer than this without a verified transition, start to end
+    recovered_greens = [2, 6]           # phases every recovery's re-read found green (after a reboot: start-up)
+
+    [expect.J2]                         # several controllers: J2 is judged by this table alone, and every
+    timeout = "communication"           # intersection without a table of its own by [expect]
 
 Implicit expectations, always checked: every fault fired at least once (a
 scenario cannot pass because its fault never happened); no SET holds two
@@ -50,15 +61,20 @@ was answered or failed). Each can be switched off in ``[expect]``
 (``no_conflicting_command``, ``no_conflicting_indication``,
 ``no_commands_in_timeout``, ``log_complete`` = false) for a scenario that studies
 that very failure. A scenario with no ``timeout`` key expects no TIMEOUT.
+
+With several controllers every expectation, implicit ones included, is judged
+for each intersection on its own records (those naming it) and its own
+controller's samples, and the report gives each intersection's outcome.
 """
 
 from __future__ import annotations
 
+import itertools
 import math
 import time
 import tomllib
-from collections.abc import Callable, Iterable, Mapping
-from dataclasses import asdict, dataclass, field
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import asdict, dataclass, field, replace
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -91,7 +107,11 @@ from hils.config import ConfigError, IntersectionConfig, MiddlewareParams
 from hils.events import Kind
 from hils.manager import TimeoutReason
 from hils.ntcip import UnitControlStatus
-from hils.testbed import RunSpec, Testbed, run_spec
+from hils.scenario import SUFFIX
+from hils.scenario import Scenario as Network
+from hils.scenario import load_scenario as load_network
+from hils.sumo_net import TLS_ID
+from hils.testbed import RunSpec, Testbed
 
 __all__ = [
     "FAULT_TYPES",
@@ -99,6 +119,7 @@ __all__ = [
     "Expectations",
     "FaultReport",
     "FaultSpec",
+    "Outcome",
     "Scenario",
     "ScenarioError",
     "ScenarioResult",
@@ -110,8 +131,8 @@ __all__ = [
     "run_scenario",
 ]
 
-SCENARIO_KEYS = ("name", "description", "config", "action_type", "agent", "duration", "seed", "recover_after",
-                 "middleware", "faults", "expect")
+SCENARIO_KEYS = ("name", "description", "config", "scenario", "action_type", "agent", "duration", "seed",
+                 "recover_after", "middleware", "faults", "expect")
 
 
 class ScenarioError(ConfigError):
@@ -188,6 +209,18 @@ class _Reader:
                 raise self.error(key, f"has {v!r}; allowed: {', '.join(options)}")
         return tuple(items)
 
+    def phases(self, key: str, allowed: Iterable[int]) -> tuple[int, ...]:
+        """A non-empty list of phase numbers, each one of ``allowed``."""
+        value = self.raw.get(key)
+        options = sorted(allowed)
+        if not isinstance(value, list) or not value or not all(
+                isinstance(v, int) and not isinstance(v, bool) for v in value):
+            raise self.error(key, f"must be a non-empty list of phase numbers, got {value!r}")
+        for v in value:
+            if v not in options:
+                raise self.error(key, f"has {v}; allowed: {', '.join(map(str, options))}")
+        return tuple(sorted(set(value)))
+
     def boolean(self, key: str, default: bool) -> bool:
         value = self.raw.get(key, default)
         if not isinstance(value, bool):
@@ -207,6 +240,11 @@ class FaultType:
     keys: tuple[str, ...]
     build: Callable[[_Reader, str, int, ActionType], Fault]
     help: str
+    per_controller: bool = True  # False: it acts on the whole run (the simulation every controller shares)
+
+    @property
+    def all_keys(self) -> tuple[str, ...]:
+        return ("type", "name", *(("intersection",) if self.per_controller else ()), *self.keys)
 
 
 def _window(r: _Reader) -> Window:
@@ -296,7 +334,7 @@ FAULT_TYPES: dict[str, FaultType] = {
     "stuck": FaultType(_WINDOW_KEYS, _build_stuck, "the controller acknowledges and ignores phase calls"),
     "reboot": FaultType(("at", "silent_for"), _build_reboot, "silent for silent_for s, then power-up"),
     "slow_steps": FaultType(("start", "count", "cost", "consecutive", "gap"), _build_slow,
-                            "count simulation steps costing cost s, in runs of consecutive"),
+                            "count simulation steps costing cost s, in runs of consecutive", per_controller=False),
     "bad_actions": FaultType(("action", *_WINDOW_KEYS), _build_bad,
                              "invalid agent actions (conflict, unknown_phase, not_in_set, nan, out_of_range, "
                              "wrong_type)"),
@@ -316,10 +354,13 @@ class FaultSpec:
     index: int
     raw: Mapping[str, Any]
     source: str
+    intersection: str | None  # the traffic light of the controller it acts on; None: the whole run
+
+    def acts_at(self, tls: str) -> bool:
+        return self.intersection is None or self.intersection == tls
 
     def build(self, seed: int, action_type: ActionType) -> Fault:
-        keys = ("type", "name", *FAULT_TYPES[self.type].keys)
-        r = _Reader(dict(self.raw), f"faults[{self.index}].", self.source, keys)
+        r = _Reader(dict(self.raw), f"faults[{self.index}].", self.source, FAULT_TYPES[self.type].all_keys)
         # Each fault draws from its own stream, so adding a fault leaves the others' draws alone.
         return FAULT_TYPES[self.type].build(r, self.name, seed * 1009 + self.index, action_type)
 
@@ -362,6 +403,8 @@ class Expectations:
     records: Mapping[str, int] = field(default_factory=dict)  # kind -> exact count
     control_status_seen: tuple[str, ...] = ()
     control_status_never: tuple[str, ...] = ()
+    verified_every: float | None = None  # s: longest stretch allowed without a verified transition
+    recovered_greens: tuple[int, ...] | None = None  # what every recovery's re-read must find green
     no_conflicting_command: bool = True
     no_conflicting_indication: bool = True
     no_commands_in_timeout: bool = True
@@ -371,20 +414,41 @@ class Expectations:
 _EXPECT_KEYS = tuple(Expectations.__dataclass_fields__)
 
 
-def _expectations(raw: Any, source: str, fault_names: Iterable[str]) -> Expectations:
-    r = _Reader(raw, "expect.", source, _EXPECT_KEYS)
+def _expect_tables(raw: Any, source: str, faults: Sequence[FaultSpec],
+                   intersections: Mapping[str, IntersectionConfig]) -> tuple[Expectations, dict[str, Expectations]]:
+    """``[expect]`` and, with several controllers, each ``[expect.TLS]``: the table that judges that intersection
+    alone; ``[expect]`` judges every intersection without one."""
+    several = len(intersections) > 1
+    r = _Reader(raw, "expect.", source, (*_EXPECT_KEYS, *(intersections if several else ())))
+    own = {tls: r.raw[tls] for tls in intersections if several and tls in r.raw}
+    rest = [tls for tls in intersections if tls not in own]
+
+    def table(raw_table: Any, where: str, judged: Sequence[str]) -> Expectations:
+        # after_fault names a fault acting on every intersection the table judges.
+        names = [f.name for f in faults if all(f.acts_at(tls) for tls in judged)]
+        configs = [intersections[tls] for tls in judged]
+        return _expectations(raw_table, where, source, names, configs)
+
+    default = table({k: v for k, v in r.raw.items() if k not in own}, "expect.", rest)
+    return default, {tls: table(value, f"expect.{tls}.", [tls]) for tls, value in own.items()}
+
+
+def _expectations(raw: Any, where: str, source: str, fault_names: Iterable[str],
+                  configs: Sequence[IntersectionConfig]) -> Expectations:
+    r = _Reader(raw, where, source, _EXPECT_KEYS)
     timeout = r.strings("timeout", choices=_TIMEOUT_CHOICES) if r.has("timeout") else (NO_TIMEOUT,)
     if len(timeout) > 1 and (NO_TIMEOUT in timeout or ANY_TIMEOUT in timeout):
         raise r.error("timeout", "'none' and 'any' stand alone; a list names TIMEOUT reasons")
     enters = timeout != (NO_TIMEOUT,)
-    for key in ("detect_within", "recover_within", "timeouts", "detect_from", "after_fault"):
+    for key in ("detect_within", "recover_within", "timeouts", "detect_from", "after_fault", "recovered_greens"):
         if r.has(key) and not enters:
             raise r.error(key, "needs expect.timeout to allow a TIMEOUT (a reason, a list of reasons, or 'any')")
     detect_from = r.string("detect_from", "fault", choices=("fault", "dispatch"))
     if detect_from == "dispatch" and timeout != (TimeoutReason.TRANSITION.value,):
         raise r.error("detect_from", "'dispatch' applies to timeout = 'transition' only")
     after_fault = r.string("after_fault", choices=tuple(fault_names)) if r.has("after_fault") else None
-    records = _Reader(r.raw.get("records", {}), "expect.records.", source, [k.value for k in Kind])
+    records = _Reader(r.raw.get("records", {}), f"{where}records.", source, [k.value for k in Kind])
+    phases = set.intersection(*(set(c.phases) for c in configs)) if configs else set()
     return Expectations(
         timeout=timeout,
         timeouts=r.optional_number("timeouts", integer=True, low=1),
@@ -401,6 +465,8 @@ def _expectations(raw: Any, source: str, fault_names: Iterable[str]) -> Expectat
             "control_status_seen") else (),
         control_status_never=r.strings("control_status_never", choices=_STATUS_NAMES) if r.has(
             "control_status_never") else (),
+        verified_every=r.optional_number("verified_every", low=0, low_open=True),
+        recovered_greens=r.phases("recovered_greens", phases) if r.has("recovered_greens") else None,
         no_conflicting_command=r.boolean("no_conflicting_command", True),
         no_conflicting_indication=r.boolean("no_conflicting_indication", True),
         no_commands_in_timeout=r.boolean("no_commands_in_timeout", True),
@@ -416,14 +482,24 @@ class Scenario:
     name: str
     source: str
     description: str
-    config: IntersectionConfig
+    config: IntersectionConfig  # the first intersection's, with several
     action_type: ActionType
     agent: str | None
     duration: float
     seed: int
     recover_after: float | None
     faults: tuple[FaultSpec, ...]
-    expect: Expectations
+    expect: Expectations  # every intersection's, but for those of expect_at
+    intersections: Mapping[str, IntersectionConfig]  # traffic light -> its controller's config
+    network: Network | None = None  # the scenario of several controllers run, if one was named
+    expect_at: Mapping[str, Expectations] = field(default_factory=dict)
+
+    @property
+    def several(self) -> bool:
+        return len(self.intersections) > 1
+
+    def expectations(self, tls: str) -> Expectations:
+        return self.expect_at.get(tls, self.expect)
 
     def spec(self, log_path: Path | None = None) -> RunSpec:
         return RunSpec(self.config, self.action_type, self.agent, self.duration, self.seed, log_path,
@@ -432,9 +508,14 @@ class Scenario:
     def build_faults(self) -> list[Fault]:
         return [f.build(self.seed, self.action_type) for f in self.faults]
 
+    def shown(self, tls: str | None) -> str | None:
+        """How reports name an intersection: only runs of several controllers name one."""
+        return tls if self.several else None
+
     def summary(self) -> str:
-        kinds = ", ".join(f.type for f in self.faults)
-        return f"{self.description or kinds} [{self.action_type.value}, {self.duration:g} s; faults: {kinds}]"
+        kinds = ", ".join(f.type + (f" at {f.intersection}" if self.several else "") for f in self.faults)
+        layout = f", {Path(self.network.source).name.removesuffix(SUFFIX)}" if self.several else ""
+        return f"{self.description or kinds} [{self.action_type.value}, {self.duration:g} s{layout}; faults: {kinds}]"
 
 
 def load_scenario(path: str | Path) -> Scenario:
@@ -453,17 +534,17 @@ def parse_scenario(text: str, source: str = "<memory>", *, base: Path | None = N
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(source, "<file>", f"is not valid TOML ({exc})") from None
     r = _Reader(raw, "", source, SCENARIO_KEYS)
-    config = _config(r, base)
+    network = _network(r, base)
+    intersections = dict(network.intersections) if network is not None else {TLS_ID: _config(r, base)}
     action_type = ActionType(r.string("action_type", ActionType.SELECTION.value, choices=[t.value for t in ActionType]))
     recover_after = r.number("recover_after", 5.0)
-    faults = _fault_specs(r, source, action_type)
-    names = [f.name for f in faults]
-    expect = _expectations(raw.get("expect", {}), source, names)
+    faults = _fault_specs(r, source, action_type, tuple(intersections))
+    expect, expect_at = _expect_tables(raw.get("expect", {}), source, faults, intersections)
     scenario = Scenario(
         name=r.string("name", default_name),
         source=source,
         description=r.string("description", ""),
-        config=config,
+        config=next(iter(intersections.values())),
         action_type=action_type,
         agent=r.string("agent") if r.has("agent") else None,
         duration=r.number("duration", low=0, low_open=True, high=24 * 3600),
@@ -471,9 +552,13 @@ def parse_scenario(text: str, source: str = "<memory>", *, base: Path | None = N
         recover_after=None if recover_after < 0 else recover_after,
         faults=tuple(faults),
         expect=expect,
+        intersections=intersections,
+        network=network,
+        expect_at=expect_at,
     )
     try:
-        load_agent(scenario.spec().agent_spec, config, action_type, scenario.seed)
+        for config in intersections.values():
+            load_agent(scenario.spec().agent_spec, config, action_type, scenario.seed)
     except AgentError as exc:
         raise r.error("agent", str(exc)) from None
     return scenario
@@ -488,6 +573,28 @@ def _config(r: _Reader, base: Path | None) -> IntersectionConfig:
             cfg = config_mod.load()
     except ConfigError as exc:
         raise r.error("config", str(exc)) from None
+    return _with_overrides(r, cfg)
+
+
+def _network(r: _Reader, base: Path | None) -> Network | None:
+    """The scenario of several controllers named by ``scenario``, with the ``[middleware]`` overrides in each
+    controller's config; None when the file names one intersection's ``config`` instead."""
+    if not r.has("scenario"):
+        return None
+    if r.has("config"):
+        raise r.error("scenario", "and config both given; allowed: config (one intersection) or scenario "
+                                  "(one controller per traffic light), not both")
+    given = r.string("scenario")
+    # A name is a shipped scenario's (a misspelt one is refused as such); a .toml file is relative to this one.
+    where = base / given if Path(given).suffix == ".toml" and base is not None else given
+    try:
+        network = load_network(where)
+    except ConfigError as exc:
+        raise r.error("scenario", str(exc)) from None
+    return replace(network, intersections={tls: _with_overrides(r, cfg) for tls, cfg in network.intersections.items()})
+
+
+def _with_overrides(r: _Reader, cfg: IntersectionConfig) -> IntersectionConfig:
     overrides = _Reader(r.raw.get("middleware", {}), "middleware.", r.source, MiddlewareParams.__dataclass_fields__)
     try:
         return cfg.with_middleware(**overrides.raw) if overrides.raw else cfg
@@ -495,7 +602,7 @@ def _config(r: _Reader, base: Path | None) -> IntersectionConfig:
         raise ScenarioError(r.source, exc.field, exc.message) from None
 
 
-def _fault_specs(r: _Reader, source: str, action_type: ActionType) -> list[FaultSpec]:
+def _fault_specs(r: _Reader, source: str, action_type: ActionType, intersections: tuple[str, ...]) -> list[FaultSpec]:
     raw = r.raw.get("faults")
     if not isinstance(raw, list) or not raw or not all(isinstance(f, dict) for f in raw):
         raise r.error("faults", "must be a non-empty array of tables ([[faults]])")
@@ -505,12 +612,22 @@ def _fault_specs(r: _Reader, source: str, action_type: ActionType) -> list[Fault
         kind = item.get("type")
         if kind not in FAULT_TYPES:
             raise ScenarioError(source, f"{where}type", f"is {kind!r}; allowed: {', '.join(FAULT_TYPES)}")
-        fr = _Reader(item, where, source, ("type", "name", *FAULT_TYPES[kind].keys))
+        fault_type = FAULT_TYPES[kind]
+        if not fault_type.per_controller and "intersection" in item:
+            raise ScenarioError(source, f"{where}intersection", f"not allowed: {kind} acts on the one simulation "
+                                                                f"every controller shares")
+        fr = _Reader(item, where, source, fault_type.all_keys)
         name = fr.string("name", f"{kind}#{i}")
         if name in names:
             raise fr.error("name", f"{name!r} is used by another fault; names must be unique")
         names.add(name)
-        spec = FaultSpec(kind, name, i, dict(item), source)
+        place = None
+        if fault_type.per_controller:
+            if len(intersections) > 1 and not fr.has("intersection"):
+                raise fr.error("intersection", f"is required with several controllers; allowed: "
+                                               f"{', '.join(intersections)}")
+            place = fr.string("intersection", intersections[0], choices=intersections)
+        spec = FaultSpec(kind, name, i, dict(item), source, place)
         spec.build(0, action_type)  # refuses a bad value now, not mid-suite
         specs.append(spec)
     return specs
@@ -539,6 +656,11 @@ class Check:
     expectation: str
     ok: bool
     message: str  # what was expected and, if it failed, what happened instead
+    intersection: str | None = None  # the one judged, in a run of several controllers
+
+    @property
+    def label(self) -> str:
+        return self.expectation if self.intersection is None else f"[{self.intersection}] {self.expectation}"
 
 
 @dataclass(frozen=True)
@@ -549,6 +671,11 @@ class FaultReport:
     fired: int
     first_fired: float | None
     details: Mapping[str, int]
+    intersection: str | None = None  # where it acted, in a run of several controllers
+
+    @property
+    def label(self) -> str:
+        return self.name if self.intersection is None else f"{self.name} at {self.intersection}"
 
 
 @dataclass(frozen=True)
@@ -561,6 +688,27 @@ class Episode:
     recovery_called: float | None  # the recover() call that succeeded
     recovered: float | None
     failed_recoveries: int
+    intersection: str | None = None  # whose controller, in a run of several
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """What happened at one intersection of a run."""
+
+    intersection: str
+    faults: tuple[str, ...]  # the faults that acted on it
+    episodes: tuple[Episode, ...]
+    detection_s: float | None
+    recovery_s: float | None
+    verified: int  # transitions verified
+    longest_unverified: tuple[float, float]  # the longest stretch (from, to) without a verified transition
+
+    def to_json(self) -> dict[str, Any]:
+        start, end = self.longest_unverified
+        return {"intersection": self.intersection, "faults": list(self.faults),
+                "timeouts": [e.reason for e in self.episodes], "detection_s": _round(self.detection_s),
+                "recovery_s": _round(self.recovery_s), "transitions_verified": self.verified,
+                "longest_unverified_s": _round(end - start)}
 
 
 @dataclass(frozen=True)
@@ -568,11 +716,12 @@ class ScenarioResult:
     scenario: Scenario
     checks: tuple[Check, ...]
     faults: tuple[FaultReport, ...]
-    episodes: tuple[Episode, ...]
-    detection_s: float | None
-    recovery_s: float | None
+    episodes: tuple[Episode, ...]  # every intersection's, in time order
+    detection_s: float | None  # with several controllers: the slowest intersection's
+    recovery_s: float | None  # the slowest, at any intersection
     records: int
     wall_s: float
+    outcomes: tuple[Outcome, ...] = ()  # one per intersection
 
     @property
     def passed(self) -> bool:
@@ -582,11 +731,20 @@ class ScenarioResult:
     def failures(self) -> list[Check]:
         return [c for c in self.checks if not c.ok]
 
+    def passed_at(self, tls: str) -> bool:
+        """Every check of intersection ``tls`` held, and every check of the whole run."""
+        return all(c.ok for c in self.checks if c.intersection in (None, tls))
+
     def fired_text(self) -> str:
-        return ", ".join(f"{f.name} x{f.fired}" for f in self.faults)
+        return ", ".join(f"{f.label} x{f.fired}" for f in self.faults)
+
+    def timeouts_text(self) -> str:
+        """How many TIMEOUT episodes, and where when several controllers ran."""
+        where = sorted({e.intersection for e in self.episodes if e.intersection is not None})
+        return f"{len(self.episodes)}" + (f" at {', '.join(where)}" if where else "")
 
     def to_json(self) -> dict[str, Any]:
-        return {
+        doc = {
             "scenario": self.scenario.name,
             "source": self.scenario.source,
             "passed": self.passed,
@@ -600,34 +758,48 @@ class ScenarioResult:
             "wall_s": round(self.wall_s, 4),
             "sim_s": self.scenario.duration,
         }
+        if self.scenario.several:
+            doc["intersections"] = [{**o.to_json(), "passed": self.passed_at(o.intersection)}
+                                    for o in self.outcomes]
+        return doc
 
 
 def _round(t: float | None) -> float | None:
     return None if t is None else round(t, 6)
 
 
-
-
 def run_scenario(scenario: Scenario, *, log_path: Path | None = None) -> ScenarioResult:
-    """Run one scenario in virtual time and judge its expectations."""
+    """Run one scenario in virtual time, without SUMO, and judge its expectations."""
     t0 = time.perf_counter()
     faults = scenario.build_faults()
-    monitors: list[IndicationMonitor] = []
+    placed = list(zip(scenario.faults, faults, strict=True))
+    monitors: dict[str, IndicationMonitor] = {}
 
-    def target_factory(env, config, seed=0):
-        target = FaultTarget(env, config, seed=seed, faults=faults)
-        monitors.append(IndicationMonitor(env, target.controller, config))
-        return target
+    def target_factory(tls: str) -> Callable[..., FaultTarget]:
+        # Each controller's target carries only the faults placed on it: the others' links stay whole.
+        here = [fault for spec, fault in placed if spec.acts_at(tls)]
 
-    def configure(run: Testbed, target: FaultTarget) -> None:
-        for fault in faults:
-            fault.on_run(run, target)
+        def make(env: Any, config: IntersectionConfig, seed: int = 0) -> FaultTarget:
+            target = FaultTarget(env, config, seed=seed, faults=here)
+            monitors[tls] = IndicationMonitor(env, target.controller, config)
+            return target
+        return make
 
-    result = run_spec(scenario.spec(log_path), target=target_factory, configure=configure)
-    return evaluate(scenario, result.records, faults, monitors[0], wall_s=time.perf_counter() - t0)
+    def configure(run: Testbed, _target: FaultTarget | None) -> None:
+        for spec, fault in placed:
+            fault.on_run(run, None if spec.intersection is None else run.junctions[spec.intersection])
+
+    with Testbed(None if scenario.network else scenario.config, scenario=scenario.network,
+                 action_type=scenario.action_type, target={tls: target_factory(tls) for tls in scenario.intersections},
+                 seed=scenario.seed, agent=scenario.agent, duration=scenario.duration, log_path=log_path,
+                 recover_after=scenario.recover_after, on_reset=configure) as tb:
+        tb.reset()
+        tb.run()
+        records = tb.records
+    return evaluate(scenario, records, faults, monitors, wall_s=time.perf_counter() - t0)
 
 
-def _episodes(records: list[dict[str, Any]]) -> list[Episode]:
+def _episodes(records: list[dict[str, Any]], intersection: str | None) -> list[Episode]:
     out: list[Episode] = []
     current: dict[str, Any] | None = None
     for rec in records:
@@ -641,38 +813,60 @@ def _episodes(records: list[dict[str, Any]]) -> list[Episode]:
             current["calls"].append(rec["t"])
         elif kind == Kind.RECOVERED:
             current["recovered"] = rec["t"]
-            out.append(_episode(current))
+            out.append(_episode(current, intersection))
             current = None
     if current is not None:
-        out.append(_episode(current))
+        out.append(_episode(current, intersection))
     return out
 
 
-def _episode(d: dict[str, Any]) -> Episode:
+def _episode(d: dict[str, Any], intersection: str | None) -> Episode:
     calls = d["calls"]
     if d["recovered"] is None:
-        return Episode(d["reason"], d["entered"], d["command_id"], None, None, len(calls))
+        return Episode(d["reason"], d["entered"], d["command_id"], None, None, len(calls), intersection)
     return Episode(d["reason"], d["entered"], d["command_id"], calls[-1] if calls else None, d["recovered"],
-                   max(0, len(calls) - 1))
+                   max(0, len(calls) - 1), intersection)
+
+
+Checker = Callable[[str, bool, str], None]
 
 
 def evaluate(scenario: Scenario, records: list[dict[str, Any]], faults: list[Fault],
-             monitor: IndicationMonitor | None, *, wall_s: float = 0.0) -> ScenarioResult:
-    """Judge a run's records, faults and controller samples against the scenario's expectations."""
-    ex = scenario.expect
-    cfg = scenario.config
+             monitors: Mapping[str, IndicationMonitor], *, wall_s: float = 0.0) -> ScenarioResult:
+    """Judge a run's records, faults and controller samples (``monitors``: each traffic light's) against the
+    scenario's expectations, intersection by intersection."""
     checks: list[Check] = []
 
-    def check(name: str, ok: bool, message: str) -> None:
-        checks.append(Check(name, ok, message))
+    def checker(tls: str | None) -> Checker:
+        where = scenario.shown(tls)
+        return lambda name, ok, message: checks.append(Check(name, ok, message, where))
 
-    for f in faults:
-        check(f"fault {f.name} fired", f.fired > 0,
-              f"fault {f.name!r} ({f.describe()}) to fire at least once" + (
-                  f"; fired {f.fired} times" if f.fired else
-                  "; it never fired, so the scenario proves nothing about it"))
+    placed = list(zip(scenario.faults, faults, strict=True))
+    for spec, f in placed:
+        checker(spec.intersection)(
+            f"fault {f.name} fired", f.fired > 0, f"fault {f.name!r} ({f.describe()}) to fire at least once" + (
+                f"; fired {f.fired} times" if f.fired else "; it never fired, so the scenario proves nothing about it"))
+    seq_problems = _seq_problems(records)
+    outcomes = []
+    for tls, cfg in scenario.intersections.items():
+        # Its own records, and the run-wide ones (run_started, run_ended), which name no intersection.
+        mine = [r for r in records if r.get("intersection", tls) == tls] if scenario.several else records
+        outcomes.append(_judge(scenario, tls, cfg, mine, [f for spec, f in placed if spec.acts_at(tls)],
+                               monitors.get(tls), seq_problems, checker(tls)))
+    reports = tuple(FaultReport(f.name, f.kind, f.describe(), f.fired, f.first_fired, dict(f.details),
+                                scenario.shown(spec.intersection)) for spec, f in placed)
+    episodes = sorted((e for o in outcomes for e in o.episodes), key=lambda e: e.entered)
+    detections = [o.detection_s for o in outcomes if o.detection_s is not None]
+    recoveries = [o.recovery_s for o in outcomes if o.recovery_s is not None]
+    return ScenarioResult(scenario, tuple(checks), reports, tuple(episodes), max(detections, default=None),
+                          max(recoveries, default=None), len(records), wall_s, tuple(outcomes))
 
-    episodes = _episodes(records)
+
+def _judge(scenario: Scenario, tls: str, cfg: IntersectionConfig, records: list[dict[str, Any]], faults: list[Fault],
+           monitor: IndicationMonitor | None, seq_problems: list[str], check: Checker) -> Outcome:
+    """Check one intersection's expectations on its records, faults and controller samples."""
+    ex = scenario.expectations(tls)
+    episodes = _episodes(records, scenario.shown(tls))
     by_kind: dict[str, list[dict[str, Any]]] = {}
     for rec in records:
         by_kind.setdefault(rec["kind"], []).append(rec)
@@ -693,13 +887,23 @@ def evaluate(scenario: Scenario, records: list[dict[str, Any]], faults: list[Fau
         else:
             detection = first_episode.entered - ref_fault.first_fired
     recoveries = [e.recovered - e.recovery_called for e in episodes if e.recovered is not None]
-    recovery = max(recoveries) if recoveries else None
+    verified = [r["t"] for r in by_kind.get(Kind.TRANSITION_VERIFIED, []) if r["t"] <= scenario.duration]
+    marks = [0.0, *verified, scenario.duration]
+    longest = max(itertools.pairwise(marks), key=lambda gap: gap[1] - gap[0])
 
     _check_timeouts(ex, episodes, check)
     if ex.detect_within is not None:
         _check_detection(ex, ref_fault, first_episode, detection, check)
     if ex.recover_within is not None:
         _check_recovery(ex, episodes, check)
+    if ex.recovered_greens is not None:
+        _check_recovered_greens(ex.recovered_greens, by_kind.get(Kind.RECOVERED, []), check)
+    if ex.verified_every is not None:
+        gap = longest[1] - longest[0]
+        check("verified_every", gap <= ex.verified_every,
+              f"a transition verified at least every {ex.verified_every:g} s ({len(verified)} verified)" + (
+                  "" if gap <= ex.verified_every else
+                  f"; got {gap:.3f} s without one, from {longest[0]:.3f} s to {longest[1]:.3f} s"))
     _check_actions(ex, by_kind, check)
     for kind, n in ex.records.items():
         got = len(by_kind.get(kind, []))
@@ -711,18 +915,12 @@ def evaluate(scenario: Scenario, records: list[dict[str, Any]], faults: list[Fau
     if ex.no_conflicting_indication or ex.control_status_seen or ex.control_status_never:
         _check_controller(ex, monitor, check)
     if ex.log_complete:
-        _check_log(records, cfg, check)
-    reports = tuple(FaultReport(f.name, f.kind, f.describe(), f.fired, f.first_fired, dict(f.details))
-                    for f in faults)
-    return ScenarioResult(scenario, tuple(checks), reports, tuple(episodes), detection, recovery, len(records),
-                          wall_s)
+        _check_log(records, cfg, seq_problems, check)
+    return Outcome(tls, tuple(f.name for f in faults), tuple(episodes), detection, max(recoveries, default=None),
+                   len(verified), longest)
 
 
-def _fmt(t: float | None) -> str:
-    return "-" if t is None else f"{t:.3f}"
-
-
-def _check_timeouts(ex: Expectations, episodes: list[Episode], check: Callable[[str, bool, str], None]) -> None:
+def _check_timeouts(ex: Expectations, episodes: list[Episode], check: Checker) -> None:
     seen = ", ".join(f"{e.reason} at {e.entered:.3f} s" for e in episodes) or "none"
     if ex.timeout == (NO_TIMEOUT,):
         check("timeout", not episodes, "no TIMEOUT" + ("" if not episodes else f"; got TIMEOUT: {seen}"))
@@ -739,7 +937,7 @@ def _check_timeouts(ex: Expectations, episodes: list[Episode], check: Callable[[
 
 
 def _check_detection(ex: Expectations, ref: Fault | None, episode: Episode | None, detection: float | None,
-                     check: Callable[[str, bool, str], None]) -> None:
+                     check: Checker) -> None:
     origin = "the dispatch of the command that timed out" if ex.detect_from == "dispatch" else (
         f"fault {ref.name!r} first fired" if ref else "the fault first fired")
     want = f"TIMEOUT within {ex.detect_within:g} s after {origin}"
@@ -756,7 +954,7 @@ def _check_detection(ex: Expectations, ref: Fault | None, episode: Episode | Non
                                            f"{detection:.3f} s after"))
 
 
-def _check_recovery(ex: Expectations, episodes: list[Episode], check: Callable[[str, bool, str], None]) -> None:
+def _check_recovery(ex: Expectations, episodes: list[Episode], check: Checker) -> None:
     want = f"every TIMEOUT back to IDLE within {ex.recover_within:g} s of the recover() call that succeeded"
     problems = []
     for e in episodes:
@@ -768,8 +966,15 @@ def _check_recovery(ex: Expectations, episodes: list[Episode], check: Callable[[
     check("recover_within", not problems, want + ("" if not problems else "; got: " + "; ".join(problems)))
 
 
+def _check_recovered_greens(greens: tuple[int, ...], recovered: list[dict[str, Any]], check: Checker) -> None:
+    want = f"every recovery found phases {list(greens)} green"
+    wrong = [f"{sorted(r['greens'])} at {r['t']:.3f} s" for r in recovered if sorted(r["greens"]) != list(greens)]
+    ok = bool(recovered) and not wrong
+    check("recovered_greens", ok, want + ("" if ok else "; got " + ("; ".join(wrong) if wrong else "no recovery")))
+
+
 def _check_actions(ex: Expectations, by_kind: dict[str, list[dict[str, Any]]],
-                   check: Callable[[str, bool, str], None]) -> None:
+                   check: Checker) -> None:
     refused = by_kind.get(Kind.ACTION_REFUSED, [])
     if ex.refused is not None:
         ids = {r["action_id"] for r in refused}
@@ -793,7 +998,7 @@ def _check_actions(ex: Expectations, by_kind: dict[str, list[dict[str, Any]]],
 
 
 def _check_commands(cfg: IntersectionConfig, sets: list[dict[str, Any]],
-                    check: Callable[[str, bool, str], None]) -> None:
+                    check: Checker) -> None:
     bad = []
     for r in sets:
         phases = sorted(r["phases"])
@@ -806,7 +1011,7 @@ def _check_commands(cfg: IntersectionConfig, sets: list[dict[str, Any]],
               "" if not bad else "; got: " + "; ".join(bad[:5])))
 
 
-def _check_quiet_in_timeout(records: list[dict[str, Any]], check: Callable[[str, bool, str], None]) -> None:
+def _check_quiet_in_timeout(records: list[dict[str, Any]], check: Checker) -> None:
     in_timeout = False
     bad = []
     for r in records:
@@ -821,7 +1026,7 @@ def _check_quiet_in_timeout(records: list[dict[str, Any]], check: Callable[[str,
 
 
 def _check_controller(ex: Expectations, monitor: IndicationMonitor | None,
-                      check: Callable[[str, bool, str], None]) -> None:
+                      check: Checker) -> None:
     if monitor is None:
         check("controller", False, "controller samples needed, but the target has no controller to sample")
         return
@@ -841,13 +1046,18 @@ def _check_controller(ex: Expectations, monitor: IndicationMonitor | None,
             "" if name not in seen else f"; got {name} at {seen[name]:.3f} s"))
 
 
-def _check_log(records: list[dict[str, Any]], cfg: IntersectionConfig,
-               check: Callable[[str, bool, str], None]) -> None:
-    problems = []
+def _seq_problems(records: list[dict[str, Any]]) -> list[str]:
+    """The whole log's sequence numbers run from 0 without a gap."""
     seqs = [r["seq"] for r in records]
-    if seqs != list(range(len(records))):
-        gap = next((i for i, s in enumerate(seqs) if s != i), len(seqs))
-        problems.append(f"seq not gapless from 0 (first break at position {gap})")
+    if seqs == list(range(len(records))):
+        return []
+    gap = next((i for i, s in enumerate(seqs) if s != i), len(seqs))
+    return [f"seq not gapless from 0 (first break at position {gap})"]
+
+
+def _check_log(records: list[dict[str, Any]], cfg: IntersectionConfig, seq_problems: list[str],
+               check: Checker) -> None:
+    problems = list(seq_problems)
     if not records or records[0]["kind"] != Kind.RUN_STARTED or records[-1]["kind"] != Kind.RUN_ENDED:
         problems.append("the log does not run from run_started to run_ended")
     ends: dict[int, int] = {}

@@ -252,9 +252,9 @@ def run_with(config: IntersectionConfig, faults, *, action_type=ActionType.SELEC
             monitors.append(IndicationMonitor(env, target.controller, cfg))
         return target
 
-    def configure(run, target):
+    def configure(run, _target):
         for f in faults:
-            f.on_run(run, target)
+            f.on_run(run, run.junction)
 
     return run_spec(RunSpec(config, action_type, agent, duration, seed=1), target=factory,
                        configure=configure)
