@@ -10,7 +10,10 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import statistics
+import subprocess
+import sys
 import tempfile
 import time
 from importlib import resources
@@ -58,6 +61,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     over.add_argument("--duration", type=float, default=3600.0, metavar="S", help="simulated seconds (3600)")
     over.add_argument("--repeat", type=int, default=3, help="alternating measurements of each (3)")
     over.add_argument("--seed", type=int, default=0)
+    over.add_argument("--instructions", action="store_true",
+                      help="also count the instructions of each side under valgrind's callgrind (minutes; "
+                           "exact and repeatable on a busy machine, where seconds are not)")
     over.add_argument("--out", type=Path, default=REPORT_DIR / "overhead.json", metavar="FILE")
     over.set_defaults(func=_overhead_command)
     wire = commands.add_parser("wire", help="verification lag and GET round trip over UDP (wall-clock time)",
@@ -218,6 +224,33 @@ def measure_overhead(duration: float, repeat: int, seed: int) -> dict[str, Any]:
             "ratio_vs_fixed_cycle_at_max_green": full_s / fixed_s}
 
 
+def measure_instructions(duration: float, warm: float = 10.0) -> dict[str, Any]:
+    """Instructions of the full loop and of its same-traffic floor per ``duration`` simulated seconds, each
+    counted by callgrind in a process of its own, less the same process run for ``warm`` s (start-up out)."""
+    counts: dict[str, float] = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        changes = Path(tmp) / "changes.json"
+        for seconds in (duration, warm):
+            for side in ("hils", "floor"):  # the floor replays what the loop just showed
+                counts[f"{side}_{seconds:g}"] = _callgrind(["-m", "harness.overhead_probe", side, str(seconds),
+                                                            str(changes)])
+    hils = counts[f"hils_{duration:g}"] - counts[f"hils_{warm:g}"]
+    floor = counts[f"floor_{duration:g}"] - counts[f"floor_{warm:g}"]
+    return {"duration_s": duration, "warm_s": warm, "counts": counts, "hils_instructions": hils,
+            "floor_instructions": floor, "ratio": hils / floor}
+
+
+def _callgrind(args: list[str]) -> float:
+    """Instructions a Python process executes, as valgrind's callgrind counts them (its 'Collected' line)."""
+    done = subprocess.run(["valgrind", "--tool=callgrind", "--callgrind-out-file=/dev/null", sys.executable, *args],
+                          capture_output=True, text=True, check=False)
+    found = re.search(r"Collected : (\d+)", done.stderr)
+    if done.returncode != 0 or found is None:
+        raise SystemExit(f"hils bench overhead --instructions: valgrind failed ({done.returncode}): "
+                         f"{done.stderr.strip()[-300:]}")
+    return float(found[1])
+
+
 def _overhead_command(args: argparse.Namespace) -> int:
     info = machine.describe()
     f = measure_overhead(args.duration, args.repeat, args.seed)
@@ -234,6 +267,10 @@ def _overhead_command(args: argparse.Namespace) -> int:
     print(f"  ratio to the same-traffic floor     {f['ratio']:.2f} (goal <= 1.15)")
     print(f"  for the record, libsumo running a fixed cycle at maximum green (other traffic): "
           f"{f['fixed_cycle_median_s']:.2f} s, ratio {f['ratio_vs_fixed_cycle_at_max_green']:.2f}")
+    if args.instructions:
+        ins = f["instructions"] = measure_instructions(args.duration)
+        print(f"  instructions (callgrind, start-up counted out): full loop {ins['hils_instructions'] / 1e9:.2f} G, "
+              f"same-traffic floor {ins['floor_instructions'] / 1e9:.2f} G, ratio {ins['ratio']:.2f}")
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(jsonout.dumps({"machine": info, "overhead": f}) + "\n", encoding="utf-8")
     print(f"written: {args.out}")
