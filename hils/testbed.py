@@ -564,7 +564,9 @@ class Testbed:
             try:
                 mw.check(value)
             except ActionError:
-                raise mw.submit(value).error from None  # logged as received and refused
+                error = mw.submit(value).error  # logged as received and refused
+                error.add_note(f"the action of traffic light {tls}; nothing was sent to any controller")
+                raise error from None
         submitted = {tls: self.junctions[tls].middleware.submit(value) for tls, value in chosen.items()}
         return self._to_decision(submitted)
 

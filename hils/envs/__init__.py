@@ -1,11 +1,25 @@
-"""Gymnasium environments on the Testbed: ``gymnasium.make("hils/Intersection-v0", action_type=...)``.
+"""Reinforcement-learning environments on the Testbed.
 
-:func:`register` puts the environment into gymnasium's registry by its entry-point string, so that
-registering loads neither the Testbed nor SUMO. ``import hils`` registers it when gymnasium is
-already imported; ``import hils.envs`` always does (gymnasium is imported then).
+- gymnasium: ``gymnasium.make("hils/Intersection-v0", action_type=...)``, one intersection
+  (:mod:`hils.envs.intersection`).
+- PettingZoo: :func:`parallel_env`, a ``ParallelEnv`` with one agent per traffic light of a scenario
+  (:mod:`hils.envs.parallel`).
+
+:func:`register` puts the gymnasium environment into gymnasium's registry by its entry-point string, so
+that registering loads neither the Testbed nor SUMO. ``import hils`` registers it when gymnasium is
+already imported; ``import hils.envs`` always does (gymnasium is imported then). PettingZoo is imported
+only when :func:`parallel_env` is called.
 """
 
 from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from hils.actions import ActionType
+    from hils.envs.parallel import IntersectionsEnv
+    from hils.scenario import Scenario
 
 ENV_ID = "hils/Intersection-v0"
 
@@ -17,6 +31,15 @@ def register() -> None:
     if ENV_ID not in gymnasium.registry:
         gymnasium.register(id=ENV_ID, entry_point="hils.envs.intersection:IntersectionEnv",
                            disable_env_checker=False)
+
+
+def parallel_env(scenario: str | Path | Scenario = "corridor", action_type: ActionType | str = "selection",
+                 **options: Any) -> IntersectionsEnv:
+    """A PettingZoo ``ParallelEnv`` of ``scenario`` (``corridor``, ``grid4x4`` or a ``.scenario.toml`` path),
+    one agent per traffic light; ``options`` as :class:`hils.envs.parallel.IntersectionsEnv` takes them."""
+    from hils.envs.parallel import IntersectionsEnv
+
+    return IntersectionsEnv(scenario, action_type, **options)
 
 
 register()

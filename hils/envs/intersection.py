@@ -28,6 +28,8 @@ Rules
   Testbed recovers from it (``recover_after``) while training goes on.
 - Seeding: ``reset(seed=s)`` seeds SUMO, the latency model and the agent-facing RNG; a reset without
   a seed draws the next seed from ``np_random``, so a seeded sequence of episodes is reproducible.
+- What is said of one intersection here (spaces, conversions, rewards) lives in :class:`IntersectionAdapter`
+  and the functions beside it, which the PettingZoo environment (:mod:`hils.envs.parallel`) uses per agent.
 """
 
 from __future__ import annotations
@@ -47,7 +49,7 @@ from hils.agents import Observation
 from hils.config import IntersectionConfig
 from hils.errors import UserError
 from hils.manager import State
-from hils.poller import Snapshot
+from hils.poller import SignalCache, Snapshot
 from hils.sumo_net import TLS_ID, derive_phase_map, read_net, scenario_config
 from hils.testbed import VIRTUAL, Testbed
 
@@ -81,6 +83,100 @@ def wait_reward(previous: Observation, current: Observation) -> float:
 REWARDS: dict[str, Reward] = {"queue": queue_reward, "pressure": pressure_reward, "wait": wait_reward}
 
 
+# --- one intersection as an agent sees it: shared by this environment and the PettingZoo one ------------
+
+
+def action_type_of(action_type: ActionType | str) -> ActionType:
+    """The action type named, or an :class:`EnvOptionError` saying which are allowed."""
+    try:
+        return ActionType(action_type)
+    except ValueError:
+        raise EnvOptionError(f"action_type {action_type!r}: allowed: "
+                             f"{', '.join(t.value for t in ActionType)}") from None
+
+
+def reward_of(reward: str | Reward) -> Reward:
+    """The reward function named in :data:`REWARDS`, or the callable given."""
+    if isinstance(reward, str) and reward not in REWARDS:
+        raise EnvOptionError(f"reward {reward!r}: allowed: {', '.join(REWARDS)} or a callable "
+                             "(previous, current) -> float")
+    if not callable(reward) and not isinstance(reward, str):
+        raise EnvOptionError(f"reward {reward!r}: allowed: {', '.join(REWARDS)} or a callable")
+    return REWARDS[reward] if isinstance(reward, str) else reward
+
+
+def with_timing(config: IntersectionConfig, sumo_step: float | None, control_interval: float | None
+                ) -> IntersectionConfig:
+    """``config`` with the environment's ``sumo_step`` and ``control_interval`` options, where given."""
+    changes = {k: v for k, v in (("sumo_step", sumo_step), ("control_interval", control_interval)) if v is not None}
+    return config.with_middleware(**changes) if changes else config
+
+
+def episode_seed(seed: int | None, rng: np.random.Generator) -> int:
+    """The seed of an episode: the one given, else the next draw of the environment's RNG."""
+    return seed if seed is not None else int(rng.integers(0, 2**31 - 1))
+
+
+def reset_info(obs: Observation, seed: int) -> dict[str, Any]:
+    """The info of an intersection's first observation."""
+    return {"t": obs.t, "seed": seed, "state": obs.state.value}
+
+
+class IntersectionAdapter:
+    """One intersection as an agent sees it: its action and observation spaces, its actions converted for
+    the Testbed and its observations as the vector of the module's layout.
+
+    ``start`` it at every reset with the intersection's signal cache: the time in the current interval is
+    counted from the signal's last change, which the cache reports."""
+
+    def __init__(self, config: IntersectionConfig, action_type: ActionType) -> None:
+        self.config = config
+        self.action_type = action_type
+        self.phases = config.phase_numbers
+        n = len(self.phases)
+        if action_type is ActionType.SELECTION:
+            self.action_space: spaces.Space = spaces.Discrete(len(config.pairs))
+        elif action_type is ActionType.SWITCH:
+            self.action_space = spaces.Discrete(2)
+        else:
+            self.action_space = spaces.Box(0.0, 1.0, (1,), np.float32)
+        low = np.concatenate([np.zeros(n), np.full(n, -np.inf), np.zeros(n), [0.0], np.zeros(len(STATES))])
+        high = np.concatenate([np.full(n, np.inf), np.full(n, np.inf), np.ones(n), [np.inf], np.ones(len(STATES))])
+        self.observation_space = spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32)
+        self._changed_at = 0.0
+
+    def start(self, cache: SignalCache, obs: Observation) -> None:
+        """Follow the signal's changes from the first observation of an episode on."""
+        self._changed_at = cache.snapshot.t if cache.snapshot is not None else obs.t
+        cache.subscribe(self._on_signal_change)
+
+    def action(self, action: Any) -> Any:
+        """What the Testbed takes: a pair for selection, 0/1 for switch, x in [0, 1] for duration."""
+        value = np.asarray(action)
+        if self.action_type is ActionType.SELECTION:
+            if value.size != 1 or not np.issubdtype(value.dtype, np.integer) \
+                    or not 0 <= int(value.reshape(())) < len(self.config.pairs):
+                raise EnvOptionError(f"selection action {action!r}: allowed: an integer in "
+                                     f"[0, {len(self.config.pairs)}) indexing {list(self.config.pairs)}")
+            return self.config.pairs[int(value.reshape(()))]
+        if self.action_type is ActionType.SWITCH:
+            return int(value.reshape(())) if value.size == 1 else action
+        return float(np.clip(value.reshape(-1)[0], 0.0, 1.0)) if value.size == 1 else action
+
+    def vector(self, obs: Observation) -> np.ndarray:
+        """The observation as the module's layout says."""
+        traffic, signal = obs.traffic, obs.signal
+        queue = [traffic.movements[p].upstream_queue for p in self.phases]
+        pressure = [traffic.movements[p].pressure for p in self.phases]
+        lights = [0.0 if signal is None else 1.0 if p in signal.greens else 0.5 if p in signal.yellows else 0.0
+                  for p in self.phases]
+        state = [float(obs.state is s) for s in STATES]
+        return np.array([*queue, *pressure, *lights, max(0.0, obs.t - self._changed_at), *state], dtype=np.float32)
+
+    def _on_signal_change(self, snapshot: Snapshot, changed: bool) -> None:
+        self._changed_at = snapshot.t
+
+
 class IntersectionEnv(gymnasium.Env):
     """``gymnasium.make("hils/Intersection-v0", action_type="selection" | "switch" | "duration", ...)``.
 
@@ -100,60 +196,39 @@ class IntersectionEnv(gymnasium.Env):
                  sumo_step: float | None = None, control_interval: float | None = None,
                  episode_length: float = 3600.0, reward: str | Reward = "queue", recover_after: float = 5.0,
                  log_path: str | Path | None = None) -> None:
-        try:
-            self.action_type = ActionType(action_type)
-        except ValueError:
-            raise EnvOptionError(f"action_type {action_type!r}: allowed: "
-                                 f"{', '.join(t.value for t in ActionType)}") from None
+        self.action_type = action_type_of(action_type)
         cfg = config if isinstance(config, IntersectionConfig) else config_mod.load(config)
-        changes = {k: v for k, v in (("sumo_step", sumo_step), ("control_interval", control_interval))
-                   if v is not None}
-        self.config = cfg.with_middleware(**changes) if changes else cfg
-        if isinstance(reward, str) and reward not in REWARDS:
-            raise EnvOptionError(f"reward {reward!r}: allowed: {', '.join(REWARDS)} or a callable "
-                                 "(previous, current) -> float")
-        if not callable(reward) and not isinstance(reward, str):
-            raise EnvOptionError(f"reward {reward!r}: allowed: {', '.join(REWARDS)} or a callable")
-        self.reward_fn: Reward = REWARDS[reward] if isinstance(reward, str) else reward
+        self.config = with_timing(cfg, sumo_step, control_interval)
+        self.reward_fn = reward_of(reward)
         self._scenario_dir = tempfile.TemporaryDirectory(prefix="hils-env-") if net is not None else None
         self.sumo_config = scenario_config(sumocfg=sumocfg, net=net, routes=routes,
                                            directory=self._scenario_dir.name if self._scenario_dir else None)
         if net is not None:
             derive_phase_map(self.config, read_net(net), tls_id=TLS_ID)  # refuse an unmappable movement now
-        self.phases = self.config.phase_numbers
+        self.adapter = IntersectionAdapter(self.config, self.action_type)
+        self.phases = self.adapter.phases
+        self.action_space = self.adapter.action_space
+        self.observation_space = self.adapter.observation_space
         self.testbed = Testbed(self.config, action_type=self.action_type, target=target, sumo=True,
                                duration=episode_length, recover_after=recover_after, log_path=log_path,
                                sumo_config=self.sumo_config)
-        n = len(self.phases)
-        if self.action_type is ActionType.SELECTION:
-            self.action_space: spaces.Space = spaces.Discrete(len(self.config.pairs))
-        elif self.action_type is ActionType.SWITCH:
-            self.action_space = spaces.Discrete(2)
-        else:
-            self.action_space = spaces.Box(0.0, 1.0, (1,), np.float32)
-        low = np.concatenate([np.zeros(n), np.full(n, -np.inf), np.zeros(n), [0.0], np.zeros(len(STATES))])
-        high = np.concatenate([np.full(n, np.inf), np.full(n, np.inf), np.ones(n), [np.inf], np.ones(len(STATES))])
-        self.observation_space = spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32)
         self._last: Observation | None = None
-        self._changed_at = 0.0
 
     # --- gymnasium API ----------------------------------------------------------------------
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None
               ) -> tuple[np.ndarray, dict[str, Any]]:
         super().reset(seed=seed)
-        run_seed = seed if seed is not None else int(self.np_random.integers(0, 2**31 - 1))
+        run_seed = episode_seed(seed, self.np_random)
         obs = self.testbed.reset(seed=run_seed)
-        cache = self.testbed.middleware.cache
-        self._changed_at = cache.snapshot.t if cache.snapshot is not None else obs.t
-        cache.subscribe(self._on_signal_change)
+        self.adapter.start(self.testbed.middleware.cache, obs)
         self._last = obs
-        return self._vector(obs), {"t": obs.t, "seed": run_seed, "state": obs.state.value}
+        return self.adapter.vector(obs), reset_info(obs, run_seed)
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         tb = self.testbed
         try:
-            obs, info = tb.step(self._action_value(action))
+            obs, info = tb.step(self.adapter.action(action))
             info["refused"] = None
         except ActionError as exc:
             obs, info = tb.wait()
@@ -163,37 +238,10 @@ class IntersectionEnv(gymnasium.Env):
         truncated = tb.done
         if truncated:
             tb.finish()
-        return self._vector(obs), reward, False, truncated, info
+        return self.adapter.vector(obs), reward, False, truncated, info
 
     def close(self) -> None:
         self.testbed.close()
         if self._scenario_dir is not None:
             self._scenario_dir.cleanup()
             self._scenario_dir = None
-
-    # --- conversion ----------------------------------------------------------------------------
-
-    def _action_value(self, action: Any) -> Any:
-        """What the Testbed takes: a pair for selection, 0/1 for switch, x in [0, 1] for duration."""
-        value = np.asarray(action)
-        if self.action_type is ActionType.SELECTION:
-            if value.size != 1 or not np.issubdtype(value.dtype, np.integer) \
-                    or not 0 <= int(value.reshape(())) < len(self.config.pairs):
-                raise EnvOptionError(f"selection action {action!r}: allowed: an integer in "
-                                     f"[0, {len(self.config.pairs)}) indexing {list(self.config.pairs)}")
-            return self.config.pairs[int(value.reshape(()))]
-        if self.action_type is ActionType.SWITCH:
-            return int(value.reshape(())) if value.size == 1 else action
-        return float(np.clip(value.reshape(-1)[0], 0.0, 1.0)) if value.size == 1 else action
-
-    def _on_signal_change(self, snapshot: Snapshot, changed: bool) -> None:
-        self._changed_at = snapshot.t
-
-    def _vector(self, obs: Observation) -> np.ndarray:
-        traffic, signal = obs.traffic, obs.signal
-        queue = [traffic.movements[p].upstream_queue for p in self.phases]
-        pressure = [traffic.movements[p].pressure for p in self.phases]
-        lights = [0.0 if signal is None else 1.0 if p in signal.greens else 0.5 if p in signal.yellows else 0.0
-                  for p in self.phases]
-        state = [float(obs.state is s) for s in STATES]
-        return np.array([*queue, *pressure, *lights, max(0.0, obs.t - self._changed_at), *state], dtype=np.float32)
