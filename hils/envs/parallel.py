@@ -8,12 +8,13 @@ environment's (:mod:`hils.envs.intersection`, through the same :class:`Intersect
 
 Rules
 -----
-- ``step(actions)`` submits every agent's action, then runs to the next decision point of *any*
-  intersection (selection and switch: the control interval; duration: the earliest end of a served
-  green). An agent left out of ``actions`` does not act this time.
-- Duration actions: an agent whose controller is not IDLE (still serving the green it was given, or
-  in TIMEOUT) has its action dropped by the manager, as the paper's ON_HOLD prescribes; its info says
-  ``dropped``. Every live agent is asked at every step, so a policy sees when it was heard.
+- Every intersection keeps its own decision schedule (selection and switch: the control interval;
+  duration: the end of the green it serves). ``step(actions)`` takes the action of each agent whose
+  intersection is at its decision point (``info["due"]`` of the last step; every agent after ``reset``),
+  then runs to the next decision point of *any* intersection. The action of an agent that is not due, or
+  left out, is not taken: its ``info["acted"]`` is False, and its controller runs on (duration: the green
+  it was given is served whole, as the paper's ON_HOLD prescribes). Every live agent gets an observation
+  and a reward at every step.
 - An action outside the agent's space is refused with a typed error (:class:`EnvOptionError`, or the
   middleware's :class:`hils.actions.ActionError`) naming the agent; nothing is sent to any controller
   and no time passes.
