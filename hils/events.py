@@ -31,7 +31,8 @@ import orjson
 class Kind(StrEnum):
     """Event kinds and the keys each one adds."""
 
-    RUN_STARTED = "run_started"                # config, seed, mode, action_type, agent
+    RUN_STARTED = "run_started"                # config, source, seed, mode, action_type, agent, duration
+    #                                                        (several: scenario, source, intersections; no config)
     ACTION_RECEIVED = "action_received"        # action_id, action_type, value
     ACTION_CONVERTED = "action_converted"      # action_id, command [p1, p2], green (s or null), keep
     ACTION_REFUSED = "action_refused"          # action_id, error, reason

@@ -310,6 +310,22 @@ def check_scenario(scenario: Scenario) -> dict[str, PhaseMap]:
     return {tls: derive_phase_map(cfg, net, tls_id=tls) for tls, cfg in scenario.intersections.items()}
 
 
+def light_positions(scenario: Scenario) -> dict[str, tuple[float, float]]:
+    """Where each traffic light of ``scenario`` is on its network (x east, y north, in metres): the centre of
+    the junctions its incoming edges end at (one junction, or the several of a joined traffic light)."""
+    net = read_net(sumocfg_net_file(scenario.sumo_config))
+    out = {}
+    for tls in scenario.intersections:
+        try:
+            edges = net.getTLS(tls).getEdges()
+        except KeyError:
+            raise NetworkError(f"{scenario.source}: intersections.{tls}: the network has no traffic light "
+                               f"{tls!r}") from None
+        coords = {e.getToNode().getID(): e.getToNode().getCoord() for e in edges}.values()
+        out[tls] = (sum(c[0] for c in coords) / len(coords), sum(c[1] for c in coords) / len(coords))
+    return out
+
+
 def netconvert_binary() -> str:
     """netconvert of the installed eclipse-sumo wheel."""
     return str(Path(sumo.SUMO_HOME) / "bin" / "netconvert")

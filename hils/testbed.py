@@ -441,7 +441,8 @@ class Testbed:
                 j.detector_feed = DetectorFeed(j.transport, j.config, j.events,
                                                {p: pm.incoming_lanes(p) for p in pm.phases})
         cfg = self.config
-        fields = ({"scenario": self.scenario.name, "intersections": list(self.configs)} if self.several else
+        fields = ({"scenario": self.scenario.name, "source": self.scenario.source, "intersections": list(self.configs)}
+                  if self.several else
                   {"config": cfg.name, "source": cfg.source})
         self.events.emit(Kind.RUN_STARTED, **fields, seed=self.seed, mode=self.mode,
                          action_type=self.action_type.value, agent=_agent_name(self._agent_spec, self.spec),

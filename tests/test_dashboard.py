@@ -24,10 +24,12 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from hils.config import IntersectionConfig, parse
-from hils.dashboard.board import STRIP_S, Board, Replay
+from hils.dashboard.board import STRIP_S, Board, Panels, Replay, map_cells
 from hils.dashboard.cabinet import COLUMNS as CABINET_COLUMNS
 from hils.dashboard.cabinet import read_cabinet
 from hils.events import Kind, read
+from hils.scenario import load_scenario
+from hils.sumo_net import light_positions
 from hils.testbed import Testbed
 
 
@@ -54,7 +56,7 @@ def test_live_board_and_replay_agree_at_the_end(run: tuple[Path, dict[str, Any]]
                                                 paper_config: IntersectionConfig) -> None:
     log, live = run
     records = list(read(log))
-    replay = Replay(paper_config, records, every=500)
+    replay = Replay(Board(paper_config), records, every=500)
     assert replay.at(replay.end).snapshot() == live
     assert live["ended"] == "duration"
     assert live["state"] in {"idle", "on_hold", "closed"}
@@ -72,7 +74,7 @@ def test_live_board_and_replay_agree_at_the_end(run: tuple[Path, dict[str, Any]]
 def test_replay_at_any_instant_is_the_log_folded_up_to_it(run: tuple[Path, dict[str, Any]], t: float,
                                                           paper_config: IntersectionConfig) -> None:
     records = list(read(run[0]))
-    replay = Replay(paper_config, records, every=97)  # checkpoints land anywhere between records
+    replay = Replay(Board(paper_config), records, every=97)  # checkpoints land anywhere between records
     direct = Board(paper_config).feed_all(r for r in records if r["t"] <= t)
     direct.t = max(direct.t, min(t, replay.end))
     assert replay.at(t).snapshot() == direct.snapshot()
@@ -112,6 +114,7 @@ def test_timeout_shows_its_reason_until_the_manager_is_idle_again(paper_config: 
                     {"t": 9.1, "kind": "state", "from": "timeout", "to": "idle"}])
     snap = board.snapshot()
     assert snap["state"] == "idle" and snap["timeout"] is None
+    assert snap["comms"]["failing"] == 0  # recovery read the controller: no longer failing, change or not
 
 
 def test_a_kept_command_is_listed_with_its_phases(paper_config: IntersectionConfig) -> None:
@@ -173,6 +176,127 @@ def test_a_board_without_cabinet_reads_claims_nothing(paper_config: Intersection
     assert all(p["ped"] is None and p["next"] is None and p["call"] is None for p in snap["phases"])
 
 
+# --- a run of several controllers: one panel per intersection ------------------------------------------
+
+
+def test_panels_fold_each_intersection_s_records_into_its_own_board(paper_config: IntersectionConfig) -> None:
+    panels = Panels.of({"J1": paper_config, "J2": paper_config}, {"J1": (0.0, 0.0), "J2": (300.0, 0.0)})
+    j1, j2 = ({"intersection": tls} for tls in ("J1", "J2"))
+    panels.feed_all([
+        {"t": 0.0, "kind": "run_started", "scenario": "two", "source": "two.scenario.toml",
+         "intersections": ["J1", "J2"], "seed": 0, "mode": "virtual", "action_type": "selection",
+         "agent": "max-pressure", "duration": 60.0},
+        {**_poll(0.0, [2, 6]), **j1}, {**_poll(0.0, [4, 8]), **j2},
+        {"t": 1.0, "kind": "state", "from": "idle", "to": "on_hold", **j2},
+        {"t": 3.0, "kind": "poll_failed", "poll_id": 30, "error": "CommunicationTimeout", "consecutive": 5, **j2},
+        {"t": 3.0, "kind": "timeout_entered", "reason": "communication", "detail": "5 consecutive polls failed",
+         "command_id": 4, **j2},
+        {"t": 3.0, "kind": "state", "from": "on_hold", "to": "timeout", **j2},
+        {**_poll(4.0, [1, 5]), **j1},
+        {"t": 5.0, "kind": "command_dispatched", "action_id": 2, "command_id": 2, "command": [3, 7], "green": None,
+         **j1},
+        {"t": 5.0, "kind": "queues", "queues": {"north": 3}, **j1},
+    ])
+    snap = panels.snapshot()
+    assert snap["run"]["scenario"] == "two" and snap["t"] == 5.0
+    assert (snap["cols"], snap["rows"]) == (2, 1)
+    first, second = snap["panels"]
+    assert (first["id"], first["col"], first["row"], second["id"], second["col"]) == ("J1", 0, 0, "J2", 1)
+    assert {p["phase"] for p in first["phases"] if p["shown"] == "G"} == {1, 5}
+    assert {p["phase"] for p in second["phases"] if p["shown"] == "G"} == {4, 8}
+    # J2's TIMEOUT is J2's alone; J1's command and queues are J1's.
+    assert second["state"] == "timeout" and second["timeout"]["reason"] == "communication"
+    assert first["state"] == "idle" and first["timeout"] is None
+    assert second["comms"]["polls_failed"] == 1 and first["comms"]["polls_failed"] == 0
+    assert [c["phases"] for c in first["commands"]] == [[3, 7]] and second["commands"] == []
+    assert first["queues"] == {"north": 3} and second["queues"] is None
+    # A quiet intersection's strip ends at the run's now, not at its own last record.
+    assert second["strip"]["segments"] == [[0.0, {"4": "G", "8": "G"}]] and "t" not in second
+    # run_ended counts the polls of each controller: each panel shows its own.
+    panels.feed({"t": 6.0, "kind": "run_ended", "reason": "duration",
+                 "polls": {"J1": {"polls": 60, "failed": 0}, "J2": {"polls": 60, "failed": 9}}})
+    snap = panels.snapshot()
+    assert snap["ended"] == "duration" and all(p["ended"] == "duration" for p in snap["panels"])
+    assert [(p["comms"]["polls_ok"], p["comms"]["polls_failed"]) for p in snap["panels"]] == [(60, 0), (51, 9)]
+
+
+def test_panels_are_placed_as_on_the_network_map() -> None:
+    corridor = map_cells(light_positions(load_scenario("corridor")))
+    assert corridor == {"J1": (0, 0), "J2": (1, 0), "J3": (2, 0), "J4": (3, 0)}  # a row, west to east
+    grid = map_cells(light_positions(load_scenario("grid4x4")))
+    # Columns A..D west to east, rows 4..1 north to south (the grid's rows are numbered from the south).
+    assert grid == {f"{col}{row}": ("ABCD".index(col), 4 - row) for col in "ABCD" for row in range(1, 5)}
+    # Junctions a few metres off a line still share it; a junction off every line gets its own.
+    assert map_cells({"a": (0.0, 0.0), "b": (250.0, 7.5), "c": (496.0, -3.0), "d": (250.0, 180.0)}) == \
+        {"a": (0, 1), "b": (1, 1), "c": (2, 1), "d": (1, 0)}
+
+
+@pytest.fixture(scope="module")
+def corridor_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Panels]:
+    """A virtual-time corridor run with SUMO, its log on disk and the panels a live board fed by it ended with."""
+    log = tmp_path_factory.mktemp("corridor") / "events.jsonl"
+    scenario = load_scenario("corridor")
+    live = Panels.of(scenario.intersections, light_positions(scenario))
+    with Testbed(scenario=scenario, sumo=True, seed=1, duration=120.0, log_path=log,
+                 on_reset=lambda tb, _target: tb.events.subscribe(live.feed)) as tb:
+        tb.reset()
+        tb.run()
+    return log, live
+
+
+def test_a_corridor_run_replays_panel_by_panel(corridor_run: tuple[Path, Panels]) -> None:
+    log, live = corridor_run
+    records = list(read(log))
+    scenario = load_scenario("corridor")
+    replay = Replay(Panels.of(scenario.intersections, light_positions(scenario)), records, every=101)
+    assert replay.at(replay.end).snapshot() == live.snapshot()
+    for t in (0.0, 33.3, 61.0, 119.9):
+        direct = Panels.of(scenario.intersections, light_positions(scenario)).feed_all(r for r in records
+                                                                                      if r["t"] <= t)
+        direct.t = max(direct.t, t)
+        assert replay.at(t).snapshot() == direct.snapshot()
+    end = live.snapshot()
+    assert [p["id"] for p in end["panels"]] == ["J1", "J2", "J3", "J4"] and end["ended"] == "duration"
+    for panel in end["panels"]:
+        tls = panel["id"]
+        last_poll = next(r for r in reversed(records) if r["kind"] == "poll" and r["intersection"] == tls)
+        assert {p["phase"] for p in panel["phases"] if p["shown"] == "G"} == set(last_poll["greens"])
+        assert panel["comms"]["polls_ok"] == 1200  # ten a second for 120 s: its own controller's count
+        assert panel["commands"] and set(panel["queues"]) == {"north", "south", "east", "west"}
+        assert len({tuple(sorted(s)) for _, s in panel["strip"]["segments"]}) > 2  # its phases changed
+    assert end["panels"][2]["name"] == "corridor crossroad"  # J3's own config
+
+
+def test_hils_view_replays_a_corridor_run_and_finds_its_scenario(corridor_run: tuple[Path, Panels],
+                                                                 tmp_path: Path) -> None:
+    log, live = corridor_run
+    proc, url = start_view(str(log.parent))
+    try:
+        status, snap = get(url + "api/snapshot")
+        assert status == 200 and snap == json.loads(json.dumps(live.snapshot()))
+        assert [(p["id"], p["col"], p["row"]) for p in snap["panels"]] == [("J1", 0, 0), ("J2", 1, 0), ("J3", 2, 0),
+                                                                          ("J4", 3, 0)]
+        status, snap = get(url + "api/snapshot?t=30")
+        assert snap["t"] == 30.0 and len(snap["panels"]) == 4
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)
+    # A log whose scenario file is not here: the view says how to name it, and replays once named.
+    moved = tmp_path / "events.jsonl"
+    moved.write_text(log.read_text().replace(load_scenario("corridor").source, "/elsewhere/corridor.scenario.toml"))
+    lost = hils("view", str(moved))
+    assert lost.returncode == 2 and "/elsewhere/corridor.scenario.toml is not a file here" in lost.stderr
+    assert "--scenario" in lost.stderr
+    wrong = hils("view", str(moved), "--scenario", "grid4x4")
+    assert wrong.returncode == 2 and "are not those of" in wrong.stderr
+    proc, url = start_view(str(moved), "--scenario", "corridor")
+    try:
+        assert len(get(url + "api/snapshot")[1]["panels"]) == 4
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)
+
+
 # --- the command line and the server -----------------------------------------------------------------
 
 
@@ -189,16 +313,20 @@ def test_dashboard_options_refuse_what_cannot_work(tmp_path: Path) -> None:
     assert empty.returncode == 2 and "no event log" in empty.stderr and "events.jsonl" in empty.stderr
 
 
-def start_view(*args: str) -> tuple[subprocess.Popen[str], str]:
-    proc = subprocess.Popen([sys.executable, "-m", "hils", "view", "--port", "0", *args],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+def start_dashboard(*cmd: str) -> tuple[subprocess.Popen[str], str]:
+    """A command that serves the dashboard, started; the page's URL once it prints it."""
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     ready, _, _ = select.select([proc.stdout], [], [], 30)
     line = proc.stdout.readline() if ready else ""
     match = re.match(r"dashboard: (http://127\.0\.0\.1:\d+/)", line)
     if match is None:
         proc.kill()
-        raise AssertionError(f"hils view printed no URL: {line!r} {proc.stderr.read()}")
+        raise AssertionError(f"{' '.join(cmd[1:])}: printed no dashboard URL: {line!r} {proc.stderr.read()}")
     return proc, match[1]
+
+
+def start_view(*args: str) -> tuple[subprocess.Popen[str], str]:
+    return start_dashboard(sys.executable, "-m", "hils", "view", "--port", "0", *args)
 
 
 @pytest.fixture

@@ -4,12 +4,16 @@ A wall-clock `hils run --dashboard` against `hils emulator serve`: the page show
 and the manager's state; the emulator is then stopped (SIGSTOP), the page shows TIMEOUT with its
 reason, the emulator continues and the page's Recover button brings the manager back to IDLE. The
 finished run is then replayed with `hils view`: the slider moves it, Play runs it at --realtime.
-Screenshots are kept in the test's tmp dir (``live.png``, ``timeout.png``, ``replay.png``). Nothing
-downloads a browser: chromium comes from the Makefile's deps target.
+A corridor run (four controllers served by one `hils emulator serve --scenario corridor`) shows four
+panels, west to east, one of them alone in TIMEOUT and recovered from its own panel, live and replayed.
+Screenshots are kept in the test's tmp dir (``live.png``, ``timeout.png``, ``replay.png``,
+``corridor.png``, ``corridor-replay.png``). Nothing downloads a browser: chromium comes from the
+Makefile's deps target.
 """
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import select
@@ -22,7 +26,7 @@ from pathlib import Path
 
 import pytest
 from playwright.sync_api import Browser, Page, sync_playwright
-from test_dashboard import start_view
+from test_dashboard import get, start_dashboard, start_view
 
 from harness.processes import start_emulator
 
@@ -41,9 +45,10 @@ def browser() -> Iterator[Browser]:
         b.close()
 
 
-def shown(page: Page) -> dict[str, str]:
-    return page.eval_on_selector_all("[data-phase]", "els => Object.fromEntries(els.map(e => "
-                                                     "[e.dataset.phase, e.dataset.shown]))")
+def shown(page: Page, within: str = "") -> dict[str, str]:
+    """Each phase's indication on the page (``within``: a selector and a space, e.g. one panel's)."""
+    return page.eval_on_selector_all(within + "[data-phase]", "els => Object.fromEntries(els.map(e => "
+                                                              "[e.dataset.phase, e.dataset.shown]))")
 
 
 def state(page: Page) -> str:
@@ -59,24 +64,28 @@ def watch(page: Page, until, within: float, what: str) -> None:
     raise AssertionError(f"the page did not show {what} within {within} s")
 
 
+def interrupt(proc: subprocess.Popen[str] | None) -> None:
+    """Stop a run as Ctrl-C does (None: it never started)."""
+    if proc is not None:
+        proc.send_signal(signal.SIGINT)
+        proc.communicate(timeout=30)
+
+
 def test_live_page_shows_phases_change_timeout_and_recovery(tmp_path: Path, browser: Browser, paper_toml: str) -> None:
     # Decisions every 4 s instead of 10, so that phases change soon.
     config = tmp_path / "fast.toml"
     config.write_text(paper_toml.replace("control_interval = 10.0", "control_interval = 4.0"))
     served = start_emulator(tmp_path / "serve.log")
     run_dir = tmp_path / "run"
-    proc = subprocess.Popen([sys.executable, "-m", "hils", "run", "--no-sumo", "--no-progress", "--config", str(config),
-                             "--target", f"snmp://127.0.0.1:{served.port}?community=private&version=2c",
-                             "--duration", "120", "--recover-after", "-1", "--dashboard", "0",
-                             "--dashboard-control", "--out", str(run_dir)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     page = browser.new_page(viewport={"width": 1280, "height": 860})
+    proc = None
     try:
-        ready, _, _ = select.select([proc.stdout], [], [], 30)
-        line = proc.stdout.readline() if ready else ""
-        match = re.match(r"dashboard: (http://127\.0\.0\.1:\d+/)", line)
-        assert match, f"no dashboard URL: {line!r}"
-        page.goto(match[1])
+        proc, url = start_dashboard(sys.executable, "-m", "hils", "run", "--no-sumo", "--no-progress", "--config",
+                                    str(config), "--target",
+                                    f"snmp://127.0.0.1:{served.port}?community=private&version=2c",
+                                    "--duration", "120", "--recover-after", "-1", "--dashboard", "0",
+                                    "--dashboard-control", "--out", str(run_dir))
+        page.goto(url)
         watch(page, lambda: "G" in shown(page).values(), 15, "a green phase")
         first = shown(page)
         greens_seen = {tuple(sorted(p for p, s in first.items() if s == "G"))}
@@ -111,10 +120,11 @@ def test_live_page_shows_phases_change_timeout_and_recovery(tmp_path: Path, brow
         page.locator("[data-testid=recover]").click()
         watch(page, lambda: state(page) in {"IDLE", "ON_HOLD"}, 20, "IDLE after Recover")
         assert page.locator("#recover-said").inner_text() == "requested"
+        status, err = get(url + "api/recover?intersection=J1", method="POST")
+        assert status == 400 and "a run of one intersection" in err["error"]
     finally:
         page.close()
-        proc.send_signal(signal.SIGINT)
-        proc.communicate(timeout=30)
+        interrupt(proc)
         served.stop()
     records = (run_dir / "events.jsonl").read_text()
     assert '"kind":"recovered"' in records and '"reason":"communication"' in records
@@ -138,6 +148,108 @@ def test_live_page_shows_phases_change_timeout_and_recovery(tmp_path: Path, brow
         watch(page, lambda: float(page.locator("body").get_attribute("data-t")) >= end - 0.1, 5, "the replay's end")
         assert time.monotonic() - started >= (end - 5.0) / 10 * 0.8  # paced, not a jump to the end
         watch(page, lambda: page.locator("#play").inner_text() == "Play", 5, "Play again at the end")
+    finally:
+        page.close()
+        view.terminate()
+        view.wait(timeout=10)
+
+
+def start_proxy(upstream: int, *rules: str) -> tuple[subprocess.Popen[str], int]:
+    """`hils faults proxy` in front of a served controller; its port once it relays."""
+    proc = subprocess.Popen([sys.executable, "-m", "hils", "faults", "proxy", "--upstream", f"127.0.0.1:{upstream}",
+                             *rules], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    ready, _, _ = select.select([proc.stdout], [], [], 20)
+    match = re.match(r"proxying udp:127\.0\.0\.1:(\d+) ", proc.stdout.readline() if ready else "")
+    if match is None:
+        proc.kill()
+        raise AssertionError(f"the proxy printed no address: {proc.stderr.read()}")
+    return proc, int(match[1])
+
+
+def panel_states(page: Page) -> dict[str, str]:
+    return page.eval_on_selector_all("[data-intersection]", "els => Object.fromEntries(els.map(e => [e.dataset."
+                                     "intersection, e.querySelector('[data-testid=manager-state]').innerText]))")
+
+
+def test_corridor_page_has_a_panel_per_intersection_and_recovers_one(tmp_path: Path, browser: Browser) -> None:
+    """The corridor's four controllers served by one `hils emulator serve --scenario corridor`, J2's link through a
+    proxy that drops everything from 17 to 25 s: four panels west to east, each changing phases; J2 alone in
+    TIMEOUT; its panel's Recover brings it back. Then the run replayed: four panels, the slider, J2's TIMEOUT."""
+    served = start_emulator(tmp_path / "serve.log", "--scenario", "corridor", count=4)
+    # The controllers change phases at about 6, 11 (yellow) and 16 s: J2's link drops after that.
+    proxy, j2 = start_proxy(served.ports[1], "--drop", "17:25")
+    ports = [served.ports[0], j2, *served.ports[2:]]
+    run_dir = tmp_path / "run"
+    page = browser.new_page(viewport={"width": 1280, "height": 760})
+    proc = None
+    try:
+        proc, url = start_dashboard(sys.executable, str(Path(__file__).parent / "corridor_live_run.py"), str(run_dir),
+                                    *(f"snmp://127.0.0.1:{port}?community=private&version=2c" for port in ports))
+        page.goto(url)
+        watch(page, lambda: page.locator("[data-intersection]").count() == 4, 15, "four panels")
+        # West to east, one row: the map's order, whatever the order of the page's elements.
+        boxes = {tls: page.locator(f"[data-intersection={tls}]").bounding_box() for tls in ("J1", "J2", "J3", "J4")}
+        assert [b["x"] for b in boxes.values()] == sorted(b["x"] for b in boxes.values())
+        assert len({b["y"] for b in boxes.values()}) == 1
+        assert page.locator("#run").inner_text().startswith("corridor: four signalised intersections on an arterial · "
+                                                            "wall-clock · switch")
+        indications: dict[str, set[tuple[tuple[str, str], ...]]] = {tls: set() for tls in boxes}
+
+        def every_panel_changed() -> bool:
+            for tls, seen in indications.items():
+                now = shown(page, f"[data-intersection={tls}] ")
+                if "none" not in now.values():  # polled
+                    seen.add(tuple(sorted(now.items())))
+            return all(len(seen) > 1 for seen in indications.values())
+
+        watch(page, every_panel_changed, 20, "the phases change on every panel")
+        watch(page, lambda: panel_states(page)["J2"] == "TIMEOUT", 20, "J2 in TIMEOUT")
+        states = panel_states(page)
+        assert all(states[tls] != "TIMEOUT" for tls in ("J1", "J3", "J4")), states
+        j2_panel = page.locator("[data-intersection=J2]")
+        assert "communication" in j2_panel.locator("[data-testid=timeout-reason]").inner_text()
+        assert j2_panel.locator("[data-testid=recover]").is_visible()
+        assert page.locator("[data-intersection=J1] [data-testid=recover]").is_hidden()
+        assert "TIMEOUT at J2" in page.locator("[data-testid=status]").inner_text()
+        page.wait_for_timeout(1500)  # a cabinet read or two: the panels show calls and PhaseNext
+        page.screenshot(path=str(tmp_path / "corridor.png"), full_page=True)
+
+        def recovered() -> bool:
+            # Recovery fails while the proxy still drops (until 25 s): ask again until the manager is back.
+            if panel_states(page)["J2"] == "TIMEOUT" and j2_panel.locator("[data-testid=recover]").is_visible():
+                j2_panel.locator("[data-testid=recover]").click()
+                page.wait_for_timeout(1000)
+            return panel_states(page)["J2"] in {"IDLE", "ON_HOLD"}
+
+        watch(page, recovered, 20, "J2 back to IDLE after Recover")
+        assert j2_panel.locator(".said").inner_text() == "requested"
+        # Whose manager to recover must be said, and be one of the run's.
+        for query in ("", "?intersection=J9"):
+            status, err = get(url + "api/recover" + query, method="POST")
+            assert status == 400 and "allowed: J1, J2, J3, J4" in err["error"]
+    finally:
+        page.close()
+        interrupt(proc)
+        proxy.terminate()
+        proxy.wait(timeout=10)
+        served.stop()
+    records = [json.loads(line) for line in (run_dir / "events.jsonl").read_text().splitlines()]
+    timeouts = [r for r in records if r["kind"] == "timeout_entered"]
+    assert {r["intersection"] for r in timeouts} == {"J2"}
+    assert any(r["kind"] == "recovered" and r["intersection"] == "J2" for r in records)
+
+    # The same run replayed: four panels; at the TIMEOUT's instant J2's panel shows it, the others do not.
+    view, url = start_view(str(run_dir))
+    page = browser.new_page(viewport={"width": 1280, "height": 760})
+    try:
+        page.goto(url)
+        watch(page, lambda: page.locator("[data-intersection] [data-phase]").count() == 32, 15, "four panels")
+        at = timeouts[0]["t"] + 0.5
+        page.locator("[data-testid=slider]").fill(str(at))
+        watch(page, lambda: page.locator("[data-testid=clock]").inner_text() == f"t = {at:.1f} s", 10, f"t = {at}")
+        states = panel_states(page)
+        assert states["J2"] == "TIMEOUT" and all(states[tls] != "TIMEOUT" for tls in ("J1", "J3", "J4")), states
+        page.screenshot(path=str(tmp_path / "corridor-replay.png"), full_page=True)
     finally:
         page.close()
         view.terminate()

@@ -8,6 +8,9 @@ Rules of this file
 - No I/O, no clock, no SimPy: time is the records' ``t`` (sim seconds).
 - Feeding a record is O(1) apart from trimming the strip: a wall-clock run feeds it on the SimPy hot
   path. :meth:`Board.snapshot` (the JSON the page draws) is where the work is done.
+- A run of several controllers (a corridor, a grid) is folded by :class:`Panels`: one :class:`Board` per
+  intersection, fed the records that name it (``intersection``); the run-wide records (``run_started``,
+  ``run_ended``) belong to the run, and each board takes its own poll counts from ``run_ended``.
 
 Theory of operation
 -------------------
@@ -31,6 +34,7 @@ from __future__ import annotations
 
 import bisect
 import copy
+import math
 from collections import deque
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
@@ -180,6 +184,7 @@ class Board:
 
     def _recovered(self, r: Mapping[str, Any]) -> None:
         self.recovering = False
+        self.failing = 0  # recovery has read the controller; a poll record would say so only on a change
 
     def _drift(self, r: Mapping[str, Any]) -> None:
         self.drifts += 1
@@ -278,12 +283,90 @@ _HANDLERS: dict[str, Callable[[Board, Mapping[str, Any]], None]] = {
 }
 
 
-class Replay:
-    """A finished run's board at any instant: the records folded up to it, from the nearest checkpoint."""
+@dataclass
+class Panels:
+    """The dashboard's view of a run of several controllers: one board per intersection, placed as on the map.
 
-    def __init__(self, config: IntersectionConfig, records: Iterable[Mapping[str, Any]], *,
-                 every: int = 2000) -> None:
-        self.config = config
+    ``cells`` gives each intersection's (column, row) on the page (:func:`map_cells`)."""
+
+    boards: dict[str, Board]
+    cells: Mapping[str, tuple[int, int]]
+    t: float = 0.0
+    run: dict[str, Any] = field(default_factory=dict)  # the run_started record's fields
+    ended: str | None = None
+    records: int = 0
+
+    @classmethod
+    def of(cls, configs: Mapping[str, IntersectionConfig], positions: Mapping[str, tuple[float, float]],
+           counters: Mapping[str, Callable[[], dict[str, int]]] | None = None) -> Panels:
+        """Empty boards for ``configs`` (traffic light -> config) at their network ``positions`` (x east, y north);
+        ``counters``: a live run's poller counts of each."""
+        return cls({tls: Board(cfg, counter=counters[tls] if counters else None) for tls, cfg in configs.items()},
+                   map_cells(positions))
+
+    def feed(self, record: Mapping[str, Any]) -> None:
+        """Fold one event-log record into the board of the intersection it names, or into the run's."""
+        self.records += 1
+        self.t = max(self.t, float(record["t"]))
+        tls = record.get("intersection")
+        if tls is not None:
+            self.boards[tls].feed(record)
+        elif record["kind"] == "run_started":
+            self.run = {k: record.get(k) for k in ("scenario", "mode", "action_type", "agent", "seed", "duration")}
+        elif record["kind"] == "run_ended":
+            self.ended = record["reason"]
+            polls = record.get("polls") or {}
+            for tls, board in self.boards.items():
+                board.feed({**record, "polls": polls.get(tls)})
+
+    def feed_all(self, records: Iterable[Mapping[str, Any]]) -> Panels:
+        for record in records:
+            self.feed(record)
+        return self
+
+    def snapshot(self) -> dict[str, Any]:
+        """The run and each intersection's board, with its cell on the page (see ``static/app.js``)."""
+        panels = []
+        for tls, board in self.boards.items():
+            board.t = self.t  # a quiet intersection's strip still ends now
+            col, row = self.cells[tls]
+            snap = board.snapshot()
+            del snap["t"], snap["run"]  # the run's, given once
+            panels.append({"id": tls, "name": board.config.name, "col": col, "row": row, **snap})
+        return {"t": round(self.t, 3), "run": self.run, "ended": self.ended, "panels": panels,
+                "cols": 1 + max(c for c, _ in self.cells.values()), "rows": 1 + max(r for _, r in self.cells.values())}
+
+
+#: Junctions closer than this (metres) along an axis share a column (or a row) of the page.
+SAME_LINE_M = 20.0
+
+
+def map_cells(positions: Mapping[str, tuple[float, float]]) -> dict[str, tuple[int, int]]:
+    """The page cell (column, row) of each junction at ``positions`` (x east, y north): columns west to east and
+    rows north to south, one per distinct coordinate. A corridor is a row, a grid a grid, whatever the
+    spacing: the page is a schematic map, as on a traffic engineer's wall."""
+    cols = _lines({tls: x for tls, (x, _) in positions.items()})
+    rows = _lines({tls: -y for tls, (_, y) in positions.items()})
+    return {tls: (cols[tls], rows[tls]) for tls in positions}
+
+
+def _lines(coordinate: Mapping[str, float]) -> dict[str, int]:
+    """The rank of each coordinate among the distinct ones (within :data:`SAME_LINE_M`)."""
+    out: dict[str, int] = {}
+    line, start = -1, -math.inf
+    for tls, c in sorted(coordinate.items(), key=lambda kv: kv[1]):
+        if c - start > SAME_LINE_M:
+            line, start = line + 1, c
+        out[tls] = line
+    return out
+
+
+class Replay:
+    """A finished run's board at any instant: the records folded up to it, from the nearest checkpoint.
+
+    ``empty`` is the board the run starts from: a :class:`Board`, or :class:`Panels` for a run of several."""
+
+    def __init__(self, empty: Board | Panels, records: Iterable[Mapping[str, Any]], *, every: int = 2000) -> None:
         self.records = list(records)
         if not self.records:
             raise ValueError("the event log has no records")
@@ -291,14 +374,14 @@ class Replay:
         self.end = self.times[-1]
         # Checkpoint k is the board after the first k * every records.
         self._every = every
-        self._checkpoints = [Board(config)]
-        board = Board(config)
+        self._checkpoints = [copy.deepcopy(empty)]
+        board = copy.deepcopy(empty)
         for i, record in enumerate(self.records, start=1):
             board.feed(record)
             if i % every == 0:
                 self._checkpoints.append(copy.deepcopy(board))
 
-    def at(self, t: float) -> Board:
+    def at(self, t: float) -> Board | Panels:
         """The board once every record with ``t`` at or before ``t`` has been fed."""
         n = bisect.bisect_right(self.times, t)
         k = min(n // self._every, len(self._checkpoints) - 1)

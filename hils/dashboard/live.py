@@ -3,20 +3,25 @@
 :func:`attach` is given to :class:`hils.Testbed` as its ``on_reset`` hook: the run is then assembled
 (its event log and its wall-clock driver exist) and nothing has started, so the board sees every
 record from ``run_started`` on; the cabinet's walks, calls and PhaseNext are read from then on too
-(:mod:`hils.dashboard.cabinet`). The server is a task on ``driver.loop``; a recovery asked for from
-the page is delivered to SimPy as an event through the driver, so it runs between two SimPy steps
-like every other completion.
+(:mod:`hils.dashboard.cabinet`), for every controller of the run. A run of several controllers (a
+scenario) gets one panel per intersection (:class:`hils.dashboard.board.Panels`), placed as on the
+network's map. The server is a task on ``driver.loop``; a recovery asked for from the page is delivered
+to SimPy as an event through the driver, so it runs between two SimPy steps like every other completion.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from hils.dashboard import DashboardError
-from hils.dashboard.board import Board
+from hils.dashboard.board import Board, Panels
 from hils.dashboard.cabinet import read_cabinet
 from hils.dashboard.server import Live, LiveServer, bind
+
+if TYPE_CHECKING:
+    from hils.junction import Junction
 
 
 @dataclass
@@ -29,17 +34,26 @@ class LiveDashboard:
     server: LiveServer | None = field(default=None, init=False)
 
     def attach(self, testbed: Any, _target: Any = None) -> None:
-        """The Testbed's ``on_reset`` hook: start serving this run's board."""
+        """The Testbed's ``on_reset`` hook: start serving this run's board (one panel per controller)."""
         driver = testbed.driver
         if driver is None:
             raise DashboardError("--dashboard needs a wall-clock run (--target snmp://...); watch a virtual-time "
                                  "run afterwards with `hils view RUN_FOLDER --realtime 10`")
         if self.server is not None:
             self.stop()
-        board = Board(testbed.config, counter=lambda: testbed.middleware.poller.counts)
+        junctions = testbed.junctions
+        if testbed.several:
+            from hils.sumo_net import light_positions
+
+            board: Board | Panels = Panels.of({tls: j.config for tls, j in junctions.items()},
+                                              light_positions(testbed.scenario),
+                                              {tls: _counter(j) for tls, j in junctions.items()})
+        else:
+            board = Board(testbed.config, counter=_counter(testbed.junction))
         testbed.events.subscribe(board.feed)
-        testbed.env.process(read_cabinet(testbed.env, testbed.transport, testbed.events, testbed.config.groups))
-        live = Live(board, recover=(lambda: _request_recovery(testbed)) if self.control else None)
+        for j in junctions.values():
+            testbed.env.process(read_cabinet(testbed.env, j.transport, j.events, j.config.groups))
+        live = Live(board, recover=(lambda tls: _request_recovery(testbed, tls)) if self.control else None)
         self.server = LiveServer(live, bind(self.host, self.port), driver.loop)
         print(f"dashboard: {self.server.url}", flush=True)
 
@@ -49,11 +63,17 @@ class LiveDashboard:
             self.server = None
 
 
-def _request_recovery(testbed: Any) -> str:
-    """Ask the manager to recover; runs as a SimPy event delivered at the wall-mapped present."""
-    mw = testbed.middleware
-    if testbed.ended or mw is None:
+def _counter(junction: Junction) -> Callable[[], dict[str, int]]:
+    """The junction's poller counts, read at each snapshot."""
+    return lambda: junction.middleware.poller.counts
+
+
+def _request_recovery(testbed: Any, tls: str | None) -> str:
+    """Ask the manager (of traffic light ``tls`` in a run of several) to recover; runs as a SimPy event
+    delivered at the wall-mapped present."""
+    if testbed.ended or not testbed.junctions:
         return "the run has ended"
+    mw = (testbed.junctions[tls] if tls is not None else testbed.junction).middleware
     if not mw.timeout_flag:
         return f"nothing to recover: the manager is {mw.state.name}"
     event = testbed.env.event()

@@ -8,6 +8,7 @@ Routes::
     GET  /api/snapshot?t=S   the board now (live) or at sim time S (replay)
     GET  /api/stream         live: server-sent events, one board snapshot per change, at most 4 a second
     POST /api/recover        live with control: ask the manager to recover from TIMEOUT; 403 otherwise
+         ?intersection=TLS   (a run of several: whose manager; required there, refused with one)
 
 A live run serves from the run's own asyncio loop (the wall-clock driver's): :class:`LiveServer`
 starts uvicorn's ``Server.serve()`` as a task there, so every handler runs on the thread that steps
@@ -33,7 +34,7 @@ from starlette.responses import Response, StreamingResponse
 from starlette.routing import Route
 
 from hils.dashboard import DashboardError
-from hils.dashboard.board import Board, Replay
+from hils.dashboard.board import Board, Panels, Replay
 
 #: Seconds between two looks at the board for the event stream.
 STREAM_PERIOD = 0.25
@@ -43,10 +44,11 @@ _ASSETS = {"app.js": "text/javascript", "style.css": "text/css", "index.html": "
 
 @dataclass
 class Live:
-    """A running run's board; ``recover`` (None: read-only) asks the run to recover from TIMEOUT."""
+    """A running run's board (or panels); ``recover(tls)`` (None: read-only) asks the run to recover the manager
+    (of traffic light ``tls`` in a run of several, else None) from TIMEOUT and says what came of the request."""
 
-    board: Board
-    recover: Callable[[], str] | None = None
+    board: Board | Panels
+    recover: Callable[[str | None], str] | None = None
     closing: bool = False
 
 
@@ -98,7 +100,12 @@ def create_app(source: Live | Replay, *, realtime: float = 1.0) -> Starlette:
         if live is None or live.recover is None:
             return _json({"error": "read-only dashboard: start the run with --dashboard-control to recover "
                                    "from here"}, 403)
-        return _json({"recover": live.recover()})
+        tls = request.query_params.get("intersection")
+        if isinstance(live.board, Panels) and tls not in live.board.boards:
+            return _json({"error": f"intersection={tls}: allowed: {', '.join(live.board.boards)}"}, 400)
+        if isinstance(live.board, Board) and tls is not None:
+            return _json({"error": f"intersection={tls}: a run of one intersection; allowed: no intersection"}, 400)
+        return _json({"recover": live.recover(tls)})
 
     return Starlette(routes=[
         Route("/", page), Route("/static/{name}", static), Route("/api/meta", meta),

@@ -1,4 +1,5 @@
-// The dashboard page: draws a board snapshot (hils/dashboard/board.py, Board.snapshot).
+// The dashboard page: draws a board snapshot (hils/dashboard/board.py, Board.snapshot), or for a run of
+// several controllers one panel per intersection (Panels.snapshot), each drawn like the single board, compact.
 // Live: snapshots arrive as server-sent events. Replay: the slider asks for the board at a sim time.
 "use strict";
 
@@ -17,65 +18,108 @@ function el(tag, attrs, ...children) {
 
 function fmt(x, digits = 2) { return x === null || x === undefined ? "–" : Number(x).toFixed(digits); }
 
-function drawRings(snap) {
+// A view is where one board is drawn: the single page's elements, or one panel's (compact).
+function singleView() {
+  return { compact: false, tls: null, rings: $("rings"), strip: $("strip"), state: $("state"), reason: $("reason"),
+           recover: $("recover"), said: $("recover-said"), commands: $("commands").tBodies[0], comms: $("comms"),
+           queues: $("queues") };
+}
+
+function panelView(p) {
+  const v = { compact: true, tls: p.id };
+  v.state = el("span", { class: "state", "data-testid": "manager-state" }, "–");
+  v.reason = el("div", { class: "reason", "data-testid": "timeout-reason" });
+  v.recover = el("button", { type: "button", class: "recover", "data-testid": "recover", hidden: "" }, "Recover");
+  v.said = el("span", { class: "said" });
+  v.rings = el("div", { class: "rings", "data-testid": "rings" });
+  v.strip = document.createElementNS("http://www.w3.org/2000/svg", "svg");
+  v.strip.setAttribute("class", "strip");
+  v.strip.setAttribute("data-testid", "strip");
+  v.commands = el("tbody");
+  v.comms = el("dl", { class: "comms", "data-testid": "comms" });
+  v.queues = el("div", { class: "queues" });
+  const head = el("tr", {}, ...["phases", "at (s)", "verified", "hold", "outcome"].map((h) => el("th", {}, h)));
+  v.root = el("article", { class: "card panel", "data-intersection": p.id,
+                           style: `grid-column: ${p.col + 1}; grid-row: ${p.row + 1}` },
+    el("div", { class: "panel-head" }, el("h3", {}, p.id), el("span", { class: "cfg" }, p.name), v.state),
+    // The reason below the diagrams: the panels' diagrams stay aligned when one is in TIMEOUT.
+    v.rings, v.strip,
+    v.reason, el("div", { class: "recover-row" }, v.recover, v.said),
+    el("table", { class: "commands" }, el("thead", {}, head), v.commands),
+    v.comms, el("div", { class: "sub" }, "queued vehicles per approach"), v.queues);
+  v.recover.onclick = () => recover(v);
+  return v;
+}
+
+function shortWhat(p) {
+  if (!p.approach) return p.turn || " ";
+  return `${p.approach[0].toUpperCase()} ${p.turn === "through" ? "thru" : p.turn || ""}`;
+}
+
+function drawRings(v, snap) {
   const byPhase = new Map(snap.phases.map((p) => [p.phase, p]));
-  const root = $("rings");
-  root.replaceChildren();
+  const c = v.compact;
+  // Polls failing, or halted in TIMEOUT: the indications are the last ones polled, not what the street shows.
+  const stale = snap.state === "timeout" || snap.comms.failing > 0;
+  v.rings.classList.toggle("stale", stale);
+  v.rings.title = stale ? "as last polled: polling is failing or halted (TIMEOUT)" : "";
+  v.rings.replaceChildren();
   snap.rings.forEach((ring, r) => {
-    const row = el("div", { class: "ring" }, el("span", { class: "label" }, `Ring ${r + 1}`));
+    const row = el("div", { class: "ring" }, el("span", { class: "label" }, c ? `R${r + 1}` : `Ring ${r + 1}`));
     for (let b = 0; b < snap.barriers; b++) {
       const cell = el("div", { class: "barrier" });
       for (const n of ring) {
         const p = byPhase.get(n);
         if (p.barrier !== b) continue;
         const shown = p.shown || "none";
+        const what = [p.approach, p.turn].filter(Boolean).join(" ");
         const box = el("div", { class: `phase ${shown}`, "data-phase": n, "data-shown": shown,
-                                title: `phase ${n}: ${NAMES[p.shown] || "not polled yet"}` },
+                                title: `phase ${n}${what ? " (" + what + ")" : ""}: ${NAMES[p.shown] || "not polled yet"}` },
           el("div", { class: "num" }, `Φ${n}`),
-          el("div", { class: "what" }, [p.approach, p.turn].filter(Boolean).join(" ") || " "),
-          el("div", { class: "what" }, NAMES[p.shown] || "not polled"));
+          el("div", { class: "what" }, c ? shortWhat(p) : what || " "));
+        if (!c) box.append(el("div", { class: "what" }, NAMES[p.shown] || "not polled"));
         if (p.ped === "walk") box.append(el("span", { class: "chip walk", "data-ped": "walk" }, "WALK"));
         if (p.ped === "ped_clear") box.append(el("span", { class: "chip fdw", "data-ped": "ped_clear" }, "FDW"));
         if (p.next) box.append(el("span", { class: "chip next", "data-next": "1" }, "next"));
         if (p.call) box.append(el("span", { class: "chip call" }, "call"));
-        if (p.ped_call) box.append(el("span", { class: "chip call" }, "ped call"));
-        if (p.vehcall) box.append(el("span", { class: "chip set" }, "VehCall SET"));
+        if (p.ped_call) box.append(el("span", { class: "chip call" }, c ? "ped" : "ped call"));
+        if (p.vehcall) box.append(el("span", { class: "chip set" }, c ? "SET" : "VehCall SET"));
         cell.append(box);
       }
       row.append(cell);
     }
-    root.append(row);
+    v.rings.append(row);
   });
 }
 
-function drawCabinetNote(snap) {
-  $("cabinet-note").textContent = snap.cabinet_read
+function cabinetNote(snap) {
+  return snap.cabinet_read
     ? "WALK, FDW (flashing don't walk), calls and next (PhaseNext) as the controller showed them at its last read (every 1 s)."
     : "Walks, calls and PhaseNext were not read in this run (they are read during dashboard runs).";
 }
 
-function drawStrip(snap) {
-  const svg = $("strip");
+function drawStrip(v, snap) {
+  const svg = v.strip, c = v.compact;
   const phases = snap.phases.map((p) => p.phase);
-  const width = svg.clientWidth || 600, rowH = 22, left = 34, top = 4;
-  const height = top + rowH * phases.length + 18;
+  const width = svg.clientWidth || 600, rowH = c ? 10 : 22, left = c ? 24 : 34, top = 4, font = c ? 9 : 12;
+  const bar = c ? rowH - 2 : rowH - 6, pad = c ? 1 : 2, base = c ? 8 : 15;
+  const height = top + rowH * phases.length + (c ? 14 : 18);
   svg.setAttribute("height", height);
   svg.setAttribute("viewBox", `0 0 ${width} ${height}`);
   const w = snap.strip.window_s, t1 = snap.t, t0 = t1 - w;
   const x = (t) => left + ((Math.max(t, t0) - t0) / w) * (width - left - 6);
-  const ns = "http://www.w3.org/2000/svg";
   const parts = [];
   const segs = snap.strip.segments;
   phases.forEach((n, i) => {
     const y = top + i * rowH;
-    parts.push(`<text x="2" y="${y + 15}" font-size="12" fill="#6b7280">Φ${n}</text>`);
-    parts.push(`<rect x="${left}" y="${y + 2}" width="${width - left - 6}" height="${rowH - 6}" fill="#eceef1"/>`);
+    parts.push(`<text x="2" y="${y + base}" font-size="${font}" fill="#6b7280">Φ${n}</text>`);
+    parts.push(`<rect x="${left}" y="${y + pad}" width="${width - left - 6}" height="${bar}" fill="#eceef1"/>`);
     // One bar per run of the same indication: segments change when any phase changes.
     let runStart = null, runShown = null;
     const flush = (end) => {
       if (runStart === null || end < t0) return;
-      parts.push(`<rect x="${x(runStart)}" y="${y + 2}" width="${Math.max(0, x(end) - x(runStart))}" ` +
-                 `height="${rowH - 6}" fill="${COLORS[runShown]}" shape-rendering="crispEdges"/>`);
+      parts.push(`<rect x="${x(runStart)}" y="${y + pad}" width="${Math.max(0, x(end) - x(runStart))}" ` +
+                 `height="${bar}" fill="${COLORS[runShown]}" shape-rendering="crispEdges"/>`);
     };
     segs.forEach(([start, shown]) => {
       const s = shown[String(n)] || "r";
@@ -85,62 +129,107 @@ function drawStrip(snap) {
     });
     flush(t1);
   });
-  const axisY = top + rowH * phases.length + 12;
-  for (let s = 0; s <= w; s += 30) {
+  const axisY = top + rowH * phases.length + (c ? 10 : 12);
+  for (let s = 0; s <= w; s += c ? 60 : 30) {
     const anchor = s === 0 ? "start" : s === w ? "end" : "middle";
-    parts.push(`<text x="${x(t0 + s)}" y="${axisY}" font-size="11" fill="#6b7280" text-anchor="${anchor}">` +
+    parts.push(`<text x="${x(t0 + s)}" y="${axisY}" font-size="${c ? 9 : 11}" fill="#6b7280" text-anchor="${anchor}">` +
                `${s === w ? "now" : "−" + (w - s) + " s"}</text>`);
   }
   svg.innerHTML = parts.join("");
-  svg.setAttribute("xmlns", ns);
 }
 
-function drawManager(snap) {
-  const state = $("state");
-  state.textContent = STATES[snap.state] || snap.state;
-  state.className = `state ${snap.state}`;
-  state.dataset.state = snap.state;
+function drawManager(v, snap) {
+  v.state.textContent = STATES[snap.state] || snap.state;
+  v.state.className = `state ${snap.state}`;
+  v.state.dataset.state = snap.state;
   const to = snap.timeout;
-  $("reason").textContent = to ? `reason: ${to.reason}${to.detail ? " — " + to.detail : ""}` +
-                                 (to.recovering ? " (recovering…)" : "") : "";
-  $("recover").hidden = !(meta && meta.control && snap.state === "timeout" && !snap.ended);
+  v.reason.textContent = to ? `reason: ${to.reason}${to.detail ? " — " + to.detail : ""}` +
+                              (to.recovering ? " (recovering…)" : "") : "";
+  v.recover.hidden = !(meta && meta.control && snap.state === "timeout" && !snap.ended);
 }
 
-function drawCommands(snap) {
-  const body = $("commands").tBodies[0];
-  body.replaceChildren(...snap.commands.map((c) => el("tr", {},
-    el("td", {}, String(c.id ?? "–")), el("td", {}, c.phases.join("+") + (c.green ? ` (${c.green}s)` : "")),
+function drawCommands(v, snap) {
+  // A panel lists the last three, without the command's number.
+  const rows = v.compact ? snap.commands.slice(0, 3) : snap.commands;
+  v.commands.replaceChildren(...rows.map((c) => el("tr", {},
+    ...(v.compact ? [] : [el("td", {}, String(c.id ?? "–"))]),
+    el("td", {}, c.phases.join("+") + (c.green ? ` (${c.green}s)` : "")),
     el("td", {}, fmt(c.t, 1)), el("td", {}, fmt(c.verified_s)), el("td", {}, fmt(c.hold_s)),
     el("td", {}, c.outcome || "holding"))));
 }
 
-function drawComms(snap) {
+function drawComms(v, snap) {
   const c = snap.comms;
-  const rows = [["polls answered", c.polls_ok], ["polls failed", c.polls_failed + (c.failing ? ` (${c.failing} in a row)` : "")],
-                ["last verification lag", c.last_lag_s === null ? "–" : `${fmt(c.last_lag_s, 3)} s`],
-                ["SETs sent / answered / failed", `${c.sets.sent} / ${c.sets.answered} / ${c.sets.failed}`],
-                ["actions dropped / refused", `${c.dropped} / ${c.refused}`], ["drifted steps", c.drifts]];
-  $("comms").replaceChildren(...rows.flatMap(([k, v]) => [el("dt", {}, k), el("dd", {}, String(v))]));
+  const failed = c.polls_failed + (c.failing ? ` (${c.failing} in a row)` : "");
+  const lag = c.last_lag_s === null ? "–" : `${fmt(c.last_lag_s, 3)} s`;
+  const sets = `${c.sets.sent} / ${c.sets.answered} / ${c.sets.failed}`;
+  const rows = v.compact
+    ? [["polls ok / failed", `${c.polls_ok} / ${failed}`], ["verification lag", lag], ["SETs sent/ans./failed", sets]]
+    : [["polls answered", c.polls_ok], ["polls failed", failed], ["last verification lag", lag],
+       ["SETs sent / answered / failed", sets], ["actions dropped / refused", `${c.dropped} / ${c.refused}`],
+       ["drifted steps", c.drifts]];
+  v.comms.replaceChildren(...rows.flatMap(([k, val]) => [el("dt", {}, k), el("dd", {}, String(val))]));
 }
 
-function drawQueues(snap) {
-  const root = $("queues");
+function drawQueues(v, snap) {
   if (!snap.queues) {
-    root.replaceChildren(el("span", { class: "muted" }, "no traffic simulation in this run (or no sample yet)"));
+    v.queues.replaceChildren(el("span", { class: "muted" }, v.compact ? "no queues (no traffic simulation, or no sample yet)"
+      : "no traffic simulation in this run (or no sample yet)"));
     return;
   }
-  const max = Math.max(1, ...Object.values(snap.queues));
-  root.replaceChildren(...Object.entries(snap.queues).map(([name, q]) => el("div", { class: "qrow" },
+  // Panels share one scale, so that bars compare across the map.
+  const max = v.queueScale || Math.max(1, ...Object.values(snap.queues));
+  v.queues.replaceChildren(...Object.entries(snap.queues).map(([name, q]) => el("div", { class: "qrow" },
     el("span", {}, name), el("div", { class: "qbar", style: `width:${(100 * q) / max}%` }), el("span", {}, String(q)))));
+}
+
+function drawBoard(v, snap) {
+  drawRings(v, snap); drawManager(v, snap); drawCommands(v, snap); drawComms(v, snap); drawQueues(v, snap); drawStrip(v, snap);
+}
+
+let single = null;
+const panels = new Map();
+
+function drawPanels(snap) {
+  const root = $("panels");
+  root.style.setProperty("--cols", snap.cols);
+  const queueScale = Math.max(1, ...snap.panels.flatMap((p) => Object.values(p.queues || {})));
+  for (const p of snap.panels) {
+    let v = panels.get(p.id);
+    if (!v) {
+      v = panelView(p);
+      panels.set(p.id, v);
+      root.append(v.root);
+    }
+    v.queueScale = queueScale;
+    drawBoard(v, { ...p, t: snap.t });
+  }
+  $("map-note").textContent = cabinetNote(snap.panels[0]);
 }
 
 function draw(snap) {
   const run = snap.run || {};
-  $("run").textContent = run.config ? `${run.config} · ${run.mode} · ${run.action_type} · agent ${run.agent}` : "waiting for the run…";
+  const what = run.config || run.scenario;
+  $("run").textContent = what ? `${what} · ${run.mode} · ${run.action_type} · agent ${run.agent}` : "waiting for the run…";
   $("clock").textContent = `t = ${fmt(snap.t, 1)} s`;
-  $("status").textContent = snap.ended ? `run ended: ${snap.ended}` : meta.mode === "live" ? "live" : "replay";
+  let status = snap.ended ? `run ended: ${snap.ended}` : meta.mode === "live" ? "live" : "replay";
   document.body.dataset.t = snap.t;
-  drawRings(snap); drawCabinetNote(snap); drawManager(snap); drawCommands(snap); drawComms(snap); drawQueues(snap); drawStrip(snap);
+  if (snap.panels) {
+    $("map").hidden = false; $("single").hidden = true;
+    drawPanels(snap);
+    const timeouts = snap.panels.filter((p) => p.state === "timeout").map((p) => p.id);
+    if (timeouts.length) status += ` · TIMEOUT at ${timeouts.join(", ")}`;
+  } else {
+    single = single || singleView();
+    drawBoard(single, snap);
+    $("cabinet-note").textContent = cabinetNote(snap);
+  }
+  $("status").textContent = status;
+}
+
+async function recover(v) {
+  const res = await fetch("/api/recover" + (v.tls ? `?intersection=${encodeURIComponent(v.tls)}` : ""), { method: "POST" });
+  v.said.textContent = (await res.json()).recover || "refused";
 }
 
 function live() {
@@ -151,10 +240,7 @@ function live() {
     if (snap.ended) source.close();
   };
   source.onerror = () => { $("status").textContent = "disconnected (run over?)"; };
-  $("recover").onclick = async () => {
-    const res = await fetch("/api/recover", { method: "POST" });
-    $("recover-said").textContent = (await res.json()).recover || "refused";
-  };
+  $("recover").onclick = () => recover(singleView());
 }
 
 function replay() {
