@@ -50,7 +50,9 @@ Commands arriving anywhere but IDLE are dropped. Every dispatched command ends e
 (:class:`CommandEnded`: verified, served or timeout), except the one pending when the run closes.
 The keepalive re-SETs the call when no SET has gone out for a keepalive period (a third of the
 controller's backup time, or the config's, whichever is shorter), except in TIMEOUT, RECOVERING and
-CLOSED, or while switched off.
+CLOSED, or while switched off. An empty call is re-SET too: the start-up SET put the controller under
+system control, and a run that has placed no call yet (an agent keeping the start-up pair, the actuated
+baseline) keeps it there rather than let the backup timer drop it to backup mode.
 """
 
 from __future__ import annotations
@@ -501,7 +503,7 @@ class Manager:
     def _keepalive(self, ev: TimerExpired, out: list[Effect]) -> None:
         # Any SET of a control object restarts the controller's backup timer: refresh only when no
         # SET went out for a whole period (a later SET re-armed the timer, so this one is stale).
-        if self.keepalive_on and self.call:
+        if self.keepalive_on:
             self._send(self.call, Purpose.KEEPALIVE, None, ev.t, out)
         else:
             self._arm_keepalive(out)

@@ -307,7 +307,7 @@ class ManagerMachine(RuleBasedStateMachine):
         elif purpose is Purpose.KEEPALIVE:
             assert before in RUNNING, f"keepalive in {before.name}"
             assert isinstance(ev, TimerExpired) and ev.token == self.keepalive_token
-            assert m.keepalive_on and phases and phases == m.call
+            assert m.keepalive_on and phases == m.call
             assert ev.t - self.last_set >= m.keepalive_period - 1e-9, "keepalive before a period without a SET"
         elif purpose is Purpose.RECOVERY:
             assert before is Mode.RECOVERING and isinstance(ev, ControllerRead) and phases == ev.greens
