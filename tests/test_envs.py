@@ -338,3 +338,26 @@ def test_async_vector_env_with_two_workers() -> None:
         assert any(o.sum() > 0 for o in trajectory)
     finally:
         envs.close()
+
+
+def test_episodes_skip_the_summary_samples_unless_asked() -> None:
+    """Training needs no end-of-run delays: by default an episode takes no per-vehicle samples (measure=True
+    brings them back), and the trajectory is the same either way."""
+    returns = {}
+    for measure in (False, True):
+        env = IntersectionEnv("selection", episode_length=120.0, measure=measure)
+        try:
+            env.reset(seed=3)
+            total = 0.0
+            for step in range(12):
+                _, reward, _, truncated, _ = env.step(step % len(env.config.pairs))
+                total += reward
+                if truncated:
+                    break
+            returns[measure] = (total, env.testbed.traffic)
+        finally:
+            env.close()
+    (unmeasured, counts), (measured, traffic) = returns[False], returns[True]
+    assert unmeasured == measured
+    assert counts.mean_delay is None and traffic.mean_delay is not None
+    assert (counts.departed, counts.arrived) == (traffic.departed, traffic.arrived)

@@ -185,7 +185,9 @@ class IntersectionEnv(gymnasium.Env):
     ``target``: ``"virtual"`` or ``"snmp://HOST:PORT"`` (wall clock). ``sumo_step``,
     ``control_interval``: override the config's. ``episode_length``: simulated seconds.
     ``reward``: a name of :data:`REWARDS` or a callable. ``recover_after``: seconds in TIMEOUT
-    before the Testbed recovers. ``log_path``: the event log of each episode (overwritten).
+    before the Testbed recovers. ``log_path``: the event log of each episode (overwritten). ``measure``:
+    True to have ``testbed.traffic`` carry the run summary's delays and queues at an episode's end (they
+    cost per-vehicle samples every second, which training does not need: off by default).
     """
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": []}
@@ -195,7 +197,7 @@ class IntersectionEnv(gymnasium.Env):
                  routes: str | Path | None = None, sumocfg: str | Path | None = None, target: str = VIRTUAL,
                  sumo_step: float | None = None, control_interval: float | None = None,
                  episode_length: float = 3600.0, reward: str | Reward = "queue", recover_after: float = 5.0,
-                 log_path: str | Path | None = None) -> None:
+                 log_path: str | Path | None = None, measure: bool = False) -> None:
         self.action_type = action_type_of(action_type)
         cfg = config if isinstance(config, IntersectionConfig) else config_mod.load(config)
         self.config = with_timing(cfg, sumo_step, control_interval)
@@ -211,7 +213,7 @@ class IntersectionEnv(gymnasium.Env):
         self.observation_space = self.adapter.observation_space
         self.testbed = Testbed(self.config, action_type=self.action_type, target=target, sumo=True,
                                duration=episode_length, recover_after=recover_after, log_path=log_path,
-                               sumo_config=self.sumo_config)
+                               sumo_config=self.sumo_config, measure=measure)
         self._last: Observation | None = None
 
     # --- gymnasium API ----------------------------------------------------------------------
