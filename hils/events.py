@@ -78,14 +78,21 @@ class EventLog:
         self._seq = 0
         self._clock = clock
         self._subscribers: list[Callable[[dict[str, Any]], None]] = []
+        self._subscribers_of: dict[str, list[Callable[[dict[str, Any]], None]]] = {}
 
     def bind(self, clock) -> None:
         """Give the log the simulation clock: a callable returning the current sim time."""
         self._clock = clock
 
-    def subscribe(self, fn: Callable[[dict[str, Any]], None]) -> None:
-        """Call ``fn(record)`` with every record emitted from now on (the live dashboard folds them)."""
-        self._subscribers.append(fn)
+    def subscribe(self, fn: Callable[[dict[str, Any]], None], intersection: str | None = None) -> None:
+        """Call ``fn(record)`` with every record emitted from now on (the live dashboard folds them); with
+        ``intersection``, only with that intersection's records and the run's own (those naming none)."""
+        if intersection is None:
+            self._subscribers.append(fn)
+        else:
+            # Kept apart, so that a record reaches its own intersection's subscribers only: a grid's
+            # tallies would otherwise each be handed, and each turn away, every other controller's records.
+            self._subscribers_of.setdefault(intersection, []).append(fn)
 
     def emit(self, kind: Kind, **fields: Any) -> dict[str, Any]:
         rec = {"seq": self._seq, "t": self._clock() if self._clock else 0.0, "wall_ns": time.monotonic_ns(),
@@ -97,6 +104,11 @@ class EventLog:
             self._file.write(orjson.dumps(rec, default=_jsonable, option=orjson.OPT_APPEND_NEWLINE))
         for fn in self._subscribers:
             fn(rec)
+        if self._subscribers_of:
+            where = fields.get("intersection")
+            for fn in (self._subscribers_of.get(where, ()) if where is not None else
+                       [fn for fns in self._subscribers_of.values() for fn in fns]):
+                fn(rec)
         return rec
 
     def of(self, *kinds: Kind) -> list[dict[str, Any]]:

@@ -624,6 +624,11 @@ _DOWN = (M.TIMEOUT, M.RECOVERING)
 # The whole state machine: (state, event kind) -> (next state, handler producing the effects).
 _TRANSITIONS: dict[tuple[Mode, Ev], tuple[Mode, _Handler]] = {
     (M.IDLE, Ev.STARTED): (M.IDLE, Manager._started),
+    # The start-up read can end after the run has already timed out (steps of a large grid drifting while
+    # its controllers start at the wall clock) or closed: what it read is kept, the state stays.
+    (M.TIMEOUT, Ev.STARTED): (M.TIMEOUT, Manager._started),
+    (M.RECOVERING, Ev.STARTED): (M.RECOVERING, Manager._started),
+    (M.CLOSED, Ev.STARTED): (M.CLOSED, None),
     (M.IDLE, Ev.COMMAND): (M.IN_TRANSITION, Manager._dispatch),
     (M.IDLE, Ev.KEEP): (M.IDLE, Manager._keep),
     (M.IN_TRANSITION, Ev.VERIFIED): (M.IDLE, Manager._verified),

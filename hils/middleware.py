@@ -161,9 +161,10 @@ class Middleware:
     def keepalive_enabled(self, on: bool) -> None:
         self._feed(KeepaliveSwitched(self.env.now, on))
 
-    def start(self) -> simpy.Process:
-        """Read the controller, then start polling; ``ready`` fires when done."""
-        return self.env.process(self._startup())
+    def start(self, after: float = 0.0) -> simpy.Process:
+        """Read the controller, then start polling; ``ready`` fires when done. ``after``: seconds to wait first
+        (the controllers of a corridor start apart, so that their polls do not all go out at one instant)."""
+        return self.env.process(self._startup(after))
 
     def check(self, value: Any) -> None:
         """Raise the :class:`hils.actions.ActionError` that :meth:`submit` would refuse ``value`` with, logging
@@ -219,7 +220,9 @@ class Middleware:
 
     # --- processes ----------------------------------------------------------------------------
 
-    def _startup(self) -> Generator[simpy.Event, Any, None]:
+    def _startup(self, after: float) -> Generator[simpy.Event, Any, None]:
+        if after > 0:
+            yield self.env.timeout(after)
         # Like the poller, give up only after n_timeout consecutive failures: one lost datagram
         # at start-up is no reason to halt.
         n = self.config.middleware.n_timeout

@@ -15,7 +15,10 @@ Rules of this module:
   answer must not be read as the next request's). SNMPv1 GETs stay with
   pysnmp: gufo-snmp reports a v1 noSuchName as an empty answer, without the
   error index.
-- One pysnmp ``SnmpEngine`` and one UDP target for the whole run, created once.
+- One pysnmp ``SnmpEngine`` per run (per wall-clock driver and SNMPv3 user), shared by the transports of
+  all its controllers and created once: an engine costs ~50 ms to build and loads its MIB modules
+  again on its first SET, which, once per controller, stalled the loop of a corridor's start-up.
+  One UDP target per transport, also created once.
 - SNMPv3 (USM, authNoPriv or authPriv with HMAC-SHA-96 and AES-128): gufo-snmp
   for GETs (each session discovers the agent's engine first), pysnmp's
   ``UsmUserData`` for SETs. Keys missing from the target URL come from the
@@ -276,9 +279,10 @@ class SnmpTransport:
         self.tau_udp = tau_udp
         self.change_feed = None  # over the wire nobody knows when the answer changes: every poll is sent
         self._address = _resolve(target)
-        # Built now rather than on the first request: it takes ~50 ms, which
+        # Taken now rather than on the first request: building one takes ~50 ms, which
         # would otherwise stall the loop in the middle of a run.
-        self._engine = SnmpEngine()
+        self._engine_key = (driver, _credentials(target))
+        self._engine = _ENGINES.take(self._engine_key)
         self._auth = _pysnmp_auth(target)
         self._context = ContextData()
         self._udp: _ResolvedUdpTarget | None = None
@@ -327,7 +331,7 @@ class SnmpTransport:
             task.cancel()
         # gufo-snmp closes a session's socket when the session is dropped.
         self._sessions.clear()
-        self._engine.close_dispatcher()
+        _ENGINES.give_back(self._engine_key)
 
     def _submit(self, work: Callable[..., Awaitable[Any]], *args: Any) -> simpy.Event:
         if self._closed:
@@ -393,6 +397,39 @@ class SnmpTransport:
                                               retries=0)
         self._udp = udp
         return udp
+
+
+class _SharedEngines:
+    """pysnmp engines shared by the transports of one run, each closed when its last transport closes.
+
+    Controllers of one credentials share an engine (pysnmp keeps a target's community or USM user in
+    its engine's configuration; two SNMPv3 users of one name and different keys cannot share one)."""
+
+    def __init__(self) -> None:
+        self._engines: dict[Any, tuple[SnmpEngine, int]] = {}
+
+    def take(self, key: Any) -> SnmpEngine:
+        engine, users = self._engines.get(key) or (SnmpEngine(), 0)
+        self._engines[key] = (engine, users + 1)
+        return engine
+
+    def give_back(self, key: Any) -> None:
+        engine, users = self._engines[key]
+        if users > 1:
+            self._engines[key] = (engine, users - 1)
+            return
+        del self._engines[key]
+        engine.close_dispatcher()
+
+
+_ENGINES = _SharedEngines()
+
+
+def _credentials(target: SnmpTarget) -> tuple[str, ...]:
+    """What decides whether two targets' SETs can share an engine (communities differ by index in one)."""
+    if target.version is not SnmpVersion.V3:
+        return ()
+    return (target.user, target.auth_key, target.priv_key or "")
 
 
 def _resolve(target: SnmpTarget) -> tuple[str, int]:

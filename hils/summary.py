@@ -18,7 +18,8 @@ from hils.latency import Stats, internal_latencies_ms, transition_holds
 class Tally:
     """What the summary and the run's plots read of its records, kept as they are emitted.
 
-    Subscribed to a run's event log (:meth:`hils.events.EventLog.subscribe`), it counts every kind and
+    Subscribed to a run's event log (:meth:`hils.events.EventLog.subscribe`; in a run of several controllers,
+    one tally per intersection subscribed to that intersection's records), it counts every kind and
     keeps the few records the figures come from, so that the end of a run re-reads nothing: a long
     run's log is mostly polls and SETs, none of which the summary needs one by one."""
 
@@ -26,14 +27,11 @@ class Tally:
                       Kind.TRANSITION_VERIFIED, Kind.TIMEOUT_ENTERED, Kind.DETECTORS, Kind.POLL})
 
     def __init__(self, intersection: str | None = None) -> None:
-        self.intersection = intersection  # in a run of several controllers: the one this tally is of
+        self.intersection = intersection  # in a run of several controllers: whose records it is handed
         self.kinds: Counter[str] = Counter()
         self.records: list[dict[str, Any]] = []
 
     def __call__(self, record: dict[str, Any]) -> None:
-        where = record.get("intersection")
-        if where is not None and self.intersection is not None and where != self.intersection:
-            return
         kind = record["kind"]
         self.kinds[kind] += 1
         if kind in self.KEPT:

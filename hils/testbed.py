@@ -396,7 +396,7 @@ class Testbed:
             where, community = f"{target.host}:{target.port}", getattr(target, "community", None)
         events = TaggedLog(self.events, tls) if self.several else self.events
         tally = Tally(tls if self.several else None)
-        self.events.subscribe(tally)
+        self.events.subscribe(tally, intersection=tally.intersection)
         middleware = Middleware(env, transport, cfg, self.action_type, events, where=where, community=community)
         return Junction(tls, cfg, target, transport, middleware, events, tally)
 
@@ -448,8 +448,12 @@ class Testbed:
                          action_type=self.action_type.value, agent=_agent_name(self._agent_spec, self.spec),
                          duration=self.duration)
         ended = lambda: self.ended  # noqa: E731 - the junctions' processes ask it as the run goes
-        for j in self.junctions.values():
-            j.middleware.start()
+        # Several controllers start spread over one poll period, so that their polls, keepalives and read-backs
+        # go out spread over it too, as a central system staggers them: 64 controllers polled at one instant
+        # are a burst that makes the last answers of each round several milliseconds late at the wall clock.
+        spread = self.config.middleware.poll_period / len(self.junctions)
+        for index, j in enumerate(self.junctions.values()):
+            j.middleware.start(after=index * spread)
             if self.recover_after is not None:
                 self.env.process(j.auto_recover(self.recover_after, ended))
             if j.view is not None and self.measure:

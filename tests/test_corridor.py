@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 from collections import Counter
+from itertools import pairwise
 from pathlib import Path
 from typing import Any
 
@@ -136,3 +137,19 @@ def test_the_corridor_at_the_wall_clock_against_served_emulators(tmp_path: Path,
         assert control["timeouts"] == {} and control["polls"]["answered"] >= 100, tls
         assert control["commands_dispatched"] >= 1, tls
     assert "4 controllers, wall-clock" in capsys.readouterr().out
+
+
+def test_the_controllers_of_a_corridor_start_spread_over_one_poll_period() -> None:
+    """So that their polls, keepalives and read-backs do not all go out at one instant (a burst that makes a
+    grid's last answers of each round late at the wall clock)."""
+    with Testbed(scenario="corridor", duration=1.0) as tb:
+        tb.reset()
+        starts = {r["intersection"]: r["t"] for r in tb.records
+                  if r["kind"] == Kind.SET_SENT and r["purpose"] == "startup"}
+        polls = {tls: [r["t"] for r in tb.records if r["kind"] == Kind.POLL and r["intersection"] == tls]
+                 for tls in starts}
+    period = tb.config.middleware.poll_period
+    assert list(starts) == ["J1", "J2", "J3", "J4"]
+    gaps = [b - a for a, b in pairwise(starts.values())]
+    assert gaps == pytest.approx([period / 4] * 3)
+    assert len({round(ts[0] % period, 4) for ts in polls.values()}) == 4

@@ -134,3 +134,20 @@ def test_same_seed_same_log_and_another_seed_differs(paper_config, tmp_path: Pat
     assert first[1:] != other[1:]
     actions = [r["value"] for r in first if r["kind"] == "action_received"]
     assert actions != [r["value"] for r in other if r["kind"] == "action_received"]
+
+
+def test_a_subscriber_of_one_intersection_sees_its_records_and_the_runs_own_only() -> None:
+    from hils.events import TaggedLog
+
+    log = EventLog()
+    everything: list[dict[str, Any]] = []
+    of_j2: list[dict[str, Any]] = []
+    log.subscribe(everything.append)
+    log.subscribe(of_j2.append, intersection="J2")
+    log.emit(Kind.RUN_STARTED)
+    for tls in ("J1", "J2", "J3"):
+        TaggedLog(log, tls).emit(Kind.NOTE, message=tls)
+    log.emit(Kind.RUN_ENDED, reason="duration")
+    assert [r["kind"] for r in everything] == ["run_started", "note", "note", "note", "run_ended"]
+    assert [(r["kind"], r.get("intersection")) for r in of_j2] == [
+        ("run_started", None), ("note", "J2"), ("run_ended", None)]

@@ -523,6 +523,24 @@ def test_drift_enters_timeout_at_the_nth_consecutive_slow_step_and_recovery_rest
     assert m.mode is Mode.IDLE and m.drifted_in_a_row == 0 and m.timeout_reason is None
 
 
+def test_a_start_up_read_ending_after_a_drift_timeout_or_a_close_changes_no_state() -> None:
+    """At the wall clock a large grid's steps can drift while its controllers still start: the start-up read
+    then ends in TIMEOUT (or, after Ctrl-C, in CLOSED). What it read is kept; the recovery resumes from it."""
+    m = Manager(TAU_TRANS, sequence=CONFIG.sequence, n_drift=N_DRIFT, keepalive_period=10.0)
+    for i in range(N_DRIFT):
+        m.handle(StepTimed(i * STEP, STEP, 1.0))
+    assert m.mode is Mode.TIMEOUT and m.timeout_reason is TimeoutReason.DRIFT
+    effects = m.handle(Started(2.0, frozenset({4, 8}), 30))
+    assert m.mode is Mode.TIMEOUT and m.position == CONFIG.sequence.index((4, 8))
+    assert not any(isinstance(e, SendCall) for e in effects), "nothing is sent in TIMEOUT"
+    assert m.handle(RecoveryRequested(3.0)) == [RecoveryStarted(), ReadController()]
+    effects = m.handle(Started(3.1, frozenset({4, 8}), 30))
+    assert m.mode is Mode.RECOVERING and not any(isinstance(e, SendCall) for e in effects)
+    closed = Manager(TAU_TRANS, sequence=CONFIG.sequence, n_drift=N_DRIFT, keepalive_period=10.0)
+    closed.handle(CloseRequested(0.5))
+    assert closed.handle(Started(1.0, frozenset({2, 6}), 30)) == [] and closed.mode is Mode.CLOSED
+
+
 def test_keepalive_is_gated_in_timeout_and_off_and_resumes_after_recovery() -> None:
     m = started(backup=30)
     assert m.keepalive_period == 10.0

@@ -412,3 +412,39 @@ def test_v3_wrong_key_fails_the_request(driver, snmpd_port, wrong):
         transport.close()
     # A wrong authentication key is reported by the agent; a wrong privacy key leaves it unable to read us.
     assert isinstance(failure, TransportError)
+
+
+def test_the_transports_of_one_run_share_an_engine_and_keep_their_communities_apart(driver, connect, snmpd_port):
+    """A corridor's controllers share one pysnmp engine (one each cost ~50 ms and the MIB modules again):
+    SETs in flight together with the read-write and the read-only community are each judged by their own."""
+    writers = [connect(snmpd_port, community="private") for _ in range(3)]
+    reader = connect(snmpd_port)
+    assert len({id(t._engine) for t in (*writers, reader)}) == 1
+    env = driver.env
+    outcomes: dict[str, object] = {}
+
+    def one(name, transport, value):
+        try:
+            yield transport.set([(AUTHEN_TRAPS, value)])
+            outcomes[name] = "done"
+        except SnmpError as exc:
+            outcomes[name] = exc.status
+
+    def scenario():
+        yield simpy.AllOf(env, [env.process(one(f"w{i}", w, 1)) for i, w in enumerate(writers)]
+                          + [env.process(one("r", reader, 2))])
+
+    run_process(driver, scenario())
+    assert outcomes == {"w0": "done", "w1": "done", "w2": "done", "r": ErrorStatus.NO_ACCESS}
+
+
+def test_closing_one_controllers_transport_leaves_the_shared_engine_to_the_others(driver, connect, snmpd_port):
+    first, second = connect(snmpd_port, community="private"), connect(snmpd_port, community="private")
+
+    def set_and_read(transport, value):
+        yield transport.set([(AUTHEN_TRAPS, value)])
+        return (yield transport.get([AUTHEN_TRAPS]))
+
+    assert run_process(driver, set_and_read(first, 1)) == (1,)
+    first.close()
+    assert run_process(driver, set_and_read(second, 2)) == (2,)
