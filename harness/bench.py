@@ -22,7 +22,7 @@ from typing import Any
 
 import simpy
 
-from harness import machine
+from harness import bench_corridor, machine
 from harness.processes import snmpd, start_emulator
 from hils import config as config_mod
 from hils import jsonout
@@ -98,6 +98,28 @@ def register(sub: argparse._SubParsersAction) -> None:
     env.add_argument("--seed", type=int, default=0)
     env.add_argument("--out", type=Path, default=REPORT_DIR / "env.json", metavar="FILE")
     env.set_defaults(func=_env_command)
+    corridor = commands.add_parser("corridor", help="controllers one process drives at wall clock; virtual time and "
+                                                    "memory per controller",
+                                   description="(1) Wall clock: N controllers of one `hils emulator serve --count N` "
+                                               "on loopback, driven by one middleware process at 10 Hz polling each "
+                                               "(four-leg config, fixed-cycle agent, no SUMO), for N = 1, 4, 16, ... "
+                                               "until a count fails: it passes without any TIMEOUT and with the "
+                                               "driver's event lateness p99 under 20 ms (goal: 64 or more). (2) "
+                                               "Virtual time: wall seconds per simulated controller-hour for 1, 4 "
+                                               "and 16 controllers, with SUMO (four_leg, corridor, grid4x4) and "
+                                               "without. (3) Resident memory of the middleware and of the serve "
+                                               "process as N grows (goal: at most 10 MB per added controller). "
+                                               "Every run in a fresh process.")
+    corridor.add_argument("--counts", type=_counts, default=list(bench_corridor.WALL_COUNTS), metavar="N,...",
+                          help="wall-clock controller counts, tried in order until one fails "
+                               f"({','.join(map(str, bench_corridor.WALL_COUNTS))})")
+    corridor.add_argument("--duration", type=float, default=30.0, metavar="S",
+                          help="wall-clock seconds per count (30)")
+    corridor.add_argument("--virtual-duration", type=float, default=600.0, metavar="S",
+                          help="simulated seconds per virtual-time run (600)")
+    corridor.add_argument("--repeat", type=int, default=3, help="virtual-time runs of each, medians (3)")
+    corridor.add_argument("--out", type=Path, default=REPORT_DIR / "corridor.json", metavar="FILE")
+    corridor.set_defaults(func=_corridor_command)
 
 
 def measure_latency(samples: int, seed: int = 0) -> dict[str, Stats]:
@@ -514,3 +536,47 @@ def _env_command(args: argparse.Namespace) -> int:
 
 def _or_dash(x: Any) -> str:
     return "-" if x is None else str(x)
+
+
+def _corridor_command(args: argparse.Namespace) -> int:
+    info = machine.describe()
+    print(machine.header(info))
+    f = bench_corridor.measure_corridor(args.counts, args.duration, args.virtual_duration, args.repeat)
+    w = f["wall_clock"]
+    print(f"wall clock: one middleware process, 10 Hz polling each controller, {args.duration:g} s per count, "
+          "against one `hils emulator serve --count N` on loopback:")
+    print(f"  {'N':>4} {'lateness p99 ms':>16} {'max ms':>8} {'TIMEOUTs':>9} {'polls answered':>15} {'failed':>7} "
+          f"{'CPU hils':>9} {'CPU serve':>10} {'RSS hils MB':>12} {'RSS serve MB':>13}  passes")
+    for r in w["runs"]:
+        polls = r["polls"]
+        print(f"  {r['controllers']:>4} {r['lateness_p99_ms']:>16.2f} {r['lateness_max_ms']:>8.1f} "
+              f"{sum(r['timeouts'].values()):>9} {polls.get('answered', 0):>15} {polls.get('failed', 0):>7} "
+              f"{r['cpu_share']:>9.0%} {r['serve_cpu_share']:>10.0%} {r['rss_mb']:>12.1f} {r['serve_rss_mb']:>13.1f}  "
+              f"{'yes' if r['passes'] else 'no'}")
+    print(f"  most controllers passing: {w['most_controllers_passing']} (goal >= {w['goal_controllers']}: no TIMEOUT, "
+          f"p99 < {w['goal_p99_ms']:g} ms)")
+    print(f"virtual time, {args.virtual_duration:g} simulated s, median of {args.repeat}:")
+    for key, label in (("with_sumo", "with SUMO"), ("controllers_only", "no SUMO")):
+        for r in f["virtual"][key]:
+            print(f"  {label:9} {r['controllers']:>3} controllers ({r['scenario']}): {r['wall_s']:.2f} s wall, "
+                  f"{r['wall_per_controller_hour_s']:.2f} s per controller-hour")
+    m = f["memory"]
+    for side in ("middleware", "serve"):
+        per = m[side]["mb_per_controller"]
+        print(f"memory, {side}: " + ("-" if per is None else f"{per:.2f} MB per added controller") +
+              f" (goal <= {m['goal_mb_per_controller']:g})")
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(jsonout.dumps({"machine": info, "corridor": f}) + "\n", encoding="utf-8")
+    print(f"written: {args.out}")
+    return 0
+
+
+def _counts(text: str) -> list[int]:
+    """``--counts``: a comma-separated list of controller counts."""
+    try:
+        counts = [int(n) for n in text.split(",")]
+    except ValueError:
+        counts = []
+    if not counts or min(counts) < 1:
+        raise argparse.ArgumentTypeError(f"{text!r}: allowed: counts of 1 or more, comma-separated (e.g. 1,4,16,64)")
+    return counts

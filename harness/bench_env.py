@@ -14,14 +14,14 @@ sumo-rl is the `bench` extra (`pip install 'hils[bench]'`).
 
 from __future__ import annotations
 
-import multiprocessing
 import os
 import statistics
 import sys
 import time
-from collections.abc import Callable
 from importlib import resources
 from typing import Any
+
+from harness.processes import in_fresh_process
 
 EPISODE_S = 3600.0
 SUMO_STEP = 0.25
@@ -101,17 +101,12 @@ def _random_episode(env: Any, seed: int) -> tuple[int, float]:
     return steps, time.perf_counter() - started
 
 
-def _in_fresh_process(fn: Callable[..., dict[str, Any]], *args: Any) -> dict[str, Any]:
-    with multiprocessing.get_context("spawn").Pool(1) as pool:
-        return pool.apply(fn, args)
-
-
 def measure_env(repeat: int = 3, seed: int = 0, duration: float = EPISODE_S) -> dict[str, Any]:
     """Alternating episodes of each; per side every run and the medians."""
     runs: dict[str, list[dict[str, Any]]] = {"hils": [], "sumo_rl": []}
     for _ in range(repeat):
-        runs["hils"].append(_in_fresh_process(hils_episode, seed, duration))
-        runs["sumo_rl"].append(_in_fresh_process(sumo_rl_episode, seed, duration))
+        runs["hils"].append(in_fresh_process(hils_episode, seed, duration))
+        runs["sumo_rl"].append(in_fresh_process(sumo_rl_episode, seed, duration))
     out: dict[str, Any] = {"episode_s": duration, "sumo_step_s": SUMO_STEP, "decision_s": DECISION_S,
                            "policy": "random (seeded)", "repeat": repeat, "runs": runs}
     for side, rs in runs.items():

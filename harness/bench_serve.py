@@ -11,7 +11,7 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -51,9 +51,16 @@ def measure_serve_memory(counts: Sequence[int] = COUNTS) -> dict[str, Any]:
     """RSS (MB) per N and the least-squares slope, MB per added controller."""
     with tempfile.TemporaryDirectory() as tmp:
         rss = {n: serve_rss_mb(n, Path(tmp)) for n in counts}
+    return {"rss_mb": rss, **per_added_controller(rss), "goal_mb_per_controller": GOAL_MB_PER_CONTROLLER}
+
+
+def per_added_controller(rss: Mapping[int, float]) -> dict[str, float | None]:
+    """The least-squares line through resident MB against controllers: MB per added controller and the base
+    (None for both with fewer than two counts)."""
+    if len(rss) < 2:
+        return {"mb_per_controller": None, "base_mb": None}
     slope, intercept = np.polyfit(list(rss), list(rss.values()), 1)
-    return {"rss_mb": rss, "mb_per_controller": float(slope), "base_mb": float(intercept),
-            "goal_mb_per_controller": GOAL_MB_PER_CONTROLLER}
+    return {"mb_per_controller": float(slope), "base_mb": float(intercept)}
 
 
 def main(argv: Sequence[str] | None = None) -> int:

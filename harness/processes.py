@@ -6,6 +6,7 @@ emulator served over real UDP.
 
 from __future__ import annotations
 
+import multiprocessing
 import os
 import re
 import shutil
@@ -15,10 +16,11 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 #: SNMPv3 users of the snmpd below: one with authentication and privacy, one with authentication only.
 SNMPD_V3_USERS = {"hilspriv": ("authPriv", "hils-auth-key", "hils-priv-key"),
@@ -135,3 +137,10 @@ def snmpd(workdir: Path) -> Iterator[int]:
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait()
+
+
+def in_fresh_process(fn: Callable[..., Any], *args: Any) -> Any:
+    """``fn(*args)`` in a newly spawned Python process (its own libsumo, its own memory), its result returned:
+    benchmarks measure each run the way a user starts it, uninfluenced by the runs before."""
+    with multiprocessing.get_context("spawn").Pool(1) as pool:
+        return pool.apply(fn, args)
