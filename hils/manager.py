@@ -37,7 +37,9 @@ States (:class:`Mode`), with the paper's names (:class:`State`) that the log and
 - RECOVERING (paper TIMEOUT): the controller was re-read; the call is SET to the pair it shows (so
   no transition follows that nobody commanded) and the sequence position follows it. When that SET
   is answered: IDLE, polling resumes and the drift count restarts. A failed read or SET: TIMEOUT.
-- CLOSED: the run has ended; the calls were cleared and nothing else is sent.
+- CLOSED: the run has ended; the calls are cleared and nothing else is sent. A clearing SET whose
+  datagram got no answer is sent again, up to CLEAR_ATTEMPTS in all: calls left on a controller stay
+  until its backup time drops them, so one lost datagram is no reason to leave them.
 
 The control objects are ours while we run. The shell reads them back at a low rate
 (:class:`ControlsRead`). In IDLE, IN_TRANSITION and SERVING, any of PhaseOmit, PedOmit, Hold,
@@ -353,6 +355,7 @@ class Ev(Enum):
     DRIFTED = auto()
     DRIFT_LIMIT = auto()
     COMMAND_SET_LOST = auto()
+    CLEAR_LOST = auto()
     RECOVERY_SET_ANSWERED = auto()
     RECOVERY_SET_FAILED = auto()
     SET_RESULT = auto()
@@ -363,6 +366,10 @@ class Ev(Enum):
     CLOSE = auto()
     CONTROLS_OURS = auto()
     FOREIGN_CONTROL = auto()
+
+
+#: How many times in all the closing clear is sent while its datagrams get no answer (see CLOSED).
+CLEAR_ATTEMPTS = 3
 
 
 class Manager:
@@ -382,6 +389,7 @@ class Manager:
         self.last_set = float("-inf")
         self.keepalive_on = True
         self.drifted_in_a_row = 0
+        self.clears_sent = 0
         self._recovering_greens: frozenset[int] = frozenset()  # what the recovery's re-read showed
         self._next_command = 0
         self._next_token = 0
@@ -441,6 +449,8 @@ class Manager:
                 if (lost and purpose in (Purpose.COMMAND, Purpose.RETRY) and self.mode is Mode.IN_TRANSITION
                         and p is not None and p.command_id == command_id):
                     return Ev.COMMAND_SET_LOST
+                if lost and purpose is Purpose.CLEAR and self.clears_sent < CLEAR_ATTEMPTS:
+                    return Ev.CLEAR_LOST
                 return Ev.SET_RESULT
             case ControlsRead():
                 return Ev.FOREIGN_CONTROL if self._foreign(ev) else Ev.CONTROLS_OURS
@@ -560,8 +570,15 @@ class Manager:
     def _close(self, ev: CloseRequested, out: list[Effect]) -> None:
         out.append(HaltPolling())
         if self.last_set > float("-inf"):  # a run that never SET a call has none to clear
-            self._send(frozenset(), Purpose.CLEAR, None, ev.t, out)
+            self._clear(ev.t, out)
         self._keepalive_token = None
+
+    def _clear_again(self, ev: SetFailed, out: list[Effect]) -> None:
+        self._clear(ev.t, out)
+
+    def _clear(self, t: float, out: list[Effect]) -> None:
+        self.clears_sent += 1
+        self._send(frozenset(), Purpose.CLEAR, None, t, out)
 
     # --- helpers ---------------------------------------------------------------------------------------
 
@@ -665,5 +682,6 @@ _TRANSITIONS: dict[tuple[Mode, Ev], tuple[Mode, _Handler]] = {
     (M.CLOSED, Ev.CONTROLLER_READ): (M.CLOSED, None),
     (M.CLOSED, Ev.CONTROLLER_UNREADABLE): (M.CLOSED, None),
     (M.CLOSED, Ev.CLOSE): (M.CLOSED, None),
+    (M.CLOSED, Ev.CLEAR_LOST): (M.CLOSED, Manager._clear_again),
     (M.CLOSED, Ev.RECOVERY_REQUESTED): (M.CLOSED, None),
 }

@@ -312,11 +312,15 @@ class Middleware:
 
     def _close(self) -> Generator[simpy.Event, Any, None]:
         self._feed(CloseRequested(self.env.now))
-        if self._clearing is not None:
+        while self._clearing is not None:
+            clearing = self._clearing
             try:
-                yield self._clearing
+                yield clearing
+                return
             except (TransportError, SnmpError) as exc:
-                log.warning("could not clear the calls at the end of the run: %s", exc)
+                if self._clearing is clearing:  # the manager sent no other: the calls stay until the backup time
+                    log.warning("could not clear the calls at the end of the run: %s", exc)
+                    return
 
     # --- the manager's shell ----------------------------------------------------------------------
 

@@ -55,7 +55,7 @@ from hils.errors import UserError
 from hils.events import EventLog, Kind, TaggedLog
 from hils.events import read as read_events
 from hils.junction import Junction
-from hils.manager import State
+from hils.manager import CLEAR_ATTEMPTS, State
 from hils.middleware import Middleware, Submission
 from hils.ntcip import SignalState
 from hils.preflight import ControllerCheckFailed
@@ -469,7 +469,8 @@ class Testbed:
         """End the run: clear the calls placed, log ``run_ended`` with ``reason``, close the log.
 
         ``reason`` defaults to ``duration`` once the duration has passed, else ``closed``.
-        Idempotent; bounded in wall-clock time (the clearing SETs answer or fail within tau_udp)."""
+        Idempotent; bounded in wall-clock time (a clearing SET answers or fails within tau_udp, and one that
+        gets no answer is sent again, :data:`hils.manager.CLEAR_ATTEMPTS` times in all)."""
         if self.env is None or self.ended:
             return
         if reason is None:
@@ -485,8 +486,7 @@ class Testbed:
         done = self.env.process(ending())
         tau_udp = max(cfg.middleware.tau_udp for cfg in self.configs.values())
         try:
-            # Bounded: the clearing SETs answer or fail within tau_udp.
-            self._advance(self.env.now + tau_udp + 1.0, done)
+            self._advance(self.env.now + CLEAR_ATTEMPTS * tau_udp + 1.0, done)
             if self._driver is not None:
                 self._advance(self.env.now + 0.05)  # let answers already on their way land before closing
         except RunInterrupted:

@@ -24,6 +24,7 @@ from hypothesis.stateful import RuleBasedStateMachine, initialize, precondition,
 from hils.actions import ActionConverter, ActionError, ActionType, Command
 from hils.config import load
 from hils.manager import (
+    CLEAR_ATTEMPTS,
     CloseRequested,
     CommandEnded,
     CommandRequested,
@@ -140,6 +141,7 @@ class ManagerMachine(RuleBasedStateMachine):
         self.keeps: set[int] = set()
         self.open: int | None = None  # the dispatched command not yet ended
         self.read_pending = False  # the recovery asked to re-read the controller
+        self.clears_lost = 0  # clearing SETs (after the close) whose datagram got no answer
         self.read_greens: frozenset[int] = frozenset()
         self.consistent = True  # False once a check failed: the trackers no longer match the manager
 
@@ -162,7 +164,13 @@ class ManagerMachine(RuleBasedStateMachine):
             assert before is Mode.RECOVERING and isinstance(ev, SetAnswered) and ev.purpose is Purpose.RECOVERY, (
                 f"left TIMEOUT on {ev}")
         if before is Mode.CLOSED:
-            assert after is Mode.CLOSED and all(isinstance(e, Dropped) for e in effects), f"closed, yet {effects}"
+            # Closed, only two things happen: a command is dropped, a clear that got no answer is sent again.
+            assert after is Mode.CLOSED and all(isinstance(e, Dropped | SendCall) for e in effects), (
+                f"closed, yet {effects}")
+            if isinstance(ev, SetFailed) and ev.purpose is Purpose.CLEAR and ev.lost:
+                self.clears_lost += 1
+                assert effects == ([SendCall(frozenset(), Purpose.CLEAR)] if self.clears_lost < CLEAR_ATTEMPTS
+                                   else []), "a lost clear is sent again, CLEAR_ATTEMPTS times in all"
         if isinstance(ev, CommandRequested) and before is not Mode.IDLE:
             assert effects == [Dropped(ev.action_id, before.log_name)]
         if isinstance(ev, FailureDetected) and before in RUNNING:
@@ -312,7 +320,8 @@ class ManagerMachine(RuleBasedStateMachine):
         elif purpose is Purpose.RECOVERY:
             assert before is Mode.RECOVERING and isinstance(ev, ControllerRead) and phases == ev.greens
         else:
-            assert isinstance(ev, CloseRequested) and phases == frozenset()
+            assert isinstance(ev, CloseRequested | SetFailed) and phases == frozenset()
+            assert isinstance(ev, CloseRequested) or (ev.purpose is Purpose.CLEAR and ev.lost)
         if purpose is not Purpose.RECOVERY:
             assert before in (*RUNNING,) or purpose is Purpose.CLEAR, f"{purpose} SET in {before.name}"
         self.last_set = ev.t
@@ -577,7 +586,7 @@ def test_every_state_names_its_paper_state_and_the_table_covers_every_event() ->
     assert {mode.paper for mode in Mode} == {*State, None}
     plain = {Ev.STARTED, Ev.COMMAND, Ev.KEEP, Ev.VERIFIED, Ev.VERIFIED_DURATION, Ev.TRANSITION_EXPIRED,
              Ev.DURATION_ELAPSED, Ev.COMMAND_SET_LOST, Ev.CONTROLLER_READ, Ev.CONTROLLER_UNREADABLE,
-             Ev.RECOVERY_SET_ANSWERED, Ev.RECOVERY_SET_FAILED}
+             Ev.RECOVERY_SET_ANSWERED, Ev.RECOVERY_SET_FAILED, Ev.CLEAR_LOST}
     for mode in Mode:
         for ev in Ev:
             if ev not in plain:

@@ -13,7 +13,7 @@ from emulator.inprocess import VirtualTarget
 from hils.actions import ActionType
 from hils.config import IntersectionConfig
 from hils.events import Kind
-from hils.manager import State
+from hils.manager import CLEAR_ATTEMPTS, State
 from hils.middleware import READBACK_PERIOD
 from hils.ntcip import ControlColumn, UnitControlStatus, control_oid
 from hils.testbed import RunSpec, Testbed, run_spec
@@ -221,6 +221,39 @@ def test_calls_are_cleared_at_the_end_of_a_run(paper_config) -> None:
     assert any(r["purpose"] == "command" for r in sets)
     assert sets[-1]["purpose"] == "clear" and sets[-1]["phases"] == frozenset()
     assert [r["kind"] for r in records[-2:]] == ["set_answered", "run_ended"]
+
+
+@pytest.mark.parametrize("lost", [1, 2, CLEAR_ATTEMPTS])
+def test_a_closing_clear_that_gets_no_answer_is_sent_again(paper_config, lost: int, caplog) -> None:
+    """One lost datagram is no reason to leave the calls on the controller until its backup time; a dead link
+    still ends the run, after CLEAR_ATTEMPTS x tau_udp at most."""
+    with Testbed(paper_config, action_type="switch", duration=30.0) as tb:
+        tb.reset()
+        while not tb.done:
+            tb.step(1)  # steps leave the calls placed: only finish() clears them
+        transport, env = tb.junction.transport, tb.env
+        real_set, dropped = transport.set, []
+
+        def set_losing_the_first_clears(varbinds):
+            if len(dropped) < lost and all(value == 0 for _oid, value in varbinds):
+                dropped.append(env.now)
+                event = env.event()
+                env.timeout(transport.tau_udp).callbacks.append(
+                    lambda _: event.fail(CommunicationTimeout("no answer (dropped by the test)")))
+                return event
+            return real_set(varbinds)
+
+        transport.set = set_losing_the_first_clears
+        assert tb.target.unit.control[ControlColumn.VEH_CALL] != frozenset()
+        tb.finish()
+    clears = [(r["kind"], r["t"]) for r in tb.records if r.get("purpose") == "clear"]
+    attempts = min(lost + 1, CLEAR_ATTEMPTS)
+    assert [k for k, _ in clears] == ["set_sent", "set_failed"] * lost + ["set_sent", "set_answered"] * (
+        attempts - lost)
+    assert clears[-1][1] - clears[0][1] <= attempts * paper_config.middleware.tau_udp + 1e-9
+    cleared = tb.target.unit.control[ControlColumn.VEH_CALL] == frozenset()
+    assert cleared is (lost < CLEAR_ATTEMPTS)
+    assert ("could not clear the calls" in caplog.text) is (lost == CLEAR_ATTEMPTS)
 
 
 def test_recover_in_idle_changes_nothing(paper_config) -> None:
