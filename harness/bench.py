@@ -117,8 +117,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                           help="wall-clock seconds per count (30)")
     corridor.add_argument("--virtual-duration", type=float, default=600.0, metavar="S",
                           help="simulated seconds per virtual-time run (600)")
-    corridor.add_argument("--repeat", type=int, default=3, help="virtual-time runs of each, medians (3)")
-    corridor.add_argument("--out", type=Path, default=REPORT_DIR / "corridor.json", metavar="FILE")
+    corridor.add_argument("--repeat", type=int, default=3, metavar="N", help="virtual-time runs of each, medians (3)")
+    corridor.add_argument("--out", type=Path, default=REPORT_DIR / "corridor.json", metavar="FILE",
+                          help="where the figures go (reports/bench/corridor.json)")
     corridor.set_defaults(func=_corridor_command)
 
 
