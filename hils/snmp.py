@@ -46,6 +46,7 @@ import asyncio
 import operator
 import os
 import socket
+import weakref
 from collections.abc import Awaitable, Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from enum import Enum
@@ -278,11 +279,10 @@ class SnmpTransport:
         self.target = target
         self.tau_udp = tau_udp
         self.change_feed = None  # over the wire nobody knows when the answer changes: every poll is sent
-        self._address = _resolve(target)
+        self._address = resolve(target)
         # Taken now rather than on the first request: building one takes ~50 ms, which
         # would otherwise stall the loop in the middle of a run.
-        self._engine_key = (driver, _credentials(target))
-        self._engine = _ENGINES.take(self._engine_key)
+        self._engine = _ENGINES.take(driver, _credentials(target))
         self._auth = _pysnmp_auth(target)
         self._context = ContextData()
         self._udp: _ResolvedUdpTarget | None = None
@@ -331,7 +331,7 @@ class SnmpTransport:
             task.cancel()
         # gufo-snmp closes a session's socket when the session is dropped.
         self._sessions.clear()
-        _ENGINES.give_back(self._engine_key)
+        _ENGINES.give_back(self.driver, _credentials(self.target))
 
     def _submit(self, work: Callable[..., Awaitable[Any]], *args: Any) -> simpy.Event:
         if self._closed:
@@ -400,26 +400,30 @@ class SnmpTransport:
 
 
 class _SharedEngines:
-    """pysnmp engines shared by the transports of one run, each closed when its last transport closes.
+    """pysnmp engines shared by the transports of one run (one wall-clock driver), each closed when its last
+    transport closes; a run dropped half assembled takes its engines with it (the drivers are weak keys).
 
     Controllers of one credentials share an engine (pysnmp keeps a target's community or USM user in
     its engine's configuration; two SNMPv3 users of one name and different keys cannot share one)."""
 
     def __init__(self) -> None:
-        self._engines: dict[Any, tuple[SnmpEngine, int]] = {}
+        self._runs: weakref.WeakKeyDictionary[WallClockDriver, dict[tuple[str, ...], list[Any]]] = (
+            weakref.WeakKeyDictionary())
 
-    def take(self, key: Any) -> SnmpEngine:
-        engine, users = self._engines.get(key) or (SnmpEngine(), 0)
-        self._engines[key] = (engine, users + 1)
-        return engine
+    def take(self, driver: WallClockDriver, credentials: tuple[str, ...]) -> SnmpEngine:
+        entry = self._runs.setdefault(driver, {}).setdefault(credentials, [None, 0])
+        if entry[0] is None:
+            entry[0] = SnmpEngine()
+        entry[1] += 1
+        return entry[0]
 
-    def give_back(self, key: Any) -> None:
-        engine, users = self._engines[key]
-        if users > 1:
-            self._engines[key] = (engine, users - 1)
-            return
-        del self._engines[key]
-        engine.close_dispatcher()
+    def give_back(self, driver: WallClockDriver, credentials: tuple[str, ...]) -> None:
+        engines = self._runs[driver]
+        entry = engines[credentials]
+        entry[1] -= 1
+        if not entry[1]:
+            del engines[credentials]
+            entry[0].close_dispatcher()
 
 
 _ENGINES = _SharedEngines()
@@ -432,7 +436,9 @@ def _credentials(target: SnmpTarget) -> tuple[str, ...]:
     return (target.user, target.auth_key, target.priv_key or "")
 
 
-def _resolve(target: SnmpTarget) -> tuple[str, int]:
+def resolve(target: SnmpTarget) -> tuple[str, int]:
+    """The IPv4 address and port of the target's host; a host this machine cannot resolve is a
+    :class:`TransportError` naming it."""
     try:
         infos = socket.getaddrinfo(target.host, target.port, socket.AF_INET, socket.SOCK_DGRAM, socket.IPPROTO_UDP)
     except socket.gaierror as exc:

@@ -461,6 +461,8 @@ class Testbed:
         self.env.process(self._simulation_loop())
 
     def _poll_counts(self) -> dict[str, Any]:
+        if not self.junctions:
+            return {}  # the run ended while it was being assembled
         if self.several:
             return {tls: j.middleware.poller.counts for tls, j in self.junctions.items()}
         return self.junction.middleware.poller.counts
@@ -783,24 +785,31 @@ def _target_specs(target: str | TargetFactory | Mapping[str, str | TargetFactory
             raise TargetError(f"target {target!r}: a run of {len(configs)} controllers needs one target per traffic "
                               f"light ({', '.join(configs)}): a mapping, or a TOML file of TLS = URL lines")
         specs = dict.fromkeys(configs, target)
-    urls = [spec for spec in specs.values() if isinstance(spec, str) and spec != VIRTUAL]
-    for url in urls:
-        _check_target(url)
+    urls = {tls: spec for tls, spec in specs.items() if isinstance(spec, str) and spec != VIRTUAL}
+    for tls, url in urls.items():
+        _check_target(url, f"{tls}: " if len(configs) > 1 else "")
     if urls and len(urls) != len(specs):
         raise TargetError("targets: either every controller is reached at the wall clock (snmp:// URLs) or none "
                           "is (virtual): a run has one clock")
     return specs
 
 
-def _check_target(url: str) -> None:
+def _check_target(url: str, light: str) -> None:
+    """Refuse, before anything starts, a URL that is not one or whose host does not resolve (``light``: how the
+    message names the traffic light, in a run of several)."""
     if not url.startswith("snmp://"):
-        raise TargetError(f"target {url!r}: allowed: 'virtual' or snmp://HOST[:PORT][?community=NAME&version=1|2c]")
-    from hils.snmp import SnmpTarget
+        raise TargetError(f"{light}target {url!r}: allowed: 'virtual' or "
+                          "snmp://HOST[:PORT][?community=NAME&version=1|2c]")
+    from hils.snmp import SnmpTarget, resolve
+    from hils.transport import TransportError
 
     try:
-        SnmpTarget.parse(url)
+        resolve(SnmpTarget.parse(url))
     except ValueError as exc:
-        raise TargetError(str(exc)) from None
+        raise TargetError(f"{light}{exc}") from None
+    except TransportError as exc:
+        raise TargetError(f"{light}target {url!r}: {exc}; allowed: a host name this machine resolves, or an "
+                          "IPv4 address") from None
 
 
 def _agent_name(given: str | Agent | None, spec: RunSpec) -> str:

@@ -117,6 +117,9 @@ def test_targets_must_name_every_light_and_share_one_clock() -> None:
                                              "J4": "virtual"})
     with pytest.raises(TargetError, match="one target per traffic light"):
         Testbed(scenario="corridor", target="snmp://127.0.0.1:1161")
+    with pytest.raises(TargetError, match=r"^J3: target 'snmp://no-such-host\.invalid': cannot resolve"):
+        Testbed(scenario="corridor", target={tls: "snmp://127.0.0.1:1161" for tls in ("J1", "J2", "J4")}
+                | {"J3": "snmp://no-such-host.invalid"})
 
 
 def test_the_corridor_at_the_wall_clock_against_served_emulators(tmp_path: Path, capsys) -> None:

@@ -52,6 +52,15 @@ def test_nothing_listening_fails_fast_with_one_line(tmp_path: Path) -> None:
     assert "Traceback" not in done.stderr and len(done.stderr.strip().splitlines()) == 1
 
 
+def test_a_host_that_does_not_resolve_is_refused_before_anything_starts(tmp_path: Path) -> None:
+    done = hils_run(tmp_path, "snmp://no-such-host.invalid:161?community=private", "--duration", "60")
+    assert (done.returncode, done.stdout) == (2, "")
+    assert done.stderr.startswith("hils: target 'snmp://no-such-host.invalid:161?community=private': cannot "
+                                  "resolve SNMP target host 'no-such-host.invalid'")
+    assert done.stderr.strip().endswith("allowed: a host name this machine resolves, or an IPv4 address")
+    assert len(done.stderr.strip().splitlines()) == 1
+
+
 def test_a_read_only_community_and_a_controller_not_in_free_mode_are_refused(tmp_path: Path) -> None:
     served = start_emulator(tmp_path / "serve.log")
     try:
