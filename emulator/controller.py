@@ -259,6 +259,11 @@ class Controller:
         setattr(self.timing[phase], name, ticks)
         self.touch()  # a threshold may have moved (red revert acts at once)
 
+    def set_backup_time(self, seconds: int) -> None:
+        """A SET of unitBackupTime: the backup timer's threshold moves at once."""
+        self.backup_time = seconds
+        self.touch()
+
     def set_max2(self, rings: Iterable[int]) -> None:
         """A SET of ringControlGroupMax2: these rings time Maximum 2 from their next green."""
         self.max2_rings = frozenset(rings)

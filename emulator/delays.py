@@ -171,16 +171,7 @@ class DelayedController:
             out[p.column] = p.phases
         return out
 
-    # Writable objects of the unit go to the controller itself.
-    @property
-    def backup_time(self) -> int:
-        return self.controller.backup_time
-
-    @backup_time.setter
-    def backup_time(self, value: int) -> None:
-        self.controller.backup_time = value
-        self.controller.touch()  # the backup timer's threshold moved
-
+    # Writable objects of the unit go to the controller itself (the backup time through set_backup_time).
     @property
     def pattern(self) -> int:
         return self.controller.pattern

@@ -167,7 +167,7 @@ class MibView:
             Instance(UNIT_STARTUP_FLASH.instance(), UNIT_STARTUP_FLASH, lambda: c.startup_flash,
                      lambda v: setattr(c, "startup_flash", v)),
             Instance(UNIT_BACKUP_TIME.instance(), UNIT_BACKUP_TIME, lambda: c.backup_time,
-                     lambda v: setattr(c, "backup_time", v)),
+                     lambda v: c.set_backup_time(v)),
             Instance(UNIT_CONTROL_STATUS.instance(), UNIT_CONTROL_STATUS, lambda: int(c.control_status)),
             Instance(UNIT_FLASH_STATUS.instance(), UNIT_FLASH_STATUS, lambda: int(c.flash_status)),
             Instance(SYSTEM_PATTERN_CONTROL.instance(), SYSTEM_PATTERN_CONTROL, lambda: c.pattern,

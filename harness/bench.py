@@ -210,36 +210,45 @@ def _replay(cfg: Any, seed: int, duration: float, changes: list[tuple[int, str]]
         return wall, sim.summary()
 
 
+def record_full_loop(cfg: Any, seed: int, duration: float) -> tuple[float, list[tuple[int, str]], Any]:
+    """The benchmark's full loop (four-leg, max-pressure, SUMO, event log to a file): its wall seconds, the
+    signal states it showed step by step (for :func:`_replay`) and SUMO's end figures."""
+    from hils.sumo import SumoSimulation
+
+    sim = SumoSimulation(cfg, seed=seed, end=duration)
+    sim.start()
+    recording = _Recording(sim)
+    try:
+        with tempfile.TemporaryDirectory() as tmp:
+            spec = RunSpec(cfg, ActionType.SELECTION, duration=duration, seed=seed, sumo=True,
+                           log_path=Path(tmp) / "events.jsonl")
+            wall = run_spec(spec, simulation=recording).wall_s
+        return wall, recording.changes, sim.summary()
+    finally:
+        sim.close()
+
+
 def measure_overhead(duration: float, repeat: int, seed: int) -> dict[str, Any]:
     """Alternating timings of the full loop and of bare libsumo replaying the very signal states the
     loop showed (same vehicles, same traffic), and, for the record, of libsumo running the config's
     fixed cycle at maximum green (other traffic: the comparison this benchmark used to make)."""
-    from hils.sumo import SumoSimulation, time_bare_sumo
+    from hils.sumo import time_bare_sumo
 
     cfg = config_mod.load()
     full, floor, fixed = [], [], []
     same_traffic = True
     traffic: dict[str, Any] = {}
     for _ in range(repeat):
-        sim = SumoSimulation(cfg, seed=seed, end=duration)
-        sim.start()
-        recording = _Recording(sim)
-        try:
-            with tempfile.TemporaryDirectory() as tmp:
-                spec = RunSpec(cfg, ActionType.SELECTION, duration=duration, seed=seed, sumo=True,
-                               log_path=Path(tmp) / "events.jsonl")
-                full.append(run_spec(spec, simulation=recording).wall_s)
-            hils_traffic = sim.summary()
-        finally:
-            sim.close()
-        wall, bare_traffic = _replay(cfg, seed, duration, recording.changes)
+        wall, changes, hils_traffic = record_full_loop(cfg, seed, duration)
+        full.append(wall)
+        wall, bare_traffic = _replay(cfg, seed, duration, changes)
         floor.append(wall)
         fixed.append(time_bare_sumo(duration, seed=seed, config=cfg))
         same = (hils_traffic.departed, hils_traffic.arrived) == (bare_traffic.departed, bare_traffic.arrived)
         same_traffic = same_traffic and same
         traffic = {"hils": {"departed": hils_traffic.departed, "arrived": hils_traffic.arrived},
                    "replay": {"departed": bare_traffic.departed, "arrived": bare_traffic.arrived},
-                   "signal_changes": len(recording.changes)}
+                   "signal_changes": len(changes)}
     full_s, floor_s, fixed_s = (statistics.median(x) for x in (full, floor, fixed))
     return {"duration_s": duration, "hils_s": full, "same_traffic_floor_s": floor, "same_traffic": same_traffic,
             "traffic": traffic, "hils_median_s": full_s, "floor_median_s": floor_s, "ratio": full_s / floor_s,

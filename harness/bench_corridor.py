@@ -98,7 +98,12 @@ def virtual_run(count: int, sumo: bool, duration: float) -> dict[str, Any]:
         tb.close()
     return {"controllers": count, "scenario": scenario if sumo else "four_leg config x N, no SUMO",
             "duration_s": duration, "wall_s": wall,
-            "wall_per_controller_hour_s": wall / (count * duration / 3600.0)}
+            "wall_per_controller_hour_s": per_controller_hour(wall, count, duration)}
+
+
+def per_controller_hour(wall: float, count: int, duration: float) -> float:
+    """Wall seconds per simulated controller-hour of a run of ``count`` controllers over ``duration`` s."""
+    return wall / (count * duration / 3600.0)
 
 
 def measure_corridor(wall_counts: Sequence[int] = WALL_COUNTS, wall_duration: float = 30.0,
@@ -119,7 +124,8 @@ def measure_corridor(wall_counts: Sequence[int] = WALL_COUNTS, wall_duration: fl
             runs = [in_fresh_process(virtual_run, count, with_sumo, virtual_duration) for _ in range(repeat)]
             median = statistics.median(r["wall_s"] for r in runs)
             virtual[key].append({**runs[0], "wall_s": median, "runs_wall_s": [r["wall_s"] for r in runs],
-                                 "wall_per_controller_hour_s": median / (count * virtual_duration / 3600.0)})
+                                 "wall_per_controller_hour_s": per_controller_hour(median, count,
+                                                                                   virtual_duration)})
     memory = {}
     for side, field in (("middleware", "rss_mb"), ("serve", "serve_rss_mb")):
         rss = {r["controllers"]: r[field] for r in wall}

@@ -12,27 +12,18 @@ from __future__ import annotations
 
 import json
 import sys
-import tempfile
 from pathlib import Path
 
-from harness.bench import _Recording, _replay
+from harness.bench import _replay, record_full_loop
 from hils import config as config_mod
-from hils.sumo import SumoSimulation
-from hils.testbed import RunSpec, run_spec
 
 
 def main(argv: list[str]) -> int:
     side, seconds, changes = argv[0], float(argv[1]), Path(argv[2])
     cfg = config_mod.load()
     if side == "hils":
-        sim = SumoSimulation(cfg, seed=0, end=seconds)
-        sim.start()
-        recording = _Recording(sim)
-        with tempfile.TemporaryDirectory() as tmp:
-            run_spec(RunSpec(cfg, duration=seconds, seed=0, sumo=True, log_path=Path(tmp) / "events.jsonl"),
-                     simulation=recording)
-        sim.close()
-        changes.write_text(json.dumps(recording.changes), encoding="utf-8")
+        _wall, shown, _traffic = record_full_loop(cfg, 0, seconds)
+        changes.write_text(json.dumps(shown), encoding="utf-8")
     else:
         _replay(cfg, 0, seconds, [tuple(c) for c in json.loads(changes.read_text(encoding="utf-8"))])
     return 0

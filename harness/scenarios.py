@@ -716,12 +716,24 @@ class ScenarioResult:
     scenario: Scenario
     checks: tuple[Check, ...]
     faults: tuple[FaultReport, ...]
-    episodes: tuple[Episode, ...]  # every intersection's, in time order
-    detection_s: float | None  # with several controllers: the slowest intersection's
-    recovery_s: float | None  # the slowest, at any intersection
     records: int
     wall_s: float
-    outcomes: tuple[Outcome, ...] = ()  # one per intersection
+    outcomes: tuple[Outcome, ...]  # one per intersection
+
+    @property
+    def episodes(self) -> list[Episode]:
+        """Every intersection's TIMEOUT episodes, in time order."""
+        return sorted((e for o in self.outcomes for e in o.episodes), key=lambda e: e.entered)
+
+    @property
+    def detection_s(self) -> float | None:
+        """With several controllers: the slowest intersection's."""
+        return max((o.detection_s for o in self.outcomes if o.detection_s is not None), default=None)
+
+    @property
+    def recovery_s(self) -> float | None:
+        """The slowest, at any intersection."""
+        return max((o.recovery_s for o in self.outcomes if o.recovery_s is not None), default=None)
 
     @property
     def passed(self) -> bool:
@@ -855,11 +867,7 @@ def evaluate(scenario: Scenario, records: list[dict[str, Any]], faults: list[Fau
                                monitors.get(tls), seq_problems, checker(tls)))
     reports = tuple(FaultReport(f.name, f.kind, f.describe(), f.fired, f.first_fired, dict(f.details),
                                 scenario.shown(spec.intersection)) for spec, f in placed)
-    episodes = sorted((e for o in outcomes for e in o.episodes), key=lambda e: e.entered)
-    detections = [o.detection_s for o in outcomes if o.detection_s is not None]
-    recoveries = [o.recovery_s for o in outcomes if o.recovery_s is not None]
-    return ScenarioResult(scenario, tuple(checks), reports, tuple(episodes), max(detections, default=None),
-                          max(recoveries, default=None), len(records), wall_s, tuple(outcomes))
+    return ScenarioResult(scenario, tuple(checks), reports, len(records), wall_s, tuple(outcomes))
 
 
 def _judge(scenario: Scenario, tls: str, cfg: IntersectionConfig, records: list[dict[str, Any]], faults: list[Fault],

@@ -61,7 +61,7 @@ class _RegisterWithGymnasium(importlib.abc.MetaPathFinder):
 
 if "gymnasium" in sys.modules:
     importlib.import_module("hils.envs")
-elif not any(isinstance(finder, _RegisterWithGymnasium) for finder in sys.meta_path):
+else:
     sys.meta_path.insert(0, _RegisterWithGymnasium())
 
 

@@ -14,7 +14,7 @@ import logging
 import signal
 import sys
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -155,7 +155,7 @@ def run_command(args: argparse.Namespace) -> int:
         outputs += _network_plots(tb, s, out, window)
     else:
         s = summary.summarize(tb.tally, cfg, traffic=tb.traffic, wall_s=tb.wall_s)
-        outputs += _plots(tb.junction, s, out, window, spillback_of=lambda approach: approach)
+        outputs += _plots(tb.junction, s, out, window)
     summary.write(s, out / "summary.json")
     print(summary.render_network(s) if tb.several else summary.render(s))
     for warning in summary.warnings(s):
@@ -165,8 +165,9 @@ def run_command(args: argparse.Namespace) -> int:
 
 
 def _plots(junction: Junction, s: dict[str, Any], folder: Path, window: tuple[float, float], *,
-           spillback_of: Callable[[str], str], name: str | None = None) -> list[str]:
-    """One controller's signal timeline and queue plot in ``folder`` (``name``: the intersection's, default its
+           prefix: str = "", name: str | None = None) -> list[str]:
+    """One controller's signal timeline and queue plot in ``folder`` (``prefix``: what the network's summary puts
+    before its approaches' names, as :attr:`hils.sumo.Light.prefix`; ``name``: the intersection's, default its
     config's); returns the names of the files written."""
     written = []
     name = name or junction.config.name
@@ -177,8 +178,8 @@ def _plots(junction: Junction, s: dict[str, Any], folder: Path, window: tuple[fl
     if junction.traffic_samples:
         approaches = s["traffic"]["approaches"] if s.get("traffic") else None
         spillback = None if approaches is None else {
-            a: [60.0 * m for m in approaches[spillback_of(a)]["spillback_minutes"]]
-            for a in junction.traffic_samples[0][1] if spillback_of(a) in approaches}
+            a: [60.0 * m for m in approaches[prefix + a]["spillback_minutes"]]
+            for a in junction.traffic_samples[0][1] if prefix + a in approaches}
         plots.queues(junction.traffic_samples, folder / "queues.svg", title=f"Queues per approach, {name}",
                      spillback=spillback)
         written.append("queues.svg")
@@ -193,7 +194,7 @@ def _network_plots(tb: Testbed, s: dict[str, Any], out: Path, window: tuple[floa
         folder = out / tls
         folder.mkdir(exist_ok=True)
         per_light.update(_plots(j, s, folder, window, name=f"{tls} ({j.config.name})",
-                                spillback_of=lambda approach, tls=tls: f"{tls} {approach}"))
+                                prefix=j.view.prefix if j.view is not None else ""))
     lights = list(tb.junctions)
     written = [f"{lights[0]}/ .. {lights[-1]}/ ({', '.join(sorted(per_light, reverse=True))})"] if per_light else []
     samples = [j.traffic_samples for j in tb.junctions.values()]

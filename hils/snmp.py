@@ -269,7 +269,9 @@ class SnmpTransport:
     """GET and SET of NTCIP objects to one SNMP agent, as SimPy events completed by the wall-clock driver."""
 
     def __init__(self, env: simpy.Environment, driver: WallClockDriver, target: SnmpTarget,
-                 tau_udp: float = 1.0) -> None:
+                 tau_udp: float = 1.0, address: tuple[str, int] | None = None) -> None:
+        """``address``: the target's, as :func:`resolve` gave it to a caller that checked the target first
+        (None: resolved here)."""
         if driver.env is not env:
             raise ValueError("the driver must step the transport's environment")
         if not tau_udp > 0:
@@ -279,7 +281,7 @@ class SnmpTransport:
         self.target = target
         self.tau_udp = tau_udp
         self.change_feed = None  # over the wire nobody knows when the answer changes: every poll is sent
-        self._address = resolve(target)
+        self._address = address or resolve(target)
         # Taken now rather than on the first request: building one takes ~50 ms, which
         # would otherwise stall the loop in the middle of a run.
         self._engine = _ENGINES.take(driver, _credentials(target))
@@ -411,9 +413,10 @@ class _SharedEngines:
             weakref.WeakKeyDictionary())
 
     def take(self, driver: WallClockDriver, credentials: tuple[str, ...]) -> SnmpEngine:
-        entry = self._runs.setdefault(driver, {}).setdefault(credentials, [None, 0])
-        if entry[0] is None:
-            entry[0] = SnmpEngine()
+        engines = self._runs.setdefault(driver, {})
+        if credentials not in engines:
+            engines[credentials] = [SnmpEngine(), 0]  # [engine, transports using it]
+        entry = engines[credentials]
         entry[1] += 1
         return entry[0]
 

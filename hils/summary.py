@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections import Counter
-from collections.abc import Iterable, Mapping
+from collections.abc import Mapping
 from dataclasses import asdict, is_dataclass
 from pathlib import Path
 from typing import Any
@@ -36,14 +36,6 @@ class Tally:
         self.kinds[kind] += 1
         if kind in self.KEPT:
             self.records.append(record)
-
-    @classmethod
-    def of(cls, records: Iterable[dict[str, Any]]) -> Tally:
-        """The tally of a finished log (``hils.events.read``), as it was kept during the run."""
-        tally = cls()
-        for r in records:
-            tally(r)
-        return tally
 
 
 def summarize(tally: Tally, config: IntersectionConfig, *, traffic: Any = None,
@@ -120,8 +112,7 @@ def _polls(ended: Mapping[str, Any], intersection: str | None) -> dict[str, int]
 def render(summary: Mapping[str, Any]) -> str:
     s = summary
     lines = [f"Run summary: {s['config']} ({s['mode']}, {s['action_type']} by {s['agent']}, seed {s['seed']})",
-             f"  simulated {s['sim_time_s']:.0f} s" + (f" in {s['wall_time_s']:.1f} s wall" if s.get("wall_time_s")
-                                                     else "")]
+             _simulated(s)]
     t = s.get("traffic")
     if t:
         lines += _traffic_lines(t)
@@ -133,9 +124,8 @@ def render(summary: Mapping[str, Any]) -> str:
     ]
     if h["n"]:
         lines.append(f"  hold per transition  mean {h['mean']:.3f} s, min {h['min']:.3f} s, max {h['max']:.3f} s")
-    lines.append("  timeouts             " + (", ".join(f"{k} {v}" for k, v in s["timeouts"].items()) or "none")
-                 + (f" ({s['recoveries']} recovered)" if s["timeouts"] else ""))
-    polls = s["polls"] or {"polls": 0, "failed": 0, "elided": 0}  # none counted: the run did not end cleanly
+    lines.append(f"  timeouts             {_timeouts(s)}")
+    polls = _polls_shown(s)
     sent = polls["polls"] - polls["elided"]
     lines.append(f"  polls                {polls['polls']} ({polls['failed']} failed"
                  + (f"; {sent} sent, {polls['elided']} could not see a change" if polls["elided"] else "")
@@ -154,22 +144,34 @@ def render_network(summary: Mapping[str, Any]) -> str:
     s = summary
     lines = [f"Run summary: {s['scenario']} ({len(s['intersections'])} controllers, {s['mode']}, "
              f"{s['action_type']} by {s['agent']}, seed {s['seed']})",
-             f"  simulated {s['sim_time_s']:.0f} s" + (f" in {s['wall_time_s']:.1f} s wall" if s.get("wall_time_s")
-                                                     else "")]
+             _simulated(s)]
     if s.get("traffic"):
         lines += _traffic_lines(s["traffic"])
     lines += ["Signal control per intersection",
               "  light   transitions  hold mean   timeouts               polls (failed, not sent)   drifted"]
     for tls, c in s["intersections"].items():
-        h, polls = c["hold_s"], c["polls"] or {"polls": 0, "failed": 0, "elided": 0}
-        timeouts = ", ".join(f"{k} {v}" for k, v in c["timeouts"].items()) or "none"
-        if c["timeouts"]:
-            timeouts += f" ({c['recoveries']} recovered)"
+        h, polls, timeouts = c["hold_s"], _polls_shown(c), _timeouts(c)
         lines.append(f"  {tls:<7} {c['transitions_verified']:>5} of {c['commands_dispatched']:<4} "
                      f"{_fmt(h['mean'] if h['n'] else None):>9}   {timeouts:<22} "
                      f"{polls['polls']:>6} ({polls['failed']}, {polls['elided']})"
                      f"{'':>10}{c['drifted_steps']:>3}")
     return "\n".join(lines)
+
+
+def _simulated(s: Mapping[str, Any]) -> str:
+    return f"  simulated {s['sim_time_s']:.0f} s" + (f" in {s['wall_time_s']:.1f} s wall" if s.get("wall_time_s")
+                                                   else "")
+
+
+def _timeouts(control: Mapping[str, Any]) -> str:
+    """One controller's TIMEOUTs by reason, and how many it recovered from."""
+    text = ", ".join(f"{k} {v}" for k, v in control["timeouts"].items()) or "none"
+    return text + (f" ({control['recoveries']} recovered)" if control["timeouts"] else "")
+
+
+def _polls_shown(control: Mapping[str, Any]) -> dict[str, int]:
+    # none counted: the run did not end cleanly
+    return {"polls": 0, "failed": 0, "elided": 0, **control["polls"]}
 
 
 def _fmt(value: float | None, unit: str = " s") -> str:

@@ -242,11 +242,10 @@ class SumoSimulation:
         self.extra_args = tuple(extra_args)
         self._sample_every = max(1, round(queue_sample_period / self.step_length))
         self._until_sample = self._sample_every
-        self._approach_lanes: tuple[tuple[str, tuple[str, ...]], ...] = ()  # every light's, named as Light says
         self._max_queue: dict[str, int] = {}
         self._approach_of_edge: dict[str, str] = {}
-        self._lane_storage: dict[str, tuple[tuple[str, int], ...]] = {}
-        self._storage: tuple[tuple[str, tuple[str, ...], tuple[int, ...]], ...] = ()  # the same, lanes apart
+        # every light's approaches (named as Light says), their lanes and how many vehicles each lane holds
+        self._storage: tuple[tuple[str, tuple[str, ...], tuple[int, ...]], ...] = ()
         self._spill_minutes: dict[str, set[int]] = {}
         # per vehicle seen in the network: its approach and departure delay, and its last sampled time loss
         self._seen: dict[str, tuple[str, float]] = {}
@@ -300,18 +299,17 @@ class SumoSimulation:
                                                              tls), several=several)
                        for tls, cfg in self.configs.items()}
         self._until_sample = self._sample_every
-        self._approach_lanes = tuple(item for light in self.lights.values() for item in light.approach_lanes)
-        self._max_queue = {approach: 0 for approach, _ in self._approach_lanes}
+        approach_lanes = [item for light in self.lights.values() for item in light.approach_lanes]
+        self._max_queue = {approach: 0 for approach, _ in approach_lanes}
         self._approach_of_edge = {link.from_lane.rsplit("_", 1)[0]: light.prefix + link.approach
                                   for light in self.lights.values() for link in light.phase_map.links}
         spacing = _vehicle_spacing()
-        self._lane_storage = {approach: tuple((lane, int(libsumo.lane.getLength(lane) // spacing)) for lane in lanes)
-                              for approach, lanes in self._approach_lanes}
-        self._storage = tuple((approach, tuple(lane for lane, _ in lanes), tuple(cap for _, cap in lanes))
-                              for approach, lanes in self._lane_storage.items())
-        self._spill_minutes = {approach: set() for approach, _ in self._approach_lanes}
+        self._storage = tuple((approach, tuple(lanes),
+                               tuple(int(libsumo.lane.getLength(lane) // spacing) for lane in lanes))
+                              for approach, lanes in approach_lanes)
+        self._spill_minutes = {approach: set() for approach, _ in approach_lanes}
         self._seen, self._time_loss = {}, {}
-        self._finished = {approach: [] for approach, _ in self._approach_lanes}
+        self._finished = {approach: [] for approach, _ in approach_lanes}
 
     def close(self) -> None:
         """End the simulation (idempotent); SUMO's end-of-run report is swallowed when quiet."""
@@ -378,12 +376,11 @@ class SumoSimulation:
         # Once a second, for the whole run. The getters are libsumo's own C functions mapped over the lanes
         # and vehicles: the Python wrappers around them (a frame per call) were most of this sample's cost.
         top = self._max_queue
-        for approach, lanes in self._approach_lanes:
+        for approach, lanes, capacities in self._storage:
             queue = sum(map(_lane_halting, lanes))
             if queue > top[approach]:
                 top[approach] = queue
-        # a lane holding as many vehicles as fit on it: the queue reaches back beyond the network
-        for approach, lanes, capacities in self._storage:
+            # a lane holding as many vehicles as fit on it: the queue reaches back beyond the network
             if any(map(operator.ge, map(_lane_vehicles, lanes), capacities)):
                 self._spill_minutes[approach].add(int(self.time // 60.0))
         self._sample_vehicles()
@@ -444,11 +441,12 @@ class SumoSimulation:
             approach = self._approach(vid)
             delays.setdefault(approach, []).append(libsumo.vehicle.getDepartDelay(vid))
             counts.setdefault(approach, Counter())["waiting"] += 1
+        storage = {a: min(capacities, default=0) for a, _, capacities in self._storage}
         approaches = {a: ApproachSummary(
             departed=counts[a]["arrived"] + counts[a]["running"], arrived=counts[a]["arrived"],
             running=counts[a]["running"], waiting_to_enter=counts[a]["waiting"],
             mean_delay=sum(d) / len(d) if d else None, max_queue=self._max_queue.get(a, 0),
-            lane_storage=min((cap for _, cap in self._lane_storage.get(a, ())), default=0),
+            lane_storage=storage.get(a, 0),
             spillback_minutes=tuple(sorted(self._spill_minutes.get(a, ())))) for a, d in sorted(delays.items())}
         every = [x for d in delays.values() for x in d]
         notes = [DELAY_NOTE, ARRIVED_NOTE]

@@ -213,6 +213,10 @@ class Testbed:
         self.config = next(iter(self.configs.values()))
         self.action_type = ActionType(action_type)
         self._targets = _target_specs(target, self.configs)
+        # Each wall-clock target parsed and its host resolved once, here: a bad one is refused before anything
+        # starts, naming its light.
+        self._wall_targets = {tls: _check_target(url, f"{tls}: " if self.several else "")
+                              for tls, url in self._targets.items() if isinstance(url, str) and url != VIRTUAL}
         if duration is not None and not duration > 0:
             raise ValueError(f"duration must be positive seconds or None, got {duration!r}")
         self._sumo_spec = sumo
@@ -248,7 +252,7 @@ class Testbed:
     @property
     def mode(self) -> str:
         """``virtual`` or ``wall-clock``."""
-        return "wall-clock" if any(isinstance(t, str) and t != VIRTUAL for t in self._targets.values()) else VIRTUAL
+        return "wall-clock" if self._wall_targets else VIRTUAL
 
     @property
     def several(self) -> bool:
@@ -389,14 +393,17 @@ class Testbed:
                 set_latency=target.set_latency, seed=seed, change_feed=getattr(target, "change_feed", None))
             where = "the in-process emulator"
         else:
-            from hils.snmp import SnmpTarget, SnmpTransport
+            from hils.snmp import SnmpTransport
 
-            target = SnmpTarget.parse(spec)
-            transport = SnmpTransport(env, self._driver, target, tau_udp=cfg.middleware.tau_udp)
+            target, address = self._wall_targets[tls]
+            transport = SnmpTransport(env, self._driver, target, tau_udp=cfg.middleware.tau_udp, address=address)
             where, community = f"{target.host}:{target.port}", getattr(target, "community", None)
         events = TaggedLog(self.events, tls) if self.several else self.events
-        tally = Tally(tls if self.several else None)
-        self.events.subscribe(tally, intersection=tally.intersection)
+        # One controller's tally is the run's; each of several has its own, handed its intersection's records.
+        tally = self.tally
+        if self.several:
+            tally = Tally(tls)
+            self.events.subscribe(tally, intersection=tls)
         middleware = Middleware(env, transport, cfg, self.action_type, events, where=where, community=community)
         return Junction(tls, cfg, target, transport, middleware, events, tally)
 
@@ -566,15 +573,19 @@ class Testbed:
         if unknown:
             raise KeyError(f"no traffic light {', '.join(unknown)} in this run; it has {', '.join(self.junctions)}")
         chosen = {tls: value for tls, value in actions.items() if value is not None and self.junctions[tls].due}
-        for tls, value in chosen.items():
-            mw = self.junctions[tls].middleware
-            try:
-                mw.check(value)
-            except ActionError:
-                error = mw.submit(value).error  # logged as received and refused
-                error.add_note(f"the action of traffic light {tls}; nothing was sent to any controller")
-                raise error from None
+        if len(chosen) > 1:  # all or none: a refused action leaves the others unsent
+            for tls, value in chosen.items():
+                try:
+                    self.junctions[tls].middleware.check(value)
+                except ActionError:
+                    chosen = {tls: value}  # submitted alone: logged as received and refused, nothing sent
+                    break
         submitted = {tls: self.junctions[tls].middleware.submit(value) for tls, value in chosen.items()}
+        for tls, done in submitted.items():
+            if done.error is not None:
+                if self.several:
+                    done.error.add_note(f"the action of traffic light {tls}; nothing was sent to any controller")
+                raise done.error
         return self._to_decision(submitted)
 
     def wait(self) -> tuple[Observation, dict[str, Any]]:
@@ -785,18 +796,16 @@ def _target_specs(target: str | TargetFactory | Mapping[str, str | TargetFactory
             raise TargetError(f"target {target!r}: a run of {len(configs)} controllers needs one target per traffic "
                               f"light ({', '.join(configs)}): a mapping, or a TOML file of TLS = URL lines")
         specs = dict.fromkeys(configs, target)
-    urls = {tls: spec for tls, spec in specs.items() if isinstance(spec, str) and spec != VIRTUAL}
-    for tls, url in urls.items():
-        _check_target(url, f"{tls}: " if len(configs) > 1 else "")
+    urls = [spec for spec in specs.values() if isinstance(spec, str) and spec != VIRTUAL]
     if urls and len(urls) != len(specs):
         raise TargetError("targets: either every controller is reached at the wall clock (snmp:// URLs) or none "
                           "is (virtual): a run has one clock")
     return specs
 
 
-def _check_target(url: str, light: str) -> None:
-    """Refuse, before anything starts, a URL that is not one or whose host does not resolve (``light``: how the
-    message names the traffic light, in a run of several)."""
+def _check_target(url: str, light: str) -> tuple[Any, tuple[str, int]]:
+    """The :class:`hils.snmp.SnmpTarget` of ``url`` and its host's address; a URL that is not one, or whose host
+    does not resolve, is refused (``light``: how the message names the traffic light, in a run of several)."""
     if not url.startswith("snmp://"):
         raise TargetError(f"{light}target {url!r}: allowed: 'virtual' or "
                           "snmp://HOST[:PORT][?community=NAME&version=1|2c]")
@@ -804,7 +813,8 @@ def _check_target(url: str, light: str) -> None:
     from hils.transport import TransportError
 
     try:
-        resolve(SnmpTarget.parse(url))
+        target = SnmpTarget.parse(url)
+        return target, resolve(target)
     except ValueError as exc:
         raise TargetError(f"{light}{exc}") from None
     except TransportError as exc:

@@ -52,7 +52,6 @@ inputs = st.one_of(
 
 def apply(unit: Controller | DelayedController, op: str, value: object, *, ticked: bool) -> None:
     """One input, or a stretch of ticks: stepped one by one, or advanced over."""
-    c = unit.controller if isinstance(unit, DelayedController) else unit
     if op == "ticks":
         if ticked:
             for _ in range(value):
@@ -66,9 +65,7 @@ def apply(unit: Controller | DelayedController, op: str, value: object, *, ticke
     elif op == "retime":
         unit.set_timing(*value)
     elif op == "backup_time":
-        unit.backup_time = value
-        if unit is c:
-            c.touch()  # the bare controller's backup time is a plain attribute; its wrapper's setter touches
+        unit.set_backup_time(value)
     elif op == "power_cycle":
         unit.reset()
     else:

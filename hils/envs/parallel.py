@@ -107,9 +107,9 @@ class IntersectionsEnv(ParallelEnv[str, np.ndarray, Any]):
             self._np_random, _ = seeding.np_random(seed)
         run_seed = episode_seed(seed, self._np_random)
         tb = self.testbed
-        tb.reset(seed=run_seed)
+        first = tb.reset(seed=run_seed)
         # A scenario of one light makes a Testbed of one controller, whose reset returns that one observation.
-        observations = tb.observe_all()
+        observations = first if tb.several else {tb.junction.id: first}
         for tls, adapter in self.adapters.items():
             adapter.start(tb.junctions[tls].middleware.cache, observations[tls])
         self._last = observations
