@@ -27,6 +27,10 @@ start answering differently (every write, every real step that changed the
 status the agent answers or the controller's own status and control objects),
 and ``changed()`` fires at the next one. A poller
 that knows the version it last read needs no GET until the version moves.
+``controls`` moves more rarely: when a control object the middleware never
+sets (all but VehCall) may have been given phases, which only a write of one
+does (the controller itself only ever clears them), or a ``bump()``; the
+middleware's read-back of those objects sleeps until it moves.
 """
 
 from __future__ import annotations
@@ -39,7 +43,10 @@ import simpy
 from emulator.controller import TICK
 from emulator.delays import DelayedController
 from emulator.mib import MibView
-from hils.ntcip import Oid, Value
+from hils.ntcip import CONTROL_TABLE, ControlColumn, Oid, Value
+
+#: The OID prefixes of the control objects a write of which moves ``EventClock.controls``.
+_OTHERS_CONTROLS = frozenset(d.prefix for c, d in CONTROL_TABLE.items() if c is not ControlColumn.VEH_CALL)
 
 
 class EventClock:
@@ -49,8 +56,10 @@ class EventClock:
         self.env = env
         self.unit = unit
         self.version = 0
+        self.controls = 0
         self.steps = 0  # real steps run (the rest were skipped)
         self._changed: simpy.Event | None = None
+        self._controls_changed: simpy.Event | None = None
         self._start = env.now + phase
         self._due: int | None = None  # tick count after the next scheduled real step
         self._generation = 0  # an alarm from an older schedule is stale
@@ -64,12 +73,36 @@ class EventClock:
             self._changed = self.env.event()
         return self._changed
 
+    def controls_changed(self) -> simpy.Event:
+        """An event that fires when ``controls`` next moves."""
+        if self._controls_changed is None:
+            self._controls_changed = self.env.event()
+        return self._controls_changed
+
     def bump(self) -> None:
-        """What a GET answers may have changed: move ``version`` and wake whoever waits for it."""
+        """Something besides the unit changed what a GET may answer: move ``version`` and ``controls`` (the
+        caller does not say what changed) and wake whoever waits for them."""
+        self._move_version()
+        self._move_controls()
+
+    def _move_version(self) -> None:
         self.version += 1
         if self._changed is not None:
             changed, self._changed = self._changed, None
             changed.succeed()
+
+    def _move_controls(self) -> None:
+        self.controls += 1
+        if self._controls_changed is not None:
+            changed, self._controls_changed = self._controls_changed, None
+            changed.succeed()
+
+    def written(self, varbinds: Sequence[tuple[Oid, Value]]) -> None:
+        """A SET reached the unit: what it answers may differ, and its control objects besides VehCall too
+        when it wrote one of them."""
+        self.touched()
+        if any(oid[:-1] in _OTHERS_CONTROLS for oid, _ in varbinds):
+            self._move_controls()
 
     # --- inputs ----------------------------------------------------------------------------------
 
@@ -83,14 +116,14 @@ class EventClock:
     def touched(self) -> None:
         """The unit was written: what it answers may differ, and its next step may not be quiet (every write
         reaches the unit through a method that says so: a SET waiting for its tick, or a touched controller)."""
-        self.bump()
+        self._move_version()
         self._schedule(self.unit.quiet_ticks())
 
     def power_cycle(self) -> None:
         """Power down and up: the unit resets and its tick grid starts now."""
         self.unit.reset()
         self._start = self.env.now
-        self.bump()
+        self._move_version()  # the control objects are cleared: none has phases it did not have
         self._schedule(1)
 
     # --- ticking ---------------------------------------------------------------------------------
@@ -126,7 +159,7 @@ class EventClock:
         unit.step()
         self.steps += 1
         if self._versions() != versions:
-            self.bump()
+            self._move_version()
         self._schedule(unit.quiet_ticks())
 
 
@@ -143,4 +176,4 @@ class ClockedSurface:
         try:
             self.mib.set_many(varbinds)
         finally:
-            self.clock.touched()
+            self.clock.written(varbinds)

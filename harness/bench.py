@@ -90,8 +90,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                                           "four-leg network and demand: 0.25 s SUMO steps, a decision every 10 s, "
                                           "a seeded random policy, each episode in a fresh process, alternately. "
                                           "hils' controller enforces minimum green, yellow and red clearance; "
-                                          "sumo-rl inserts its own yellow and no all-red, so the same demand makes "
-                                          "different traffic (vehicles inserted and arrived are shown). Needs "
+                                          "sumo-rl inserts its own yellow (the config's 3 s, and its 3 s minimum "
+                                          "green, given in SUMO steps: sumo-rl counts them so) and no all-red, so "
+                                          "the same demand makes different traffic (vehicles inserted and arrived "
+                                          "are shown). Needs "
                                           "sumo-rl: pip install 'hils[bench]'.")
     env.add_argument("--duration", type=float, default=3600.0, metavar="S", help="simulated seconds per episode (3600)")
     env.add_argument("--repeat", type=int, default=3, help="alternating episodes of each (3)")
@@ -181,6 +183,10 @@ class _Recording:
         self.steps += 1
         return self.sim.step()
 
+    def advance(self, steps: int) -> None:
+        self.steps += steps
+        self.sim.advance(steps)
+
     def traffic_state(self) -> Any:
         return self.sim.traffic_state()
 
@@ -190,7 +196,8 @@ class _Recording:
 
 def _replay(cfg: Any, seed: int, duration: float, changes: list[tuple[int, str]]) -> tuple[float, Any]:
     """Bare libsumo stepping the same scenario and seed, showing the recorded state strings at the same
-    steps: the same-traffic floor. Returns the wall seconds of the stepping and SUMO's end figures."""
+    steps: the same-traffic floor. Between two changes SUMO steps in one call (to the next change's
+    time), as cheaply as libsumo allows. Returns the wall seconds of the stepping and SUMO's end figures."""
     import libsumo
 
     from hils.sumo import SumoSimulation
@@ -198,14 +205,18 @@ def _replay(cfg: Any, seed: int, duration: float, changes: list[tuple[int, str]]
     sim = SumoSimulation(cfg, seed=seed, end=duration)
     with sim:
         steps = round(duration / sim.step_length)
-        at = dict(changes)
-        show, step, tls = libsumo.trafficlight.setRedYellowGreenState, libsumo.simulationStep, sim.tls_id
+        show, step, tls, length = libsumo.trafficlight.setRedYellowGreenState, libsumo.simulationStep, sim.tls_id, \
+            sim.step_length
+        shown = [(k, text) for k, text in changes if k < steps]
+        begins = [0, *(k for k, _ in shown)]
+        ends = [*begins[1:], steps]
+        texts = [None, *(text for _, text in shown)]
         t0 = time.perf_counter()
-        for k in range(steps):
-            text = at.get(k)
+        for text, begin, end in zip(texts, begins, ends, strict=True):
             if text is not None:
                 show(tls, text)
-            step()
+            if end > begin:
+                step((end - 0.5) * length)  # steps begin .. end - 1: SUMO steps while its time is below the target
         wall = time.perf_counter() - t0
         return wall, sim.summary()
 
@@ -528,6 +539,10 @@ def _env_command(args: argparse.Namespace) -> int:
     print(machine.header(info))
     print(f"one {f['episode_s']:g} s episode, {f['sumo_step_s']} s SUMO steps, a decision every {f['decision_s']:g} s, "
           f"random policy; {args.repeat} alternating episodes each, medians:")
+    t = f["sumo_rl_timing_steps"]
+    print(f"  sumo-rl's yellow, min and max green in its unit, SUMO steps: {t['yellow']}, {t['min_green']}, "
+          f"{t['max_green']} (the config's {t['yellow'] * f['sumo_step_s']:g}, {t['min_green'] * f['sumo_step_s']:g}, "
+          f"{t['max_green'] * f['sumo_step_s']:g} s)")
     print(f"  {'':10} {'steps':>6} {'steps/s':>8} {'wall s / sim h':>15} {'of it SUMO':>11} {'own work':>9} "
           f"{'inserted':>9} {'arrived':>8}")
     for side in ("hils", "sumo_rl"):

@@ -5,7 +5,10 @@ every 10 s and a seeded random policy, for one simulated hour per episode, each 
 libsumo per process), alternately and several times; the medians are compared. What differs, on
 purpose, is the controller: hils' emulator enforces minimum green, yellow and red clearance itself
 (10 Hz polls, NTCIP objects, the manager), while sumo-rl switches SUMO's program directly and inserts a
-yellow of its own without an all-red. So the two serve different signal sequences and the same demand
+yellow of its own without an all-red. sumo-rl gets the shipped config's yellow and minimum green (3 s
+each), converted to its unit: it counts both in SUMO steps (one per ``simulationStep``) although its docs
+say seconds, so at a 0.25 s step its defaults of "3" would be 0.75 s. The two still serve different
+signal sequences (hils adds the 2 s all-red and decides among the config's pairs) and the same demand
 becomes different traffic, which SUMO takes longer or shorter to step: each side's vehicles inserted and
 arrived are reported beside its time, and its time is split into SUMO's steps and the environment's own
 work (controller, middleware, observations), the part an environment is answerable for.
@@ -56,15 +59,27 @@ def sumo_rl_episode(seed: int, duration: float = EPISODE_S) -> dict[str, Any]:
 
     data = resources.files("hils.data")
     env = sumo_rl.SumoEnvironment(net_file=str(data / "four_leg.net.xml"), route_file=str(data / "four_leg.rou.xml"),
-                                  use_gui=False, num_seconds=int(duration), delta_time=int(DECISION_S), yellow_time=3,
-                                  min_green=3, max_green=20, single_agent=True, sumo_seed=seed, sumo_warnings=False,
+                                  use_gui=False, num_seconds=int(duration), delta_time=int(DECISION_S),
+                                  single_agent=True, sumo_seed=seed, sumo_warnings=False,
                                   additional_sumo_cmd=f"--step-length {SUMO_STEP}")
+    # Set after construction: its constructor compares the yellow, in steps, with delta_time, in seconds.
+    env.yellow_time, env.min_green, env.max_green = sumo_rl_timing()
     steps, wall = _random_episode(env, seed)
     stats = env.sumo.simulation
     inserted = int(stats.getParameter("", "stats.vehicles.inserted"))
     running = int(stats.getParameter("", "stats.vehicles.running"))
     env.close()
     return {"steps": steps, "wall_s": wall, "sumo_s": sumo_s[0], "inserted": inserted, "arrived": inserted - running}
+
+
+def sumo_rl_timing() -> tuple[int, int, int]:
+    """The shipped config's yellow, minimum and maximum green in sumo-rl's unit: SUMO steps, since its
+    TrafficSignal counts a yellow and a minimum green by calls of ``update()``, one per step."""
+    from hils.config import load
+
+    phase = load().phases[2]
+    yellow, min_green, max_green = (round(s / SUMO_STEP) for s in (phase.yellow, phase.min_green, phase.max_green))
+    return yellow, min_green, max_green
 
 
 def _time_sumo_steps() -> list[float]:
@@ -108,7 +123,10 @@ def measure_env(repeat: int = 3, seed: int = 0, duration: float = EPISODE_S) -> 
         runs["hils"].append(in_fresh_process(hils_episode, seed, duration))
         runs["sumo_rl"].append(in_fresh_process(sumo_rl_episode, seed, duration))
     out: dict[str, Any] = {"episode_s": duration, "sumo_step_s": SUMO_STEP, "decision_s": DECISION_S,
-                           "policy": "random (seeded)", "repeat": repeat, "runs": runs}
+                           "policy": "random (seeded)", "repeat": repeat,
+                           "sumo_rl_timing_steps": dict(zip(("yellow", "min_green", "max_green"), sumo_rl_timing(),
+                                                            strict=True)),
+                           "runs": runs}
     for side, rs in runs.items():
         wall = statistics.median(r["wall_s"] for r in rs)
         steps = rs[0]["steps"]

@@ -269,20 +269,32 @@ class Middleware:
     def _read_back(self) -> Generator[simpy.Event, Any, None]:
         """Read the control objects back every READBACK_PERIOD s; the manager judges whose they are.
 
-        Like a poll, a read-back that cannot see a change is not sent: with a change feed, one whose
-        version is the one the last read-back (found ours) read would find them ours again."""
+        Like a poll, a read-back that cannot see a change is not sent: with a change feed, every read-back
+        after one that found the control objects ours would find them ours again until the feed's
+        ``controls`` moves (someone wrote one), so the process sleeps until then and goes on at the first
+        time of its grid not before the write (at the write's own instant, should they meet)."""
+        env = self.env
         groups = self.config.groups
         oids = [control_oid(c, g) for c in FOREIGN_COLUMNS for g in range(1, groups + 1)]
-        ours: int | None = None  # the feed's version when a read-back last found the control objects ours
+        ours: int | None = None  # the feed's controls when a read-back last found the control objects ours
         # Half a poll period off the poll grid, so that a read-back and a poll do not go out together.
-        yield self.env.timeout(self.poller.period / 2)
+        yield env.timeout(self.poller.period / 2)
+        wait = READBACK_PERIOD
         while self.manager.mode is not Mode.CLOSED:
-            yield self.env.timeout(READBACK_PERIOD)
+            yield env.timeout(wait)
+            wait = READBACK_PERIOD
             if self.poller.halted or self.poller.consecutive_failures:
                 continue  # in TIMEOUT only recovery sends; while polls fail, the poller counts them
             feed = self.transport.change_feed
-            version = feed.version if feed is not None else None
-            if version is not None and version == ours:
+            controls = feed.controls if feed is not None else None
+            if controls is not None and controls == ours:
+                # The grid's times as successive timeouts make them, float for float; from 2 s on a wait
+                # below 2 s is exact (due - now), so the timeout lands on due itself.
+                due = env.now + READBACK_PERIOD
+                yield feed.controls_changed()
+                while due < env.now:
+                    due += READBACK_PERIOD
+                wait = due - env.now
                 continue
             try:
                 values = yield self.transport.get(oids)
@@ -293,7 +305,7 @@ class Middleware:
             effects = self._feed(ControlsRead(self.env.now, tuple(
                 (CONTROL_TABLE[c].name, groups_to_phases([int(v) for v in values[i * groups:(i + 1) * groups]]))
                 for i, c in enumerate(FOREIGN_COLUMNS))))
-            ours = None if any(isinstance(e, TimeoutEntered) for e in effects) else version
+            ours = None if any(isinstance(e, TimeoutEntered) for e in effects) else controls
 
     def _recover(self) -> Generator[simpy.Event, Any, bool]:
         self._feed(RecoveryRequested(self.env.now))

@@ -84,6 +84,9 @@ class Simulation(Protocol):
 
     def step(self) -> Any: ...
 
+    def advance(self, steps: int) -> None:
+        """``steps`` steps at once, with nothing shown changing between them (as many :meth:`step` calls)."""
+
     def traffic_state(self) -> Any: ...
 
     def queues(self) -> Mapping[int, int]: ...
@@ -96,6 +99,9 @@ class NoSimulation:
         """No lights to set."""
 
     def step(self) -> None:
+        """No traffic to move."""
+
+    def advance(self, steps: int) -> None:
         """No traffic to move."""
 
     def traffic_state(self) -> None:
@@ -724,16 +730,19 @@ class Testbed:
 
         # Steps that cost no time and act on nothing but SUMO (virtual time, no fault on their cost, no detectors
         # SETting the controller) run back to back while nothing else is due before the next one: what they
-        # do and see is the same, without a trip through the event queue for each.
+        # do and see is the same, without a trip through the event queue for each, and SUMO makes them in one
+        # call (nothing can change what it shows until the next event).
         back_to_back = self.step_cost is modeled_cost and not feeds
         while not self.ended:
             took = self.step_cost(one_step)
             for mw in middlewares:
                 mw.observe_step(step, took)
             k += 1
-            while back_to_back and env.peek() > start + k * step:
-                one_step()
-                k += 1
+            if back_to_back:
+                n = _steps_before(env.peek(), start, k, step)
+                if n:
+                    sim.advance(n)
+                    k += n
             yield env.timeout(max(0.0, start + k * step - env.now))
 
     # --- helpers ----------------------------------------------------------------------------------------
@@ -756,6 +765,23 @@ class Testbed:
         self._started()
         if self.ended:
             raise NotStarted(f"the run has ended ({self.end_reason}): call reset() to start another")
+
+
+def _steps_before(until: float, start: float, k: int, step: float) -> int:
+    """How many steps of the grid ``start + j * step``, from j = k on, start before ``until``."""
+    if math.isinf(until):
+        return _MAX_STRETCH  # nothing else will ever happen: step on, a stretch at a time
+    j = max(k, math.ceil((until - start) / step))
+    # the grid's own float comparison decides, however the division rounded
+    while j > k and start + (j - 1) * step >= until:
+        j -= 1
+    while start + j * step < until:
+        j += 1
+    return j - k
+
+
+#: Steps run back to back at most when no other event is queued (one simulated hour at 0.25 s).
+_MAX_STRETCH = 14400
 
 
 def _deadline(env: simpy.Environment, at: float) -> simpy.Event:

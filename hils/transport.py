@@ -47,12 +47,17 @@ class ChangeFeed(Protocol):
     """What an in-process controller can tell its poller: when a GET could start answering differently.
 
     ``version`` moves whenever it could (a write, a change of the status the controller answers);
-    ``changed()`` is an event that fires when it next moves. Over the wire nobody knows this: a
-    transport without a feed has every poll sent."""
+    ``changed()`` is an event that fires when it next moves. ``controls`` moves whenever a control
+    object the middleware never sets (all but VehCall) could have been given phases (a write of one),
+    ``controls_changed()`` when it next moves. Over the wire nobody knows this: a transport without a
+    feed has every poll and read-back sent."""
 
     version: int
+    controls: int
 
     def changed(self) -> simpy.Event: ...
+
+    def controls_changed(self) -> simpy.Event: ...
 
     def bump(self) -> None:
         """Something besides the controller changed what a GET may answer (a transport's loss, say)."""

@@ -50,6 +50,10 @@ class Watched:
                 self.crossings[shown[self._link_of[(lane, libsumo.vehicle.getRoute(vid)[-1])]]] += 1
         self._last = now
 
+    def advance(self, steps: int) -> None:
+        for _ in range(steps):  # every step watched
+            self.step()
+
     def traffic_state(self):
         return self.sim.traffic_state()
 

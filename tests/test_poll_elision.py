@@ -75,3 +75,42 @@ def test_faults_draw_on_every_poll() -> None:
         tb.run()
         counts = tb.records[-1]["polls"]
     assert counts["polls"] == 1200 and counts["elided"] == 0 and counts["failed"] > 0
+
+
+class CountingSurface:
+    """The emulator's surface, counting the GETs that read the control objects back."""
+
+    def __init__(self, inner: Any, oid: Any) -> None:
+        self.inner, self.oid, self.read_backs = inner, oid, 0
+
+    def get_many(self, oids: Any) -> Any:
+        self.read_backs += self.oid in oids
+        return self.inner.get_many(oids)
+
+    def set_many(self, varbinds: Any) -> None:
+        self.inner.set_many(varbinds)
+
+
+@pytest.mark.parametrize("ticked", [True, False])
+def test_read_backs_that_cannot_see_a_change_are_not_sent(ticked: bool) -> None:
+    """Only a write of a control object besides VehCall can give one phases: with a change feed the read-back
+    sleeps from the first that finds them ours, commands and keepalives going on; every 2 s without one."""
+    from hils.middleware import READBACK_PERIOD
+    from hils.ntcip import ControlColumn, control_oid
+
+    hold = control_oid(ControlColumn.HOLD, 1)
+    surfaces: list[CountingSurface] = []
+
+    def target(env: Any, config: Any, seed: int = 0) -> VirtualTarget:
+        t = VirtualTarget(env, config, seed=seed, ticked=ticked)
+        surfaces.append(CountingSurface(t.surface, hold))
+        t.surface = surfaces[-1]
+        return t
+
+    with Testbed(target=target, seed=3, duration=300.0, agent="random") as tb:
+        tb.reset()
+        tb.run()
+        assert len([r for r in tb.records if r["kind"] == Kind.SET_ANSWERED]) > 20
+    # the start-up read, then the first read-back (finding them ours); without a feed every 2 s
+    expected = 2 if not ticked else pytest.approx(1 + 300.0 / READBACK_PERIOD, abs=2)
+    assert surfaces[0].read_backs == expected

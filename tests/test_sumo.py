@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import re
 from collections.abc import Iterator
 from pathlib import Path
@@ -292,3 +293,35 @@ def test_a_vehicle_standing_at_the_stop_bar_is_present_on_its_lane(config) -> No
         queued = {lane for lane in phase_of_lane if libsumo.lane.getLastStepHaltingNumber(lane)}
         assert present == queued and len({phase_of_lane[lane] for lane in present}) >= 4
         assert sim.present(zone=0.5) <= present
+
+
+@pytest.mark.parametrize("measure", [True, False])
+def test_advancing_several_steps_at_once_is_stepping_them_one_by_one(config, measure: bool) -> None:
+    """libsumo steps to a time in one call; the stretches the Testbed hands it (nothing shown changes within
+    one) must give the very traffic, and the very per-second samples, of as many single steps."""
+    states = list(itertools.islice(cycle(config, green=12.0), 1200))  # 300 s
+    runs = [(state, len(list(group))) for state, group in itertools.groupby(states)]
+
+    def run(stretched: bool) -> tuple:
+        with SumoSimulation(config, seed=5, measure=measure) as sim:
+            for state, n in runs:
+                sim.apply(state)
+                sim.step()
+                left = n - 1
+                while left:  # stretches of 1..7 steps: across the per-second samples and between them
+                    if stretched:
+                        m = min(left, 1 + left % 7)
+                        sim.advance(m)
+                    else:
+                        m = 1
+                        sim.step()
+                    left -= m
+            vehicles = {v: (libsumo.vehicle.getLanePosition(v), libsumo.vehicle.getSpeed(v))
+                        for v in libsumo.vehicle.getIDList()}
+            return sim.time, vehicles, sim.summary()
+
+    single, stretched = run(False), run(True)
+    assert stretched[0] == single[0] == 300.0
+    assert stretched[1] == single[1] and len(single[1]) > 20
+    assert stretched[2] == single[2]
+    assert (single[2].mean_delay is not None) is measure

@@ -17,6 +17,8 @@ from typing import Any
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from harness.faults import DatagramLoss, FaultTarget, Window
 from harness.processes import start_emulator, tool
@@ -307,3 +309,18 @@ def test_a_run_that_does_not_measure_is_the_same_run_without_the_summary_samples
     assert (counts.departed, counts.arrived, counts.running) == (traffic.departed, traffic.arrived, traffic.running)
     assert traffic.mean_delay is not None and counts.mean_delay is None and counts.approaches == {}
     assert "not measured" in counts.notes[0]
+
+
+@settings(max_examples=300, deadline=None)
+@given(start=st.floats(0.0, 5000.0), k=st.integers(0, 20000), step=st.sampled_from([0.1, 0.2, 0.25, 0.5, 1.0]),
+       ahead=st.floats(0.0, 40.0), on_grid=st.booleans())
+def test_a_stretch_is_the_steps_the_grid_starts_before_the_next_event(start, k, step, ahead, on_grid) -> None:
+    """The steps run back to back are counted as the stepping loop counted them, one float comparison each
+    (an event on a step's own start time stops the stretch before that step)."""
+    from hils.testbed import _steps_before
+
+    until = start + (k + round(ahead / step)) * step if on_grid else start + k * step + ahead
+    counted = 0
+    while until > start + (k + counted) * step:
+        counted += 1
+    assert _steps_before(until, start, k, step) == counted
