@@ -539,19 +539,22 @@ def _env_command(args: argparse.Namespace) -> int:
     print(machine.header(info))
     print(f"one {f['episode_s']:g} s episode, {f['sumo_step_s']} s SUMO steps, a decision every {f['decision_s']:g} s, "
           f"random policy; {args.repeat} alternating episodes each, medians:")
-    t = f["sumo_rl_timing_steps"]
-    print(f"  sumo-rl's yellow, min and max green in its unit, SUMO steps: {t['yellow']}, {t['min_green']}, "
-          f"{t['max_green']} (the config's {t['yellow'] * f['sumo_step_s']:g}, {t['min_green'] * f['sumo_step_s']:g}, "
-          f"{t['max_green'] * f['sumo_step_s']:g} s)")
-    print(f"  {'':10} {'steps':>6} {'steps/s':>8} {'wall s / sim h':>15} {'of it SUMO':>11} {'own work':>9} "
+    t, c = f["sumo_rl_timing_steps"], f["config_timing_s"]
+    print(f"  sumo-rl counts its yellow and minimum green in SUMO steps: it is given the config's {c['yellow']:g} s "
+          f"and {c['min_green']:g} s as {t['yellow']} and {t['min_green']} steps; 'unconverted' is the same numbers "
+          f"as steps (a {c['yellow'] * f['sumo_step_s']:g} s yellow), as its own docs suggest writing them")
+    print(f"  {'':20} {'steps':>6} {'steps/s':>8} {'wall s / sim h':>15} {'of it SUMO':>11} {'own work':>9} "
           f"{'inserted':>9} {'arrived':>8}")
-    for side in ("hils", "sumo_rl"):
+    for side, label in (("hils", "hils"), ("sumo_rl", "sumo-rl"), ("sumo_rl_unconverted", "sumo-rl, unconverted")):
         r = f[side]
-        print(f"  {side:10} {r['steps']:>6} {r['steps_per_s']:>8.1f} {r['wall_per_sim_hour_s']:>15.2f} "
+        print(f"  {label:20} {r['steps']:>6} {r['steps_per_s']:>8.1f} {r['wall_per_sim_hour_s']:>15.2f} "
               f"{r['sumo_per_sim_hour_s']:>11.2f} {r['own_per_sim_hour_s']:>9.2f} "
               f"{_or_dash(r['inserted']):>9} {_or_dash(r['arrived']):>8}")
-    print(f"  hils / sumo-rl speed: {f['speed_ratio_hils_to_sumo_rl']:.2f} (goal >= 1; hils' controller enforces "
-          "the clearances, sumo-rl's does not: other signals, other traffic, which SUMO steps at its own cost)")
+    print(f"  hils / sumo-rl speed: {f['speed_ratio_hils_to_sumo_rl']:.2f} (goal >= 1; hils' controller adds a 2 s "
+          "all-red to every change and serves the config's pairs: other signals, other traffic, which SUMO steps at "
+          "its own cost)")
+    print(f"  hils / sumo-rl unconverted: {f['speed_ratio_hils_to_sumo_rl_unconverted']:.2f} (shorter clearances, "
+          "lighter traffic)")
     print(f"  the environments' own work per simulated hour, sumo-rl / hils: {f['own_work_ratio_sumo_rl_to_hils']:.2f}")
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(jsonout.dumps({"machine": info, "env": f}) + "\n", encoding="utf-8")

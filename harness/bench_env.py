@@ -7,7 +7,8 @@ purpose, is the controller: hils' emulator enforces minimum green, yellow and re
 (10 Hz polls, NTCIP objects, the manager), while sumo-rl switches SUMO's program directly and inserts a
 yellow of its own without an all-red. sumo-rl gets the shipped config's yellow and minimum green (3 s
 each), converted to its unit: it counts both in SUMO steps (one per ``simulationStep``) although its docs
-say seconds, so at a 0.25 s step its defaults of "3" would be 0.75 s. The two still serve different
+say seconds, so at a 0.25 s step a "3" is 0.75 s; that unconverted run is measured too, for the record.
+The two still serve different
 signal sequences (hils adds the 2 s all-red and decides among the config's pairs) and the same demand
 becomes different traffic, which SUMO takes longer or shorter to step: each side's vehicles inserted and
 arrived are reported beside its time, and its time is split into SUMO's steps and the environment's own
@@ -29,6 +30,7 @@ from harness.processes import in_fresh_process
 EPISODE_S = 3600.0
 SUMO_STEP = 0.25
 DECISION_S = 10.0
+TIMINGS = ("yellow", "min_green", "max_green")
 
 
 def hils_episode(seed: int, duration: float = EPISODE_S) -> dict[str, Any]:
@@ -47,8 +49,11 @@ def hils_episode(seed: int, duration: float = EPISODE_S) -> dict[str, Any]:
             "arrived": traffic.arrived}
 
 
-def sumo_rl_episode(seed: int, duration: float = EPISODE_S) -> dict[str, Any]:
-    """One episode of sumo-rl's single-agent SumoEnvironment with a random policy, through libsumo."""
+def sumo_rl_episode(seed: int, duration: float = EPISODE_S, converted: bool = True) -> dict[str, Any]:
+    """One episode of sumo-rl's single-agent SumoEnvironment with a random policy, through libsumo.
+
+    ``converted``: the config's timings in sumo-rl's unit (:func:`sumo_rl_timing`); else the same numbers
+    as seconds would be written, which sumo-rl takes as steps (a 0.75 s yellow at 0.25 s steps)."""
     import sumo
 
     os.environ.setdefault("SUMO_HOME", sumo.SUMO_HOME)
@@ -63,7 +68,7 @@ def sumo_rl_episode(seed: int, duration: float = EPISODE_S) -> dict[str, Any]:
                                   single_agent=True, sumo_seed=seed, sumo_warnings=False,
                                   additional_sumo_cmd=f"--step-length {SUMO_STEP}")
     # Set after construction: its constructor compares the yellow, in steps, with delta_time, in seconds.
-    env.yellow_time, env.min_green, env.max_green = sumo_rl_timing()
+    env.yellow_time, env.min_green, env.max_green = sumo_rl_timing() if converted else _config_timing()
     steps, wall = _random_episode(env, seed)
     stats = env.sumo.simulation
     inserted = int(stats.getParameter("", "stats.vehicles.inserted"))
@@ -75,11 +80,16 @@ def sumo_rl_episode(seed: int, duration: float = EPISODE_S) -> dict[str, Any]:
 def sumo_rl_timing() -> tuple[int, int, int]:
     """The shipped config's yellow, minimum and maximum green in sumo-rl's unit: SUMO steps, since its
     TrafficSignal counts a yellow and a minimum green by calls of ``update()``, one per step."""
+    yellow, min_green, max_green = (round(s / SUMO_STEP) for s in _config_timing())
+    return yellow, min_green, max_green
+
+
+def _config_timing() -> tuple[float, float, float]:
+    """The shipped config's yellow, minimum and maximum green in seconds (every phase has the same)."""
     from hils.config import load
 
     phase = load().phases[2]
-    yellow, min_green, max_green = (round(s / SUMO_STEP) for s in (phase.yellow, phase.min_green, phase.max_green))
-    return yellow, min_green, max_green
+    return phase.yellow, phase.min_green, phase.max_green
 
 
 def _time_sumo_steps() -> list[float]:
@@ -118,14 +128,15 @@ def _random_episode(env: Any, seed: int) -> tuple[int, float]:
 
 def measure_env(repeat: int = 3, seed: int = 0, duration: float = EPISODE_S) -> dict[str, Any]:
     """Alternating episodes of each; per side every run and the medians."""
-    runs: dict[str, list[dict[str, Any]]] = {"hils": [], "sumo_rl": []}
+    runs: dict[str, list[dict[str, Any]]] = {"hils": [], "sumo_rl": [], "sumo_rl_unconverted": []}
     for _ in range(repeat):
         runs["hils"].append(in_fresh_process(hils_episode, seed, duration))
         runs["sumo_rl"].append(in_fresh_process(sumo_rl_episode, seed, duration))
+        runs["sumo_rl_unconverted"].append(in_fresh_process(sumo_rl_episode, seed, duration, False))
     out: dict[str, Any] = {"episode_s": duration, "sumo_step_s": SUMO_STEP, "decision_s": DECISION_S,
                            "policy": "random (seeded)", "repeat": repeat,
-                           "sumo_rl_timing_steps": dict(zip(("yellow", "min_green", "max_green"), sumo_rl_timing(),
-                                                            strict=True)),
+                           "config_timing_s": dict(zip(TIMINGS, _config_timing(), strict=True)),
+                           "sumo_rl_timing_steps": dict(zip(TIMINGS, sumo_rl_timing(), strict=True)),
                            "runs": runs}
     for side, rs in runs.items():
         wall = statistics.median(r["wall_s"] for r in rs)
@@ -137,5 +148,7 @@ def measure_env(repeat: int = 3, seed: int = 0, duration: float = EPISODE_S) -> 
                      "own_per_sim_hour_s": own * 3600.0 / duration,
                      "inserted": rs[0]["inserted"], "arrived": rs[0]["arrived"]}
     out["speed_ratio_hils_to_sumo_rl"] = out["hils"]["steps_per_s"] / out["sumo_rl"]["steps_per_s"]
+    out["speed_ratio_hils_to_sumo_rl_unconverted"] = (out["hils"]["steps_per_s"]
+                                                      / out["sumo_rl_unconverted"]["steps_per_s"])
     out["own_work_ratio_sumo_rl_to_hils"] = out["sumo_rl"]["own_per_sim_hour_s"] / out["hils"]["own_per_sim_hour_s"]
     return out

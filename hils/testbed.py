@@ -767,6 +767,10 @@ class Testbed:
             raise NotStarted(f"the run has ended ({self.end_reason}): call reset() to start another")
 
 
+#: Steps run back to back at most when no other event is queued (one simulated hour at 0.25 s).
+_MAX_STRETCH = 14400
+
+
 def _steps_before(until: float, start: float, k: int, step: float) -> int:
     """How many steps of the grid ``start + j * step``, from j = k on, start before ``until``."""
     if math.isinf(until):
@@ -778,10 +782,6 @@ def _steps_before(until: float, start: float, k: int, step: float) -> int:
     while start + j * step < until:
         j += 1
     return j - k
-
-
-#: Steps run back to back at most when no other event is queued (one simulated hour at 0.25 s).
-_MAX_STRETCH = 14400
 
 
 def _deadline(env: simpy.Environment, at: float) -> simpy.Event:
