@@ -114,3 +114,24 @@ def test_read_backs_that_cannot_see_a_change_are_not_sent(ticked: bool) -> None:
     # the start-up read, then the first read-back (finding them ours); without a feed every 2 s
     expected = 2 if not ticked else pytest.approx(1 + 300.0 / READBACK_PERIOD, abs=2)
     assert surfaces[0].read_backs == expected
+
+
+def test_only_a_write_of_another_control_object_moves_the_controls_counter() -> None:
+    """What the read-back sleeps on: VehCall SETs (every command, every keepalive) and the controller's own
+    steps leave ``controls`` alone; a SET of Hold (or any other control object) and a bump move it."""
+    import simpy
+
+    from hils.config import load
+    from hils.ntcip import ControlColumn, control_oid
+
+    env = simpy.Environment()
+    target = VirtualTarget(env, load(), seed=0)
+    clock, surface = target.clock, target.surface
+    controls, version = clock.controls, clock.version
+    surface.set_many([(control_oid(ControlColumn.VEH_CALL, 1), 0b1000_1000)])
+    env.run(until=30.0)  # the call served: intervals change, the status moves
+    assert clock.version > version and clock.controls == controls
+    surface.set_many([(control_oid(ControlColumn.HOLD, 1), 0b10)])
+    assert clock.controls == controls + 1
+    clock.bump()
+    assert clock.controls == controls + 2
