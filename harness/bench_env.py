@@ -18,6 +18,8 @@ sumo-rl is the `bench` extra (`pip install 'hils[bench]'`).
 
 from __future__ import annotations
 
+import contextlib
+import io
 import os
 import statistics
 import sys
@@ -58,7 +60,8 @@ def sumo_rl_episode(seed: int, duration: float = EPISODE_S, converted: bool = Tr
 
     os.environ.setdefault("SUMO_HOME", sumo.SUMO_HOME)
     os.environ["LIBSUMO_AS_TRACI"] = "1"
-    import sumo_rl
+    with contextlib.redirect_stdout(io.StringIO()):  # traci's "Using libsumo as traci as requested ..."
+        import sumo_rl
 
     sumo_s = _time_sumo_steps()  # after sumo_rl's import: it must find libsumo as traci untouched
 
