@@ -720,29 +720,33 @@ class Testbed:
         k = 0
         start = env.now
 
-        def one_step() -> None:
+        def show() -> None:
             for view, cache in lights:
                 if cache.snapshot is not None:
                     view.apply(cache.snapshot.state)
+
+        def one_step() -> None:
+            show()
             sim.step()
             for view, feed in feeds:
                 feed.feed(view.present())
 
         # Steps that cost no time and act on nothing but SUMO (virtual time, no fault on their cost, no detectors
         # SETting the controller) run back to back while nothing else is due before the next one: what they
-        # do and see is the same, without a trip through the event queue for each, and SUMO makes them in one
-        # call (nothing can change what it shows until the next event).
+        # do and see is the same, without a trip through the event queue for each, and SUMO makes the step due
+        # and those after it in one call (nothing can change what it shows until the next event).
         back_to_back = self.step_cost is modeled_cost and not feeds
         while not self.ended:
-            took = self.step_cost(one_step)
+            if back_to_back:
+                show()
+                n = 1 + _steps_before(env.peek(), start, k + 1, step)
+                sim.advance(n)
+                took = 0.0
+            else:
+                n, took = 1, self.step_cost(one_step)
             for mw in middlewares:
                 mw.observe_step(step, took)
-            k += 1
-            if back_to_back:
-                n = _steps_before(env.peek(), start, k, step)
-                if n:
-                    sim.advance(n)
-                    k += n
+            k += n
             yield env.timeout(max(0.0, start + k * step - env.now))
 
     # --- helpers ----------------------------------------------------------------------------------------
