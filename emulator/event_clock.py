@@ -43,10 +43,30 @@ import simpy
 from emulator.controller import TICK
 from emulator.delays import DelayedController
 from emulator.mib import MibView
-from hils.ntcip import CONTROL_TABLE, ControlColumn, Oid, Value
+from hils.ntcip import CONTROL_TABLE, FOREIGN_COLUMNS, Oid, Value
 
 #: The OID prefixes of the control objects a write of which moves ``EventClock.controls``.
-_OTHERS_CONTROLS = frozenset(d.prefix for c, d in CONTROL_TABLE.items() if c is not ControlColumn.VEH_CALL)
+_FOREIGN_PREFIXES = frozenset(CONTROL_TABLE[c].prefix for c in FOREIGN_COLUMNS)
+
+
+class _Moves:
+    """A count of moments, and an event that fires at the next one."""
+
+    def __init__(self, env: simpy.Environment) -> None:
+        self.env = env
+        self.count = 0
+        self._next: simpy.Event | None = None
+
+    def next(self) -> simpy.Event:
+        if self._next is None:
+            self._next = self.env.event()
+        return self._next
+
+    def move(self) -> None:
+        self.count += 1
+        if self._next is not None:
+            moved, self._next = self._next, None
+            moved.succeed()
 
 
 class EventClock:
@@ -55,11 +75,9 @@ class EventClock:
     def __init__(self, env: simpy.Environment, unit: DelayedController, phase: float = 0.0) -> None:
         self.env = env
         self.unit = unit
-        self.version = 0
-        self.controls = 0
+        self._version = _Moves(env)
+        self._controls = _Moves(env)
         self.steps = 0  # real steps run (the rest were skipped)
-        self._changed: simpy.Event | None = None
-        self._controls_changed: simpy.Event | None = None
         self._start = env.now + phase
         self._due: int | None = None  # tick count after the next scheduled real step
         self._generation = 0  # an alarm from an older schedule is stale
@@ -67,42 +85,34 @@ class EventClock:
 
     # --- the change feed ---------------------------------------------------------------------
 
+    @property
+    def version(self) -> int:
+        return self._version.count
+
+    @property
+    def controls(self) -> int:
+        return self._controls.count
+
     def changed(self) -> simpy.Event:
         """An event that fires when ``version`` next moves."""
-        if self._changed is None:
-            self._changed = self.env.event()
-        return self._changed
+        return self._version.next()
 
     def controls_changed(self) -> simpy.Event:
         """An event that fires when ``controls`` next moves."""
-        if self._controls_changed is None:
-            self._controls_changed = self.env.event()
-        return self._controls_changed
+        return self._controls.next()
 
     def bump(self) -> None:
         """Something besides the unit changed what a GET may answer: move ``version`` and ``controls`` (the
         caller does not say what changed) and wake whoever waits for them."""
-        self._move_version()
-        self._move_controls()
-
-    def _move_version(self) -> None:
-        self.version += 1
-        if self._changed is not None:
-            changed, self._changed = self._changed, None
-            changed.succeed()
-
-    def _move_controls(self) -> None:
-        self.controls += 1
-        if self._controls_changed is not None:
-            changed, self._controls_changed = self._controls_changed, None
-            changed.succeed()
+        self._version.move()
+        self._controls.move()
 
     def written(self, varbinds: Sequence[tuple[Oid, Value]]) -> None:
         """A SET reached the unit: what it answers may differ, and its control objects besides VehCall too
         when it wrote one of them."""
         self.touched()
-        if any(oid[:-1] in _OTHERS_CONTROLS for oid, _ in varbinds):
-            self._move_controls()
+        if any(oid[:-1] in _FOREIGN_PREFIXES for oid, _ in varbinds):
+            self._controls.move()
 
     # --- inputs ----------------------------------------------------------------------------------
 
@@ -116,14 +126,14 @@ class EventClock:
     def touched(self) -> None:
         """The unit was written: what it answers may differ, and its next step may not be quiet (every write
         reaches the unit through a method that says so: a SET waiting for its tick, or a touched controller)."""
-        self._move_version()
+        self._version.move()
         self._schedule(self.unit.quiet_ticks())
 
     def power_cycle(self) -> None:
         """Power down and up: the unit resets and its tick grid starts now."""
         self.unit.reset()
         self._start = self.env.now
-        self._move_version()  # the control objects are cleared: none has phases it did not have
+        self._version.move()  # the control objects are cleared: none has phases it did not have
         self._schedule(1)
 
     # --- ticking ---------------------------------------------------------------------------------
@@ -159,7 +169,7 @@ class EventClock:
         unit.step()
         self.steps += 1
         if self._versions() != versions:
-            self._move_version()
+            self._version.move()
         self._schedule(unit.quiet_ticks())
 
 

@@ -200,13 +200,12 @@ def _replay(cfg: Any, seed: int, duration: float, changes: list[tuple[int, str]]
     time), as cheaply as libsumo allows. Returns the wall seconds of the stepping and SUMO's end figures."""
     import libsumo
 
-    from hils.sumo import SumoSimulation
+    from hils.sumo import SumoSimulation, step_on
 
     sim = SumoSimulation(cfg, seed=seed, end=duration)
     with sim:
         steps = round(duration / sim.step_length)
-        show, step, tls, length = libsumo.trafficlight.setRedYellowGreenState, libsumo.simulationStep, sim.tls_id, \
-            sim.step_length
+        show, tls, length = libsumo.trafficlight.setRedYellowGreenState, sim.tls_id, sim.step_length
         shown = [(k, text) for k, text in changes if k < steps]
         begins = [0, *(k for k, _ in shown)]
         ends = [*begins[1:], steps]
@@ -216,7 +215,7 @@ def _replay(cfg: Any, seed: int, duration: float, changes: list[tuple[int, str]]
             if text is not None:
                 show(tls, text)
             if end > begin:
-                step((end - 0.5) * length)  # steps begin .. end - 1: SUMO steps while its time is below the target
+                step_on(end - begin, length)
         wall = time.perf_counter() - t0
         return wall, sim.summary()
 

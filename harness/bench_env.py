@@ -8,11 +8,11 @@ purpose, is the controller: hils' emulator enforces minimum green, yellow and re
 yellow of its own without an all-red. sumo-rl gets the shipped config's yellow and minimum green (3 s
 each), converted to its unit: it counts both in SUMO steps (one per ``simulationStep``) although its docs
 say seconds, so at a 0.25 s step a "3" is 0.75 s; that unconverted run is measured too, for the record.
-The two still serve different
-signal sequences (hils adds the 2 s all-red and decides among the config's pairs) and the same demand
-becomes different traffic, which SUMO takes longer or shorter to step: each side's vehicles inserted and
-arrived are reported beside its time, and its time is split into SUMO's steps and the environment's own
-work (controller, middleware, observations), the part an environment is answerable for.
+The two still serve different signal sequences (hils adds the 2 s all-red and decides among the config's
+pairs) and the same demand becomes different traffic, which SUMO takes longer or shorter to step: each
+side's vehicles inserted and arrived are reported beside its time, and its time is split into SUMO's steps
+and the environment's own work (controller, middleware, observations), the part an environment is
+answerable for.
 sumo-rl is the `bench` extra (`pip install 'hils[bench]'`).
 """
 

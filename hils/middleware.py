@@ -58,6 +58,7 @@ from hils.manager import (
 )
 from hils.ntcip import (
     CONTROL_TABLE,
+    FOREIGN_COLUMNS,
     SYSTEM_PATTERN_CONTROL,
     UNIT_BACKUP_TIME,
     UNIT_FLASH_STATUS,
@@ -76,9 +77,6 @@ log = logging.getLogger(__name__)
 
 #: Seconds between read-backs of the control objects: a change by someone else is noticed within this.
 READBACK_PERIOD = 2.0
-#: The control objects the run never sets, read back to see whether someone else did (VehCall is ours,
-#: re-SET by every command and keepalive, and its read races with our own SETs in flight).
-FOREIGN_COLUMNS = tuple(c for c in ControlColumn if c is not ControlColumn.VEH_CALL)
 
 
 @dataclass(frozen=True, slots=True)

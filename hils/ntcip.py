@@ -242,6 +242,9 @@ CONTROL_TABLE: dict[ControlColumn, ObjectDef] = {
     col: _o("phaseControlGroup" + col.name.title().replace("_", ""), (1, 5, 1, int(col)), access=Access.READ_WRITE)
     for col in ControlColumn
 }
+#: The control objects a middleware never sets, read back to see whether someone else did (VehCall is the
+#: middleware's, re-SET by every command and keepalive, and its read races with its own SETs in flight).
+FOREIGN_COLUMNS = tuple(c for c in ControlColumn if c is not ControlColumn.VEH_CALL)
 CHANNEL_TABLE: dict[ChannelColumn, ObjectDef] = {
     col: _o("channelStatusGroup" + col.name.title().replace("_", ""), (8, 4, 1, int(col))) for col in ChannelColumn
 }

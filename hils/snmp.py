@@ -408,25 +408,30 @@ class _SharedEngines:
     Controllers of one credentials share an engine (pysnmp keeps a target's community or USM user in
     its engine's configuration; two SNMPv3 users of one name and different keys cannot share one)."""
 
+    @dataclass
+    class _Shared:
+        engine: SnmpEngine
+        users: int = 0  # transports using it
+
     def __init__(self) -> None:
-        self._runs: weakref.WeakKeyDictionary[WallClockDriver, dict[tuple[str, ...], list[Any]]] = (
+        self._runs: weakref.WeakKeyDictionary[WallClockDriver, dict[tuple[str, ...], _SharedEngines._Shared]] = (
             weakref.WeakKeyDictionary())
 
     def take(self, driver: WallClockDriver, credentials: tuple[str, ...]) -> SnmpEngine:
         engines = self._runs.setdefault(driver, {})
         if credentials not in engines:
-            engines[credentials] = [SnmpEngine(), 0]  # [engine, transports using it]
-        entry = engines[credentials]
-        entry[1] += 1
-        return entry[0]
+            engines[credentials] = self._Shared(SnmpEngine())
+        shared = engines[credentials]
+        shared.users += 1
+        return shared.engine
 
     def give_back(self, driver: WallClockDriver, credentials: tuple[str, ...]) -> None:
         engines = self._runs[driver]
-        entry = engines[credentials]
-        entry[1] -= 1
-        if not entry[1]:
+        shared = engines[credentials]
+        shared.users -= 1
+        if not shared.users:
             del engines[credentials]
-            entry[0].close_dispatcher()
+            shared.engine.close_dispatcher()
 
 
 _ENGINES = _SharedEngines()

@@ -375,11 +375,7 @@ class SumoSimulation:
         a stretch costs one call (one per sample when measuring) rather than a trip into Python per step."""
         while steps > 0:
             n = min(steps, self._until_sample) if self.measure else steps
-            if n == 1:
-                libsumo.simulationStep()
-            else:
-                # half a step short of the n-th step's end: SUMO steps while its time is below the target
-                libsumo.simulationStep(libsumo.simulation.getTime() + (n - 0.5) * self.step_length)
+            step_on(n, self.step_length)
             steps -= n
             if self.measure:
                 self._until_sample -= n
@@ -538,8 +534,18 @@ def time_bare_sumo(seconds: float = 3600.0, *, seed: int = 0, config: Intersecti
         sim.run_fixed_time()
         steps = round(seconds / sim.step_length)
         t0 = time.perf_counter()
-        libsumo.simulationStep((steps - 0.5) * sim.step_length)  # every step in one call, as SUMO alone would
+        step_on(steps, sim.step_length)  # every step in one call, as SUMO alone would
         return time.perf_counter() - t0
+
+
+def step_on(steps: int, step_length: float) -> None:
+    """``steps`` SUMO steps of ``step_length`` s in one libsumo call (SUMO's own loop over the very steps single
+    calls make)."""
+    if steps == 1:
+        libsumo.simulationStep()
+    else:
+        # half a step short of the last step's end: SUMO steps while its time is below the target
+        libsumo.simulationStep(libsumo.simulation.getTime() + (steps - 0.5) * step_length)
 
 
 class _Console:
