@@ -1,10 +1,13 @@
-# `make test` installs what the tests need (Debian's net-snmp tools, the Python test extra) and runs them.
+# `make test` installs what the tests need (Debian's net-snmp tools and chromium; the project with its test
+# extra in a fresh virtual environment, so that a dependency installed by hand on this machine can hide nothing)
+# and runs the whole suite in it.
 .PHONY: test deps lint
 
 SUDO := $(shell [ "$$(id -u)" -eq 0 ] || echo sudo)
+VENV ?= .venv-test
 
 test: deps
-	python -m pytest -q
+	$(VENV)/bin/python -m pytest -q
 
 # net-snmp's snmpget/snmpset/snmpwalk are the independent client the emulator's agent is tested
 # against; snmpd is the independent agent the middleware's SNMP client is tested against.
@@ -12,7 +15,8 @@ deps:
 	@command -v snmpget >/dev/null && command -v snmpd >/dev/null && command -v chromium >/dev/null || { \
 		$(SUDO) apt-get update -qq && \
 		DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq snmp snmpd chromium >/dev/null; }
-	pip install -q -e '.[test]'
+	python3 -m venv --clear $(VENV)
+	$(VENV)/bin/pip install -q -e '.[test]'
 
 lint:
-	ruff check .
+	$(VENV)/bin/ruff check .
