@@ -102,6 +102,7 @@ import simpy
 
 from hils.config import IntersectionConfig, Phase, Recall
 from hils.ntcip import ControlColumn, PhaseStartup, UnitControlStatus, UnitFlashStatus
+from hils.timegrid import Grid
 
 log = logging.getLogger(__name__)
 
@@ -241,10 +242,9 @@ class Controller:
 
         ``phase`` (0 <= phase < 0.1 s) shifts the tick grid: a real controller's ticks keep their
         own phase relative to whoever talks to it."""
-        start = env.now + phase
+        grid = Grid(env.now + phase, TICK)
         while True:
-            due = start + (self.tick + 1) * TICK
-            yield env.timeout(max(0.0, due - env.now))
+            yield env.timeout(grid.delay(self.tick + 1, env.now))
             self.step()
 
     # --- control objects ----------------------------------------------------------------

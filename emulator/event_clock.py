@@ -35,7 +35,6 @@ middleware's read-back of those objects sleeps until it moves.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 
 import simpy
@@ -44,6 +43,7 @@ from emulator.controller import TICK
 from emulator.delays import DelayedController
 from emulator.mib import MibView
 from hils.ntcip import CONTROL_TABLE, FOREIGN_COLUMNS, Oid, Value
+from hils.timegrid import Grid
 
 #: The OID prefixes of the control objects a write of which moves ``EventClock.controls``.
 _FOREIGN_PREFIXES = frozenset(CONTROL_TABLE[c].prefix for c in FOREIGN_COLUMNS)
@@ -78,7 +78,7 @@ class EventClock:
         self._version = _Moves(env)
         self._controls = _Moves(env)
         self.steps = 0  # real steps run (the rest were skipped)
-        self._start = env.now + phase
+        self._grid = Grid(env.now + phase, TICK)
         self._due: int | None = None  # tick count after the next scheduled real step
         self._generation = 0  # an alarm from an older schedule is stale
         self._schedule(1)
@@ -132,7 +132,7 @@ class EventClock:
     def power_cycle(self) -> None:
         """Power down and up: the unit resets and its tick grid starts now."""
         self.unit.reset()
-        self._start = self.env.now
+        self._grid = Grid(self.env.now, TICK)
         self._version.move()  # the control objects are cleared: none has phases it did not have
         self._schedule(1)
 
@@ -140,12 +140,7 @@ class EventClock:
 
     def _ticks_due(self) -> int:
         """The tick count the unit has by now: every tick due at or before the present."""
-        k = max(0, math.floor((self.env.now - self._start) / TICK))
-        while self._start + (k + 1) * TICK <= self.env.now:
-            k += 1
-        while k > 0 and self._start + k * TICK > self.env.now:
-            k -= 1
-        return k
+        return max(0, self._grid.first_after(self.env.now) - 1)
 
     def _versions(self) -> tuple[int, int]:
         # The status as the agent answers it, and the controller's own: the control objects (a backup
@@ -159,7 +154,7 @@ class EventClock:
             return
         self._due = due = self.unit.tick + ahead
         generation = self._generation
-        alarm = self.env.timeout(max(0.0, self._start + due * TICK - self.env.now))
+        alarm = self.env.timeout(self._grid.delay(due, self.env.now))
         alarm.callbacks.append(lambda _ev: generation == self._generation and self._step())
 
     def _step(self) -> None:

@@ -39,6 +39,7 @@ from emulator.mib import MibView
 from hils.config import IntersectionConfig
 from hils.errors import UserError
 from hils.ntcip import Latency
+from hils.timegrid import Grid
 
 log = logging.getLogger(__name__)
 
@@ -89,13 +90,13 @@ class WallClockTicker:
     async def run(self) -> None:
         """Tick until cancelled."""
         loop = asyncio.get_running_loop()
-        start = loop.time()
+        grid = Grid(loop.time(), self.period)
         k = 1
         while True:
-            await asyncio.sleep(max(0.0, start + k * self.period - loop.time()))
+            await asyncio.sleep(grid.delay(k, loop.time()))
             now = loop.time()
-            while start + k * self.period <= now:
-                lateness = now - (start + k * self.period)
+            while grid.at(k) <= now:
+                lateness = now - grid.at(k)
                 for controller in self.controllers:
                     controller.step()
                 self.stats.ticks += 1

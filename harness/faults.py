@@ -55,6 +55,7 @@ from hils.manager import State
 from hils.middleware import Middleware
 from hils.ntcip import CONTROL_TABLE, ControlColumn, ErrorStatus, Oid, SnmpError, UnitControlStatus, UnitFlashStatus
 from hils.testbed import StepCost, Testbed
+from hils.timegrid import Grid
 from hils.transport import CommunicationTimeout, LocalTransport, ObjectSurface, Transport, Value, VarBind
 
 __all__ = [
@@ -648,12 +649,14 @@ class ActionsDuringTimeout(Fault):
 
     def _act(self, run: Testbed, junction: Junction) -> Generator[simpy.Event, Any, None]:
         env, mw = junction.env, junction.middleware
-        yield env.timeout(self.window.start)
+        grid, k = Grid(self.window.start, self.period), 0
+        yield env.timeout(grid.delay(k, env.now))
         while env.now < self.window.end:
             if mw.timeout_flag and self.active(env.now) and not run.ended:
                 self.fire(env.now)
                 mw.submit(junction.agent.act(junction.observe()))
-            yield env.timeout(self.period)
+            k += 1
+            yield env.timeout(grid.delay(k, env.now))
 
     def describe(self) -> str:
         return f"actions every {self.period:g} s while in TIMEOUT {self.scope()}"
@@ -688,7 +691,8 @@ class KeepaliveSuppressed(Fault):
                     break
                 continue
             # The refreshes the keepalive would have sent fall every period after the last SET.
-            due = seen + (math.floor((env.now - seen) / period + 1e-9) + 1) * period
+            refreshes = Grid(seen, period)
+            due = refreshes.at(refreshes.first_after(env.now))
             yield env.timeout(max(0.0, min(due, end) - env.now))
             if due >= end:
                 break
@@ -755,10 +759,10 @@ class IndicationMonitor:
 
     def _sample(self) -> Generator[simpy.Event, Any, None]:
         # Once per tick: a display lasts at least one tick, so none is missed.
-        start = self.env.now + TICK / 2
+        grid = Grid(self.env.now + TICK / 2, TICK)
         k = 0
         while True:
-            yield self.env.timeout(max(0.0, start + k * TICK - self.env.now))
+            yield self.env.timeout(grid.delay(k, self.env.now))
             k += 1
             self._check()
 

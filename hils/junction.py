@@ -24,6 +24,7 @@ from hils.events import EventLog, Kind, TaggedLog
 from hils.manager import State
 from hils.middleware import Middleware
 from hils.summary import Tally
+from hils.timegrid import Grid
 from hils.transport import Transport
 
 log = logging.getLogger(__name__)
@@ -121,8 +122,10 @@ class Junction:
         """Queue per approach every ``period`` s, for the queue plot."""
         phases = self.config.phases
         env = self.env
+        grid, k = Grid(env.now, period), 0
         while not ended():
-            yield env.timeout(period)
+            k += 1
+            yield env.timeout(grid.delay(k, env.now))
             per_approach: dict[str, int] = {}
             for p, queue in self.view.queues().items():
                 name = phases[p].approach or f"phase {p}"

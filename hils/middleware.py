@@ -71,6 +71,7 @@ from hils.ntcip import (
 )
 from hils.poller import Decoded, Poller, SignalCache, Snapshot
 from hils.preflight import ControllerReading, Verdict, judge
+from hils.timegrid import Grid
 from hils.transport import CommunicationTimeout, Transport, TransportError
 
 log = logging.getLogger(__name__)
@@ -286,13 +287,11 @@ class Middleware:
             feed = self.transport.change_feed
             controls = feed.controls if feed is not None else None
             if controls is not None and controls == ours:
-                # The grid's times as successive timeouts make them, float for float; from 2 s on a wait
-                # below 2 s is exact (due - now), so the timeout lands on due itself.
-                due = env.now + READBACK_PERIOD
+                # Asleep until someone writes a control object, then on at the first read-back time (every
+                # READBACK_PERIOD from now) not before the write, at the write's own instant should they meet.
+                times = Grid(env.now, READBACK_PERIOD)
                 yield feed.controls_changed()
-                while due < env.now:
-                    due += READBACK_PERIOD
-                wait = due - env.now
+                wait = times.at(times.first_at_or_after(env.now, 1)) - env.now
                 continue
             try:
                 values = yield self.transport.get(oids)

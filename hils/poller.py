@@ -32,7 +32,6 @@ Rules of this module:
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -40,6 +39,7 @@ import simpy
 
 from hils.events import EventLog, Kind
 from hils.ntcip import SignalState, SnmpError, signal_oids
+from hils.timegrid import Grid
 from hils.transport import Transport, TransportError
 
 Subscriber = Callable[["Snapshot", bool], None]
@@ -114,7 +114,7 @@ class Poller:
         self._epoch = 0  # polling periods between halts; answers from an earlier one are ignored
         self._resume = env.event()
         self._halting: simpy.Event | None = None  # set during an elided sleep; wakes it when polling halts
-        self._start, self._k = env.now, 0  # the grid: poll k is due at start + k * period
+        self._grid, self._k = Grid(env.now, self.period), 0  # poll k is due at the grid's instant k
         self._decoded: dict[tuple, Decoded] = {}
 
     @property
@@ -155,12 +155,12 @@ class Poller:
 
     def run(self):
         env = self.env
-        self._start, self._k = env.now, 0
+        self._grid, self._k = Grid(env.now, self.period), 0
         while True:
             if self.halted:
                 self._resume = env.event()
                 yield self._resume
-                self._start, self._k = env.now, 0
+                self._grid, self._k = Grid(env.now, self.period), 0
             self.polls += 1
             feed = self.transport.change_feed
             if self._unchanged():
@@ -179,16 +179,11 @@ class Poller:
                 self._halting = None
                 if self.halted:
                     continue
-            yield env.timeout(max(0.0, self._start + self._k * self.period - env.now))
+            yield env.timeout(self._grid.delay(self._k, env.now))
 
     def _pass_quiet_polls(self) -> None:
         """Count, as elided, the polls of the grid due before now that an elided sleep passed over."""
-        now, start, period = self.env.now, self._start, self.period
-        due = max(self._k, math.ceil((now - start) / period))
-        while due > self._k and start + (due - 1) * period >= now:
-            due -= 1  # the first poll time at or after now, however the division rounded
-        while start + due * period < now:
-            due += 1
+        due = self._grid.first_at_or_after(self.env.now, self._k)
         self.polls += due - self._k
         self.elided += due - self._k
         self._k = due

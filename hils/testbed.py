@@ -62,6 +62,7 @@ from hils.preflight import ControllerCheckFailed
 from hils.scenario import Scenario, load_scenario
 from hils.summary import Tally
 from hils.sumo_net import TLS_ID
+from hils.timegrid import Grid
 from hils.transport import LocalTransport, Transport
 
 log = logging.getLogger(__name__)
@@ -718,7 +719,7 @@ class Testbed:
         feeds = [(j.view, j.detector_feed) for j in self.junctions.values() if j.detector_feed is not None]
         middlewares = [j.middleware for j in self.junctions.values()]
         k = 0
-        start = env.now
+        grid = Grid(env.now, step)
 
         def show() -> None:
             for view, cache in lights:
@@ -739,7 +740,7 @@ class Testbed:
         while not self.ended:
             if back_to_back:
                 show()
-                n = 1 + _steps_before(env.peek(), start, k + 1, step)
+                n = 1 + _steps_before(env.peek(), grid, k + 1)
                 sim.advance(n)
                 took = 0.0
             else:
@@ -747,7 +748,7 @@ class Testbed:
             for mw in middlewares:
                 mw.observe_step(step, took)
             k += n
-            yield env.timeout(max(0.0, start + k * step - env.now))
+            yield env.timeout(grid.delay(k, env.now))
 
     # --- helpers ----------------------------------------------------------------------------------------
 
@@ -775,17 +776,11 @@ class Testbed:
 _MAX_STRETCH = 14400
 
 
-def _steps_before(until: float, start: float, k: int, step: float) -> int:
-    """How many steps of the grid ``start + j * step``, from j = k on, start before ``until``."""
+def _steps_before(until: float, grid: Grid, k: int) -> int:
+    """How many steps of the grid, from step k on, start before ``until``."""
     if math.isinf(until):
         return _MAX_STRETCH  # nothing else will ever happen: step on, a stretch at a time
-    j = max(k, math.ceil((until - start) / step))
-    # the grid's own float comparison decides, however the division rounded
-    while j > k and start + (j - 1) * step >= until:
-        j -= 1
-    while start + j * step < until:
-        j += 1
-    return j - k
+    return grid.first_at_or_after(until, k) - k
 
 
 def _deadline(env: simpy.Environment, at: float) -> simpy.Event:

@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-SHARED = {"hils", "hils.ntcip", "hils.config", "hils.scenario", "hils.errors"}
+SHARED = {"hils", "hils.ntcip", "hils.config", "hils.scenario", "hils.errors", "hils.timegrid"}
 
 
 def imports_of(path: Path) -> set[str]:
