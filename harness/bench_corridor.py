@@ -68,7 +68,7 @@ def wall_clock_run(count: int, duration: float) -> dict[str, Any]:
             lateness = tb.lateness
             polls: Counter[str] = Counter()
             for j in tb.junctions.values():
-                polls.update(j.middleware.poller.counts)
+                polls.update(j.middleware.poll_counts)
             timeouts = Counter(r["reason"] for r in tb.tally.records if r["kind"] == Kind.TIMEOUT_ENTERED)
             verified = tb.tally.kinds[Kind.TRANSITION_VERIFIED]
             drifted = tb.tally.kinds[Kind.DRIFT]

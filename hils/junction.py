@@ -107,17 +107,6 @@ class Junction:
 
     # --- processes ---------------------------------------------------------------------------------
 
-    def auto_recover(self, after: float, ended: Any) -> Generator[simpy.Event, Any, None]:
-        """Recover ``after`` s in TIMEOUT, again and again while recovery fails, until ``ended()``."""
-        mw = self.middleware
-        while not ended():
-            yield mw.wait_for(State.TIMEOUT)
-            yield self.env.timeout(after)
-            while mw.timeout_flag and not ended():
-                ok = yield mw.recover()
-                if not ok:
-                    yield self.env.timeout(after)
-
     def sample_traffic(self, ended: Any, period: float = 5.0) -> Generator[simpy.Event, Any, None]:
         """Queue per approach every ``period`` s, for the queue plot."""
         phases = self.config.phases

@@ -4,49 +4,69 @@ Rules of this file
 ------------------
 - Everything that affects the state machine lives here (h11's rule): whether a command is sent or
   dropped, verification, timers, the retry of an unanswered command SET, the gating of the
-  keepalive, drift counting, recovery, closing, and the position in the cyclic sequence. The shell
-  (:mod:`hils.middleware`) only carries out the effects returned and feeds back what happened.
+  keepalive and of the read-back, the counting of failed polls and of start-up attempts, drift
+  counting, recovery and its timer, closing, and the position in the cyclic sequence. Every TIMEOUT is
+  decided here. The shell (:mod:`hils.middleware`) only carries out the effects returned and feeds back
+  what happened: it never counts, retries or gates.
 - No clock, no I/O, no SimPy. Every input is an event object that carries the time it happened;
   every output is an effect object.
-- ``_TRANSITIONS`` maps each (state, event kind) to the next state and the handler that produces
-  the effects, so the whole graph can be read (and drawn) off the table. An event is first given
-  its kind by ``_classify`` (which only looks, never changes anything); a (state, kind) pair not in
-  the table is an error naming both. Handlers never choose the next state.
+- ``_TRANSITIONS`` maps each (state, event kind) to the next state and the handler that produces the
+  effects, one row per line, so the whole graph can be read (and drawn: ``python -m hils.manager``
+  prints it) off the table. An event is first given its kind by ``_classify``: the guard of each kind
+  (:class:`Ev`) is a condition on the event and the machine's data, evaluated without changing
+  anything. A (state, kind) pair not in the table is an error naming both. Handlers never choose the
+  next state.
 - Timers are identified by a token. A timer that was superseded or belongs to an older command has
-  a stale token: its expiry is classified STALE_TIMER and changes nothing.
+  a stale token: its expiry is classified STALE_TIMER and changes nothing. Poll results carry the
+  polling period they were sent in (``epoch``, one more at every halt): a result from before the last
+  halt is STALE_POLL and changes nothing.
 
 Theory of operation
 -------------------
 States (:class:`Mode`), with the paper's names (:class:`State`) that the log and reports keep:
 
+- STARTING (paper IDLE): the controller is being read for the first time. A read that gets no answer
+  is made again, up to n_timeout attempts in all (one lost datagram at start-up is no reason to halt);
+  the last unanswered one, or a refusal, is a communication TIMEOUT. The read done: IDLE.
 - IDLE (paper IDLE): a command may be sent. A command that asks to keep what is shown (switch 0,
   or selection of the pair already green) completes at once (KEEP). Any other is dispatched: the
   shell SETs VehCall to the commanded phases, the transition timer (tau_trans) starts, and the
   manager goes IN_TRANSITION.
-- IN_TRANSITION (paper ON_HOLD): waits for an observation whose greens hold the commanded phases.
-  That verifies the transition: a plain command returns to IDLE; a duration command goes SERVING
-  and its green timer starts from the verifying observation. A command SET that got no answer
+- IN_TRANSITION (paper ON_HOLD): waits for a poll whose greens hold the commanded phases. That
+  verifies the transition: a plain command returns to IDLE; a duration command goes SERVING
+  and its green timer starts from the verifying poll. A command SET that got no answer
   (lost, not refused) is SET again while the transition is awaited; tau_trans still bounds the wait.
   If the transition timer expires first: TIMEOUT.
 - SERVING (paper ON_HOLD): the prescribed green is being served; back to IDLE when it has passed.
 - TIMEOUT (paper TIMEOUT): entered on a transition not seen within tau_trans, a communication
-  failure (n_timeout consecutive failed polls, reported by the poller), n_drift consecutive
-  drifted steps, or a control object changed by someone else (FOREIGN_CONTROL, below). Polling
-  halts; commands and keepalives are not sent. A recovery request re-reads the controller
-  (RECOVERING).
+  failure (n_timeout consecutive failed polls, below), n_drift consecutive drifted steps, or a
+  control object changed by someone else (FOREIGN_CONTROL, below). Polling halts; commands,
+  keepalives and read-backs are not sent. A recovery request, or the recovery timer (``recover_after``
+  seconds after entering TIMEOUT, when set), re-reads the controller (RECOVERING).
 - RECOVERING (paper TIMEOUT): the controller was re-read; the call is SET to the pair it shows (so
   no transition follows that nobody commanded) and the sequence position follows it. When that SET
-  is answered: IDLE, polling resumes and the drift count restarts. A failed read or SET: TIMEOUT.
+  is answered: IDLE, polling resumes and the drift and failure counts restart. A failed read or SET:
+  TIMEOUT, and the recovery timer starts again.
 - CLOSED: the run has ended; the calls are cleared and nothing else is sent. A clearing SET whose
   datagram got no answer is sent again, up to CLEAR_ATTEMPTS in all: calls left on a controller stay
-  until its backup time drops them, so one lost datagram is no reason to leave them.
+  until its backup time drops them, so one lost datagram is no reason to leave them. The close is
+  done (:class:`CloseDone`) when a clear is answered, when the last one fails, or at once when the run
+  never SET a call.
 
-The control objects are ours while we run. The shell reads them back at a low rate
-(:class:`ControlsRead`). In IDLE, IN_TRANSITION and SERVING, any of PhaseOmit, PedOmit, Hold,
-ForceOff or PedCall set is a control object changed by someone else (the run never sets them):
-TIMEOUT (FOREIGN_CONTROL). VehCall is not judged: it is ours, re-SET by every command and
-keepalive, and a read of it races with our own SETs in flight. The recovery's SET and the
-close's clear set every control object.
+Polls. The poller sends one GET per period and reports each one's fate (:class:`PollAnswered`,
+:class:`PollFailed`), in whatever order they settle. Answers are applied in poll order: one older
+than the newest applied is late and discarded. A communication failure is n_timeout consecutive failed
+polls, as the paper defines it: failed polls newer than the newest answered one are counted, and an
+answer resets the count. With overlapping polls a dead link is therefore seen about (n_timeout - 1)
+periods + tau_udp after it dies. While polls fail the read-back waits (the failure count speaks for
+the link).
+
+The control objects are ours while we run. The shell reads them back at a low rate when the
+manager says so (:class:`ReadbackDue` -> :class:`ReadControls` -> :class:`ControlsRead`). In IDLE,
+IN_TRANSITION and SERVING, any of PhaseOmit, PedOmit, Hold, ForceOff or PedCall set is a control
+object changed by someone else (the run never sets them): TIMEOUT (FOREIGN_CONTROL). VehCall is not
+judged: it is ours, re-SET by every command and keepalive, and a read of it races with our own SETs
+in flight. The recovery's SET and the close's clear set every control object.
 
 Commands arriving anywhere but IDLE are dropped. Every dispatched command ends exactly once
 (:class:`CommandEnded`: verified, served or timeout), except the one pending when the run closes.
@@ -59,12 +79,66 @@ baseline) keeps it there rather than let the backup timer drop it to backup mode
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 from enum import Enum, StrEnum, auto
 
 from hils.actions import Command
 from hils.config import Pair
+from hils.ntcip import SignalState
+
+__all__ = [
+    "CLEAR_ATTEMPTS",
+    "CloseDone",
+    "CloseRequested",
+    "CommandEnded",
+    "CommandRequested",
+    "ControllerRead",
+    "ControllerUnreachable",
+    "ControllerUnreadable",
+    "ControlsRead",
+    "Dispatch",
+    "DriftSeen",
+    "Dropped",
+    "Effect",
+    "Ev",
+    "Event",
+    "HaltPolling",
+    "KeepaliveSwitched",
+    "Manager",
+    "Mode",
+    "Note",
+    "PollAnswered",
+    "PollFailed",
+    "PollFailureSeen",
+    "Purpose",
+    "ReadController",
+    "ReadControls",
+    "ReadbackDue",
+    "Recovered",
+    "RecoveryRequested",
+    "RecoveryStarted",
+    "ResumePolling",
+    "RetryStartup",
+    "SendCall",
+    "SetAnswered",
+    "SetFailed",
+    "ShowSignal",
+    "StartTimer",
+    "Started",
+    "StartupDone",
+    "StartupLost",
+    "StartupRefused",
+    "State",
+    "StepTimed",
+    "TimeoutEntered",
+    "TimeoutReason",
+    "TimerExpired",
+    "TimerKind",
+    "Verified",
+    "graph",
+]
 
 
 class State(Enum):
@@ -78,6 +152,7 @@ class State(Enum):
 class Mode(Enum):
     """The states of the machine."""
 
+    STARTING = "starting"
     IDLE = "idle"
     IN_TRANSITION = "in_transition"
     SERVING = "serving"
@@ -96,8 +171,8 @@ class Mode(Enum):
         return self.value if paper is None else paper.value
 
 
-_PAPER = {Mode.IDLE: State.IDLE, Mode.IN_TRANSITION: State.ON_HOLD, Mode.SERVING: State.ON_HOLD,
-          Mode.TIMEOUT: State.TIMEOUT, Mode.RECOVERING: State.TIMEOUT, Mode.CLOSED: None}
+_PAPER = {Mode.STARTING: State.IDLE, Mode.IDLE: State.IDLE, Mode.IN_TRANSITION: State.ON_HOLD,
+          Mode.SERVING: State.ON_HOLD, Mode.TIMEOUT: State.TIMEOUT, Mode.RECOVERING: State.TIMEOUT, Mode.CLOSED: None}
 
 
 class TimeoutReason(StrEnum):
@@ -111,6 +186,7 @@ class TimerKind(StrEnum):
     TRANSITION = "transition"
     DURATION = "duration"
     KEEPALIVE = "keepalive"
+    RECOVER = "recover"
 
 
 class Purpose(StrEnum):
@@ -136,6 +212,22 @@ class Started:
 
 
 @dataclass(frozen=True, slots=True)
+class StartupLost:
+    """A start-up read or write that got no answer (``error``: what the transport said)."""
+
+    t: float
+    error: str
+
+
+@dataclass(frozen=True, slots=True)
+class StartupRefused:
+    """The controller refused the start-up read or write (``detail``: the refusal, for the user)."""
+
+    t: float
+    detail: str
+
+
+@dataclass(frozen=True, slots=True)
 class CommandRequested:
     t: float
     action_id: int
@@ -144,10 +236,24 @@ class CommandRequested:
 
 
 @dataclass(frozen=True, slots=True)
-class SignalObserved:
+class PollAnswered:
+    """Poll ``poll_id``, sent in polling period ``epoch``, read ``state``."""
+
     t: float
-    greens: frozenset[int]
     poll_id: int
+    epoch: int
+    state: SignalState
+
+
+@dataclass(frozen=True, slots=True)
+class PollFailed:
+    """Poll ``poll_id``, sent in polling period ``epoch``, got no usable answer (``kind``: the error's type)."""
+
+    t: float
+    poll_id: int
+    epoch: int
+    kind: str
+    error: str
 
 
 @dataclass(frozen=True, slots=True)
@@ -155,13 +261,6 @@ class TimerExpired:
     t: float
     kind: TimerKind
     token: int
-
-
-@dataclass(frozen=True, slots=True)
-class FailureDetected:
-    t: float
-    reason: TimeoutReason
-    detail: str = ""
 
 
 @dataclass(frozen=True, slots=True)
@@ -186,6 +285,7 @@ class SetFailed:
     purpose: Purpose
     command_id: int | None
     lost: bool  # no answer at all (the SET may never have arrived), as opposed to a refusal
+    error: str = ""
 
 
 @dataclass(frozen=True, slots=True)
@@ -208,6 +308,13 @@ class ControllerUnreadable:
 
 
 @dataclass(frozen=True, slots=True)
+class ReadbackDue:
+    """The read-back's time has come: the manager says whether to read the control objects."""
+
+    t: float
+
+
+@dataclass(frozen=True, slots=True)
 class ControlsRead:
     """The read-back of the control objects the run never sets (all but VehCall): the phases each holds."""
 
@@ -226,11 +333,28 @@ class CloseRequested:
     t: float
 
 
-Event = (Started | CommandRequested | SignalObserved | TimerExpired | FailureDetected | StepTimed | SetAnswered
-         | SetFailed | RecoveryRequested | ControllerRead | ControllerUnreadable | KeepaliveSwitched | CloseRequested
-         | ControlsRead)
+Event = (Started | StartupLost | StartupRefused | CommandRequested | PollAnswered | PollFailed | TimerExpired
+         | StepTimed | SetAnswered | SetFailed | RecoveryRequested | ControllerRead | ControllerUnreadable
+         | ReadbackDue | ControlsRead | KeepaliveSwitched | CloseRequested)
 
 # --- effects --------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class RetryStartup:
+    """Read the controller for the start-up again."""
+
+
+@dataclass(frozen=True, slots=True)
+class StartupDone:
+    """The start-up is over (read, or given up): start polling and reading back."""
+
+
+@dataclass(frozen=True, slots=True)
+class ControllerUnreachable:
+    """No start-up read got an answer in ``attempts`` tries."""
+
+    attempts: int
 
 
 @dataclass(frozen=True, slots=True)
@@ -265,11 +389,28 @@ class Dropped:
 
 
 @dataclass(frozen=True, slots=True)
+class ShowSignal:
+    """What poll ``poll_id`` read is the signal state now (the cache, SUMO, the agents)."""
+
+    poll_id: int
+    state: SignalState
+
+
+@dataclass(frozen=True, slots=True)
+class PollFailureSeen:
+    """A failed poll (0: a start-up read), and the failed polls in a row it makes."""
+
+    poll_id: int
+    error: str
+    consecutive: int
+
+
+@dataclass(frozen=True, slots=True)
 class Verified:
     command_id: int
     command: Command
     poll_id: int
-    hold: float  # seconds from dispatch to the verifying observation
+    hold: float  # seconds from dispatch to the verifying poll
 
 
 @dataclass(frozen=True, slots=True)
@@ -304,6 +445,11 @@ class ResumePolling:
 
 
 @dataclass(frozen=True, slots=True)
+class ReadControls:
+    """Read the control objects back now; answer with ControlsRead (a read that fails is let go)."""
+
+
+@dataclass(frozen=True, slots=True)
 class ReadController:
     """Re-read the controller's signal state (recovery); answer with ControllerRead or ControllerUnreadable."""
 
@@ -319,12 +465,20 @@ class Recovered:
 
 
 @dataclass(frozen=True, slots=True)
+class CloseDone:
+    """The close is over; ``error`` says why the calls could not be cleared ('' when they were, or none)."""
+
+    error: str = ""
+
+
+@dataclass(frozen=True, slots=True)
 class Note:
     message: str
 
 
-Effect = (Dispatch | SendCall | StartTimer | Dropped | Verified | CommandEnded | TimeoutEntered | DriftSeen
-          | HaltPolling | ResumePolling | ReadController | RecoveryStarted | Recovered | Note)
+Effect = (RetryStartup | StartupDone | ControllerUnreachable | Dispatch | SendCall | StartTimer | Dropped | ShowSignal
+          | PollFailureSeen | Verified | CommandEnded | TimeoutEntered | DriftSeen | HaltPolling | ResumePolling
+          | ReadControls | ReadController | RecoveryStarted | Recovered | CloseDone | Note)
 
 
 @dataclass(frozen=True, slots=True)
@@ -338,34 +492,45 @@ class Pending:
 
 
 class Ev(Enum):
-    """The kinds an input event is classified into; the table is written in these."""
+    """The kinds an input event is classified into; the table is written in these. Each says its guard."""
 
-    STARTED = auto()
-    COMMAND = auto()
-    KEEP = auto()
-    VERIFIED = auto()
-    VERIFIED_DURATION = auto()
-    OBSERVED = auto()
-    TRANSITION_EXPIRED = auto()
-    DURATION_ELAPSED = auto()
-    KEEPALIVE_DUE = auto()
-    STALE_TIMER = auto()
-    FAILURE = auto()
-    ON_TIME = auto()
-    DRIFTED = auto()
-    DRIFT_LIMIT = auto()
-    COMMAND_SET_LOST = auto()
-    CLEAR_LOST = auto()
-    RECOVERY_SET_ANSWERED = auto()
-    RECOVERY_SET_FAILED = auto()
-    SET_RESULT = auto()
-    RECOVERY_REQUESTED = auto()
-    CONTROLLER_READ = auto()
-    CONTROLLER_UNREADABLE = auto()
-    KEEPALIVE_SWITCHED = auto()
-    CLOSE = auto()
-    CONTROLS_OURS = auto()
-    FOREIGN_CONTROL = auto()
+    STARTED = auto()  # Started
+    STARTUP_RETRY = auto()  # StartupLost, fewer than n_timeout attempts so far
+    STARTUP_UNREACHABLE = auto()  # StartupLost, the n_timeout-th attempt
+    STARTUP_REFUSED = auto()  # StartupRefused
+    COMMAND = auto()  # CommandRequested that asks for a transition
+    KEEP = auto()  # CommandRequested that keeps what is shown (switch 0, the pair already green)
+    VERIFIED = auto()  # PollAnswered in IN_TRANSITION showing the commanded phases green (a plain command)
+    VERIFIED_DURATION = auto()  # the same, for a duration command
+    OBSERVED = auto()  # any other PollAnswered of this polling period, not older than the newest applied
+    LATE_POLL = auto()  # PollAnswered older than the newest applied
+    STALE_POLL = auto()  # PollAnswered or PollFailed sent before the last halt
+    POLL_FAILED = auto()  # PollFailed that does not make n_timeout in a row
+    POLLS_FAILED = auto()  # PollFailed that makes n_timeout in a row
+    TRANSITION_EXPIRED = auto()  # TimerExpired: the pending command's transition timer
+    DURATION_ELAPSED = auto()  # TimerExpired: the pending command's green timer
+    KEEPALIVE_DUE = auto()  # TimerExpired: the live keepalive timer
+    RECOVERY_DUE = auto()  # TimerExpired: the live recovery timer
+    STALE_TIMER = auto()  # TimerExpired with any other token
+    ON_TIME = auto()  # StepTimed within its step
+    DRIFTED = auto()  # StepTimed over its step, fewer than n_drift in a row
+    DRIFT_LIMIT = auto()  # StepTimed over its step, the n_drift-th in a row
+    COMMAND_SET_LOST = auto()  # SetFailed, lost, of the pending command's SET in IN_TRANSITION
+    CLEAR_ANSWERED = auto()  # SetAnswered of a clear
+    CLEAR_LOST = auto()  # SetFailed, lost, of a clear, fewer than CLEAR_ATTEMPTS sent
+    CLEAR_FAILED = auto()  # SetFailed of a clear: refused, or the last attempt lost
+    RECOVERY_SET_ANSWERED = auto()  # SetAnswered of the recovery SET
+    RECOVERY_SET_FAILED = auto()  # SetFailed of the recovery SET
+    SET_RESULT = auto()  # any other SetAnswered or SetFailed
+    RECOVERY_REQUESTED = auto()  # RecoveryRequested
+    CONTROLLER_READ = auto()  # ControllerRead
+    CONTROLLER_UNREADABLE = auto()  # ControllerUnreadable
+    READBACK = auto()  # ReadbackDue, no poll failing
+    READBACK_WAITS = auto()  # ReadbackDue while polls fail
+    CONTROLS_OURS = auto()  # ControlsRead, nothing set
+    FOREIGN_CONTROL = auto()  # ControlsRead, something set
+    KEEPALIVE_SWITCHED = auto()  # KeepaliveSwitched
+    CLOSE = auto()  # CloseRequested
 
 
 #: How many times in all the closing clear is sent while its datagrams get no answer (see CLOSED).
@@ -373,15 +538,20 @@ CLEAR_ATTEMPTS = 3
 
 
 class Manager:
-    """The state machine. Feed events to :meth:`handle`; it returns the effects to carry out."""
+    """The state machine. Feed events to :meth:`handle`; it returns the effects to carry out.
 
-    def __init__(self, tau_trans: float, *, sequence: tuple[Pair, ...] = (), n_drift: int = 5,
-                 keepalive_period: float = 0.0) -> None:
+    ``n_timeout``: failed polls in a row (and start-up reads without answer) that are a communication
+    failure. ``recover_after``: seconds in TIMEOUT before the manager recovers by itself (None: never)."""
+
+    def __init__(self, tau_trans: float, *, sequence: tuple[Pair, ...] = (), n_drift: int = 5, n_timeout: int = 5,
+                 keepalive_period: float = 0.0, recover_after: float | None = None) -> None:
         self.tau_trans = tau_trans
         self.sequence = sequence
         self.n_drift = n_drift
+        self.n_timeout = n_timeout
         self.keepalive_period = keepalive_period  # 0: no keepalive
-        self.mode = Mode.IDLE
+        self.recover_after = recover_after
+        self.mode = Mode.STARTING
         self.pending: Pending | None = None
         self.timeout_reason: TimeoutReason | None = None
         self.position = -1  # index in the sequence of the pair last commanded or shown; -1: none yet
@@ -389,11 +559,19 @@ class Manager:
         self.last_set = float("-inf")
         self.keepalive_on = True
         self.drifted_in_a_row = 0
+        self.startup_attempts = 0  # start-up reads that got no answer
+        self.poll_epoch = 0  # polling periods so far: one more at every halt
+        self.newest_poll = 0  # the newest poll whose answer was applied
+        self.failed_in_a_row = 0  # failed polls newer than the newest answered one
+        self.polls_answered = 0
+        self.polls_failed = 0
+        self.polls_late = 0
         self.clears_sent = 0
         self._recovering_greens: frozenset[int] = frozenset()  # what the recovery's re-read showed
         self._next_command = 0
         self._next_token = 0
         self._keepalive_token: int | None = None
+        self._recover_token: int | None = None
 
     @property
     def state(self) -> State | None:
@@ -418,21 +596,34 @@ class Manager:
         self.mode = target
         return effects
 
-    # --- classification: looks, never changes ----------------------------------------------------
+    # --- classification: the guards; looks, never changes ------------------------------------------
 
     def _classify(self, ev: Event) -> Ev:
         match ev:
+            case StartupLost():
+                return Ev.STARTUP_UNREACHABLE if self.startup_attempts + 1 >= self.n_timeout else Ev.STARTUP_RETRY
             case CommandRequested(command=cmd, shown=shown):
                 keep = cmd.green is None and (cmd.keep or set(cmd.phases) <= shown)
                 return Ev.KEEP if keep else Ev.COMMAND
-            case SignalObserved(greens=greens):
+            case PollAnswered(poll_id=poll_id, epoch=epoch, state=state):
+                if epoch != self.poll_epoch:
+                    return Ev.STALE_POLL
+                if poll_id < self.newest_poll:
+                    return Ev.LATE_POLL
                 p = self.pending
-                if self.mode is Mode.IN_TRANSITION and p is not None and set(p.command.phases) <= greens:
+                if self.mode is Mode.IN_TRANSITION and p is not None and set(p.command.phases) <= state.greens:
                     return Ev.VERIFIED if p.command.green is None else Ev.VERIFIED_DURATION
                 return Ev.OBSERVED
+            case PollFailed(poll_id=poll_id, epoch=epoch):
+                if epoch != self.poll_epoch:
+                    return Ev.STALE_POLL
+                counted = poll_id >= self.newest_poll  # one overtaken by a newer answer is not in a run
+                return Ev.POLLS_FAILED if counted and self.failed_in_a_row + 1 == self.n_timeout else Ev.POLL_FAILED
             case TimerExpired(kind=kind, token=token):
                 if kind is TimerKind.KEEPALIVE:
                     return Ev.KEEPALIVE_DUE if token == self._keepalive_token else Ev.STALE_TIMER
+                if kind is TimerKind.RECOVER:
+                    return Ev.RECOVERY_DUE if token == self._recover_token else Ev.STALE_TIMER
                 if self.pending is None or token != self.pending.token:
                     return Ev.STALE_TIMER
                 return Ev.TRANSITION_EXPIRED if kind is TimerKind.TRANSITION else Ev.DURATION_ELAPSED
@@ -441,17 +632,20 @@ class Manager:
                     return Ev.ON_TIME
                 return Ev.DRIFT_LIMIT if self.drifted_in_a_row + 1 >= self.n_drift else Ev.DRIFTED
             case SetAnswered(purpose=purpose):
-                return Ev.RECOVERY_SET_ANSWERED if purpose is Purpose.RECOVERY else Ev.SET_RESULT
+                return {Purpose.RECOVERY: Ev.RECOVERY_SET_ANSWERED, Purpose.CLEAR: Ev.CLEAR_ANSWERED}.get(
+                    purpose, Ev.SET_RESULT)
             case SetFailed(purpose=purpose, command_id=command_id, lost=lost):
                 if purpose is Purpose.RECOVERY:
                     return Ev.RECOVERY_SET_FAILED
+                if purpose is Purpose.CLEAR:
+                    return Ev.CLEAR_LOST if lost and self.clears_sent < CLEAR_ATTEMPTS else Ev.CLEAR_FAILED
                 p = self.pending
                 if (lost and purpose in (Purpose.COMMAND, Purpose.RETRY) and self.mode is Mode.IN_TRANSITION
                         and p is not None and p.command_id == command_id):
                     return Ev.COMMAND_SET_LOST
-                if lost and purpose is Purpose.CLEAR and self.clears_sent < CLEAR_ATTEMPTS:
-                    return Ev.CLEAR_LOST
                 return Ev.SET_RESULT
+            case ReadbackDue():
+                return Ev.READBACK_WAITS if self.failed_in_a_row else Ev.READBACK
             case ControlsRead():
                 return Ev.FOREIGN_CONTROL if self._foreign(ev) else Ev.CONTROLS_OURS
         return _PLAIN_KINDS[type(ev)]
@@ -468,6 +662,38 @@ class Manager:
             limit = ev.backup_time / 3.0  # the controller's own backup time rules
             self.keepalive_period = min(self.keepalive_period, limit) if self.keepalive_period else limit
         self._arm_keepalive(out)
+        out.append(StartupDone())
+
+    def _retry_startup(self, ev: StartupLost, out: list[Effect]) -> None:
+        self.startup_attempts += 1
+        out.append(PollFailureSeen(0, f"start-up read: {ev.error}", self.startup_attempts))
+        out.append(RetryStartup())
+
+    def _unreachable(self, ev: StartupLost, out: list[Effect]) -> None:
+        self._last_attempt(ev, out)
+        self._enter_timeout(ev.t, TimeoutReason.COMMUNICATION, f"controller unreachable at start-up: {ev.error}", out)
+        out.append(StartupDone())
+
+    def _give_up_startup(self, ev: StartupLost, out: list[Effect]) -> None:
+        self._last_attempt(ev, out)
+        out.append(StartupDone())
+
+    def _last_attempt(self, ev: StartupLost, out: list[Effect]) -> None:
+        self.startup_attempts += 1
+        out.append(PollFailureSeen(0, f"start-up read: {ev.error}", self.startup_attempts))
+        out.append(ControllerUnreachable(self.startup_attempts))
+
+    def _refused(self, ev: StartupRefused, out: list[Effect]) -> None:
+        out.append(Note(f"start-up: {ev.detail}"))
+        self._enter_timeout(ev.t, TimeoutReason.COMMUNICATION, ev.detail, out)
+        out.append(StartupDone())
+
+    def _note_refusal(self, ev: StartupRefused, out: list[Effect]) -> None:
+        out.append(Note(f"start-up: {ev.detail}"))
+        out.append(StartupDone())
+
+    def _end_startup(self, ev: Started | StartupLost | StartupRefused, out: list[Effect]) -> None:
+        out.append(StartupDone())
 
     def _dispatch(self, ev: CommandRequested, out: list[Effect]) -> None:
         command_id = self._new_command()
@@ -486,19 +712,42 @@ class Manager:
     def _drop(self, ev: CommandRequested, out: list[Effect]) -> None:
         out.append(Dropped(ev.action_id, self.mode.log_name))
 
-    def _verified(self, ev: SignalObserved, out: list[Effect]) -> None:
+    def _answered(self, ev: PollAnswered, out: list[Effect]) -> None:
+        self.newest_poll = ev.poll_id
+        self.polls_answered += 1
+        self.failed_in_a_row = 0
+        out.append(ShowSignal(ev.poll_id, ev.state))
+
+    def _late(self, ev: PollAnswered, out: list[Effect]) -> None:
+        self.polls_late += 1
+
+    def _verified(self, ev: PollAnswered, out: list[Effect]) -> None:
+        self._answered(ev, out)
         p = self.pending
         hold = ev.t - p.since
         out.append(Verified(p.command_id, p.command, ev.poll_id, hold))
         out.append(CommandEnded(p.command_id, "verified", hold))
         self.pending = None
 
-    def _serve(self, ev: SignalObserved, out: list[Effect]) -> None:
+    def _serve(self, ev: PollAnswered, out: list[Effect]) -> None:
+        self._answered(ev, out)
         p = self.pending
         out.append(Verified(p.command_id, p.command, ev.poll_id, ev.t - p.since))
         token = self._new_token()
         self.pending = Pending(p.command_id, p.command, p.since, token)
         out.append(StartTimer(TimerKind.DURATION, p.command.green, token))
+
+    def _poll_failed(self, ev: PollFailed, out: list[Effect]) -> None:
+        self.polls_failed += 1
+        if ev.poll_id >= self.newest_poll:
+            self.failed_in_a_row += 1
+        # A poll overtaken by a newer answer is not part of a run of failures: logged with the count as it stands.
+        out.append(PollFailureSeen(ev.poll_id, ev.error, self.failed_in_a_row))
+
+    def _polls_failed(self, ev: PollFailed, out: list[Effect]) -> None:
+        self._poll_failed(ev, out)
+        self._enter_timeout(ev.t, TimeoutReason.COMMUNICATION,
+                            f"{self.n_timeout} consecutive polls failed (last: {ev.kind})", out)
 
     def _served(self, ev: TimerExpired, out: list[Effect]) -> None:
         p = self.pending
@@ -526,9 +775,6 @@ class Manager:
         self._enter_timeout(ev.t, TimeoutReason.TRANSITION,
                             f"phases {list(p.command.phases)} not green after {ev.t - p.since:.3f} s", out)
 
-    def _failure(self, ev: FailureDetected, out: list[Effect]) -> None:
-        self._enter_timeout(ev.t, ev.reason, ev.detail, out)
-
     def _on_time(self, ev: StepTimed, out: list[Effect]) -> None:
         self.drifted_in_a_row = 0
 
@@ -545,7 +791,8 @@ class Manager:
         # Re-SETting the call to the greens shown would cancel a command in transition.
         out.append(Note(f"recover() in {self.mode.log_name}: nothing to recover"))
 
-    def _read_controller(self, ev: RecoveryRequested, out: list[Effect]) -> None:
+    def _read_controller(self, ev: RecoveryRequested | TimerExpired, out: list[Effect]) -> None:
+        self._recover_token = None
         out.append(RecoveryStarted())
         out.append(ReadController())
 
@@ -557,24 +804,38 @@ class Manager:
     def _recovered(self, ev: SetAnswered, out: list[Effect]) -> None:
         self.timeout_reason = None
         self.drifted_in_a_row = 0
+        self.failed_in_a_row = 0
         out.append(Recovered(self._recovering_greens))
         out.append(ResumePolling())
 
     def _recovery_failed(self, ev: ControllerUnreadable | SetFailed, out: list[Effect]) -> None:
         what = ev.error if isinstance(ev, ControllerUnreadable) else "the recovery SET got no answer"
         out.append(Note(f"recovery failed, still in TIMEOUT: {what}"))
+        self._arm_recovery(out)
+
+    def _read_controls(self, ev: ReadbackDue, out: list[Effect]) -> None:
+        out.append(ReadControls())
 
     def _foreign_control(self, ev: ControlsRead, out: list[Effect]) -> None:
         self._enter_timeout(ev.t, TimeoutReason.FOREIGN_CONTROL, f"set by someone else: {self._foreign(ev)}", out)
 
     def _close(self, ev: CloseRequested, out: list[Effect]) -> None:
-        out.append(HaltPolling())
+        self._halt(out)
+        self._keepalive_token = None
+        self._recover_token = None
         if self.last_set > float("-inf"):  # a run that never SET a call has none to clear
             self._clear(ev.t, out)
-        self._keepalive_token = None
+        else:
+            out.append(CloseDone())
 
     def _clear_again(self, ev: SetFailed, out: list[Effect]) -> None:
         self._clear(ev.t, out)
+
+    def _cleared(self, ev: SetAnswered, out: list[Effect]) -> None:
+        out.append(CloseDone())
+
+    def _not_cleared(self, ev: SetFailed, out: list[Effect]) -> None:
+        out.append(CloseDone(ev.error or "the clearing SET failed"))
 
     def _clear(self, t: float, out: list[Effect]) -> None:
         self.clears_sent += 1
@@ -589,7 +850,17 @@ class Manager:
             self.pending = None
         self.timeout_reason = reason
         out.append(TimeoutEntered(reason, detail, p.command_id if p else None))
+        self._halt(out)
+        self._arm_recovery(out)
+
+    def _halt(self, out: list[Effect]) -> None:
+        self.poll_epoch += 1  # results of polls sent until now are stale
         out.append(HaltPolling())
+
+    def _arm_recovery(self, out: list[Effect]) -> None:
+        if self.recover_after is not None:
+            self._recover_token = self._new_token()
+            out.append(StartTimer(TimerKind.RECOVER, self.recover_after, self._recover_token))
 
     def _send(self, phases: frozenset[int], purpose: Purpose, command_id: int | None, t: float,
               out: list[Effect]) -> None:
@@ -621,67 +892,112 @@ class Manager:
 
 
 _PLAIN_KINDS: dict[type, Ev] = {
-    Started: Ev.STARTED, FailureDetected: Ev.FAILURE, RecoveryRequested: Ev.RECOVERY_REQUESTED,
+    Started: Ev.STARTED, StartupRefused: Ev.STARTUP_REFUSED, RecoveryRequested: Ev.RECOVERY_REQUESTED,
     ControllerRead: Ev.CONTROLLER_READ, ControllerUnreadable: Ev.CONTROLLER_UNREADABLE,
     KeepaliveSwitched: Ev.KEEPALIVE_SWITCHED, CloseRequested: Ev.CLOSE,
 }
 
 _Handler = Callable[[Manager, Event, list[Effect]], None] | None
 M = Mode
+H = Manager
 
-# Every state: events that change nothing, or that every state handles alike.
-_EVERYWHERE: dict[Ev, _Handler] = {
-    Ev.STALE_TIMER: None, Ev.SET_RESULT: None, Ev.KEEPALIVE_SWITCHED: Manager._switch_keepalive,
-    Ev.CONTROLS_OURS: None,
-}
-# The states in which the machine works normally (commands, keepalive, drift).
+# The states of a machine at work (commands, keepalive, drift, polls, read-back), and those of one halted.
 _RUNNING = (M.IDLE, M.IN_TRANSITION, M.SERVING)
 _DOWN = (M.TIMEOUT, M.RECOVERING)
 
-# The whole state machine: (state, event kind) -> (next state, handler producing the effects).
+# The whole state machine, one row per line: (state, event kind) -> (next state, handler producing the effects).
+# A line over several states (a named tuple of them) writes the same row for each.
 _TRANSITIONS: dict[tuple[Mode, Ev], tuple[Mode, _Handler]] = {
-    (M.IDLE, Ev.STARTED): (M.IDLE, Manager._started),
-    # The start-up read can end after the run has already timed out (steps of a large grid drifting while
-    # its controllers start at the wall clock) or closed: what it read is kept, the state stays.
-    (M.TIMEOUT, Ev.STARTED): (M.TIMEOUT, Manager._started),
-    (M.RECOVERING, Ev.STARTED): (M.RECOVERING, Manager._started),
-    (M.CLOSED, Ev.STARTED): (M.CLOSED, None),
-    (M.IDLE, Ev.COMMAND): (M.IN_TRANSITION, Manager._dispatch),
-    (M.IDLE, Ev.KEEP): (M.IDLE, Manager._keep),
-    (M.IN_TRANSITION, Ev.VERIFIED): (M.IDLE, Manager._verified),
-    (M.IN_TRANSITION, Ev.VERIFIED_DURATION): (M.SERVING, Manager._serve),
-    (M.IN_TRANSITION, Ev.TRANSITION_EXPIRED): (M.TIMEOUT, Manager._transition_timeout),
-    (M.IN_TRANSITION, Ev.COMMAND_SET_LOST): (M.IN_TRANSITION, Manager._retry),
-    (M.SERVING, Ev.DURATION_ELAPSED): (M.IDLE, Manager._served),
-    (M.TIMEOUT, Ev.RECOVERY_REQUESTED): (M.RECOVERING, Manager._read_controller),
-    (M.RECOVERING, Ev.RECOVERY_REQUESTED): (M.RECOVERING, None),  # one recovery at a time
-    (M.RECOVERING, Ev.CONTROLLER_READ): (M.RECOVERING, Manager._recovery_set),
-    (M.RECOVERING, Ev.CONTROLLER_UNREADABLE): (M.TIMEOUT, Manager._recovery_failed),
-    (M.RECOVERING, Ev.RECOVERY_SET_ANSWERED): (M.IDLE, Manager._recovered),
-    (M.RECOVERING, Ev.RECOVERY_SET_FAILED): (M.TIMEOUT, Manager._recovery_failed),
-    **{(s, ev): (s, handler) for s in (*_RUNNING, *_DOWN, M.CLOSED) for ev, handler in _EVERYWHERE.items()},
-    **{(s, ev): (s, Manager._drop) for s in (M.IN_TRANSITION, M.SERVING, *_DOWN, M.CLOSED)
-       for ev in (Ev.COMMAND, Ev.KEEP)},
-    **{(s, Ev.OBSERVED): (s, None) for s in (*_RUNNING, *_DOWN, M.CLOSED)},
-    **{(s, Ev.KEEPALIVE_DUE): (s, Manager._keepalive) for s in _RUNNING},
-    **{(s, Ev.KEEPALIVE_DUE): (s, None) for s in (*_DOWN, M.CLOSED)},  # gated; the recovery SET re-arms it
-    **{(s, Ev.FAILURE): (M.TIMEOUT, Manager._failure) for s in _RUNNING},
-    **{(s, Ev.FAILURE): (s, None) for s in (*_DOWN, M.CLOSED)},
-    **{(s, Ev.ON_TIME): (s, Manager._on_time) for s in _RUNNING},
-    **{(s, Ev.DRIFTED): (s, Manager._drifted) for s in _RUNNING},
-    **{(s, Ev.DRIFT_LIMIT): (M.TIMEOUT, Manager._drift_limit) for s in _RUNNING},
-    **{(s, ev): (s, None) for s in (*_DOWN, M.CLOSED) for ev in (Ev.ON_TIME, Ev.DRIFTED, Ev.DRIFT_LIMIT)},
-    **{(s, Ev.RECOVERY_REQUESTED): (s, Manager._nothing_to_recover) for s in _RUNNING},
-    **{(s, Ev.FOREIGN_CONTROL): (M.TIMEOUT, Manager._foreign_control) for s in _RUNNING},
-    **{(s, Ev.FOREIGN_CONTROL): (s, None) for s in (*_DOWN, M.CLOSED)},  # halted: the recovery clears them
-    **{(s, Ev.CLOSE): (M.CLOSED, Manager._close) for s in (*_RUNNING, *_DOWN)},
-    **{(s, ev): (s, None) for s in (*_RUNNING, M.TIMEOUT, M.CLOSED)
-       for ev in (Ev.RECOVERY_SET_ANSWERED, Ev.RECOVERY_SET_FAILED)},  # a recovery overtaken by a close
+    # --- start-up ---------------------------------------------------------------------------------------
+    (M.STARTING, Ev.STARTED): (M.IDLE, H._started),
+    (M.STARTING, Ev.STARTUP_RETRY): (M.STARTING, H._retry_startup),
+    (M.STARTING, Ev.STARTUP_UNREACHABLE): (M.TIMEOUT, H._unreachable),
+    (M.STARTING, Ev.STARTUP_REFUSED): (M.TIMEOUT, H._refused),
+    # The start-up read can end after the run has already timed out (steps of a large grid drifting while its
+    # controllers start at the wall clock) or closed: what it read is kept, the state stays.
+    **{(s, Ev.STARTED): (s, H._started) for s in _DOWN},
+    **{(s, Ev.STARTUP_RETRY): (s, H._retry_startup) for s in _DOWN},
+    **{(s, Ev.STARTUP_UNREACHABLE): (s, H._give_up_startup) for s in _DOWN},
+    **{(s, Ev.STARTUP_REFUSED): (s, H._note_refusal) for s in _DOWN},
+    (M.CLOSED, Ev.STARTED): (M.CLOSED, H._end_startup),
+    (M.CLOSED, Ev.STARTUP_RETRY): (M.CLOSED, H._end_startup),  # closed: no more attempts
+    (M.CLOSED, Ev.STARTUP_UNREACHABLE): (M.CLOSED, H._end_startup),
+    (M.CLOSED, Ev.STARTUP_REFUSED): (M.CLOSED, H._end_startup),
+    # --- commands ---------------------------------------------------------------------------------------
+    (M.IDLE, Ev.COMMAND): (M.IN_TRANSITION, H._dispatch),
+    (M.IDLE, Ev.KEEP): (M.IDLE, H._keep),
+    **{(s, Ev.COMMAND): (s, H._drop) for s in (M.STARTING, M.IN_TRANSITION, M.SERVING, *_DOWN, M.CLOSED)},
+    **{(s, Ev.KEEP): (s, H._drop) for s in (M.STARTING, M.IN_TRANSITION, M.SERVING, *_DOWN, M.CLOSED)},
+    (M.IN_TRANSITION, Ev.COMMAND_SET_LOST): (M.IN_TRANSITION, H._retry),
+    (M.IN_TRANSITION, Ev.TRANSITION_EXPIRED): (M.TIMEOUT, H._transition_timeout),
+    (M.SERVING, Ev.DURATION_ELAPSED): (M.IDLE, H._served),
     (M.CLOSED, Ev.TRANSITION_EXPIRED): (M.CLOSED, None),  # the command pending at the close stays open
     (M.CLOSED, Ev.DURATION_ELAPSED): (M.CLOSED, None),
+    # --- polls (halted in TIMEOUT, RECOVERING and CLOSED: every result there is from before the halt) ----
+    (M.IN_TRANSITION, Ev.VERIFIED): (M.IDLE, H._verified),
+    (M.IN_TRANSITION, Ev.VERIFIED_DURATION): (M.SERVING, H._serve),
+    **{(s, Ev.OBSERVED): (s, H._answered) for s in _RUNNING},
+    **{(s, Ev.LATE_POLL): (s, H._late) for s in _RUNNING},
+    **{(s, Ev.POLL_FAILED): (s, H._poll_failed) for s in _RUNNING},
+    **{(s, Ev.POLLS_FAILED): (M.TIMEOUT, H._polls_failed) for s in _RUNNING},
+    **{(s, Ev.STALE_POLL): (s, None) for s in (*_RUNNING, *_DOWN, M.CLOSED)},
+    # --- timers -----------------------------------------------------------------------------------------
+    **{(s, Ev.KEEPALIVE_DUE): (s, H._keepalive) for s in _RUNNING},
+    **{(s, Ev.KEEPALIVE_DUE): (s, None) for s in _DOWN},  # gated; the recovery SET re-arms it
+    (M.TIMEOUT, Ev.RECOVERY_DUE): (M.RECOVERING, H._read_controller),
+    **{(s, Ev.STALE_TIMER): (s, None) for s in Mode},
+    # --- simulation steps (drift is counted while the machine works) ---------------------------------
+    **{(s, Ev.ON_TIME): (s, H._on_time) for s in (M.STARTING, *_RUNNING)},
+    **{(s, Ev.DRIFTED): (s, H._drifted) for s in (M.STARTING, *_RUNNING)},
+    **{(s, Ev.DRIFT_LIMIT): (M.TIMEOUT, H._drift_limit) for s in (M.STARTING, *_RUNNING)},
+    **{(s, Ev.ON_TIME): (s, None) for s in (*_DOWN, M.CLOSED)},
+    **{(s, Ev.DRIFTED): (s, None) for s in (*_DOWN, M.CLOSED)},
+    **{(s, Ev.DRIFT_LIMIT): (s, None) for s in (*_DOWN, M.CLOSED)},
+    # --- SET answers ------------------------------------------------------------------------------------
+    **{(s, Ev.SET_RESULT): (s, None) for s in Mode},
+    (M.RECOVERING, Ev.RECOVERY_SET_ANSWERED): (M.IDLE, H._recovered),
+    (M.RECOVERING, Ev.RECOVERY_SET_FAILED): (M.TIMEOUT, H._recovery_failed),
+    (M.CLOSED, Ev.RECOVERY_SET_ANSWERED): (M.CLOSED, None),  # a recovery overtaken by the close
+    (M.CLOSED, Ev.RECOVERY_SET_FAILED): (M.CLOSED, None),
+    (M.CLOSED, Ev.CLEAR_ANSWERED): (M.CLOSED, H._cleared),
+    (M.CLOSED, Ev.CLEAR_LOST): (M.CLOSED, H._clear_again),
+    (M.CLOSED, Ev.CLEAR_FAILED): (M.CLOSED, H._not_cleared),
+    # --- recovery ---------------------------------------------------------------------------------------
+    **{(s, Ev.RECOVERY_REQUESTED): (s, H._nothing_to_recover) for s in (M.STARTING, *_RUNNING)},
+    (M.TIMEOUT, Ev.RECOVERY_REQUESTED): (M.RECOVERING, H._read_controller),
+    (M.RECOVERING, Ev.RECOVERY_REQUESTED): (M.RECOVERING, None),  # one recovery at a time
+    (M.CLOSED, Ev.RECOVERY_REQUESTED): (M.CLOSED, None),
+    (M.RECOVERING, Ev.CONTROLLER_READ): (M.RECOVERING, H._recovery_set),
+    (M.RECOVERING, Ev.CONTROLLER_UNREADABLE): (M.TIMEOUT, H._recovery_failed),
     (M.CLOSED, Ev.CONTROLLER_READ): (M.CLOSED, None),
     (M.CLOSED, Ev.CONTROLLER_UNREADABLE): (M.CLOSED, None),
+    # --- the read-back of the control objects ---------------------------------------------------------
+    **{(s, Ev.READBACK): (s, H._read_controls) for s in _RUNNING},
+    **{(s, Ev.READBACK_WAITS): (s, None) for s in _RUNNING},  # polls are failing: the poll count speaks
+    **{(s, Ev.READBACK): (s, None) for s in (*_DOWN, M.CLOSED)},  # in TIMEOUT only recovery sends
+    **{(s, Ev.READBACK_WAITS): (s, None) for s in (*_DOWN, M.CLOSED)},
+    **{(s, Ev.FOREIGN_CONTROL): (M.TIMEOUT, H._foreign_control) for s in _RUNNING},
+    **{(s, Ev.FOREIGN_CONTROL): (s, None) for s in (*_DOWN, M.CLOSED)},  # halted: the recovery clears them
+    **{(s, Ev.CONTROLS_OURS): (s, None) for s in (*_RUNNING, *_DOWN, M.CLOSED)},
+    # --- the keepalive switch and the close ---------------------------------------------------------
+    **{(s, Ev.KEEPALIVE_SWITCHED): (s, H._switch_keepalive) for s in Mode},
+    **{(s, Ev.CLOSE): (M.CLOSED, H._close) for s in (M.STARTING, *_RUNNING, *_DOWN)},
     (M.CLOSED, Ev.CLOSE): (M.CLOSED, None),
-    (M.CLOSED, Ev.CLEAR_LOST): (M.CLOSED, Manager._clear_again),
-    (M.CLOSED, Ev.RECOVERY_REQUESTED): (M.CLOSED, None),
 }
+
+
+def graph() -> list[tuple[Mode, Ev, Mode]]:
+    """Every edge of the state graph that changes the state, as (from, event kind, to), read off the table."""
+    return sorted(((s, ev, to) for (s, ev), (to, _handler) in _TRANSITIONS.items() if to is not s),
+                  key=lambda e: (list(Mode).index(e[0]), e[1].value))
+
+
+def _dot() -> str:
+    """The state graph in Graphviz's dot language (``python -m hils.manager | dot -Tsvg``)."""
+    lines = ["digraph manager {", "  rankdir=LR;"]
+    lines += [f'  {a.name} -> {b.name} [label="{ev.name.lower()}"];' for a, ev, b in graph()]
+    return "\n".join([*lines, "}"])
+
+
+if __name__ == "__main__":
+    sys.stdout.write(_dot() + "\n")

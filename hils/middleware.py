@@ -2,9 +2,10 @@
 
 The manager (:mod:`hils.manager`) decides; this module does, and decides nothing. It turns agent
 actions into manager events, carries out the effects the manager returns (SET the call, start
-timers, halt or resume polling, re-read the controller, log) and feeds back what happened: timer
-expiries, signal observations, the answers to SETs, the cost of simulation steps. It runs unchanged
-in virtual and wall-clock time: only the environment's driver and the transport differ.
+timers, halt or resume polling, read the controller, log) and feeds back what happened: the start-up
+read, every poll's answer or failure, timer expiries, the answers to SETs, the read-back of the control
+objects, the cost of simulation steps. It runs unchanged in virtual and wall-clock time: only the
+environment's driver and the transport differ.
 """
 
 from __future__ import annotations
@@ -20,10 +21,12 @@ from hils.actions import ActionConverter, ActionError, ActionType
 from hils.config import IntersectionConfig, Pair
 from hils.events import EventLog, Kind
 from hils.manager import (
+    CloseDone,
     CloseRequested,
     CommandEnded,
     CommandRequested,
     ControllerRead,
+    ControllerUnreachable,
     ControllerUnreadable,
     ControlsRead,
     Dispatch,
@@ -31,24 +34,32 @@ from hils.manager import (
     Dropped,
     Effect,
     Event,
-    FailureDetected,
     HaltPolling,
     KeepaliveSwitched,
     Manager,
     Mode,
     Note,
+    PollAnswered,
+    PollFailed,
+    PollFailureSeen,
     Purpose,
+    ReadbackDue,
     ReadController,
+    ReadControls,
     Recovered,
     RecoveryRequested,
     RecoveryStarted,
     ResumePolling,
+    RetryStartup,
     SendCall,
     SetAnswered,
     SetFailed,
-    SignalObserved,
+    ShowSignal,
     Started,
     StartTimer,
+    StartupDone,
+    StartupLost,
+    StartupRefused,
     State,
     StepTimed,
     TimeoutEntered,
@@ -64,12 +75,14 @@ from hils.ntcip import (
     UNIT_FLASH_STATUS,
     ControlColumn,
     ErrorStatus,
+    SignalState,
     SnmpError,
     control_oid,
     groups_to_phases,
     phases_to_groups,
+    signal_oids,
 )
-from hils.poller import Decoded, Poller, SignalCache, Snapshot
+from hils.poller import Poller, SignalCache
 from hils.preflight import ControllerReading, Verdict, judge
 from hils.timegrid import Grid
 from hils.transport import CommunicationTimeout, Transport, TransportError
@@ -90,11 +103,13 @@ class Submission:
 
 
 class Middleware:
-    """Everything between the agent and the transport, on one SimPy environment."""
+    """Everything between the agent and the transport, on one SimPy environment.
+
+    ``recover_after``: seconds in TIMEOUT before the manager recovers by itself (None: only when asked)."""
 
     def __init__(self, env: simpy.Environment, transport: Transport, config: IntersectionConfig,
                  action_type: ActionType | str, events: EventLog, *, where: str = "the controller",
-                 community: str | None = None) -> None:
+                 community: str | None = None, recover_after: float | None = None) -> None:
         params = config.middleware
         self.where = where  # how messages name the controller (HOST:PORT)
         self.community = community
@@ -106,19 +121,20 @@ class Middleware:
         self.log = events
         events.bind(lambda: env.now)
         self.manager = Manager(params.tau_trans, sequence=config.sequence, n_drift=params.n_drift,
-                               keepalive_period=params.keepalive_period or 0.0)
+                               n_timeout=params.n_timeout, keepalive_period=params.keepalive_period or 0.0,
+                               recover_after=recover_after)
         self.converter = ActionConverter(config, ActionType(action_type))
         self.cache = SignalCache()
-        self.poller = Poller(env, transport, self.cache, events, groups=config.groups,
-                             rate_hz=params.poll_hz, n_timeout=params.n_timeout,
-                             on_failure=lambda why: self._fail(TimeoutReason.COMMUNICATION, why))
-        # Every poll, not only changes: a command for phases already green is verified by the
-        # next poll, which shows no change.
-        self.cache.subscribe(self._on_signal, every_poll=True)
+        self.signal_oids = signal_oids(config.groups)
+        self.poller = Poller(env, transport, rate_hz=params.poll_hz, send=self._poll,
+                             newest=lambda: self.manager.newest_poll)
         self.ready = env.event()
         self._entering: dict[State, simpy.Event] = {}  # events of processes waiting for a state
         self._leaving_recovery: simpy.Event | None = None
-        self._clearing: simpy.Event | None = None
+        self._closed: simpy.Event | None = None
+        self._startup_over = False
+        self._decoded: dict[tuple[Any, ...], SignalState] = {}  # a controller shows a handful of distinct states
+        self._log_fields: dict[SignalState, tuple[tuple[int, ...], tuple[int, ...]]] = {}
         self._actions = 0
         self.last_hold: float | None = None  # s from dispatch to verification of the last verified transition
 
@@ -151,6 +167,12 @@ class Middleware:
     @property
     def keepalive_period(self) -> float:
         return self.manager.keepalive_period
+
+    @property
+    def poll_counts(self) -> dict[str, int]:
+        """Polls on the grid so far, and how each ended (``elided``: not sent, it could not see a change)."""
+        m = self.manager
+        return {**self.poller.counts, "answered": m.polls_answered, "failed": m.polls_failed, "late": m.polls_late}
 
     @property
     def keepalive_enabled(self) -> bool:
@@ -213,19 +235,19 @@ class Middleware:
         IDLE. The process's value is True when the manager is not in TIMEOUT afterwards."""
         return self.env.process(self._recover())
 
-    def close(self) -> simpy.Process:
-        """Clear the calls this run placed and stop polling and the keepalive for good."""
-        return self.env.process(self._close())
+    def close(self) -> simpy.Event:
+        """Clear the calls this run placed and stop polling and the keepalive for good; the event fires when
+        the close is over (the clear answered, or given up)."""
+        self._closed = self.env.event()
+        self._feed(CloseRequested(self.env.now))
+        return self._closed
 
     # --- processes ----------------------------------------------------------------------------
 
     def _startup(self, after: float) -> Generator[simpy.Event, Any, None]:
         if after > 0:
             yield self.env.timeout(after)
-        # Like the poller, give up only after n_timeout consecutive failures: one lost datagram
-        # at start-up is no reason to halt.
-        n = self.config.middleware.n_timeout
-        for attempt in range(1, n + 1):
+        while not self._startup_over:  # the manager says whether a read without answer is made again
             try:
                 seen, reading = yield from self._read_controller_setup()
                 # The control objects are ours while we run: whatever someone else left is cleared,
@@ -233,31 +255,31 @@ class Middleware:
                 yield self._logged_set(_cleared_control(self.config.groups), frozenset(), "startup", None)
             except SnmpError as exc:
                 self.startup_error = _refusal_text(exc, self.where)
-                self.log.emit(Kind.NOTE, message=f"start-up: {self.startup_error}")
-                self._fail(TimeoutReason.COMMUNICATION, self.startup_error)
-                break
+                self._feed(StartupRefused(self.env.now, self.startup_error))
+                continue
             except TransportError as exc:
-                self.log.emit(Kind.POLL_FAILED, poll_id=0, error=f"start-up read: {type(exc).__name__}: {exc}",
-                              consecutive=attempt)
-                if attempt == n:
-                    self.startup_error = (f"no answer from {self.where} within {n} x tau_udp = "
-                                          f"{n * self.config.middleware.tau_udp:g} s: is the controller there, "
-                                          "at that address and port, and is the community right?")
-                    self._fail(TimeoutReason.COMMUNICATION, f"controller unreachable at start-up: {exc}")
+                self._feed(StartupLost(self.env.now, f"{type(exc).__name__}: {exc}"))
                 continue
             self.verdict = judge(reading, where=self.where, community=self.community,
                                  keepalive_period=self.manager.keepalive_period)
             for line in (*self.verdict.refusals, *self.verdict.warnings):
                 self.log.emit(Kind.NOTE, message=f"start-up: {line}")
-            self.poller.show(seen, 0)
-            self._feed(Started(self.env.now, seen.state.greens, reading.backup_time))
-            break
-        self.env.process(self.poller.run())
-        self.env.process(self._read_back())
-        self.ready.succeed()
+            self._show(seen, 0)
+            self._feed(Started(self.env.now, seen.greens, reading.backup_time))
 
-    def _read_controller_setup(self) -> Generator[simpy.Event, Any, tuple[Decoded, ControllerReading]]:
-        seen = yield from self.poller.read_once()
+    def _read_signal(self) -> Generator[simpy.Event, Any, SignalState]:
+        """One GET of the signal state outside the poll grid (start-up, recovery)."""
+        values = yield self.transport.get(self.signal_oids)
+        return self._decode(values)
+
+    def _decode(self, values: tuple[Any, ...]) -> SignalState:
+        state = self._decoded.get(values)
+        if state is None:
+            state = self._decoded[tuple(values)] = SignalState.from_values(values, self.config.groups)
+        return state
+
+    def _read_controller_setup(self) -> Generator[simpy.Event, Any, tuple[SignalState, ControllerReading]]:
+        seen = yield from self._read_signal()
         backup, pattern, flash = yield self.transport.get(
             [UNIT_BACKUP_TIME.instance(), SYSTEM_PATTERN_CONTROL.instance(), UNIT_FLASH_STATUS.instance()])
         groups = self.config.groups
@@ -282,8 +304,8 @@ class Middleware:
         while self.manager.mode is not Mode.CLOSED:
             yield env.timeout(wait)
             wait = READBACK_PERIOD
-            if self.poller.halted or self.poller.consecutive_failures:
-                continue  # in TIMEOUT only recovery sends; while polls fail, the poller counts them
+            if not any(isinstance(e, ReadControls) for e in self._feed(ReadbackDue(env.now))):
+                continue
             feed = self.transport.change_feed
             controls = feed.controls if feed is not None else None
             if controls is not None and controls == ours:
@@ -296,7 +318,7 @@ class Middleware:
             try:
                 values = yield self.transport.get(oids)
             except (TransportError, SnmpError):
-                continue  # the poller counts communication failures
+                continue  # failed polls speak for the link; a failed read-back is let go
             if self.manager.mode is Mode.CLOSED:
                 return
             effects = self._feed(ControlsRead(self.env.now, tuple(
@@ -312,24 +334,40 @@ class Middleware:
 
     def _read_controller(self) -> Generator[simpy.Event, Any, None]:
         try:
-            seen = yield from self.poller.read_once()
+            seen = yield from self._read_signal()
         except (TransportError, SnmpError) as exc:
             self._feed(ControllerUnreadable(self.env.now, str(exc)))
             return
-        self.poller.show(seen, self.poller.polls)
-        self._feed(ControllerRead(self.env.now, seen.state.greens))
+        self._show(seen, self.poller.polls)
+        self._feed(ControllerRead(self.env.now, seen.greens))
 
-    def _close(self) -> Generator[simpy.Event, Any, None]:
-        self._feed(CloseRequested(self.env.now))
-        while self._clearing is not None:
-            clearing = self._clearing
-            try:
-                yield clearing
-                return
-            except (TransportError, SnmpError) as exc:
-                if self._clearing is clearing:  # the manager sent no other: the calls stay until the backup time
-                    log.warning("could not clear the calls at the end of the run: %s", exc)
-                    return
+    # --- polls ------------------------------------------------------------------------------------
+
+    def _poll(self, poll_id: int) -> None:
+        """Send poll ``poll_id``; its answer or failure goes to the manager, in whatever order they settle."""
+        epoch = self.manager.poll_epoch
+        self.transport.get(self.signal_oids).callbacks.append(
+            lambda ev: self._polled(ev, poll_id, epoch))
+
+    def _polled(self, ev: simpy.Event, poll_id: int, epoch: int) -> None:
+        ev.defused = True
+        try:
+            if not ev.ok:
+                raise ev.value
+            state = self._decode(ev.value)
+        except (TransportError, SnmpError, ValueError) as exc:
+            self._feed(PollFailed(self.env.now, poll_id, epoch, type(exc).__name__, f"{type(exc).__name__}: {exc}"))
+            return
+        self._feed(PollAnswered(self.env.now, poll_id, epoch, state))
+
+    def _show(self, state: SignalState, poll_id: int) -> None:
+        """Put what a read saw into the cache, with a ``poll`` record when it changes the state."""
+        if self.cache.snapshot is None or state != self.cache.snapshot.state:
+            fields = self._log_fields.get(state)
+            if fields is None:
+                fields = self._log_fields[state] = (tuple(sorted(state.greens)), tuple(sorted(state.yellows)))
+            self.log.emit(Kind.POLL, poll_id=poll_id, greens=fields[0], yellows=fields[1])
+        self.cache.update(state, self.env.now, poll_id)
 
     # --- the manager's shell ----------------------------------------------------------------------
 
@@ -351,6 +389,10 @@ class Middleware:
 
     def _carry_out(self, effect: Effect) -> None:
         match effect:
+            case ShowSignal(poll_id, state):
+                self._show(state, poll_id)
+            case PollFailureSeen(poll_id, error, consecutive):
+                self.log.emit(Kind.POLL_FAILED, poll_id=poll_id, error=error, consecutive=consecutive)
             case Dispatch(command_id, action_id, command):
                 self.log.emit(Kind.COMMAND_DISPATCHED, action_id=action_id, command_id=command_id,
                               command=command.phases, green=command.green)
@@ -382,10 +424,28 @@ class Middleware:
                 self._leaving_recovery = self.env.event()
             case ReadController():
                 self.env.process(self._read_controller())
+            case ReadControls():
+                pass  # the read-back process sends it: it is waiting for this answer
             case Recovered(greens):
                 self.log.emit(Kind.RECOVERED, greens=greens)
             case Note(message):
                 self.log.emit(Kind.NOTE, message=message)
+            case RetryStartup():
+                pass  # the start-up process reads again: it is waiting for this answer
+            case ControllerUnreachable(attempts):
+                self.startup_error = (f"no answer from {self.where} within {attempts} x tau_udp = "
+                                      f"{attempts * self.config.middleware.tau_udp:g} s: is the controller there, "
+                                      "at that address and port, and is the community right?")
+            case StartupDone():
+                self._startup_over = True
+                self.env.process(self.poller.run())
+                self.env.process(self._read_back())
+                self.ready.succeed()
+            case CloseDone(error):
+                if error:
+                    log.warning("could not clear the calls at the end of the run: %s", error)
+                if self._closed is not None:
+                    self._closed.succeed()
 
     def _send(self, phases: frozenset[int], purpose: Purpose, command_id: int | None) -> None:
         """SET VehCall to ``phases``; logs the SET and its answer, and feeds the answer back."""
@@ -396,8 +456,6 @@ class Middleware:
             varbinds += _cleared_control(self.config.groups, FOREIGN_COLUMNS)
         done = self._logged_set(varbinds, phases, purpose.value, command_id)
         done.callbacks.append(lambda ev: self._answered(ev, purpose, command_id))
-        if purpose is Purpose.CLEAR:
-            self._clearing = done
 
     def _logged_set(self, varbinds: list[tuple[Any, int]], phases: frozenset[int], purpose: str,
                     command_id: int | None) -> simpy.Event:
@@ -420,18 +478,9 @@ class Middleware:
         if ev.ok:
             self._feed(SetAnswered(self.env.now, purpose, command_id))
             return
-        if purpose is not Purpose.CLEAR:
-            ev.defused = True
-        self._feed(SetFailed(self.env.now, purpose, command_id, isinstance(ev.value, CommunicationTimeout)))
-
-    def _on_signal(self, snap: Snapshot, changed: bool) -> None:
-        # ON_HOLD verifies on every poll (a command may target what is already shown); otherwise
-        # an unchanged poll tells the manager nothing new.
-        if changed or self.manager.mode is Mode.IN_TRANSITION:
-            self._feed(SignalObserved(snap.t, snap.state.greens, snap.seq))
-
-    def _fail(self, reason: TimeoutReason, detail: str) -> None:
-        self._feed(FailureDetected(self.env.now, reason, detail))
+        ev.defused = True
+        self._feed(SetFailed(self.env.now, purpose, command_id, isinstance(ev.value, CommunicationTimeout),
+                             str(ev.value)))
 
 
 _NOT_WRITABLE = {ErrorStatus.NO_ACCESS, ErrorStatus.NOT_WRITABLE, ErrorStatus.READ_ONLY, ErrorStatus.NO_SUCH_NAME,

@@ -43,7 +43,7 @@ class StatusLine:
         state = mw.state.value.upper() if mw.state else "CLOSED"
         if mw.timeout_flag and mw.manager.timeout_reason:
             state += f" ({mw.manager.timeout_reason.value})"
-        counts = mw.poller.counts
+        counts = mw.poll_counts
         hold = mw.last_hold
         return (f"{tb.env.now:7.1f} s  {state:<22}  {_shown(mw.cache.state):<13}  polls "
                 f"{counts['polls'] - counts['failed']} answered, {counts['failed']} failed  "
@@ -54,7 +54,7 @@ class StatusLine:
         tb = self.tb
         states = Counter(j.middleware.state.name if j.middleware.state else "CLOSED" for j in tb.junctions.values())
         timed_out = [tls for tls, j in tb.junctions.items() if j.middleware.timeout_flag]
-        counts = [j.middleware.poller.counts for j in tb.junctions.values()]
+        counts = [j.middleware.poll_counts for j in tb.junctions.values()]
         failed = sum(c["failed"] for c in counts)
         return (f"{tb.env.now:7.1f} s  {len(tb.junctions)} controllers: "
                 + ", ".join(f"{name} {n}" for name, n in sorted(states.items()))

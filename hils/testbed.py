@@ -411,7 +411,8 @@ class Testbed:
         if self.several:
             tally = Tally(tls)
             self.events.subscribe(tally, intersection=tls)
-        middleware = Middleware(env, transport, cfg, self.action_type, events, where=where, community=community)
+        middleware = Middleware(env, transport, cfg, self.action_type, events, where=where, community=community,
+                                recover_after=self.recover_after)
         return Junction(tls, cfg, target, transport, middleware, events, tally)
 
     def _assemble_simulation(self) -> None:
@@ -468,8 +469,6 @@ class Testbed:
         spread = self.config.middleware.poll_period / len(self.junctions)
         for index, j in enumerate(self.junctions.values()):
             j.middleware.start(after=index * spread)
-            if self.recover_after is not None:
-                self.env.process(j.auto_recover(self.recover_after, ended))
             if j.view is not None and self.measure:
                 self.env.process(j.sample_traffic(ended))
         self.env.process(self._simulation_loop())
@@ -478,8 +477,8 @@ class Testbed:
         if not self.junctions:
             return {}  # the run ended while it was being assembled
         if self.several:
-            return {tls: j.middleware.poller.counts for tls, j in self.junctions.items()}
-        return self.junction.middleware.poller.counts
+            return {tls: j.middleware.poll_counts for tls, j in self.junctions.items()}
+        return self.junction.middleware.poll_counts
 
     def finish(self, reason: str | None = None) -> None:
         """End the run: clear the calls placed, log ``run_ended`` with ``reason``, close the log.

@@ -3,8 +3,8 @@
 Every request returns a SimPy event on the run's environment. It succeeds with
 the values (GET) or None (SET), or fails with :class:`CommunicationTimeout`
 when no answer came within tau_udp, or with :class:`hils.ntcip.SnmpError` when
-the controller refused. Requests are never retried here: the poller counts
-failures and the manager decides.
+the controller refused. Requests are never retried here: the manager counts
+failures and decides.
 
 :class:`LocalTransport` reaches an object surface in the same process (the
 emulator's MIB view) with a modeled latency and loss, for virtual time. The SNMP

@@ -1,18 +1,22 @@
 """Properties of the manager's state machine, driven directly (it is pure: no SimPy).
 
-Hypothesis plays the shell and the world: it converts random action values (valid and invalid)
-through the converters of the shipped config at the manager's sequence position, feeds random
-signal observations, fires the timers the manager asked for in random order (and stale tokens),
-answers, refuses or loses the SETs it asked for, times simulation steps (drift), reports
-communication failures, asks for recovery and answers its re-read, switches the keepalive and
-closes the run, with time never going back. Every effect the manager returns is checked against
-the rules of the paper as it comes out: what may be sent in which state, retries, the gating of
-the keepalive, drift counting, recovery and the sequence position.
+Hypothesis plays the shell and the world: it starts the machine (start-up reads that get no answer, a
+refusal, or a read), converts random action values (valid and invalid) through the converters of the
+shipped config at the manager's sequence position, sends polls and settles them in any order (answered,
+failed, late, or from before a halt), fires the timers the manager asked for in random order (and stale
+tokens), answers, refuses or loses the SETs it asked for, times simulation steps (drift), asks for
+read-backs and answers them, asks for recovery and answers its re-read, switches the keepalive and
+closes the run, with time never going back. Every effect the manager returns is checked against the
+rules of the paper as it comes out: what may be sent in which state, retries, the gating of the
+keepalive and of the read-back, failed polls counted in a row, start-up attempts, drift counting,
+recovery and its timer, the close and the sequence position.
 """
 
 from __future__ import annotations
 
 import math
+import subprocess
+import sys
 from dataclasses import dataclass
 from typing import Any
 
@@ -25,35 +29,46 @@ from hils.actions import ActionConverter, ActionError, ActionType, Command
 from hils.config import load
 from hils.manager import (
     CLEAR_ATTEMPTS,
+    CloseDone,
     CloseRequested,
     CommandEnded,
     CommandRequested,
     ControllerRead,
+    ControllerUnreachable,
     ControllerUnreadable,
     ControlsRead,
     Dispatch,
     DriftSeen,
     Dropped,
     Effect,
+    Ev,
     Event,
-    FailureDetected,
     HaltPolling,
     KeepaliveSwitched,
     Manager,
     Mode,
     Note,
+    PollAnswered,
+    PollFailed,
+    PollFailureSeen,
     Purpose,
+    ReadbackDue,
     ReadController,
+    ReadControls,
     Recovered,
     RecoveryRequested,
     RecoveryStarted,
     ResumePolling,
+    RetryStartup,
     SendCall,
     SetAnswered,
     SetFailed,
-    SignalObserved,
+    ShowSignal,
     Started,
     StartTimer,
+    StartupDone,
+    StartupLost,
+    StartupRefused,
     State,
     StepTimed,
     TimeoutEntered,
@@ -61,11 +76,15 @@ from hils.manager import (
     TimerExpired,
     TimerKind,
     Verified,
+    graph,
 )
+from hils.ntcip import SignalState
 
 CONFIG = load()
 PHASES = CONFIG.phase_numbers
 TAU_TRANS = CONFIG.middleware.tau_trans
+N_TIMEOUT = CONFIG.middleware.n_timeout
+RECOVER_AFTER = 5.0
 DISPATCHED_OUTCOMES = {"verified", "served", "timeout"}
 
 # --- action values, each tagged with whether the converter must accept it --------------------
@@ -109,6 +128,17 @@ N_DRIFT = CONFIG.middleware.n_drift
 STEP = CONFIG.middleware.sumo_step
 BACKUP = st.sampled_from([0, 6, 30, 300])
 RUNNING = (Mode.IDLE, Mode.IN_TRANSITION, Mode.SERVING)
+DOWN = (Mode.TIMEOUT, Mode.RECOVERING)
+
+
+def shown(greens: frozenset[int]) -> SignalState:
+    return SignalState(frozenset(PHASES) - greens, frozenset(), greens)
+
+
+def manager(recover_after: float | None = RECOVER_AFTER, keepalive_period: float | None = None) -> Manager:
+    return Manager(TAU_TRANS, sequence=CONFIG.sequence, n_drift=N_DRIFT, n_timeout=N_TIMEOUT,
+                   keepalive_period=(CONFIG.middleware.keepalive_period or 0.0) if keepalive_period is None
+                   else keepalive_period, recover_after=recover_after)
 
 
 @dataclass
@@ -120,21 +150,33 @@ class Outstanding:
     phases: frozenset[int]
 
 
+@dataclass
+class InFlight:
+    """A poll sent, not settled yet: its id and the polling period it went out in."""
+
+    poll_id: int
+    epoch: int
+
+
 class ManagerMachine(RuleBasedStateMachine):
     def __init__(self) -> None:
         super().__init__()
-        self.manager = Manager(TAU_TRANS, sequence=CONFIG.sequence, n_drift=N_DRIFT,
-                               keepalive_period=CONFIG.middleware.keepalive_period or 0.0)
+        self.manager = manager()
         self.converters = {t: ActionConverter(CONFIG, t) for t in ActionType}
         self.t = 0.0
         self.actions = 0
         self.polls = 0
+        self.in_flight: list[InFlight] = []
+        self.epoch = 0  # one more at every HaltPolling, as the poller's polling periods
+        self.newest = 0  # the newest poll answered and applied
+        self.failed = 0  # failed polls in a row, as the paper counts them (newer than the newest answered)
         self.timers: list[tuple[float, TimerKind, int]] = []  # started, not yet fired
         self.fired: set[int] = set()
         self.keepalive_token: int | None = None  # the latest keepalive timer armed
+        self.recover_token: int | None = None  # the latest recovery timer armed
         self.sets: list[Outstanding] = []
         self.last_set = -math.inf
-        self.drifted = 0  # consecutive drifted steps while running, as the paper counts them
+        self.drifted = 0  # consecutive drifted steps while working, as the paper counts them
         self.dispatched: dict[int, Command] = {}
         self.dispatched_at: dict[int, float] = {}
         self.ended: dict[int, str] = {}
@@ -142,7 +184,9 @@ class ManagerMachine(RuleBasedStateMachine):
         self.open: int | None = None  # the dispatched command not yet ended
         self.read_pending = False  # the recovery asked to re-read the controller
         self.clears_lost = 0  # clearing SETs (after the close) whose datagram got no answer
+        self.close_done = 0
         self.read_greens: frozenset[int] = frozenset()
+        self.shown: frozenset[int] = frozenset()
         self.consistent = True  # False once a check failed: the trackers no longer match the manager
 
     # --- the shell -----------------------------------------------------------------------------
@@ -160,27 +204,70 @@ class ManagerMachine(RuleBasedStateMachine):
         after = m.mode
 
         # Where the machine may go.
-        if before in (Mode.TIMEOUT, Mode.RECOVERING) and after not in (Mode.TIMEOUT, Mode.RECOVERING, Mode.CLOSED):
+        if before in DOWN and after not in (*DOWN, Mode.CLOSED):
             assert before is Mode.RECOVERING and isinstance(ev, SetAnswered) and ev.purpose is Purpose.RECOVERY, (
                 f"left TIMEOUT on {ev}")
+        if before is Mode.STARTING and after is Mode.IDLE:
+            assert isinstance(ev, Started) and effects[-1] == StartupDone()
+        if after is Mode.STARTING:
+            assert before is Mode.STARTING, "nothing goes back to the start-up"
         if before is Mode.CLOSED:
-            # Closed, only two things happen: a command is dropped, a clear that got no answer is sent again.
-            assert after is Mode.CLOSED and all(isinstance(e, Dropped | SendCall) for e in effects), (
-                f"closed, yet {effects}")
-            if isinstance(ev, SetFailed) and ev.purpose is Purpose.CLEAR and ev.lost:
-                self.clears_lost += 1
-                assert effects == ([SendCall(frozenset(), Purpose.CLEAR)] if self.clears_lost < CLEAR_ATTEMPTS
-                                   else []), "a lost clear is sent again, CLEAR_ATTEMPTS times in all"
-        if isinstance(ev, CommandRequested) and before is not Mode.IDLE:
+            # Closed, only this happens: a command is dropped, a clear that got no answer is sent again, the
+            # close ends, the start-up (if it was still going) ends.
+            assert after is Mode.CLOSED and all(isinstance(e, Dropped | SendCall | CloseDone | StartupDone)
+                                                for e in effects), f"closed, yet {effects}"
+            if isinstance(ev, SetFailed) and ev.purpose is Purpose.CLEAR:
+                self.clears_lost += ev.lost
+                again = ev.lost and self.clears_lost < CLEAR_ATTEMPTS
+                assert effects == ([SendCall(frozenset(), Purpose.CLEAR)] if again else [CloseDone(ev.error)]), (
+                    "a lost clear is sent again, CLEAR_ATTEMPTS times in all; then the close is over")
+            if isinstance(ev, SetAnswered) and ev.purpose is Purpose.CLEAR:
+                assert effects == [CloseDone()]
+        if isinstance(ev, CommandRequested) and before not in (Mode.IDLE,):
             assert effects == [Dropped(ev.action_id, before.log_name)]
-        if isinstance(ev, FailureDetected) and before in RUNNING:
-            assert after is Mode.TIMEOUT
         if isinstance(ev, CloseRequested) and before is not Mode.CLOSED:
-            assert after is Mode.CLOSED
+            assert after is Mode.CLOSED and effects[0] == HaltPolling()
             if self.last_set > -math.inf:
                 assert effects[-1] == SendCall(frozenset(), Purpose.CLEAR), "closing clears the call"
             else:
-                assert effects == [HaltPolling()], "nothing was SET, nothing to clear"
+                assert effects == [HaltPolling(), CloseDone()], "nothing was SET, nothing to clear"
+
+        # Start-up: attempts without answer are counted; the n_timeout-th is a communication TIMEOUT.
+        if isinstance(ev, StartupLost) and before is not Mode.CLOSED:
+            attempt = m.startup_attempts
+            assert effects[0] == PollFailureSeen(0, f"start-up read: {ev.error}", attempt)
+            if attempt < N_TIMEOUT:
+                assert effects[1:] == [RetryStartup()] and after is before
+            else:
+                assert ControllerUnreachable(N_TIMEOUT) in effects and effects[-1] == StartupDone()
+                assert after is (Mode.TIMEOUT if before is Mode.STARTING else before)
+        if isinstance(ev, StartupRefused) and before is not Mode.CLOSED:
+            assert effects[0] == Note(f"start-up: {ev.detail}") and effects[-1] == StartupDone()
+            assert after is (Mode.TIMEOUT if before is Mode.STARTING else before)
+
+        # Polls: answers applied in poll order, results from before a halt ignored, failures counted in a row.
+        if isinstance(ev, PollAnswered | PollFailed) and ev.epoch != self.epoch:
+            assert effects == [] and after is before, "a poll sent before the halt changed something"
+        elif isinstance(ev, PollAnswered):
+            assert before in RUNNING, f"a poll of this period answered in {before.name}"
+            if ev.poll_id < self.newest:
+                assert effects == [] and after is before, "a late answer changed something"
+            else:
+                assert effects[0] == ShowSignal(ev.poll_id, ev.state)
+                self.newest, self.failed = ev.poll_id, 0
+                self.shown = ev.state.greens
+        elif isinstance(ev, PollFailed):
+            assert before in RUNNING, f"a poll of this period failed in {before.name}"
+            if ev.poll_id >= self.newest:
+                self.failed += 1
+            assert effects[0] == PollFailureSeen(ev.poll_id, ev.error, self.failed)
+            if self.failed == N_TIMEOUT and ev.poll_id >= self.newest:
+                assert after is Mode.TIMEOUT and m.timeout_reason is TimeoutReason.COMMUNICATION
+            else:
+                assert effects == [effects[0]] and after is before
+        if isinstance(ev, ReadbackDue):
+            expected = [ReadControls()] if before in RUNNING and self.failed == 0 else []
+            assert effects == expected, "the read-back goes out while working and no poll fails, and only then"
 
         sent = [e for e in effects if isinstance(e, SendCall)]
         for eff in effects:
@@ -210,17 +297,22 @@ class ManagerMachine(RuleBasedStateMachine):
                     if kind is TimerKind.KEEPALIVE:
                         assert delay == m.keepalive_period > 0
                         self.keepalive_token = token
+                    elif kind is TimerKind.RECOVER:
+                        assert delay == RECOVER_AFTER and after is Mode.TIMEOUT
+                        assert any(isinstance(e, TimeoutEntered) for e in effects) or isinstance(
+                            ev, ControllerUnreadable | SetFailed), "the recovery timer starts on entering TIMEOUT"
+                        self.recover_token = token
                     elif kind is TimerKind.TRANSITION:
                         assert delay == TAU_TRANS and isinstance(ev, CommandRequested)
                     else:
                         command = self.dispatched[self.open]
-                        assert isinstance(ev, SignalObserved) and set(command.phases) <= ev.greens
+                        assert isinstance(ev, PollAnswered) and set(command.phases) <= ev.state.greens
                         assert command.green is not None and delay == command.green
                     self.timers.append((ev.t + delay, kind, token))
                 case Verified(command_id, command, poll_id, hold):
                     assert command_id == self.open and command == self.dispatched[command_id]
-                    assert isinstance(ev, SignalObserved) and poll_id == ev.poll_id
-                    assert set(command.phases) <= ev.greens
+                    assert isinstance(ev, PollAnswered) and poll_id == ev.poll_id
+                    assert set(command.phases) <= ev.state.greens
                     assert math.isclose(hold, ev.t - self.dispatched_at[command_id]) and hold >= 0
                 case CommandEnded(command_id, outcome, hold):
                     if outcome == "keep":
@@ -235,7 +327,7 @@ class ManagerMachine(RuleBasedStateMachine):
                     assert command_id not in self.ended, "a command ended twice"
                     green = self.dispatched[command_id].green
                     if outcome == "verified":
-                        assert green is None and isinstance(ev, SignalObserved)
+                        assert green is None and isinstance(ev, PollAnswered)
                     elif outcome == "served":
                         assert green is not None and isinstance(ev, TimerExpired) and ev.kind is TimerKind.DURATION
                     assert math.isclose(hold, ev.t - self.dispatched_at[command_id]) and hold >= 0
@@ -245,11 +337,11 @@ class ManagerMachine(RuleBasedStateMachine):
                     assert isinstance(ev, CommandRequested) and action_id == ev.action_id
                     assert state == before.log_name and before is not Mode.IDLE
                 case TimeoutEntered(reason, _detail, command_id):
-                    assert after is Mode.TIMEOUT and before in RUNNING
+                    assert after is Mode.TIMEOUT and before in (Mode.STARTING, *RUNNING)
                     assert command_id == open_before
                     assert HaltPolling() in effects, "polling halts in TIMEOUT"
-                    if isinstance(ev, FailureDetected):
-                        assert reason is ev.reason
+                    if isinstance(ev, PollFailed | StartupLost | StartupRefused):
+                        assert reason is TimeoutReason.COMMUNICATION
                     elif isinstance(ev, StepTimed):
                         assert reason is TimeoutReason.DRIFT and self.drifted + 1 == N_DRIFT
                     elif isinstance(ev, ControlsRead):
@@ -258,33 +350,43 @@ class ManagerMachine(RuleBasedStateMachine):
                         assert isinstance(ev, TimerExpired) and ev.kind is TimerKind.TRANSITION
                         assert reason is TimeoutReason.TRANSITION
                 case DriftSeen(step, took, consecutive):
-                    assert isinstance(ev, StepTimed) and took > step and before in RUNNING
+                    assert isinstance(ev, StepTimed) and took > step and before in (Mode.STARTING, *RUNNING)
                     assert consecutive == self.drifted + 1
                 case RecoveryStarted() | ReadController():
-                    assert before is Mode.TIMEOUT and isinstance(ev, RecoveryRequested) and after is Mode.RECOVERING
+                    assert before is Mode.TIMEOUT and after is Mode.RECOVERING
+                    by_timer = isinstance(ev, TimerExpired) and ev.kind is TimerKind.RECOVER
+                    assert isinstance(ev, RecoveryRequested) or (by_timer and ev.token == self.recover_token)
                     self.read_pending = True
                 case Recovered(greens):
                     assert before is Mode.RECOVERING and after is Mode.IDLE and ResumePolling() in effects
                     assert greens == self.read_greens, "recovered to what the re-read showed"
-                case HaltPolling() | ResumePolling() | Note():
+                case HaltPolling():
+                    self.epoch += 1
+                    self.in_flight = []  # whatever was sent: its result is from before the halt
+                case CloseDone():
+                    self.close_done += 1
+                    assert self.close_done == 1, "the close ended twice"
+                case (ResumePolling() | Note() | ShowSignal() | PollFailureSeen() | ReadControls() | RetryStartup()
+                      | StartupDone() | ControllerUnreachable()):
                     pass
                 case _:
                     raise AssertionError(f"unknown effect {eff!r}")
 
-        # A control object the run never sets, found set while running, is a TIMEOUT; else nothing happens.
+        # A control object the run never sets, found set while working, is a TIMEOUT; else nothing happens.
         if isinstance(ev, ControlsRead):
             foreign = any(phases for _name, phases in ev.held)
             if before in RUNNING and foreign:
                 assert after is Mode.TIMEOUT and any(isinstance(e, TimeoutEntered) for e in effects)
             else:
                 assert after is before and effects == []
-        # Drift is counted while running and only then; an on-time step resets the count.
-        if isinstance(ev, StepTimed) and before in RUNNING:
+        # Drift is counted while the machine works and only then; an on-time step resets the count.
+        if isinstance(ev, StepTimed) and before in (Mode.STARTING, *RUNNING):
             self.drifted = self.drifted + 1 if ev.took > ev.step else 0
         if isinstance(ev, SetAnswered) and before is Mode.RECOVERING and ev.purpose is Purpose.RECOVERY:
             self.drifted = 0
+            self.failed = 0
         if after is Mode.IDLE and before is Mode.RECOVERING:
-            assert m.drifted_in_a_row == 0
+            assert m.drifted_in_a_row == 0 and m.failed_in_a_row == 0
         if isinstance(ev, ControllerRead) and before is Mode.RECOVERING:
             expected = next((i for i, pair in enumerate(CONFIG.sequence) if set(pair) <= ev.greens), position_before)
             assert m.position == expected, "recovery aligns the position with what the controller shows"
@@ -295,6 +397,7 @@ class ManagerMachine(RuleBasedStateMachine):
         assert (m.pending is None) == (self.open is None)
         assert m.state is after.paper
         assert len(self.dispatched) - len(self.ended) <= 1
+        assert m.poll_epoch == self.epoch
         self.consistent = True
         return effects
 
@@ -329,11 +432,37 @@ class ManagerMachine(RuleBasedStateMachine):
 
     # --- rules ---------------------------------------------------------------------------------
 
-    @initialize(greens=GREENS, backup=BACKUP)
-    def start(self, greens: frozenset[int], backup: int) -> None:
-        self.feed(Started(self.t, greens, backup))
-        self.polls += 1
-        self.feed(SignalObserved(self.t, greens, self.polls))
+    @initialize(greens=GREENS, backup=BACKUP, lost=st.integers(0, N_TIMEOUT), refused=st.integers(0, 7),
+                meanwhile=st.lists(st.sampled_from(["on_time", "drifted", "drift_limit", "keepalive", "recovery",
+                                                    "command", "stale_timer", "close"]), max_size=3))
+    def start(self, greens: frozenset[int], backup: int, lost: int, refused: int, meanwhile: list[str]) -> None:
+        # Mostly a read after a few attempts without answer; sometimes no answer at all, a refusal, and the run
+        # going on while the controller is read (its steps drifting into a TIMEOUT, even a close).
+        for what in meanwhile:
+            t = self._tick(0.25)
+            if what in ("on_time", "drifted"):
+                self.feed(StepTimed(t, STEP, 1.0 if what == "drifted" else 0.1))
+            elif what == "drift_limit":
+                for _ in range(N_DRIFT):
+                    self.feed(StepTimed(self._tick(0.25), STEP, 1.0))
+            elif what == "keepalive":
+                self.feed(KeepaliveSwitched(t, True))
+            elif what == "recovery":
+                self.feed(RecoveryRequested(t))
+            elif what == "command":
+                self.feed(CommandRequested(t, 0, Command((2, 6), keep=True), frozenset()))
+            elif what == "stale_timer":
+                self.feed(TimerExpired(t, TimerKind.TRANSITION, -1))
+            else:
+                self.feed(CloseRequested(t))
+        for _ in range(lost):
+            self.feed(StartupLost(self._tick(1.0), "CommunicationTimeout: no answer within 1.0 s"))
+        if lost == N_TIMEOUT:
+            return
+        if refused == 0:
+            self.feed(StartupRefused(self._tick(0.002), "the controller refuses to be written (noAccess)"))
+            return
+        self.feed(Started(self._tick(0.0135), greens, backup))
         self.shown = greens
 
     @rule(data=st.data(), action_type=st.sampled_from(ActionType), dt=DT)
@@ -356,13 +485,25 @@ class ManagerMachine(RuleBasedStateMachine):
         self.actions += 1
         self.feed(CommandRequested(self._tick(dt), self.actions, command, self.shown))
 
+    def _send_poll(self) -> InFlight | None:
+        """A poll goes out, as the poller sends one per period while polling is not halted."""
+        if self.manager.mode not in RUNNING:
+            return None
+        self.polls += 1
+        poll = InFlight(self.polls, self.epoch)
+        self.in_flight.append(poll)
+        return poll
+
     @rule(dt=DT, greens=GREENS, with_pending=st.booleans())
     def observe(self, dt: float, greens: frozenset[int], with_pending: bool) -> None:
+        """A poll answered at once (the usual case)."""
+        poll = self._send_poll()
+        if poll is None:
+            return
+        self.in_flight.remove(poll)
         if with_pending and self.open is not None:
             greens |= set(self.dispatched[self.open].phases)
-        self.polls += 1
-        self.shown = greens
-        self.feed(SignalObserved(self._tick(dt), greens, self.polls))
+        self.feed(PollAnswered(self._tick(dt), poll.poll_id, poll.epoch, shown(greens)))
 
     @precondition(lambda self: self.open is not None)
     @rule(dt=DT, greens=GREENS)
@@ -371,18 +512,51 @@ class ManagerMachine(RuleBasedStateMachine):
         # against the transition timer that timer_fires may pick first.
         self.observe(dt, greens, with_pending=True)
 
+    @rule(polls=st.integers(1, 8))
+    def polls_go_out(self, polls: int) -> None:
+        """Polls on their way, overlapping (their fates come in any order: poll_settles)."""
+        for _ in range(polls):
+            self._send_poll()
+
+    @precondition(lambda self: self.in_flight)
+    @rule(data=st.data(), dt=DT, fate=st.sampled_from(["answered", "failed", "failed", "failed"]), greens=GREENS)
+    def poll_settles(self, data: st.DataObject, dt: float, fate: str, greens: frozenset[int]) -> None:
+        poll = self.in_flight.pop(data.draw(st.integers(0, len(self.in_flight) - 1), label="poll"))
+        t = self._tick(dt)
+        if fate == "answered":
+            self.feed(PollAnswered(t, poll.poll_id, poll.epoch, shown(greens)))
+        else:
+            self.feed(PollFailed(t, poll.poll_id, poll.epoch, "CommunicationTimeout",
+                                 "CommunicationTimeout: no answer within 1.0 s"))
+
+    @rule(dt=DT, answered=st.booleans(), greens=GREENS)
+    def poll_from_before_a_halt_settles(self, dt: float, answered: bool, greens: frozenset[int]) -> None:
+        t, epoch = self._tick(dt), self.epoch - 1
+        self.polls += 1
+        if answered:
+            self.feed(PollAnswered(t, self.polls, epoch, shown(greens)))
+        else:
+            self.feed(PollFailed(t, self.polls, epoch, "CommunicationTimeout", "lost"))
+
     @precondition(lambda self: self.timers)
     @rule(data=st.data())
     def timer_fires(self, data: st.DataObject) -> None:
         due, kind, token = self.timers.pop(data.draw(st.integers(0, len(self.timers) - 1), label="timer"))
         self.t = max(self.t, due)
-        live = token == self.keepalive_token if kind is TimerKind.KEEPALIVE else (
-            self.manager.pending is not None and self.manager.pending.token == token)
-        mode = self.manager.mode
+        m = self.manager
+        if kind is TimerKind.KEEPALIVE:
+            live = token == self.keepalive_token
+        elif kind is TimerKind.RECOVER:
+            live = token == self.recover_token and m.mode is Mode.TIMEOUT
+        else:
+            live = m.pending is not None and m.pending.token == token
+        mode = m.mode
         effects = self.feed(TimerExpired(self.t, kind, token))
         self.fired.add(token)
         if not live:
-            assert effects == [] and self.manager.mode is mode, "a stale timer had an effect"
+            assert effects == [] and m.mode is mode, "a stale timer had an effect"
+        if kind is TimerKind.RECOVER and live:
+            assert effects == [RecoveryStarted(), ReadController()] and m.mode is Mode.RECOVERING
 
     @precondition(lambda self: self.sets)
     @rule(data=st.data(), dt=DT, fate=st.sampled_from(["answered", "lost", "refused"]))
@@ -392,7 +566,7 @@ class ManagerMachine(RuleBasedStateMachine):
         if fate == "answered":
             self.feed(SetAnswered(t, done.purpose, done.command_id))
         else:
-            effects = self.feed(SetFailed(t, done.purpose, done.command_id, lost=fate == "lost"))
+            effects = self.feed(SetFailed(t, done.purpose, done.command_id, lost=fate == "lost", error=fate))
             if fate == "refused":
                 assert not any(isinstance(e, SendCall) for e in effects), "a refused SET is never retried"
 
@@ -416,21 +590,20 @@ class ManagerMachine(RuleBasedStateMachine):
         else:
             self.feed(ControllerUnreadable(t, "no answer"))
 
-    # Failures, recovery requests, keepalive switching and stale timers share one rule, so that they
+    # Recovery requests, keepalive switching, read-backs and stale timers share one rule, so that they
     # come rarely enough for commands to run their course in between.
     @rule(data=st.data(), dt=DT,
-          what=st.sampled_from(["failure", "recovery", "recovery", "keepalive_switch", "stale_timer", "controls_read",
-                                "controls_read"]))
+          what=st.sampled_from(["recovery", "recovery", "keepalive_switch", "stale_timer", "readback",
+                                "controls_read", "controls_read"]))
     def disturbance(self, data: st.DataObject, dt: float, what: str) -> None:
         t = self._tick(dt)
         mode = self.manager.mode
-        if what == "failure":
-            reason = data.draw(st.sampled_from([TimeoutReason.COMMUNICATION, TimeoutReason.TRANSITION]), label="why")
-            self.feed(FailureDetected(t, reason, data.draw(st.text(max_size=5), label="detail")))
-        elif what == "recovery":
+        if what == "recovery":
             effects = self.feed(RecoveryRequested(t))
             if mode is not Mode.TIMEOUT:
                 assert self.manager.mode is mode and not any(isinstance(e, SendCall) for e in effects)
+        elif what == "readback":
+            self.feed(ReadbackDue(t))
         elif what == "controls_read":
             names = ("phaseControlGroupPhaseOmit", "phaseControlGroupPedOmit", "phaseControlGroupHold",
                      "phaseControlGroupForceOff", "phaseControlGroupPedCall")
@@ -458,9 +631,11 @@ class ManagerMachine(RuleBasedStateMachine):
     def teardown(self) -> None:
         if not self.consistent:
             return  # a rule failed: report that failure, not one that follows from it
-        # A failure ends whatever is pending, so every dispatched command has now ended exactly once.
-        if self.manager.mode in RUNNING:
-            self.feed(FailureDetected(self.t + 1.0, TimeoutReason.COMMUNICATION))
+        # A communication failure ends whatever is pending, so every dispatched command has now ended exactly once.
+        while self.manager.mode in RUNNING:
+            poll = self._send_poll()
+            self.in_flight.remove(poll)
+            self.feed(PollFailed(self._tick(0.1), poll.poll_id, poll.epoch, "CommunicationTimeout", "lost"))
         if self.manager.mode is not Mode.CLOSED:
             assert set(self.ended) == set(self.dispatched)
         assert set(self.ended.values()) <= DISPATCHED_OUTCOMES
@@ -471,11 +646,14 @@ ManagerMachine.TestCase.settings = settings(max_examples=200, stateful_step_coun
 TestManagerMachine = ManagerMachine.TestCase
 
 
-def started(greens: frozenset[int] = frozenset({2, 6}), backup: int = 0) -> Manager:
-    m = Manager(TAU_TRANS, sequence=CONFIG.sequence, n_drift=N_DRIFT,
-                keepalive_period=CONFIG.middleware.keepalive_period or 0.0)
+def started(greens: frozenset[int] = frozenset({2, 6}), backup: int = 0, **options: Any) -> Manager:
+    m = manager(**options)
     m.handle(Started(0.0, greens, backup))
     return m
+
+
+def answered(m: Manager, t: float, poll_id: int, greens: frozenset[int]) -> list[Effect]:
+    return m.handle(PollAnswered(t, poll_id, m.poll_epoch, shown(greens)))
 
 
 def test_a_full_duration_cycle_by_hand() -> None:
@@ -490,14 +668,14 @@ def test_a_full_duration_cycle_by_hand() -> None:
     assert effects[-1].kind is TimerKind.TRANSITION and effects[-1].delay == TAU_TRANS
     assert m.mode is Mode.IN_TRANSITION and m.state is State.ON_HOLD
     transition_token = effects[-1].token
-    assert m.handle(SignalObserved(3.0, frozenset(), 2)) == []
+    assert answered(m, 3.0, 2, frozenset()) == [ShowSignal(2, shown(frozenset()))]
     assert m.handle(CommandRequested(4.0, 2, cmd, frozenset())) == [Dropped(2, "on_hold")]
-    effects = m.handle(SignalObserved(6.2, frozenset({3, 7}), 3))
-    assert effects[0] == Verified(1, cmd, 3, effects[0].hold) and math.isclose(effects[0].hold, 5.2)
-    assert effects[1].kind is TimerKind.DURATION and effects[1].delay == 11.5
+    effects = answered(m, 6.2, 3, frozenset({3, 7}))
+    assert effects[1] == Verified(1, cmd, 3, effects[1].hold) and math.isclose(effects[1].hold, 5.2)
+    assert effects[2].kind is TimerKind.DURATION and effects[2].delay == 11.5
     assert m.mode is Mode.SERVING and m.state is State.ON_HOLD
     assert m.handle(TimerExpired(11.0, TimerKind.TRANSITION, transition_token)) == [], "stale by now"
-    effects = m.handle(TimerExpired(17.7, TimerKind.DURATION, effects[1].token))
+    effects = m.handle(TimerExpired(17.7, TimerKind.DURATION, effects[2].token))
     assert len(effects) == 1 and effects[0].command_id == 1 and effects[0].outcome == "served"
     assert math.isclose(effects[0].hold, 16.7)
     assert m.mode is Mode.IDLE and m.pending is None
@@ -514,7 +692,7 @@ def test_a_lost_command_set_is_retried_a_refused_one_is_not() -> None:
 
 
 def test_drift_enters_timeout_at_the_nth_consecutive_slow_step_and_recovery_restarts_the_count() -> None:
-    m = started()
+    m = started(recover_after=None)
     for i in range(N_DRIFT - 1):
         assert m.handle(StepTimed(i, STEP, 1.0)) == [DriftSeen(STEP, 1.0, i + 1)]
     assert m.handle(StepTimed(5.0, STEP, 0.1)) == []
@@ -532,30 +710,103 @@ def test_drift_enters_timeout_at_the_nth_consecutive_slow_step_and_recovery_rest
     assert m.mode is Mode.IDLE and m.drifted_in_a_row == 0 and m.timeout_reason is None
 
 
+def test_n_timeout_failed_polls_in_a_row_are_a_communication_timeout() -> None:
+    m = started(recover_after=None)
+    assert answered(m, 0.1, 1, frozenset({2, 6}))[0] == ShowSignal(1, shown(frozenset({2, 6})))
+    for i in range(2, 2 + N_TIMEOUT - 1):
+        effects = m.handle(PollFailed(i * 0.1 + 1.0, i, 0, "CommunicationTimeout", "lost"))
+        assert effects == [PollFailureSeen(i, "lost", i - 1)]
+    assert answered(m, 2.0, 7, frozenset({2, 6}))[0] == ShowSignal(7, shown(frozenset({2, 6}))), "an answer resets"
+    assert m.failed_in_a_row == 0
+    for i in range(8, 8 + N_TIMEOUT):
+        effects = m.handle(PollFailed(i * 0.1 + 1.0, i, 0, "SnmpError", "genErr"))
+    assert [type(e) for e in effects] == [PollFailureSeen, TimeoutEntered, HaltPolling]
+    assert effects[1].detail == f"{N_TIMEOUT} consecutive polls failed (last: SnmpError)"
+    assert m.mode is Mode.TIMEOUT and m.poll_epoch == 1
+    assert m.handle(PollFailed(3.0, 13, 0, "CommunicationTimeout", "lost")) == [], "sent before the halt"
+    assert (m.polls_answered, m.polls_failed, m.polls_late) == (2, 2 * N_TIMEOUT - 1, 0)
+
+
+def test_a_late_answer_is_counted_and_not_applied() -> None:
+    m = started()
+    answered(m, 0.3, 3, frozenset({2, 6}))
+    assert answered(m, 0.35, 2, frozenset({4, 8})) == [] and m.polls_late == 1 and m.newest_poll == 3
+
+
+def test_start_up_reads_without_answer_are_made_again_then_a_communication_timeout() -> None:
+    m = manager()
+    for attempt in range(1, N_TIMEOUT):
+        effects = m.handle(StartupLost(attempt * 1.0, "CommunicationTimeout: no answer"))
+        assert effects == [PollFailureSeen(0, "start-up read: CommunicationTimeout: no answer", attempt),
+                           RetryStartup()]
+        assert m.mode is Mode.STARTING and m.state is State.IDLE
+    effects = m.handle(StartupLost(N_TIMEOUT * 1.0, "CommunicationTimeout: no answer"))
+    assert [type(e) for e in effects] == [PollFailureSeen, ControllerUnreachable, TimeoutEntered, HaltPolling,
+                                          StartTimer, StartupDone]
+    assert m.mode is Mode.TIMEOUT and m.timeout_reason is TimeoutReason.COMMUNICATION
+    refused = manager(recover_after=None)
+    effects = refused.handle(StartupRefused(0.1, "the community can read but not write"))
+    assert effects == [Note("start-up: the community can read but not write"),
+                       TimeoutEntered(TimeoutReason.COMMUNICATION, "the community can read but not write", None),
+                       HaltPolling(), StartupDone()]
+
+
+def test_the_recovery_timer_recovers_after_recover_after_and_again_after_a_failed_recovery() -> None:
+    m = started()
+    effects = m.handle(StepTimed(0.0, STEP, 1.0))
+    for i in range(1, N_DRIFT):
+        effects = m.handle(StepTimed(i * STEP, STEP, 1.0))
+    timer = effects[-1]
+    assert timer.kind is TimerKind.RECOVER and timer.delay == RECOVER_AFTER
+    assert m.handle(TimerExpired(6.0, TimerKind.RECOVER, timer.token)) == [RecoveryStarted(), ReadController()]
+    effects = m.handle(ControllerUnreadable(6.1, "no answer"))
+    again = effects[-1]
+    assert m.mode is Mode.TIMEOUT and again.kind is TimerKind.RECOVER and again.token != timer.token
+    assert m.handle(TimerExpired(7.0, TimerKind.RECOVER, timer.token)) == [], "the first timer is spent"
+    m.handle(RecoveryRequested(8.0))  # recovered by hand meanwhile
+    m.handle(ControllerRead(8.1, frozenset({2, 6})))
+    m.handle(SetAnswered(8.2, Purpose.RECOVERY, None))
+    assert m.mode is Mode.IDLE
+    assert m.handle(TimerExpired(11.1, TimerKind.RECOVER, again.token)) == [] and m.mode is Mode.IDLE
+
+
+def test_the_read_back_waits_while_polls_fail_and_in_timeout() -> None:
+    m = started(recover_after=None)
+    assert m.handle(ReadbackDue(2.0)) == [ReadControls()]
+    m.handle(PollFailed(2.1, 1, 0, "CommunicationTimeout", "lost"))
+    assert m.handle(ReadbackDue(4.0)) == []
+    answered(m, 4.1, 2, frozenset({2, 6}))
+    assert m.handle(ReadbackDue(6.0)) == [ReadControls()]
+    for i in range(3, 3 + N_DRIFT):
+        m.handle(StepTimed(i, STEP, 1.0))
+    assert m.mode is Mode.TIMEOUT and m.handle(ReadbackDue(10.0)) == []
+
+
 def test_a_start_up_read_ending_after_a_drift_timeout_or_a_close_changes_no_state() -> None:
     """At the wall clock a large grid's steps can drift while its controllers still start: the start-up read
     then ends in TIMEOUT (or, after Ctrl-C, in CLOSED). What it read is kept; the recovery resumes from it."""
-    m = Manager(TAU_TRANS, sequence=CONFIG.sequence, n_drift=N_DRIFT, keepalive_period=10.0)
+    m = manager(recover_after=None, keepalive_period=10.0)
     for i in range(N_DRIFT):
         m.handle(StepTimed(i * STEP, STEP, 1.0))
     assert m.mode is Mode.TIMEOUT and m.timeout_reason is TimeoutReason.DRIFT
     effects = m.handle(Started(2.0, frozenset({4, 8}), 30))
     assert m.mode is Mode.TIMEOUT and m.position == CONFIG.sequence.index((4, 8))
     assert not any(isinstance(e, SendCall) for e in effects), "nothing is sent in TIMEOUT"
+    assert effects[-1] == StartupDone()
     assert m.handle(RecoveryRequested(3.0)) == [RecoveryStarted(), ReadController()]
     effects = m.handle(Started(3.1, frozenset({4, 8}), 30))
     assert m.mode is Mode.RECOVERING and not any(isinstance(e, SendCall) for e in effects)
-    closed = Manager(TAU_TRANS, sequence=CONFIG.sequence, n_drift=N_DRIFT, keepalive_period=10.0)
-    closed.handle(CloseRequested(0.5))
-    assert closed.handle(Started(1.0, frozenset({2, 6}), 30)) == [] and closed.mode is Mode.CLOSED
+    closed = manager(keepalive_period=10.0)
+    assert closed.handle(CloseRequested(0.5)) == [HaltPolling(), CloseDone()]
+    assert closed.handle(Started(1.0, frozenset({2, 6}), 30)) == [StartupDone()] and closed.mode is Mode.CLOSED
 
 
 def test_keepalive_is_gated_in_timeout_and_off_and_resumes_after_recovery() -> None:
-    m = started(backup=30)
+    m = started(backup=30, recover_after=None)
     assert m.keepalive_period == 10.0
     effects = m.handle(CommandRequested(0.0, 1, Command((3, 7)), frozenset({2, 6})))
     token = next(e.token for e in effects if isinstance(e, StartTimer) and e.kind is TimerKind.KEEPALIVE)
-    m.handle(SignalObserved(6.0, frozenset({3, 7}), 1))
+    answered(m, 6.0, 1, frozenset({3, 7}))
     effects = m.handle(TimerExpired(10.0, TimerKind.KEEPALIVE, token))
     assert effects[0] == SendCall(frozenset({3, 7}), Purpose.KEEPALIVE)
     token = effects[1].token
@@ -563,7 +814,9 @@ def test_keepalive_is_gated_in_timeout_and_off_and_resumes_after_recovery() -> N
     effects = m.handle(TimerExpired(20.0, TimerKind.KEEPALIVE, token))
     assert [type(e) for e in effects] == [StartTimer], "switched off: no SET, the timer runs on"
     m.handle(KeepaliveSwitched(21.0, True))
-    m.handle(FailureDetected(25.0, TimeoutReason.COMMUNICATION))
+    for i in range(2, 2 + N_TIMEOUT):
+        m.handle(PollFailed(25.0, i, 0, "CommunicationTimeout", "lost"))
+    assert m.mode is Mode.TIMEOUT
     assert m.handle(TimerExpired(30.0, TimerKind.KEEPALIVE, effects[0].token)) == [], "gated in TIMEOUT"
     m.handle(RecoveryRequested(31.0))
     effects = m.handle(ControllerRead(31.1, frozenset({3, 7})))
@@ -575,19 +828,31 @@ def test_close_clears_the_call_and_then_nothing_is_sent() -> None:
     m.handle(CommandRequested(0.0, 1, Command((3, 7)), frozenset({2, 6})))
     assert m.handle(CloseRequested(1.0)) == [HaltPolling(), SendCall(frozenset(), Purpose.CLEAR)]
     for ev in (CommandRequested(2.0, 2, Command((4, 8)), frozenset()), TimerExpired(10.0, TimerKind.KEEPALIVE, 1),
-               FailureDetected(11.0, TimeoutReason.COMMUNICATION), RecoveryRequested(12.0)):
+               PollFailed(11.0, 9, 0, "CommunicationTimeout", "lost"), RecoveryRequested(12.0)):
         assert not any(isinstance(e, SendCall) for e in m.handle(ev))
+    assert m.handle(SetAnswered(12.5, Purpose.CLEAR, None)) == [CloseDone()]
     assert m.mode is Mode.CLOSED and m.state is None
 
 
-def test_every_state_names_its_paper_state_and_the_table_covers_every_event() -> None:
-    from hils.manager import _TRANSITIONS, Ev
+def test_every_state_names_its_paper_state_and_the_graph_reads_off_the_table() -> None:
+    from hils.manager import _TRANSITIONS
 
     assert {mode.paper for mode in Mode} == {*State, None}
-    plain = {Ev.STARTED, Ev.COMMAND, Ev.KEEP, Ev.VERIFIED, Ev.VERIFIED_DURATION, Ev.TRANSITION_EXPIRED,
-             Ev.DURATION_ELAPSED, Ev.COMMAND_SET_LOST, Ev.CONTROLLER_READ, Ev.CONTROLLER_UNREADABLE,
-             Ev.RECOVERY_SET_ANSWERED, Ev.RECOVERY_SET_FAILED, Ev.CLEAR_LOST}
-    for mode in Mode:
-        for ev in Ev:
-            if ev not in plain:
-                assert (mode, ev) in _TRANSITIONS, f"{ev.name} can reach {mode.name} but has no entry"
+    assert {ev for _s, ev in _TRANSITIONS} == set(Ev), "every kind of event has a row somewhere"
+    edges = graph()
+    reachable, frontier = {Mode.STARTING}, [Mode.STARTING]
+    while frontier:
+        here = frontier.pop()
+        for a, _ev, b in edges:
+            if a is here and b not in reachable:
+                reachable.add(b)
+                frontier.append(b)
+    assert reachable == set(Mode), "every state is reached from the start-up"
+    assert not any(a is Mode.CLOSED for a, _ev, _b in edges), "nothing leaves CLOSED"
+    assert {b for a, _ev, b in edges if a is Mode.TIMEOUT} == {Mode.RECOVERING, Mode.CLOSED}
+    assert {(a, b) for a, ev, b in edges if a is Mode.RECOVERING and b is Mode.IDLE} == {
+        (Mode.RECOVERING, Mode.IDLE)} and [ev for a, ev, b in edges if b is Mode.IDLE and a is Mode.RECOVERING] == [
+        Ev.RECOVERY_SET_ANSWERED], "TIMEOUT is left only through an answered recovery SET"
+    dot = subprocess.run([sys.executable, "-m", "hils.manager"], capture_output=True, text=True, check=True).stdout
+    assert dot.startswith("digraph manager {") and "TIMEOUT -> RECOVERING" in dot
+    assert dot.count(" -> ") == len(edges)

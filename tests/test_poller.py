@@ -1,4 +1,5 @@
-"""The signal-state poller and cache, in virtual time against the in-process emulator."""
+"""The poll grid and the signal cache, through the middleware (whose manager judges every poll's fate), in
+virtual time against the in-process emulator."""
 
 from __future__ import annotations
 
@@ -15,25 +16,33 @@ from hils.events import EventLog, Kind
 from hils.manager import State
 from hils.middleware import Middleware
 from hils.ntcip import ErrorStatus, Oid, SignalState, SnmpError, signal_oids
-from hils.poller import Poller, SignalCache, Snapshot
+from hils.poller import SignalCache, Snapshot
 from hils.transport import LocalTransport
+
+SIGNAL = tuple(signal_oids(1))
 
 
 class Surface:
-    """The emulator's MIB view, counting GETs and failing them on demand."""
+    """The emulator's MIB view, counting GETs and failing signal polls on demand."""
 
     def __init__(self, env: simpy.Environment, mib: MibView) -> None:
         self.env = env
         self.mib = mib
         self.gets: list[tuple[float, tuple[Oid, ...]]] = []
         self.failing = False
-        self.plan: list[bool] = []  # per GET: True = fail; used up before ``failing`` applies
+        self.plan: list[bool] = []  # per signal GET: True = fail; used up before ``failing`` applies
+
+    @property
+    def polls(self) -> list[float]:
+        """When each GET of the signal state reached the controller (the start-up read first)."""
+        return [t for t, oids in self.gets if oids == SIGNAL]
 
     def get_many(self, oids: Sequence[Oid]) -> tuple[int | bytes, ...]:
         self.gets.append((self.env.now, tuple(oids)))
-        fail = self.plan.pop(0) if self.plan else self.failing
-        if fail:
-            raise SnmpError(ErrorStatus.GEN_ERR, 1, "injected by the test")
+        if tuple(oids) == SIGNAL:
+            fail = self.plan.pop(0) if self.plan else self.failing
+            if fail:
+                raise SnmpError(ErrorStatus.GEN_ERR, 1, "injected by the test")
         return self.mib.get_many(oids)
 
     def set_many(self, varbinds: Sequence[tuple[Oid, int]]) -> None:
@@ -53,17 +62,10 @@ class Rig:
         self.env.process(self.controller.process(self.env))
         self.log = EventLog()
         self.log.bind(lambda: self.env.now)
-        self.failures: list[tuple[float, str]] = []
 
-    def poller(self, rate_hz: float = 10.0, n_timeout: int = 5) -> Poller:
-        cache = SignalCache()
-        poller = Poller(self.env, self.transport, cache, self.log, groups=self.config.groups, rate_hz=rate_hz,
-                        n_timeout=n_timeout, on_failure=lambda why: self.failures.append((self.env.now, why)))
-        self.env.process(poller.run())
-        return poller
-
-    def middleware(self) -> Middleware:
-        mw = Middleware(self.env, self.transport, self.config, "selection", self.log)
+    def middleware(self, rate_hz: float = 10.0, n_timeout: int = 5) -> Middleware:
+        config = self.config.with_middleware(poll_hz=rate_hz, n_timeout=n_timeout)
+        mw = Middleware(self.env, self.transport, config, "selection", self.log)
         mw.start()
         self.env.run(until=mw.ready)
         return mw
@@ -72,28 +74,29 @@ class Rig:
 @pytest.mark.parametrize("rate_hz", [10, 50, 100])
 def test_poll_rate_and_one_get_of_reds_yellows_greens_per_poll(paper_config, rate_hz: int) -> None:
     rig = Rig(paper_config)
-    poller = rig.poller(rate_hz)
-    rig.env.run(until=10.0)
-    expected = 10 * rate_hz
-    assert abs(poller.polls - expected) <= 1
-    assert len(rig.surface.gets) == poller.polls
-    assert all(oids == signal_oids(1) for _, oids in rig.surface.gets)
-    assert len(signal_oids(1)) == 3
-    assert poller.counts["answered"] == poller.polls and poller.elided == 0  # no change feed: every poll is sent
+    mw = rig.middleware(rate_hz)
+    start = rig.env.now
+    rig.env.run(until=start + 10.0)
+    counts = mw.poll_counts
+    polls = rig.surface.polls[1:]  # after the start-up read
+    assert abs(counts["polls"] - 10 * rate_hz) <= 1
+    assert len(polls) == counts["polls"]
+    assert len(SIGNAL) == 3
+    assert counts["answered"] == counts["polls"] and counts["elided"] == 0  # no change feed: every poll is sent
     assert [r["greens"] for r in rig.log.of(Kind.POLL)] == [(2, 6)]  # one record: the state never changed
     # Polls sit on a fixed grid, so the rate does not drift with the response time.
-    for k, (t, _) in enumerate(rig.surface.gets):
-        assert math.isclose(t, k / rate_hz, abs_tol=1e-6)
+    for k, t in enumerate(polls):
+        assert math.isclose(t, start + k / rate_hz, abs_tol=1e-6)
 
 
 def test_poll_reads_what_the_controller_shows(paper_config) -> None:
     rig = Rig(paper_config)
-    poller = rig.poller()
+    mw = rig.middleware()
     rig.env.run(until=2.0)
-    snap = poller.cache.snapshot
+    snap = mw.cache.snapshot
     assert snap.state == SignalState(rig.controller.reds, rig.controller.yellows, rig.controller.greens)
     assert snap.state.greens == frozenset({2, 6})
-    assert snap.seq == poller.polls
+    assert snap.seq == mw.poller.polls
     assert snap.t <= rig.env.now
 
 
@@ -115,32 +118,36 @@ def test_cache_notifies_on_change_only_with_time_and_sequence() -> None:
     assert cache.snapshot == Snapshot(b, 0.4, 4)
 
 
-def test_n_timeout_lost_polls_report_one_failure(paper_config) -> None:
-    rig = Rig(paper_config, loss=1.0)
-    poller = rig.poller(n_timeout=5)
+def test_n_timeout_lost_polls_are_one_communication_timeout(paper_config) -> None:
+    rig = Rig(paper_config)
+    mw = rig.middleware()
+    rig.env.run(until=2.0)
+    lost_from = rig.env.now
+    rig.transport.loss = 1.0
     rig.env.run(until=20.0)
     # Each lost GET fails tau_udp (1 s) after it went out; polls keep their grid meanwhile, so the fifth
-    # one, sent 4 periods after the first, reports, and only that one.
-    assert len(rig.failures) == 1
-    assert math.isclose(rig.failures[0][0], 4 * 0.1 + paper_config.middleware.tau_udp)
-    assert "5 consecutive polls failed" in rig.failures[0][1]
-    assert poller.consecutive_failures >= 19
+    # one, sent 4 periods after the first, is the failure; the polls already on their way are let go.
+    (entered,) = rig.log.of(Kind.TIMEOUT_ENTERED)
+    first_lost = rig.surface.polls[-1] + 0.1
+    assert first_lost >= lost_from
+    assert math.isclose(entered["t"], first_lost + 4 * 0.1 + paper_config.middleware.tau_udp)
+    assert entered["reason"] == "communication" and "5 consecutive polls failed" in entered["detail"]
     failed = rig.log.of(Kind.POLL_FAILED)
-    assert [r["consecutive"] for r in failed[:6]] == [1, 2, 3, 4, 5, 6]
+    assert [r["consecutive"] for r in failed] == [1, 2, 3, 4, 5]
     assert "CommunicationTimeout" in failed[0]["error"]
+    assert mw.state is State.TIMEOUT and mw.poller.halted
 
 
 def test_a_success_in_between_resets_the_failure_count(paper_config) -> None:
     rig = Rig(paper_config)
+    mw = rig.middleware()
     rig.surface.plan = [True] * 4 + [False] + [True] * 4 + [False]
-    poller = rig.poller(n_timeout=5)
     rig.env.run(until=2.0)
-    assert rig.failures == []
-    assert poller.consecutive_failures == 0
+    assert mw.state is State.IDLE and mw.manager.failed_in_a_row == 0
     assert [r["consecutive"] for r in rig.log.of(Kind.POLL_FAILED)] == [1, 2, 3, 4, 1, 2, 3, 4]
     rig.surface.plan = [True] * 5
     rig.env.run(until=3.0)
-    assert len(rig.failures) == 1
+    assert mw.state is State.TIMEOUT and len(rig.log.of(Kind.TIMEOUT_ENTERED)) == 1
 
 
 def test_failures_put_the_manager_in_timeout_and_polling_halts(paper_config) -> None:
@@ -190,32 +197,37 @@ def test_transition_is_verified_on_the_first_poll_that_shows_it(paper_config) ->
 
 def test_lost_polls_do_not_hold_the_next_back(paper_config) -> None:
     rig = Rig(paper_config, loss=0.2)
-    poller = rig.poller(n_timeout=50)  # count failures without reporting one
+    mw = rig.middleware(n_timeout=50)  # count failures without a TIMEOUT
     answered: list[Snapshot] = []
-    poller.cache.subscribe(lambda snap, _changed: answered.append(snap), every_poll=True)
-    rig.env.run(until=60.0)
+    mw.cache.subscribe(lambda snap, _changed: answered.append(snap), every_poll=True)
+    start = rig.env.now
+    rig.env.run(until=start + 60.0)
+    counts = mw.poll_counts
     # Every slot of the grid got its poll, lost ones included (a lost GET does not wait tau_udp).
-    assert poller.polls == 600 and poller.elided == 0
-    assert len(answered) == poller.counts["answered"]
+    assert counts["polls"] == 600 and counts["elided"] == 0
+    assert len(answered) == counts["answered"]
     # (lost polls of the last second have not timed out yet)
-    assert 0.7 * 600 < len(answered) < 0.9 * 600 and 590 <= len(answered) + poller.failed <= 600
-    assert all(math.isclose(snap.t, (snap.seq - 1) / 10 + 0.002, abs_tol=1e-3) for snap in answered)
-    assert not rig.failures
+    assert 0.7 * 600 < len(answered) < 0.9 * 600 and 590 <= len(answered) + counts["failed"] <= 600
+    assert all(math.isclose(snap.t, start + (snap.seq - 1) / 10 + 0.002, abs_tol=1e-3) for snap in answered)
+    assert mw.state is State.IDLE
 
 
 class Reordering:
-    """A transport whose GETs answer after the latency given per request (in order of the requests)."""
+    """A transport whose signal GETs answer after the latency given per request (in order of the requests, the
+    start-up read first); every other request answers after 2 ms."""
 
     def __init__(self, env: simpy.Environment, mib: MibView, latencies: list[float]) -> None:
         self.env, self.mib, self.latencies = env, mib, latencies
         self.change_feed = None
 
     def get(self, oids: Sequence[Oid]) -> simpy.Event:
-        answer = self.env.event()
         values = self.mib.get_many(oids)
-        self.env.timeout(self.latencies.pop(0) if self.latencies else 0.002).callbacks.append(
-            lambda _ev: answer.succeed(values))
-        return answer
+        late = self.latencies.pop(0) if tuple(oids) == SIGNAL and self.latencies else 0.002
+        return self.env.timeout(late, values)
+
+    def set(self, varbinds: Sequence[tuple[Oid, int]]) -> simpy.Event:
+        self.mib.set_many(varbinds)
+        return self.env.timeout(0.002)
 
 
 def test_an_answer_older_than_the_newest_applied_is_discarded(paper_config) -> None:
@@ -225,12 +237,11 @@ def test_an_answer_older_than_the_newest_applied_is_discarded(paper_config) -> N
     log = EventLog()
     log.bind(lambda: env.now)
     # Poll 2 answers after 0.25 s, after polls 3 and 4 have answered.
-    transport = Reordering(env, MibView(controller), [0.002, 0.25])
-    poller = Poller(env, transport, SignalCache(), log, groups=1, rate_hz=10.0, n_timeout=5,
-                    on_failure=lambda why: None)
+    transport = Reordering(env, MibView(controller), [0.002, 0.002, 0.25])
+    mw = Middleware(env, transport, paper_config, "selection", log)
     applied: list[int] = []
-    poller.cache.subscribe(lambda snap, _changed: applied.append(snap.seq), every_poll=True)
-    env.process(poller.run())
+    mw.cache.subscribe(lambda snap, _changed: applied.append(snap.seq), every_poll=True)
+    mw.start()
     env.run(until=1.0)
-    assert 2 not in applied and applied == sorted(applied) and applied[:3] == [1, 3, 4]
-    assert poller.late == 1 and poller.cache.snapshot.seq == applied[-1]
+    assert 2 not in applied and applied == sorted(applied) and applied[:4] == [0, 1, 3, 4]
+    assert mw.poll_counts["late"] == 1 and mw.cache.snapshot.seq == applied[-1]

@@ -318,9 +318,10 @@ def test_a_stretch_is_the_steps_the_grid_starts_before_the_next_event(start, k, 
     """The steps run back to back are counted as the stepping loop counted them, one float comparison each
     (an event on a step's own start time stops the stretch before that step)."""
     from hils.testbed import _steps_before
+    from hils.timegrid import Grid
 
     until = start + (k + round(ahead / step)) * step if on_grid else start + k * step + ahead
     counted = 0
     while until > start + (k + counted) * step:
         counted += 1
-    assert _steps_before(until, start, k, step) == counted
+    assert _steps_before(until, Grid(start, step), k) == counted
