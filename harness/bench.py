@@ -165,7 +165,8 @@ def _latency_command(args: argparse.Namespace) -> int:
 
 
 class _Recording:
-    """A SUMO simulation that notes, step by step, each change of the light's state string it was given.
+    """A SUMO simulation of one intersection that notes, step by step, each change of the light's state string it
+    was given.
 
     Only changes are noted (a few hundred per hour), so the recording costs the measured run nothing
     on the steps where the controller's indications stay as they are."""
@@ -174,10 +175,7 @@ class _Recording:
         self.sim = sim
         self.steps = 0
         self.changes: list[tuple[int, str]] = []
-
-    def apply(self, state: Any) -> None:
-        if self.sim.apply(state):
-            self.changes.append((self.steps, self.sim.indications()))
+        self.lights = {name: _RecordedLight(light, self) for name, light in sim.lights.items()}
 
     def step(self) -> Any:
         self.steps += 1
@@ -187,11 +185,22 @@ class _Recording:
         self.steps += steps
         self.sim.advance(steps)
 
+
+class _RecordedLight:
+    """A light of a :class:`_Recording`: what it is given to show goes to the recording when it changes SUMO's."""
+
+    def __init__(self, light: Any, recording: _Recording) -> None:
+        self.light, self.recording = light, recording
+
+    def apply(self, state: Any) -> None:
+        if self.light.apply(state):
+            self.recording.changes.append((self.recording.steps, self.light.indications()))
+
     def traffic_state(self) -> Any:
-        return self.sim.traffic_state()
+        return self.light.traffic_state()
 
     def queues(self) -> Any:
-        return self.sim.queues()
+        return self.light.queues()
 
 
 def _replay(cfg: Any, seed: int, duration: float, changes: list[tuple[int, str]]) -> tuple[float, Any]:
@@ -205,7 +214,8 @@ def _replay(cfg: Any, seed: int, duration: float, changes: list[tuple[int, str]]
     sim = SumoSimulation(cfg, seed=seed, end=duration)
     with sim:
         steps = round(duration / sim.step_length)
-        show, tls, length = libsumo.trafficlight.setRedYellowGreenState, sim.tls_id, sim.step_length
+        (tls,) = sim.lights
+        show, length = libsumo.trafficlight.setRedYellowGreenState, sim.step_length
         shown = [(k, text) for k, text in changes if k < steps]
         begins = [0, *(k for k, _ in shown)]
         ends = [*begins[1:], steps]

@@ -67,11 +67,13 @@ def wall_clock_run(count: int, duration: float) -> dict[str, Any]:
             rss, serve_rss = resident_mb(os.getpid()), resident_mb(served.proc.pid)
             lateness = tb.lateness
             polls: Counter[str] = Counter()
-            for j in tb.junctions.values():
-                polls.update(j.middleware.poll_counts)
-            timeouts = Counter(r["reason"] for r in tb.tally.records if r["kind"] == Kind.TIMEOUT_ENTERED)
-            verified = tb.tally.kinds[Kind.TRANSITION_VERIFIED]
-            drifted = tb.tally.kinds[Kind.DRIFT]
+            timeouts: Counter[str] = Counter()
+            kinds: Counter[str] = Counter()
+            for i in tb.intersections.values():
+                polls.update(i.middleware.poll_counts)
+                timeouts.update(r["reason"] for r in i.tally.records if r["kind"] == Kind.TIMEOUT_ENTERED)
+                kinds.update(i.tally.kinds)
+            verified, drifted = kinds[Kind.TRANSITION_VERIFIED], kinds[Kind.DRIFT]
             tb.close()
         finally:
             served.stop()

@@ -26,7 +26,7 @@ the path: ``middleware -> FaultyTransport -> LocalTransport -> [StuckSurface]
 built (:meth:`Fault.on_target`, where transport faults register with the
 :class:`FaultyTransport`) and about the run before it starts
 (:meth:`Fault.on_run`, where agent and keepalive faults wrap or drive the
-parts of the junction they are placed on, and step-cost faults the run's one
+parts of the intersection they are placed on, and step-cost faults the run's one
 simulation). In a run of several controllers each controller has its own
 target with the faults placed on it, so a fault on one controller's link
 leaves the others alone. :class:`IndicationMonitor` samples the controller every
@@ -50,7 +50,7 @@ from emulator.mib import MibView
 from hils.actions import ActionType
 from hils.agents import Agent, Observation
 from hils.config import IntersectionConfig
-from hils.junction import Junction
+from hils.intersection import Intersection
 from hils.manager import State
 from hils.middleware import Middleware
 from hils.ntcip import CONTROL_TABLE, ControlColumn, ErrorStatus, Oid, SnmpError, UnitControlStatus, UnitFlashStatus
@@ -150,10 +150,10 @@ class Fault:
         """The object surface the transport should reach; unchanged unless the fault sits there."""
         return surface
 
-    def on_run(self, run: Testbed, junction: Junction | None) -> None:
+    def on_run(self, run: Testbed, intersection: Intersection | None) -> None:
         """Called before the run starts (agent, step-cost and middleware faults install here).
 
-        ``junction``: the controller the fault is placed on (its agent and middleware); None for a fault
+        ``intersection``: the controller the fault is placed on (its agent and middleware); None for a fault
         of the whole run (slow simulation steps) in a run of several controllers."""
 
     def describe(self) -> str:
@@ -493,7 +493,7 @@ class SlowSteps(Fault):
         self.gap = gap
         self._offset = 0  # steps seen since the window opened
 
-    def on_run(self, run: Testbed, junction: Junction | None) -> None:
+    def on_run(self, run: Testbed, intersection: Intersection | None) -> None:
         run.step_cost = self.wrap(run.step_cost, lambda: run.env.now)
 
     def wrap(self, inner: StepCost, clock: Callable[[], float]) -> StepCost:
@@ -581,17 +581,17 @@ class BadActions(Fault):
         super().__init__(name, window=window, count=count)
         self.action = action
 
-    def on_run(self, run: Testbed, junction: Junction) -> None:
-        value = bad_value(self.action, run.action_type, junction.config)
+    def on_run(self, run: Testbed, intersection: Intersection) -> None:
+        value = bad_value(self.action, run.action_type, intersection.config)
 
         def act(inner: Agent, observation: Observation) -> Any:
-            now = junction.env.now
+            now = intersection.env.now
             if self.active(now):
                 self.fire(now)
                 return value
             return inner.act(observation)
 
-        junction.agent = WrappedAgent(junction.agent, act)
+        intersection.agent = WrappedAgent(intersection.agent, act)
 
     def describe(self) -> str:
         return f"{self.action} actions {self.scope()}"
@@ -610,8 +610,8 @@ class ActionBurst(Fault):
         super().__init__(name, window=window, count=count)
         self.size = size
 
-    def on_run(self, run: Testbed, junction: Junction) -> None:
-        env, mw = junction.env, junction.middleware
+    def on_run(self, run: Testbed, intersection: Intersection) -> None:
+        env, mw = intersection.env, intersection.middleware
 
         def burst(inner: Agent) -> Generator[simpy.Event, Any, None]:
             # Started from act(), this process runs once the agent loop has submitted the action.
@@ -621,7 +621,7 @@ class ActionBurst(Fault):
                 if mw.state is not State.ON_HOLD or not self.active(now):
                     return
                 self.fire(now)
-                mw.submit(inner.act(junction.observe()))
+                mw.submit(inner.act(intersection.observe()))
 
         def act(inner: Agent, observation: Observation) -> Any:
             value = inner.act(observation)
@@ -629,7 +629,7 @@ class ActionBurst(Fault):
                 env.process(burst(inner))
             return value
 
-        junction.agent = WrappedAgent(junction.agent, act)
+        intersection.agent = WrappedAgent(intersection.agent, act)
 
     def describe(self) -> str:
         return f"{self.size} extra actions after each action {self.scope()}"
@@ -644,17 +644,17 @@ class ActionsDuringTimeout(Fault):
         super().__init__(name, window=window, count=count)
         self.period = 1.0 / rate_hz
 
-    def on_run(self, run: Testbed, junction: Junction) -> None:
-        junction.env.process(self._act(run, junction))
+    def on_run(self, run: Testbed, intersection: Intersection) -> None:
+        intersection.env.process(self._act(run, intersection))
 
-    def _act(self, run: Testbed, junction: Junction) -> Generator[simpy.Event, Any, None]:
-        env, mw = junction.env, junction.middleware
+    def _act(self, run: Testbed, intersection: Intersection) -> Generator[simpy.Event, Any, None]:
+        env, mw = intersection.env, intersection.middleware
         grid, k = Grid(self.window.start, self.period), 0
         yield env.timeout(grid.delay(k, env.now))
         while env.now < self.window.end:
             if mw.timeout_flag and self.active(env.now) and not run.ended:
                 self.fire(env.now)
-                mw.submit(junction.agent.act(junction.observe()))
+                mw.submit(intersection.agent.act(intersection.observe()))
             k += 1
             yield env.timeout(grid.delay(k, env.now))
 
@@ -674,8 +674,8 @@ class KeepaliveSuppressed(Fault):
 
     kind = "keepalive_off"
 
-    def on_run(self, run: Testbed, junction: Junction) -> None:
-        junction.env.process(self._suppress(run, junction.middleware))
+    def on_run(self, run: Testbed, intersection: Intersection) -> None:
+        intersection.env.process(self._suppress(run, intersection.middleware))
 
     def _suppress(self, run: Testbed, mw: Middleware) -> Generator[simpy.Event, Any, None]:
         env = run.env

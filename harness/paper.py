@@ -85,7 +85,7 @@ def trajectory_run(cfg: IntersectionConfig, seed: int) -> tuple[list[dict[str, A
     then the paper's three commands. Returns the records and the time of Command 1 (the paper's t = 0)."""
     spec = RunSpec(cfg, ActionType.SWITCH, duration=60.0, seed=seed, recover_after=None)
 
-    def configure(run, target):
+    def configure(run):
         run.agent = ScriptedSwitchAgent([1, 0, 1, 0, 1])
 
     records = run_spec(spec, configure=configure).records

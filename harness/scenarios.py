@@ -797,15 +797,15 @@ def run_scenario(scenario: Scenario, *, log_path: Path | None = None) -> Scenari
             return target
         return make
 
-    def configure(run: Testbed, _target: FaultTarget | None) -> None:
+    def configure(run: Testbed) -> None:
         for spec, fault in placed:
-            fault.on_run(run, None if spec.intersection is None else run.junctions[spec.intersection])
+            fault.on_run(run, None if spec.intersection is None else run.intersections[spec.intersection])
 
     with Testbed(None if scenario.network else scenario.config, scenario=scenario.network,
                  action_type=scenario.action_type, target={tls: target_factory(tls) for tls in scenario.intersections},
                  seed=scenario.seed, agent=scenario.agent, duration=scenario.duration, log_path=log_path,
                  recover_after=scenario.recover_after, on_reset=configure) as tb:
-        tb.reset()
+        tb.reset_all()
         tb.run()
         records = tb.records
     return evaluate(scenario, records, faults, monitors, wall_s=time.perf_counter() - t0)

@@ -22,7 +22,7 @@ from hils import config as config_mod
 from hils import plots, summary
 from hils.actions import ActionType
 from hils.errors import UserError
-from hils.junction import Junction
+from hils.intersection import Intersection
 from hils.scenario import SCENARIOS, Scenario, load_scenario, load_targets
 from hils.status import StatusLine
 from hils.sumo_net import scenario_config
@@ -131,7 +131,7 @@ def run_command(args: argparse.Namespace) -> int:
     error: BaseException | None = None
     with _terminate_as_interrupt(), tb, _served(dashboard):
         try:
-            tb.reset()
+            tb.reset_all()
             if tb.mode == VIRTUAL and not args.no_progress:
                 with _progress(spec) as bar:
                     tb.run(progress=lambda t: bar.update(t - bar.n))
@@ -149,60 +149,56 @@ def run_command(args: argparse.Namespace) -> int:
             if status is not None:
                 status.close()
     outputs = [log_path.name if log_path.parent == out else str(log_path), "summary.json"]
-    if tb.several:
-        s = summary.summarize_network(tb.tally, {tls: (j.tally, j.config) for tls, j in tb.junctions.items()},
-                                      traffic=tb.traffic, wall_s=tb.wall_s)
-        outputs += _network_plots(tb, s, out, window)
-    else:
-        s = summary.summarize(tb.tally, cfg, traffic=tb.traffic, wall_s=tb.wall_s)
-        outputs += _plots(tb.junction, s, out, window)
+    s = summary.summarize({i.label: (i.tally, i.config) for i in tb.intersections.values()}, traffic=tb.traffic,
+                          wall_s=tb.wall_s)
+    outputs += _plots(tb, s, out, window)
     summary.write(s, out / "summary.json")
-    print(summary.render_network(s) if tb.several else summary.render(s))
+    print(summary.render(s))
     for warning in summary.warnings(s):
         print(warning)
     print(f"Outputs in {out}/: {', '.join(outputs)}")
     return _ending(tb.end_reason, error)
 
 
-def _plots(junction: Junction, s: dict[str, Any], folder: Path, window: tuple[float, float], *,
-           prefix: str = "", name: str | None = None) -> list[str]:
-    """One controller's signal timeline and queue plot in ``folder`` (``prefix``: what the network's summary puts
-    before its approaches' names, as :attr:`hils.sumo.Light.prefix`; ``name``: the intersection's, default its
-    config's); returns the names of the files written."""
-    written = []
-    name = name or junction.config.name
-    if junction.tally.records:
-        plots.signal_timeline(junction.tally.records, junction.config, folder / "signal_timeline.svg",
-                              start=window[0], end=window[1], label=name)
-        written.append("signal_timeline.svg")
-    if junction.traffic_samples:
-        approaches = s["traffic"]["approaches"] if s.get("traffic") else None
-        spillback = None if approaches is None else {
-            a: [60.0 * m for m in approaches[prefix + a]["spillback_minutes"]]
-            for a in junction.traffic_samples[0][1] if prefix + a in approaches}
-        plots.queues(junction.traffic_samples, folder / "queues.svg", title=f"Queues per approach, {name}",
-                     spillback=spillback)
-        written.append("queues.svg")
-    return written
-
-
-def _network_plots(tb: Testbed, s: dict[str, Any], out: Path, window: tuple[float, float]) -> list[str]:
-    """Per traffic light, a folder with its signal timeline and queues; and the network's queues, one line per
-    light (the queues of its approaches summed)."""
-    per_light: set[str] = set()
-    for tls, j in tb.junctions.items():
-        folder = out / tls
-        folder.mkdir(exist_ok=True)
-        per_light.update(_plots(j, s, folder, window, name=f"{tls} ({j.config.name})",
-                                prefix=j.view.prefix if j.view is not None else ""))
-    lights = list(tb.junctions)
-    written = [f"{lights[0]}/ .. {lights[-1]}/ ({', '.join(sorted(per_light, reverse=True))})"] if per_light else []
-    samples = [j.traffic_samples for j in tb.junctions.values()]
+def _plots(tb: Testbed, s: dict[str, Any], out: Path, window: tuple[float, float]) -> list[str]:
+    """Each intersection's signal timeline and queue plot, in the run folder (a run of one) or in a folder of its
+    own named by its label; for several, the network's queues too (one line per intersection, the queues of its
+    approaches summed). Returns what was written, as the console lists it."""
+    written: list[str] = []
+    for i in tb.intersections.values():
+        written += [name for name in _intersection_plots(i, s, out / i.label if i.label else out, window)
+                    if name not in written]
+    labels = [i.label for i in tb.intersections.values() if i.label]
+    if not labels:
+        return written
+    shown = [f"{labels[0]}/ .. {labels[-1]}/ ({', '.join(sorted(written, reverse=True))})"] if written else []
+    samples = [i.traffic_samples for i in tb.intersections.values()]
     if all(samples):
-        network = [(at[0][0], {tls: sum(q.values()) for tls, (_, q) in zip(tb.junctions, at, strict=True)})
+        network = [(at[0][0], {label: sum(q.values()) for label, (_, q) in zip(labels, at, strict=True)})
                    for at in zip(*samples, strict=False)]
         plots.queues(network, out / "queues.svg", title=f"Queues per intersection (approaches summed), "
                                                         f"{tb.scenario.name}", legend="intersection")
+        shown.append("queues.svg")
+    return shown
+
+
+def _intersection_plots(i: Intersection, s: dict[str, Any], folder: Path, window: tuple[float, float]) -> list[str]:
+    """One intersection's signal timeline and queue plot in ``folder``; returns the names of the files written."""
+    folder.mkdir(exist_ok=True)
+    written = []
+    name = f"{i.label} ({i.config.name})" if i.label else i.config.name
+    if i.tally.records:
+        plots.signal_timeline(i.tally.records, i.config, folder / "signal_timeline.svg",
+                              start=window[0], end=window[1], label=name)
+        written.append("signal_timeline.svg")
+    if i.traffic_samples:
+        approaches = s["traffic"]["approaches"] if s.get("traffic") else None
+        prefix = i.signals.prefix if i.signals is not None else ""  # how the summary names its approaches
+        spillback = None if approaches is None else {
+            a: [60.0 * m for m in approaches[prefix + a]["spillback_minutes"]]
+            for a in i.traffic_samples[0][1] if prefix + a in approaches}
+        plots.queues(i.traffic_samples, folder / "queues.svg", title=f"Queues per approach, {name}",
+                     spillback=spillback)
         written.append("queues.svg")
     return written
 
@@ -261,9 +257,9 @@ def _hooks(*hooks: Any) -> Any:
     if not given:
         return None
 
-    def on_reset(testbed: Testbed, target: Any) -> None:
+    def on_reset(testbed: Testbed) -> None:
         for hook in given:
-            hook(testbed, target)
+            hook(testbed)
 
     return on_reset
 

@@ -11,13 +11,14 @@ environment's driver and the transport differ.
 from __future__ import annotations
 
 import logging
+import time
 from collections.abc import Generator
 from dataclasses import dataclass
 from typing import Any
 
 import simpy
 
-from hils.actions import ActionConverter, ActionError, ActionType
+from hils.actions import ActionConverter, ActionError, ActionType, Command
 from hils.config import IntersectionConfig, Pair
 from hils.events import EventLog, Kind
 from hils.manager import (
@@ -91,6 +92,16 @@ log = logging.getLogger(__name__)
 
 #: Seconds between read-backs of the control objects: a change by someone else is noticed within this.
 READBACK_PERIOD = 2.0
+
+
+@dataclass(frozen=True, slots=True)
+class Received:
+    """An action value as it arrived (``wall_ns``: the monotonic clock then) and what converting it gave."""
+
+    value: Any
+    wall_ns: int
+    command: Command | None
+    error: ActionError | None = None  # refused by the converter: nothing will be sent
 
 
 @dataclass(frozen=True, slots=True)
@@ -187,23 +198,29 @@ class Middleware:
         (the controllers of a corridor start apart, so that their polls do not all go out at one instant)."""
         return self.env.process(self._startup(after))
 
-    def check(self, value: Any) -> None:
-        """Raise the :class:`hils.actions.ActionError` that :meth:`submit` would refuse ``value`` with, logging
-        and sending nothing (a run of several controllers checks every action before it submits any)."""
-        self.converter.convert(value, self.manager.position)
+    def receive(self, value: Any) -> Received:
+        """An agent's action value as it arrives, converted (logging and sending nothing yet): a run converts
+        every action of a step before it submits any, so that a refused one leaves the others unsent."""
+        received_ns = time.monotonic_ns()
+        try:
+            return Received(value, received_ns, self.converter.convert(value, self.manager.position))
+        except ActionError as exc:
+            return Received(value, received_ns, None, exc)
 
-    def submit(self, value: Any) -> Submission:
-        """An agent's action value, converted and handed to the manager."""
+    def submit(self, action: Any) -> Submission:
+        """An agent's action (a value, or what :meth:`receive` made of one) logged and handed to the manager."""
+        received = action if isinstance(action, Received) else self.receive(action)
         self._actions += 1
         action_id = self._actions
+        # Stamped when it arrived: the internal latency counts its conversion.
         self.log.emit(Kind.ACTION_RECEIVED, action_id=action_id, action_type=self.converter.action_type.value,
-                      value=_plain(value))
-        try:
-            command = self.converter.convert(value, self.manager.position)
-        except ActionError as exc:
+                      value=_plain(received.value), wall_ns=received.wall_ns)
+        if received.error is not None:
+            exc = received.error
             self.log.emit(Kind.ACTION_REFUSED, action_id=action_id, error=type(exc).__name__, reason=exc.reason,
                           message=str(exc))
             return Submission(action_id, error=exc)
+        command = received.command
         self.log.emit(Kind.ACTION_CONVERTED, action_id=action_id, command=command.phases, green=command.green,
                       keep=command.keep)
         shown = self.cache.state.greens if self.cache.state is not None else frozenset()

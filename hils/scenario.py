@@ -20,7 +20,7 @@ the middleware or SUMO; :func:`hils.sumo_net.check_scenario` checks a scenario a
 from __future__ import annotations
 
 import tomllib
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -48,6 +48,13 @@ class Scenario:
     @property
     def tls_ids(self) -> tuple[str, ...]:
         return tuple(self.intersections)
+
+
+def labels(names: Sequence[str]) -> dict[str, str | None]:
+    """How the outputs of a run of these intersections name each one: by its name (every record's
+    ``intersection``, ``J2 north`` in a summary, ``J2:`` in a message), or, in a run of one, not at all: it
+    writes what the single-controller run always wrote."""
+    return {name: name if len(names) > 1 else None for name in names}
 
 
 def scenario_path(name_or_path: str | Path) -> Path:

@@ -30,16 +30,17 @@ class StatusLine:
         self.period = period if self.tty else log_every
         self._width = 0
 
-    def start(self, testbed: Any, _target: Any = None) -> None:
+    def start(self, testbed: Any) -> None:
         """An ``on_reset`` hook of the Testbed: start showing once the run is assembled."""
         self.tb = testbed
         testbed.env.process(self._show())
 
     def line(self) -> str:
         tb = self.tb
-        if tb.several:
+        first = next(iter(tb.intersections.values()))
+        if first.label is not None:
             return self._network_line()
-        mw = tb.middleware
+        mw = first.middleware
         state = mw.state.value.upper() if mw.state else "CLOSED"
         if mw.timeout_flag and mw.manager.timeout_reason:
             state += f" ({mw.manager.timeout_reason.value})"
@@ -50,13 +51,13 @@ class StatusLine:
                 f"last hold {'-' if hold is None else f'{hold:.3f} s'}")
 
     def _network_line(self) -> str:
-        """A run of several controllers: how many are in each state (naming those in TIMEOUT), polls summed."""
+        """A run of several intersections: how many are in each state (naming those in TIMEOUT), polls summed."""
         tb = self.tb
-        states = Counter(j.middleware.state.name if j.middleware.state else "CLOSED" for j in tb.junctions.values())
-        timed_out = [tls for tls, j in tb.junctions.items() if j.middleware.timeout_flag]
-        counts = [j.middleware.poll_counts for j in tb.junctions.values()]
+        states = Counter(i.middleware.state.name if i.middleware.state else "CLOSED" for i in tb.intersections.values())
+        timed_out = [name for name, i in tb.intersections.items() if i.middleware.timeout_flag]
+        counts = [i.middleware.poll_counts for i in tb.intersections.values()]
         failed = sum(c["failed"] for c in counts)
-        return (f"{tb.env.now:7.1f} s  {len(tb.junctions)} controllers: "
+        return (f"{tb.env.now:7.1f} s  {len(tb.intersections)} controllers: "
                 + ", ".join(f"{name} {n}" for name, n in sorted(states.items()))
                 + (f" ({', '.join(timed_out)})" if timed_out else "")
                 + f"  polls {sum(c['polls'] for c in counts) - failed} answered, {failed} failed")

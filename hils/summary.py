@@ -18,8 +18,8 @@ from hils.latency import Stats, internal_latencies_ms, transition_holds
 class Tally:
     """What the summary and the run's plots read of its records, kept as they are emitted.
 
-    Subscribed to a run's event log (:meth:`hils.events.EventLog.subscribe`; in a run of several controllers,
-    one tally per intersection subscribed to that intersection's records), it counts every kind and
+    Subscribed to a run's event log, one per intersection (:meth:`hils.events.EventLog.subscribe` with its
+    label: that intersection's records and the run's own; in a run of one, every record), it counts every kind and
     keeps the few records the figures come from, so that the end of a run re-reads nothing: a long
     run's log is mostly polls and SETs, none of which the summary needs one by one."""
 
@@ -38,22 +38,20 @@ class Tally:
             self.records.append(record)
 
 
-def summarize(tally: Tally, config: IntersectionConfig, *, traffic: Any = None,
+def summarize(intersections: Mapping[str | None, tuple[Tally, IntersectionConfig]], *, traffic: Any = None,
               wall_s: float | None = None) -> dict[str, Any]:
-    """The summary of a run of one controller: the run, its signal control and its traffic."""
-    out = {"config": config.name, **_run(tally, wall_s), **_control(tally, config)}
-    if traffic is not None:
-        out["traffic"] = _plain(traffic)
-    return out
-
-
-def summarize_network(tally: Tally, junctions: Mapping[str, tuple[Tally, IntersectionConfig]], *,
-                      traffic: Any = None, wall_s: float | None = None) -> dict[str, Any]:
-    """The summary of a run of several controllers: the run, the signal control of each intersection (from its
-    own tally) and the network's traffic (its approaches named by traffic light: ``J2 north``)."""
-    started = next((r for r in tally.records if r["kind"] == Kind.RUN_STARTED), {})
-    out = {"scenario": started.get("scenario"), **_run(tally, wall_s),
-           "intersections": {tls: {"config": cfg.name, **_control(t, cfg)} for tls, (t, cfg) in junctions.items()}}
+    """The summary of a run: the run, the signal control of each intersection (from its own tally, keyed by its
+    label) and the traffic. A run of one intersection (labelled None) is summed up as the single controller's
+    run always was; a run of several names each intersection, and the network's approaches (``J2 north``)."""
+    run = next(iter(intersections.values()))[0]  # every tally holds the run's own records
+    if None in intersections:
+        tally, config = intersections[None]
+        out = {"config": config.name, **_run(tally, wall_s), **_control(tally, config)}
+    else:
+        started = next((r for r in run.records if r["kind"] == Kind.RUN_STARTED), {})
+        out = {"scenario": started.get("scenario"), **_run(run, wall_s),
+               "intersections": {label: {"config": cfg.name, **_control(t, cfg)}
+                                 for label, (t, cfg) in intersections.items()}}
     if traffic is not None:
         out["traffic"] = _plain(traffic)
     return out
@@ -110,6 +108,12 @@ def _polls(ended: Mapping[str, Any], intersection: str | None) -> dict[str, int]
 
 
 def render(summary: Mapping[str, Any]) -> str:
+    """The console summary of a run: the run, its traffic and its signal control (per intersection when the
+    summary names them)."""
+    return _render_network(summary) if "intersections" in summary else _render_one(summary)
+
+
+def _render_one(summary: Mapping[str, Any]) -> str:
     s = summary
     lines = [f"Run summary: {s['config']} ({s['mode']}, {s['action_type']} by {s['agent']}, seed {s['seed']})",
              _simulated(s)]
@@ -139,8 +143,8 @@ def render(summary: Mapping[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def render_network(summary: Mapping[str, Any]) -> str:
-    """The console summary of a run of several controllers: the network's traffic, then a line per intersection."""
+def _render_network(summary: Mapping[str, Any]) -> str:
+    """The network's traffic, then a line per intersection."""
     s = summary
     lines = [f"Run summary: {s['scenario']} ({len(s['intersections'])} controllers, {s['mode']}, "
              f"{s['action_type']} by {s['agent']}, seed {s['seed']})",

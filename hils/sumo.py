@@ -31,6 +31,7 @@ import libsumo
 from hils.config import IntersectionConfig, load
 from hils.errors import UserError
 from hils.ntcip import SignalState
+from hils.scenario import labels
 from hils.sumo_net import SUMO_CONFIG, TLS_ID, PhaseMap, data_path, derive_phase_map, read_net
 from hils.webster import webster_plan
 
@@ -143,16 +144,18 @@ _active: SumoSimulation | None = None
 
 
 class Light:
-    """One traffic light of a running simulation: its phase map, what it shows, and the lanes it serves.
+    """What a running simulation shows for one intersection: its traffic light's phase map, what it shows, and
+    the lanes it serves.
 
-    ``prefix`` names its approaches in the run's summary: nothing in a simulation of one light (``west``),
-    its id in one of several (``J2 north``)."""
+    ``prefix`` names its approaches in the run's summary, after the intersection's label
+    (:func:`hils.scenario.labels`): nothing in a simulation of one intersection (``west``), its name in one of
+    several (``J2 north``)."""
 
-    def __init__(self, tls_id: str, config: IntersectionConfig, phase_map: PhaseMap, *, several: bool) -> None:
+    def __init__(self, tls_id: str, config: IntersectionConfig, phase_map: PhaseMap, *, label: str | None) -> None:
         self.tls_id = tls_id
         self.config = config
         self.phase_map = phase_map
-        self.prefix = f"{tls_id} " if several else ""
+        self.prefix = f"{label} " if label else ""
         self._state_strings: dict[SignalState, str] = {}
         self._applied_state: SignalState | None = None
         self._applied = "r" * len(phase_map.link_phases)
@@ -215,7 +218,8 @@ class Light:
 
 
 class SumoSimulation:
-    """One libsumo run of a network whose traffic light follows :class:`SignalState` s.
+    """One libsumo run of a network whose traffic lights follow :class:`SignalState` s: once started, ``lights``
+    holds what it shows for each intersection (:class:`Light`), by its traffic light's id.
 
     ``sumo_config`` defaults to the shipped four-leg scenario (``hils/data/four_leg.sumocfg``,
     one hour of demand). ``end`` (s) is passed to SUMO as ``--end`` for its own outputs; how
@@ -296,9 +300,9 @@ class SumoSimulation:
             raise SumoError(f"the network has no traffic light {', '.join(map(repr, missing))}; it has "
                             f"{', '.join(map(repr, present)) or 'none'}")
         net = read_net(libsumo.simulation.getOption("net-file"))
-        several = len(self.configs) > 1
+        named = labels(list(self.configs))
         self.lights = {tls: Light(tls, cfg, derive_phase_map(cfg, net, libsumo.trafficlight.getControlledLinks(tls),
-                                                             tls), several=several)
+                                                             tls), label=named[tls])
                        for tls, cfg in self.configs.items()}
         self._until_sample = self._sample_every
         approach_lanes = [item for light in self.lights.values() for item in light.approach_lanes]
@@ -337,30 +341,8 @@ class SumoSimulation:
     # --- hot path ------------------------------------------------------------------------
 
     @property
-    def light(self) -> Light:
-        """The simulation's traffic light, when it has one (a network of several: :attr:`lights`)."""
-        if not self.lights:
-            raise SumoError("the simulation has not been started")
-        if len(self.lights) > 1:
-            raise SumoError(f"the simulation has {len(self.lights)} traffic lights ({', '.join(self.lights)}): "
-                            "name one (simulation.lights[TLS])")
-        return next(iter(self.lights.values()))
-
-    @property
-    def tls_id(self) -> str:
-        return next(iter(self.configs))
-
-    @property
-    def phase_map(self) -> PhaseMap:
-        return self.light.phase_map
-
-    @property
     def time(self) -> float:
         return libsumo.simulation.getTime()
-
-    def apply(self, state: SignalState) -> bool:
-        """Show ``state`` on the traffic light; True when SUMO's state had to change."""
-        return self.light.apply(state)
 
     def step(self) -> float:
         """Advance one SUMO step; returns the wall seconds it took."""
@@ -414,21 +396,6 @@ class SumoSimulation:
 
     # --- observation ---------------------------------------------------------------------
 
-    def indications(self) -> str:
-        """SUMO's current per-link state string of the light."""
-        return self.light.indications()
-
-    def present(self, zone: float = PRESENCE_ZONE_M) -> frozenset[str]:
-        """The light's incoming lanes with a vehicle within ``zone`` m of the stop bar (:meth:`Light.present`)."""
-        return self.light.present(zone)
-
-    def queues(self) -> dict[int, int]:
-        """Halting vehicles upstream of each of the light's phases (:meth:`Light.queues`)."""
-        return self.light.queues()
-
-    def traffic_state(self) -> TrafficState:
-        return self.light.traffic_state()
-
     def summary(self) -> RunSummary:
         """Every vehicle counted: arrived, running, waiting to enter, with delays so far (see
         :class:`RunSummary` for what each figure counts); without ``measure``, the counts only."""
@@ -480,14 +447,15 @@ class SumoSimulation:
         )
 
     def run_fixed_time(self) -> None:
-        """Hand the light to SUMO itself, running :func:`fixed_time_states` as a static program."""
-        light = self.light
-        phases = [libsumo.trafficlight.Phase(duration, light.phase_map.state_string(state))
-                  for duration, state in fixed_time_states(self.config)]
-        logic = libsumo.trafficlight.Logic("hils-fixed", 0, 0, phases)
-        libsumo.trafficlight.setProgramLogic(light.tls_id, logic)
-        libsumo.trafficlight.setProgram(light.tls_id, "hils-fixed")
-        light.release()
+        """Hand the lights to SUMO itself, each running :func:`fixed_time_states` of its config as a static
+        program."""
+        for light in self.lights.values():
+            phases = [libsumo.trafficlight.Phase(duration, light.phase_map.state_string(state))
+                      for duration, state in fixed_time_states(light.config)]
+            logic = libsumo.trafficlight.Logic("hils-fixed", 0, 0, phases)
+            libsumo.trafficlight.setProgramLogic(light.tls_id, logic)
+            libsumo.trafficlight.setProgram(light.tls_id, "hils-fixed")
+            light.release()
 
 
 def fixed_time_states(config: IntersectionConfig) -> list[tuple[float, SignalState]]:

@@ -41,7 +41,7 @@ import time
 from collections.abc import Callable, Generator, Mapping
 from importlib.metadata import entry_points
 from pathlib import Path
-from types import TracebackType
+from types import MappingProxyType, TracebackType
 from typing import Any, Protocol
 
 import simpy
@@ -54,12 +54,12 @@ from hils.detectors import DetectorFeed
 from hils.errors import UserError
 from hils.events import EventLog, Kind, TaggedLog
 from hils.events import read as read_events
-from hils.junction import Junction
+from hils.intersection import Intersection
 from hils.manager import CLEAR_ATTEMPTS, State
 from hils.middleware import Middleware, Submission
 from hils.ntcip import SignalState
 from hils.preflight import ControllerCheckFailed
-from hils.scenario import Scenario, load_scenario
+from hils.scenario import Scenario, labels, load_scenario
 from hils.summary import Tally
 from hils.sumo_net import TLS_ID
 from hils.timegrid import Grid
@@ -78,38 +78,37 @@ BLIND_AGENTS = {ActionType.SELECTION: "random", ActionType.SWITCH: "fixed-cycle"
 VIRTUAL = "virtual"
 
 
-class Simulation(Protocol):
-    """What the run steps: SUMO, or nothing (:class:`NoSimulation`)."""
+class Signals(Protocol):
+    """What the simulation shows for one intersection (:class:`hils.sumo.Light`)."""
 
-    def apply(self, state: SignalState) -> None: ...
-
-    def step(self) -> Any: ...
-
-    def advance(self, steps: int) -> None:
-        """``steps`` steps at once, with nothing shown changing between them (as many :meth:`step` calls)."""
+    def apply(self, state: SignalState) -> Any: ...
 
     def traffic_state(self) -> Any: ...
 
     def queues(self) -> Mapping[int, int]: ...
 
 
-class NoSimulation:
-    """Stands in for SUMO in middleware-only runs: steps cost nothing and there is no traffic."""
+class Simulation(Protocol):
+    """What the run steps: SUMO, or nothing (:class:`NoSimulation`); ``lights`` by intersection name."""
 
-    def apply(self, state: SignalState) -> None:
-        """No lights to set."""
+    lights: Mapping[str, Signals]
+
+    def step(self) -> Any: ...
+
+    def advance(self, steps: int) -> None:
+        """``steps`` steps at once, with nothing shown changing between them (as many :meth:`step` calls)."""
+
+
+class NoSimulation:
+    """Stands in for SUMO in middleware-only runs: steps cost nothing and there is no traffic, nor lights."""
+
+    lights: Mapping[str, Signals] = MappingProxyType({})
 
     def step(self) -> None:
         """No traffic to move."""
 
     def advance(self, steps: int) -> None:
         """No traffic to move."""
-
-    def traffic_state(self) -> None:
-        return None
-
-    def queues(self) -> Mapping[int, int]:
-        return {}
 
 
 class RunInterrupted(Exception):
@@ -128,8 +127,8 @@ class NotStarted(RuntimeError):
     """A Testbed used before :meth:`Testbed.reset` or after :meth:`Testbed.close`."""
 
 
-class SeveralControllers(UserError, ValueError):
-    """A run of several controllers asked for the one controller (name a traffic light instead)."""
+class SeveralIntersections(UserError, ValueError):
+    """A run of several intersections asked for its one intersection (name one instead)."""
 
 
 def modeled_cost(step: Callable[[], Any]) -> float:
@@ -173,31 +172,33 @@ class RunSpec:
 
 
 class Testbed:
-    __test__ = False  # pytest: a class named Test* here is not a test
-    """A run of one intersection's controller, or of a scenario's several: controllers (virtual or real),
-    middleware, optional SUMO, event log.
+    """A run: controllers (virtual or real), the middleware of each, optional SUMO, the event log.
 
     ``config``: an :class:`IntersectionConfig`, a TOML path, or None for the shipped four-leg; or, instead,
     ``scenario``: a shipped scenario's name (``corridor``, ``grid4x4``), a ``.scenario.toml`` path or a
-    :class:`hils.scenario.Scenario`, one controller per traffic light, all in this one run (:attr:`junctions`).
+    :class:`hils.scenario.Scenario`, one controller per intersection (traffic light), all in this one run.
     ``action_type``: selection, switch or duration. ``target``: ``"virtual"``, an ``snmp://`` URL or a target
-    factory; with several controllers, a mapping from each traffic light to its own (a scenario at wall clock
-    needs a URL for every light). ``sumo``: True to run the SUMO scenario (started at each reset), or a
-    simulation object the caller started; ``sumo_config``: the ``.sumocfg`` SUMO starts with (default: the
-    scenario's, or the shipped four-leg). ``seed``: every virtual-time run is reproducible from it.
-    ``agent``: what :meth:`run` uses when given none (a built-in name, ``package.module:Class`` or an
-    instance; with several controllers each gets its own of a named agent). ``duration``: simulated seconds
-    after which the run is done (None: no end). ``log_path``: the JSON Lines event log (None: kept in memory
-    only). ``recover_after``: seconds in TIMEOUT before recover() is called (None: never).
-    ``on_reset(testbed, target)`` runs after assembly, before anything starts: the fault harness wraps parts
-    of the run there (``target``: the single controller's, or None with several). ``measure``: False skips
-    what only the end-of-run summary and the queue plot need (per-vehicle delays, queue and spillback samples,
-    ``queues`` records), as environments do for speed.
+    factory; with several intersections, a mapping from each one's name to its own (a scenario at wall clock
+    needs a URL for every intersection). ``sumo``: True to run the SUMO scenario (started at each reset), or a
+    simulation object the caller started (with a ``lights`` mapping); ``sumo_config``: the ``.sumocfg`` SUMO
+    starts with (default: the scenario's, or the shipped four-leg). ``seed``: every virtual-time run is
+    reproducible from it. ``agent``: what :meth:`run` uses when given none (a built-in name,
+    ``package.module:Class`` or an instance; with several intersections each gets its own of a named agent).
+    ``duration``: simulated seconds after which the run is done (None: no end). ``log_path``: the JSON Lines
+    event log (None: kept in memory only). ``recover_after``: seconds in TIMEOUT before the manager recovers by
+    itself (None: never). ``on_reset(testbed)`` runs after assembly, before anything starts: the fault harness
+    wraps parts of the run there. ``detectors``: SUMO's stop-bar loops actuate the controllers' detectors
+    (default: for the actuated agent). ``measure``: False skips what only the end-of-run summary and the queue
+    plot need (per-vehicle delays, queue and spillback samples, ``queues`` records), as environments do for
+    speed.
 
-    With one controller the Testbed is that controller's: :meth:`step`, :meth:`observe`, :attr:`middleware`,
-    :attr:`config`. With several, :meth:`step_all` and :meth:`observe_all` take and give one value per
-    traffic light, and :attr:`junctions` holds each controller's parts.
+    The general API takes and gives one value per intersection, by name: :meth:`reset_all`, :meth:`step_all`,
+    :meth:`observe_all`, :attr:`intersections`. A run of one intersection also has the single view of it:
+    :meth:`reset`, :meth:`step`, :meth:`wait`, :meth:`observe`, :attr:`intersection`, :attr:`middleware`,
+    :attr:`config`... (in a run of several these raise :class:`SeveralIntersections`).
     """
+
+    __test__ = False  # pytest: a class named Test* here is not a test
 
     def __init__(self, config: IntersectionConfig | str | Path | None = None, *,
                  action_type: ActionType | str = ActionType.SELECTION,
@@ -205,7 +206,7 @@ class Testbed:
                  sumo: bool | Simulation = False, seed: int = 0, agent: str | Agent | None = None,
                  duration: float | None = None, log_path: str | Path | None = None,
                  recover_after: float | None = 5.0,
-                 on_reset: Callable[[Testbed, Any], None] | None = None,
+                 on_reset: Callable[[Testbed], None] | None = None,
                  sumo_config: str | Path | None = None, detectors: bool | None = None,
                  scenario: str | Path | Scenario | None = None, measure: bool = True) -> None:
         if scenario is not None and config is not None:
@@ -217,15 +218,19 @@ class Testbed:
         else:
             cfg = config if isinstance(config, IntersectionConfig) else config_mod.load(config)
             self.configs = {TLS_ID: cfg}
-        self.config = next(iter(self.configs.values()))
+        self.labels = labels(list(self.configs))
+        first = next(iter(self.configs.values()))
         self.action_type = ActionType(action_type)
         self._targets = _target_specs(target, self.configs)
         # Each wall-clock target parsed and its host resolved once, here: a bad one is refused before anything
-        # starts, naming its light.
-        self._wall_targets = {tls: _check_target(url, f"{tls}: " if self.several else "")
-                              for tls, url in self._targets.items() if isinstance(url, str) and url != VIRTUAL}
+        # starts, naming its intersection.
+        self._wall_targets = {name: _check_target(url, self.labels[name])
+                              for name, url in self._targets.items() if isinstance(url, str) and url != VIRTUAL}
         if duration is not None and not duration > 0:
             raise ValueError(f"duration must be positive seconds or None, got {duration!r}")
+        if agent is not None and not isinstance(agent, str) and len(self.configs) > 1:
+            raise SeveralIntersections("an agent object drives one controller: name a built-in agent or "
+                                       "package.module:Class, and each intersection gets its own")
         self._sumo_spec = sumo
         self.sumo_config = sumo_config
         self.seed = seed
@@ -237,11 +242,11 @@ class Testbed:
         self.recover_after = recover_after
         self.on_reset = on_reset
         self.measure = measure
-        self.spec = RunSpec(self.config, self.action_type, agent if isinstance(agent, str) else None,
+        self.spec = RunSpec(first, self.action_type, agent if isinstance(agent, str) else None,
                             math.inf if duration is None else duration, seed, self.log_path, recover_after,
                             sumo=bool(sumo))
         self.env: simpy.Environment | None = None
-        self.junctions: dict[str, Junction] = {}
+        self.intersections: dict[str, Intersection] = {}
         self.events: EventLog | None = None
         self.tally = Tally()
         self.simulation: Simulation = NoSimulation()
@@ -262,52 +267,8 @@ class Testbed:
         return "wall-clock" if self._wall_targets else VIRTUAL
 
     @property
-    def several(self) -> bool:
-        """True for a run of more than one controller (a corridor, a grid)."""
-        return len(self.configs) > 1
-
-    @property
-    def junction(self) -> Junction:
-        """The run's one controller (a run of several: :attr:`junctions`)."""
-        if self.several:
-            raise SeveralControllers(f"this run has {len(self.configs)} controllers ({', '.join(self.configs)}): "
-                                     "use testbed.junctions[TLS], step_all() and observe_all()")
-        if not self.junctions:
-            raise NotStarted("the Testbed is not started: call reset() first")
-        return next(iter(self.junctions.values()))
-
-    @property
-    def middleware(self) -> Middleware | None:
-        return self.junction.middleware if self.junctions else None
-
-    @property
-    def transport(self) -> Transport | None:
-        return self.junction.transport if self.junctions else None
-
-    @property
-    def target(self) -> Any:
-        return self.junction.target if self.junctions else None
-
-    @property
-    def agent(self) -> Agent | None:
-        return self.junction.agent if self.junctions else None
-
-    @agent.setter
-    def agent(self, agent: Agent | None) -> None:
-        self.junction.agent = agent
-
-    @property
-    def traffic_samples(self) -> list[tuple[float, dict[str, int]]]:
-        return self.junction.traffic_samples if self.junctions else []
-
-    @property
     def now(self) -> float:
         return self._env.now
-
-    @property
-    def state(self) -> State:
-        """The manager's state."""
-        return self._mw.state
 
     @property
     def done(self) -> bool:
@@ -333,11 +294,87 @@ class Testbed:
         """Wall-clock runs: the driver's lateness summary; None in virtual time."""
         return None if self._driver is None else self._driver.lateness.summary()
 
+    # --- the single view: a run of one intersection ----------------------------------------------
+
+    @property
+    def config(self) -> IntersectionConfig:
+        """The intersection's config."""
+        return self.configs[self._only()]
+
+    @property
+    def intersection(self) -> Intersection:
+        """The run's intersection (its parts stay after the run is closed)."""
+        name = self._only()
+        if name not in self.intersections:
+            raise NotStarted("the Testbed is not started: call reset() first")
+        return self.intersections[name]
+
+    @property
+    def middleware(self) -> Middleware:
+        return self.intersection.middleware
+
+    @property
+    def transport(self) -> Transport:
+        return self.intersection.transport
+
+    @property
+    def target(self) -> Any:
+        return self.intersection.target
+
+    @property
+    def agent(self) -> Agent | None:
+        return self.intersection.agent
+
+    @agent.setter
+    def agent(self, agent: Agent | None) -> None:
+        self.intersection.agent = agent
+
+    @property
+    def traffic_samples(self) -> list[tuple[float, dict[str, int]]]:
+        return self.intersection.traffic_samples
+
+    @property
+    def state(self) -> State:
+        """The manager's state."""
+        return self.intersection.middleware.state
+
+    def reset(self, seed: int | None = None) -> Observation:
+        """Start (or restart, with a new seed) the run; returns the first observation."""
+        name = self._only()
+        return self.reset_all(seed)[name]
+
+    def observe(self) -> Observation:
+        """What the agent sees now."""
+        return self.intersection.observe()
+
+    def step(self, action: Any) -> tuple[Observation, dict[str, Any]]:
+        """Submit ``action`` and run to the next decision point; returns the observation and an info mapping.
+
+        An action that cannot be served is refused with a typed :class:`hils.actions.ActionError`
+        (logged; nothing is sent, no time passes). ``info`` says what happened: ``action_id``,
+        ``dropped`` (the manager was not IDLE), ``state``, ``timeout`` (the manager entered TIMEOUT
+        during the step) and ``timeout_reason``, ``ended`` (the run's duration has passed)."""
+        name = self._only()
+        observations, infos = self.step_all({name: action})
+        return observations[name], infos[name]
+
+    def wait(self) -> tuple[Observation, dict[str, Any]]:
+        """Run to the next decision point without acting (e.g. after a refused action)."""
+        name = self._only()
+        observations, infos = self.step_all({})
+        return observations[name], infos[name]
+
+    def _only(self) -> str:
+        """The name of the run's one intersection; a run of several has none."""
+        if len(self.configs) > 1:
+            raise SeveralIntersections(f"this run has {len(self.configs)} intersections ({', '.join(self.configs)}): "
+                                       "use reset_all(), step_all(), observe_all() and testbed.intersections[NAME]")
+        return next(iter(self.configs))
+
     # --- life cycle -----------------------------------------------------------------------------
 
-    def reset(self, seed: int | None = None) -> Observation | dict[str, Observation]:
-        """Start (or restart, with a new seed) the run; returns the first observation (one per traffic light
-        in a run of several)."""
+    def reset_all(self, seed: int | None = None) -> dict[str, Observation]:
+        """Start (or restart, with a new seed) the run; returns the first observation of each intersection."""
         if self.env is not None:
             self.close()
         if seed is not None:
@@ -350,26 +387,25 @@ class Testbed:
         # A run that writes its log to a file does not also keep it in memory: a long run's records
         # would grow the heap that every full garbage collection walks, in the middle of the hot path.
         self.events = EventLog(self.log_path, keep=self.log_path is None)
-        self.tally = Tally()  # the summary's figures, kept as the run goes: its end re-reads nothing
-        self.events.subscribe(self.tally)
-        self.junctions = {tls: self._assemble_junction(env, tls, index) for index, tls in enumerate(self.configs)}
+        self.tally = Tally()  # the run's records (start, end), as the summary reads them: its end re-reads nothing
+        self.intersections = {name: self._assemble_intersection(env, name, index)
+                              for index, name in enumerate(self.configs)}
         self._assemble_simulation()
-        for j in self.junctions.values():
-            j.agent = self._load_agent(j.config)
+        for i in self.intersections.values():
+            i.agent = self._load_agent(i.config)
         if self.on_reset is not None:
-            self.on_reset(self, None if self.several else self.junction.target)
+            self.on_reset(self)
         self._start()
-        self._advance(None, *(j.middleware.ready for j in self.junctions.values()), every=True)
+        self._advance(None, *(i.middleware.ready for i in self.intersections.values()), every=True)
         self._check_controllers()
-        return self.observe_all() if self.several else self.observe()
+        return self.observe_all()
 
     def _check_controllers(self) -> None:
         """The start-up checks: refuse a controller unfit for a run (one line each), warn about the rest."""
-        refusals = [(j.id, line) for j in self.junctions.values() for line in j.refusals()]
+        refusals = [i.named(line) for i in self.intersections.values() for line in i.refusals()]
         if refusals:
             self.finish("error")
-            raise ControllerCheckFailed("; ".join(f"{tls}: {line}" if self.several else line
-                                                  for tls, line in refusals))
+            raise ControllerCheckFailed("; ".join(refusals))
 
     def _assemble_clock(self, env: simpy.Environment) -> None:
         if self.mode == VIRTUAL:
@@ -386,10 +422,11 @@ class Testbed:
 
         self.step_cost = wall_cost
 
-    def _assemble_junction(self, env: simpy.Environment, tls: str, index: int) -> Junction:
-        cfg, spec = self.configs[tls], self._targets[tls]
-        # Every controller of a run has its own seeded draws (its tick phase, its latencies).
-        seed = self.seed if not self.several else self.seed * 1009 + index
+    def _assemble_intersection(self, env: simpy.Environment, name: str, index: int) -> Intersection:
+        cfg, spec, label = self.configs[name], self._targets[name], self.labels[name]
+        # Every controller of a run of several has its own seeded draws (its tick phase, its latencies); a lone
+        # one draws from the run's seed itself.
+        seed = self.seed if label is None else self.seed * 1009 + index
         community = None
         if self.mode == VIRTUAL:
             factory = virtual_target_factory() if spec == VIRTUAL else spec
@@ -402,19 +439,19 @@ class Testbed:
         else:
             from hils.snmp import SnmpTransport
 
-            target, address = self._wall_targets[tls]
+            target, address = self._wall_targets[name]
             transport = SnmpTransport(env, self._driver, target, tau_udp=cfg.middleware.tau_udp, address=address)
             where, community = f"{target.host}:{target.port}", getattr(target, "community", None)
-        events = TaggedLog(self.events, tls) if self.several else self.events
-        # One controller's tally is the run's; each of several has its own, handed its intersection's records.
-        tally = self.tally
-        if self.several:
-            tally = Tally(tls)
-            self.events.subscribe(tally, intersection=tls)
+        events = TaggedLog(self.events, label) if label is not None else self.events
+        # Each intersection's tally is handed its own records (a lone one's are all of the run's, the run's
+        # own included: the run's tally is then that one).
+        tally = Tally(label)
+        self.events.subscribe(tally, intersection=label)
+        if label is None:
+            self.tally = tally
         middleware = Middleware(env, transport, cfg, self.action_type, events, where=where, community=community,
                                 recover_after=self.recover_after)
-        return Junction(tls, cfg, target, transport, middleware, events, tally)
-
+        return Intersection(name, label, cfg, target, transport, middleware, events, tally)
     def _assemble_simulation(self) -> None:
         sumo = self._sumo_spec
         self._owns_sumo = False
@@ -430,55 +467,49 @@ class Testbed:
             self.simulation = NoSimulation()
         else:
             self.simulation = sumo
-        if isinstance(self.simulation, NoSimulation):
-            return
-        for j in self.junctions.values():
-            # One light: the simulation itself (a wrapper the caller hands in works); several: each its own.
-            j.view = self.simulation.lights[j.id] if self.several else self.simulation
+        for i in self.intersections.values():
+            i.signals = self.simulation.lights.get(i.name)
 
     def _load_agent(self, config: IntersectionConfig) -> Agent | None:
         spec = self._agent_spec
         if spec is None or isinstance(spec, str):
             return load_agent(self.spec.agent_spec, config, self.action_type, self.seed)
-        if self.several:
-            raise SeveralControllers("an agent object drives one controller: name a built-in agent or "
-                                     "package.module:Class, and each controller gets its own")
         return spec
 
     def _start(self) -> None:
         # Everything loaded so far (SUMO, numpy, the config) lives for the whole run: keep it out of
         # the collector's way so that collections during the run stay short.
         gc.freeze()
-        for j in self.junctions.values():
-            if self.detectors and j.view is not None:
+        for i in self.intersections.values():
+            if self.detectors and i.signals is not None:
                 # Built before the run starts: a detector on a lane its phase does not have is refused now.
-                pm = j.view.phase_map
-                j.detector_feed = DetectorFeed(j.transport, j.config, j.events,
+                pm = i.signals.phase_map
+                i.detector_feed = DetectorFeed(i.transport, i.config, i.events,
                                                {p: pm.incoming_lanes(p) for p in pm.phases})
-        cfg = self.config
-        fields = ({"scenario": self.scenario.name, "source": self.scenario.source, "intersections": list(self.configs)}
-                  if self.several else
-                  {"config": cfg.name, "source": cfg.source})
-        self.events.emit(Kind.RUN_STARTED, **fields, seed=self.seed, mode=self.mode,
+        self.events.emit(Kind.RUN_STARTED, **self._what_runs(), seed=self.seed, mode=self.mode,
                          action_type=self.action_type.value, agent=_agent_name(self._agent_spec, self.spec),
                          duration=self.duration)
-        ended = lambda: self.ended  # noqa: E731 - the junctions' processes ask it as the run goes
-        # Several controllers start spread over one poll period, so that their polls, keepalives and read-backs
-        # go out spread over it too, as a central system staggers them: 64 controllers polled at one instant
-        # are a burst that makes the last answers of each round several milliseconds late at the wall clock.
-        spread = self.config.middleware.poll_period / len(self.junctions)
-        for index, j in enumerate(self.junctions.values()):
-            j.middleware.start(after=index * spread)
-            if j.view is not None and self.measure:
-                self.env.process(j.sample_traffic(ended))
+        ended = lambda: self.ended  # noqa: E731 - the intersections' processes ask it as the run goes
+        # The controllers start spread over one poll period, so that their polls, keepalives and read-backs go
+        # out spread over it too, as a central system staggers them: 64 controllers polled at one instant are a
+        # burst that makes the last answers of each round several milliseconds late at the wall clock.
+        spread = self.spec.config.middleware.poll_period / len(self.intersections)
+        for index, i in enumerate(self.intersections.values()):
+            i.middleware.start(after=index * spread)
+            if i.signals is not None and self.measure:
+                self.env.process(i.sample_traffic(ended))
         self.env.process(self._simulation_loop())
 
+    def _what_runs(self) -> dict[str, Any]:
+        """``run_started``'s account of what runs: the intersection's config, or the scenario and its names."""
+        if self.labels[next(iter(self.configs))] is None:
+            return {"config": self.spec.config.name, "source": self.spec.config.source}
+        return {"scenario": self.scenario.name, "source": self.scenario.source, "intersections": list(self.configs)}
+
     def _poll_counts(self) -> dict[str, Any]:
-        if not self.junctions:
-            return {}  # the run ended while it was being assembled
-        if self.several:
-            return {tls: j.middleware.poll_counts for tls, j in self.junctions.items()}
-        return self.junction.middleware.poll_counts
+        """``run_ended``'s poll counts: the intersection's, or each one's by name."""
+        counts = {i.label: i.middleware.poll_counts for i in self.intersections.values()}
+        return counts.get(None, counts)
 
     def finish(self, reason: str | None = None) -> None:
         """End the run: clear the calls placed, log ``run_ended`` with ``reason``, close the log.
@@ -494,7 +525,7 @@ class Testbed:
         self.end_reason = reason
 
         def ending() -> Generator[simpy.Event, Any, None]:
-            yield simpy.AllOf(self.env, [j.middleware.close() for j in self.junctions.values()])
+            yield simpy.AllOf(self.env, [i.middleware.close() for i in self.intersections.values()])
             self.events.emit(Kind.RUN_ENDED, reason=reason, polls=self._poll_counts())
             self.events.close()
 
@@ -525,8 +556,8 @@ class Testbed:
         try:
             self.finish()
         finally:
-            for j in self.junctions.values():
-                j.transport.close()
+            for i in self.intersections.values():
+                i.transport.close()
             if self._driver is not None:
                 self._driver.close()
             if self._owns_sumo:
@@ -544,98 +575,73 @@ class Testbed:
 
     # --- stepping ---------------------------------------------------------------------------------
 
-    def observe(self) -> Observation:
-        """What the agent sees now."""
-        self._started()
-        return self.junction.observe()
-
     def observe_all(self) -> dict[str, Observation]:
-        """What each traffic light's agent sees now."""
+        """What each intersection's agent sees now."""
         self._started()
-        return {tls: j.observe() for tls, j in self.junctions.items()}
-
-    def step(self, action: Any) -> tuple[Observation, dict[str, Any]]:
-        """Submit ``action`` and run to the next decision point; returns the observation and an info mapping.
-
-        An action that cannot be served is refused with a typed :class:`hils.actions.ActionError`
-        (logged; nothing is sent, no time passes). ``info`` says what happened: ``action_id``,
-        ``dropped`` (the manager was not IDLE), ``state``, ``timeout`` (the manager entered TIMEOUT
-        during the step) and ``timeout_reason``, ``ended`` (the run's duration has passed)."""
-        self._check_running()
-        observations, infos = self.step_all({self.junction.id: action})
-        return observations[self.junction.id], infos[self.junction.id]
+        return {name: i.observe() for name, i in self.intersections.items()}
 
     def step_all(self, actions: Mapping[str, Any]) -> tuple[dict[str, Observation], dict[str, dict[str, Any]]]:
-        """One action per traffic light, then run to the next decision point of any of them; returns the
-        observation and the info (as :meth:`step`'s, with ``due``) of each.
+        """One action per intersection, then run to the next decision point of any of them; returns the
+        observation and the info (as :meth:`step`'s, with ``due`` and ``acted``) of each.
 
-        Each controller keeps its own decision schedule: only the lights that are ``due`` (at their decision
-        point now, as the last step's infos said; every light after :meth:`reset`) act; the action of a light
-        that is not due, left out or None is not taken (``acted`` False), and its schedule runs on. Every
-        action taken is converted before any is submitted: one that cannot be served raises its
+        Each intersection keeps its own decision schedule: only those that are ``due`` (at their decision point
+        now, as the last step's infos said; every one after :meth:`reset_all`) act; the action of one that is
+        not due, left out or None is not taken (``acted`` False), and its schedule runs on. Every action taken
+        is converted before any is submitted: one that cannot be served raises its
         :class:`hils.actions.ActionError` and nothing is sent to any controller."""
         self._check_running()
-        unknown = sorted(set(actions) - set(self.junctions))
+        unknown = sorted(set(actions) - set(self.intersections))
         if unknown:
-            raise KeyError(f"no traffic light {', '.join(unknown)} in this run; it has {', '.join(self.junctions)}")
-        chosen = {tls: value for tls, value in actions.items() if value is not None and self.junctions[tls].due}
-        if len(chosen) > 1:  # all or none: a refused action leaves the others unsent
-            for tls, value in chosen.items():
-                try:
-                    self.junctions[tls].middleware.check(value)
-                except ActionError:
-                    chosen = {tls: value}  # submitted alone: logged as received and refused, nothing sent
-                    break
-        submitted = {tls: self.junctions[tls].middleware.submit(value) for tls, value in chosen.items()}
-        for tls, done in submitted.items():
-            if done.error is not None:
-                if self.several:
-                    done.error.add_note(f"the action of traffic light {tls}; nothing was sent to any controller")
-                raise done.error
+            raise KeyError(f"no intersection {', '.join(unknown)} in this run; it has "
+                           f"{', '.join(self.intersections)}")
+        received = {name: self.intersections[name].middleware.receive(value) for name, value in actions.items()
+                    if value is not None and self.intersections[name].due}
+        refused = next((name for name, r in received.items() if r.error is not None), None)
+        if refused is not None:  # all or none: submitted alone, logged as received and refused, nothing sent
+            received = {refused: received[refused]}
+        submitted = {name: self.intersections[name].middleware.submit(r) for name, r in received.items()}
+        if refused is not None:
+            error = submitted[refused].error
+            if self.intersections[refused].label is not None:
+                error.add_note(f"the action of intersection {refused}; nothing was sent to any controller")
+            raise error
         return self._to_decision(submitted)
 
-    def wait(self) -> tuple[Observation, dict[str, Any]]:
-        """Run to the next decision point without acting (e.g. after a refused action)."""
-        self._check_running()
-        observations, infos = self._to_decision({})
-        return observations[self.junction.id], infos[self.junction.id]
-
-    def run_for(self, seconds: float) -> Observation | dict[str, Observation]:
-        """Let ``seconds`` of run time pass without acting; returns the observation then."""
+    def run_for(self, seconds: float) -> None:
+        """Let ``seconds`` of run time pass without acting."""
         self._check_running()
         self._advance(self._env.now + seconds)
-        return self.observe_all() if self.several else self.observe()
 
-    def recover(self, tls: str | None = None) -> bool:
-        """Recover from TIMEOUT now (the controller of traffic light ``tls`` in a run of several): re-read the
+    def recover(self, name: str | None = None) -> bool:
+        """Recover from TIMEOUT now (the controller of intersection ``name``; None: the run's one): re-read the
         controller and return to IDLE; False if it failed."""
         self._check_running()
-        junction = self.junctions[tls] if tls is not None else self.junction
-        proc = junction.middleware.recover()
+        intersection = self.intersections[name] if name is not None else self.intersection
+        proc = intersection.middleware.recover()
         self._advance(None, proc)
         return bool(proc.value)
 
     def run(self, agent: Agent | None = None, progress: Callable[[float], None] | None = None) -> str:
-        """Let the agents (``agent``, or the Testbed's: one per traffic light) act at every decision point until
+        """Let the agents (``agent``, or the Testbed's: one per intersection) act at every decision point until
         the run is done.
 
         Returns the end reason (``duration``). Whatever else ends the run (an agent raising:
         :class:`AgentFailed`; Ctrl-C or SIGTERM: :class:`RunInterrupted` or KeyboardInterrupt; an
         error) first finishes the run cleanly, then propagates."""
         if self.env is None:
-            self.reset()
-        agents = {tls: agent or j.agent for tls, j in self.junctions.items()}
+            self.reset_all()
+        agents = {name: agent or i.agent for name, i in self.intersections.items()}
         if any(a is None for a in agents.values()):
             raise NotStarted("no agent: pass one to run() or to the Testbed")
         observations = self.observe_all()
         try:
             while not self.done:
                 actions = {}
-                for tls, a in agents.items():
-                    if not self.junctions[tls].due:
+                for name, a in agents.items():
+                    if not self.intersections[name].due:
                         continue  # its own decision point has not come: it is not asked
                     try:
-                        actions[tls] = a.act(observations[tls])
+                        actions[name] = a.act(observations[name])
                     except Exception as exc:
                         raise AgentFailed(f"the agent's act() raised {type(exc).__name__}: {exc}") from exc
                 try:
@@ -655,21 +661,21 @@ class Testbed:
     def _to_decision(self, submitted: Mapping[str, Submission]
                      ) -> tuple[dict[str, Observation], dict[str, dict[str, Any]]]:
         self._started()
-        timeouts = {tls: j.middleware.entering(State.TIMEOUT) for tls, j in self.junctions.items()}
-        for j in self.junctions.values():
-            if j.due:
-                j.schedule(self.action_type)  # asked now: its next decision point starts from here
-        deadlines = [j.deadline for j in self.junctions.values() if j.deadline is not None]
+        timeouts = {name: i.middleware.entering(State.TIMEOUT) for name, i in self.intersections.items()}
+        for i in self.intersections.values():
+            if i.due:
+                i.schedule(self.action_type)  # asked now: its next decision point starts from here
+        deadlines = [i.deadline for i in self.intersections.values() if i.deadline is not None]
         if self.duration is not None:
             deadlines.append(self.duration)
-        self._advance(min(deadlines, default=None), *(ev for j in self.junctions.values() for ev in j.waits))
+        self._advance(min(deadlines, default=None), *(ev for i in self.intersections.values() for ev in i.waits))
         infos = {}
-        for tls, j in self.junctions.items():
-            j.due = j.at_decision()
-            done = submitted.get(tls)
-            infos[tls] = j.info(done.action_id if done else None, done is not None,
-                                done.dropped if done else False, timeouts[tls].triggered) | {
-                "ended": self.done, "due": j.due}
+        for name, i in self.intersections.items():
+            i.due = i.at_decision()
+            done = submitted.get(name)
+            infos[name] = i.info(done.action_id if done else None, done is not None,
+                                 done.dropped if done else False, timeouts[name].triggered) | {
+                "ended": self.done, "due": i.due}
         return self.observe_all(), infos
 
     # --- the clock ----------------------------------------------------------------------------------
@@ -712,11 +718,11 @@ class Testbed:
 
     def _simulation_loop(self) -> Generator[simpy.Event, Any, None]:
         env = self._env
-        step = self.config.middleware.sumo_step
+        step = self.spec.config.middleware.sumo_step
         sim = self.simulation
-        lights = [(j.view, j.middleware.cache) for j in self.junctions.values() if j.view is not None]
-        feeds = [(j.view, j.detector_feed) for j in self.junctions.values() if j.detector_feed is not None]
-        middlewares = [j.middleware for j in self.junctions.values()]
+        lights = [(i.signals, i.middleware.cache) for i in self.intersections.values() if i.signals is not None]
+        feeds = [(i.signals, i.detector_feed) for i in self.intersections.values() if i.detector_feed is not None]
+        middlewares = [i.middleware for i in self.intersections.values()]
         k = 0
         grid = Grid(env.now, step)
 
@@ -759,11 +765,6 @@ class Testbed:
     def _started(self) -> None:
         if self.env is None:
             raise NotStarted("the Testbed is not started: call reset() first")
-
-    @property
-    def _mw(self) -> Middleware:
-        self._started()
-        return self.junction.middleware
 
     def _check_running(self) -> None:
         self._started()
@@ -827,9 +828,10 @@ def _target_specs(target: str | TargetFactory | Mapping[str, str | TargetFactory
     return specs
 
 
-def _check_target(url: str, light: str) -> tuple[Any, tuple[str, int]]:
+def _check_target(url: str, label: str | None) -> tuple[Any, tuple[str, int]]:
     """The :class:`hils.snmp.SnmpTarget` of ``url`` and its host's address; a URL that is not one, or whose host
-    does not resolve, is refused (``light``: how the message names the traffic light, in a run of several)."""
+    does not resolve, is refused (``label``: how the message names the intersection)."""
+    light = f"{label}: " if label else ""
     if not url.startswith("snmp://"):
         raise TargetError(f"{light}target {url!r}: allowed: 'virtual' or "
                           "snmp://HOST[:PORT][?community=NAME&version=1|2c]")
@@ -881,7 +883,7 @@ class RunResult:
 
 
 def run_spec(spec: RunSpec, *, target: str | TargetFactory = VIRTUAL, simulation: Simulation | None = None,
-             configure: Callable[[Testbed, Any], None] | None = None,
+             configure: Callable[[Testbed], None] | None = None,
              progress: Callable[[float], None] | None = None) -> RunResult:
     """Build a Testbed from ``spec``, run its agent for ``spec.duration`` s and close it.
 

@@ -27,7 +27,7 @@ def main(run_dir: str, *urls: str) -> None:
                  recover_after=None, on_reset=dashboard.attach)
     with tb:
         try:
-            tb.reset()
+            tb.reset_all()
             tb.run()
         except (RunInterrupted, KeyboardInterrupt):
             pass

@@ -22,7 +22,7 @@ from hils import Testbed
 from hils.actions import ConflictError
 from hils.cli import main
 from hils.events import Kind, read
-from hils.testbed import SeveralControllers, TargetError
+from hils.testbed import SeveralIntersections, TargetError
 
 LIGHTS = ["J1", "J2", "J3", "J4"]
 RUN_WIDE = {Kind.RUN_STARTED, Kind.RUN_ENDED}
@@ -74,7 +74,7 @@ def test_a_lost_link_times_out_only_its_own_controller() -> None:
 
     def run(targets: dict[str, Any]) -> list[dict[str, Any]]:
         with Testbed(scenario="corridor", target=targets, seed=2, duration=240.0, agent="random") as tb:
-            tb.reset()
+            tb.reset_all()
             tb.run()
             return tb.records
 
@@ -96,7 +96,7 @@ def test_a_lost_link_times_out_only_its_own_controller() -> None:
 
 def test_a_refused_action_reaches_no_controller() -> None:
     with Testbed(scenario="corridor", seed=0, duration=60.0) as tb:
-        tb.reset()
+        tb.reset_all()
         sent = len(tb.events.of(Kind.SET_SENT))
         with pytest.raises(ConflictError):
             tb.step_all({"J1": (2, 6), "J2": (1, 2), "J3": (3, 7)})  # 1 and 2 share a ring
@@ -105,7 +105,7 @@ def test_a_refused_action_reaches_no_controller() -> None:
         assert [r["intersection"] for r in refused] == ["J2"]
         observations, infos = tb.step_all({"J1": (2, 6), "J3": (3, 7)})
         assert set(observations) == set(LIGHTS) and infos["J3"]["acted"] and not infos["J2"]["acted"]
-        with pytest.raises(SeveralControllers, match=r"use testbed\.junctions"):
+        with pytest.raises(SeveralIntersections, match=r"testbed\.intersections\[NAME\]"):
             tb.step((2, 6))
 
 
@@ -146,12 +146,12 @@ def test_the_controllers_of_a_corridor_start_spread_over_one_poll_period() -> No
     """So that their polls, keepalives and read-backs do not all go out at one instant (a burst that makes a
     grid's last answers of each round late at the wall clock)."""
     with Testbed(scenario="corridor", duration=1.0) as tb:
-        tb.reset()
+        tb.reset_all()
         starts = {r["intersection"]: r["t"] for r in tb.records
                   if r["kind"] == Kind.SET_SENT and r["purpose"] == "startup"}
         polls = {tls: [r["t"] for r in tb.records if r["kind"] == Kind.POLL and r["intersection"] == tls]
                  for tls in starts}
-    period = tb.config.middleware.poll_period
+    period = tb.intersections["J1"].config.middleware.poll_period
     assert list(starts) == ["J1", "J2", "J3", "J4"]
     gaps = [b - a for a, b in pairwise(starts.values())]
     assert gaps == pytest.approx([period / 4] * 3)

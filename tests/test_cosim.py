@@ -14,34 +14,37 @@ from hils.actions import ActionType
 from hils.events import Kind
 from hils.ntcip import SignalState
 from hils.sumo import SumoSimulation
+from hils.sumo_net import TLS_ID
 from hils.testbed import RunSpec, run_spec
 
 CFG = config_mod.load()
 
 
 class Watched:
-    """The SUMO simulation of the run, checked after every step."""
+    """The SUMO simulation of the run (its one light), checked after every step."""
 
     def __init__(self, sim: SumoSimulation) -> None:
         self.sim = sim
+        (self.light,) = sim.lights.values()
+        self.lights = {TLS_ID: self}
         self.applied: SignalState | None = None
         self.mismatches: list[tuple[float, str, str]] = []
         self.steps = 0
         self.crossings = {"G": 0, "y": 0, "r": 0}
         self._last: dict[str, str] = {}
-        pm = sim.phase_map
+        pm = self.light.phase_map
         self._link_of = {(lk.from_lane, lk.to_lane.rsplit("_", 1)[0]): lk.index for lk in pm.links}
         self._incoming = sorted({lk.from_lane for lk in pm.links})
 
     def apply(self, state: SignalState) -> None:
         self.applied = state
-        self.sim.apply(state)
+        self.light.apply(state)
 
     def step(self) -> None:
         self.sim.step()
         self.steps += 1
-        shown = self.sim.indications()
-        expected = self.sim.phase_map.state_string(self.applied) if self.applied else shown
+        shown = self.light.indications()
+        expected = self.light.phase_map.state_string(self.applied) if self.applied else shown
         if shown != expected:
             self.mismatches.append((self.sim.time, shown, expected))
         now = {v: lane for lane in self._incoming for v in libsumo.lane.getLastStepVehicleIDs(lane)}
@@ -55,10 +58,10 @@ class Watched:
             self.step()
 
     def traffic_state(self):
-        return self.sim.traffic_state()
+        return self.light.traffic_state()
 
     def queues(self):
-        return self.sim.queues()
+        return self.light.queues()
 
 
 def test_sumo_shows_the_controllers_state_and_nobody_crosses_on_red():

@@ -40,7 +40,7 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, Any]]
     live: dict[str, Any] = {}
     boards: list[Board] = []
 
-    def attach(tb: Testbed, _target: Any) -> None:
+    def attach(tb: Testbed) -> None:
         board = Board(tb.config)
         tb.events.subscribe(board.feed)
         boards.append(board)
@@ -141,7 +141,7 @@ def test_the_cabinet_read_shows_walks_clearances_calls_and_next(paper_toml: str)
                    + paper_toml[end:], "peds.toml")
     boards: list[Board] = []
 
-    def attach(tb: Testbed, _target: Any) -> None:
+    def attach(tb: Testbed) -> None:
         boards.append(Board(tb.config))
         tb.events.subscribe(boards[0].feed)
         tb.env.process(read_cabinet(tb.env, tb.transport, tb.events, tb.config.groups))
@@ -238,8 +238,8 @@ def corridor_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Panels
     scenario = load_scenario("corridor")
     live = Panels.of(scenario.intersections, light_positions(scenario))
     with Testbed(scenario=scenario, sumo=True, seed=1, duration=120.0, log_path=log,
-                 on_reset=lambda tb, _target: tb.events.subscribe(live.feed)) as tb:
-        tb.reset()
+                 on_reset=lambda tb: tb.events.subscribe(live.feed)) as tb:
+        tb.reset_all()
         tb.run()
     return log, live
 

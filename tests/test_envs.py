@@ -229,9 +229,9 @@ def test_the_four_phase_intersection_runs_with_permissive_lefts() -> None:
             *_, truncated, info = env.step(1)
             assert info["refused"] is None
         assert truncated
-        sim = env.unwrapped.testbed.simulation
-        lefts = [link.index for link in sim.phase_map.links if link.turn == "left"]
-        assert lefts and all(link.permissive for link in sim.phase_map.links if link.turn == "left")
+        links = env.unwrapped.testbed.intersection.signals.phase_map.links
+        lefts = [link.index for link in links if link.turn == "left"]
+        assert lefts and all(link.permissive for link in links if link.turn == "left")
         traffic = env.unwrapped.testbed.traffic
         assert traffic.arrived > 50 and traffic.collisions == 0
     finally:
@@ -313,7 +313,7 @@ def test_the_testbed_takes_a_sumocfg() -> None:
                  seed=1) as tb:
         tb.reset()
         assert tb.run() == "duration"
-        assert tb.simulation.phase_map.phases == (2, 4, 6, 8)
+        assert tb.intersection.signals.phase_map.phases == (2, 4, 6, 8)
 
 
 # --- parallel environments ------------------------------------------------------------------------------

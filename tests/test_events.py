@@ -82,7 +82,7 @@ def test_a_run_whose_agent_crashes_keeps_every_record_and_ends_cleanly(paper_con
     path = tmp_path / "crash.jsonl"
     emitted: list[dict[str, Any]] = []
 
-    def configure(run: Testbed, target: Any) -> None:
+    def configure(run: Testbed) -> None:
         run.agent = CrashingAgent(crash_after=3)
         emit = run.events.emit
 

@@ -252,9 +252,9 @@ def run_with(config: IntersectionConfig, faults, *, action_type=ActionType.SELEC
             monitors.append(IndicationMonitor(env, target.controller, cfg))
         return target
 
-    def configure(run, _target):
+    def configure(run):
         for f in faults:
-            f.on_run(run, run.junction)
+            f.on_run(run, run.intersection)
 
     return run_spec(RunSpec(config, action_type, agent, duration, seed=1), target=factory,
                        configure=configure)

@@ -64,7 +64,7 @@ def test_one_hour_every_transition_verified_within_clearance_plus_one_poll(actio
 
 
 def test_loss_of_n_timeout_polls_enters_timeout_and_recovery_resumes_service():
-    def configure(run, target):
+    def configure(run):
         def outage():
             yield run.env.timeout(100.0)
             run.transport.loss = 1.0
@@ -119,7 +119,7 @@ def test_n_drift_consecutive_slow_steps_enter_timeout_and_isolated_ones_do_not()
     step = CFG.middleware.sumo_step
 
     def slow_steps(slow):
-        def configure(run, target):
+        def configure(run):
             count = iter(range(10**9))
 
             def cost(fn):

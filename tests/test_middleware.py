@@ -231,7 +231,7 @@ def test_a_closing_clear_that_gets_no_answer_is_sent_again(paper_config, lost: i
         tb.reset()
         while not tb.done:
             tb.step(1)  # steps leave the calls placed: only finish() clears them
-        transport, env = tb.junction.transport, tb.env
+        transport, env = tb.intersection.transport, tb.env
         real_set, dropped = transport.set, []
 
         def set_losing_the_first_clears(varbinds):
@@ -371,7 +371,7 @@ def test_a_command_for_a_pair_already_green_is_verified_by_the_next_poll(paper_c
 
 def test_no_backup_time_anywhere_means_no_keepalive_and_no_stall(paper_config) -> None:
     cfg = paper_config.with_middleware(backup_time=0)
-    tb = Testbed(cfg, action_type="switch", on_reset=lambda _tb, target: setattr(target.controller, "backup_time", 0))
+    tb = Testbed(cfg, action_type="switch", on_reset=lambda tb: setattr(tb.target.controller, "backup_time", 0))
     tb.reset()
     tb.run_for(1.0)
     tb.middleware.submit(1)

@@ -150,7 +150,7 @@ def test_invalid_actions_are_refused_naming_the_agent_and_nothing_is_sent() -> N
         converted = sum(r["kind"] == Kind.ACTION_CONVERTED for r in env.testbed.records)
         with pytest.raises(ActionError, match=r"phase switch takes 0 \(keep\) or 1 \(advance\), got 2") as refused:
             env.step({"J1": 1, "J2": np.int64(2), "J3": 0, "J4": 1})
-        assert "the action of traffic light J2; nothing was sent to any controller" in refused.value.__notes__
+        assert "the action of intersection J2; nothing was sent to any controller" in refused.value.__notes__
         with pytest.raises(EnvOptionError, match="actions for J9: no such live agent; allowed: J1, J2, J3, J4"):
             env.step({"J9": 1})
         assert sum(r["kind"] == Kind.ACTION_CONVERTED for r in env.testbed.records) == converted

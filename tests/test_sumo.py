@@ -16,6 +16,7 @@ from hils.ntcip import SignalState
 from hils.sumo import SumoError, SumoSimulation, time_bare_sumo
 from hils.sumo_net import (
     NETWORKS,
+    TLS_ID,
     NetworkError,
     build_network,
     compass_side,
@@ -156,7 +157,7 @@ def test_shipped_network_is_what_netconvert_makes_of_the_sources(tmp_path: Path,
 
 def test_indications_follow_the_applied_state_and_nobody_crosses_on_red(config, net) -> None:
     with SumoSimulation(config, seed=3) as sim:
-        pm = sim.phase_map
+        pm = sim.lights[TLS_ID].phase_map
         # the link table SUMO runs with is the one the map was derived for
         assert [list(t) for t in libsumo.trafficlight.getControlledLinks("C")] == controlled_links_from_net(net)
         link_of = {(lk.from_lane, edge_of(lk.to_lane)): lk.index for lk in pm.links}
@@ -167,10 +168,10 @@ def test_indications_follow_the_applied_state_and_nobody_crosses_on_red(config, 
         states = cycle(config, green=12.0)
         while sim.time < 400.0:
             state = next(states)
-            sim.apply(state)
+            sim.lights[TLS_ID].apply(state)
             expected = pm.state_string(state)
             sim.step()
-            assert sim.indications() == expected, f"t={sim.time}"
+            assert sim.lights[TLS_ID].indications() == expected, f"t={sim.time}"
             now = {vid: lane for lane in incoming for vid in libsumo.lane.getLastStepVehicleIDs(lane)}
             for vid, lane in last_lane.items():
                 if vid in now:
@@ -189,10 +190,10 @@ def test_queues_build_on_red_and_discharge_on_green(config) -> None:
     every = frozenset(config.phases)
     with SumoSimulation(config, seed=5) as sim:
         all_red = SignalState(every, frozenset(), frozenset())
-        assert sim.apply(all_red) is False  # the light starts all red
+        assert sim.lights[TLS_ID].apply(all_red) is False  # the light starts all red
         while sim.time < 120.0:
             sim.step()
-        red = sim.traffic_state()
+        red = sim.lights[TLS_ID].traffic_state()
         assert red.departed > 30 and red.arrived == 0
         assert sim.summary().mean_time_loss is None
         for phase in (2, 6):  # the major through movements
@@ -201,11 +202,11 @@ def test_queues_build_on_red_and_discharge_on_green(config) -> None:
         assert red.lanes["W2C_1"].waiting_time > 0 and red.lanes["W2C_1"].vehicles >= red.lanes["W2C_1"].halting
 
         green = SignalState(every - {2, 6}, frozenset(), frozenset({2, 6}))
-        assert sim.apply(green) is True
-        assert sim.apply(SignalState(every - {2, 6}, frozenset(), frozenset({2, 6}))) is False
+        assert sim.lights[TLS_ID].apply(green) is True
+        assert sim.lights[TLS_ID].apply(SignalState(every - {2, 6}, frozenset(), frozenset({2, 6}))) is False
         while sim.time < 180.0:
             sim.step()
-        after = sim.traffic_state()
+        after = sim.lights[TLS_ID].traffic_state()
         assert after.arrived > 10
         for phase in (2, 6):
             assert after.movements[phase].upstream_queue < red.movements[phase].upstream_queue
@@ -230,9 +231,9 @@ def test_same_seed_same_run_and_restart_in_one_process(config) -> None:
         with SumoSimulation(config, seed=11) as sim:
             states = cycle(config, green=10.0)
             while sim.time < 150.0:
-                sim.apply(next(states))
+                sim.lights[TLS_ID].apply(next(states))
                 sim.step()
-            return sim.traffic_state(), sim.summary()
+            return sim.lights[TLS_ID].traffic_state(), sim.summary()
 
     first, second = run(), run()
     assert first == second
@@ -267,7 +268,7 @@ def test_fixed_time_baseline_runs_the_webster_cycle(config) -> None:
     green = webster_plan(config).green_of((1, 5))  # yellow 3 s and red clearance 2 s follow it
     with SumoSimulation(config) as sim:
         sim.run_fixed_time()
-        pm = sim.phase_map
+        pm = sim.lights[TLS_ID].phase_map
         checks = {green - 1.0: SignalState(every - {1, 5}, frozenset(), frozenset({1, 5})),
                   green + 1.5: SignalState(every - {1, 5}, frozenset({1, 5}), frozenset()),
                   green + 4.0: SignalState(every, frozenset(), frozenset()),
@@ -275,24 +276,25 @@ def test_fixed_time_baseline_runs_the_webster_cycle(config) -> None:
         for at, state in checks.items():
             while sim.time < at:
                 sim.step()
-            assert sim.indications() == pm.state_string(state), at
+            assert sim.lights[TLS_ID].indications() == pm.state_string(state), at
     wall = time_bare_sumo(60.0, config=config)
     assert 0.0 < wall < 10.0
 
 
 def test_a_vehicle_standing_at_the_stop_bar_is_present_on_its_lane(config) -> None:
     with SumoSimulation(config, seed=2) as sim:
-        pm = sim.phase_map
+        pm = sim.lights[TLS_ID].phase_map
         phase_of_lane = {lane: p for p in pm.phases for lane in pm.incoming_lanes(p)}
-        sim.apply(SignalState(frozenset(config.phases), frozenset(), frozenset()))  # all red: queues form
+        # all red: queues form
+        sim.lights[TLS_ID].apply(SignalState(frozenset(config.phases), frozenset(), frozenset()))
         while sim.time < 60.0:
             sim.step()
-        present = sim.present()
+        present = sim.lights[TLS_ID].present()
         # After a minute of red, a lane with a halted queue has its first vehicle at the stop bar: exactly those
         # lanes are present.
         queued = {lane for lane in phase_of_lane if libsumo.lane.getLastStepHaltingNumber(lane)}
         assert present == queued and len({phase_of_lane[lane] for lane in present}) >= 4
-        assert sim.present(zone=0.5) <= present
+        assert sim.lights[TLS_ID].present(zone=0.5) <= present
 
 
 @pytest.mark.parametrize("measure", [True, False])
@@ -305,7 +307,7 @@ def test_advancing_several_steps_at_once_is_stepping_them_one_by_one(config, mea
     def run(stretched: bool) -> tuple:
         with SumoSimulation(config, seed=5, measure=measure) as sim:
             for state, n in runs:
-                sim.apply(state)
+                sim.lights[TLS_ID].apply(state)
                 sim.step()
                 left = n - 1
                 while left:  # stretches of 1..7 steps: across the per-second samples and between them

@@ -132,8 +132,8 @@ def test_the_steps_at_wall_clock_against_the_served_emulator(tmp_path: Path) -> 
             assert info["state"] == "on_hold"
             _, info = tb.step((4, 8))
             assert info["dropped"]
-            obs = tb.run_for(5.0)
-            assert obs.signal.greens == {3, 7} and tb.state is State.IDLE
+            tb.run_for(5.0)
+            assert tb.observe().signal.greens == {3, 7} and tb.state is State.IDLE
         assert veh_call(served.port) == 0, "close() clears the call it placed"
         assert tb.records[-1]["kind"] == Kind.RUN_ENDED and tb.records[-1]["reason"] == "closed"
     finally:
@@ -248,7 +248,7 @@ def short_interval_config(tmp_path: Path) -> Path:
 
 
 def test_an_error_inside_the_run_finishes_it_before_it_propagates() -> None:
-    def broken(tb: Testbed, target: Any) -> None:
+    def broken(tb: Testbed) -> None:
         def fail_at_30():
             yield tb.env.timeout(30.0)
             raise RuntimeError("a part of the run broke")
@@ -325,3 +325,41 @@ def test_a_stretch_is_the_steps_the_grid_starts_before_the_next_event(start, k, 
     while until > start + (k + counted) * step:
         counted += 1
     assert _steps_before(until, Grid(start, step), k) == counted
+
+
+@pytest.mark.parametrize("scenario", [None, "corridor"])
+def test_each_action_is_converted_once_and_its_latency_counts_the_conversion(monkeypatch, scenario) -> None:
+    """A step converts every action before it submits any (all or none), once; the action's receipt is stamped
+    before that conversion, so the internal latency (received to dispatched) counts it, as the paper's does."""
+    from hils.actions import ActionConverter
+
+    converted: list[Any] = []
+    convert = ActionConverter.convert
+
+    def slow(self: ActionConverter, value: Any, position: int) -> Any:
+        converted.append(value)
+        time.sleep(0.003)
+        return convert(self, value, position)
+
+    monkeypatch.setattr(ActionConverter, "convert", slow)
+    with Testbed(scenario=scenario, seed=0, duration=30.0) as tb:
+        tb.reset_all()
+        names = list(tb.intersections)
+        tb.step_all(dict.fromkeys(names, (4, 8)))
+        assert converted == [(4, 8)] * len(names)
+        received = {r["action_id"] if scenario is None else r["intersection"]: r["wall_ns"]
+                    for r in kinds(tb, Kind.ACTION_RECEIVED)}
+        dispatched = {r["action_id"] if scenario is None else r["intersection"]: r["wall_ns"]
+                      for r in kinds(tb, Kind.COMMAND_DISPATCHED)}
+        assert received.keys() == dispatched.keys() and len(received) == len(names)
+        assert all(dispatched[k] - received[k] >= 3_000_000 for k in received)
+
+
+def test_the_single_view_refuses_a_run_of_several_before_anything_starts() -> None:
+    from hils.testbed import SeveralIntersections
+
+    tb = Testbed(scenario="corridor", duration=10.0)
+    with pytest.raises(SeveralIntersections, match=r"4 intersections \(J1, J2, J3, J4\).*reset_all"):
+        tb.reset()
+    assert tb.env is None and tb.intersections == {}
+    assert Testbed.__doc__ is not None and "reset_all" in Testbed.__doc__

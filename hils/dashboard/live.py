@@ -21,7 +21,7 @@ from hils.dashboard.cabinet import read_cabinet
 from hils.dashboard.server import Live, LiveServer, bind
 
 if TYPE_CHECKING:
-    from hils.junction import Junction
+    from hils.intersection import Intersection
 
 
 @dataclass
@@ -33,7 +33,7 @@ class LiveDashboard:
     host: str = "127.0.0.1"
     server: LiveServer | None = field(default=None, init=False)
 
-    def attach(self, testbed: Any, _target: Any = None) -> None:
+    def attach(self, testbed: Any) -> None:
         """The Testbed's ``on_reset`` hook: start serving this run's board (one panel per controller)."""
         driver = testbed.driver
         if driver is None:
@@ -41,18 +41,19 @@ class LiveDashboard:
                                  "run afterwards with `hils view RUN_FOLDER --realtime 10`")
         if self.server is not None:
             self.stop()
-        junctions = testbed.junctions
-        if testbed.several:
+        intersections = testbed.intersections
+        first = next(iter(intersections.values()))
+        if first.label is not None:
             from hils.sumo_net import light_positions
 
-            board: Board | Panels = Panels.of({tls: j.config for tls, j in junctions.items()},
+            board: Board | Panels = Panels.of({name: i.config for name, i in intersections.items()},
                                               light_positions(testbed.scenario),
-                                              {tls: _counter(j) for tls, j in junctions.items()})
+                                              {name: _counter(i) for name, i in intersections.items()})
         else:
-            board = Board(testbed.config, counter=_counter(testbed.junction))
+            board = Board(first.config, counter=_counter(first))
         testbed.events.subscribe(board.feed)
-        for j in junctions.values():
-            testbed.env.process(read_cabinet(testbed.env, j.transport, j.events, j.config.groups))
+        for i in intersections.values():
+            testbed.env.process(read_cabinet(testbed.env, i.transport, i.events, i.config.groups))
         live = Live(board, recover=(lambda tls: _request_recovery(testbed, tls)) if self.control else None)
         self.server = LiveServer(live, bind(self.host, self.port), driver.loop)
         print(f"dashboard: {self.server.url}", flush=True)
@@ -63,17 +64,17 @@ class LiveDashboard:
             self.server = None
 
 
-def _counter(junction: Junction) -> Callable[[], dict[str, int]]:
-    """The junction's poller counts, read at each snapshot."""
-    return lambda: junction.middleware.poller.counts
+def _counter(intersection: Intersection) -> Callable[[], dict[str, int]]:
+    """The intersection's poll counts, read at each snapshot."""
+    return lambda: intersection.middleware.poll_counts
 
 
 def _request_recovery(testbed: Any, tls: str | None) -> str:
     """Ask the manager (of traffic light ``tls`` in a run of several) to recover; runs as a SimPy event
     delivered at the wall-mapped present."""
-    if testbed.ended or not testbed.junctions:
+    if testbed.ended or not testbed.intersections:
         return "the run has ended"
-    mw = (testbed.junctions[tls] if tls is not None else testbed.junction).middleware
+    mw = (testbed.intersections[tls] if tls is not None else testbed.intersection).middleware
     if not mw.timeout_flag:
         return f"nothing to recover: the manager is {mw.state.name}"
     event = testbed.env.event()

@@ -107,11 +107,9 @@ class IntersectionsEnv(ParallelEnv[str, np.ndarray, Any]):
             self._np_random, _ = seeding.np_random(seed)
         run_seed = episode_seed(seed, self._np_random)
         tb = self.testbed
-        first = tb.reset(seed=run_seed)
-        # A scenario of one light makes a Testbed of one controller, whose reset returns that one observation.
-        observations = first if tb.several else {tb.junction.id: first}
-        for tls, adapter in self.adapters.items():
-            adapter.start(tb.junctions[tls].middleware.cache, observations[tls])
+        observations = tb.reset_all(seed=run_seed)
+        for name, adapter in self.adapters.items():
+            adapter.start(tb.intersections[name].middleware.cache, observations[name])
         self._last = observations
         self.agents = list(self.possible_agents)
         return ({tls: self.adapters[tls].vector(obs) for tls, obs in observations.items()},

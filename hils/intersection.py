@@ -1,17 +1,23 @@
-"""One controller of a run: its intersection, the controller it reaches, the middleware and the agent.
+"""One intersection of a run: its controller, the middleware that drives it, its agent, its decision schedule
+and what SUMO shows for it.
 
-A :class:`hils.Testbed` holds one :class:`Junction` per signalised intersection: one for the paper's
-four-leg, four for the corridor, sixteen for the grid. Each has its own transport, manager, poller and
-signal cache (its :class:`hils.middleware.Middleware`), its own agent, and, when SUMO runs, the traffic
-light it drives; they share the Testbed's one SimPy environment, clock and event log (where, in a run of
-several, every record names its intersection). A failure on one controller's link times that controller
-out and leaves the others running: nothing here reaches across junctions.
+A :class:`hils.Testbed` holds one :class:`Intersection` per signalised intersection, keyed by its name (its
+traffic light's SUMO id): one for the paper's four-leg (``C``), four for the corridor, sixteen for the grid.
+A run of one intersection is the case N = 1 of the same code. Each intersection has its own transport,
+manager, poller and signal cache (its :class:`hils.middleware.Middleware`), its own agent and decision
+schedule, and, when SUMO runs, the traffic light it drives; they share the Testbed's one SimPy environment,
+clock and event log. A failure on one controller's link times that controller out and leaves the others
+running: nothing here reaches across intersections.
+
+How outputs name an intersection (:func:`hils.scenario.labels`): by its name in a run of several (every record's
+``intersection``, ``J2 north`` in the summary, ``J2:`` in a message); a run of one names none, and writes
+what the single-controller run always wrote.
 """
 
 from __future__ import annotations
 
 import logging
-from collections.abc import Generator
+from collections.abc import Callable, Generator
 from typing import Any
 
 import simpy
@@ -27,19 +33,22 @@ from hils.summary import Tally
 from hils.timegrid import Grid
 from hils.transport import Transport
 
+__all__ = ["Intersection"]
+
 log = logging.getLogger(__name__)
 
 
-class Junction:
+class Intersection:
     """One intersection's controller in a run, and everything that acts on it alone.
 
-    ``id`` is its traffic light's SUMO id (``C`` for a single intersection); ``view`` is what it shows in
-    the simulation (a :class:`hils.sumo.Light`, or the simulation itself when it has one light), or None
+    ``name``: its traffic light's SUMO id (``C`` for a single intersection); ``label``: how outputs name it
+    (:func:`hils.scenario.labels`); ``signals``: what it shows in the simulation (a :class:`hils.sumo.Light`), or None
     without SUMO."""
 
-    def __init__(self, id: str, config: IntersectionConfig, target: Any, transport: Transport,
+    def __init__(self, name: str, label: str | None, config: IntersectionConfig, target: Any, transport: Transport,
                  middleware: Middleware, events: EventLog | TaggedLog, tally: Tally) -> None:
-        self.id = id
+        self.name = name
+        self.label = label
         self.config = config
         self.target = target
         self.transport = transport
@@ -47,7 +56,7 @@ class Junction:
         self.events = events
         self.tally = tally
         self.agent: Agent | None = None
-        self.view: Any = None
+        self.signals: Any = None
         self.detector_feed: DetectorFeed | None = None
         self.traffic_samples: list[tuple[float, dict[str, int]]] = []
         # Its own decision schedule: asked now (``due``), or when ``deadline`` passes or one of ``waits`` fires.
@@ -63,10 +72,14 @@ class Junction:
     def state(self) -> State | None:
         return self.middleware.state
 
+    def named(self, message: str) -> str:
+        """``message`` as said of this intersection (``J2: ...`` in a run of several)."""
+        return f"{self.label}: {message}" if self.label else message
+
     def observe(self) -> Observation:
-        """What this junction's agent sees now."""
+        """What this intersection's agent sees now."""
         mw = self.middleware
-        traffic = self.view.traffic_state() if self.view is not None else None
+        traffic = self.signals.traffic_state() if self.signals is not None else None
         return Observation(mw.env.now, mw.cache.state, traffic, mw.next_pair, mw.state)
 
     def refusals(self) -> list[str]:
@@ -77,7 +90,7 @@ class Junction:
         return ([mw.startup_error] if mw.startup_error else []) + list(mw.verdict.refusals)
 
     def decision(self, action_type: ActionType) -> tuple[float | None, list[simpy.Event]]:
-        """When this junction next wants a decision: a delay from now (or None) and the events that end the
+        """When this intersection next wants a decision: a delay from now (or None) and the events that end the
         wait earlier (the manager entering TIMEOUT, a served green ending)."""
         mw, params = self.middleware, self.config.middleware
         timeout_entered = mw.entering(State.TIMEOUT)
@@ -90,7 +103,7 @@ class Junction:
         return params.sumo_step, []  # nothing to serve: do not ask again at the same instant
 
     def schedule(self, action_type: ActionType) -> None:
-        """Start the wait for this junction's next decision point, from now."""
+        """Start the wait for this intersection's next decision point, from now."""
         delay, self.waits = self.decision(action_type)
         self.deadline = None if delay is None else self.env.now + delay
 
@@ -107,7 +120,7 @@ class Junction:
 
     # --- processes ---------------------------------------------------------------------------------
 
-    def sample_traffic(self, ended: Any, period: float = 5.0) -> Generator[simpy.Event, Any, None]:
+    def sample_traffic(self, ended: Callable[[], bool], period: float = 5.0) -> Generator[simpy.Event, Any, None]:
         """Queue per approach every ``period`` s, for the queue plot."""
         phases = self.config.phases
         env = self.env
@@ -116,7 +129,7 @@ class Junction:
             k += 1
             yield env.timeout(grid.delay(k, env.now))
             per_approach: dict[str, int] = {}
-            for p, queue in self.view.queues().items():
+            for p, queue in self.signals.queues().items():
                 name = phases[p].approach or f"phase {p}"
                 per_approach[name] = per_approach.get(name, 0) + queue
             self.traffic_samples.append((env.now, per_approach))
