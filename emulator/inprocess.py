@@ -31,13 +31,14 @@ class VirtualTarget:
     """Controller model + its delays + MIB view on one environment; the MIB view is the transport's surface.
 
     ``controller`` is the model itself (its lamps, for monitors); ``unit`` is what the agent talks to.
-    The unit's ticks run event by event (:mod:`emulator.event_clock`), and the clock is the change feed
-    that lets the poller skip polls that cannot see a change. ``ticked=True`` is the reference this is
-    tested against: every tick stepped by a SimPy process, no change feed, so every poll is sent.
+    On virtual time's fast path (``fast_path``, the run's flag: :mod:`hils.fastpath`) the unit's ticks run
+    event by event (:mod:`emulator.event_clock`), and the clock is the change feed that lets the poller skip
+    polls that cannot see a change. Without it is the reference the fast path is tested against: every tick
+    stepped by a SimPy process, no change feed, so every poll is sent.
     """
 
     def __init__(self, env: simpy.Environment, config: IntersectionConfig, *, seed: int = 0,
-                 ticked: bool = False) -> None:
+                 fast_path: bool = True) -> None:
         self.env = env
         self.controller = Controller(config)
         self.unit = DelayedController(self.controller, config.emulator)
@@ -49,12 +50,12 @@ class VirtualTarget:
         self.tick_phase = random.Random(f"tick-phase-{seed}").uniform(0.0, TICK)
         self.clock: EventClock | None = None
         self._ticking: simpy.Process | None = None
-        if ticked:
-            self.surface: MibView | ClockedSurface = self.mib
-            self._ticking = env.process(self.unit.process(env, self.tick_phase))
-        else:
+        if fast_path:
             self.clock = EventClock(env, self.unit, self.tick_phase)
-            self.surface = ClockedSurface(self.mib, self.clock)
+            self.surface: MibView | ClockedSurface = ClockedSurface(self.mib, self.clock)
+        else:
+            self.surface = self.mib
+            self._ticking = env.process(self.unit.process(env, self.tick_phase))
 
     @property
     def change_feed(self) -> EventClock | None:

@@ -50,11 +50,12 @@ from emulator.mib import MibView
 from hils.actions import ActionType
 from hils.agents import Agent, Observation
 from hils.config import IntersectionConfig
+from hils.fastpath import StepCost
 from hils.intersection import Intersection
 from hils.manager import State
 from hils.middleware import Middleware
 from hils.ntcip import CONTROL_TABLE, ControlColumn, ErrorStatus, Oid, SnmpError, UnitControlStatus, UnitFlashStatus
-from hils.testbed import StepCost, Testbed
+from hils.testbed import Testbed
 from hils.timegrid import Grid
 from hils.transport import CommunicationTimeout, LocalTransport, ObjectSurface, Transport, Value, VarBind
 
@@ -209,6 +210,10 @@ class FaultyTransport:
     answer is discarded. An injected error answers at once with an SNMP error
     and the controller never sees the request, as an agent refusing it would.
     A request no fault touches is the inner transport's own event.
+
+    On virtual time's fast path (:mod:`hils.fastpath`) it offers the inner transport's change feed while no
+    fault may act on a request, and none while one may (every request then goes out, for the fault to judge):
+    a poller or read-back asleep meanwhile is woken when the next fault's window opens.
     """
 
     def __init__(self, env: simpy.Environment, inner: Transport, *, tau_udp: float,
@@ -219,7 +224,39 @@ class FaultyTransport:
         self.faults: list[TransportFault] = list(faults)
         self.error_latency = error_latency
         self.late_discarded = 0  # answers that came after the request had failed
-        self.change_feed = None  # faults draw per request: every poll is sent
+
+    # --- the change feed: the inner one's, while no fault may act -------------------------------------
+
+    @property
+    def change_feed(self) -> FaultyTransport | None:
+        now = self.env.now
+        if self.inner.change_feed is None or any(f.active(now) for f in self.faults):
+            return None
+        return self
+
+    @property
+    def version(self) -> int:
+        return self.inner.change_feed.version
+
+    @property
+    def controls(self) -> int:
+        return self.inner.change_feed.controls
+
+    def changed(self) -> simpy.Event:
+        return self._or_next_window(self.inner.change_feed.changed())
+
+    def controls_changed(self) -> simpy.Event:
+        return self._or_next_window(self.inner.change_feed.controls_changed())
+
+    def bump(self) -> None:
+        self.inner.change_feed.bump()
+
+    def _or_next_window(self, event: simpy.Event) -> simpy.Event:
+        """``event``, or the opening of the next fault's window if that comes first."""
+        now = self.env.now
+        opening = min((f.window.start for f in self.faults
+                       if f.window.start > now and (f.limit is None or f.fired < f.limit)), default=None)
+        return event if opening is None else self.env.any_of([event, self.env.timeout(opening - now)])
 
     def get(self, oids: Sequence[Oid]) -> simpy.Event:
         return self._request(Op.GET, lambda: self.inner.get(oids))
@@ -497,22 +534,43 @@ class SlowSteps(Fault):
         run.step_cost = self.wrap(run.step_cost, lambda: run.env.now)
 
     def wrap(self, inner: StepCost, clock: Callable[[], float]) -> StepCost:
-        def cost(step: Callable[[], Any]) -> float:
-            took = inner(step)
-            now = clock()
-            if not self.active(now):
-                return took
-            i = self._offset
-            self._offset += 1
-            if i % (self.consecutive + self.gap) < self.consecutive:
-                self.fire(now)
-                return max(took, self.cost)
+        return _SlowCost(self, inner, clock)
+
+    def judge(self, took: float, now: float) -> float:
+        """What a step that took ``took`` s at ``now`` costs with this fault on it."""
+        if not self.active(now):
             return took
-        return cost
+        i = self._offset
+        self._offset += 1
+        if i % (self.consecutive + self.gap) < self.consecutive:
+            self.fire(now)
+            return max(took, self.cost)
+        return took
+
+    def quiet_until(self, now: float) -> float:
+        """The time before which this fault makes no step cost: its window's start, or forever once spent."""
+        if self.limit is not None and self.fired >= self.limit:
+            return math.inf
+        return self.window.start if now < self.window.start else now
 
     def describe(self) -> str:
         return (f"{self.limit} steps costing {self.cost:g} s, in runs of {self.consecutive} "
                 f"with {self.gap} on time between, from {self.window.start:g} s")
+
+
+class _SlowCost:
+    """A step cost with a :class:`SlowSteps` fault on it: the fault judges every step while it is active, and
+    says so to the fast path (:meth:`free_until`), which steps SUMO in stretches before and after."""
+
+    def __init__(self, fault: SlowSteps, inner: StepCost, clock: Callable[[], float]) -> None:
+        self.fault, self.inner, self.clock = fault, inner, clock
+
+    def __call__(self, step: Callable[[], Any]) -> float:
+        took = self.inner(step)
+        return self.fault.judge(took, self.clock())
+
+    def free_until(self, now: float) -> float:
+        return min(self.fault.quiet_until(now), self.inner.free_until(now))
 
 
 # --- the agent ------------------------------------------------------------------------------------------
@@ -717,17 +775,17 @@ class FaultTarget:
     """
 
     def __init__(self, env: simpy.Environment, config: IntersectionConfig, *, seed: int = 0,
-                 faults: Sequence[Fault] = ()) -> None:
+                 faults: Sequence[Fault] = (), fast_path: bool = True) -> None:
         self.env = env
         self.config = config
-        self.base = VirtualTarget(env, config, seed=seed)
+        self.base = VirtualTarget(env, config, seed=seed, fast_path=fast_path)
         self.controller: Controller = self.base.controller
         self.mib: MibView = self.base.mib
         surface: ObjectSurface = self.base.surface  # writes go through the controller's clock
         for fault in faults:
             surface = fault.wrap_surface(surface, env)
         inner = LocalTransport(env, surface, tau_udp=config.middleware.tau_udp, get_latency=self.base.get_latency,
-                               set_latency=self.base.set_latency, seed=seed)
+                               set_latency=self.base.set_latency, seed=seed, change_feed=self.base.change_feed)
         self.transport = FaultyTransport(env, inner, tau_udp=config.middleware.tau_udp)
         for fault in faults:
             fault.on_target(self)

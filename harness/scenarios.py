@@ -791,8 +791,8 @@ def run_scenario(scenario: Scenario, *, log_path: Path | None = None) -> Scenari
         # Each controller's target carries only the faults placed on it: the others' links stay whole.
         here = [fault for spec, fault in placed if spec.acts_at(tls)]
 
-        def make(env: Any, config: IntersectionConfig, seed: int = 0) -> FaultTarget:
-            target = FaultTarget(env, config, seed=seed, faults=here)
+        def make(env: Any, config: IntersectionConfig, *, seed: int, fast_path: bool) -> FaultTarget:
+            target = FaultTarget(env, config, seed=seed, faults=here, fast_path=fast_path)
             monitors[tls] = IndicationMonitor(env, target.controller, config)
             return target
         return make

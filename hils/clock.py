@@ -5,6 +5,7 @@ process; only the object that advances the environment differs:
 
 - :class:`VirtualClock` runs the environment as fast as it can (CI, fault
   suites, training). Deterministic: nothing outside SimPy takes part.
+  A simulation step costs no simulated time (:data:`hils.fastpath.modeled_cost`).
 - :class:`WallClockDriver` steps the same environment to the wall clock from
   asyncio on one thread, so that pysnmp's asyncio I/O and SimPy share a loop.
   Sim time ``s`` maps to wall time ``t0 + s`` on the loop's monotonic clock
@@ -15,7 +16,9 @@ process; only the object that advances the environment differs:
 Both follow SimPy's ``run(until=t)`` rule and never paper over it: every
 event due strictly before ``t`` is processed, ``env.now`` ends at ``t``, and
 an event due exactly at ``t`` stays queued for the next run. Code written
-against ``env.run`` therefore behaves the same under either clock.
+against ``env.run`` therefore behaves the same under either clock. The
+Testbed moves time with one call, ``advance(until, events)``, the same on
+both: run until one of ``events`` has been processed, or to ``until``.
 
 I/O completions reach SimPy only through :meth:`WallClockDriver.deliver`,
 which schedules them at their wall-mapped time with public SimPy API. SimPy is
@@ -28,13 +31,16 @@ import asyncio
 import math
 import random
 import signal
-from collections.abc import Callable
+import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import partial
 from typing import Any, Protocol
 
 import numpy as np
 import simpy
+
+from hils.fastpath import StepCost, modeled_cost
 
 __all__ = ["Clock", "LatenessStats", "LatenessSummary", "VirtualClock", "WallClockDriver"]
 
@@ -46,12 +52,14 @@ _MAX_BATCH = 256
 
 
 class Clock(Protocol):
-    """What a scenario runner needs from either clock."""
+    """What a run needs from either clock."""
 
     env: simpy.Environment
+    step_cost: StepCost  # what a simulation step costs under this clock
 
-    def run_sync(self, until: float | None = None) -> None:
-        """Advance the environment to ``until`` (None: until it runs out of events or is stopped)."""
+    def advance(self, until: float | None, events: Sequence[simpy.Event]) -> signal.Signals | None:
+        """Run until one of ``events`` has been processed, or to ``until``; returns the signal (SIGINT, SIGTERM)
+        that stopped it, if one did."""
         ...
 
     def sim_now(self) -> float:
@@ -64,6 +72,14 @@ class VirtualClock:
 
     def __init__(self, env: simpy.Environment) -> None:
         self.env = env
+        self.step_cost = modeled_cost
+
+    def advance(self, until: float | None, events: Sequence[simpy.Event]) -> None:
+        """Run until one of ``events`` has been processed, or to ``until`` (events due exactly then stay queued,
+        so that an agent deciding at ``until`` acts before them)."""
+        if until is not None:
+            events = (*events, _deadline(self.env, until))
+        _run_until_one(events, simpy.core.StopSimulation.callback, self.env.run)
 
     def run(self, until: float | None = None) -> None:
         """Process every event due before ``until`` and leave ``env.now == until``.
@@ -150,6 +166,7 @@ class WallClockDriver:
     def __init__(self, env: simpy.Environment, *, loop: asyncio.AbstractEventLoop | None = None,
                  on_lateness: LatenessHook | None = None) -> None:
         self.env = env
+        self.step_cost: StepCost = _WallCost(self)
         self._owns_loop = loop is None
         self.loop: asyncio.AbstractEventLoop = asyncio.new_event_loop() if loop is None else loop
         #: Called after every processed event with (due sim time, lateness in s); drift detection hooks in here.
@@ -209,6 +226,13 @@ class WallClockDriver:
                     await asyncio.sleep(0)
         finally:
             self._running = False
+
+    def advance(self, until: float | None, events: Sequence[simpy.Event]) -> signal.Signals | None:
+        """Run at the wall clock until one of ``events`` has been processed, or to ``until``; returns the signal
+        (SIGINT, SIGTERM) that stopped it, if one did."""
+        _run_until_one(events, lambda _ev: self.stop(), lambda: self.run_sync(until=until))
+        signalled, self.signalled = self.signalled, None
+        return signalled
 
     def run_sync(self, until: float | None = None, *, handle_signals: bool = True) -> None:
         """Run :meth:`run` to completion on :attr:`loop` from synchronous code.
@@ -290,6 +314,46 @@ class WallClockDriver:
             self._waiter = None
             if timer is not None:
                 timer.cancel()
+
+
+class _WallCost:
+    """What a step cost at the wall clock: its own time plus how late it started. Never free."""
+
+    def __init__(self, driver: WallClockDriver) -> None:
+        self.driver = driver
+
+    def __call__(self, step: Callable[[], Any]) -> float:
+        late = max(0.0, self.driver.sim_now() - self.driver.env.now)
+        t0 = time.perf_counter()
+        step()
+        return late + time.perf_counter() - t0
+
+    def free_until(self, now: float) -> float:
+        return now
+
+
+def _run_until_one(events: Sequence[simpy.Event], stop: Callable[[simpy.Event], None], run: Callable[[], None]
+                   ) -> None:
+    """``run()`` with ``stop`` called back by whichever of ``events`` is processed first; the callbacks go again."""
+    for ev in events:
+        ev.callbacks.append(stop)
+    try:
+        run()
+    finally:
+        for ev in events:
+            if ev.callbacks is not None and stop in ev.callbacks:
+                ev.callbacks.remove(stop)
+
+
+def _deadline(env: simpy.Environment, at: float) -> simpy.Event:
+    """An event due at ``at`` that runs before every other event due then, as ``env.run(until=at)``'s own.
+
+    Built as SimPy builds that one; unlike it, a deadline that another event beat to the stop is left
+    without callbacks, so it cannot stop a later run."""
+    event = simpy.Event(env)
+    event._ok, event._value = True, None
+    env.schedule(event, simpy.core.URGENT, at - env.now)
+    return event
 
 
 def _wake(waiter: asyncio.Future[None]) -> None:

@@ -21,6 +21,7 @@ import simpy
 from hils.actions import ActionConverter, ActionError, ActionType, Command
 from hils.config import IntersectionConfig, Pair
 from hils.events import EventLog, Kind
+from hils.fastpath import QuietPolls, QuietReadbacks
 from hils.manager import (
     CloseDone,
     CloseRequested,
@@ -116,11 +117,12 @@ class Submission:
 class Middleware:
     """Everything between the agent and the transport, on one SimPy environment.
 
-    ``recover_after``: seconds in TIMEOUT before the manager recovers by itself (None: only when asked)."""
+    ``recover_after``: seconds in TIMEOUT before the manager recovers by itself (None: only when asked).
+    ``fast_path``: leave out the polls and read-backs that cannot see a change (:mod:`hils.fastpath`)."""
 
     def __init__(self, env: simpy.Environment, transport: Transport, config: IntersectionConfig,
                  action_type: ActionType | str, events: EventLog, *, where: str = "the controller",
-                 community: str | None = None, recover_after: float | None = None) -> None:
+                 community: str | None = None, recover_after: float | None = None, fast_path: bool = True) -> None:
         params = config.middleware
         self.where = where  # how messages name the controller (HOST:PORT)
         self.community = community
@@ -137,8 +139,10 @@ class Middleware:
         self.converter = ActionConverter(config, ActionType(action_type))
         self.cache = SignalCache()
         self.signal_oids = signal_oids(config.groups)
-        self.poller = Poller(env, transport, rate_hz=params.poll_hz, send=self._poll,
-                             newest=lambda: self.manager.newest_poll)
+        self._control_oids = [control_oid(c, g) for c in FOREIGN_COLUMNS for g in range(1, config.groups + 1)]
+        self.poller = Poller(env, rate_hz=params.poll_hz, send=self._poll,
+                             quiet=QuietPolls(transport, lambda: self.manager.newest_poll) if fast_path else None)
+        self._quiet_readbacks = QuietReadbacks(transport) if fast_path else None
         self.ready = env.event()
         self._entering: dict[State, simpy.Event] = {}  # events of processes waiting for a state
         self._leaving_recovery: simpy.Event | None = None
@@ -305,43 +309,38 @@ class Middleware:
         return seen, ControllerReading(int(backup), int(pattern), int(flash), control)
 
     def _read_back(self) -> Generator[simpy.Event, Any, None]:
-        """Read the control objects back every READBACK_PERIOD s; the manager judges whose they are.
-
-        Like a poll, a read-back that cannot see a change is not sent: with a change feed, every read-back
-        after one that found the control objects ours would find them ours again until the feed's
-        ``controls`` moves (someone wrote one), so the process sleeps until then and goes on at the first
-        time of its grid not before the write (at the write's own instant, should they meet)."""
+        """Read the control objects back at every READBACK_PERIOD of its grid when the manager says so; the
+        manager judges whose they are. On the fast path a read-back that cannot see a change is left out
+        (:mod:`hils.fastpath`, rule 3): the process sleeps until one could and goes on at the first time of its
+        grid not before then (at that very instant, should they meet)."""
         env = self.env
-        groups = self.config.groups
-        oids = [control_oid(c, g) for c in FOREIGN_COLUMNS for g in range(1, groups + 1)]
-        ours: int | None = None  # the feed's controls when a read-back last found the control objects ours
+        quiet = self._quiet_readbacks
         # Half a poll period off the poll grid, so that a read-back and a poll do not go out together.
-        yield env.timeout(self.poller.period / 2)
-        wait = READBACK_PERIOD
+        grid, k = Grid(env.now + self.poller.period / 2, READBACK_PERIOD), 1
         while self.manager.mode is not Mode.CLOSED:
-            yield env.timeout(wait)
-            wait = READBACK_PERIOD
+            yield env.timeout(grid.delay(k, env.now))
+            k += 1
             if not any(isinstance(e, ReadControls) for e in self._feed(ReadbackDue(env.now))):
                 continue
-            feed = self.transport.change_feed
-            controls = feed.controls if feed is not None else None
-            if controls is not None and controls == ours:
-                # Asleep until someone writes a control object, then on at the first read-back time (every
-                # READBACK_PERIOD from now) not before the write, at the write's own instant should they meet.
-                times = Grid(env.now, READBACK_PERIOD)
-                yield feed.controls_changed()
-                wait = times.at(times.first_at_or_after(env.now, 1)) - env.now
+            asleep = quiet.asleep() if quiet is not None else None
+            if asleep is not None:
+                yield asleep
+                k = grid.first_at_or_after(env.now, k)
                 continue
-            try:
-                values = yield self.transport.get(oids)
-            except (TransportError, SnmpError):
-                continue  # failed polls speak for the link; a failed read-back is let go
-            if self.manager.mode is Mode.CLOSED:
-                return
-            effects = self._feed(ControlsRead(self.env.now, tuple(
-                (CONTROL_TABLE[c].name, groups_to_phases([int(v) for v in values[i * groups:(i + 1) * groups]]))
-                for i, c in enumerate(FOREIGN_COLUMNS))))
-            ours = None if any(isinstance(e, TimeoutEntered) for e in effects) else controls
+            controls = quiet.sent() if quiet is not None else None
+            self.transport.get(self._control_oids).callbacks.append(lambda ev, seen=controls: self._read(ev, seen))
+
+    def _read(self, ev: simpy.Event, controls: int | None) -> None:
+        """A read-back's answer to the manager (one that failed is let go: failed polls speak for the link)."""
+        ev.defused = True
+        if not ev.ok:
+            return
+        groups = self.config.groups
+        effects = self._feed(ControlsRead(self.env.now, tuple(
+            (CONTROL_TABLE[c].name, groups_to_phases([int(v) for v in ev.value[i * groups:(i + 1) * groups]]))
+            for i, c in enumerate(FOREIGN_COLUMNS))))
+        if self._quiet_readbacks is not None:
+            self._quiet_readbacks.found(controls, ours=not any(isinstance(e, TimeoutEntered) for e in effects))
 
     def _recover(self) -> Generator[simpy.Event, Any, bool]:
         self._feed(RecoveryRequested(self.env.now))

@@ -12,12 +12,9 @@ Rules of this module:
 - The poller decides nothing about what an answer or a failure means: it sends (``send(poll_id)``) and
   counts the polls of its grid. While halted (the manager in TIMEOUT) no poll goes out; polling resumes
   on a new grid from the moment it is resumed.
-- A poll that cannot see a change costs nothing. When the transport has a change feed (an in-process
-  controller, no random loss or jitter), a poll whose feed version is the one the newest answered poll
-  read would get that same answer at the same latency: it is counted on the grid (its poll id is
-  used up) and not sent, and the poller sleeps until the feed moves (a write, a change of status) or
-  polling halts. The next poll on the grid then goes out. What the cache holds, and when the manager
-  sees it, is what polling every period gives (``tests/test_poll_elision.py`` compares the logs).
+- On virtual time's fast path (:mod:`hils.fastpath`, rule 2) a poll that cannot see a change is counted on
+  the grid (its poll id used up) and not sent, and the poller sleeps until one could or polling halts; the
+  next poll on the grid then goes out.
 """
 
 from __future__ import annotations
@@ -28,9 +25,9 @@ from typing import Any
 
 import simpy
 
+from hils.fastpath import QuietPolls
 from hils.ntcip import SignalState
 from hils.timegrid import Grid
-from hils.transport import Transport
 
 __all__ = ["Poller", "SignalCache", "Snapshot"]
 
@@ -70,23 +67,18 @@ class SignalCache:
 
 
 class Poller:
-    """The poll grid: ``send(poll_id)`` once per period of ``rate_hz`` while not halted.
+    """The poll grid: ``send(poll_id)`` once per period of ``rate_hz`` while not halted, leaving out on the fast
+    path (``quiet``) the polls that cannot see a change."""
 
-    ``newest()`` is the newest poll whose answer was applied (the manager's): a poll may be left out only
-    when that is the newest one sent."""
-
-    def __init__(self, env: simpy.Environment, transport: Transport, *, rate_hz: float,
-                 send: Callable[[int], None], newest: Callable[[], int]) -> None:
+    def __init__(self, env: simpy.Environment, *, rate_hz: float, send: Callable[[int], None],
+                 quiet: QuietPolls | None = None) -> None:
         self.env = env
-        self.transport = transport
         self.period = 1.0 / rate_hz
         self.send = send
-        self.newest = newest
+        self.quiet = quiet
         self.polls = 0  # polls on the grid, sent or not
         self.elided = 0  # polls not sent: they could not see a change
         self.halted = False
-        self._sent = 0  # the newest poll sent
-        self._seen: int | None = None  # the feed's version when the newest poll sent read the controller
         self._resume = env.event()
         self._halting: simpy.Event | None = None  # set during an elided sleep; wakes it when polling halts
         self._grid, self._k = Grid(env.now, self.period), 0  # poll k is due at the grid's instant k
@@ -100,7 +92,8 @@ class Poller:
 
     def halt(self) -> None:
         self.halted = True
-        self._seen = None  # after a halt the first poll goes out
+        if self.quiet is not None:
+            self.quiet.forget()
         if self._halting is not None and not self._halting.triggered:
             self._halting.succeed()
 
@@ -118,18 +111,17 @@ class Poller:
                 yield self._resume
                 self._grid, self._k = Grid(env.now, self.period), 0
             self.polls += 1
-            feed = self.transport.change_feed
-            if self._unchanged():
+            if self.quiet is not None and self.quiet.leaves_out(self.polls):
                 self.elided += 1
             else:
-                self._sent, self._seen = self.polls, feed.version if feed is not None else None
                 self.send(self.polls)
             self._k += 1
-            if self._unchanged():
-                # Every poll until the feed moves would be this one again: sleep until then; the polls due
-                # meanwhile are counted as they pass (_pass_quiet_polls).
+            wake = self.quiet.asleep() if self.quiet is not None else None
+            if wake is not None:
+                # Every poll until then would be this one again: sleep; the polls due meanwhile are counted as
+                # they pass (_pass_quiet_polls).
                 self._halting = env.event()
-                yield env.any_of([feed.changed(), self._halting])
+                yield env.any_of([wake, self._halting])
                 self._pass_quiet_polls()
                 self._halting = None
                 if self.halted:
@@ -142,8 +134,3 @@ class Poller:
         self.polls += due - self._k
         self.elided += due - self._k
         self._k = due
-
-    def _unchanged(self) -> bool:
-        """True when a poll now would get the answer the newest poll got (sent, answered, nothing since)."""
-        feed = self.transport.change_feed
-        return feed is not None and self._seen == feed.version and self.newest() == self._sent and not self.halted

@@ -15,13 +15,17 @@ the tests and your own code::
 Rules of this module
 --------------------
 - This is the only place that creates the SimPy environment of a run.
-- Virtual time and wall-clock time go through the same code: only the clock (``_advance``) and the
-  transport differ. ``target="virtual"`` (the default) is the in-process emulator, found through
-  the ``hils.targets`` entry point so that ``hils`` never imports it; ``target="snmp://..."`` is a
-  real controller, or ``hils emulator serve``, at wall-clock time; a callable target is a factory
-  ``(env, config, seed=...) -> target`` whose target has a ``transport``, or a ``surface`` (with
-  ``get_latency`` and ``set_latency``) that an in-process transport reaches (the fault harness puts
-  its faults there).
+- One intersection is the case N = 1: the run holds a mapping of :class:`hils.intersection.Intersection`
+  and every step of it (assembly, stepping, observing, finishing) goes over that mapping; the single-light
+  API is a view of the one-intersection case.
+- Virtual time and wall-clock time go through the same code: only the clock (:mod:`hils.clock`, whose
+  ``advance`` is the one place time moves) and the transport differ. ``target="virtual"`` (the default) is
+  the in-process emulator, found through the ``hils.targets`` entry point so that ``hils`` never imports it;
+  ``target="snmp://..."`` is a real controller, or ``hils emulator serve``, at wall-clock time; a callable
+  target is a factory ``(env, config, *, seed, fast_path) -> target`` whose target has a ``transport``, or a
+  ``surface`` (with ``get_latency`` and ``set_latency``) that an in-process transport reaches (the fault
+  harness puts its faults there).
+- Virtual time's fast path is switched by the run's ``fast_path`` flag alone (:mod:`hils.fastpath`).
 - A decision point is the end of the control interval for selection and switch actions, the end of
   the served green for duration actions, and, earlier, the manager entering TIMEOUT or the end of
   the run's ``duration``.
@@ -49,11 +53,13 @@ import simpy
 from hils import config as config_mod
 from hils.actions import ActionError, ActionType
 from hils.agents import Agent, Observation, load_agent
+from hils.clock import Clock, VirtualClock, WallClockDriver
 from hils.config import IntersectionConfig
 from hils.detectors import DetectorFeed
 from hils.errors import UserError
 from hils.events import EventLog, Kind, TaggedLog
 from hils.events import read as read_events
+from hils.fastpath import StepCost, modeled_cost, steps_before
 from hils.intersection import Intersection
 from hils.manager import CLEAR_ATTEMPTS, State
 from hils.middleware import Middleware, Submission
@@ -67,7 +73,6 @@ from hils.transport import LocalTransport, Transport
 
 log = logging.getLogger(__name__)
 
-StepCost = Callable[[Callable[[], Any]], float]
 TargetFactory = Callable[..., Any]
 
 #: Agents used when none is named: with traffic to observe, and without (no SUMO).
@@ -131,19 +136,6 @@ class SeveralIntersections(UserError, ValueError):
     """A run of several intersections asked for its one intersection (name one instead)."""
 
 
-def modeled_cost(step: Callable[[], Any]) -> float:
-    """Virtual time: a step costs no simulated time (faults may model otherwise)."""
-    step()
-    return 0.0
-
-
-def measured_cost(step: Callable[[], Any]) -> float:
-    """Wall-clock time: a step costs the wall time it took."""
-    t0 = time.perf_counter()
-    step()
-    return time.perf_counter() - t0
-
-
 def virtual_target_factory() -> TargetFactory:
     """The in-process emulator, found through the ``hils.targets`` entry point."""
     found = [ep for ep in entry_points(group="hils.targets") if ep.name == VIRTUAL]
@@ -163,8 +155,9 @@ class RunSpec:
     duration: float = 3600.0
     seed: int = 0
     log_path: Path | None = None
-    recover_after: float | None = 5.0  # call recover() this long after entering TIMEOUT; None: never
+    recover_after: float | None = 5.0  # recover this long after entering TIMEOUT; None: never
     sumo: bool = False  # whether a traffic simulation runs (decides the default agent)
+    fast_path: bool = True  # virtual time leaves out what cannot change a result (hils.fastpath)
 
     @property
     def agent_spec(self) -> str:
@@ -190,7 +183,8 @@ class Testbed:
     wraps parts of the run there. ``detectors``: SUMO's stop-bar loops actuate the controllers' detectors
     (default: for the actuated agent). ``measure``: False skips what only the end-of-run summary and the queue
     plot need (per-vehicle delays, queue and spillback samples, ``queues`` records), as environments do for
-    speed.
+    speed. ``fast_path``: leave out in virtual time what cannot change a result (:mod:`hils.fastpath`); False runs
+    the reference (every controller tick, every poll, every SUMO step).
 
     The general API takes and gives one value per intersection, by name: :meth:`reset_all`, :meth:`step_all`,
     :meth:`observe_all`, :attr:`intersections`. A run of one intersection also has the single view of it:
@@ -208,7 +202,7 @@ class Testbed:
                  recover_after: float | None = 5.0,
                  on_reset: Callable[[Testbed], None] | None = None,
                  sumo_config: str | Path | None = None, detectors: bool | None = None,
-                 scenario: str | Path | Scenario | None = None, measure: bool = True) -> None:
+                 scenario: str | Path | Scenario | None = None, measure: bool = True, fast_path: bool = True) -> None:
         if scenario is not None and config is not None:
             raise ValueError("give a config (one intersection) or a scenario (its intersections), not both")
         self.scenario = _scenario(scenario)
@@ -235,6 +229,7 @@ class Testbed:
         self.sumo_config = sumo_config
         self.seed = seed
         self._agent_spec = agent
+        self.fast_path = fast_path
         # Detector actuations from SUMO feed the controller when asked, and by default for the actuated agent.
         self.detectors = agent == "actuated" if detectors is None else detectors
         self.duration = duration
@@ -244,12 +239,13 @@ class Testbed:
         self.measure = measure
         self.spec = RunSpec(first, self.action_type, agent if isinstance(agent, str) else None,
                             math.inf if duration is None else duration, seed, self.log_path, recover_after,
-                            sumo=bool(sumo))
+                            sumo=bool(sumo), fast_path=fast_path)
         self.env: simpy.Environment | None = None
         self.intersections: dict[str, Intersection] = {}
         self.events: EventLog | None = None
         self.tally = Tally()
         self.simulation: Simulation = NoSimulation()
+        self.clock: Clock | None = None
         self.step_cost: StepCost = modeled_cost
         self.ended = False
         self.end_reason: str | None = None
@@ -408,19 +404,9 @@ class Testbed:
             raise ControllerCheckFailed("; ".join(refusals))
 
     def _assemble_clock(self, env: simpy.Environment) -> None:
-        if self.mode == VIRTUAL:
-            self.step_cost = modeled_cost
-            self._driver = None
-            return
-        from hils.clock import WallClockDriver
-
-        driver = self._driver = WallClockDriver(env)
-
-        def wall_cost(step: Callable[[], Any]) -> float:
-            # What a step cost at the wall clock: its own time plus how late it started.
-            return max(0.0, driver.sim_now() - env.now) + measured_cost(step)
-
-        self.step_cost = wall_cost
+        self._driver = WallClockDriver(env) if self._wall_targets else None
+        self.clock = self._driver or VirtualClock(env)
+        self.step_cost = self.clock.step_cost  # a fault may wrap it (on_reset)
 
     def _assemble_intersection(self, env: simpy.Environment, name: str, index: int) -> Intersection:
         cfg, spec, label = self.configs[name], self._targets[name], self.labels[name]
@@ -430,7 +416,7 @@ class Testbed:
         community = None
         if self.mode == VIRTUAL:
             factory = virtual_target_factory() if spec == VIRTUAL else spec
-            target = factory(env, cfg, seed=seed)
+            target = factory(env, cfg, seed=seed, fast_path=self.fast_path)
             # A target brings its transport, or an object surface that an in-process transport reaches.
             transport = getattr(target, "transport", None) or LocalTransport(
                 env, target.surface, tau_udp=cfg.middleware.tau_udp, get_latency=target.get_latency,
@@ -450,7 +436,7 @@ class Testbed:
         if label is None:
             self.tally = tally
         middleware = Middleware(env, transport, cfg, self.action_type, events, where=where, community=community,
-                                recover_after=self.recover_after)
+                                recover_after=self.recover_after, fast_path=self.fast_path)
         return Intersection(name, label, cfg, target, transport, middleware, events, tally)
     def _assemble_simulation(self) -> None:
         sumo = self._sumo_spec
@@ -477,6 +463,9 @@ class Testbed:
         return spec
 
     def _start(self) -> None:
+        if not callable(getattr(self.step_cost, "free_until", None)):
+            raise TypeError(f"step_cost {self.step_cost!r} is not a hils.fastpath.StepCost (a cost function with "
+                            "free_until): wrap a plain cost function with hils.fastpath.every_step")
         # Everything loaded so far (SUMO, numpy, the config) lives for the whole run: keep it out of
         # the collector's way so that collections during the run stay short.
         gc.freeze()
@@ -691,28 +680,9 @@ class Testbed:
             events = (simpy.AllOf(env, events),)
         if any(ev.processed for ev in events) or (until is not None and until <= env.now):
             return
-        virtual = self._driver is None
-        if virtual and until is not None:
-            events = (*events, _deadline(env, until))
-        stop = simpy.core.StopSimulation.callback if virtual else self._stop_driver
-        for ev in events:
-            ev.callbacks.append(stop)
-        try:
-            if virtual:
-                env.run()  # until one of the events stops it
-            else:
-                self._driver.run_sync(until=until)
-        finally:
-            for ev in events:
-                if ev.callbacks is not None and stop in ev.callbacks:
-                    ev.callbacks.remove(stop)
-        driver = self._driver
-        if driver is not None and driver.signalled is not None:
-            signalled, driver.signalled = driver.signalled, None
+        signalled = self.clock.advance(until, events)
+        if signalled is not None:
             raise RunInterrupted("interrupted" if signalled == signal.SIGINT else "terminated")
-
-    def _stop_driver(self, _event: simpy.Event) -> None:
-        self._driver.stop()
 
     # --- processes ---------------------------------------------------------------------------------
 
@@ -737,19 +707,19 @@ class Testbed:
             for view, feed in feeds:
                 feed.feed(view.present())
 
-        # Steps that cost no time and act on nothing but SUMO (virtual time, no fault on their cost, no detectors
-        # SETting the controller) run back to back while nothing else is due before the next one: what they
-        # do and see is the same, without a trip through the event queue for each, and SUMO makes the step due
-        # and those after it in one call (nothing can change what it shows until the next event).
-        back_to_back = self.step_cost is modeled_cost and not feeds
+        # The fast path (rule 4 of hils.fastpath): steps that cost nothing and act on nothing but SUMO (no
+        # detectors SETting the controller) run in one call while nothing else is due before the next one.
+        stretches = self.fast_path and not feeds
+        cost = self.step_cost
         while not self.ended:
-            if back_to_back:
+            free_until = cost.free_until(env.now) if stretches else env.now
+            if free_until > env.now:
                 show()
-                n = 1 + _steps_before(env.peek(), grid, k + 1)
+                n = 1 + steps_before(min(env.peek(), free_until), grid, k + 1)
                 sim.advance(n)
                 took = 0.0
             else:
-                n, took = 1, self.step_cost(one_step)
+                n, took = 1, cost(one_step)
             for mw in middlewares:
                 mw.observe_step(step, took)
             k += n
@@ -770,28 +740,6 @@ class Testbed:
         self._started()
         if self.ended:
             raise NotStarted(f"the run has ended ({self.end_reason}): call reset() to start another")
-
-
-#: Steps run back to back at most when no other event is queued (one simulated hour at 0.25 s).
-_MAX_STRETCH = 14400
-
-
-def _steps_before(until: float, grid: Grid, k: int) -> int:
-    """How many steps of the grid, from step k on, start before ``until``."""
-    if math.isinf(until):
-        return _MAX_STRETCH  # nothing else will ever happen: step on, a stretch at a time
-    return grid.first_at_or_after(until, k) - k
-
-
-def _deadline(env: simpy.Environment, at: float) -> simpy.Event:
-    """An event due at ``at`` that runs before every other event due then, as ``env.run(until=at)``'s own.
-
-    Built as SimPy builds that one; unlike it, a deadline that another event beat to the stop is left
-    without callbacks, so it cannot stop a later run."""
-    event = simpy.Event(env)
-    event._ok, event._value = True, None
-    env.schedule(event, simpy.core.URGENT, at - env.now)
-    return event
 
 
 class TargetError(UserError, ValueError):
@@ -891,7 +839,7 @@ def run_spec(spec: RunSpec, *, target: str | TargetFactory = VIRTUAL, simulation
     tb = Testbed(spec.config, action_type=spec.action_type, target=target,
                  sumo=simulation if simulation is not None else spec.sumo, seed=spec.seed, agent=spec.agent,
                  duration=spec.duration, log_path=spec.log_path, recover_after=spec.recover_after,
-                 on_reset=configure)
+                 on_reset=configure, fast_path=spec.fast_path)
     with tb:
         tb.reset()
         reason = tb.run(progress=progress)

@@ -19,6 +19,7 @@ from typing import Protocol
 
 import simpy
 
+from hils.fastpath import ChangeFeed
 from hils.ntcip import Latency, Oid, SnmpError, Value
 
 VarBind = tuple[Oid, int]
@@ -41,27 +42,6 @@ class TransportError(Exception):
 
 class CommunicationTimeout(TransportError):
     """No answer within tau_udp."""
-
-
-class ChangeFeed(Protocol):
-    """What an in-process controller can tell its poller: when a GET could start answering differently.
-
-    ``version`` moves whenever it could (a write, a change of the status the controller answers);
-    ``changed()`` is an event that fires when it next moves. ``controls`` moves whenever a control
-    object the middleware never sets (all but VehCall) could have been given phases (a write of one),
-    ``controls_changed()`` when it next moves. Over the wire nobody knows this: a transport without a
-    feed has every poll and read-back sent."""
-
-    version: int
-    controls: int
-
-    def changed(self) -> simpy.Event: ...
-
-    def controls_changed(self) -> simpy.Event: ...
-
-    def bump(self) -> None:
-        """Something besides the controller changed what a GET may answer (a transport's loss, say)."""
-        ...
 
 
 class Transport(Protocol):
@@ -95,8 +75,8 @@ class LocalTransport:
     an answer later than tau_udp, fails the event at tau_udp.
 
     ``change_feed`` (the surface's, when it has one) is offered to the poller only when a GET
-    draws nothing at random (no loss, no jitter): a poll skipped then is one whose answer, and
-    its time, are known without sending it, and the draws of every other request stay the same.
+    draws nothing at random (no loss, no jitter): a poll left out then (:mod:`hils.fastpath`) is one whose
+    answer, and its time, are known without sending it, and the draws of every other request stay the same.
     """
 
     def __init__(self, env: simpy.Environment, surface: ObjectSurface, *, tau_udp: float = 1.0,

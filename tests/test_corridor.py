@@ -69,8 +69,8 @@ def test_a_lost_link_times_out_only_its_own_controller() -> None:
     other three never leave normal operation and keep verifying transitions through the outage."""
     loss = DatagramLoss("j2-link", window=Window(100.0, 120.0))
 
-    def j2(env: Any, config: Any, seed: int = 0) -> FaultTarget:
-        return FaultTarget(env, config, seed=seed, faults=[loss])
+    def j2(env: Any, config: Any, **run: Any) -> FaultTarget:
+        return FaultTarget(env, config, **run, faults=[loss])
 
     def run(targets: dict[str, Any]) -> list[dict[str, Any]]:
         with Testbed(scenario="corridor", target=targets, seed=2, duration=240.0, agent="random") as tb:

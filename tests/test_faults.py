@@ -34,6 +34,7 @@ from harness.faults import (
 from hils.actions import ActionConverter, ActionError, ActionType
 from hils.config import IntersectionConfig
 from hils.events import Kind
+from hils.fastpath import modeled_cost
 from hils.ntcip import (
     ControlColumn,
     ErrorStatus,
@@ -43,7 +44,7 @@ from hils.ntcip import (
     control_oid,
     signal_oids,
 )
-from hils.testbed import RunSpec, modeled_cost, run_spec
+from hils.testbed import RunSpec, run_spec
 from hils.transport import CommunicationTimeout, Latency, LocalTransport
 
 TAU = 1.0
@@ -246,8 +247,8 @@ def test_a_rebooting_controller_is_silent_then_back_in_its_startup_phases_with_c
 
 def run_with(config: IntersectionConfig, faults, *, action_type=ActionType.SELECTION, agent=None, duration=60.0,
              monitors: list | None = None):
-    def factory(env, cfg, seed=0):
-        target = FaultTarget(env, cfg, seed=seed, faults=faults)
+    def factory(env, cfg, *, seed, fast_path):
+        target = FaultTarget(env, cfg, seed=seed, faults=faults, fast_path=fast_path)
         if monitors is not None:
             monitors.append(IndicationMonitor(env, target.controller, cfg))
         return target

@@ -10,6 +10,7 @@ from harness.faults import FaultTarget, StuckController, Window
 from hils import config as config_mod
 from hils.actions import ActionType
 from hils.events import Kind
+from hils.fastpath import every_step
 from hils.ntcip import ControlColumn
 from hils.testbed import RunSpec, run_spec
 
@@ -99,7 +100,7 @@ def test_transition_never_seen_enters_timeout_after_tau_trans():
     # From 50 s the controller acknowledges calls and ignores them: a transition that never comes.
     stuck = StuckController("stuck", window=Window(50.0, math.inf))
     result = run_spec(RunSpec(CFG, ActionType.SWITCH, duration=120.0, seed=1, recover_after=None),
-                      target=lambda env, cfg, seed=0: FaultTarget(env, cfg, seed=seed, faults=[stuck]))
+                      target=lambda env, cfg, **run: FaultTarget(env, cfg, **run, faults=[stuck]))
     records = result.records
     (timeout,) = _kinds(records, Kind.TIMEOUT_ENTERED)
     assert timeout["reason"] == "transition"
@@ -125,7 +126,7 @@ def test_n_drift_consecutive_slow_steps_enter_timeout_and_isolated_ones_do_not()
             def cost(fn):
                 fn()
                 return 2 * step if next(count) in slow else 0.0
-            run.step_cost = cost
+            run.step_cost = every_step(cost)
         return configure
 
     isolated = run_spec(RunSpec(CFG, ActionType.SWITCH, duration=60.0, seed=1),

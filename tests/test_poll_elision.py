@@ -1,5 +1,6 @@
-"""Virtual time at the speed of SUMO changes no result: the event-driven controller with polls that cannot
-see a change left out runs exactly the reference (every tick stepped, every poll sent).
+"""Virtual time at the speed of SUMO changes no result: the fast path (the event-driven controller, polls and
+read-backs that cannot see a change left out, SUMO in stretches) runs exactly the reference, ``fast_path=False``
+(every tick stepped, every poll sent, every SUMO step taken alone).
 
 The two runs share seed, agent and traffic; their event logs must be equal record for record, apart
 from the wall-clock stamps and the per-poll bookkeeping (``poll`` records are compared on their own:
@@ -19,12 +20,10 @@ from hils import Testbed
 from hils.events import Kind
 
 
-def run(*, ticked: bool, seconds: float, agent: str | None, action_type: str, seed: int, sumo: bool
+def run(*, fast_path: bool, seconds: float, agent: str | None, action_type: str, seed: int, sumo: bool
         ) -> tuple[list[dict[str, Any]], Any, VirtualTarget]:
-    def target(env: Any, config: Any, seed: int = 0) -> VirtualTarget:
-        return VirtualTarget(env, config, seed=seed, ticked=ticked)
-
-    with Testbed(action_type=action_type, target=target, sumo=sumo, seed=seed, duration=seconds, agent=agent) as tb:
+    with Testbed(action_type=action_type, sumo=sumo, seed=seed, duration=seconds, agent=agent,
+                 fast_path=fast_path) as tb:
         tb.reset()
         tb.run()
         return tb.records, tb.traffic, tb.target
@@ -41,9 +40,9 @@ def comparable(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
     ("actuated", "selection", 4),  # no commands: the controller on its detectors, SET every change
 ])
 def test_the_elided_run_is_the_polled_run_with_sumo(agent: str | None, action_type: str, seed: int) -> None:
-    reference, ref_traffic, _ = run(ticked=True, seconds=400.0, agent=agent, action_type=action_type, seed=seed,
+    reference, ref_traffic, _ = run(fast_path=False, seconds=400.0, agent=agent, action_type=action_type, seed=seed,
                                     sumo=True)
-    fast, traffic, target = run(ticked=False, seconds=400.0, agent=agent, action_type=action_type, seed=seed,
+    fast, traffic, target = run(fast_path=True, seconds=400.0, agent=agent, action_type=action_type, seed=seed,
                                 sumo=True)
     assert comparable(fast) == comparable(reference)
     assert traffic == ref_traffic
@@ -54,8 +53,8 @@ def test_the_elided_run_is_the_polled_run_with_sumo(agent: str | None, action_ty
 
 
 def test_the_elided_run_is_the_polled_run_without_traffic() -> None:
-    reference, _, _ = run(ticked=True, seconds=300.0, agent="random", action_type="selection", seed=7, sumo=False)
-    fast, _, _ = run(ticked=False, seconds=300.0, agent="random", action_type="selection", seed=7, sumo=False)
+    reference, _, _ = run(fast_path=False, seconds=300.0, agent="random", action_type="selection", seed=7, sumo=False)
+    fast, _, _ = run(fast_path=True, seconds=300.0, agent="random", action_type="selection", seed=7, sumo=False)
     assert comparable(fast) == comparable(reference)
     # One poll record per change of what the polls saw, the first being the start-up read.
     changes = [r for r in fast if r["kind"] == Kind.POLL]
@@ -63,18 +62,28 @@ def test_the_elided_run_is_the_polled_run_without_traffic() -> None:
     assert all((a["greens"], a["yellows"]) != (b["greens"], b["yellows"]) for a, b in pairwise(changes))
 
 
-def test_faults_draw_on_every_poll() -> None:
-    """A fault in the request path sees every poll: nothing is elided where a fault could act."""
-    loss = DatagramLoss("loss", probability=0.1, window=Window(50.0, 60.0), seed=1)
+def test_faults_draw_on_every_poll_in_their_window() -> None:
+    """A fault in the request path sees every poll while it may act: polls are left out only outside its window,
+    and the run is the reference's record for record."""
+    def target_with(loss: DatagramLoss) -> Any:
+        def target(env: Any, config: Any, *, seed: int, fast_path: bool) -> FaultTarget:
+            return FaultTarget(env, config, seed=seed, faults=[loss], fast_path=fast_path)
+        return target
 
-    def target(env: Any, config: Any, seed: int = 0) -> FaultTarget:
-        return FaultTarget(env, config, seed=seed, faults=[loss])
-
-    with Testbed(target=target, seed=1, duration=120.0, agent="random") as tb:
-        tb.reset()
-        tb.run()
-        counts = tb.records[-1]["polls"]
-    assert counts["polls"] == 1200 and counts["elided"] == 0 and counts["failed"] > 0
+    runs = {}
+    for fast_path in (True, False):
+        loss = DatagramLoss("loss", probability=0.1, window=Window(50.0, 60.0), seed=1)
+        with Testbed(target=target_with(loss), seed=1, duration=120.0, agent="random", fast_path=fast_path) as tb:
+            tb.reset()
+            tb.run()
+            runs[fast_path] = (tb.records, loss.fired)
+    (fast, fired), (reference, ref_fired) = runs[True], runs[False]
+    assert comparable(fast) == comparable(reference) and fired == ref_fired > 0
+    counts, ref_counts = fast[-1]["polls"], reference[-1]["polls"]
+    assert counts["polls"] == ref_counts["polls"] == 1200 and counts["failed"] == ref_counts["failed"] > 0
+    assert counts["elided"] > 900 and ref_counts["elided"] == 0
+    in_window = [r for r in fast if r["kind"] == Kind.POLL_FAILED]
+    assert in_window and all(50.0 <= r["t"] <= 60.0 + 1.0 for r in in_window)
 
 
 class CountingSurface:
@@ -91,8 +100,8 @@ class CountingSurface:
         self.inner.set_many(varbinds)
 
 
-@pytest.mark.parametrize("ticked", [True, False])
-def test_read_backs_that_cannot_see_a_change_are_not_sent(ticked: bool) -> None:
+@pytest.mark.parametrize("fast_path", [False, True])
+def test_read_backs_that_cannot_see_a_change_are_not_sent(fast_path: bool) -> None:
     """Only a write of a control object besides VehCall can give one phases: with a change feed the read-back
     sleeps from the first that finds them ours, commands and keepalives going on; every 2 s without one."""
     from hils.middleware import READBACK_PERIOD
@@ -101,18 +110,18 @@ def test_read_backs_that_cannot_see_a_change_are_not_sent(ticked: bool) -> None:
     hold = control_oid(ControlColumn.HOLD, 1)
     surfaces: list[CountingSurface] = []
 
-    def target(env: Any, config: Any, seed: int = 0) -> VirtualTarget:
-        t = VirtualTarget(env, config, seed=seed, ticked=ticked)
+    def target(env: Any, config: Any, *, seed: int, fast_path: bool) -> VirtualTarget:
+        t = VirtualTarget(env, config, seed=seed, fast_path=fast_path)
         surfaces.append(CountingSurface(t.surface, hold))
         t.surface = surfaces[-1]
         return t
 
-    with Testbed(target=target, seed=3, duration=300.0, agent="random") as tb:
+    with Testbed(target=target, seed=3, duration=300.0, agent="random", fast_path=fast_path) as tb:
         tb.reset()
         tb.run()
         assert len([r for r in tb.records if r["kind"] == Kind.SET_ANSWERED]) > 20
     # the start-up read, then the first read-back (finding them ours); without a feed every 2 s
-    expected = 2 if not ticked else pytest.approx(1 + 300.0 / READBACK_PERIOD, abs=2)
+    expected = 2 if fast_path else pytest.approx(1 + 300.0 / READBACK_PERIOD, abs=2)
     assert surfaces[0].read_backs == expected
 
 

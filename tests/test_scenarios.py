@@ -111,8 +111,8 @@ def test_the_implicit_checks_catch_a_conflicting_command_and_a_lost_record():
     # Judge doctored records of a fresh run: one SET of conflicting phases, one record missing.
     monitors = []
 
-    def factory(env, config, seed=0):
-        target = FaultTarget(env, config, seed=seed, faults=faults)
+    def factory(env, config, *, seed, fast_path):
+        target = FaultTarget(env, config, seed=seed, faults=faults, fast_path=fast_path)
         monitors.append(IndicationMonitor(env, target.controller, config))
         return target
 

@@ -88,8 +88,9 @@ def test_a_refused_action_raises_sends_nothing_and_takes_no_time() -> None:
 
 
 def test_a_step_ends_early_when_the_manager_enters_timeout() -> None:
-    def target(env: Any, config: IntersectionConfig, seed: int = 0) -> FaultTarget:
-        return FaultTarget(env, config, seed=seed, faults=[DatagramLoss("down", window=Window(2.0))])
+    def target(env: Any, config: IntersectionConfig, *, seed: int, fast_path: bool) -> FaultTarget:
+        return FaultTarget(env, config, seed=seed, faults=[DatagramLoss("down", window=Window(2.0))],
+                           fast_path=fast_path)
 
     with Testbed(CFG, action_type="selection", target=target, recover_after=None) as tb:
         tb.reset()
@@ -317,14 +318,14 @@ def test_a_run_that_does_not_measure_is_the_same_run_without_the_summary_samples
 def test_a_stretch_is_the_steps_the_grid_starts_before_the_next_event(start, k, step, ahead, on_grid) -> None:
     """The steps run back to back are counted as the stepping loop counted them, one float comparison each
     (an event on a step's own start time stops the stretch before that step)."""
-    from hils.testbed import _steps_before
+    from hils.fastpath import steps_before
     from hils.timegrid import Grid
 
     until = start + (k + round(ahead / step)) * step if on_grid else start + k * step + ahead
     counted = 0
     while until > start + (k + counted) * step:
         counted += 1
-    assert _steps_before(until, Grid(start, step), k) == counted
+    assert steps_before(until, Grid(start, step), k) == counted
 
 
 @pytest.mark.parametrize("scenario", [None, "corridor"])
