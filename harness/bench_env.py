@@ -39,7 +39,7 @@ def hils_episode(seed: int, duration: float = EPISODE_S) -> dict[str, Any]:
     """One episode of `hils/Intersection-v0` (selection) with a random policy."""
     import gymnasium as gym
 
-    import hils  # noqa: F401  (registers the environment)
+    import hils.envs  # noqa: F401  (registers the environment)
 
     sumo_s = _time_sumo_steps()
     env = gym.make("hils/Intersection-v0", action_type="selection", sumo_step=SUMO_STEP,

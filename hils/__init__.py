@@ -8,17 +8,14 @@ action that cannot be served; :func:`load_config` reads an intersection config.
 The names are loaded when first used, so that importing the shared layer (``hils.ntcip``,
 ``hils.config``), as the emulator does, does not load the middleware.
 
-The gymnasium environment ``hils/Intersection-v0`` (:mod:`hils.envs`) is registered on ``import hils``
-without importing gymnasium: at once when gymnasium is already loaded, else the moment it is (an import
-hook that steps aside after that one import), so ``gymnasium.make`` finds it whichever came first.
+The gymnasium environment ``hils/Intersection-v0`` is registered by :mod:`hils.envs`, as gymnasium documents
+for third-party environments: ``import hils.envs`` first, or let gymnasium import it,
+``gymnasium.make("hils.envs:hils/Intersection-v0")``. ``import hils`` loads neither gymnasium nor the envs.
 """
 
 from __future__ import annotations
 
 import importlib
-import importlib.abc
-import importlib.util
-import sys
 from typing import Any
 
 _EXPORTS = {
@@ -37,32 +34,6 @@ _EXPORTS = {
 }
 
 __all__ = sorted(_EXPORTS)
-
-
-
-class _RegisterWithGymnasium(importlib.abc.MetaPathFinder):
-    """Registers hils' environments right after gymnasium is first imported (then leaves the import path)."""
-
-    def find_spec(self, name: str, path: Any, target: Any = None) -> Any:
-        if name != "gymnasium":
-            return None
-        sys.meta_path.remove(self)
-        spec = importlib.util.find_spec(name)
-        if spec is not None and spec.loader is not None:
-            exec_module = spec.loader.exec_module
-
-            def exec_and_register(module: Any) -> None:
-                exec_module(module)
-                importlib.import_module("hils.envs")
-
-            spec.loader.exec_module = exec_and_register
-        return spec
-
-
-if "gymnasium" in sys.modules:
-    importlib.import_module("hils.envs")
-else:
-    sys.meta_path.insert(0, _RegisterWithGymnasium())
 
 
 def __getattr__(name: str) -> Any:

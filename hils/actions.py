@@ -16,6 +16,11 @@ from enum import StrEnum
 
 from hils.config import IntersectionConfig, Pair
 
+__all__ = [
+    "ActionConverter", "ActionError", "ActionType", "ActionTypeError", "Command", "ConflictError", "ConflictMatrix",
+    "DurationRangeError", "NotInActionSetError", "UnknownPhaseError",
+]
+
 
 class ActionType(StrEnum):
     SELECTION = "selection"  # a compatible pair from the configured set (acyclic)

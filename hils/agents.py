@@ -20,6 +20,11 @@ from hils.errors import UserError
 from hils.ntcip import SignalState
 from hils.webster import webster_plan
 
+__all__ = [
+    "BUILTIN", "ActuatedAgent", "Agent", "AgentError", "FixedCycleAgent", "MaxPressureAgent", "Observation",
+    "QueueProportionalAgent", "RandomAgent", "WebsterAgent", "load_agent",
+]
+
 
 @dataclass(frozen=True, slots=True)
 class Observation:

@@ -29,6 +29,8 @@ from hils.events import EventLog, Kind
 from hils.ntcip import DETECTOR_ACTUATION, phases_to_groups
 from hils.transport import Transport
 
+__all__ = ["DetectorError", "DetectorFeed", "actuations_per_phase"]
+
 
 class DetectorError(UserError):
     """A detector the network cannot carry: its lane is not an approach lane of its phase."""

@@ -14,6 +14,8 @@ from typing import Any
 
 from hils.events import Kind
 
+__all__ = ["PAPER_LATENCY_MS", "Stats", "internal_latencies_ms", "transition_holds"]
+
 #: The paper's Table (Cobalt, MacBook Pro M1): N, mean ms, std ms per action type.
 PAPER_LATENCY_MS = {
     "selection": (71, 0.6464, 0.6278),

@@ -89,6 +89,8 @@ from hils.preflight import ControllerReading, Verdict, judge
 from hils.timegrid import Grid
 from hils.transport import CommunicationTimeout, Transport, TransportError
 
+__all__ = ["READBACK_PERIOD", "Middleware", "Received", "Submission"]
+
 log = logging.getLogger(__name__)
 
 #: Seconds between read-backs of the control objects: a change by someone else is noticed within this.

@@ -17,6 +17,8 @@ from typing import IO, Any
 
 import simpy
 
+__all__ = ["StatusLine"]
+
 log = logging.getLogger("hils.status")
 
 

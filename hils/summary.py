@@ -14,6 +14,8 @@ from hils.detectors import actuations_per_phase
 from hils.events import Kind
 from hils.latency import Stats, internal_latencies_ms, transition_holds
 
+__all__ = ["Tally", "render", "summarize", "warnings", "write"]
+
 
 class Tally:
     """What the summary and the run's plots read of its records, kept as they are emitted.

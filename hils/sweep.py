@@ -35,6 +35,11 @@ from hils.actions import ActionType
 from hils.agents import BUILTIN
 from hils.errors import UserError
 
+__all__ = [
+    "COLUMNS", "SHIPPED", "Cell", "CellResult", "Progress", "SweepError", "figures", "grid", "native_action_type",
+    "parse_seeds", "render", "rows", "run_cell", "run_grid", "scenario_arguments", "write_table",
+]
+
 #: The shipped scenarios: `hils run` arguments that select them (the four-leg is the default run).
 SHIPPED = ("four_leg", "four_phase")
 

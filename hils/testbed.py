@@ -71,6 +71,12 @@ from hils.sumo_net import TLS_ID
 from hils.timegrid import Grid
 from hils.transport import LocalTransport, Transport
 
+__all__ = [
+    "BLIND_AGENTS", "DEFAULT_AGENTS", "VIRTUAL", "AgentFailed", "NoSimulation", "NotStarted", "RunInterrupted",
+    "RunResult", "RunSpec", "SeveralIntersections", "Signals", "Simulation", "TargetError", "TargetFactory",
+    "Testbed", "run_spec", "virtual_target_factory",
+]
+
 log = logging.getLogger(__name__)
 
 TargetFactory = Callable[..., Any]

@@ -206,12 +206,16 @@ def test_the_same_env_runs_at_wall_clock_against_the_served_emulator(tmp_path: P
         served.stop()
 
 
-def test_import_hils_does_not_import_gymnasium_and_registers_whichever_comes_first() -> None:
-    for code in ("import sys, hils\nassert 'gymnasium' not in sys.modules, 'import hils loaded gymnasium'\n",
-                 f"import gymnasium, hils\nassert {ENV_ID!r} in gymnasium.registry\n"
+def test_registration_is_gymnasiums_own_way_and_import_hils_hooks_nothing() -> None:
+    """``import hils`` loads no gymnasium and leaves the import system alone; ``import hils.envs`` registers the
+    environment, and gymnasium's ``module:id`` form imports it by itself."""
+    for code in ("import sys\nhooks = list(sys.meta_path)\nimport hils\n"
+                 "assert 'gymnasium' not in sys.modules, 'import hils loaded gymnasium'\n"
+                 "assert sys.meta_path == hooks, 'import hils changed the import system'\n",
+                 f"import gymnasium, hils.envs\nassert {ENV_ID!r} in gymnasium.registry\n"
                  f"gymnasium.make({ENV_ID!r}).close()\n",
-                 # hils first, gymnasium later (a script, or a worker process that imported hils on its own)
-                 f"import hils, gymnasium\nassert {ENV_ID!r} in gymnasium.registry\n"):
+                 f"import gymnasium\nassert {ENV_ID!r} not in gymnasium.registry\n"
+                 f"gymnasium.make('hils.envs:{ENV_ID}').close()\n"):
         done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
         assert done.returncode == 0, done.stderr
     assert hils.envs.ENV_ID == ENV_ID

@@ -5,10 +5,11 @@
 - PettingZoo: :func:`parallel_env`, a ``ParallelEnv`` with one agent per traffic light of a scenario
   (:mod:`hils.envs.parallel`).
 
-:func:`register` puts the gymnasium environment into gymnasium's registry by its entry-point string, so
-that registering loads neither the Testbed nor SUMO. ``import hils`` registers it when gymnasium is
-already imported; ``import hils.envs`` always does (gymnasium is imported then). PettingZoo is imported
-only when :func:`parallel_env` is called.
+Importing this package registers the gymnasium environment (:func:`register`, by its entry-point string, so
+that registering loads neither the Testbed nor SUMO), as gymnasium documents for third-party environments:
+``import hils.envs`` before ``gymnasium.make("hils/Intersection-v0")``, or name the package in the id,
+``gymnasium.make("hils.envs:hils/Intersection-v0")``, and gymnasium imports it. PettingZoo is imported only
+when :func:`parallel_env` is called.
 """
 
 from __future__ import annotations
@@ -21,6 +22,8 @@ if TYPE_CHECKING:
     from hils.envs.parallel import IntersectionsEnv
     from hils.scenario import Scenario
 
+
+__all__ = ["ENV_ID", "parallel_env", "register"]
 ENV_ID = "hils/Intersection-v0"
 
 

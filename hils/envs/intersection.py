@@ -53,6 +53,11 @@ from hils.poller import SignalCache, Snapshot
 from hils.sumo_net import TLS_ID, derive_phase_map, read_net, scenario_config
 from hils.testbed import VIRTUAL, Testbed
 
+__all__ = [
+    "REWARDS", "STATES", "EnvOptionError", "IntersectionAdapter", "IntersectionEnv", "Reward", "action_type_of",
+    "episode_seed", "pressure_reward", "queue_reward", "reset_info", "reward_of", "wait_reward", "with_timing",
+]
+
 Reward = Callable[[Observation, Observation], float]
 STATES = (State.IDLE, State.ON_HOLD, State.TIMEOUT)
 

@@ -53,6 +53,8 @@ from hils.envs.intersection import (
 from hils.scenario import Scenario, load_scenario
 from hils.testbed import VIRTUAL, NotStarted, Testbed
 
+__all__ = ["IntersectionsEnv", "Targets"]
+
 Targets = str | Mapping[str, str]
 
 
