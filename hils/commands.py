@@ -26,7 +26,8 @@ from hils.intersection import Intersection
 from hils.scenario import SCENARIOS, Scenario, load_scenario, load_targets
 from hils.status import StatusLine
 from hils.sumo_net import scenario_config
-from hils.testbed import DEFAULT_AGENTS, VIRTUAL, AgentFailed, RunInterrupted, RunSpec, Testbed
+from hils.targets import VIRTUAL
+from hils.testbed import DEFAULT_AGENTS, AgentFailed, RunInterrupted, RunSpec, Testbed
 from hils.webster import webster_plan
 
 log = logging.getLogger(__name__)

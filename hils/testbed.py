@@ -43,10 +43,9 @@ import math
 import signal
 import time
 from collections.abc import Callable, Generator, Mapping
-from importlib.metadata import entry_points
 from pathlib import Path
-from types import MappingProxyType, TracebackType
-from typing import Any, Protocol
+from types import TracebackType
+from typing import Any
 
 import simpy
 
@@ -59,67 +58,31 @@ from hils.detectors import DetectorFeed
 from hils.errors import UserError
 from hils.events import EventLog, Kind, TaggedLog
 from hils.events import read as read_events
-from hils.fastpath import StepCost, modeled_cost, steps_before
+from hils.fastpath import StepCost, modeled_cost
 from hils.intersection import Intersection
 from hils.manager import CLEAR_ATTEMPTS, State
 from hils.middleware import Middleware, Submission
-from hils.ntcip import SignalState
 from hils.preflight import ControllerCheckFailed
 from hils.scenario import Scenario, labels, load_scenario
+from hils.simulation import NoSimulation, Simulation, steps
 from hils.summary import Tally
 from hils.sumo_net import TLS_ID
-from hils.timegrid import Grid
-from hils.transport import LocalTransport, Transport
+from hils.targets import VIRTUAL, TargetFactory, check_target, connect, target_specs
+from hils.transport import Transport
 
 __all__ = [
-    "BLIND_AGENTS", "DEFAULT_AGENTS", "VIRTUAL", "AgentFailed", "NoSimulation", "NotStarted", "RunInterrupted",
-    "RunResult", "RunSpec", "SeveralIntersections", "Signals", "Simulation", "TargetError", "TargetFactory",
-    "Testbed", "run_spec", "virtual_target_factory",
+    "BLIND_AGENTS", "DEFAULT_AGENTS", "AgentFailed", "NotStarted", "RunInterrupted", "RunResult", "RunSpec",
+    "SeveralIntersections", "Testbed", "run_spec",
 ]
 
 log = logging.getLogger(__name__)
 
-TargetFactory = Callable[..., Any]
 
 #: Agents used when none is named: with traffic to observe, and without (no SUMO).
 DEFAULT_AGENTS = {ActionType.SELECTION: "max-pressure", ActionType.SWITCH: "fixed-cycle",
                   ActionType.DURATION: "queue-proportional"}
 BLIND_AGENTS = {ActionType.SELECTION: "random", ActionType.SWITCH: "fixed-cycle", ActionType.DURATION: "random"}
 
-VIRTUAL = "virtual"
-
-
-class Signals(Protocol):
-    """What the simulation shows for one intersection (:class:`hils.sumo.Light`)."""
-
-    def apply(self, state: SignalState) -> Any: ...
-
-    def traffic_state(self) -> Any: ...
-
-    def queues(self) -> Mapping[int, int]: ...
-
-
-class Simulation(Protocol):
-    """What the run steps: SUMO, or nothing (:class:`NoSimulation`); ``lights`` by intersection name."""
-
-    lights: Mapping[str, Signals]
-
-    def step(self) -> Any: ...
-
-    def advance(self, steps: int) -> None:
-        """``steps`` steps at once, with nothing shown changing between them (as many :meth:`step` calls)."""
-
-
-class NoSimulation:
-    """Stands in for SUMO in middleware-only runs: steps cost nothing and there is no traffic, nor lights."""
-
-    lights: Mapping[str, Signals] = MappingProxyType({})
-
-    def step(self) -> None:
-        """No traffic to move."""
-
-    def advance(self, steps: int) -> None:
-        """No traffic to move."""
 
 
 class RunInterrupted(Exception):
@@ -142,15 +105,6 @@ class SeveralIntersections(UserError, ValueError):
     """A run of several intersections asked for its one intersection (name one instead)."""
 
 
-def virtual_target_factory() -> TargetFactory:
-    """The in-process emulator, found through the ``hils.targets`` entry point."""
-    found = [ep for ep in entry_points(group="hils.targets") if ep.name == VIRTUAL]
-    if not found:
-        raise RuntimeError("no virtual target installed: the emulator package is needed for virtual-time runs "
-                           "(or give target='snmp://HOST:PORT')")
-    return found[0].load()
-
-
 @dataclasses.dataclass(frozen=True)
 class RunSpec:
     """What a run is, as the CLI and the harness describe it (see :class:`Testbed` for the fields)."""
@@ -170,133 +124,14 @@ class RunSpec:
         return self.agent or (DEFAULT_AGENTS if self.sumo else BLIND_AGENTS)[self.action_type]
 
 
-class Testbed:
-    """A run: controllers (virtual or real), the middleware of each, optional SUMO, the event log.
+class _OneIntersection:
+    """The single-light API: a thin view of a run of one intersection (:class:`Testbed`'s general API takes and
+    gives one value per intersection; in a run of several, these raise :class:`SeveralIntersections`)."""
 
-    ``config``: an :class:`IntersectionConfig`, a TOML path, or None for the shipped four-leg; or, instead,
-    ``scenario``: a shipped scenario's name (``corridor``, ``grid4x4``), a ``.scenario.toml`` path or a
-    :class:`hils.scenario.Scenario`, one controller per intersection (traffic light), all in this one run.
-    ``action_type``: selection, switch or duration. ``target``: ``"virtual"``, an ``snmp://`` URL or a target
-    factory; with several intersections, a mapping from each one's name to its own (a scenario at wall clock
-    needs a URL for every intersection). ``sumo``: True to run the SUMO scenario (started at each reset), or a
-    simulation object the caller started (with a ``lights`` mapping); ``sumo_config``: the ``.sumocfg`` SUMO
-    starts with (default: the scenario's, or the shipped four-leg). ``seed``: every virtual-time run is
-    reproducible from it. ``agent``: what :meth:`run` uses when given none (a built-in name,
-    ``package.module:Class`` or an instance; with several intersections each gets its own of a named agent).
-    ``duration``: simulated seconds after which the run is done (None: no end). ``log_path``: the JSON Lines
-    event log (None: kept in memory only). ``recover_after``: seconds in TIMEOUT before the manager recovers by
-    itself (None: never). ``on_reset(testbed)`` runs after assembly, before anything starts: the fault harness
-    wraps parts of the run there. ``detectors``: SUMO's stop-bar loops actuate the controllers' detectors
-    (default: for the actuated agent). ``measure``: False skips what only the end-of-run summary and the queue
-    plot need (per-vehicle delays, queue and spillback samples, ``queues`` records), as environments do for
-    speed. ``fast_path``: leave out in virtual time what cannot change a result (:mod:`hils.fastpath`); False runs
-    the reference (every controller tick, every poll, every SUMO step).
-
-    The general API takes and gives one value per intersection, by name: :meth:`reset_all`, :meth:`step_all`,
-    :meth:`observe_all`, :attr:`intersections`. A run of one intersection also has the single view of it:
-    :meth:`reset`, :meth:`step`, :meth:`wait`, :meth:`observe`, :attr:`intersection`, :attr:`middleware`,
-    :attr:`config`... (in a run of several these raise :class:`SeveralIntersections`).
-    """
-
-    __test__ = False  # pytest: a class named Test* here is not a test
-
-    def __init__(self, config: IntersectionConfig | str | Path | None = None, *,
-                 action_type: ActionType | str = ActionType.SELECTION,
-                 target: str | TargetFactory | Mapping[str, str | TargetFactory] = VIRTUAL,
-                 sumo: bool | Simulation = False, seed: int = 0, agent: str | Agent | None = None,
-                 duration: float | None = None, log_path: str | Path | None = None,
-                 recover_after: float | None = 5.0,
-                 on_reset: Callable[[Testbed], None] | None = None,
-                 sumo_config: str | Path | None = None, detectors: bool | None = None,
-                 scenario: str | Path | Scenario | None = None, measure: bool = True, fast_path: bool = True) -> None:
-        if scenario is not None and config is not None:
-            raise ValueError("give a config (one intersection) or a scenario (its intersections), not both")
-        self.scenario = _scenario(scenario)
-        if self.scenario is not None:
-            self.configs = dict(self.scenario.intersections)
-            sumo_config = sumo_config if sumo_config is not None else self.scenario.sumo_config
-        else:
-            cfg = config if isinstance(config, IntersectionConfig) else config_mod.load(config)
-            self.configs = {TLS_ID: cfg}
-        self.labels = labels(list(self.configs))
-        first = next(iter(self.configs.values()))
-        self.action_type = ActionType(action_type)
-        self._targets = _target_specs(target, self.configs)
-        # Each wall-clock target parsed and its host resolved once, here: a bad one is refused before anything
-        # starts, naming its intersection.
-        self._wall_targets = {name: _check_target(url, self.labels[name])
-                              for name, url in self._targets.items() if isinstance(url, str) and url != VIRTUAL}
-        if duration is not None and not duration > 0:
-            raise ValueError(f"duration must be positive seconds or None, got {duration!r}")
-        if agent is not None and not isinstance(agent, str) and len(self.configs) > 1:
-            raise SeveralIntersections("an agent object drives one controller: name a built-in agent or "
-                                       "package.module:Class, and each intersection gets its own")
-        self._sumo_spec = sumo
-        self.sumo_config = sumo_config
-        self.seed = seed
-        self._agent_spec = agent
-        self.fast_path = fast_path
-        # Detector actuations from SUMO feed the controller when asked, and by default for the actuated agent.
-        self.detectors = agent == "actuated" if detectors is None else detectors
-        self.duration = duration
-        self.log_path = Path(log_path) if log_path is not None else None
-        self.recover_after = recover_after
-        self.on_reset = on_reset
-        self.measure = measure
-        self.spec = RunSpec(first, self.action_type, agent if isinstance(agent, str) else None,
-                            math.inf if duration is None else duration, seed, self.log_path, recover_after,
-                            sumo=bool(sumo), fast_path=fast_path)
-        self.env: simpy.Environment | None = None
-        self.intersections: dict[str, Intersection] = {}
-        self.events: EventLog | None = None
-        self.tally = Tally()
-        self.simulation: Simulation = NoSimulation()
-        self.clock: Clock | None = None
-        self.step_cost: StepCost = modeled_cost
-        self.ended = False
-        self.end_reason: str | None = None
-        self.traffic: Any = None  # the simulation's end-of-run summary, once finished
-        self.wall_s = 0.0
-        self._driver: Any = None
-        self._owns_sumo = False
-        self._wall_t0 = 0.0
-
-    # --- properties ---------------------------------------------------------------------------
-
-    @property
-    def mode(self) -> str:
-        """``virtual`` or ``wall-clock``."""
-        return "wall-clock" if self._wall_targets else VIRTUAL
-
-    @property
-    def now(self) -> float:
-        return self._env.now
-
-    @property
-    def done(self) -> bool:
-        """True once the run has ended or its ``duration`` has passed."""
-        return self.ended or (self.duration is not None and self._env.now >= self.duration - 1e-9)
-
-    @property
-    def records(self) -> list[dict[str, Any]]:
-        """The event log's records (read back from the file when the log is not kept in memory)."""
-        log_ = self.events
-        if log_ is None:
-            return []
-        return log_.records if log_.keep else list(read_events(log_.path))
-
-    @property
-    def driver(self) -> Any:
-        """Wall-clock runs: the :class:`hils.clock.WallClockDriver` (its ``loop`` is the run's asyncio loop,
-        where servers of the run such as the dashboard run as tasks); None in virtual time."""
-        return self._driver
-
-    @property
-    def lateness(self) -> Any:
-        """Wall-clock runs: the driver's lateness summary; None in virtual time."""
-        return None if self._driver is None else self._driver.lateness.summary()
-
-    # --- the single view: a run of one intersection ----------------------------------------------
+    configs: dict[str, IntersectionConfig]
+    intersections: dict[str, Intersection]
+    reset_all: Callable[..., dict[str, Observation]]
+    step_all: Callable[..., tuple[dict[str, Observation], dict[str, dict[str, Any]]]]
 
     @property
     def config(self) -> IntersectionConfig:
@@ -373,6 +208,133 @@ class Testbed:
                                        "use reset_all(), step_all(), observe_all() and testbed.intersections[NAME]")
         return next(iter(self.configs))
 
+
+class Testbed(_OneIntersection):
+    """A run: controllers (virtual or real), the middleware of each, optional SUMO, the event log.
+
+    ``config``: an :class:`IntersectionConfig`, a TOML path, or None for the shipped four-leg; or, instead,
+    ``scenario``: a shipped scenario's name (``corridor``, ``grid4x4``), a ``.scenario.toml`` path or a
+    :class:`hils.scenario.Scenario`, one controller per intersection (traffic light), all in this one run.
+    ``action_type``: selection, switch or duration. ``target``: ``"virtual"``, an ``snmp://`` URL or a target
+    factory; with several intersections, a mapping from each one's name to its own (a scenario at wall clock
+    needs a URL for every intersection). ``sumo``: True to run the SUMO scenario (started at each reset), or a
+    simulation object the caller started (with a ``lights`` mapping); ``sumo_config``: the ``.sumocfg`` SUMO
+    starts with (default: the scenario's, or the shipped four-leg). ``seed``: every virtual-time run is
+    reproducible from it. ``agent``: what :meth:`run` uses when given none (a built-in name,
+    ``package.module:Class`` or an instance; with several intersections each gets its own of a named agent).
+    ``duration``: simulated seconds after which the run is done (None: no end). ``log_path``: the JSON Lines
+    event log (None: kept in memory only). ``recover_after``: seconds in TIMEOUT before the manager recovers by
+    itself (None: never). ``on_reset(testbed)`` runs after assembly, before anything starts: the fault harness
+    wraps parts of the run there. ``detectors``: SUMO's stop-bar loops actuate the controllers' detectors
+    (default: for the actuated agent). ``measure``: False skips what only the end-of-run summary and the queue
+    plot need (per-vehicle delays, queue and spillback samples, ``queues`` records), as environments do for
+    speed. ``fast_path``: leave out in virtual time what cannot change a result (:mod:`hils.fastpath`); False runs
+    the reference (every controller tick, every poll, every SUMO step).
+
+    The general API takes and gives one value per intersection, by name: :meth:`reset_all`, :meth:`step_all`,
+    :meth:`observe_all`, :attr:`intersections`. A run of one intersection also has the single view of it:
+    :meth:`reset`, :meth:`step`, :meth:`wait`, :meth:`observe`, :attr:`intersection`, :attr:`middleware`,
+    :attr:`config`... (in a run of several these raise :class:`SeveralIntersections`).
+    """
+
+    __test__ = False  # pytest: a class named Test* here is not a test
+
+    def __init__(self, config: IntersectionConfig | str | Path | None = None, *,
+                 action_type: ActionType | str = ActionType.SELECTION,
+                 target: str | TargetFactory | Mapping[str, str | TargetFactory] = VIRTUAL,
+                 sumo: bool | Simulation = False, seed: int = 0, agent: str | Agent | None = None,
+                 duration: float | None = None, log_path: str | Path | None = None,
+                 recover_after: float | None = 5.0,
+                 on_reset: Callable[[Testbed], None] | None = None,
+                 sumo_config: str | Path | None = None, detectors: bool | None = None,
+                 scenario: str | Path | Scenario | None = None, measure: bool = True, fast_path: bool = True) -> None:
+        if scenario is not None and config is not None:
+            raise ValueError("give a config (one intersection) or a scenario (its intersections), not both")
+        self.scenario = _scenario(scenario)
+        if self.scenario is not None:
+            self.configs = dict(self.scenario.intersections)
+            sumo_config = sumo_config if sumo_config is not None else self.scenario.sumo_config
+        else:
+            cfg = config if isinstance(config, IntersectionConfig) else config_mod.load(config)
+            self.configs = {TLS_ID: cfg}
+        self.labels = labels(list(self.configs))
+        first = next(iter(self.configs.values()))
+        self.action_type = ActionType(action_type)
+        self._targets = target_specs(target, self.configs)
+        # Each wall-clock target parsed and its host resolved once, here: a bad one is refused before anything
+        # starts, naming its intersection.
+        self._wall_targets = {name: check_target(url, self.labels[name])
+                              for name, url in self._targets.items() if isinstance(url, str) and url != VIRTUAL}
+        if duration is not None and not duration > 0:
+            raise ValueError(f"duration must be positive seconds or None, got {duration!r}")
+        if agent is not None and not isinstance(agent, str) and len(self.configs) > 1:
+            raise SeveralIntersections("an agent object drives one controller: name a built-in agent or "
+                                       "package.module:Class, and each intersection gets its own")
+        self._sumo_spec = sumo
+        self.sumo_config = sumo_config
+        self.seed = seed
+        self._agent_spec = agent
+        self.fast_path = fast_path
+        # Detector actuations from SUMO feed the controller when asked, and by default for the actuated agent.
+        self.detectors = agent == "actuated" if detectors is None else detectors
+        self.duration = duration
+        self.log_path = Path(log_path) if log_path is not None else None
+        self.recover_after = recover_after
+        self.on_reset = on_reset
+        self.measure = measure
+        self.spec = RunSpec(first, self.action_type, agent if isinstance(agent, str) else None,
+                            math.inf if duration is None else duration, seed, self.log_path, recover_after,
+                            sumo=bool(sumo), fast_path=fast_path)
+        self.env: simpy.Environment | None = None
+        self.intersections: dict[str, Intersection] = {}
+        self.events: EventLog | None = None
+        self.tally = Tally()
+        self.simulation: Simulation = NoSimulation()
+        self.clock: Clock | None = None
+        self.step_cost: StepCost = modeled_cost
+        self.ended = False
+        self.end_reason: str | None = None
+        self.traffic: Any = None  # the simulation's end-of-run summary, once finished
+        self.wall_s = 0.0
+        self._driver: Any = None
+        self._owns_sumo = False
+        self._wall_t0 = 0.0
+
+    # --- properties ---------------------------------------------------------------------------
+
+    @property
+    def mode(self) -> str:
+        """``virtual`` or ``wall-clock``."""
+        return "wall-clock" if self._wall_targets else VIRTUAL
+
+    @property
+    def now(self) -> float:
+        return self._env.now
+
+    @property
+    def done(self) -> bool:
+        """True once the run has ended or its ``duration`` has passed."""
+        return self.ended or (self.duration is not None and self._env.now >= self.duration - 1e-9)
+
+    @property
+    def records(self) -> list[dict[str, Any]]:
+        """The event log's records (read back from the file when the log is not kept in memory)."""
+        log_ = self.events
+        if log_ is None:
+            return []
+        return log_.records if log_.keep else list(read_events(log_.path))
+
+    @property
+    def driver(self) -> Any:
+        """Wall-clock runs: the :class:`hils.clock.WallClockDriver` (its ``loop`` is the run's asyncio loop,
+        where servers of the run such as the dashboard run as tasks); None in virtual time."""
+        return self._driver
+
+    @property
+    def lateness(self) -> Any:
+        """Wall-clock runs: the driver's lateness summary; None in virtual time."""
+        return None if self._driver is None else self._driver.lateness.summary()
+
     # --- life cycle -----------------------------------------------------------------------------
 
     def reset_all(self, seed: int | None = None) -> dict[str, Observation]:
@@ -419,21 +381,8 @@ class Testbed:
         # Every controller of a run of several has its own seeded draws (its tick phase, its latencies); a lone
         # one draws from the run's seed itself.
         seed = self.seed if label is None else self.seed * 1009 + index
-        community = None
-        if self.mode == VIRTUAL:
-            factory = virtual_target_factory() if spec == VIRTUAL else spec
-            target = factory(env, cfg, seed=seed, fast_path=self.fast_path)
-            # A target brings its transport, or an object surface that an in-process transport reaches.
-            transport = getattr(target, "transport", None) or LocalTransport(
-                env, target.surface, tau_udp=cfg.middleware.tau_udp, get_latency=target.get_latency,
-                set_latency=target.set_latency, seed=seed, change_feed=getattr(target, "change_feed", None))
-            where = "the in-process emulator"
-        else:
-            from hils.snmp import SnmpTransport
-
-            target, address = self._wall_targets[name]
-            transport = SnmpTransport(env, self._driver, target, tau_udp=cfg.middleware.tau_udp, address=address)
-            where, community = f"{target.host}:{target.port}", getattr(target, "community", None)
+        target, transport, where, community = connect(env, cfg, spec, self._wall_targets.get(name), self._driver,
+                                                      seed=seed, fast_path=self.fast_path)
         events = TaggedLog(self.events, label) if label is not None else self.events
         # Each intersection's tally is handed its own records (a lone one's are all of the run's, the run's
         # own included: the run's tally is then that one).
@@ -493,7 +442,9 @@ class Testbed:
             i.middleware.start(after=index * spread)
             if i.signals is not None and self.measure:
                 self.env.process(i.sample_traffic(ended))
-        self.env.process(self._simulation_loop())
+        self.env.process(steps(self.env, self.simulation, list(self.intersections.values()),
+                                self.spec.config.middleware.sumo_step, self.step_cost,
+                                fast_path=self.fast_path, ended=ended))
 
     def _what_runs(self) -> dict[str, Any]:
         """``run_started``'s account of what runs: the intersection's config, or the scenario and its names."""
@@ -692,45 +643,6 @@ class Testbed:
 
     # --- processes ---------------------------------------------------------------------------------
 
-    def _simulation_loop(self) -> Generator[simpy.Event, Any, None]:
-        env = self._env
-        step = self.spec.config.middleware.sumo_step
-        sim = self.simulation
-        lights = [(i.signals, i.middleware.cache) for i in self.intersections.values() if i.signals is not None]
-        feeds = [(i.signals, i.detector_feed) for i in self.intersections.values() if i.detector_feed is not None]
-        middlewares = [i.middleware for i in self.intersections.values()]
-        k = 0
-        grid = Grid(env.now, step)
-
-        def show() -> None:
-            for view, cache in lights:
-                if cache.snapshot is not None:
-                    view.apply(cache.snapshot.state)
-
-        def one_step() -> None:
-            show()
-            sim.step()
-            for view, feed in feeds:
-                feed.feed(view.present())
-
-        # The fast path (rule 4 of hils.fastpath): steps that cost nothing and act on nothing but SUMO (no
-        # detectors SETting the controller) run in one call while nothing else is due before the next one.
-        stretches = self.fast_path and not feeds
-        cost = self.step_cost
-        while not self.ended:
-            free_until = cost.free_until(env.now) if stretches else env.now
-            if free_until > env.now:
-                show()
-                n = 1 + steps_before(min(env.peek(), free_until), grid, k + 1)
-                sim.advance(n)
-                took = 0.0
-            else:
-                n, took = 1, cost(one_step)
-            for mw in middlewares:
-                mw.observe_step(step, took)
-            k += n
-            yield env.timeout(grid.delay(k, env.now))
-
     # --- helpers ----------------------------------------------------------------------------------------
 
     @property
@@ -748,58 +660,10 @@ class Testbed:
             raise NotStarted(f"the run has ended ({self.end_reason}): call reset() to start another")
 
 
-class TargetError(UserError, ValueError):
-    """A target that is neither ``virtual`` nor a usable ``snmp://`` URL."""
-
-
 def _scenario(scenario: str | Path | Scenario | None) -> Scenario | None:
     if scenario is None or isinstance(scenario, Scenario):
         return scenario
     return load_scenario(scenario)
-
-
-def _target_specs(target: str | TargetFactory | Mapping[str, str | TargetFactory],
-                  configs: Mapping[str, IntersectionConfig]) -> dict[str, str | TargetFactory]:
-    """Each traffic light's target: one for all, or a mapping naming every light; all in virtual time (the
-    emulator, a factory) or all at the wall clock (URLs), since a run has one clock."""
-    if isinstance(target, Mapping):
-        missing, unknown = sorted(set(configs) - set(target)), sorted(set(target) - set(configs))
-        if missing or unknown:
-            raise TargetError(f"targets: {'no target for ' + ', '.join(missing) if missing else ''}"
-                              f"{'; ' if missing and unknown else ''}"
-                              f"{'no traffic light ' + ', '.join(unknown) if unknown else ''}; allowed: one "
-                              f"target per traffic light of the run ({', '.join(configs)})")
-        specs = {tls: target[tls] for tls in configs}
-    else:
-        if isinstance(target, str) and target != VIRTUAL and len(configs) > 1:
-            raise TargetError(f"target {target!r}: a run of {len(configs)} controllers needs one target per traffic "
-                              f"light ({', '.join(configs)}): a mapping, or a TOML file of TLS = URL lines")
-        specs = dict.fromkeys(configs, target)
-    urls = [spec for spec in specs.values() if isinstance(spec, str) and spec != VIRTUAL]
-    if urls and len(urls) != len(specs):
-        raise TargetError("targets: either every controller is reached at the wall clock (snmp:// URLs) or none "
-                          "is (virtual): a run has one clock")
-    return specs
-
-
-def _check_target(url: str, label: str | None) -> tuple[Any, tuple[str, int]]:
-    """The :class:`hils.snmp.SnmpTarget` of ``url`` and its host's address; a URL that is not one, or whose host
-    does not resolve, is refused (``label``: how the message names the intersection)."""
-    light = f"{label}: " if label else ""
-    if not url.startswith("snmp://"):
-        raise TargetError(f"{light}target {url!r}: allowed: 'virtual' or "
-                          "snmp://HOST[:PORT][?community=NAME&version=1|2c]")
-    from hils.snmp import SnmpTarget, resolve
-    from hils.transport import TransportError
-
-    try:
-        target = SnmpTarget.parse(url)
-        return target, resolve(target)
-    except ValueError as exc:
-        raise TargetError(f"{light}{exc}") from None
-    except TransportError as exc:
-        raise TargetError(f"{light}target {url!r}: {exc}; allowed: a host name this machine resolves, or an "
-                          "IPv4 address") from None
 
 
 def _agent_name(given: str | Agent | None, spec: RunSpec) -> str:

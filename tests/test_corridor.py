@@ -22,7 +22,8 @@ from hils import Testbed
 from hils.actions import ConflictError
 from hils.cli import main
 from hils.events import Kind, read
-from hils.testbed import SeveralIntersections, TargetError
+from hils.targets import TargetError
+from hils.testbed import SeveralIntersections
 
 LIGHTS = ["J1", "J2", "J3", "J4"]
 RUN_WIDE = {Kind.RUN_STARTED, Kind.RUN_ENDED}
@@ -115,7 +116,7 @@ def test_targets_must_name_every_light_and_share_one_clock() -> None:
     with pytest.raises(TargetError, match="one clock"):
         Testbed(scenario="corridor", target={"J1": "snmp://127.0.0.1:1161", "J2": "virtual", "J3": "virtual",
                                              "J4": "virtual"})
-    with pytest.raises(TargetError, match="one target per traffic light"):
+    with pytest.raises(TargetError, match="one target per intersection"):
         Testbed(scenario="corridor", target="snmp://127.0.0.1:1161")
     with pytest.raises(TargetError, match=r"^J3: target 'snmp://no-such-host\.invalid': cannot resolve"):
         Testbed(scenario="corridor", target={tls: "snmp://127.0.0.1:1161" for tls in ("J1", "J2", "J4")}

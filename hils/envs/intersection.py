@@ -51,7 +51,8 @@ from hils.errors import UserError
 from hils.manager import State
 from hils.poller import SignalCache, Snapshot
 from hils.sumo_net import TLS_ID, derive_phase_map, read_net, scenario_config
-from hils.testbed import VIRTUAL, Testbed
+from hils.targets import VIRTUAL
+from hils.testbed import Testbed
 
 __all__ = [
     "REWARDS", "STATES", "EnvOptionError", "IntersectionAdapter", "IntersectionEnv", "Reward", "action_type_of",

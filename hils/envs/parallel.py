@@ -51,7 +51,8 @@ from hils.envs.intersection import (
     with_timing,
 )
 from hils.scenario import Scenario, load_scenario
-from hils.testbed import VIRTUAL, NotStarted, Testbed
+from hils.targets import VIRTUAL
+from hils.testbed import NotStarted, Testbed
 
 __all__ = ["IntersectionsEnv", "Targets"]
 
