@@ -288,7 +288,6 @@ class Testbed(_OneIntersection):
         self.env: simpy.Environment | None = None
         self.intersections: dict[str, Intersection] = {}
         self.events: EventLog | None = None
-        self.tally = Tally()
         self.simulation: Simulation = NoSimulation()
         self.clock: Clock | None = None
         self.step_cost: StepCost = modeled_cost
@@ -351,7 +350,6 @@ class Testbed(_OneIntersection):
         # A run that writes its log to a file does not also keep it in memory: a long run's records
         # would grow the heap that every full garbage collection walks, in the middle of the hot path.
         self.events = EventLog(self.log_path, keep=self.log_path is None)
-        self.tally = Tally()  # the run's records (start, end), as the summary reads them: its end re-reads nothing
         self.intersections = {name: self._assemble_intersection(env, name, index)
                               for index, name in enumerate(self.configs)}
         self._assemble_simulation()
@@ -384,12 +382,10 @@ class Testbed(_OneIntersection):
         target, transport, where, community = connect(env, cfg, spec, self._wall_targets.get(name), self._driver,
                                                       seed=seed, fast_path=self.fast_path)
         events = TaggedLog(self.events, label) if label is not None else self.events
-        # Each intersection's tally is handed its own records (a lone one's are all of the run's, the run's
-        # own included: the run's tally is then that one).
+        # The summary's figures, kept as the run goes (its end re-reads nothing): each intersection's tally is handed
+        # its own records and the run's (a lone one's, every record).
         tally = Tally(label)
         self.events.subscribe(tally, intersection=label)
-        if label is None:
-            self.tally = tally
         middleware = Middleware(env, transport, cfg, self.action_type, events, where=where, community=community,
                                 recover_after=self.recover_after, fast_path=self.fast_path)
         return Intersection(name, label, cfg, target, transport, middleware, events, tally)
