@@ -10,6 +10,7 @@ proxy`` relays UDP to an SNMP agent with faults on a schedule (:mod:`harness.pro
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import logging
 import sys
 import time
@@ -21,6 +22,7 @@ from tqdm import tqdm
 from harness.proxy import register_proxy
 from harness.scenarios import Scenario, ScenarioResult, default_suite, discover, load_scenario, run_scenario
 from hils import jsonout
+from hils.sweep import SweepError, parse_seeds
 
 RUN_HELP = """\
 Run fault scenarios in virtual time and check their expected outcomes.
@@ -32,6 +34,9 @@ A scenario may run several controllers (scenario = "corridor") with a fault on
 one of them; each intersection is then judged on its own.
 Besides its own expectations every scenario checks that each of its faults fired,
 that nothing conflicting was ever sent or shown, and that the event log is whole.
+With --seeds every scenario runs once per seed (its own seed replaced: the
+emulator's draws, the faults' and the agent's), and is reported per seed: an
+expectation must hold at every seed.
 
 Exit status: 0 if every expectation held, 1 if any failed, 2 if a scenario file
 is invalid.
@@ -51,6 +56,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                      help="where faults.md and faults.json go (default: reports)")
     run.add_argument("--log-dir", type=Path, metavar="DIR",
                      help="also write each scenario's JSON Lines event log to DIR/<scenario>.jsonl")
+    run.add_argument("--seeds", type=_seeds, metavar="SEEDS",
+                     help="run every scenario at each of these seeds, e.g. 1,1001,2002 or 0-4 (default: the "
+                          "scenario's own)")
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
     run.set_defaults(func=_run)
 
@@ -83,8 +91,17 @@ def _list(args: argparse.Namespace) -> int:
     return 0
 
 
+def _seeds(text: str) -> list[int]:
+    try:
+        return parse_seeds(text)
+    except SweepError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def _run(args: argparse.Namespace) -> int:
     scenarios = _scenarios(args.paths)
+    if args.seeds:
+        scenarios = [dataclasses.replace(s, seed=seed) for s in scenarios for seed in args.seeds]
     t0 = time.perf_counter()
     results: list[ScenarioResult] = []
     # Faults make the controller model warn (backup mode after a suppressed keepalive, say): that is
@@ -92,16 +109,17 @@ def _run(args: argparse.Namespace) -> int:
     logging.getLogger("emulator").setLevel(max(logging.ERROR, logging.getLogger().level))
     with tqdm(scenarios, unit="scenario", disable=args.no_progress or args.quiet, file=sys.stderr) as bar:
         for scenario in bar:
-            bar.set_postfix_str(scenario.name)
-            log_path = None if args.log_dir is None else args.log_dir / f"{scenario.name}.jsonl"
+            bar.set_postfix_str(f"{scenario.name} seed {scenario.seed}")
+            name = f"{scenario.name}-seed{scenario.seed}" if args.seeds else scenario.name
+            log_path = None if args.log_dir is None else args.log_dir / f"{name}.jsonl"
             results.append(run_scenario(scenario, log_path=log_path))
     wall = time.perf_counter() - t0
     print(render_table(results))
     for r in results:
         for c in r.failures:
-            print(f"FAIL {r.scenario.name}: {c.label}: expected {c.message}")
+            print(f"FAIL {r.scenario.name} (seed {r.scenario.seed}): {c.label}: expected {c.message}")
     failed = sum(not r.passed for r in results)
-    print(f"{len(results) - failed} of {len(results)} scenarios passed in {wall:.1f} s")
+    print(f"{len(results) - failed} of {len(results)} scenario runs passed in {wall:.1f} s")
     md, js = write_reports(results, args.report_dir, wall)
     print(f"reports: {md} {js}")
     return 1 if failed else 0
@@ -112,11 +130,11 @@ def _seconds(t: float | None) -> str:
 
 
 def _rows(results: Sequence[ScenarioResult]) -> list[list[str]]:
-    return [[r.scenario.name, "PASS" if r.passed else "FAIL", _seconds(r.detection_s), _seconds(r.recovery_s),
-             r.timeouts_text(), r.fired_text(), f"{r.wall_s:.2f}"] for r in results]
+    return [[r.scenario.name, str(r.scenario.seed), "PASS" if r.passed else "FAIL", _seconds(r.detection_s),
+             _seconds(r.recovery_s), r.timeouts_text(), r.fired_text(), f"{r.wall_s:.2f}"] for r in results]
 
 
-HEADER = ["scenario", "result", "detection s", "recovery s", "timeouts", "faults fired", "wall s"]
+HEADER = ["scenario", "seed", "result", "detection s", "recovery s", "timeouts", "faults fired", "wall s"]
 
 
 def render_table(results: Sequence[ScenarioResult]) -> str:
@@ -132,7 +150,7 @@ def render_markdown(results: Sequence[ScenarioResult], wall_s: float) -> str:
     out = [
         "# Fault scenarios",
         "",
-        f"{len(results) - failed} of {len(results)} scenarios passed; the suite took {wall_s:.1f} s of wall time "
+        f"{len(results) - failed} of {len(results)} scenario runs passed; the suite took {wall_s:.1f} s of wall time "
         f"for {sum(r.scenario.duration for r in results):g} s of virtual time. Generated by `hils faults run`.",
         "",
         "Detection: seconds from the fault's first firing (or, where stated, from the dispatch of the command "
@@ -147,7 +165,7 @@ def render_markdown(results: Sequence[ScenarioResult], wall_s: float) -> str:
     out += ["| " + " | ".join(row) + " |" for row in _rows(results)]
     for r in results:
         s = r.scenario
-        out += ["", f"## {s.name}: {'PASS' if r.passed else 'FAIL'}", "", s.description or "", "",
+        out += ["", f"## {s.name} (seed {s.seed}): {'PASS' if r.passed else 'FAIL'}", "", s.description or "", "",
                 f"`{_display(s.source)}`: {s.action_type.value} actions, agent {s.agent or 'default'}, "
                 f"{s.duration:g} s, seed {s.seed}"
                 + (f", controllers {', '.join(s.intersections)}." if s.several else "."), ""]

@@ -758,6 +758,7 @@ class ScenarioResult:
     def to_json(self) -> dict[str, Any]:
         doc = {
             "scenario": self.scenario.name,
+            "seed": self.scenario.seed,
             "source": self.scenario.source,
             "passed": self.passed,
             "detection_s": _round(self.detection_s),

@@ -56,10 +56,12 @@ States (:class:`Mode`), with the paper's names (:class:`State`) that the log and
 Polls. The poller sends one GET per period and reports each one's fate (:class:`PollAnswered`,
 :class:`PollFailed`), in whatever order they settle. Answers are applied in poll order: one older
 than the newest applied is late and discarded. A communication failure is n_timeout consecutive failed
-polls, as the paper defines it: failed polls newer than the newest answered one are counted, and an
-answer resets the count. With overlapping polls a dead link is therefore seen about (n_timeout - 1)
-periods + tau_udp after it dies. While polls fail the read-back waits (the failure count speaks for
-the link).
+polls, as the paper defines it, counted in poll order: n_timeout polls of consecutive ids that all failed,
+whenever each failure became known. A failure overtaken by the answer of a later poll still belongs to its
+run (an outage shorter than tau_udp is n_timeout lost polls like any other: its failures come in after
+the first answer beyond it); a poll answered breaks the run it falls in. With overlapping polls a dead
+link is therefore seen about (n_timeout - 1) periods + tau_udp after it dies. While a poll newer than
+the newest answered one has failed, the read-back waits (the failed polls speak for the link).
 
 The control objects are ours while we run. The shell reads them back at a low rate when the
 manager says so (:class:`ReadbackDue` -> :class:`ReadControls` -> :class:`ControlsRead`). In IDLE,
@@ -243,8 +245,8 @@ class Ev(Enum):
     OBSERVED = auto()  # any other PollAnswered of this polling period, not older than the newest applied
     LATE_POLL = auto()  # PollAnswered older than the newest applied
     STALE_POLL = auto()  # PollAnswered or PollFailed sent before the last halt
-    POLL_FAILED = auto()  # PollFailed that does not make n_timeout in a row
-    POLLS_FAILED = auto()  # PollFailed that makes n_timeout in a row
+    POLL_FAILED = auto()  # PollFailed that makes no run of n_timeout in a row, in poll order
+    POLLS_FAILED = auto()  # PollFailed that makes a run of n_timeout in a row, in poll order
     TRANSITION_EXPIRED = auto()  # TimerExpired: the pending command's transition timer
     DURATION_ELAPSED = auto()  # TimerExpired: the pending command's green timer
     KEEPALIVE_DUE = auto()  # TimerExpired: the live keepalive timer
@@ -264,7 +266,7 @@ class Ev(Enum):
     CONTROLLER_READ = auto()  # ControllerRead
     CONTROLLER_UNREADABLE = auto()  # ControllerUnreadable
     READBACK = auto()  # ReadbackDue, no poll failing
-    READBACK_WAITS = auto()  # ReadbackDue while polls fail
+    READBACK_WAITS = auto()  # ReadbackDue while a poll newer than the newest answered one has failed
     CONTROLS_OURS = auto()  # ControlsRead, nothing set
     FOREIGN_CONTROL = auto()  # ControlsRead, something set
     KEEPALIVE_SWITCHED = auto()  # KeepaliveSwitched
@@ -273,6 +275,9 @@ class Ev(Enum):
 
 #: How many times in all the closing clear is sent while its datagrams get no answer (see CLOSED).
 CLEAR_ATTEMPTS = 3
+
+#: Failed poll ids kept at most (a poll settles within tau_udp, a few dozen periods at most).
+_FAILED_KEPT = 4096
 
 
 class Manager:
@@ -300,7 +305,8 @@ class Manager:
         self.startup_attempts = 0  # start-up reads that got no answer
         self.poll_epoch = 0  # polling periods so far: one more at every halt
         self.newest_poll = 0  # the newest poll whose answer was applied
-        self.failed_in_a_row = 0  # failed polls newer than the newest answered one
+        self.newest_failed = 0  # the newest poll that failed
+        self._failed: set[int] = set()  # the polls of this polling period that failed (the recent ones), by id
         self.polls_answered = 0
         self.polls_failed = 0
         self.polls_late = 0
@@ -355,8 +361,7 @@ class Manager:
             case PollFailed(poll_id=poll_id, epoch=epoch):
                 if epoch != self.poll_epoch:
                     return Ev.STALE_POLL
-                counted = poll_id >= self.newest_poll  # one overtaken by a newer answer is not in a run
-                return Ev.POLLS_FAILED if counted and self.failed_in_a_row + 1 == self.n_timeout else Ev.POLL_FAILED
+                return Ev.POLLS_FAILED if self._run_with(poll_id) >= self.n_timeout else Ev.POLL_FAILED
             case TimerExpired(kind=kind, token=token):
                 if kind is TimerKind.KEEPALIVE:
                     return Ev.KEEPALIVE_DUE if token == self._keepalive_token else Ev.STALE_TIMER
@@ -383,10 +388,24 @@ class Manager:
                     return Ev.COMMAND_SET_LOST
                 return Ev.SET_RESULT
             case ReadbackDue():
-                return Ev.READBACK_WAITS if self.failed_in_a_row else Ev.READBACK
+                return Ev.READBACK_WAITS if self.polls_failing else Ev.READBACK
             case ControlsRead():
                 return Ev.FOREIGN_CONTROL if self._foreign(ev) else Ev.CONTROLS_OURS
         return _PLAIN_KINDS[type(ev)]
+
+    @property
+    def polls_failing(self) -> bool:
+        """True while a poll newer than the newest answered one has failed."""
+        return self.newest_failed > self.newest_poll
+
+    def _run_with(self, poll_id: int) -> int:
+        """The failed polls of consecutive ids, in poll order, that poll ``poll_id`` failing makes (itself too)."""
+        failed, below, above = self._failed, 0, 0
+        while poll_id - below - 1 in failed:
+            below += 1
+        while poll_id + above + 1 in failed:
+            above += 1
+        return below + 1 + above
 
     def _foreign(self, ev: ControlsRead) -> str:
         """What of the read-back is not ours ('' when all of it is)."""
@@ -453,7 +472,6 @@ class Manager:
     def _answered(self, ev: PollAnswered, out: list[Effect]) -> None:
         self.newest_poll = ev.poll_id
         self.polls_answered += 1
-        self.failed_in_a_row = 0
         out.append(ShowSignal(ev.poll_id, ev.state))
 
     def _late(self, ev: PollAnswered, out: list[Effect]) -> None:
@@ -477,10 +495,12 @@ class Manager:
 
     def _poll_failed(self, ev: PollFailed, out: list[Effect]) -> None:
         self.polls_failed += 1
-        if ev.poll_id >= self.newest_poll:
-            self.failed_in_a_row += 1
-        # A poll overtaken by a newer answer is not part of a run of failures: logged with the count as it stands.
-        out.append(PollFailureSeen(ev.poll_id, ev.error, self.failed_in_a_row))
+        run = self._run_with(ev.poll_id)
+        self._failed.add(ev.poll_id)
+        self.newest_failed = max(self.newest_failed, ev.poll_id)
+        if len(self._failed) > _FAILED_KEPT:  # polls settle within tau_udp: older failures are in no run to come
+            self._failed = {i for i in self._failed if i > self.newest_failed - _FAILED_KEPT // 2}
+        out.append(PollFailureSeen(ev.poll_id, ev.error, run))
 
     def _polls_failed(self, ev: PollFailed, out: list[Effect]) -> None:
         self._poll_failed(ev, out)
@@ -542,7 +562,8 @@ class Manager:
     def _recovered(self, ev: SetAnswered, out: list[Effect]) -> None:
         self.timeout_reason = None
         self.drifted_in_a_row = 0
-        self.failed_in_a_row = 0
+        self._failed.clear()
+        self.newest_failed = 0
         out.append(Recovered(self._recovering_greens))
         out.append(ResumePolling())
 

@@ -169,7 +169,7 @@ class ManagerMachine(RuleBasedStateMachine):
         self.in_flight: list[InFlight] = []
         self.epoch = 0  # one more at every HaltPolling, as the poller's polling periods
         self.newest = 0  # the newest poll answered and applied
-        self.failed = 0  # failed polls in a row, as the paper counts them (newer than the newest answered)
+        self.failed_ids: set[int] = set()  # the polls of this polling period that failed
         self.timers: list[tuple[float, TimerKind, int]] = []  # started, not yet fired
         self.fired: set[int] = set()
         self.keepalive_token: int | None = None  # the latest keepalive timer armed
@@ -254,19 +254,27 @@ class ManagerMachine(RuleBasedStateMachine):
                 assert effects == [] and after is before, "a late answer changed something"
             else:
                 assert effects[0] == ShowSignal(ev.poll_id, ev.state)
-                self.newest, self.failed = ev.poll_id, 0
+                self.newest = ev.poll_id
                 self.shown = ev.state.greens
         elif isinstance(ev, PollFailed):
+            # n_timeout polls of consecutive ids that all failed, in poll order, whatever order they settled in.
             assert before in RUNNING, f"a poll of this period failed in {before.name}"
-            if ev.poll_id >= self.newest:
-                self.failed += 1
-            assert effects[0] == PollFailureSeen(ev.poll_id, ev.error, self.failed)
-            if self.failed == N_TIMEOUT and ev.poll_id >= self.newest:
+            self.failed_ids.add(ev.poll_id)
+            ids = sorted(self.failed_ids)
+            blocks, start = [], 0
+            for i in range(1, len(ids) + 1):
+                if i == len(ids) or ids[i] != ids[i - 1] + 1:
+                    blocks.append(ids[start:i])
+                    start = i
+            run = next(len(b) for b in blocks if ev.poll_id in b)
+            assert effects[0] == PollFailureSeen(ev.poll_id, ev.error, run)
+            if run >= N_TIMEOUT:
                 assert after is Mode.TIMEOUT and m.timeout_reason is TimeoutReason.COMMUNICATION
             else:
                 assert effects == [effects[0]] and after is before
         if isinstance(ev, ReadbackDue):
-            expected = [ReadControls()] if before in RUNNING and self.failed == 0 else []
+            failing = any(i > self.newest for i in self.failed_ids)
+            expected = [ReadControls()] if before in RUNNING and not failing else []
             assert effects == expected, "the read-back goes out while working and no poll fails, and only then"
 
         sent = [e for e in effects if isinstance(e, SendCall)]
@@ -384,9 +392,9 @@ class ManagerMachine(RuleBasedStateMachine):
             self.drifted = self.drifted + 1 if ev.took > ev.step else 0
         if isinstance(ev, SetAnswered) and before is Mode.RECOVERING and ev.purpose is Purpose.RECOVERY:
             self.drifted = 0
-            self.failed = 0
+            self.failed_ids.clear()
         if after is Mode.IDLE and before is Mode.RECOVERING:
-            assert m.drifted_in_a_row == 0 and m.failed_in_a_row == 0
+            assert m.drifted_in_a_row == 0 and not m.polls_failing
         if isinstance(ev, ControllerRead) and before is Mode.RECOVERING:
             expected = next((i for i, pair in enumerate(CONFIG.sequence) if set(pair) <= ev.greens), position_before)
             assert m.position == expected, "recovery aligns the position with what the controller shows"
@@ -716,8 +724,8 @@ def test_n_timeout_failed_polls_in_a_row_are_a_communication_timeout() -> None:
     for i in range(2, 2 + N_TIMEOUT - 1):
         effects = m.handle(PollFailed(i * 0.1 + 1.0, i, 0, "CommunicationTimeout", "lost"))
         assert effects == [PollFailureSeen(i, "lost", i - 1)]
-    assert answered(m, 2.0, 7, frozenset({2, 6}))[0] == ShowSignal(7, shown(frozenset({2, 6}))), "an answer resets"
-    assert m.failed_in_a_row == 0
+    assert answered(m, 2.0, 7, frozenset({2, 6}))[0] == ShowSignal(7, shown(frozenset({2, 6}))), "an answer breaks"
+    assert not m.polls_failing
     for i in range(8, 8 + N_TIMEOUT):
         effects = m.handle(PollFailed(i * 0.1 + 1.0, i, 0, "SnmpError", "genErr"))
     assert [type(e) for e in effects] == [PollFailureSeen, TimeoutEntered, HaltPolling]
@@ -725,6 +733,27 @@ def test_n_timeout_failed_polls_in_a_row_are_a_communication_timeout() -> None:
     assert m.mode is Mode.TIMEOUT and m.poll_epoch == 1
     assert m.handle(PollFailed(3.0, 13, 0, "CommunicationTimeout", "lost")) == [], "sent before the halt"
     assert (m.polls_answered, m.polls_failed, m.polls_late) == (2, 2 * N_TIMEOUT - 1, 0)
+
+
+def test_failures_are_counted_in_poll_order_whatever_overtook_them() -> None:
+    """An outage shorter than tau_udp: polls 2..9 lost, poll 10 answered before their failures come in (each
+    fails tau_udp after it went out). In poll order they are eight failed polls in a row: a TIMEOUT at the
+    fifth, poll 6's failure; the answer of poll 10 does not hide the run."""
+    m = started(recover_after=None)
+    answered(m, 0.1, 1, frozenset({2, 6}))
+    answered(m, 1.002, 10, frozenset({2, 6}))
+    for i in range(2, 6):
+        assert m.handle(PollFailed(0.1 * i + 1.0, i, 0, "CommunicationTimeout", "lost")) == [
+            PollFailureSeen(i, "lost", i - 1)]
+    effects = m.handle(PollFailed(1.6, 6, 0, "CommunicationTimeout", "lost"))
+    assert [type(e) for e in effects] == [PollFailureSeen, TimeoutEntered, HaltPolling] and effects[0].consecutive == 5
+    assert m.mode is Mode.TIMEOUT and m.timeout_reason is TimeoutReason.COMMUNICATION
+    # Out of order, too: a run is made whole by the failure that joins its two halves.
+    joined = started(recover_after=None)
+    for i in (1, 2, 4, 5):
+        assert joined.handle(PollFailed(1.0, i, 0, "CommunicationTimeout", "lost"))[0].consecutive in (1, 2)
+    effects = joined.handle(PollFailed(1.1, 3, 0, "CommunicationTimeout", "lost"))
+    assert effects[0].consecutive == 5 and joined.mode is Mode.TIMEOUT
 
 
 def test_a_late_answer_is_counted_and_not_applied() -> None:

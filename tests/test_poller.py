@@ -138,12 +138,37 @@ def test_n_timeout_lost_polls_are_one_communication_timeout(paper_config) -> Non
     assert mw.state is State.TIMEOUT and mw.poller.halted
 
 
+def test_an_outage_shorter_than_tau_udp_is_a_communication_timeout(paper_config) -> None:
+    """Eight polls lost in 0.8 s, less than tau_udp: the poll after them is answered before their failures come
+    in. In poll order they are eight failed polls in a row: a TIMEOUT, seen tau_udp after the fifth went out."""
+    rig = Rig(paper_config)
+    mw = rig.middleware()
+    rig.env.run(until=2.0)
+
+    def outage():
+        rig.transport.loss = 1.0
+        yield rig.env.timeout(0.8)
+        rig.transport.loss = 0.0
+
+    answers: list[Snapshot] = []
+    mw.cache.subscribe(lambda snap, _changed: answers.append(snap), every_poll=True)
+    rig.env.process(outage())
+    rig.env.run(until=6.0)
+    failed = rig.log.of(Kind.POLL_FAILED)
+    (entered,) = rig.log.of(Kind.TIMEOUT_ENTERED)
+    assert [r["consecutive"] for r in failed] == [1, 2, 3, 4, 5]
+    assert entered["reason"] == "communication" and entered["t"] == failed[4]["t"]
+    overtaking = [a for a in answers if a.seq > failed[-1]["poll_id"] and a.t < failed[0]["t"]]
+    assert overtaking, "polls after the outage were answered before its first failure came in"
+    assert mw.state is State.TIMEOUT
+
+
 def test_a_success_in_between_resets_the_failure_count(paper_config) -> None:
     rig = Rig(paper_config)
     mw = rig.middleware()
     rig.surface.plan = [True] * 4 + [False] + [True] * 4 + [False]
     rig.env.run(until=2.0)
-    assert mw.state is State.IDLE and mw.manager.failed_in_a_row == 0
+    assert mw.state is State.IDLE and not mw.manager.polls_failing
     assert [r["consecutive"] for r in rig.log.of(Kind.POLL_FAILED)] == [1, 2, 3, 4, 1, 2, 3, 4]
     rig.surface.plan = [True] * 5
     rig.env.run(until=3.0)

@@ -37,24 +37,36 @@ recover_within = 0.1
 """
 
 
-def test_the_shipped_suite_passes_through_the_cli(tmp_path, capsys):
-    code = main(["faults", "run", "--report-dir", str(tmp_path), "--no-progress"])
+SEEDS = (1, 1001, 2002)
+
+
+def test_the_shipped_suite_passes_at_every_seed_through_the_cli(tmp_path, capsys):
+    """Every scenario's expectations hold at three seeds (its faults', emulator's and agent's draws replaced),
+    burst-loss's too: each burst of lost polls is a TIMEOUT however the polls' answers and failures interleave."""
+    code = main(["faults", "run", "--seeds", ",".join(map(str, SEEDS)), "--report-dir", str(tmp_path),
+                 "--no-progress"])
     out = capsys.readouterr().out
     assert code == 0, out
-    assert "scenario" in out and "detection s" in out and "faults fired" in out
+    assert "scenario" in out and "seed" in out and "detection s" in out and "faults fired" in out
     report = json.loads((tmp_path / "faults.json").read_text())
-    names = {s["scenario"] for s in report["scenarios"]}
-    assert report["failed"] == 0 and report["passed"] == len(names) >= 18
-    assert {"paper-communication-failure", "paper-transition-timeout", "paper-drift"} <= names
+    runs = {(s["scenario"], s["seed"]) for s in report["scenarios"]}
+    names = {name for name, _ in runs}
+    assert runs == {(name, seed) for name in names for seed in SEEDS}
+    assert report["failed"] == 0 and report["passed"] == len(runs) and len(names) >= 18
+    assert {"paper-communication-failure", "paper-transition-timeout", "paper-drift", "burst-loss"} <= names
     for s in report["scenarios"]:
         assert s["faults"] and all(f["fired"] > 0 for f in s["faults"]), s["scenario"]
+    bursts = [s for s in report["scenarios"] if s["scenario"] == "burst-loss"]
+    for s in bursts:
+        lost = s["faults"][0]["details"]["requests_lost"]
+        assert len(s["timeouts"]) >= lost // 8 - 3 > 5, (s["seed"], len(s["timeouts"]), lost)
     md = (tmp_path / "faults.md").read_text()
-    assert "| paper-drift | PASS |" in md
+    assert "| paper-drift | 1001 | PASS |" in md and "## burst-loss (seed 2002): PASS" in md
     # A scenario of several controllers reports each intersection's outcome.
-    link = next(s for s in report["scenarios"] if s["scenario"] == "corridor-link-down")
+    link = next(s for s in report["scenarios"] if s["scenario"] == "corridor-link-down" and s["seed"] == 1)
     assert [(o["intersection"], o["timeouts"]) for o in link["intersections"]] == [
         ("J1", []), ("J2", ["communication"]), ("J3", []), ("J4", [])]
-    assert "| corridor-link-down | PASS | 1.400 | 0.010 | 1 at J2 | j2-link-down at J2 x" in md
+    assert "| corridor-link-down | 1 | PASS | 1.400 | 0.010 | 1 at J2 | j2-link-down at J2 x" in md
     assert "| J2 | PASS | j2-link-down | communication | 1.400 | 0.010 | 3 | 36.6 (10.0-46.7) |" in md
 
 
@@ -90,7 +102,8 @@ def test_a_scenario_expecting_no_timeout_fails_when_one_happens(tmp_path, capsys
     code = main(["faults", "run", str(path), "--report-dir", str(tmp_path / "rep"), "--no-progress"])
     out = capsys.readouterr().out
     assert code == 1
-    assert re.search(r"FAIL ride: timeout: expected no TIMEOUT; got TIMEOUT: communication at 21\.4\d\d s", out)
+    assert re.search(r"FAIL ride \(seed \d+\): timeout: expected no TIMEOUT; got TIMEOUT: communication at "
+                     r"21\.4\d\d s", out)
     assert json.loads((tmp_path / "rep" / "faults.json").read_text())["failed"] == 1
 
 
@@ -252,11 +265,11 @@ def test_a_corridor_fault_on_the_wrong_controller_fails_at_both_intersections(tm
     path.write_text(CORRIDOR_LINK_DOWN.replace('intersection = "J2"', 'intersection = "J3"'))
     assert main(["faults", "run", str(path), "--report-dir", str(tmp_path / "rep"), "--no-progress"]) == 1
     out = capsys.readouterr().out
-    assert re.search(r"FAIL moved: \[J3\] timeout: expected no TIMEOUT; got TIMEOUT: communication at 21\.4\d\d s",
-                     out)
-    assert re.search(r"FAIL moved: \[J3\] verified_every: expected a transition verified at least every 16 s "
-                     r"\(3 verified\); got 36\.\d{3} s without one", out)
-    assert "FAIL moved: [J2] timeout: expected TIMEOUT because of communication; got: none" in out
+    assert re.search(r"FAIL moved \(seed 1\): \[J3\] timeout: expected no TIMEOUT; got TIMEOUT: communication "
+                     r"at 21\.4\d\d s", out)
+    assert re.search(r"FAIL moved \(seed 1\): \[J3\] verified_every: expected a transition verified at least every "
+                     r"16 s \(3 verified\); got 36\.\d{3} s without one", out)
+    assert "FAIL moved (seed 1): [J2] timeout: expected TIMEOUT because of communication; got: none" in out
     report = json.loads((tmp_path / "rep" / "faults.json").read_text())["scenarios"][0]
     assert [(o["intersection"], o["passed"], o["timeouts"]) for o in report["intersections"]] == [
         ("J1", True, []), ("J2", False, []), ("J3", False, ["communication"]), ("J4", True, [])]
