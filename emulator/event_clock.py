@@ -27,10 +27,10 @@ start answering differently (every write, every real step that changed the
 status the agent answers or the controller's own status and control objects),
 and ``changed()`` fires at the next one. A poller
 that knows the version it last read needs no GET until the version moves.
-``controls`` moves more rarely: when a control object the middleware never
-sets (all but VehCall) may have been given phases, which only a write of one
-does (the controller itself only ever clears them), or a ``bump()``; the
-middleware's read-back of those objects sleeps until it moves.
+``controls`` moves more rarely: when a control object may have been given
+phases, which only a write of one does (the controller itself only ever clears
+them), or a ``bump()``; the middleware's read-back of the control objects
+sleeps until it moves (and knows its own writes).
 """
 
 from __future__ import annotations
@@ -42,11 +42,11 @@ import simpy
 from emulator.controller import TICK
 from emulator.delays import DelayedController
 from emulator.mib import MibView
-from hils.ntcip import CONTROL_TABLE, FOREIGN_COLUMNS, Oid, Value
+from hils.ntcip import CONTROL_TABLE, Oid, Value
 from hils.timegrid import Grid
 
-#: The OID prefixes of the control objects a write of which moves ``EventClock.controls``.
-_FOREIGN_PREFIXES = frozenset(CONTROL_TABLE[c].prefix for c in FOREIGN_COLUMNS)
+#: The OID prefixes of the control objects, a write of which moves ``EventClock.controls``.
+_CONTROL_PREFIXES = frozenset(entry.prefix for entry in CONTROL_TABLE.values())
 
 
 class _Moves:
@@ -108,10 +108,9 @@ class EventClock:
         self._controls.move()
 
     def written(self, varbinds: Sequence[tuple[Oid, Value]]) -> None:
-        """A SET reached the unit: what it answers may differ, and its control objects besides VehCall too
-        when it wrote one of them."""
+        """A SET reached the unit: what it answers may differ, and its control objects too when it wrote one."""
         self.touched()
-        if any(oid[:-1] in _FOREIGN_PREFIXES for oid, _ in varbinds):
+        if any(oid[:-1] in _CONTROL_PREFIXES for oid, _ in varbinds):
             self._controls.move()
 
     # --- inputs ----------------------------------------------------------------------------------

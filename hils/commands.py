@@ -82,7 +82,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--no-sumo", action="store_true", help="middleware and controller only, no traffic simulation")
     p.add_argument("--poll-hz", type=float, metavar="HZ", help="signal-state polling rate (default: config, 10)")
     p.add_argument("--recover-after", type=float, default=5.0, metavar="S",
-                   help="call recover() this long after a TIMEOUT (default 5; negative: never)")
+                   help="recover this long after a TIMEOUT (default 5; negative: never)")
+    p.add_argument("--take-over", action="store_true",
+                   help="drive a controller on which someone else's calls are found at once and clear them; by "
+                        "default they are watched for two control intervals first, and a run that sees them "
+                        "change (another manager at work) refuses to start")
     p.add_argument("--plot-window", default="0:180", metavar="START:END",
                    help="simulated seconds shown in the signal timeline (0:180)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -128,7 +132,7 @@ def run_command(args: argparse.Namespace) -> int:
                  target=_targets(args.target, scenario), sumo=spec.sumo, seed=spec.seed, agent=spec.agent,
                  duration=spec.duration, log_path=log_path, recover_after=spec.recover_after,
                  on_reset=_hooks(status.start if status else None, dashboard.attach if dashboard else None),
-                 sumo_config=sumo_config)
+                 sumo_config=sumo_config, take_over=args.take_over)
     error: BaseException | None = None
     with _terminate_as_interrupt(), tb, _served(dashboard):
         try:

@@ -20,8 +20,9 @@ What is left out, and why the result is the same
    and the poller sleeps until the feed moves. What the signal cache holds, and when the manager sees it, is
    what polling every period gives.
 3. Read-backs of the control objects that cannot see a change (:class:`QuietReadbacks`): only a write of a
-   control object besides VehCall can give one phases (the controller itself only clears them); the feed's
-   ``controls`` moves on such a write, and a read-back that found the objects ours sleeps until it does.
+   control object can give one phases (the controller itself only clears them); the feed's ``controls``
+   moves on such a write, and a read-back that found the objects ours sleeps until someone else's moves it
+   (the middleware's own SETs, whose values it knows, leave it asleep).
 4. SUMO's steps one by one (:func:`steps_before`): while nothing else is due and the steps cost nothing, the
    step due and the quiet ones after it run in one libsumo call; nothing SUMO shows can change in between.
 
@@ -57,8 +58,7 @@ class ChangeFeed(Protocol):
 
     ``version`` moves whenever it could (a write, a change of the status the controller answers);
     ``changed()`` is an event that fires when it next moves. ``controls`` moves whenever a control
-    object the middleware never sets (all but VehCall) could have been given phases (a write of one),
-    ``controls_changed()`` when it next moves."""
+    object could have been given phases (a write of one), ``controls_changed()`` when it next moves."""
 
     version: int
     controls: int
@@ -174,6 +174,16 @@ class QuietReadbacks:
         """A read-back goes out: the feed's controls it reads."""
         feed = self.transport.change_feed
         return feed.controls if feed is not None else None
+
+    def writing(self) -> Callable[[], None]:
+        """The middleware SETs control objects to values it knows: call the function returned once the SET is
+        sent; a read-back asleep on objects found ours stays asleep (they are still ours)."""
+        before = self.sent()
+
+        def sent() -> None:
+            if before is not None and before == self._ours:
+                self._ours = self.sent()
+        return sent
 
     def found(self, controls: int | None, ours: bool) -> None:
         """What the read-back sent at ``controls`` found: the objects ours (or not)."""

@@ -27,7 +27,10 @@ States (:class:`Mode`), with the paper's names (:class:`State`) that the log and
 
 - STARTING (paper IDLE): the controller is being read for the first time. A read that gets no answer
   is made again, up to n_timeout attempts in all (one lost datagram at start-up is no reason to halt);
-  the last unanswered one, or a refusal, is a communication TIMEOUT. The read done: IDLE.
+  the last unanswered one, or a refusal, is a communication TIMEOUT. Calls found on the controller are
+  watched before anything is SET (unless the run takes over): VehCall read again every ``watch_period``
+  for ``watch`` seconds; calls that change meanwhile mean another manager drives the controller, a
+  FOREIGN_CONTROL TIMEOUT in which the run refuses to start (it has SET nothing). The read done: IDLE.
 - IDLE (paper IDLE): a command may be sent. A command that asks to keep what is shown (switch 0,
   or selection of the pair already green) completes at once (KEEP). Any other is dispatched: the
   shell SETs VehCall to the commanded phases, the transition timer (tau_trans) starts, and the
@@ -66,9 +69,11 @@ the newest answered one has failed, the read-back waits (the failed polls speak 
 The control objects are ours while we run. The shell reads them back at a low rate when the
 manager says so (:class:`ReadbackDue` -> :class:`ReadControls` -> :class:`ControlsRead`). In IDLE,
 IN_TRANSITION and SERVING, any of PhaseOmit, PedOmit, Hold, ForceOff or PedCall set is a control
-object changed by someone else (the run never sets them): TIMEOUT (FOREIGN_CONTROL). VehCall is not
-judged: it is ours, re-SET by every command and keepalive, and a read of it races with our own SETs
-in flight. The recovery's SET and the close's clear set every control object.
+object changed by someone else (the run never sets them): TIMEOUT (FOREIGN_CONTROL). VehCall is ours,
+re-SET by every command and keepalive: a read of it is judged only when it cannot race with a SET of
+ours (none in flight when the read was sent, none sent before its answer, the last one answered), and
+then VehCall other than the call last SET is a change by someone else: TIMEOUT (FOREIGN_CONTROL). The
+recovery's SET and the close's clear set every control object.
 
 Commands arriving anywhere but IDLE are dropped. Every dispatched command ends exactly once
 (:class:`CommandEnded`: verified, served or timeout), except the one pending when the run closes.
@@ -89,6 +94,9 @@ from enum import Enum, auto
 from hils.actions import Command
 from hils.config import Pair
 from hils.manager_io import (
+    AnotherManager,
+    CallsFound,
+    CallsWatched,
     CloseDone,
     CloseRequested,
     CommandEnded,
@@ -132,10 +140,14 @@ from hils.manager_io import (
     TimerExpired,
     TimerKind,
     Verified,
+    WatchCalls,
 )
 
 __all__ = [
     "CLEAR_ATTEMPTS",
+    "AnotherManager",
+    "CallsFound",
+    "CallsWatched",
     "CloseDone",
     "CloseRequested",
     "CommandEnded",
@@ -183,6 +195,7 @@ __all__ = [
     "TimerExpired",
     "TimerKind",
     "Verified",
+    "WatchCalls",
     "graph",
 ]
 
@@ -238,6 +251,9 @@ class Ev(Enum):
     STARTUP_RETRY = auto()  # StartupLost, fewer than n_timeout attempts so far
     STARTUP_UNREACHABLE = auto()  # StartupLost, the n_timeout-th attempt
     STARTUP_REFUSED = auto()  # StartupRefused
+    CALLS_WATCHED = auto()  # CallsFound with calls the run does not take over, or CallsWatched the same, watch not over
+    CALLS_LEFT = auto()  # CallsFound without calls (or taken over), or CallsWatched the same when the watch is over
+    CALLS_CHANGED = auto()  # CallsWatched other than the calls found
     COMMAND = auto()  # CommandRequested that asks for a transition
     KEEP = auto()  # CommandRequested that keeps what is shown (switch 0, the pair already green)
     VERIFIED = auto()  # PollAnswered in IN_TRANSITION showing the commanded phases green (a plain command)
@@ -284,16 +300,22 @@ class Manager:
     """The state machine. Feed events to :meth:`handle`; it returns the effects to carry out.
 
     ``n_timeout``: failed polls in a row (and start-up reads without answer) that are a communication
-    failure. ``recover_after``: seconds in TIMEOUT before the manager recovers by itself (None: never)."""
+    failure. ``recover_after``: seconds in TIMEOUT before the manager recovers by itself (None: never).
+    ``watch``, ``watch_period``: how long and how often the start-up watches calls found on the controller;
+    ``take_over``: take the controller without watching (another manager's calls are cleared)."""
 
     def __init__(self, tau_trans: float, *, sequence: tuple[Pair, ...] = (), n_drift: int = 5, n_timeout: int = 5,
-                 keepalive_period: float = 0.0, recover_after: float | None = None) -> None:
+                 keepalive_period: float = 0.0, recover_after: float | None = None, watch: float = 20.0,
+                 watch_period: float = 0.1, take_over: bool = False) -> None:
         self.tau_trans = tau_trans
         self.sequence = sequence
         self.n_drift = n_drift
         self.n_timeout = n_timeout
         self.keepalive_period = keepalive_period  # 0: no keepalive
         self.recover_after = recover_after
+        self.watch = watch
+        self.watch_period = watch_period
+        self.take_over = take_over
         self.mode = Mode.STARTING
         self.pending: Pending | None = None
         self.timeout_reason: TimeoutReason | None = None
@@ -311,6 +333,11 @@ class Manager:
         self.polls_failed = 0
         self.polls_late = 0
         self.clears_sent = 0
+        self._found: tuple[float, frozenset[int]] | None = None  # when the start-up found someone's calls, which
+        self._sets_sent = 0  # VehCall SETs sent, and not yet answered or failed
+        self._sets_pending = 0
+        self._set_failed = False  # a SET failed since the last one was sent: what the controller holds is unsure
+        self._readback: tuple[int, bool] = (-1, False)  # SETs sent when the read-back went out; could it judge?
         self._recovering_greens: frozenset[int] = frozenset()  # what the recovery's re-read showed
         self._next_command = 0
         self._next_token = 0
@@ -346,6 +373,13 @@ class Manager:
         match ev:
             case StartupLost():
                 return Ev.STARTUP_UNREACHABLE if self.startup_attempts + 1 >= self.n_timeout else Ev.STARTUP_RETRY
+            case CallsFound(calls=calls):
+                return Ev.CALLS_WATCHED if calls and not self.take_over else Ev.CALLS_LEFT
+            case CallsWatched(t=t, calls=calls):
+                since, found = self._found
+                if calls != found:
+                    return Ev.CALLS_CHANGED
+                return Ev.CALLS_LEFT if t - since >= self.watch else Ev.CALLS_WATCHED
             case CommandRequested(command=cmd, shown=shown):
                 keep = cmd.green is None and (cmd.keep or set(cmd.phases) <= shown)
                 return Ev.KEEP if keep else Ev.COMMAND
@@ -409,7 +443,16 @@ class Manager:
 
     def _foreign(self, ev: ControlsRead) -> str:
         """What of the read-back is not ours ('' when all of it is)."""
-        return "; ".join(f"{name} on phases {sorted(phases)}" for name, phases in ev.held if phases)
+        found = [f"{name} on phases {sorted(phases)}" for name, phases in ev.held if phases]
+        sent_then, judged = self._readback
+        if ev.veh_call is not None and judged and sent_then == self._sets_sent and ev.veh_call != self.call:
+            found.append(f"phaseControlGroupVehCall on phases {sorted(ev.veh_call)} (the run's call: "
+                         f"{sorted(self.call)})")
+        return "; ".join(found)
+
+    def _call_known(self) -> bool:
+        """True when the controller holds the call last SET for sure: every SET answered, the last one too."""
+        return self._sets_pending == 0 and not self._set_failed
 
     # --- handlers: effects only ------------------------------------------------------------------
 
@@ -449,7 +492,23 @@ class Manager:
         out.append(Note(f"start-up: {ev.detail}"))
         out.append(StartupDone())
 
-    def _end_startup(self, ev: Started | StartupLost | StartupRefused, out: list[Effect]) -> None:
+    def _end_startup(self, ev: Started | StartupLost | StartupRefused | CallsFound | CallsWatched,
+                     out: list[Effect]) -> None:
+        out.append(StartupDone())
+
+    def _watch_calls(self, ev: CallsFound | CallsWatched, out: list[Effect]) -> None:
+        if isinstance(ev, CallsFound):
+            self._found = (ev.t, ev.calls)
+            out.append(Note(f"start-up: VehCall holds phases {sorted(ev.calls)} placed by someone else: watching "
+                            f"them for {self.watch:g} s before taking the controller"))
+        out.append(WatchCalls(self.watch_period))
+
+    def _another_manager(self, ev: CallsWatched, out: list[Effect]) -> None:
+        since, found = self._found
+        detail = (f"another manager drives the controller: its VehCall went from phases {sorted(found)} to "
+                  f"{sorted(ev.calls)} while the run watched for {ev.t - since:.1f} s")
+        out.append(AnotherManager(detail))
+        self._enter_timeout(ev.t, TimeoutReason.FOREIGN_CONTROL, detail, out)
         out.append(StartupDone())
 
     def _dispatch(self, ev: CommandRequested, out: list[Effect]) -> None:
@@ -514,6 +573,7 @@ class Manager:
 
     def _retry(self, ev: SetFailed, out: list[Effect]) -> None:
         # The SET is idempotent; tau_trans still bounds the wait, and each try takes tau_udp.
+        self._settled(ev, out)
         p = self.pending
         self._send(frozenset(p.command.phases), Purpose.RETRY, p.command_id, ev.t, out)
 
@@ -560,6 +620,7 @@ class Manager:
         self._send(ev.greens, Purpose.RECOVERY, None, ev.t, out)
 
     def _recovered(self, ev: SetAnswered, out: list[Effect]) -> None:
+        self._settled(ev, out)
         self.timeout_reason = None
         self.drifted_in_a_row = 0
         self._failed.clear()
@@ -568,12 +629,22 @@ class Manager:
         out.append(ResumePolling())
 
     def _recovery_failed(self, ev: ControllerUnreadable | SetFailed, out: list[Effect]) -> None:
+        if isinstance(ev, SetFailed):
+            self._settled(ev, out)
         what = ev.error if isinstance(ev, ControllerUnreadable) else "the recovery SET got no answer"
         out.append(Note(f"recovery failed, still in TIMEOUT: {what}"))
         self._arm_recovery(out)
 
     def _read_controls(self, ev: ReadbackDue, out: list[Effect]) -> None:
+        self._readback = (self._sets_sent, self._call_known())
         out.append(ReadControls())
+
+    def _settled(self, ev: SetAnswered | SetFailed, out: list[Effect]) -> None:
+        """A SET of VehCall answered or failed (a lost request may not have reached the controller, a lost answer
+        may have)."""
+        self._sets_pending -= 1
+        if isinstance(ev, SetFailed):
+            self._set_failed = True
 
     def _foreign_control(self, ev: ControlsRead, out: list[Effect]) -> None:
         self._enter_timeout(ev.t, TimeoutReason.FOREIGN_CONTROL, f"set by someone else: {self._foreign(ev)}", out)
@@ -588,12 +659,15 @@ class Manager:
             out.append(CloseDone())
 
     def _clear_again(self, ev: SetFailed, out: list[Effect]) -> None:
+        self._settled(ev, out)
         self._clear(ev.t, out)
 
     def _cleared(self, ev: SetAnswered, out: list[Effect]) -> None:
+        self._settled(ev, out)
         out.append(CloseDone())
 
     def _not_cleared(self, ev: SetFailed, out: list[Effect]) -> None:
+        self._settled(ev, out)
         out.append(CloseDone(ev.error or "the clearing SET failed"))
 
     def _clear(self, t: float, out: list[Effect]) -> None:
@@ -625,6 +699,9 @@ class Manager:
               out: list[Effect]) -> None:
         self.call = phases
         self.last_set = t
+        self._sets_sent += 1
+        self._sets_pending += 1
+        self._set_failed = False
         out.append(SendCall(phases, purpose, command_id))
         if purpose is not Purpose.CLEAR:
             self._arm_keepalive(out)
@@ -672,6 +749,9 @@ _TRANSITIONS: dict[tuple[Mode, Ev], tuple[Mode, _Handler]] = {
     (M.STARTING, Ev.STARTUP_RETRY): (M.STARTING, H._retry_startup),
     (M.STARTING, Ev.STARTUP_UNREACHABLE): (M.TIMEOUT, H._unreachable),
     (M.STARTING, Ev.STARTUP_REFUSED): (M.TIMEOUT, H._refused),
+    (M.STARTING, Ev.CALLS_WATCHED): (M.STARTING, H._watch_calls),
+    (M.STARTING, Ev.CALLS_LEFT): (M.STARTING, None),  # nobody changed them: the start-up goes on and clears them
+    (M.STARTING, Ev.CALLS_CHANGED): (M.TIMEOUT, H._another_manager),
     # The start-up read can end after the run has already timed out (steps of a large grid drifting while its
     # controllers start at the wall clock) or closed: what it read is kept, the state stays.
     **{(s, Ev.STARTED): (s, H._started) for s in _DOWN},
@@ -682,6 +762,12 @@ _TRANSITIONS: dict[tuple[Mode, Ev], tuple[Mode, _Handler]] = {
     (M.CLOSED, Ev.STARTUP_RETRY): (M.CLOSED, H._end_startup),  # closed: no more attempts
     (M.CLOSED, Ev.STARTUP_UNREACHABLE): (M.CLOSED, H._end_startup),
     (M.CLOSED, Ev.STARTUP_REFUSED): (M.CLOSED, H._end_startup),
+    **{(s, Ev.CALLS_WATCHED): (s, None) for s in _DOWN},  # timed out while reading: no watch, the start-up goes on
+    **{(s, Ev.CALLS_LEFT): (s, None) for s in _DOWN},
+    **{(s, Ev.CALLS_CHANGED): (s, None) for s in _DOWN},
+    (M.CLOSED, Ev.CALLS_WATCHED): (M.CLOSED, H._end_startup),
+    (M.CLOSED, Ev.CALLS_LEFT): (M.CLOSED, H._end_startup),
+    (M.CLOSED, Ev.CALLS_CHANGED): (M.CLOSED, H._end_startup),
     # --- commands ---------------------------------------------------------------------------------------
     (M.IDLE, Ev.COMMAND): (M.IN_TRANSITION, H._dispatch),
     (M.IDLE, Ev.KEEP): (M.IDLE, H._keep),
@@ -713,11 +799,11 @@ _TRANSITIONS: dict[tuple[Mode, Ev], tuple[Mode, _Handler]] = {
     **{(s, Ev.DRIFTED): (s, None) for s in (*_DOWN, M.CLOSED)},
     **{(s, Ev.DRIFT_LIMIT): (s, None) for s in (*_DOWN, M.CLOSED)},
     # --- SET answers ------------------------------------------------------------------------------------
-    **{(s, Ev.SET_RESULT): (s, None) for s in Mode},
+    **{(s, Ev.SET_RESULT): (s, H._settled) for s in Mode},
     (M.RECOVERING, Ev.RECOVERY_SET_ANSWERED): (M.IDLE, H._recovered),
     (M.RECOVERING, Ev.RECOVERY_SET_FAILED): (M.TIMEOUT, H._recovery_failed),
-    (M.CLOSED, Ev.RECOVERY_SET_ANSWERED): (M.CLOSED, None),  # a recovery overtaken by the close
-    (M.CLOSED, Ev.RECOVERY_SET_FAILED): (M.CLOSED, None),
+    (M.CLOSED, Ev.RECOVERY_SET_ANSWERED): (M.CLOSED, H._settled),  # a recovery overtaken by the close
+    (M.CLOSED, Ev.RECOVERY_SET_FAILED): (M.CLOSED, H._settled),
     (M.CLOSED, Ev.CLEAR_ANSWERED): (M.CLOSED, H._cleared),
     (M.CLOSED, Ev.CLEAR_LOST): (M.CLOSED, H._clear_again),
     (M.CLOSED, Ev.CLEAR_FAILED): (M.CLOSED, H._not_cleared),

@@ -13,6 +13,9 @@ from hils.actions import Command
 from hils.ntcip import SignalState
 
 __all__ = [
+    "AnotherManager",
+    "CallsFound",
+    "CallsWatched",
     "CloseDone",
     "CloseRequested",
     "CommandEnded",
@@ -56,6 +59,7 @@ __all__ = [
     "TimerExpired",
     "TimerKind",
     "Verified",
+    "WatchCalls",
 ]
 
 
@@ -200,10 +204,27 @@ class ReadbackDue:
 
 @dataclass(frozen=True, slots=True)
 class ControlsRead:
-    """The read-back of the control objects the run never sets (all but VehCall): the phases each holds."""
+    """The read-back of the control objects: the phases each of those the run never sets holds, and VehCall."""
 
     t: float
     held: tuple[tuple[str, frozenset[int]], ...]  # (name, phases): PhaseOmit, PedOmit, Hold, ForceOff, PedCall
+    veh_call: frozenset[int] | None = None  # VehCall as read (None: not read)
+
+
+@dataclass(frozen=True, slots=True)
+class CallsFound:
+    """The start-up read found VehCall holding ``calls`` (someone else's, the run has SET nothing yet)."""
+
+    t: float
+    calls: frozenset[int]
+
+
+@dataclass(frozen=True, slots=True)
+class CallsWatched:
+    """VehCall read again while the start-up watches for another manager."""
+
+    t: float
+    calls: frozenset[int]
 
 
 @dataclass(frozen=True, slots=True)
@@ -217,9 +238,9 @@ class CloseRequested:
     t: float
 
 
-Event = (Started | StartupLost | StartupRefused | CommandRequested | PollAnswered | PollFailed | TimerExpired
-         | StepTimed | SetAnswered | SetFailed | RecoveryRequested | ControllerRead | ControllerUnreadable
-         | ReadbackDue | ControlsRead | KeepaliveSwitched | CloseRequested)
+Event = (Started | StartupLost | StartupRefused | CallsFound | CallsWatched | CommandRequested | PollAnswered
+         | PollFailed | TimerExpired | StepTimed | SetAnswered | SetFailed | RecoveryRequested | ControllerRead
+         | ControllerUnreadable | ReadbackDue | ControlsRead | KeepaliveSwitched | CloseRequested)
 
 # --- effects --------------------------------------------------------------------------------------
 
@@ -232,6 +253,20 @@ class RetryStartup:
 @dataclass(frozen=True, slots=True)
 class StartupDone:
     """The start-up is over (read, or given up): start polling and reading back."""
+
+
+@dataclass(frozen=True, slots=True)
+class WatchCalls:
+    """Read VehCall again in ``delay`` s (answer with CallsWatched): is someone else changing it?"""
+
+    delay: float
+
+
+@dataclass(frozen=True, slots=True)
+class AnotherManager:
+    """Someone else changed VehCall while the start-up watched: another manager drives the controller."""
+
+    detail: str
 
 
 @dataclass(frozen=True, slots=True)
@@ -360,6 +395,7 @@ class Note:
     message: str
 
 
-Effect = (RetryStartup | StartupDone | ControllerUnreachable | Dispatch | SendCall | StartTimer | Dropped | ShowSignal
-          | PollFailureSeen | Verified | CommandEnded | TimeoutEntered | DriftSeen | HaltPolling | ResumePolling
-          | ReadControls | ReadController | RecoveryStarted | Recovered | CloseDone | Note)
+Effect = (RetryStartup | StartupDone | WatchCalls | AnotherManager | ControllerUnreachable | Dispatch | SendCall |
+          StartTimer | Dropped | ShowSignal | PollFailureSeen | Verified | CommandEnded | TimeoutEntered |
+          DriftSeen | HaltPolling | ResumePolling | ReadControls | ReadController | RecoveryStarted | Recovered |
+          CloseDone | Note)

@@ -23,6 +23,9 @@ from hils.config import IntersectionConfig, Pair
 from hils.events import EventLog, Kind
 from hils.fastpath import QuietPolls, QuietReadbacks
 from hils.manager import (
+    AnotherManager,
+    CallsFound,
+    CallsWatched,
     CloseDone,
     CloseRequested,
     CommandEnded,
@@ -68,6 +71,7 @@ from hils.manager import (
     TimeoutReason,
     TimerExpired,
     Verified,
+    WatchCalls,
 )
 from hils.ntcip import (
     CONTROL_TABLE,
@@ -120,11 +124,14 @@ class Middleware:
     """Everything between the agent and the transport, on one SimPy environment.
 
     ``recover_after``: seconds in TIMEOUT before the manager recovers by itself (None: only when asked).
-    ``fast_path``: leave out the polls and read-backs that cannot see a change (:mod:`hils.fastpath`)."""
+    ``fast_path``: leave out the polls and read-backs that cannot see a change (:mod:`hils.fastpath`).
+    ``take_over``: take a controller whose calls someone else placed without watching them first (see the
+    manager's STARTING)."""
 
     def __init__(self, env: simpy.Environment, transport: Transport, config: IntersectionConfig,
                  action_type: ActionType | str, events: EventLog, *, where: str = "the controller",
-                 community: str | None = None, recover_after: float | None = None, fast_path: bool = True) -> None:
+                 community: str | None = None, recover_after: float | None = None, fast_path: bool = True,
+                 take_over: bool = False) -> None:
         params = config.middleware
         self.where = where  # how messages name the controller (HOST:PORT)
         self.community = community
@@ -137,11 +144,15 @@ class Middleware:
         events.bind(lambda: env.now)
         self.manager = Manager(params.tau_trans, sequence=config.sequence, n_drift=params.n_drift,
                                n_timeout=params.n_timeout, keepalive_period=params.keepalive_period or 0.0,
-                               recover_after=recover_after)
+                               recover_after=recover_after, watch=2 * params.control_interval,
+                               watch_period=params.poll_period, take_over=take_over)
         self.converter = ActionConverter(config, ActionType(action_type))
         self.cache = SignalCache()
         self.signal_oids = signal_oids(config.groups)
-        self._control_oids = [control_oid(c, g) for c in FOREIGN_COLUMNS for g in range(1, config.groups + 1)]
+        self._veh_call_oids = [control_oid(ControlColumn.VEH_CALL, g) for g in range(1, config.groups + 1)]
+        # The read-back: the control objects the run never sets, then VehCall.
+        self._control_oids = [*(control_oid(c, g) for c in FOREIGN_COLUMNS for g in range(1, config.groups + 1)),
+                              *self._veh_call_oids]
         self.poller = Poller(env, rate_hz=params.poll_hz, send=self._poll,
                              quiet=QuietPolls(transport, lambda: self.manager.newest_poll) if fast_path else None)
         self._quiet_readbacks = QuietReadbacks(transport) if fast_path else None
@@ -273,6 +284,14 @@ class Middleware:
         while not self._startup_over:  # the manager says whether a read without answer is made again
             try:
                 seen, reading = yield from self._read_controller_setup()
+                # Calls found are someone's: the manager may have them watched for another manager first.
+                effects = self._feed(CallsFound(self.env.now, reading.control[ControlColumn.VEH_CALL]))
+                while (watch := next((e for e in effects if isinstance(e, WatchCalls)), None)) is not None:
+                    yield self.env.timeout(watch.delay)
+                    calls = yield self.transport.get(self._veh_call_oids)
+                    effects = self._feed(CallsWatched(self.env.now, groups_to_phases([int(v) for v in calls])))
+                if self._startup_over:
+                    return  # another manager drives the controller: nothing is SET
                 # The control objects are ours while we run: whatever someone else left is cleared,
                 # and this harmless SET shows whether the community may write.
                 yield self._logged_set(_cleared_control(self.config.groups), frozenset(), "startup", None)
@@ -338,9 +357,10 @@ class Middleware:
         if not ev.ok:
             return
         groups = self.config.groups
+        values = [int(v) for v in ev.value]
         effects = self._feed(ControlsRead(self.env.now, tuple(
-            (CONTROL_TABLE[c].name, groups_to_phases([int(v) for v in ev.value[i * groups:(i + 1) * groups]]))
-            for i, c in enumerate(FOREIGN_COLUMNS))))
+            (CONTROL_TABLE[c].name, groups_to_phases(values[i * groups:(i + 1) * groups]))
+            for i, c in enumerate(FOREIGN_COLUMNS)), groups_to_phases(values[-groups:])))
         if self._quiet_readbacks is not None:
             self._quiet_readbacks.found(controls, ours=not any(isinstance(e, TimeoutEntered) for e in effects))
 
@@ -428,7 +448,7 @@ class Middleware:
             case CommandEnded(command_id, outcome, hold):
                 self.log.emit(Kind.HOLD_RELEASED, command_id=command_id, reason=outcome, hold_s=hold)
             case TimeoutEntered(reason, detail, command_id):
-                if reason is TimeoutReason.FOREIGN_CONTROL:
+                if reason is TimeoutReason.FOREIGN_CONTROL and self.startup_error is None:  # a refusal says it itself
                     log.warning("control objects %s: TIMEOUT (foreign_control)", detail)
                 self.log.emit(Kind.TIMEOUT_ENTERED, reason=reason.value, detail=detail, command_id=command_id)
             case DriftSeen(step, took, consecutive):
@@ -450,6 +470,11 @@ class Middleware:
                 self.log.emit(Kind.NOTE, message=message)
             case RetryStartup():
                 pass  # the start-up process reads again: it is waiting for this answer
+            case WatchCalls():
+                pass  # the start-up process reads VehCall again: it is waiting for this answer
+            case AnotherManager(detail):
+                self.startup_error = (f"the controller at {self.where}: {detail}; stop that run, or take the "
+                                      "controller over (hils run --take-over, Testbed(take_over=True))")
             case ControllerUnreachable(attempts):
                 self.startup_error = (f"no answer from {self.where} within {attempts} x tau_udp = "
                                       f"{attempts * self.config.middleware.tau_udp:g} s: is the controller there, "
@@ -479,7 +504,10 @@ class Middleware:
                     command_id: int | None) -> simpy.Event:
         """One SET, logged when sent and when answered or failed; every SET of the run goes through here."""
         self.log.emit(Kind.SET_SENT, command_id=command_id, phases=phases, purpose=purpose)
+        ours = self._quiet_readbacks.writing() if self._quiet_readbacks is not None else None
         done = self.transport.set(varbinds)
+        if ours is not None:
+            ours()
 
         def logged(ev: simpy.Event) -> None:
             if ev.ok:

@@ -229,7 +229,9 @@ class Testbed(_OneIntersection):
     (default: for the actuated agent). ``measure``: False skips what only the end-of-run summary and the queue
     plot need (per-vehicle delays, queue and spillback samples, ``queues`` records), as environments do for
     speed. ``fast_path``: leave out in virtual time what cannot change a result (:mod:`hils.fastpath`); False runs
-    the reference (every controller tick, every poll, every SUMO step).
+    the reference (every controller tick, every poll, every SUMO step). ``take_over``: drive a controller on which
+    someone else's calls are found without first watching them for another manager (a run that finds them
+    changing refuses to start); their calls are cleared.
 
     The general API takes and gives one value per intersection, by name: :meth:`reset_all`, :meth:`step_all`,
     :meth:`observe_all`, :attr:`intersections`. A run of one intersection also has the single view of it:
@@ -247,7 +249,8 @@ class Testbed(_OneIntersection):
                  recover_after: float | None = 5.0,
                  on_reset: Callable[[Testbed], None] | None = None,
                  sumo_config: str | Path | None = None, detectors: bool | None = None,
-                 scenario: str | Path | Scenario | None = None, measure: bool = True, fast_path: bool = True) -> None:
+                 scenario: str | Path | Scenario | None = None, measure: bool = True, fast_path: bool = True,
+                 take_over: bool = False) -> None:
         if scenario is not None and config is not None:
             raise ValueError("give a config (one intersection) or a scenario (its intersections), not both")
         self.scenario = _scenario(scenario)
@@ -275,6 +278,7 @@ class Testbed(_OneIntersection):
         self.seed = seed
         self._agent_spec = agent
         self.fast_path = fast_path
+        self.take_over = take_over
         # Detector actuations from SUMO feed the controller when asked, and by default for the actuated agent.
         self.detectors = agent == "actuated" if detectors is None else detectors
         self.duration = duration
@@ -387,7 +391,7 @@ class Testbed(_OneIntersection):
         tally = Tally(label)
         self.events.subscribe(tally, intersection=label)
         middleware = Middleware(env, transport, cfg, self.action_type, events, where=where, community=community,
-                                recover_after=self.recover_after, fast_path=self.fast_path)
+                                recover_after=self.recover_after, fast_path=self.fast_path, take_over=self.take_over)
         return Intersection(name, label, cfg, target, transport, middleware, events, tally)
     def _assemble_simulation(self) -> None:
         sumo = self._sumo_spec

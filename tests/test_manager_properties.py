@@ -29,6 +29,9 @@ from hils.actions import ActionConverter, ActionError, ActionType, Command
 from hils.config import load
 from hils.manager import (
     CLEAR_ATTEMPTS,
+    AnotherManager,
+    CallsFound,
+    CallsWatched,
     CloseDone,
     CloseRequested,
     CommandEnded,
@@ -76,6 +79,7 @@ from hils.manager import (
     TimerExpired,
     TimerKind,
     Verified,
+    WatchCalls,
     graph,
 )
 from hils.ntcip import SignalState
@@ -85,6 +89,7 @@ PHASES = CONFIG.phase_numbers
 TAU_TRANS = CONFIG.middleware.tau_trans
 N_TIMEOUT = CONFIG.middleware.n_timeout
 RECOVER_AFTER = 5.0
+WATCH, WATCH_PERIOD = 20.0, 0.1
 DISPATCHED_OUTCOMES = {"verified", "served", "timeout"}
 
 # --- action values, each tagged with whether the converter must accept it --------------------
@@ -138,7 +143,7 @@ def shown(greens: frozenset[int]) -> SignalState:
 def manager(recover_after: float | None = RECOVER_AFTER, keepalive_period: float | None = None) -> Manager:
     return Manager(TAU_TRANS, sequence=CONFIG.sequence, n_drift=N_DRIFT, n_timeout=N_TIMEOUT,
                    keepalive_period=(CONFIG.middleware.keepalive_period or 0.0) if keepalive_period is None
-                   else keepalive_period, recover_after=recover_after)
+                   else keepalive_period, recover_after=recover_after, watch=WATCH, watch_period=WATCH_PERIOD)
 
 
 @dataclass
@@ -176,6 +181,10 @@ class ManagerMachine(RuleBasedStateMachine):
         self.recover_token: int | None = None  # the latest recovery timer armed
         self.sets: list[Outstanding] = []
         self.last_set = -math.inf
+        self.sets_sent = 0  # VehCall SETs sent
+        self.set_unsure = False  # a SET failed since the last was sent: what the controller holds is unsure
+        self.readback: tuple[int, bool] = (-1, False)  # SETs sent when the read-back went out; could it judge?
+        self.found: tuple[float, frozenset[int]] | None = None  # someone's calls the start-up found
         self.drifted = 0  # consecutive drifted steps while working, as the paper counts them
         self.dispatched: dict[int, Command] = {}
         self.dispatched_at: dict[int, float] = {}
@@ -276,6 +285,23 @@ class ManagerMachine(RuleBasedStateMachine):
             failing = any(i > self.newest for i in self.failed_ids)
             expected = [ReadControls()] if before in RUNNING and not failing else []
             assert effects == expected, "the read-back goes out while working and no poll fails, and only then"
+            if effects:
+                self.readback = (self.sets_sent, not self.sets and not self.set_unsure)
+        if isinstance(ev, SetFailed):
+            self.set_unsure = True
+        # Someone's calls found at start-up are watched, unless gone; calls that change are another manager.
+        if isinstance(ev, CallsFound) and before is Mode.STARTING:
+            assert effects[-1:] == ([WatchCalls(WATCH_PERIOD)] if ev.calls else [])
+            self.found = (ev.t, ev.calls)
+        if isinstance(ev, CallsWatched) and before is Mode.STARTING:
+            since, found = self.found
+            if ev.calls != found:
+                assert after is Mode.TIMEOUT and isinstance(effects[0], AnotherManager)
+                assert effects[-1] == StartupDone() and m.timeout_reason is TimeoutReason.FOREIGN_CONTROL
+                assert not any(isinstance(e, SendCall) for e in effects), "nothing is SET on someone's controller"
+            else:
+                assert after is Mode.STARTING
+                assert effects == ([] if ev.t - since >= WATCH else [WatchCalls(WATCH_PERIOD)])
 
         sent = [e for e in effects if isinstance(e, SendCall)]
         for eff in effects:
@@ -352,7 +378,7 @@ class ManagerMachine(RuleBasedStateMachine):
                         assert reason is TimeoutReason.COMMUNICATION
                     elif isinstance(ev, StepTimed):
                         assert reason is TimeoutReason.DRIFT and self.drifted + 1 == N_DRIFT
-                    elif isinstance(ev, ControlsRead):
+                    elif isinstance(ev, ControlsRead | CallsWatched):
                         assert reason is TimeoutReason.FOREIGN_CONTROL
                     else:
                         assert isinstance(ev, TimerExpired) and ev.kind is TimerKind.TRANSITION
@@ -375,14 +401,17 @@ class ManagerMachine(RuleBasedStateMachine):
                     self.close_done += 1
                     assert self.close_done == 1, "the close ended twice"
                 case (ResumePolling() | Note() | ShowSignal() | PollFailureSeen() | ReadControls() | RetryStartup()
-                      | StartupDone() | ControllerUnreachable()):
+                      | StartupDone() | ControllerUnreachable() | WatchCalls() | AnotherManager()):
                     pass
                 case _:
                     raise AssertionError(f"unknown effect {eff!r}")
 
-        # A control object the run never sets, found set while working, is a TIMEOUT; else nothing happens.
+        # A control object the run never sets found set while working is a TIMEOUT; so is VehCall other than the
+        # call last SET, read when no SET of the run could race with the read; else nothing happens.
         if isinstance(ev, ControlsRead):
-            foreign = any(phases for _name, phases in ev.held)
+            sent_then, clean = self.readback
+            foreign = any(phases for _name, phases in ev.held) or (
+                ev.veh_call is not None and clean and sent_then == self.sets_sent and ev.veh_call != m.call)
             if before in RUNNING and foreign:
                 assert after is Mode.TIMEOUT and any(isinstance(e, TimeoutEntered) for e in effects)
             else:
@@ -436,14 +465,20 @@ class ManagerMachine(RuleBasedStateMachine):
         if purpose is not Purpose.RECOVERY:
             assert before in (*RUNNING,) or purpose is Purpose.CLEAR, f"{purpose} SET in {before.name}"
         self.last_set = ev.t
+        self.sets_sent += 1
+        self.set_unsure = False
         self.sets.append(Outstanding(purpose, command_id, phases))
 
     # --- rules ---------------------------------------------------------------------------------
 
     @initialize(greens=GREENS, backup=BACKUP, lost=st.integers(0, N_TIMEOUT), refused=st.integers(0, 7),
                 meanwhile=st.lists(st.sampled_from(["on_time", "drifted", "drift_limit", "keepalive", "recovery",
-                                                    "command", "stale_timer", "close"]), max_size=3))
-    def start(self, greens: frozenset[int], backup: int, lost: int, refused: int, meanwhile: list[str]) -> None:
+                                                    "command", "stale_timer", "close"]), max_size=3),
+                found=st.sampled_from([frozenset(), frozenset(), frozenset({2, 6})]),
+                watched=st.lists(st.sampled_from([frozenset({2, 6}), frozenset({2, 6}), frozenset({4, 8})]),
+                                 max_size=4))
+    def start(self, greens: frozenset[int], backup: int, lost: int, refused: int, meanwhile: list[str],
+              found: frozenset[int], watched: list[frozenset[int]]) -> None:
         # Mostly a read after a few attempts without answer; sometimes no answer at all, a refusal, and the run
         # going on while the controller is read (its steps drifting into a TIMEOUT, even a close).
         for what in meanwhile:
@@ -470,6 +505,13 @@ class ManagerMachine(RuleBasedStateMachine):
         if refused == 0:
             self.feed(StartupRefused(self._tick(0.002), "the controller refuses to be written (noAccess)"))
             return
+        effects = self.feed(CallsFound(self._tick(0.006), found))
+        for calls in watched:
+            if not any(isinstance(e, WatchCalls) for e in effects):
+                break
+            effects = self.feed(CallsWatched(self._tick(WATCH / 3), calls))
+        if any(isinstance(e, StartupDone) for e in effects):
+            return  # another manager: the run refuses to start
         self.feed(Started(self._tick(0.0135), greens, backup))
         self.shown = greens
 
@@ -618,7 +660,10 @@ class ManagerMachine(RuleBasedStateMachine):
             # Mostly clear (as a run sees them), sometimes one set by someone else.
             foreign = data.draw(st.sampled_from([frozenset()] * 3 + [frozenset({p}) for p in PHASES]), label="held")
             which = data.draw(st.sampled_from(names), label="object")
-            self.feed(ControlsRead(t, tuple((n, foreign if n == which else frozenset()) for n in names)))
+            # VehCall: not read, the run's call, or someone else's
+            veh_call = data.draw(st.sampled_from([None, self.manager.call, self.manager.call,
+                                                  frozenset({4, 8}), frozenset()]), label="veh_call")
+            self.feed(ControlsRead(t, tuple((n, foreign if n == which else frozenset()) for n in names), veh_call))
         elif what == "keepalive_switch":
             on = data.draw(st.booleans(), label="on")
             assert self.feed(KeepaliveSwitched(t, on)) == []
@@ -754,6 +799,56 @@ def test_failures_are_counted_in_poll_order_whatever_overtook_them() -> None:
         assert joined.handle(PollFailed(1.0, i, 0, "CommunicationTimeout", "lost"))[0].consecutive in (1, 2)
     effects = joined.handle(PollFailed(1.1, 3, 0, "CommunicationTimeout", "lost"))
     assert effects[0].consecutive == 5 and joined.mode is Mode.TIMEOUT
+
+
+def test_vehcall_changed_by_someone_else_is_foreign_control_when_no_set_of_ours_races_the_read() -> None:
+    names = ("phaseControlGroupPhaseOmit", "phaseControlGroupPedOmit", "phaseControlGroupHold",
+             "phaseControlGroupForceOff", "phaseControlGroupPedCall")
+    clear = tuple((n, frozenset()) for n in names)
+    m = started(recover_after=None)
+    m.handle(CommandRequested(1.0, 1, Command((3, 7)), frozenset({2, 6})))
+    assert m.handle(ReadbackDue(1.5)) == [ReadControls()]
+    # The command's SET is still in flight: whatever the read shows, it is not judged.
+    assert m.handle(ControlsRead(1.52, clear, frozenset({4, 8}))) == []
+    m.handle(SetAnswered(1.6, Purpose.COMMAND, 1))
+    m.handle(ReadbackDue(3.5))
+    assert m.handle(ControlsRead(3.52, clear, frozenset({3, 7}))) == [], "the run's own call"
+    m.handle(ReadbackDue(5.5))
+    effects = m.handle(ControlsRead(5.52, clear, frozenset({4, 8})))
+    assert [type(e) for e in effects] == [CommandEnded, TimeoutEntered, HaltPolling]
+    assert effects[1].reason is TimeoutReason.FOREIGN_CONTROL
+    assert effects[1].detail == ("set by someone else: phaseControlGroupVehCall on phases [4, 8] (the run's call: "
+                                 "[3, 7])")
+    # A SET of ours sent between the read and its answer, or one that failed: the read cannot be judged.
+    racing = started(recover_after=None)
+    racing.handle(ReadbackDue(2.0))
+    racing.handle(CommandRequested(2.01, 1, Command((3, 7)), frozenset({2, 6})))
+    racing.handle(SetAnswered(2.02, Purpose.COMMAND, 1))
+    assert racing.handle(ControlsRead(2.03, clear, frozenset())) == []
+    refused = started(recover_after=None)
+    refused.handle(CommandRequested(2.0, 1, Command((3, 7)), frozenset({2, 6})))
+    refused.handle(SetFailed(2.01, Purpose.COMMAND, 1, lost=False, error="genErr"))
+    refused.handle(ReadbackDue(4.0))
+    assert refused.handle(ControlsRead(4.02, clear, frozenset())) == [], "the controller may hold either call"
+
+
+def test_calls_found_at_start_up_are_watched_and_calls_that_change_refuse_the_run() -> None:
+    m = manager()
+    effects = m.handle(CallsFound(0.01, frozenset({2, 6})))
+    assert isinstance(effects[0], Note) and effects[-1] == WatchCalls(WATCH_PERIOD)
+    assert m.handle(CallsWatched(0.11, frozenset({2, 6}))) == [WatchCalls(WATCH_PERIOD)]
+    effects = m.handle(CallsWatched(3.21, frozenset({4, 8})))
+    assert isinstance(effects[0], AnotherManager) and "from phases [2, 6] to [4, 8]" in effects[0].detail
+    assert m.mode is Mode.TIMEOUT and m.timeout_reason is TimeoutReason.FOREIGN_CONTROL
+    assert effects[-1] == StartupDone() and m.last_set == -math.inf, "nothing was SET: the close clears nothing"
+    assert m.handle(CloseRequested(4.0)) == [HaltPolling(), CloseDone()]
+    left = manager()
+    left.handle(CallsFound(0.0, frozenset({2, 6})))
+    assert left.handle(CallsWatched(WATCH, frozenset({2, 6}))) == [] and left.mode is Mode.STARTING, (
+        "calls that did not change in the watch are taken as left: the start-up goes on and clears them")
+    taking = Manager(TAU_TRANS, take_over=True)
+    assert taking.handle(CallsFound(0.0, frozenset({2, 6}))) == [] and taking.mode is Mode.STARTING
+    assert manager().handle(CallsFound(0.0, frozenset())) == [], "no calls: nothing to watch"
 
 
 def test_a_late_answer_is_counted_and_not_applied() -> None:

@@ -125,9 +125,9 @@ def test_read_backs_that_cannot_see_a_change_are_not_sent(fast_path: bool) -> No
     assert surfaces[0].read_backs == expected
 
 
-def test_only_a_write_of_another_control_object_moves_the_controls_counter() -> None:
-    """What the read-back sleeps on: VehCall SETs (every command, every keepalive) and the controller's own
-    steps leave ``controls`` alone; a SET of Hold (or any other control object) and a bump move it."""
+def test_a_write_of_a_control_object_moves_the_controls_counter_and_the_controllers_steps_do_not() -> None:
+    """What the read-back sleeps on: a SET of a control object (VehCall or any other) and a bump move
+    ``controls``; the controller's own steps (serving the call, clearing a force-off) leave it alone."""
     import simpy
 
     from hils.config import load
@@ -138,9 +138,35 @@ def test_only_a_write_of_another_control_object_moves_the_controls_counter() -> 
     clock, surface = target.clock, target.surface
     controls, version = clock.controls, clock.version
     surface.set_many([(control_oid(ControlColumn.VEH_CALL, 1), 0b1000_1000)])
-    env.run(until=30.0)  # the call served: intervals change, the status moves
-    assert clock.version > version and clock.controls == controls
-    surface.set_many([(control_oid(ControlColumn.HOLD, 1), 0b10)])
     assert clock.controls == controls + 1
-    clock.bump()
+    env.run(until=30.0)  # the call served: intervals change, the status moves
+    assert clock.version > version and clock.controls == controls + 1
+    surface.set_many([(control_oid(ControlColumn.HOLD, 1), 0b10)])
     assert clock.controls == controls + 2
+    clock.bump()
+    assert clock.controls == controls + 3
+
+
+def test_someone_elses_call_is_seen_on_the_fast_path_as_on_the_reference() -> None:
+    """A VehCall written by someone else (here: straight into the emulator) is a foreign_control TIMEOUT at the
+    next read-back, on the fast path too: the read-back sleeps through the run's own SETs, not through that one."""
+    from hils.ntcip import ControlColumn, control_oid
+
+    runs = {}
+    for fast_path in (True, False):
+        def other_manager(tb: Testbed) -> None:
+            def write() -> Any:
+                yield tb.env.timeout(33.3)
+                tb.target.surface.set_many([(control_oid(ControlColumn.VEH_CALL, 1), 0b0100_0100)])
+            tb.env.process(write())
+
+        with Testbed(seed=5, duration=60.0, agent="random", recover_after=None, fast_path=fast_path,
+                     on_reset=other_manager) as tb:
+            tb.reset()
+            tb.run()
+            runs[fast_path] = tb.records
+    fast, reference = runs[True], runs[False]
+    assert comparable(fast) == comparable(reference)
+    (entered,) = [r for r in fast if r["kind"] == Kind.TIMEOUT_ENTERED]
+    assert entered["reason"] == "foreign_control" and "phaseControlGroupVehCall on phases [3, 7]" in entered["detail"]
+    assert 33.3 < entered["t"] <= 33.3 + 2.1
