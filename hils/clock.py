@@ -13,6 +13,11 @@ process; only the object that advances the environment differs:
   is re-anchored at each :meth:`WallClockDriver.run` so that sim time does not
   jump over the time spent stopped.
 
+An agent's decision is asked through the clock too (``ask``): in virtual time it is called at once and takes no
+simulated time; at the wall clock it runs in a thread of its own while the loop goes on stepping the
+environment (polls, keepalives, SUMO), and its answer is delivered like an I/O completion. An agent that
+thinks for 30 s does not stop the middleware.
+
 Both follow SimPy's ``run(until=t)`` rule and never paper over it: every
 event due strictly before ``t`` is processed, ``env.now`` ends at ``t``, and
 an event due exactly at ``t`` stays queued for the next run. Code written
@@ -31,6 +36,7 @@ import asyncio
 import math
 import random
 import signal
+import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -42,7 +48,7 @@ import simpy
 
 from hils.fastpath import StepCost, modeled_cost
 
-__all__ = ["Clock", "LatenessStats", "LatenessSummary", "VirtualClock", "WallClockDriver"]
+__all__ = ["Answer", "Clock", "LatenessStats", "LatenessSummary", "VirtualClock", "WallClockDriver"]
 
 LatenessHook = Callable[[float, float], None]
 
@@ -51,11 +57,32 @@ LatenessHook = Callable[[float, float], None]
 _MAX_BATCH = 256
 
 
+@dataclass(slots=True)
+class Answer:
+    """An agent's answer the run is waiting for (:meth:`Clock.ask`): ``done`` once it came (``value``, or the
+    ``error`` its call raised), at ``answered_at``; ``event`` fires then at the wall clock (None: it came at once)."""
+
+    asked_at: float
+    event: simpy.Event | None = None
+    done: bool = False
+    value: Any = None
+    error: BaseException | None = None
+    answered_at: float | None = None
+    overdue: bool = False  # it did not come within the decision's deadline: the run went on without it
+
+    def settle(self, now: float, value: Any = None, error: BaseException | None = None) -> None:
+        self.done, self.value, self.error, self.answered_at = True, value, error, now
+
+
 class Clock(Protocol):
     """What a run needs from either clock."""
 
     env: simpy.Environment
     step_cost: StepCost  # what a simulation step costs under this clock
+
+    def ask(self, fn: Callable[..., Any], *args: Any) -> Answer:
+        """Call ``fn(*args)`` (an agent's ``act``) the way this clock lets time pass meanwhile."""
+        ...
 
     def advance(self, until: float | None, events: Sequence[simpy.Event]) -> signal.Signals | None:
         """Run until one of ``events`` has been processed, or to ``until``; returns the signal (SIGINT, SIGTERM)
@@ -73,6 +100,15 @@ class VirtualClock:
     def __init__(self, env: simpy.Environment) -> None:
         self.env = env
         self.step_cost = modeled_cost
+
+    def ask(self, fn: Callable[..., Any], *args: Any) -> Answer:
+        """At once: an agent's decision takes no simulated time."""
+        answer = Answer(self.env.now)
+        try:
+            answer.settle(self.env.now, fn(*args))
+        except Exception as exc:
+            answer.settle(self.env.now, error=exc)
+        return answer
 
     def advance(self, until: float | None, events: Sequence[simpy.Event]) -> None:
         """Run until one of ``events`` has been processed, or to ``until`` (events due exactly then stay queued,
@@ -226,6 +262,23 @@ class WallClockDriver:
                     await asyncio.sleep(0)
         finally:
             self._running = False
+
+    def ask(self, fn: Callable[..., Any], *args: Any) -> Answer:
+        """In a thread of its own (a daemon: one that never returns does not hold the process at exit), while the
+        loop steps the environment on; the answer reaches SimPy as a completion at the wall-mapped present."""
+        answer = Answer(self.env.now, self.env.event())
+        # The event always succeeds: an agent's error is the run's to raise where it asked, not SimPy's.
+        answer.event.callbacks.append(lambda ev: answer.settle(self.env.now, *ev.value))
+
+        def call() -> None:
+            try:
+                outcome = (fn(*args), None)
+            except Exception as exc:
+                outcome = (None, exc)
+            self.loop.call_soon_threadsafe(self.deliver, answer.event, outcome)
+
+        threading.Thread(target=call, name="hils-agent", daemon=True).start()
+        return answer
 
     def advance(self, until: float | None, events: Sequence[simpy.Event]) -> signal.Signals | None:
         """Run at the wall clock until one of ``events`` has been processed, or to ``until``; returns the signal

@@ -48,8 +48,10 @@ class Kind(StrEnum):
     TRANSITION_VERIFIED = "transition_verified"  # command_id, command, poll_id, hold_s
     HOLD_RELEASED = "hold_released"            # command_id, reason (verified|served|timeout|keep), hold_s
     DRIFT = "drift"                            # step_s, took_s, consecutive
-    TIMEOUT_ENTERED = "timeout_entered"        # reason (communication|transition|drift|foreign_control), command_id,
-    #                                                        detail
+    TIMEOUT_ENTERED = "timeout_entered"        # reason (communication|transition|drift|foreign_control|agent),
+    #                                                        command_id, detail
+    AGENT_LATE = "agent_late"                  # took_s, discarded: the agent answered after the next SUMO step was
+    #                                                        due (discarded: beyond the control interval)
     RECOVERY_STARTED = "recovery_started"      # -
     RECOVERED = "recovered"                    # greens
     STATE = "state"                            # from, to: the paper's names (idle, on_hold, timeout)

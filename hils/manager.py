@@ -42,8 +42,10 @@ States (:class:`Mode`), with the paper's names (:class:`State`) that the log and
   If the transition timer expires first: TIMEOUT.
 - SERVING (paper ON_HOLD): the prescribed green is being served; back to IDLE when it has passed.
 - TIMEOUT (paper TIMEOUT): entered on a transition not seen within tau_trans, a communication
-  failure (n_timeout consecutive failed polls, below), n_drift consecutive drifted steps, or a
-  control object changed by someone else (FOREIGN_CONTROL, below). Polling halts; commands,
+  failure (n_timeout consecutive failed polls, below), n_drift consecutive drifted steps, a
+  control object changed by someone else (FOREIGN_CONTROL, below), or an agent that gave no action
+  within the control interval of its decision point (AGENT: at the wall clock an agent thinks in a
+  thread of its own, and the run goes on meanwhile). Polling halts; commands,
   keepalives and read-backs are not sent. A recovery request, or the recovery timer (``recover_after``
   seconds after entering TIMEOUT, when set), re-reads the controller (RECOVERING).
 - RECOVERING (paper TIMEOUT): the controller was re-read; the call is SET to the pair it shows (so
@@ -94,6 +96,7 @@ from enum import Enum, auto
 from hils.actions import Command
 from hils.config import Pair
 from hils.manager_io import (
+    AgentOverdue,
     AnotherManager,
     CallsFound,
     CallsWatched,
@@ -145,6 +148,7 @@ from hils.manager_io import (
 
 __all__ = [
     "CLEAR_ATTEMPTS",
+    "AgentOverdue",
     "AnotherManager",
     "CallsFound",
     "CallsWatched",
@@ -285,6 +289,7 @@ class Ev(Enum):
     READBACK_WAITS = auto()  # ReadbackDue while a poll newer than the newest answered one has failed
     CONTROLS_OURS = auto()  # ControlsRead, nothing set
     FOREIGN_CONTROL = auto()  # ControlsRead, something set
+    AGENT_OVERDUE = auto()  # AgentOverdue
     KEEPALIVE_SWITCHED = auto()  # KeepaliveSwitched
     CLOSE = auto()  # CloseRequested
 
@@ -646,6 +651,10 @@ class Manager:
         if isinstance(ev, SetFailed):
             self._set_failed = True
 
+    def _agent_overdue(self, ev: AgentOverdue, out: list[Effect]) -> None:
+        self._enter_timeout(ev.t, TimeoutReason.AGENT,
+                            f"the agent gave no action within the control interval ({ev.waited:g} s)", out)
+
     def _foreign_control(self, ev: ControlsRead, out: list[Effect]) -> None:
         self._enter_timeout(ev.t, TimeoutReason.FOREIGN_CONTROL, f"set by someone else: {self._foreign(ev)}", out)
 
@@ -730,7 +739,7 @@ class Manager:
 _PLAIN_KINDS: dict[type, Ev] = {
     Started: Ev.STARTED, StartupRefused: Ev.STARTUP_REFUSED, RecoveryRequested: Ev.RECOVERY_REQUESTED,
     ControllerRead: Ev.CONTROLLER_READ, ControllerUnreadable: Ev.CONTROLLER_UNREADABLE,
-    KeepaliveSwitched: Ev.KEEPALIVE_SWITCHED, CloseRequested: Ev.CLOSE,
+    KeepaliveSwitched: Ev.KEEPALIVE_SWITCHED, CloseRequested: Ev.CLOSE, AgentOverdue: Ev.AGENT_OVERDUE,
 }
 
 _Handler = Callable[[Manager, Event, list[Effect]], None] | None
@@ -824,6 +833,9 @@ _TRANSITIONS: dict[tuple[Mode, Ev], tuple[Mode, _Handler]] = {
     **{(s, Ev.FOREIGN_CONTROL): (M.TIMEOUT, H._foreign_control) for s in _RUNNING},
     **{(s, Ev.FOREIGN_CONTROL): (s, None) for s in (*_DOWN, M.CLOSED)},  # halted: the recovery clears them
     **{(s, Ev.CONTROLS_OURS): (s, None) for s in (*_RUNNING, *_DOWN, M.CLOSED)},
+    # --- the agent ------------------------------------------------------------------------------------
+    **{(s, Ev.AGENT_OVERDUE): (M.TIMEOUT, H._agent_overdue) for s in _RUNNING},
+    **{(s, Ev.AGENT_OVERDUE): (s, None) for s in (*_DOWN, M.CLOSED)},  # already halted, or over
     # --- the keepalive switch and the close ---------------------------------------------------------
     **{(s, Ev.KEEPALIVE_SWITCHED): (s, H._switch_keepalive) for s in Mode},
     **{(s, Ev.CLOSE): (M.CLOSED, H._close) for s in (M.STARTING, *_RUNNING, *_DOWN)},

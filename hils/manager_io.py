@@ -13,6 +13,7 @@ from hils.actions import Command
 from hils.ntcip import SignalState
 
 __all__ = [
+    "AgentOverdue",
     "AnotherManager",
     "CallsFound",
     "CallsWatched",
@@ -68,6 +69,7 @@ class TimeoutReason(StrEnum):
     TRANSITION = "transition"
     DRIFT = "drift"
     FOREIGN_CONTROL = "foreign_control"
+    AGENT = "agent"
 
 
 class TimerKind(StrEnum):
@@ -228,6 +230,14 @@ class CallsWatched:
 
 
 @dataclass(frozen=True, slots=True)
+class AgentOverdue:
+    """The agent asked at a decision point has given no action within the control interval (``waited`` s)."""
+
+    t: float
+    waited: float
+
+
+@dataclass(frozen=True, slots=True)
 class KeepaliveSwitched:
     t: float
     on: bool
@@ -240,7 +250,7 @@ class CloseRequested:
 
 Event = (Started | StartupLost | StartupRefused | CallsFound | CallsWatched | CommandRequested | PollAnswered
          | PollFailed | TimerExpired | StepTimed | SetAnswered | SetFailed | RecoveryRequested | ControllerRead
-         | ControllerUnreadable | ReadbackDue | ControlsRead | KeepaliveSwitched | CloseRequested)
+         | ControllerUnreadable | ReadbackDue | ControlsRead | AgentOverdue | KeepaliveSwitched | CloseRequested)
 
 # --- effects --------------------------------------------------------------------------------------
 

@@ -23,6 +23,7 @@ from hils.config import IntersectionConfig, Pair
 from hils.events import EventLog, Kind
 from hils.fastpath import QuietPolls, QuietReadbacks
 from hils.manager import (
+    AgentOverdue,
     AnotherManager,
     CallsFound,
     CallsWatched,
@@ -243,6 +244,10 @@ class Middleware:
         shown = self.cache.state.greens if self.cache.state is not None else frozenset()
         effects = self._feed(CommandRequested(self.env.now, action_id, command, shown))
         return Submission(action_id, dropped=any(isinstance(e, Dropped) for e in effects))
+
+    def agent_overdue(self, waited: float) -> None:
+        """The agent asked ``waited`` s ago (the control interval) has given no action yet."""
+        self._feed(AgentOverdue(self.env.now, waited))
 
     def observe_step(self, step: float, took: float) -> None:
         """Report one simulation step's cost to drift detection (when the manager would notice it)."""

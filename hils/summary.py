@@ -87,6 +87,7 @@ def _control(tally: Tally, config: IntersectionConfig) -> dict[str, Any]:
         "actions": kinds[Kind.ACTION_RECEIVED],
         "actions_refused": kinds[Kind.ACTION_REFUSED],
         "actions_dropped": kinds[Kind.ACTION_DROPPED],
+        "agent_late": kinds[Kind.AGENT_LATE],  # answers after the next SUMO step was due (wall clock)
         "commands_dispatched": kinds[Kind.COMMAND_DISPATCHED],
         "transitions_verified": kinds[Kind.TRANSITION_VERIFIED],
         "hold_s": Stats.of(transition_holds(records)).as_dict(),
@@ -125,7 +126,8 @@ def _render_one(summary: Mapping[str, Any]) -> str:
     h = s["hold_s"]
     lines += [
         "Signal control",
-        f"  actions              {s['actions']} ({s['actions_refused']} refused, {s['actions_dropped']} dropped)",
+        f"  actions              {s['actions']} ({s['actions_refused']} refused, {s['actions_dropped']} dropped"
+        + (f"; the agent answered late {s['agent_late']} times" if s.get("agent_late") else "") + ")",
         f"  transitions          {s['transitions_verified']} verified of {s['commands_dispatched']} commanded",
     ]
     if h["n"]:

@@ -52,7 +52,7 @@ import simpy
 from hils import config as config_mod
 from hils.actions import ActionError, ActionType
 from hils.agents import Agent, Observation, load_agent
-from hils.clock import Clock, VirtualClock, WallClockDriver
+from hils.clock import Answer, Clock, VirtualClock, WallClockDriver
 from hils.config import IntersectionConfig
 from hils.detectors import DetectorFeed
 from hils.errors import UserError
@@ -571,6 +571,11 @@ class Testbed(_OneIntersection):
         """Let the agents (``agent``, or the Testbed's: one per intersection) act at every decision point until
         the run is done.
 
+        The agents are asked through the clock (:meth:`hils.clock.Clock.ask`): at the wall clock each thinks in
+        a thread of its own while the run goes on, an answer later than a SUMO step is logged (``agent_late``),
+        and none within the control interval is a TIMEOUT (``agent``); its answer, when it comes, is discarded
+        and the agent is asked again at the next decision point after it.
+
         Returns the end reason (``duration``). Whatever else ends the run (an agent raising:
         :class:`AgentFailed`; Ctrl-C or SIGTERM: :class:`RunInterrupted` or KeyboardInterrupt; an
         error) first finishes the run cleanly, then propagates."""
@@ -580,19 +585,15 @@ class Testbed(_OneIntersection):
         if any(a is None for a in agents.values()):
             raise NotStarted("no agent: pass one to run() or to the Testbed")
         observations = self.observe_all()
+        asked: dict[str, Answer] = {}  # agents thinking (at the wall clock: still, after their decision's time)
         try:
             while not self.done:
-                actions = {}
                 for name, a in agents.items():
-                    if not self.intersections[name].due:
-                        continue  # its own decision point has not come: it is not asked
-                    try:
-                        actions[name] = a.act(observations[name])
-                    except Exception as exc:
-                        raise AgentFailed(f"the agent's act() raised {type(exc).__name__}: {exc}") from exc
+                    if self.intersections[name].due and name not in asked:
+                        asked[name] = self.clock.ask(a.act, observations[name])
                 try:
                     # None: no action this time, the controller runs on its own until the next decision.
-                    observations, _ = self.step_all(actions)
+                    observations, _ = self.step_all(self._answers(asked))
                 except ActionError:
                     # refused and logged: the agents are asked again at the next decision
                     observations, _ = self.step_all({})
@@ -603,6 +604,37 @@ class Testbed(_OneIntersection):
             raise
         self.finish("duration")
         return "duration"
+
+    def _answers(self, asked: dict[str, Answer]) -> dict[str, Any]:
+        """The actions of the agents asked: waits (at the wall clock) until each has answered or its control
+        interval has passed; an agent that has not answered by then is overdue (a TIMEOUT) and keeps thinking."""
+        waiting = [a for a in asked.values() if not a.done and not a.overdue]
+        if waiting:
+            deadline = min(a.asked_at + self.intersections[name].config.middleware.control_interval
+                           for name, a in asked.items() if a in waiting)
+            self._advance(deadline, *(a.event for a in waiting), every=True)
+        actions = {}
+        for name, answer in list(asked.items()):
+            intersection = self.intersections[name]
+            params = intersection.config.middleware
+            if not answer.done:
+                if not answer.overdue and self._env.now >= answer.asked_at + params.control_interval - 1e-9:
+                    answer.overdue = True
+                    intersection.middleware.agent_overdue(self._env.now - answer.asked_at)
+                continue
+            del asked[name]
+            if answer.error is not None:
+                raise AgentFailed(f"the agent's act() raised {type(answer.error).__name__}: {answer.error}"
+                                  ) from answer.error
+            took = answer.answered_at - answer.asked_at
+            if took > params.sumo_step:
+                intersection.events.emit(Kind.AGENT_LATE, took_s=took, discarded=answer.overdue)
+                log.warning("%s", intersection.named(f"the agent answered after {took:.1f} s"
+                                                     + (": beyond the control interval, its action is discarded"
+                                                        if answer.overdue else "")))
+            if not answer.overdue:
+                actions[name] = answer.value
+        return actions
 
     def _to_decision(self, submitted: Mapping[str, Submission]
                      ) -> tuple[dict[str, Observation], dict[str, dict[str, Any]]]:

@@ -292,3 +292,37 @@ def test_lateness_stats_empty_and_invalid():
     assert np.isnan(summary.mean) and np.isnan(summary.max) and np.isnan(summary.p99)
     with pytest.raises(ValueError, match="reservoir"):
         LatenessStats(reservoir=0)
+
+
+def test_an_agent_is_asked_at_once_in_virtual_time_and_in_a_thread_at_the_wall_clock() -> None:
+    """Virtual time: the call takes no simulated time and its error is kept for the asker. Wall clock: the
+    environment goes on stepping while the call sleeps, and the answer arrives as a completion."""
+    env = simpy.Environment()
+    clock = VirtualClock(env)
+    answer = clock.ask(lambda x: x + 1, 41)
+    assert answer.done and answer.value == 42 and answer.answered_at == answer.asked_at == env.now == 0.0
+    failed = clock.ask(lambda: 1 / 0)
+    assert failed.done and isinstance(failed.error, ZeroDivisionError)
+
+    env = simpy.Environment()
+    driver = WallClockDriver(env)
+    ticks: list[float] = []
+
+    def ticking():
+        while True:
+            yield env.timeout(0.05)
+            ticks.append(env.now)
+
+    env.process(ticking())
+    try:
+        answer = driver.ask(lambda: time.sleep(0.4) or "done")
+        assert not answer.done
+        driver.advance(2.0, [answer.event])
+        assert answer.done and answer.value == "done" and answer.error is None
+        assert answer.answered_at == pytest.approx(0.4, abs=0.15)
+        assert len([t for t in ticks if t < answer.answered_at]) >= 5, "the environment stepped while it slept"
+        failing = driver.ask(lambda: 1 / 0)
+        driver.advance(env.now + 2.0, [failing.event])
+        assert failing.done and isinstance(failing.error, ZeroDivisionError)
+    finally:
+        driver.close()

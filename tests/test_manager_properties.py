@@ -29,6 +29,7 @@ from hils.actions import ActionConverter, ActionError, ActionType, Command
 from hils.config import load
 from hils.manager import (
     CLEAR_ATTEMPTS,
+    AgentOverdue,
     AnotherManager,
     CallsFound,
     CallsWatched,
@@ -380,6 +381,8 @@ class ManagerMachine(RuleBasedStateMachine):
                         assert reason is TimeoutReason.DRIFT and self.drifted + 1 == N_DRIFT
                     elif isinstance(ev, ControlsRead | CallsWatched):
                         assert reason is TimeoutReason.FOREIGN_CONTROL
+                    elif isinstance(ev, AgentOverdue):
+                        assert reason is TimeoutReason.AGENT
                     else:
                         assert isinstance(ev, TimerExpired) and ev.kind is TimerKind.TRANSITION
                         assert reason is TimeoutReason.TRANSITION
@@ -644,7 +647,7 @@ class ManagerMachine(RuleBasedStateMachine):
     # come rarely enough for commands to run their course in between.
     @rule(data=st.data(), dt=DT,
           what=st.sampled_from(["recovery", "recovery", "keepalive_switch", "stale_timer", "readback",
-                                "controls_read", "controls_read"]))
+                                "controls_read", "controls_read", "agent_overdue"]))
     def disturbance(self, data: st.DataObject, dt: float, what: str) -> None:
         t = self._tick(dt)
         mode = self.manager.mode
@@ -654,6 +657,12 @@ class ManagerMachine(RuleBasedStateMachine):
                 assert self.manager.mode is mode and not any(isinstance(e, SendCall) for e in effects)
         elif what == "readback":
             self.feed(ReadbackDue(t))
+        elif what == "agent_overdue":
+            effects = self.feed(AgentOverdue(t, 10.0))
+            if mode in RUNNING:
+                assert self.manager.mode is Mode.TIMEOUT and self.manager.timeout_reason is TimeoutReason.AGENT
+            else:
+                assert effects == [] and self.manager.mode is mode
         elif what == "controls_read":
             names = ("phaseControlGroupPhaseOmit", "phaseControlGroupPedOmit", "phaseControlGroupHold",
                      "phaseControlGroupForceOff", "phaseControlGroupPedCall")

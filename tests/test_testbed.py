@@ -10,6 +10,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from importlib import resources
 from pathlib import Path
@@ -26,7 +27,7 @@ from hils import ActionError, State, Testbed
 from hils.actions import ConflictError
 from hils.config import DEFAULT_CONFIG_NAME, IntersectionConfig, load
 from hils.events import Kind, read
-from hils.ntcip import ControlColumn, control_oid, oid_str
+from hils.ntcip import UNIT_CONTROL_STATUS, ControlColumn, control_oid, oid_str
 from hils.status import StatusLine
 
 CFG = load()
@@ -364,3 +365,67 @@ def test_the_single_view_refuses_a_run_of_several_before_anything_starts() -> No
         tb.reset()
     assert tb.env is None and tb.intersections == {}
     assert Testbed.__doc__ is not None and "reset_all" in Testbed.__doc__
+
+
+class SlowOnce:
+    """Switches every decision, and once (its second decision) blocks 16 s before it answers."""
+
+    action_type = "switch"
+
+    def __init__(self) -> None:
+        self.calls = 0
+
+    def act(self, obs: Any) -> int:
+        self.calls += 1
+        if self.calls == 2:
+            time.sleep(16.0)
+        return 1
+
+
+def test_an_agent_that_blocks_at_the_wall_clock_does_not_stop_the_middleware(tmp_path: Path) -> None:
+    """The agent thinks in a thread of its own: while it blocks 16 s (the controller's backup time is 12 s, the
+    control interval 4 s) polls and the keepalive go on, so net-snmp's snmpget sees unitControlStatus
+    systemControl throughout; the run's log shows the late agent and the TIMEOUT of its own reason (the agent
+    gave nothing within the control interval), recovered while the agent still thinks; its late answer is
+    discarded and it is asked again."""
+    config = tmp_path / "backup12.toml"
+    text = (resources.files("hils.data") / "four_leg.toml").read_text(encoding="utf-8")
+    text = text.replace("control_interval = 10.0", "control_interval = 4.0").replace("backup_time = 30",
+                                                                                      "backup_time = 12")
+    config.write_text(text)
+    served = start_emulator(tmp_path / "serve.log", "--config", str(config))
+    status = oid_str(UNIT_CONTROL_STATUS.instance())
+    seen: list[str] = []
+    done = threading.Event()
+
+    def watch() -> None:
+        while not done.is_set():
+            out = subprocess.run([tool("snmpget"), "-v2c", "-c", "public", "-On", "-t", "1", "-r", "0",
+                                  f"127.0.0.1:{served.port}", status], capture_output=True, text=True)
+            seen.append(out.stdout.strip().rsplit(" ", 1)[-1] if out.returncode == 0 else "no answer")
+            time.sleep(0.5)
+
+    watcher = threading.Thread(target=watch, daemon=True)
+    try:
+        agent = SlowOnce()
+        with Testbed(load(config), action_type="switch", agent=agent, duration=30.0,
+                     target=f"snmp://127.0.0.1:{served.port}?community=private&version=2c") as tb:
+            tb.reset()
+            tb.run_for(1.0)  # the controller's status image shows the start-up SET a few ticks later
+            watcher.start()
+            tb.run()
+            records = tb.records
+    finally:
+        done.set()
+        watcher.join(timeout=10)
+        served.stop()
+    assert len(seen) > 40 and set(seen) == {"2"}, f"unitControlStatus seen: {sorted(set(seen))}"
+    (late,) = [r for r in records if r["kind"] == Kind.AGENT_LATE]
+    assert late["took_s"] == pytest.approx(16.0, abs=1.0) and late["discarded"] is True
+    (timeout,) = [r for r in records if r["kind"] == Kind.TIMEOUT_ENTERED]
+    assert timeout["reason"] == "agent" and "within the control interval (4 s)" in timeout["detail"]
+    assert timeout["t"] == pytest.approx(late["t"] - 12.0, abs=1.0), "TIMEOUT when the interval passed"
+    assert [r for r in records if r["kind"] == Kind.RECOVERED and r["t"] < late["t"]], "recovered meanwhile"
+    keepalives = [r["t"] for r in records if r["kind"] == Kind.SET_SENT and r["purpose"] == "keepalive"]
+    assert any(timeout["t"] < t < late["t"] for t in keepalives), "the keepalive went on while the agent thought"
+    assert agent.calls >= 4, "asked again after its late answer"
