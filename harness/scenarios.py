@@ -105,7 +105,7 @@ from hils.actions import ActionError, ActionType
 from hils.agents import AgentError, load_agent
 from hils.config import ConfigError, IntersectionConfig, MiddlewareParams
 from hils.events import Kind
-from hils.manager import TimeoutReason
+from hils.manager_io import TimeoutReason
 from hils.ntcip import UnitControlStatus
 from hils.scenario import SUFFIX
 from hils.scenario import Scenario as Network

@@ -22,7 +22,8 @@ from hils.actions import ActionConverter, ActionError, ActionType, Command
 from hils.config import IntersectionConfig, Pair
 from hils.events import EventLog, Kind
 from hils.fastpath import QuietPolls, QuietReadbacks
-from hils.manager import (
+from hils.manager import Manager, Mode, State
+from hils.manager_io import (
     AgentOverdue,
     AnotherManager,
     CallsFound,
@@ -42,8 +43,6 @@ from hils.manager import (
     Event,
     HaltPolling,
     KeepaliveSwitched,
-    Manager,
-    Mode,
     Note,
     PollAnswered,
     PollFailed,
@@ -66,7 +65,6 @@ from hils.manager import (
     StartupDone,
     StartupLost,
     StartupRefused,
-    State,
     StepTimed,
     TimeoutEntered,
     TimeoutReason,

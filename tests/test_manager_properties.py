@@ -27,8 +27,8 @@ from hypothesis.stateful import RuleBasedStateMachine, initialize, precondition,
 
 from hils.actions import ActionConverter, ActionError, ActionType, Command
 from hils.config import load
-from hils.manager import (
-    CLEAR_ATTEMPTS,
+from hils.manager import CLEAR_ATTEMPTS, Ev, Manager, Mode, State, graph
+from hils.manager_io import (
     AgentOverdue,
     AnotherManager,
     CallsFound,
@@ -45,12 +45,9 @@ from hils.manager import (
     DriftSeen,
     Dropped,
     Effect,
-    Ev,
     Event,
     HaltPolling,
     KeepaliveSwitched,
-    Manager,
-    Mode,
     Note,
     PollAnswered,
     PollFailed,
@@ -73,7 +70,6 @@ from hils.manager import (
     StartupDone,
     StartupLost,
     StartupRefused,
-    State,
     StepTimed,
     TimeoutEntered,
     TimeoutReason,
@@ -81,7 +77,6 @@ from hils.manager import (
     TimerKind,
     Verified,
     WatchCalls,
-    graph,
 )
 from hils.ntcip import SignalState
 
