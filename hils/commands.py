@@ -84,9 +84,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--recover-after", type=float, default=5.0, metavar="S",
                    help="recover this long after a TIMEOUT (default 5; negative: never)")
     p.add_argument("--take-over", action="store_true",
-                   help="drive a controller on which someone else's calls are found at once and clear them; by "
-                        "default they are watched for two control intervals first, and a run that sees them "
-                        "change (another manager at work) refuses to start")
+                   help="take the controller at once when someone else's calls are found on it, and clear them "
+                        "(default: watch them for two control intervals first; calls that change mean another "
+                        "manager at work, and the run refuses to start)")
     p.add_argument("--plot-window", default="0:180", metavar="START:END",
                    help="simulated seconds shown in the signal timeline (0:180)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
