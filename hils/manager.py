@@ -321,15 +321,6 @@ class Manager:
 
     def _classify(self, ev: Event) -> Ev:
         match ev:
-            case StartupLost():
-                return Ev.STARTUP_UNREACHABLE if self.startup_attempts + 1 >= self.n_timeout else Ev.STARTUP_RETRY
-            case CallsFound(calls=calls):
-                return Ev.CALLS_WATCHED if calls and not self.take_over else Ev.CALLS_LEFT
-            case CallsWatched(t=t, calls=calls):
-                since, found = self._found
-                if calls != found:
-                    return Ev.CALLS_CHANGED
-                return Ev.CALLS_LEFT if t - since >= self.watch else Ev.CALLS_WATCHED
             case CommandRequested(command=cmd, shown=shown):
                 keep = cmd.green is None and (cmd.keep or set(cmd.phases) <= shown)
                 return Ev.KEEP if keep else Ev.COMMAND
@@ -346,6 +337,15 @@ class Manager:
                 if epoch != self.poll_epoch:
                     return Ev.STALE_POLL
                 return Ev.POLLS_FAILED if self._run_with(poll_id) >= self.n_timeout else Ev.POLL_FAILED
+            case StartupLost():
+                return Ev.STARTUP_UNREACHABLE if self.startup_attempts + 1 >= self.n_timeout else Ev.STARTUP_RETRY
+            case CallsFound(calls=calls):
+                return Ev.CALLS_WATCHED if calls and not self.take_over else Ev.CALLS_LEFT
+            case CallsWatched(t=t, calls=calls):
+                since, found = self._found
+                if calls != found:
+                    return Ev.CALLS_CHANGED
+                return Ev.CALLS_LEFT if t - since >= self.watch else Ev.CALLS_WATCHED
             case TimerExpired(kind=kind, token=token):
                 if kind is TimerKind.KEEPALIVE:
                     return Ev.KEEPALIVE_DUE if token == self._keepalive_token else Ev.STALE_TIMER

@@ -100,7 +100,7 @@ log = logging.getLogger(__name__)
 READBACK_PERIOD = 2.0
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)
 class Received:
     """An action value as it arrived (``wall_ns``: the monotonic clock then) and what converting it gave."""
 
@@ -430,13 +430,13 @@ class Middleware:
 
     def _carry_out(self, effect: Effect) -> None:
         match effect:
+            case Dispatch(command_id, action_id, command):
+                self.log.emit(Kind.COMMAND_DISPATCHED, action_id=action_id, command_id=command_id,
+                              command=command.phases, green=command.green)
             case ShowSignal(poll_id, state):
                 self._show(state, poll_id)
             case PollFailureSeen(poll_id, error, consecutive):
                 self.log.emit(Kind.POLL_FAILED, poll_id=poll_id, error=error, consecutive=consecutive)
-            case Dispatch(command_id, action_id, command):
-                self.log.emit(Kind.COMMAND_DISPATCHED, action_id=action_id, command_id=command_id,
-                              command=command.phases, green=command.green)
             case SendCall(phases, purpose, command_id):
                 self._send(phases, purpose, command_id)
             case StartTimer(kind, delay, token):

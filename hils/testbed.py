@@ -61,7 +61,7 @@ from hils.events import read as read_events
 from hils.fastpath import StepCost, modeled_cost
 from hils.intersection import Intersection
 from hils.manager import CLEAR_ATTEMPTS, State
-from hils.middleware import Middleware, Submission
+from hils.middleware import Middleware, Received, Submission
 from hils.preflight import ControllerCheckFailed
 from hils.scenario import Scenario, labels, load_scenario
 from hils.simulation import NoSimulation, Simulation, steps
@@ -540,9 +540,14 @@ class Testbed(_OneIntersection):
         if unknown:
             raise KeyError(f"no intersection {', '.join(unknown)} in this run; it has "
                            f"{', '.join(self.intersections)}")
-        received = {name: self.intersections[name].middleware.receive(value) for name, value in actions.items()
-                    if value is not None and self.intersections[name].due}
-        refused = next((name for name, r in received.items() if r.error is not None), None)
+        received: dict[str, Received] = {}
+        refused = None
+        for name, value in actions.items():
+            intersection = self.intersections[name]
+            if value is not None and intersection.due:
+                r = received[name] = intersection.middleware.receive(value)
+                if r.error is not None and refused is None:
+                    refused = name
         if refused is not None:  # all or none: submitted alone, logged as received and refused, nothing sent
             received = {refused: received[refused]}
         submitted = {name: self.intersections[name].middleware.submit(r) for name, r in received.items()}
