@@ -154,7 +154,7 @@ def run_command(args: argparse.Namespace) -> int:
                                       traffic=tb.traffic, wall_s=tb.wall_s)
         outputs += _network_plots(tb, s, out, window)
     else:
-        s = summary.summarize(tb.tally, cfg, traffic=tb.traffic, wall_s=tb.wall_s)
+        s = summary.summarize(tb.tally, tb.config, traffic=tb.traffic, wall_s=tb.wall_s)
         outputs += _plots(tb.junction, s, out, window)
     summary.write(s, out / "summary.json")
     print(summary.render_network(s) if tb.several else summary.render(s))

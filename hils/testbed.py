@@ -419,8 +419,11 @@ class Testbed:
         if sumo is True:
             from hils.sumo import SumoSimulation
 
+            # SUMO's tripinfo (RESCO's figures) goes beside the event log
+            tripinfo = self.log_path.with_name("tripinfo.xml") if self.log_path is not None else None
             sim = SumoSimulation(seed=self.seed, end=self.duration, sumo_config=self.sumo_config, lights=self.configs,
-                                 measure=self.measure)
+                                 measure=self.measure, links=self.scenario.links if self.scenario else None,
+                                 tripinfo=tripinfo)
             sim.start()  # a SUMO that fails to start (e.g. a network the config does not fit) closes itself
             self.simulation = sim
             self._owns_sumo = True
@@ -516,7 +519,8 @@ class Testbed:
     def _collect_traffic(self) -> None:
         summary = getattr(self.simulation, "summary", None)
         if summary is not None and getattr(self.simulation, "running", False):
-            self.traffic = summary()
+            # the run's own SUMO ends here, so that its tripinfo (RESCO's figures) is complete
+            self.traffic = self.simulation.finish() if self._owns_sumo else summary()
 
     def close(self) -> None:
         """Finish the run if it is still going, then release the transports, the clock and SUMO."""
