@@ -53,8 +53,6 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
-import sumolib
-
 from hils.config import IntersectionConfig, from_dict
 from hils.errors import UserError
 from hils.scenario import RESCO_PREFIX, Scenario, SignalLink
@@ -131,6 +129,8 @@ def load(name: str) -> Scenario:
 
 @cache
 def _load(name: str) -> Scenario:
+    import sumolib  # here: `hils` names RESCO's scenarios at every start, and reads a network only to load one
+
     cfg = sumo_config(name)
     net = sumolib.net.readNet(str(_net_file(cfg)), withPrograms=True)
     configs, links = {}, {}

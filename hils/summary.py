@@ -188,6 +188,14 @@ def _traffic_lines(t: Mapping[str, Any]) -> list[str]:
         "(departure delay + time loss, so far for those not arrived)",
         f"  arrived only         time loss {_fmt(t['mean_time_loss'])}, waiting time {_fmt(t['mean_waiting_time'])}"
         " (SUMO trip statistics)",
+    ]
+    r = t.get("resco")
+    if r:
+        queue = "n/a" if r["queue"] is None else f"{r['queue']:.2f}"
+        lines.append(f"  RESCO's figures      delay {_fmt(r['delay_s'])}, trip time {_fmt(r['trip_time_s'])}, "
+                     f"waiting time {_fmt(r['waiting_time_s'])}, queue {queue} (SUMO tripinfo of {r['vehicles']} "
+                     f"vehicles, {r['never_entered']} never entered; queue over {r['queue_steps']} decision steps)")
+    lines += [
         "  per approach         arrived  running  waiting  mean delay  max queue  minutes with a lane full",
     ]
     for name, a in t["approaches"].items():

@@ -169,7 +169,7 @@ class Light:
         self.approach_lanes = tuple((self.prefix + approach, lanes)
                                     for approach, lanes in phase_map.approach_lanes.items())
         self._movement_lanes = tuple((p, phase_map.incoming_lanes(p), phase_map.outgoing_lanes(p))
-                                     for p in phase_map.phases)
+                                     for p in config.phase_numbers)
         self._lanes = tuple(dict.fromkeys(lane for _, inc, out in self._movement_lanes for lane in (*inc, *out)))
         self._lane_length = {lane: libsumo.lane.getLength(lane) for lane in self._lanes}
         self.incoming_lanes = tuple(dict.fromkeys(lane for _, inc, _ in self._movement_lanes for lane in inc))
