@@ -287,10 +287,11 @@ def _movements(light: _Light) -> list[tuple[str, str, frozenset[int], list[int]]
     return out
 
 
-def _parent(phases: Sequence[_Phase], stage: int, edge: str | None) -> int:
-    """The phase a link follows in ``stage``: one of that stage's, its own approach's first."""
+def _parent(phases: Sequence[_Phase], stage: int, edge: str | None, shown: frozenset[int]) -> int:
+    """The phase a link follows in ``stage``: one of that stage's, best one green only where the program shows the
+    link green (``shown``), then its own approach's."""
     green = [n for n, p in enumerate(phases) if stage in p.stages and p.links]
-    return next((n for n in green if phases[n].edge == edge), green[0])
+    return min(green, key=lambda n: (not phases[n].stages <= shown, phases[n].edge != edge))
 
 
 def _bind(light: _Light, phases: list[_Phase], primary: Mapping[int, int]) -> list[Any]:
@@ -306,11 +307,12 @@ def _bind(light: _Light, phases: list[_Phase], primary: Mapping[int, int]) -> li
             covered = phases[own].stages
             yields = not protected
         else:  # permissive only: beside the phase of its first yielding stage
-            own = _parent(phases, min(yielding), edge)
+            own = _parent(phases, min(yielding), edge, yielding)
             covered, yields = phases[own].stages, True
-        also = sorted({_parent(phases, k, edge) for k in protected - covered} - {own})
+        also = sorted({_parent(phases, k, edge, protected) for k in protected - covered} - {own})
         covered = covered | {k for n in also for k in phases[n].stages}
-        yields_with = sorted({_parent(phases, k, edge) for k in yielding - covered} - {own, *also})
+        yields_with = sorted({_parent(phases, k, edge, protected | yielding) for k in yielding - covered}
+                             - {own, *also})
         out.append((own, yields, tuple(also), tuple(yields_with)))
     return out
 
@@ -437,30 +439,27 @@ def _conflict(light: _Light, a: Iterable[int], b: Iterable[int]) -> bool:
 
 
 def _split_phase(light: _Light) -> tuple[list[_Phase], list]:
-    """Each stage its own barrier group, its links split between a phase of each ring."""
+    """Each stage its own barrier group, the links it turns green first split between a phase of each ring; a link
+    green in a later stage too is an overlap of that stage's ring 1 phase."""
     phases: list[_Phase] = []
-    primary: dict[int, int] = {}
+    links = [i for i in range(len(light.edges)) if light.edges[i] is not None]
+    first = {i: min(light.protected(i) or light.yielding(i)) for i in links}
     for k in range(len(light.stages)):
-        mine = [i for i in range(len(light.edges)) if light.edges[i] is not None and light.protected(i)
-                and min(light.protected(i)) == k]
+        mine = [i for i in links if first[i] == k]
         edges = list(dict.fromkeys(light.edges[i] for i in mine))
-        first = [i for i in mine if light.edges[i] == edges[0]] if len(edges) > 1 else \
+        ring1 = [i for i in mine if light.edges[i] == edges[0]] if len(edges) > 1 else \
             [i for i in mine if not set(light.directions[i]) <= set("rR")] or mine
-        second = [i for i in mine if i not in first]
-        for ring, links in ((1, first), (2, second)):
-            phases.append(_Phase(links, frozenset({k}), _turn_of(light, links), _edge_of(light, links), ring, k))
-            primary.update(dict.fromkeys(links, len(phases) - 1))
-    return phases, _bind(light, phases, primary)
-
-
-def _turn_of(light: _Light, links: Sequence[int]) -> str | None:
-    turns = {light.turns[i] for i in links}
-    return turns.pop() if len(turns) == 1 else None
-
-
-def _edge_of(light: _Light, links: Sequence[int]) -> str | None:
-    edges = {light.edges[i] for i in links}
-    return edges.pop() if len(edges) == 1 else None
+        for ring, own in ((1, ring1), (2, [i for i in mine if i not in ring1])):
+            phases.append(_Phase(own, frozenset({k}), _common(light.turns[i] for i in own),
+                                 _common(light.edges[i] for i in own), ring, k))
+    lead = {k: 2 * k for k in range(len(light.stages))}  # each stage's ring 1 phase
+    bound: list[Any] = [None] * len(light.edges)
+    for i in links:
+        own = next(n for n, p in enumerate(phases) if i in p.links)
+        protected = light.protected(i)
+        bound[i] = (own, not protected, tuple(sorted(lead[k] for k in protected - {first[i]})),
+                    tuple(sorted(lead[k] for k in light.yielding(i) - protected - {first[i]})))
+    return phases, bound
 
 
 def _number(phases: list[_Phase]) -> None:
