@@ -6,11 +6,14 @@ so the committed file is always reproducible from its sources.
 
 The phase of each traffic-light link is derived, never typed: the approach of a link is the
 compass side of the junction its incoming edge comes from (geometry), its turn is SUMO's
-connection direction (right turns run with the through of their approach), and the
+connection direction (right turns run with the through of their approach, U-turns with its left), and the
 intersection config says which phase serves each (approach, turn), protected, or permissive
 (``permissive = ["left"]`` on a through phase: the left yields, SUMO's lower-case 'g'). A
 link that no phase serves, or a phase that serves no link, is an error: either would leave a
 movement on red for good or a commanded phase without effect.
+
+A light whose links a scenario binds explicitly (:class:`hils.scenario.SignalLink`: RESCO's, derived from
+their programs by :mod:`hils.resco`) is mapped by that binding instead, with overlaps and permissive yields.
 
 A scenario of your own is a ``.sumocfg``, or a network and a demand file, resolved by
 :func:`scenario_config` into the ``.sumocfg`` SUMO starts with. A scenario of many intersections
@@ -303,7 +306,7 @@ def _approach_labels(net: Any, edges: Iterable[str]) -> dict[str, str]:
         edge = net.getEdge(edge_id)
         (jx, jy), (fx, fy) = edge.getToNode().getCoord(), edge.getFromNode().getCoord()
         side[edge_id] = points[round(math.degrees(math.atan2(fy - jy, fx - jx)) / 45.0) % 8]
-    taken = [s for s in side.values()]
+    taken = list(side.values())
     return {e: s if taken.count(s) == 1 else f"{s} {e}" for e, s in side.items()}
 
 

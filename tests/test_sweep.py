@@ -28,7 +28,8 @@ def test_a_grid_is_every_combination_with_each_agents_own_action_type() -> None:
 @pytest.mark.parametrize(("call", "message"), [
     (lambda: parse_seeds("a-b"), "allowed: integers and ranges"),
     (lambda: grid([], [0]), "at least one agent"),
-    (lambda: scenario_arguments("nowhere"), "allowed: four_leg, four_phase, corridor, grid4x4, resco:grid4x4, .* or CONFIG.toml"),
+    (lambda: scenario_arguments("nowhere"),
+     "allowed: four_leg, four_phase, corridor, grid4x4, resco:grid4x4, .* or CONFIG.toml"),
 ])
 def test_a_bad_grid_is_refused_saying_what_is_allowed(call, message: str) -> None:
     with pytest.raises(SweepError, match=message):
