@@ -65,7 +65,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--scenario", metavar="NAME|FILE",
                    help="a scenario of one or several signalised intersections, each controller with its own "
                         f"config and agent: {', '.join(SCENARIOS)} (corridor: four on an arterial; grid4x4: "
-                        "sixteen) or your own .scenario.toml; default: the shipped four-leg")
+                        "sixteen), resco:NAME (RESCO's benchmark: grid4x4, arterial4x4, cologne1/3/8, "
+                        "ingolstadt1/7/21; pip install 'hils[resco]') or your own .scenario.toml; default: the "
+                        "shipped four-leg")
     p.add_argument("--target", metavar="URL|FILE", help="snmp://HOST:PORT?community=NAME&version=1|2c: run at "
                                                         "wall-clock time against a real controller or "
                                                         "`hils emulator serve`; for a scenario of several "
