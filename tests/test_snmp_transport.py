@@ -26,7 +26,8 @@ from harness.processes import SNMPD_V3_USERS, snmpd, tool
 from hils.clock import WallClockDriver
 from hils.ntcip import ErrorStatus, SnmpError
 from hils.snmp import AUTH_KEY_ENV, PRIV_KEY_ENV, AuthProtocol, PrivProtocol, SnmpTarget, SnmpTransport, SnmpVersion
-from hils.transport import CommunicationTimeout, TransportError
+from hils.transport import CommunicationTimeout, SecurityRefused, TransportError
+from hils.usm import UsmFailure
 
 SYS_DESCR = (1, 3, 6, 1, 2, 1, 1, 1, 0)
 SYS_UPTIME = (1, 3, 6, 1, 2, 1, 1, 3, 0)
@@ -392,26 +393,35 @@ def test_v3_get_and_set_against_snmpd(driver, snmpd_port, user):
     assert out.stdout.strip() == ".1.3.6.1.2.1.11.30.0 = INTEGER: 2", out.stderr
 
 
-@pytest.mark.parametrize("wrong", ["auth", "priv"])
-def test_v3_wrong_key_fails_the_request(driver, snmpd_port, wrong):
-    _, auth_key, priv_key = SNMPD_V3_USERS["hilspriv"]
-    keys = {"auth": ("not-the-auth-key", priv_key), "priv": (auth_key, "not-the-priv-key")}[wrong]
-    transport = SnmpTransport(driver.env, driver, SnmpTarget.parse(v3_url(snmpd_port, "hilspriv", *keys)),
+@pytest.mark.parametrize(("user", "auth_key", "priv_key", "failure"), [
+    ("hilspriv", "not-the-auth-key", "hils-priv-key", UsmFailure.WRONG_DIGEST),
+    ("nobody", "hils-auth-key", "hils-priv-key", UsmFailure.UNKNOWN_USER_NAME),
+    ("hilsauth", "hils-auth-key", "hils-priv-key", UsmFailure.UNSUPPORTED_SEC_LEVEL),  # a user without privacy
+    ("hilspriv", "hils-auth-key", "not-the-priv-key", None),  # snmpd drops what it cannot decrypt: no Report
+], ids=["wrong-auth-key", "unknown-user", "priv-for-auth-only-user", "wrong-priv-key"])
+@pytest.mark.parametrize("request_kind", ["get", "set"])
+def test_v3_refusals_say_why_from_the_report(driver, snmpd_port, user, auth_key, priv_key, failure, request_kind):
+    """GETs go through gufo-snmp and SETs through pysnmp: both name the usmStats counter of snmpd's Report."""
+    transport = SnmpTransport(driver.env, driver, SnmpTarget.parse(v3_url(snmpd_port, user, auth_key, priv_key)),
                               tau_udp=0.5)
 
     def scenario():
         try:
-            yield transport.get([SYS_UPTIME])
+            yield transport.get([SYS_UPTIME]) if request_kind == "get" else transport.set([(DO_DEBUGGING, 0)])
         except TransportError as exc:
             return exc
-        pytest.fail("a GET with a wrong key succeeded")
+        pytest.fail("a request with wrong credentials succeeded")
 
     try:
-        failure = run_process(driver, scenario())
+        error = run_process(driver, scenario())
     finally:
         transport.close()
-    # A wrong authentication key is reported by the agent; a wrong privacy key leaves it unable to read us.
-    assert isinstance(failure, TransportError)
+    if failure is None:
+        assert isinstance(error, CommunicationTimeout)
+        return
+    assert isinstance(error, SecurityRefused), error
+    assert str(error) == f"127.0.0.1:{snmpd_port} refused SNMPv3 user {user!r} at authPriv: {failure}"
+    assert failure.value in str(error) and "community" not in str(error)
 
 
 def test_the_transports_of_one_run_share_an_engine_and_keep_their_communities_apart(driver, connect, snmpd_port):
