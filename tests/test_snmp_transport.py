@@ -424,6 +424,38 @@ def test_v3_refusals_say_why_from_the_report(driver, snmpd_port, user, auth_key,
     assert failure.value in str(error) and "community" not in str(error)
 
 
+def test_a_user_removed_mid_run_fails_each_request_with_the_reason(driver, tmp_path):
+    """The agent's administrator deletes the user while a run polls and sets (net-snmp's snmpusm, on an snmpd of
+    this test's own): the next GET and SET fail as unknown user, not as a lost datagram."""
+    _, auth_key, _ = SNMPD_V3_USERS["hilsauth"]
+    admin, admin_auth, admin_priv = "hilspriv", *SNMPD_V3_USERS["hilspriv"][1:]
+    with snmpd(tmp_path) as port:
+        transport = SnmpTransport(driver.env, driver, SnmpTarget.parse(v3_url(port, "hilsauth", auth_key, "")),
+                                  tau_udp=0.5)
+
+        def scenario():
+            yield transport.get([SYS_UPTIME])
+            yield transport.set([(DO_DEBUGGING, 0)])
+            deleted = subprocess.run([tool("snmpusm"), "-v3", "-l", "authPriv", "-u", admin, "-a", "SHA", "-A",
+                                      admin_auth, "-x", "AES", "-X", admin_priv, f"127.0.0.1:{port}", "delete",
+                                      "hilsauth"], capture_output=True, text=True, timeout=10)
+            assert deleted.returncode == 0, deleted.stderr
+            errors = []
+            for request in (lambda: transport.get([SYS_UPTIME]), lambda: transport.set([(DO_DEBUGGING, 0)])):
+                try:
+                    yield request()
+                except TransportError as exc:
+                    errors.append(exc)
+            return errors
+
+        try:
+            errors = run_process(driver, scenario())
+        finally:
+            transport.close()
+    assert [type(e) for e in errors] == [SecurityRefused, SecurityRefused]
+    assert all(str(e).endswith(f"authNoPriv: {UsmFailure.UNKNOWN_USER_NAME}") for e in errors), errors
+
+
 def test_the_transports_of_one_run_share_an_engine_and_keep_their_communities_apart(driver, connect, snmpd_port):
     """A corridor's controllers share one pysnmp engine (one each cost ~50 ms and the MIB modules again):
     SETs in flight together with the read-write and the read-only community are each judged by their own."""
