@@ -230,6 +230,10 @@ class SnmpTarget:
             return cls(host, port, community, version)
         auth = _protocol(shown, "auth", options.get("auth"), AuthProtocol)
         priv = _protocol(shown, "priv", options.get("priv"), PrivProtocol)
+        for name, protocol, kind in (("auth", auth, AuthProtocol), ("priv", priv, PrivProtocol)):
+            if f"{name}_key" in options and protocol is None:
+                raise ValueError(f"SNMP target {shown!r}: {name}_key without {name}: add {name}="
+                                 f"{'|'.join(p.value for p in kind)}, or leave the key out")
         auth_key = options.get("auth_key") or env.get(AUTH_KEY_ENV, "") if auth else ""
         priv_key = options.get("priv_key") or env.get(PRIV_KEY_ENV, "") if priv else ""
         for name, protocol, key, variable in (("auth", auth, auth_key, AUTH_KEY_ENV),
@@ -430,7 +434,7 @@ class SnmpTransport:
                                   f"{target.security_level}: {failure}")
         if isinstance(indication, _LOCAL_SECURITY_FAILURES):
             raise SecurityRefused(services_missing(privacy=target.priv is not None)
-                                  or f"SNMPv3 message not secured here: {indication}")
+                                  or f"SNMPv3 security failed: {indication}")
 
     async def _open(self) -> _ResolvedUdpTarget:
         # create() does not suspend (the address is already resolved), so no

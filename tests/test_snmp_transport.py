@@ -361,6 +361,22 @@ def test_v3_keys_from_the_environment_and_never_in_the_repr():
     assert (target.auth_key, target.priv, target.security_level) == ("auth-in-url", None, "authNoPriv")
 
 
+@pytest.mark.parametrize("url", [
+    "snmp://h?version=3&user=ops&auth=SHA&auth_key=secret-one&priv=DES&priv_key=secret-two",  # DES: not offered
+    "snmp://h?version=3&user=ops&auth=SHA&auth_key=secret-one&priv_key=secret-two",  # a key without its protocol
+    "snmp://h?version=3&auth=SHA&auth_key=secret-one",  # no user
+])
+def test_target_errors_quote_the_url_without_its_keys(url):
+    with pytest.raises(ValueError) as refused:
+        SnmpTarget.parse(url, environ={})
+    assert "secret" not in str(refused.value) and "auth_key=..." in str(refused.value)
+
+
+def test_a_v3_target_has_no_community():
+    target = SnmpTarget.parse("snmp://h?version=3&user=ops&auth=SHA&auth_key=auth-pass-phrase")
+    assert target.community == ""
+
+
 @pytest.mark.parametrize("user", sorted(SNMPD_V3_USERS))
 def test_v3_get_and_set_against_snmpd(driver, snmpd_port, user):
     level, auth_key, priv_key = SNMPD_V3_USERS[user]
