@@ -13,8 +13,9 @@ Rules of this file
 - SNMPv3 (one USM user, HMAC-SHA-96 with or without AES-128) goes through
   pysnmp's own message processing and user-based security (:class:`_Usm`):
   nothing of v3 is decoded here. Its PDUs are SNMPv2 PDUs and are answered
-  by the same handlers as v2c; a request below the user's security level is
-  dropped, discovery and authentication failures get pysnmp's Reports.
+  by the same handlers as v2c; discovery, a request below the user's security
+  level and authentication failures get pysnmp's Reports (a request below the
+  level that pysnmp lets through all the same is dropped).
 - pysnmp is handed only what it can answer cheaply or must: a message is
   screened first on its security header (:func:`emulator.ber.read_usm`, a few
   microseconds, where pysnmp takes half a millisecond or more). An authentic
