@@ -12,6 +12,7 @@ from hils import config as config_mod
 from hils.config import IntersectionConfig
 from hils.ntcip import AUTH_KEY_ENV, PRIV_KEY_ENV
 from hils.scenario import SCENARIOS, load_scenario
+from hils.usm import services_missing
 
 if TYPE_CHECKING:
     from emulator.agent import V3User
@@ -96,9 +97,13 @@ def _v3_user(args: argparse.Namespace) -> V3User | None:
     if not auth_key:
         raise SystemExit(f"hils emulator serve: --v3-user needs --v3-auth-key (or ${AUTH_KEY_ENV})")
     try:
-        return V3User(args.v3_user, auth_key, priv_key)
+        user = V3User(args.v3_user, auth_key, priv_key)
     except ValueError as exc:
         raise SystemExit(f"hils emulator serve: {exc}") from None
+    missing = services_missing(privacy=bool(priv_key))
+    if missing:
+        raise SystemExit(f"hils emulator serve: --v3-user {args.v3_user}: {missing}")
+    return user
 
 
 def _controllers(args: argparse.Namespace) -> list[tuple[str | None, IntersectionConfig]]:

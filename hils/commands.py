@@ -91,7 +91,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="serve a live dashboard of the run on http://127.0.0.1:PORT/ (wall-clock runs; 0: any "
                         "free port); watch a finished or virtual-time run with `hils view RUN_DIR`")
     p.add_argument("--dashboard-control", action="store_true",
-                   help="let the dashboard's page recover the manager from TIMEOUT (default: read-only)")
+                   help="let the dashboard's page recover the manager from TIMEOUT (default: read-only); only the "
+                        "page opened from the URL printed at start may: it carries the run's secret (?token=...)")
     p.set_defaults(func=run_command)
 
 

@@ -71,7 +71,7 @@ from hils.ntcip import (
 )
 from hils.poller import Decoded, Poller, SignalCache, Snapshot
 from hils.preflight import ControllerReading, Verdict, judge
-from hils.transport import CommunicationTimeout, Transport, TransportError
+from hils.transport import CommunicationTimeout, SecurityRefused, Transport, TransportError
 
 log = logging.getLogger(__name__)
 
@@ -96,7 +96,7 @@ class Middleware:
                  community: str | None = None) -> None:
         params = config.middleware
         self.where = where  # how messages name the controller (HOST:PORT)
-        self.community = community
+        self.community = community  # SNMPv1/v2c's; "" over SNMPv3 (none), None in process
         self.startup_error: str | None = None  # why the start-up read or write failed, if it did
         self.verdict = Verdict((), ())  # the start-up checks' refusals and warnings
         self.env = env
@@ -230,8 +230,10 @@ class Middleware:
                 # The control objects are ours while we run: whatever someone else left is cleared,
                 # and this harmless SET shows whether the community may write.
                 yield self._logged_set(_cleared_control(self.config.groups), frozenset(), "startup", None)
-            except SnmpError as exc:
-                self.startup_error = _refusal_text(exc, self.where)
+            except (SnmpError, SecurityRefused) as exc:
+                # A refusal, not a loss: asking again gets the same answer.
+                self.startup_error = (_refusal_text(exc, self.where) if isinstance(exc, SnmpError)
+                                      else f"the start-up read or write failed: {exc}")
                 self.log.emit(Kind.NOTE, message=f"start-up: {self.startup_error}")
                 self._fail(TimeoutReason.COMMUNICATION, self.startup_error)
                 break
@@ -239,9 +241,12 @@ class Middleware:
                 self.log.emit(Kind.POLL_FAILED, poll_id=0, error=f"start-up read: {type(exc).__name__}: {exc}",
                               consecutive=attempt)
                 if attempt == n:
+                    credentials = {None: "?", "": ", and are the SNMPv3 user and its keys right (an agent may "
+                                                  "drop what it cannot decrypt without a word)?"}
                     self.startup_error = (f"no answer from {self.where} within {n} x tau_udp = "
                                           f"{n * self.config.middleware.tau_udp:g} s: is the controller there, "
-                                          "at that address and port, and is the community right?")
+                                          "at that address and port"
+                                          + credentials.get(self.community, ", and is the community right?"))
                     self._fail(TimeoutReason.COMMUNICATION, f"controller unreachable at start-up: {exc}")
                 continue
             self.verdict = judge(reading, where=self.where, community=self.community,

@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import re
 import select
+import signal
 import subprocess
 import sys
 import urllib.error
@@ -23,6 +24,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from harness.processes import start_emulator
 from hils.config import IntersectionConfig, parse
 from hils.dashboard.board import STRIP_S, Board, Panels, Replay, map_cells
 from hils.dashboard.cabinet import COLUMNS as CABINET_COLUMNS
@@ -313,12 +315,59 @@ def test_dashboard_options_refuse_what_cannot_work(tmp_path: Path) -> None:
     assert empty.returncode == 2 and "no event log" in empty.stderr and "events.jsonl" in empty.stderr
 
 
+def test_only_the_dashboards_own_page_with_the_runs_secret_may_recover(tmp_path: Path) -> None:
+    """A live run with --dashboard-control: the URL printed at start carries the run's secret; a POST without it,
+    with another one, or from a page of another origin (another site, another port here) is refused with 403, and
+    so is every request naming another host (DNS rebinding). The page itself, and curl with the secret, may."""
+    served = start_emulator(tmp_path / "serve.log")
+    proc = None
+    try:
+        proc, url = start_dashboard(sys.executable, "-m", "hils", "run", "--no-sumo", "--no-progress", "--target",
+                                    f"snmp://127.0.0.1:{served.port}?community=private&version=2c", "--duration",
+                                    "60", "--dashboard", "0", "--dashboard-control", "--out", str(tmp_path / "run"))
+        root, secret = page_root(url), secret_of(url)
+        port = root.rsplit(":", 1)[1].rstrip("/")
+        recover = root + "api/recover"
+        assert get(root + "api/meta")[1]["control"] is True
+        refused = {
+            "no secret": get(recover, "POST"),
+            "another secret": get(recover, "POST", {"X-Hils-Token": "guessed"}),
+            "another site": get(recover, "POST", {**secret, "Origin": "http://evil.example"}),
+            "another port": get(recover, "POST", {**secret, "Origin": "http://127.0.0.1:9"}),
+            "rebound name, page": get(root, "GET", {"Host": "evil.example"}),
+            "rebound name, board": get(root + "api/snapshot", "GET", {"Host": f"evil.example:{port}"}),
+            "rebound name, recover": get(recover, "POST", {**secret, "Host": "evil.example"}),
+        }
+        for why, (status, body) in refused.items():
+            assert status == 403, (why, status, body)
+        assert "needs its secret" in refused["no secret"][1]["error"]
+        assert "may not use this dashboard" in refused["another site"][1]["error"]
+        assert "is not this dashboard's" in refused["rebound name, page"][1]["error"]
+        for allowed in (secret, {**secret, "Origin": root.rstrip("/")}):  # curl with the secret, the page
+            status, said = get(recover, "POST", allowed)
+            assert status == 200 and said["recover"].startswith("nothing to recover: the manager is "), said
+        assert get(f"http://localhost:{port}/api/meta", "GET")[0] == 200
+    finally:
+        if proc is not None:
+            proc.send_signal(signal.SIGINT)
+            proc.communicate(timeout=30)
+        served.stop()
+
+
+def test_a_read_only_dashboard_prints_no_secret_and_refuses_control(tmp_path: Path, viewed: str) -> None:
+    assert "token" not in viewed
+    assert get(viewed + "api/snapshot", "GET", {"Host": "evil.example"})[0] == 403
+    status, err = get(viewed + "api/recover", "POST", {"Origin": viewed.rstrip("/")})
+    assert status == 403 and "--dashboard-control" in err["error"]
+
+
 def start_dashboard(*cmd: str) -> tuple[subprocess.Popen[str], str]:
-    """A command that serves the dashboard, started; the page's URL once it prints it."""
+    """A command that serves the dashboard, started; the page's URL once it prints it (with the run's secret,
+    ``?token=...``, when the page may control the run)."""
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     ready, _, _ = select.select([proc.stdout], [], [], 30)
     line = proc.stdout.readline() if ready else ""
-    match = re.match(r"dashboard: (http://127\.0\.0\.1:\d+/)", line)
+    match = re.match(r"dashboard: (http://127\.0\.0\.1:\d+/(\?token=[\w-]+)?)(\s|$)", line)
     if match is None:
         proc.kill()
         raise AssertionError(f"{' '.join(cmd[1:])}: printed no dashboard URL: {line!r} {proc.stderr.read()}")
@@ -337,12 +386,23 @@ def viewed(run: tuple[Path, dict[str, Any]]) -> Iterator[str]:
     proc.wait(timeout=10)
 
 
-def get(url: str, method: str = "GET") -> tuple[int, Any]:
+def get(url: str, method: str = "GET", headers: dict[str, str] | None = None) -> tuple[int, Any]:
     try:
-        with urllib.request.urlopen(urllib.request.Request(url, method=method), timeout=10) as res:
+        with urllib.request.urlopen(urllib.request.Request(url, method=method, headers=headers or {}),
+                                    timeout=10) as res:
             return res.status, json.loads(res.read())
     except urllib.error.HTTPError as err:
         return err.code, json.loads(err.read())
+
+
+def page_root(url: str) -> str:
+    """The dashboard's root (``http://HOST:PORT/``) of the URL it printed."""
+    return url.split("?", 1)[0]
+
+
+def secret_of(url: str) -> dict[str, str]:
+    """The header that controls the run, with the secret of the URL it printed."""
+    return {"X-Hils-Token": url.split("?token=", 1)[1]}
 
 
 def test_replay_server_serves_the_board_at_an_instant_and_refuses_control(viewed: str,

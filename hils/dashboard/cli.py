@@ -40,7 +40,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def view_command(args: argparse.Namespace) -> int:
     from hils.dashboard.board import Board, Replay
-    from hils.dashboard.server import bind, create_app, server, url
+    from hils.dashboard.server import address, bind, create_app, server, url
     from hils.events import read
 
     if not args.realtime > 0:
@@ -61,7 +61,8 @@ def view_command(args: argparse.Namespace) -> int:
     sock = bind("127.0.0.1", args.port)
     print(f"dashboard: {url(sock)} (replay of {log_path}, {replay.end:.0f} sim s; Ctrl-C stops)", flush=True)
     try:
-        asyncio.run(server(create_app(replay, realtime=args.realtime), own_signals=True).serve(sockets=[sock]))
+        app = create_app(replay, address(sock), realtime=args.realtime)
+        asyncio.run(server(app, own_signals=True).serve(sockets=[sock]))
     finally:
         sock.close()
     return 0

@@ -9,6 +9,19 @@ const COLORS = { G: "#1fa64a", Y: "#f2c21b", r: "#c8322b" };
 const STATES = { idle: "IDLE", on_hold: "ON_HOLD", timeout: "TIMEOUT", closed: "CLOSED" };
 let meta = null;
 
+// The run's secret, printed at start in the page's URL (?token=..., as Jupyter does): kept for this tab, taken out
+// of the address bar (it is not for screenshots or links), and sent with the requests that control the run.
+const token = (() => {
+  const here = new URL(location.href);
+  const given = here.searchParams.get("token");
+  if (given) {
+    sessionStorage.setItem("hils-token", given);
+    here.searchParams.delete("token");
+    history.replaceState(null, "", here.pathname + here.search + here.hash);
+  }
+  return sessionStorage.getItem("hils-token");
+})();
+
 function el(tag, attrs, ...children) {
   const node = document.createElement(tag);
   for (const [k, v] of Object.entries(attrs || {})) node.setAttribute(k, v);
@@ -145,7 +158,7 @@ function drawManager(v, snap) {
   const to = snap.timeout;
   v.reason.textContent = to ? `reason: ${to.reason}${to.detail ? " — " + to.detail : ""}` +
                               (to.recovering ? " (recovering…)" : "") : "";
-  v.recover.hidden = !(meta && meta.control && snap.state === "timeout" && !snap.ended);
+  v.recover.hidden = !(meta && meta.control && token && snap.state === "timeout" && !snap.ended);
 }
 
 function drawCommands(v, snap) {
@@ -228,8 +241,10 @@ function draw(snap) {
 }
 
 async function recover(v) {
-  const res = await fetch("/api/recover" + (v.tls ? `?intersection=${encodeURIComponent(v.tls)}` : ""), { method: "POST" });
-  v.said.textContent = (await res.json()).recover || "refused";
+  const res = await fetch("/api/recover" + (v.tls ? `?intersection=${encodeURIComponent(v.tls)}` : ""),
+                          { method: "POST", headers: { "X-Hils-Token": token } });
+  const said = await res.json();
+  v.said.textContent = said.recover || `refused: ${said.error}`;
 }
 
 function live() {
