@@ -26,8 +26,10 @@ Rules of this module:
   a change of status) or polling halts. The next poll on the grid then goes
   out. What the cache holds, and when the manager sees it, is what polling
   every period gives (``tests/test_poll_elision.py`` compares the logs).
-- The log keeps a ``poll`` record when the signal state changes; the counts
-  (:attr:`Poller.counts`) say how many polls there were.
+- The log keeps a ``poll`` record when the signal state changes, and for the first
+  answer after failed polls (the state is known again, changed or not: the plots
+  mark the time between as no data); the counts (:attr:`Poller.counts`) say how
+  many polls there were.
 """
 
 from __future__ import annotations
@@ -224,11 +226,11 @@ class Poller:
             return
         self._newest = poll_id
         self.answered += 1
-        self.consecutive_failures = 0
-        self.show(decoded, poll_id)
+        failing, self.consecutive_failures = self.consecutive_failures, 0
+        self.show(decoded, poll_id, logged=failing > 0)
 
-    def show(self, decoded: Decoded, poll_id: int) -> None:
-        """Put what a read saw into the cache, with a ``poll`` record when it changes the state."""
-        if self.cache.snapshot is None or decoded.state != self.cache.snapshot.state:
+    def show(self, decoded: Decoded, poll_id: int, *, logged: bool = False) -> None:
+        """Put what a read saw into the cache, with a ``poll`` record when it changes the state (or ``logged``)."""
+        if logged or self.cache.snapshot is None or decoded.state != self.cache.snapshot.state:
             self.log.emit(Kind.POLL, poll_id=poll_id, greens=decoded.greens, yellows=decoded.yellows)
         self.cache.update(decoded.state, self.env.now, poll_id)

@@ -303,7 +303,7 @@ class SumoSimulation:
             try:
                 libsumo.start(self.command())
             except libsumo.TraCIException as exc:
-                raise SumoError(f"SUMO did not start: {console.text() or exc}") from None
+                raise SumoError(f"SUMO did not start: {_start_error(console.text(), str(exc))}") from None
         _active = self
         try:
             self._setup()
@@ -626,6 +626,16 @@ class _Console:
         if self.path is None:
             return ""
         return self.path.read_text(encoding="utf-8", errors="replace").strip()
+
+
+def _start_error(console: str, exception: str) -> str:
+    """Why SUMO did not start, on one line: the errors it printed (from its first ``Error:`` line on) and the
+    exception's own text (an error in a route file, say, is only there)."""
+    lines = console.splitlines()
+    first = next((i for i, line in enumerate(lines) if line.startswith("Error")), len(lines))
+    told = [line.strip() for line in lines[first:] if line.strip()]
+    told += [line.strip() for line in exception.splitlines() if line.strip() and line.strip() not in told]
+    return " ".join(told) or console.replace("\n", " ") or "no reason given"
 
 
 @contextmanager

@@ -51,8 +51,8 @@ from hils.actions import ActionError, ActionType
 from hils.agents import Agent, Observation, load_agent
 from hils.config import IntersectionConfig
 from hils.detectors import DetectorFeed
-from hils.errors import UserError
-from hils.events import EventLog, Kind, TaggedLog
+from hils.errors import STOPS, AgentFailed, RunInterrupted, UserError, described
+from hils.events import EventLog, Kind, LogWriteError, TaggedLog
 from hils.events import read as read_events
 from hils.junction import Junction
 from hils.manager import CLEAR_ATTEMPTS, State
@@ -109,18 +109,6 @@ class NoSimulation:
 
     def queues(self) -> Mapping[int, int]:
         return {}
-
-
-class RunInterrupted(Exception):
-    """The run was stopped from outside (Ctrl-C or SIGTERM); ``reason`` is what ``run_ended`` logs."""
-
-    def __init__(self, reason: str) -> None:
-        super().__init__(reason)
-        self.reason = reason
-
-
-class AgentFailed(Exception):
-    """The agent's ``act()`` raised; the original exception is the cause."""
 
 
 class NotStarted(RuntimeError):
@@ -344,11 +332,13 @@ class Testbed:
             self.spec = dataclasses.replace(self.spec, seed=seed)
         self._wall_t0 = time.perf_counter()
         self.ended, self.end_reason, self.traffic = False, None, None
-        env = self.env = simpy.Environment()
-        self._assemble_clock(env)
         # A run that writes its log to a file does not also keep it in memory: a long run's records
         # would grow the heap that every full garbage collection walks, in the middle of the hot path.
+        # Opened first: a log that cannot be written stops the run before anything is assembled.
         self.events = EventLog(self.log_path, keep=self.log_path is None)
+        self.events.on_failure = self._log_failed
+        env = self.env = simpy.Environment()
+        self._assemble_clock(env)
         self.tally = Tally()  # the summary's figures, kept as the run goes: its end re-reads nothing
         self.events.subscribe(self.tally)
         self.junctions = {tls: self._assemble_junction(env, tls, index) for index, tls in enumerate(self.configs)}
@@ -361,6 +351,12 @@ class Testbed:
         self._advance(None, *(j.middleware.ready for j in self.junctions.values()), every=True)
         self._check_controllers()
         return self.observe_all() if self.several else self.observe()
+
+    def _log_failed(self, failure: LogWriteError) -> None:
+        """The log's file stopped taking records: the run ends as an error at its next event, and finish() clears
+        the calls all the same (the clearing SET never waits on the log). During finish() the run is ending."""
+        if not self.ended:
+            self.env.event().fail(failure)  # raised by the environment's next step, between two events
 
     def _check_controllers(self) -> None:
         """The start-up checks: refuse a controller unfit for a run (one line each), warn about the rest."""
@@ -543,7 +539,7 @@ class Testbed:
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
                  tb: TracebackType | None) -> None:
         if self.env is not None and not self.ended:
-            self.finish(_reason_of(exc) if exc is not None else None)
+            self.finish(reason_of(exc) if exc is not None else None)
         self.close()
 
     # --- stepping ---------------------------------------------------------------------------------
@@ -640,8 +636,10 @@ class Testbed:
                         continue  # its own decision point has not come: it is not asked
                     try:
                         actions[tls] = a.act(observations[tls])
-                    except Exception as exc:
-                        raise AgentFailed(f"the agent's act() raised {type(exc).__name__}: {exc}") from exc
+                    except STOPS:
+                        raise
+                    except BaseException as exc:  # SystemExit too: an agent does not end the process
+                        raise AgentFailed(f"the agent's act() raised {described(exc)}") from exc
                 try:
                     # None: no action this time, the controller runs on its own until the next decision.
                     observations, _ = self.step_all(actions)
@@ -651,7 +649,7 @@ class Testbed:
                 if progress is not None:
                     progress(self._env.now)
         except BaseException as exc:
-            self.finish(_reason_of(exc))
+            self.finish(reason_of(exc))
             raise
         self.finish("duration")
         return "duration"
@@ -861,7 +859,7 @@ def _agent_name(given: str | Agent | None, spec: RunSpec) -> str:
     return spec.agent_spec if given is None or isinstance(given, str) else type(given).__name__
 
 
-def _reason_of(exc: BaseException) -> str:
+def reason_of(exc: BaseException) -> str:
     """The ``run_ended`` reason for what ended a run."""
     if isinstance(exc, RunInterrupted):
         return exc.reason

@@ -212,8 +212,8 @@ def test_panels_fold_each_intersection_s_records_into_its_own_board(paper_config
     assert second["comms"]["polls_failed"] == 1 and first["comms"]["polls_failed"] == 0
     assert [c["phases"] for c in first["commands"]] == [[3, 7]] and second["commands"] == []
     assert first["queues"] == {"north": 3} and second["queues"] is None
-    # A quiet intersection's strip ends at the run's now, not at its own last record.
-    assert second["strip"]["segments"] == [[0.0, {"4": "G", "8": "G"}]] and "t" not in second
+    # A quiet intersection's strip ends at the run's now, not at its own last record; in TIMEOUT it has no data.
+    assert second["strip"]["segments"] == [[0.0, {"4": "G", "8": "G"}], [3.0, None]] and "t" not in second
     # run_ended counts the polls of each controller: each panel shows its own.
     panels.feed({"t": 6.0, "kind": "run_ended", "reason": "duration",
                  "polls": {"J1": {"polls": 60, "failed": 0}, "J2": {"polls": 60, "failed": 9}}})
@@ -265,7 +265,9 @@ def test_a_corridor_run_replays_panel_by_panel(corridor_run: tuple[Path, Panels]
         assert {p["phase"] for p in panel["phases"] if p["shown"] == "G"} == set(last_poll["greens"])
         assert panel["comms"]["polls_ok"] == 1200  # ten a second for 120 s: its own controller's count
         assert panel["commands"] and set(panel["queues"]) == {"north", "south", "east", "west"}
-        assert len({tuple(sorted(s)) for _, s in panel["strip"]["segments"]}) > 2  # its phases changed
+        *polled, (_, closed) = panel["strip"]["segments"]
+        assert len({tuple(sorted(s)) for _, s in polled}) > 2  # its phases changed
+        assert closed is None  # polling stopped with the close: no data
     assert end["panels"][2]["name"] == "corridor crossroad"  # J3's own config
 
 

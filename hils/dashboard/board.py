@@ -17,7 +17,9 @@ Theory of operation
 Each kind of record updates one part of the board (see ``_HANDLERS``):
 
 - ``poll``: the indication of every phase (green, yellow, else red); a change opens a segment of the
-  strip, which keeps the last :data:`STRIP_S` seconds.
+  strip, which keeps the last :data:`STRIP_S` seconds. A record after which the signal state is not
+  verified (:func:`hils.events.signal_known`: polls failing, halted in TIMEOUT or by the close) opens a
+  segment without indications, drawn as no data, until the next poll or recovery.
 - ``cabinet`` (dashboard runs only, :mod:`hils.dashboard.cabinet`): walks, pedestrian clearances
   (flashing don't walk), the controller's vehicle and pedestrian calls and PhaseNext; a run logged
   without a dashboard has none, and the page says so.
@@ -42,6 +44,7 @@ from typing import Any
 
 from hils.config import IntersectionConfig
 from hils.dashboard.cabinet import COLUMNS as CABINET_COLUMNS
+from hils.events import signal_known
 
 #: Seconds of signal history in the strip.
 STRIP_S = 120.0
@@ -92,7 +95,8 @@ class Board:
     last_lag: float | None = None  # the last transition's dispatch-to-verification time
     queues: dict[str, int] | None = None
     cabinet: dict[str, list[int]] | None = None  # the last cabinet record's phase lists
-    strip: deque[tuple[float, dict[int, str]]] = field(default_factory=deque)  # (start, indications)
+    # (start, indications; None: no verified signal state)
+    strip: deque[tuple[float, dict[int, str] | None]] = field(default_factory=deque)
     records: int = 0
     _pending: list[int] = field(default_factory=list)  # the last converted command, for a keep
 
@@ -103,6 +107,9 @@ class Board:
         handler = _HANDLERS.get(record["kind"])
         if handler is not None:
             handler(self, record)
+        known = signal_known(record)
+        if known is not None:
+            self._segment(float(record["t"]), self.shown if known and self.polled else None)
 
     def feed_all(self, records: Iterable[Mapping[str, Any]]) -> Board:
         for record in records:
@@ -122,11 +129,7 @@ class Board:
         self.last_poll = max(self.last_poll, int(r["poll_id"]))
         self.failing = 0
         greens, yellows = set(r["greens"]), set(r["yellows"])
-        shown = {p: GREEN if p in greens else YELLOW if p in yellows else RED for p in self.config.phase_numbers}
-        if shown != self.shown or not self.polled:
-            self.shown = shown
-            self.strip.append((float(r["t"]), shown))
-            self._trim()
+        self.shown = {p: GREEN if p in greens else YELLOW if p in yellows else RED for p in self.config.phase_numbers}
         self.polled = True
 
     def _poll_failed(self, r: Mapping[str, Any]) -> None:
@@ -209,6 +212,12 @@ class Board:
         return {"ped": ped, "call": phase in c["veh_calls"], "ped_call": phase in c["ped_calls"],
                 "next": phase in c["nexts"]}
 
+    def _segment(self, t: float, shown: dict[int, str] | None) -> None:
+        """The strip from ``t`` on shows ``shown`` (None: no data), unless it shows that already."""
+        if not self.strip or self.strip[-1][1] != shown:
+            self.strip.append((t, shown))
+            self._trim()
+
     def _trim(self) -> None:
         # Drop segments that ended before the strip's window (a segment ends where the next starts).
         horizon = self.t - STRIP_S
@@ -242,8 +251,8 @@ class Board:
                       "drifts": self.drifts, "last_lag_s": _r(self.last_lag)},
             "queues": self.queues,
             "strip": {"window_s": STRIP_S,
-                      "segments": [[round(t0, 3), {str(p): s for p, s in shown.items() if s != RED}]
-                                   for t0, shown in self.strip]},
+                      "segments": [[round(t0, 3), None if shown is None else
+                                    {str(p): s for p, s in shown.items() if s != RED}] for t0, shown in self.strip]},
         }
 
 
