@@ -8,12 +8,14 @@ from __future__ import annotations
 
 import copy
 import datetime
+import json
 import tomllib
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from importlib import resources
 from pathlib import Path
 from typing import Any
 
+import orjson
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -21,6 +23,10 @@ from hypothesis import strategies as st
 from hils import config
 from hils.cli import main
 from hils.config import DEFAULT_CONFIG_NAME, ConfigError, IntersectionConfig
+from hils.dashboard.cli import load_replay
+from hils.errors import UserError
+from hils.events import BadLine, EventLogError, read
+from hils.testbed import Testbed
 
 SHIPPED = tomllib.loads((resources.files("hils.data") / DEFAULT_CONFIG_NAME).read_text(encoding="utf-8"))
 SOURCE = "lab/site.toml"
@@ -110,3 +116,131 @@ def test_a_detector_calling_a_list_is_refused_naming_the_detector() -> None:
     with pytest.raises(ConfigError) as info:
         config.from_dict(raw, SOURCE)
     assert info.value.field == "detectors.3" and "allowed: the configured phases" in info.value.message
+
+
+# --- event logs: hils.events.read and `hils view` ------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def run_log(tmp_path_factory: pytest.TempPathFactory) -> list[bytes]:
+    """The lines of a real run's event log: two minutes, commands and polls."""
+    path = tmp_path_factory.mktemp("run") / "events.jsonl"
+    with Testbed(action_type="switch", agent="fixed-cycle", duration=120.0, log_path=path) as tb:
+        tb.reset()
+        tb.run()
+    lines = path.read_bytes().splitlines(keepends=True)
+    assert len(lines) > 40
+    return lines
+
+
+def _deep(depth: int) -> Any:
+    value: Any = [2]
+    for _ in range(depth):
+        value = [value]
+    return value
+
+
+def _edit(field: str, value: Any, kind: str = "poll") -> Callable[[list[bytes]], list[bytes]]:
+    """A crafter: the first record of ``kind`` with ``field`` set to ``value`` (removed when ``value`` is _GONE)."""
+    def craft(lines: list[bytes]) -> list[bytes]:
+        out, done = [], False
+        for line in lines:
+            record = orjson.loads(line)
+            if not done and record["kind"] == kind:
+                if value is _GONE:
+                    record.pop(field, None)
+                else:
+                    record[field] = value
+                line, done = orjson.dumps(record) + b"\n", True
+            out.append(line)
+        assert done, kind
+        return out
+
+    return craft
+
+
+def _line(n: int, text: bytes) -> Callable[[list[bytes]], list[bytes]]:
+    """A crafter: line ``n`` (1-based) replaced by ``text``."""
+    return lambda lines: [*lines[:n - 1], text, *lines[n:]]
+
+
+# Logs as a hostile or broken tool could hand them over: every one is replayed (its bad lines left out and
+# named) or refused in one line; none gives a traceback.
+CRAFTED: dict[str, Callable[[list[bytes]], list[bytes]]] = {
+    "no kind": _edit("kind", _GONE),
+    "no t": _edit("t", _GONE),
+    "t a string": _edit("t", "12.5"),
+    "t null": _edit("t", None),
+    "t huge": _edit("t", 1e308),
+    "no seq": _edit("seq", _GONE),
+    "kind a number": _edit("kind", 7),
+    "invalid UTF-8": _line(11, b'{"seq":10,"t":1.0,"kind":"note","message":"\xff\xfe"}\n'),
+    "nested 100000 deep": _line(11, b"[" * 100_000 + b"\n"),
+    "nested 40 deep": _edit("greens", _deep(40)),
+    "a JSON array": _line(11, b"[1, 2, 3]\n"),
+    "an empty line": _line(11, b"\n"),
+    "NaN": _line(11, b'{"seq":10,"t":NaN,"kind":"note"}\n'),
+    "poll without greens": _edit("greens", _GONE),
+    "greens a string": _edit("greens", "2,6"),
+    "poll_id a string": _edit("poll_id", "7"),
+    "greens of lists": _edit("greens", [[2], [6]]),
+    "state without to": _edit("to", _GONE, "state"),
+    "command of strings": _edit("command", ["a", "b"], "command_dispatched"),
+    "hold a string": _edit("hold_s", "5.2", "transition_verified"),
+    "polls of run_ended": _edit("polls", {"polls": "many"}, "run_ended"),
+    "reason of run_ended a list": _edit("reason", ["duration"], "run_ended"),
+    "an unknown kind": _edit("kind", "from_the_future"),
+    "intersections not a list": _edit("intersections", 5, "run_started"),
+    "source a table": _edit("source", {"a": 1}, "run_started"),
+    "torn last line": lambda lines: [*lines[:-1], lines[-1][:25]],
+    "first line gone": lambda lines: lines[1:],
+    "first line bad": _line(1, b"{not json\n"),
+    "empty": lambda lines: [],
+    "binary": lambda lines: [bytes(range(256)) * 4],
+}
+
+
+@pytest.mark.parametrize("name", list(CRAFTED))
+def test_a_crafted_log_is_replayed_without_its_bad_lines_or_refused_in_one_line(tmp_path: Path, run_log: list[bytes],
+                                                                                 name: str) -> None:
+    path = tmp_path / "events.jsonl"
+    path.write_bytes(b"".join(CRAFTED[name](run_log)))
+    try:
+        replay, _, skipped = load_replay(path)
+    except UserError as err:
+        assert "\n" not in str(err) and str(path) in str(err)
+        return
+    # What the page gets at any instant is JSON that every browser reads.
+    for t in (0.0, replay.end / 2, replay.end):
+        json.dumps(replay.at(t).snapshot(), allow_nan=False)
+    # Records of a kind the board does not know (another version's) and a late t are records all the same.
+    if name not in ("an unknown kind", "t huge"):
+        assert skipped, "the bad line is named"
+
+
+def test_a_bad_line_in_the_middle_is_named_and_the_rest_replays(tmp_path: Path, run_log: list[bytes]) -> None:
+    """A log whose line 11 is bad: read() refuses it naming the line; the replay leaves it out and replays the
+    whole run (it used to stop at line 11 and replay 0 s)."""
+    path = tmp_path / "events.jsonl"
+    path.write_bytes(b"".join(_line(11, b'{"seq":10,"t":1.0,"wall_ns":1}\n')(run_log)))
+    with pytest.raises(EventLogError, match=rf"{path}: line 11: kind is missing"):
+        list(read(path))
+    bad: list[BadLine] = []
+    records = list(read(path, on_bad=bad.append))
+    assert [b.line for b in bad] == [11] and len(records) == len(run_log) - 1
+    replay, _, skipped = load_replay(path)
+    assert replay.end == orjson.loads(run_log[-1])["t"] > 100.0
+    assert skipped == ["line 11: kind is missing; allowed: a string"]
+
+
+@pytest.mark.parametrize(("args", "says"), [
+    (["--realtime", "inf"], "--realtime is inf"),
+    (["--realtime", "nan"], "--realtime is nan"),
+    (["--port", "99999"], "--port is 99999"),
+])
+def test_hils_view_refuses_bad_options_in_one_line(tmp_path: Path, run_log: list[bytes], capsys, args: list[str],
+                                                   says: str) -> None:
+    (tmp_path / "events.jsonl").write_bytes(b"".join(run_log))
+    assert main(["view", str(tmp_path), *args]) == 2
+    err = capsys.readouterr().err
+    assert says in err and err.count("\n") == 1

@@ -116,6 +116,11 @@ class Board:
             self.feed(record)
         return self
 
+    @staticmethod
+    def refuses(record: Mapping[str, Any]) -> str | None:
+        """Why the board cannot fold ``record`` (a field it reads missing or of another type), or None."""
+        return _refused(record, _READS)
+
     # --- handlers -------------------------------------------------------------------------------
 
     def _run_started(self, r: Mapping[str, Any]) -> None:
@@ -268,6 +273,71 @@ def _r(x: float | None) -> float | None:
     return None if x is None else round(x, 3)
 
 
+def _integer(v: Any) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def _number(v: Any) -> bool:
+    return isinstance(v, int | float) and not isinstance(v, bool)
+
+
+def _phases(v: Any) -> bool:
+    return isinstance(v, list) and all(_integer(p) for p in v)
+
+
+def _text(v: Any) -> bool:
+    return isinstance(v, str)
+
+
+def _counts(v: Any) -> bool:
+    """A poller's counts, as run_ended has them."""
+    return isinstance(v, dict) and {"polls", "failed"} <= v.keys() and all(_integer(n) for n in v.values())
+
+
+def _optional(check: Callable[[Any], bool]) -> Callable[[Any], bool]:
+    return lambda v: v is None or check(v)
+
+
+_MISSING = object()
+
+#: What the board reads of each kind it folds, and what each field must be. A finished run's log is checked
+#: against it before it is replayed (:meth:`Board.refuses`): a record that would not fold is left out and
+#: named, never half applied. Records of a live run are the run's own and are not checked.
+_READS: dict[str, dict[str, Callable[[Any], bool]]] = {
+    "run_ended": {"reason": _text, "polls": _optional(_counts)},
+    "poll": {"poll_id": _integer, "greens": _phases, "yellows": _phases},
+    "poll_failed": {"poll_id": _optional(_integer), "consecutive": _optional(_integer)},
+    "set_sent": {"phases": _phases},
+    "action_converted": {"command": _phases},
+    "command_dispatched": {"command_id": _optional(_integer), "command": _phases, "green": _optional(_number)},
+    "transition_verified": {"command_id": _optional(_integer), "hold_s": _number},
+    "hold_released": {"command_id": _optional(_integer), "hold_s": _number, "reason": _text},
+    "state": {"to": _text},
+    "timeout_entered": {"reason": _text},
+    "queues": {"queues": lambda v: isinstance(v, dict) and all(_integer(n) for n in v.values())},
+    "cabinet": dict.fromkeys(CABINET_COLUMNS, _phases),
+}
+# A run of several controllers: its run_ended has each intersection's counts.
+_READS_OF_RUN = {"run_ended": {"reason": _text,
+                               "polls": _optional(lambda v: isinstance(v, dict) and all(map(_optional(_counts),
+                                                                                            v.values())))}}
+_OPTIONAL_FIELDS = {("poll_failed", "poll_id"), ("poll_failed", "consecutive"), ("run_ended", "polls")}
+
+
+def _refused(record: Mapping[str, Any], reads: Mapping[str, Mapping[str, Callable[[Any], bool]]]) -> str | None:
+    """Why a record does not give what ``reads`` says its kind must give (None when it does)."""
+    kind = record["kind"]
+    for name, check in reads.get(kind, {}).items():
+        value = record.get(name, _MISSING)
+        if value is _MISSING:
+            if (kind, name) in _OPTIONAL_FIELDS:
+                continue
+            return f"{kind} without {name}"
+        if not check(value):
+            return f"{kind}.{name} is {repr(value)[:40]}"
+    return None
+
+
 _HANDLERS: dict[str, Callable[[Board, Mapping[str, Any]], None]] = {
     "run_started": Board._run_started,
     "run_ended": Board._run_ended,
@@ -333,6 +403,15 @@ class Panels:
             self.feed(record)
         return self
 
+    def refuses(self, record: Mapping[str, Any]) -> str | None:
+        """Why these panels cannot fold ``record`` (an intersection not of the run, or what a board refuses)."""
+        tls = record.get("intersection")
+        if tls is None:
+            return _refused(record, _READS_OF_RUN)
+        if tls not in self.boards:
+            return f"intersection {repr(tls)[:20]} is not one of the run's ({', '.join(self.boards)})"
+        return Board.refuses(record)
+
     def snapshot(self) -> dict[str, Any]:
         """The run and each intersection's board, with its cell on the page (see ``static/app.js``)."""
         panels = []
@@ -376,7 +455,15 @@ class Replay:
     ``empty`` is the board the run starts from: a :class:`Board`, or :class:`Panels` for a run of several."""
 
     def __init__(self, empty: Board | Panels, records: Iterable[Mapping[str, Any]], *, every: int = 2000) -> None:
-        self.records = list(records)
+        #: (seq, why) of the records left out: the board could not fold them (a log not written by a run).
+        self.skipped: list[tuple[Any, str]] = []
+        self.records = []
+        for record in records:
+            why = empty.refuses(record)
+            if why is None:
+                self.records.append(record)
+            else:
+                self.skipped.append((record.get("seq"), why))
         if not self.records:
             raise ValueError("the event log has no records")
         self.times = [float(r["t"]) for r in self.records]
