@@ -31,7 +31,7 @@ from hils.junction import Junction
 from hils.scenario import SCENARIOS, Scenario, load_scenario, load_targets
 from hils.status import Notices, StatusLine
 from hils.sumo_net import scenario_config
-from hils.testbed import DEFAULT_AGENTS, VIRTUAL, RunSpec, Testbed, reason_of
+from hils.testbed import BLIND_AGENTS, DEFAULT_AGENTS, VIRTUAL, RunSpec, Testbed, reason_of
 from hils.webster import webster_plan
 
 log = logging.getLogger(__name__)
@@ -49,6 +49,18 @@ One flag to real hardware: --target snmp://HOST:PORT?community=NAME&version=1|2c
 runs the same agent and middleware at wall-clock time against that controller
 (or against `hils emulator serve`). For an Econolite Cobalt: version=1, port 501,
 community = the controller's user name (default administrator).
+
+A TIMEOUT is one console line when it happens, and its recovery another. Every
+way the run ends clears the calls it placed first, and a last line says how it
+ended. Exit status:
+  0    the duration passed, every controller under control to the end
+  1    an error: the agent failed, or the event log or the outputs could not be
+       written (the calls are cleared all the same)
+  2    bad input, refused before the run started
+  3    a controller was lost: the run ended in an unrecovered TIMEOUT, or its
+       calls could not be cleared (they stay until the controller's backup time)
+  130  interrupted (Ctrl-C)
+  143  terminated (SIGTERM)
 """
 
 
@@ -61,9 +73,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "(green time of the next pair); default: selection")
     p.add_argument("--agent", metavar="NAME|MODULE:CLASS",
                    help="built-in agent (random, fixed-cycle, max-pressure, queue-proportional, webster; actuated: "
-                        "none, the controller runs on its detectors) or your own "
-                        "package.module:Class; default: " + ", ".join(f"{k.value} -> {v}"
-                                                                      for k, v in DEFAULT_AGENTS.items()))
+                        "none, the controller runs on its detectors) or your own package.module:Class; default "
+                        "per action type: " + ", ".join(f"{k.value} -> {v}" for k, v in DEFAULT_AGENTS.items())
+                        + "; with --no-sumo (no traffic to observe): "
+                        + ", ".join(f"{k.value} -> {v}" for k, v in BLIND_AGENTS.items()))
     p.add_argument("--duration", type=float, default=3600.0, metavar="S", help="simulated seconds (3600)")
     p.add_argument("--seed", type=int, default=0, help="seed of SUMO, the emulator's latency model and random "
                                                        "agents; a virtual-time run is reproducible from it (0)")
@@ -149,6 +162,9 @@ def run_command(args: argparse.Namespace) -> int:
     spec = RunSpec(cfg, ActionType(args.action_type), agent=args.agent, duration=args.duration, seed=args.seed,
                    log_path=log_path, recover_after=None if args.recover_after < 0 else args.recover_after,
                    sumo=not args.no_sumo)
+    if args.agent is None and spec.agent_spec != DEFAULT_AGENTS[spec.action_type]:
+        log.info("agent: %s (--no-sumo: %s, the default for %s, needs the traffic SUMO simulates)", spec.agent_spec,
+                 DEFAULT_AGENTS[spec.action_type], spec.action_type.value)
     if spec.agent_spec == "webster":
         if sumo_config is not None or scenario is not None:
             raise UsageError("--agent webster plans from the shipped four-leg network and demand; it cannot "
