@@ -244,3 +244,40 @@ def test_hils_view_refuses_bad_options_in_one_line(tmp_path: Path, run_log: list
     assert main(["view", str(tmp_path), *args]) == 2
     err = capsys.readouterr().err
     assert says in err and err.count("\n") == 1
+
+
+# --- command-line values -----------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(("args", "says"), [
+    (["--poll-hz", "0"], "--poll-hz is 0.0; allowed: > 0 and <= 1000"),
+    (["--poll-hz", "nan"], "--poll-hz must be a finite number"),
+    (["--duration", "inf"], "--duration is inf; allowed: a finite number of simulated seconds > 0"),
+    (["--duration", "nan"], "--duration is nan"),
+    (["--duration", "0"], "--duration is 0"),
+    (["--recover-after", "nan"], "--recover-after is nan"),
+    (["--seed", "-1"], "--seed is -1; allowed: 0 to 2147483647"),
+    (["--seed", "99999999999999999999"], "--seed is 99999999999999999999"),
+    (["--plot-window", "0:0"], "--plot-window is '0:0'; allowed: START:END in simulated seconds, 0 <= START < END"),
+    (["--plot-window", "nan:inf"], "--plot-window is 'nan:inf'"),
+    (["--plot-window", "60"], "--plot-window is '60'"),
+    (["--log", "."], "--log . is a folder; allowed: the path of a file"),
+])
+def test_a_bad_run_option_is_one_line_naming_the_option(tmp_path: Path, monkeypatch, capsys, args: list[str],
+                                                        says: str) -> None:
+    monkeypatch.chdir(tmp_path)
+    assert main(["run", "--no-sumo", "--no-progress", "--duration", "5", "--out", "run", *args]) == 2
+    err = capsys.readouterr().err
+    assert err == f"hils: {err[6:]}" and err.count("\n") == 1 and says in err
+    assert "four_leg.toml" not in err  # the option is to blame, not a file the user never gave
+
+
+def test_a_route_file_sumo_cannot_read_is_named_with_sumos_reason(tmp_path: Path, capsys) -> None:
+    from hils.sumo_net import NET_FILE, data_path
+
+    routes = tmp_path / "broken.rou.xml"
+    routes.write_text("this is not XML\n")
+    assert main(["run", "--duration", "5", "--no-progress", "--out", str(tmp_path / "run"),
+                 "--net", str(data_path(NET_FILE)), "--routes", str(routes)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("hils: SUMO did not start: ") and str(routes) in err and err.count("\n") == 1

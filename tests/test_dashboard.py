@@ -422,3 +422,20 @@ def test_replay_server_serves_the_board_at_an_instant_and_refuses_control(viewed
     with urllib.request.urlopen(viewed, timeout=10) as page:
         html = page.read().decode()
     assert "/static/app.js" in html and "http" not in html.split("<body>", 1)[1]  # nothing from the internet
+
+
+def test_the_strip_shows_no_data_while_the_signal_state_is_not_verified(paper_config: IntersectionConfig) -> None:
+    board = Board(paper_config)
+    board.feed_all([
+        _poll(0.0, [2, 6]),
+        {"t": 1.0, "kind": "poll_failed", "poll_id": 9, "error": "CommunicationTimeout", "consecutive": 0},  # overtaken
+        {"t": 2.0, "kind": "poll_failed", "poll_id": 10, "error": "CommunicationTimeout", "consecutive": 1},
+        {"t": 2.1, "kind": "poll_failed", "poll_id": 11, "error": "CommunicationTimeout", "consecutive": 2},
+        _poll(2.5, [2, 6]),  # known again, unchanged
+        {"t": 4.0, "kind": "timeout_entered", "reason": "transition", "detail": "x", "command_id": 3},
+        {"t": 9.0, "kind": "recovered", "greens": [2, 6]},
+        {"t": 12.0, "kind": "set_sent", "command_id": None, "phases": [], "purpose": "clear"},
+    ])
+    segments = board.snapshot()["strip"]["segments"]
+    green = {"2": "G", "6": "G"}
+    assert segments == [[0.0, green], [2.0, None], [2.5, green], [4.0, None], [9.0, green], [12.0, None]]

@@ -7,7 +7,9 @@ agents that fail or are refused. What the controller holds afterwards is read wi
 
 from __future__ import annotations
 
+import io
 import json
+import logging
 import os
 import re
 import resource
@@ -26,6 +28,8 @@ from hils.cli import main
 from hils.config import DEFAULT_CONFIG_NAME
 from hils.events import EventLog, Kind, LogWriteError, read
 from hils.ntcip import ControlColumn, control_oid, oid_str
+from hils.status import Notices, StatusLine
+from hils.testbed import Testbed
 
 SVG = "{http://www.w3.org/2000/svg}"
 
@@ -313,3 +317,40 @@ def test_the_run_help_documents_the_exit_statuses(capsys) -> None:
         assert f"\n  {status}" in text, status
     assert "a controller was lost" in text
 
+
+
+# --- the console ---------------------------------------------------------------------------------------------------
+
+
+class _Terminal(io.StringIO):
+    def isatty(self) -> bool:
+        return True
+
+
+def test_a_timeout_line_goes_above_the_status_line_which_is_drawn_again_under_it(monkeypatch) -> None:
+    terminal = _Terminal()
+    monkeypatch.setattr(sys, "stderr", terminal)
+    console = logging.StreamHandler(sys.stderr)  # what logging.basicConfig gives `hils`
+    root = logging.getLogger()
+    root.addHandler(console)
+    status, notices = StatusLine(stream=terminal), Notices()
+
+    def on_reset(tb: Testbed, target) -> None:
+        status.start(tb)
+        notices.start(tb)
+
+    try:
+        with Testbed(action_type="switch", agent="fixed-cycle", on_reset=on_reset) as tb, status.above():
+            tb.reset()
+            tb.run_for(2.0)
+            tb.events.emit(Kind.TIMEOUT_ENTERED, reason="communication", detail="5 consecutive polls failed",
+                           command_id=None)
+            tb.run_for(1.0)
+    finally:
+        root.removeHandler(console)
+    status.close()
+    lines = terminal.getvalue().split("\n")
+    said = next(i for i, line in enumerate(lines) if "TIMEOUT at 2.0 s (communication)" in line)
+    # On its own line: the status line was erased first, and is drawn again under it.
+    assert lines[said].rsplit("\r", 1)[1].startswith("TIMEOUT at 2.0 s (communication): 5 consecutive polls failed")
+    assert lines[said + 1].startswith("\r") and " s  " in lines[said + 1]
