@@ -20,12 +20,16 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from emulator.controller import Controller
+from emulator.delays import DelayedController
+from emulator.mib import MibView
 from hils import config
 from hils.cli import main
 from hils.config import DEFAULT_CONFIG_NAME, ConfigError, IntersectionConfig
 from hils.dashboard.cli import load_replay
 from hils.errors import UserError
 from hils.events import BadLine, EventLogError, read
+from hils.ntcip import UNIT_FLASH_STATUS, UNIT_STARTUP_FLASH, UnitFlashStatus
 from hils.testbed import Testbed
 
 SHIPPED = tomllib.loads((resources.files("hils.data") / DEFAULT_CONFIG_NAME).read_text(encoding="utf-8"))
@@ -281,3 +285,26 @@ def test_a_route_file_sumo_cannot_read_is_named_with_sumos_reason(tmp_path: Path
                  "--net", str(data_path(NET_FILE)), "--routes", str(routes)]) == 2
     err = capsys.readouterr().err
     assert err.startswith("hils: SUMO did not start: ") and str(routes) in err and err.count("\n") == 1
+
+
+# --- a SET the emulator accepts acts ---------------------------------------------------------------------------------
+
+
+def test_a_set_of_unit_startup_flash_acts_at_the_next_power_up(paper_config: IntersectionConfig) -> None:
+    """unitStartUpFlash is read-write in NTCIP 1202 (0..255 s): the Start-Up Flash the controller shows when power is
+    restored. A SET reached the latency wrapper and changed nothing; it now goes to the controller, whose next
+    power-up (a reboot) flashes that long, as unitFlashStatus startup(7) says, then starts its intervals."""
+    unit = DelayedController(Controller(paper_config), paper_config.emulator)
+    mib = MibView(unit)
+    oid = UNIT_STARTUP_FLASH.instance()
+    mib.set_many([(oid, 4)])
+    assert mib.get_many([oid]) == (4,)
+    unit.reset()  # power restored
+    flash = UNIT_FLASH_STATUS.instance()
+    assert mib.get_many([flash]) == (int(UnitFlashStatus.STARTUP),)
+    for _ in range(39):
+        unit.step()
+    assert mib.get_many([flash]) == (int(UnitFlashStatus.STARTUP),) and not unit.greens
+    unit.step()
+    assert mib.get_many([flash]) == (int(UnitFlashStatus.NOT_FLASH),)
+    assert unit.controller.greens == {2, 6}  # the start-up intervals of the config
