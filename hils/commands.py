@@ -162,9 +162,6 @@ def run_command(args: argparse.Namespace) -> int:
     spec = RunSpec(cfg, ActionType(args.action_type), agent=args.agent, duration=args.duration, seed=args.seed,
                    log_path=log_path, recover_after=None if args.recover_after < 0 else args.recover_after,
                    sumo=not args.no_sumo)
-    if args.agent is None and spec.agent_spec != DEFAULT_AGENTS[spec.action_type]:
-        log.info("agent: %s (--no-sumo: %s, the default for %s, needs the traffic SUMO simulates)", spec.agent_spec,
-                 DEFAULT_AGENTS[spec.action_type], spec.action_type.value)
     if spec.agent_spec == "webster":
         if sumo_config is not None or scenario is not None:
             raise UsageError("--agent webster plans from the shipped four-leg network and demand; it cannot "
@@ -175,14 +172,15 @@ def run_command(args: argparse.Namespace) -> int:
     tb = Testbed(None if scenario else cfg, scenario=scenario, action_type=spec.action_type,
                  target=_targets(args.target, scenario), sumo=spec.sumo, seed=spec.seed, agent=spec.agent,
                  duration=spec.duration, log_path=log_path, recover_after=spec.recover_after,
-                 on_reset=_hooks(Notices().start, status.start if status else None,
-                                 dashboard.attach if dashboard else None),
+                 on_reset=_hooks(status.start if status else None, dashboard.attach if dashboard else None),
                  sumo_config=sumo_config)
     error: BaseException | None = None
     with _terminate_as_interrupt(), tb, _served(dashboard):
         try:
             with status.above() if status is not None else contextlib.nullcontext():
                 tb.reset()
+                # From here on: a controller refused at start-up is said once, by the refusal itself.
+                tb.events.subscribe(Notices())
                 if tb.mode == VIRTUAL and not args.no_progress:
                     with _progress(spec) as bar:
                         tb.run(progress=lambda t: bar.update(t - bar.n))

@@ -134,16 +134,13 @@ class _Above(logging.Handler):
 
 
 class Notices:
-    """An event-log subscriber that writes one log line when a user watching the run must know: a controller
-    enters TIMEOUT (warning), recovers (info), or refuses the agent's first action (warning; the others are
-    counted in the summary). In a run of several controllers each line names its traffic light."""
+    """An event-log subscriber (:meth:`hils.events.EventLog.subscribe`) that writes one log line when a user
+    watching the run must know: a controller enters TIMEOUT (warning), recovers (info), or refuses the agent's
+    first action (warning; the others are counted in the summary). In a run of several controllers each line
+    names its traffic light."""
 
     def __init__(self) -> None:
         self._refused = False
-
-    def start(self, testbed: Any, _target: Any = None) -> None:
-        """An ``on_reset`` hook of the Testbed: follow the run's log from its start."""
-        testbed.events.subscribe(self)
 
     def __call__(self, record: Mapping[str, Any]) -> None:
         kind = record["kind"]

@@ -17,43 +17,25 @@ import subprocess
 import sys
 import time
 from collections.abc import Callable
-from importlib import resources
 from pathlib import Path
 from xml.etree import ElementTree
 
 import pytest
+from test_testbed import short_interval_config, veh_call
 
-from harness.processes import Served, start_emulator, tool
+from harness.processes import Served, start_emulator
 from hils.cli import main
-from hils.config import DEFAULT_CONFIG_NAME
 from hils.events import EventLog, Kind, LogWriteError, read
-from hils.ntcip import ControlColumn, control_oid, oid_str
 from hils.status import Notices, StatusLine
 from hils.testbed import Testbed
 
 SVG = "{http://www.w3.org/2000/svg}"
 
 
-def veh_call(port: int) -> int:
-    """VehCall of phase group 1 as net-snmp's snmpget reads it from the served controller."""
-    done = subprocess.run([tool("snmpget"), "-v2c", "-c", "public", "-On", "-t", "1", "-r", "2", f"127.0.0.1:{port}",
-                           oid_str(control_oid(ControlColumn.VEH_CALL, 1))], capture_output=True, text=True, timeout=20)
-    assert done.returncode == 0, done.stderr
-    return int(done.stdout.rsplit("INTEGER: ", 1)[1])
-
-
 def vehcalls_applied(served: Served) -> list[int]:
     """Every VehCall value the served controller applied, in order, from its own log of SETs."""
     return [int(m[1]) for m in re.finditer(r"phaseControlGroupVehCall\.1 = (\d+)[^\n]*-> applied",
                                            served.log.read_text())]
-
-
-def short_config(tmp_path: Path) -> Path:
-    """The shipped config with a decision every 2 s, so that a wall-clock run commands soon and often."""
-    path = tmp_path / "short.toml"
-    text = (resources.files("hils.data") / DEFAULT_CONFIG_NAME).read_text(encoding="utf-8")
-    path.write_text(text.replace("control_interval = 10.0", "control_interval = 2.0"), encoding="utf-8")
-    return path
 
 
 def file_size_limit(size: int) -> Callable[[], None]:
@@ -65,7 +47,7 @@ def hils_run(tmp_path: Path, served: Served, *args: str, limit: int | None = Non
     url = f"snmp://127.0.0.1:{served.port}?community=private&version=2c"
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), os.environ.get("PYTHONPATH", "")])}
     return subprocess.Popen([sys.executable, "-m", "hils", "run", "--target", url, "--no-sumo", "--no-progress",
-                             "--out", str(tmp_path / "run"), "--config", str(short_config(tmp_path)), *args],
+                             "--out", str(tmp_path / "run"), "--config", str(short_interval_config(tmp_path)), *args],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path, env=env,
                             preexec_fn=None if limit is None else file_size_limit(limit))
 
@@ -337,7 +319,7 @@ def test_a_timeout_line_goes_above_the_status_line_which_is_drawn_again_under_it
 
     def on_reset(tb: Testbed, target) -> None:
         status.start(tb)
-        notices.start(tb)
+        tb.events.subscribe(notices)
 
     try:
         with Testbed(action_type="switch", agent="fixed-cycle", on_reset=on_reset) as tb, status.above():
