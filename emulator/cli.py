@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 from pathlib import Path
@@ -132,8 +133,9 @@ def _serve(args: argparse.Namespace) -> int:
 
     if args.ro_community == args.rw_community:
         raise SystemExit("hils emulator serve: --ro-community and --rw-community must differ")
-    if args.latency_ms < 0 or args.jitter_ms < 0:
-        raise SystemExit("hils emulator serve: --latency-ms and --jitter-ms must not be negative")
+    if not all(math.isfinite(ms) and ms >= 0 for ms in (args.latency_ms, args.jitter_ms)):
+        raise SystemExit(f"hils emulator serve: --latency-ms {args.latency_ms:g} --jitter-ms {args.jitter_ms:g}; "
+                         "allowed: finite milliseconds >= 0")
     v3_user = _v3_user(args)
     controllers = _controllers(args)
     options = ServeOptions(host=args.host, port=args.port, ro_community=args.ro_community,

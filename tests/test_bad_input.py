@@ -308,3 +308,10 @@ def test_a_set_of_unit_startup_flash_acts_at_the_next_power_up(paper_config: Int
     unit.step()
     assert mib.get_many([flash]) == (int(UnitFlashStatus.NOT_FLASH),)
     assert unit.controller.greens == {2, 6}  # the start-up intervals of the config
+
+
+@pytest.mark.parametrize("args", [["--latency-ms", "nan"], ["--jitter-ms", "inf"], ["--latency-ms", "-1"]])
+def test_the_served_emulator_refuses_a_latency_that_is_not_finite_milliseconds(args: list[str]) -> None:
+    with pytest.raises(SystemExit) as done:
+        main(["emulator", "serve", "--port", "0", *args])
+    assert "allowed: finite milliseconds >= 0" in str(done.value.code)
