@@ -13,8 +13,28 @@ Rules of this file
 - SNMPv3 (one USM user, HMAC-SHA-96 with or without AES-128) goes through
   pysnmp's own message processing and user-based security (:class:`_Usm`):
   nothing of v3 is decoded here. Its PDUs are SNMPv2 PDUs and are answered
-  by the same handlers as v2c; a request below the user's security level is
-  dropped, discovery and authentication failures get pysnmp's Reports.
+  by the same handlers as v2c; discovery, a request below the user's security
+  level and authentication failures get pysnmp's Reports (a request below the
+  level that pysnmp lets through all the same is dropped).
+- pysnmp is handed only what it can answer cheaply or must: a message is
+  screened first on its security header (:func:`emulator.ber.read_usm`, a few
+  microseconds, where pysnmp takes half a millisecond or more). An authentic
+  message of the user at its level (its HMAC checked here against the user's
+  key) goes through; one that draws a Report (discovery, an unknown user, a
+  lower level, a wrong digest) goes through only within a :class:`ReportBudget`
+  shared by the process's agents; the rest is dropped at once: a foreign engine
+  ID (pysnmp would keep going and end in an error), or the agent's engine ID
+  with no user name (no step of RFC 3414 sends that, and pysnmp lets it through
+  as an unauthenticated request).
+- No per-request state outlives its datagram: pysnmp keeps a state per message
+  in its message processing and USM caches until the answer is sent, and never
+  frees the state of a message nobody answers (USM's cache has no expiry, the
+  other one expires on a timer this agent has no use for); both are emptied
+  after every datagram. A flood of refused messages therefore costs no memory.
+- A refused SNMPv3 request is logged as a warning with its reason (the usmStats
+  counter of the Report, or why it was dropped), at once for the first of its
+  kind and then at most once per :data:`WARN_EVERY` seconds with the count of
+  those left out, so that a flood does not flood the log.
 - :meth:`SnmpAgent.respond` turns one datagram into one answer (or None for a
   dropped datagram) synchronously and without I/O; it applies a SET to the MIB
   view at once. Only the endpoint sends, on an asyncio timer at the arrival
@@ -64,8 +84,11 @@ varbind before applying any.
 from __future__ import annotations
 
 import asyncio
+import hashlib
+import hmac
 import logging
 import random
+import time
 from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -80,10 +103,14 @@ from pysnmp.entity import config
 from pysnmp.entity.engine import SnmpEngine
 from pysnmp.error import PySnmpError
 from pysnmp.proto import api, rfc1905
+from pysnmp.proto.mpmod.cache import Cache as MessageStates
+from pysnmp.proto.secmod.cache import Cache as SecurityStates
+from pysnmp.proto.secmod.rfc3414 import localkey
 
-from emulator.ber import Header, HeaderError, encode_response, read_get, read_header
+from emulator.ber import Header, HeaderError, UsmHeader, encode_response, read_get, read_header, read_usm
 from emulator.mib import MibView, Value
 from hils.ntcip import Access, ErrorStatus, Latency, Oid, SnmpError, object_for, oid_str
+from hils.usm import UsmFailure
 
 log = logging.getLogger(__name__)
 
@@ -93,6 +120,15 @@ SNMP_VERSION_3 = 3
 _V3_LENGTH_MARGIN = 8
 #: Seconds between two ticks of USM's timer (see :meth:`_Usm.tick`).
 USM_TICK = 1.0
+#: The security model number of USM (RFC 3411).
+USM_MODEL = 3
+# msgFlags' two low bits (RFC 3412 6.4) -> securityLevel (RFC 3411): noAuthNoPriv 1, authNoPriv 2, authPriv 3.
+_LEVELS = {0: 1, 1: 2, 3: 3}
+#: SNMPv3 Reports a process's agents may send per second, and at once (see :class:`ReportBudget`).
+REPORTS_PER_S = 100.0
+REPORT_BURST = 100
+#: Seconds between two warnings of one kind of refused SNMPv3 request.
+WARN_EVERY = 10.0
 # The dispatcher wants a transport address to answer to; ours answers the datagram's sender itself.
 _NOWHERE = ("0.0.0.0", 0)
 
@@ -132,6 +168,9 @@ class DropReason(Enum):
     COMMUNITY = "unknown community"
     NOT_A_REQUEST = "not a request"  # a response, trap, inform or report PDU
     AUTHENTICATION = "refused by USM"  # SNMPv3 below the user's security level, or USM dropped it silently
+    ENGINE_ID = "foreign SNMPv3 engine ID"  # neither empty (discovery) nor this agent's
+    NO_USER = "SNMPv3 without a user name"  # with this agent's engine ID: no step of RFC 3414 sends that
+    REPORTS_SPENT = "SNMPv3 Reports over their rate"  # would have drawn a Report, with the budget spent
 
 
 class RequestKind(Enum):
@@ -163,7 +202,7 @@ class AgentStats:
     requests: Counter[RequestKind] = field(default_factory=Counter)
     errors: int = 0  # answers with a non-zero error status
     dropped: Counter[DropReason] = field(default_factory=Counter)
-    reports: int = 0  # SNMPv3 Reports sent: engine discovery, unknown user, wrong digest, out of time window
+    reports: Counter[UsmFailure] = field(default_factory=Counter)  # SNMPv3 Reports sent, by the counter they name
 
     @property
     def answered(self) -> int:
@@ -178,6 +217,51 @@ class _Drop(Exception):
     def __init__(self, reason: DropReason, detail: str) -> None:
         super().__init__(detail)
         self.reason = reason
+
+
+class ReportBudget:
+    """How many SNMPv3 Reports may still be sent: a token bucket of ``burst`` tokens refilled at ``per_second``.
+
+    A message that draws a Report costs pysnmp about a millisecond; a stream of them would take the loop
+    from the controller's tick. One budget serves every agent of a process (they share its loop)."""
+
+    def __init__(self, per_second: float = REPORTS_PER_S, burst: int = REPORT_BURST,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.per_second = per_second
+        self.burst = burst
+        self._clock = clock
+        self._tokens = float(burst)
+        self._at = clock()
+
+    def take(self) -> bool:
+        """Spend one Report if one is left."""
+        now = self._clock()
+        self._tokens = min(float(self.burst), self._tokens + (now - self._at) * self.per_second)
+        self._at = now
+        if self._tokens < 1.0:
+            return False
+        self._tokens -= 1.0
+        return True
+
+
+class _Warnings:
+    """Warnings of one kind at once, then at most one per ``every`` seconds with how many were left out."""
+
+    def __init__(self, every: float = WARN_EVERY, clock: Callable[[], float] = time.monotonic) -> None:
+        self.every = every
+        self._clock = clock
+        self._last: dict[Any, float] = {}
+        self._left_out: Counter[Any] = Counter()
+
+    def warn(self, kind: Any, message: str) -> None:
+        now = self._clock()
+        last = self._last.get(kind)
+        if last is not None and now - last < self.every:
+            self._left_out[kind] += 1
+            return
+        self._last[kind] = now
+        left_out = self._left_out.pop(kind, 0)
+        log.warning("%s%s", message, f" ({left_out} more like it in the last {now - last:.0f} s)" if left_out else "")
 
 
 @dataclass(frozen=True, slots=True)
@@ -201,11 +285,14 @@ class SnmpAgent:
 
     def __init__(self, view: MibView, *, ro_community: str = "public", rw_community: str = "private",
                  latency: Latency | None = None, seed: int | None = None,
-                 max_message_size: int = DEFAULT_MAX_MESSAGE_SIZE, v3_user: V3User | None = None) -> None:
+                 max_message_size: int = DEFAULT_MAX_MESSAGE_SIZE, v3_user: V3User | None = None,
+                 reports: ReportBudget | None = None) -> None:
+        """``reports``: the budget of SNMPv3 Reports, shared with the process's other agents (None: its own)."""
         if ro_community == rw_community:
             raise ValueError("the read-only and read-write communities must differ")
         self.view = view
-        self._usm = _Usm(v3_user) if v3_user is not None else None
+        self._usm = _Usm(v3_user, reports or ReportBudget()) if v3_user is not None else None
+        self._warnings = _Warnings()
         self.communities = {ro_community.encode(): False, rw_community.encode(): True}
         self.latency = latency or Latency(0.0)
         self.max_message_size = max_message_size
@@ -306,23 +393,41 @@ class SnmpAgent:
     def _respond_v3(self, datagram: bytes, source: str) -> bytes | None:
         """An SNMPv3 message through pysnmp's message processing and USM: a discovery or an
         authentication failure gets pysnmp's Report, a request at the user's level our answer."""
-        assert self._usm is not None
-        reports, received = self._usm.receive(datagram)
-        if received is None:
-            if not reports:
-                raise _Drop(DropReason.AUTHENTICATION, "refused by the user-based security model")
-            self.stats.reports += 1
-            return reports[0]
-        pdu = received.pdu
-        handler = self._handlers[SNMP_VERSION_3].get(pdu.tagSet)
-        if handler is None:
-            raise _Drop(DropReason.NOT_A_REQUEST, f"a {type(pdu).__name__} PDU")
-        varbinds = api.v2c.apiPDU.get_varbinds(pdu)
-        # The user may write: like the read-write community, it is the middleware's.
-        request = _Request(SNMP_VERSION_3, api.v2c, None, pdu, tuple(tuple(oid) for oid, _ in varbinds),
-                           tuple(value for _, value in varbinds), True, received)
-        handler(request, source)
-        return received.finish()
+        usm = self._usm
+        assert usm is not None
+        try:
+            header = read_usm(datagram)
+        except HeaderError as exc:
+            raise _Drop(DropReason.MALFORMED, f"SNMPv3: {exc}") from None
+        who = f"SNMPv3 request from {source or '?'} as user {header.user.decode(errors='replace')!r}"
+        try:
+            usm.admit(header, datagram)
+            reports, received = usm.receive(datagram)
+            if received is None:
+                failure = usm.failure
+                if not reports:
+                    raise _Drop(DropReason.AUTHENTICATION, f"{failure or 'refused by the user-based security model'}"
+                                                           ", no Report asked for")
+                if failure is not None:
+                    self.stats.reports[failure] += 1
+                    if failure is not UsmFailure.UNKNOWN_ENGINE_ID:  # discovery: how every manager starts
+                        self._warnings.warn(failure, f"{who} refused, answered with a Report: {failure}")
+                return reports[0]
+            pdu = received.pdu
+            handler = self._handlers[SNMP_VERSION_3].get(pdu.tagSet)
+            if handler is None:
+                raise _Drop(DropReason.NOT_A_REQUEST, f"a {type(pdu).__name__} PDU")
+            varbinds = api.v2c.apiPDU.get_varbinds(pdu)
+            # The user may write: like the read-write community, it is the middleware's.
+            request = _Request(SNMP_VERSION_3, api.v2c, None, pdu, tuple(tuple(oid) for oid, _ in varbinds),
+                               tuple(value for _, value in varbinds), True, received)
+            handler(request, source)
+            return received.finish()
+        except _Drop as drop:
+            self._warnings.warn(drop.reason, f"{who} dropped ({drop.reason.value}): {drop}")
+            raise
+        finally:
+            usm.forget()
 
     def _fast_get(self, datagram: bytes, header: Header) -> bytes | None:
         """The answer to a plain GET of objects that all exist, written by hand; None leaves the
@@ -522,24 +627,59 @@ class _Usm:
     its transport and MIB instrumentation: a datagram goes in, Reports and requests come out, and an
     answer PDU goes back in to be secured and encoded."""
 
-    def __init__(self, user: V3User) -> None:
+    def __init__(self, user: V3User, budget: ReportBudget) -> None:
         self.user = user
+        self.budget = budget
         self.engine = SnmpEngine()
         priv = config.USM_PRIV_CFB128_AES if user.priv_key else config.USM_PRIV_NONE
         config.add_v3_user(self.engine, user.name, config.USM_AUTH_HMAC96_SHA, user.auth_key, priv,
                            user.priv_key or None)
+        self.engine_id = self.engine.snmpEngineID.asOctets()
+        self._name = user.name.encode()
+        # The user's key localized to this engine (RFC 3414 A.2.2), as pysnmp keeps it for its own check.
+        self._auth_key = localkey.password_to_key_sha(univ.OctetString(user.auth_key),
+                                                      self.engine.snmpEngineID).asOctets()
         # The dispatcher only ever calls send_message on its transport: collect what it sends.
         self.engine.transport_dispatcher = self  # type: ignore[assignment]
         self._sent: list[bytes] = []
         self._received: list[_UsmRequest] = []
         self._datagram = b""
+        self.failure: UsmFailure | None = None  # why USM refused the last datagram, if it did
         self.engine.message_dispatcher.register_context_engine_id(
             b"", (rfc1905.GetRequestPDU.tagSet, rfc1905.GetNextRequestPDU.tagSet, rfc1905.GetBulkRequestPDU.tagSet,
                   rfc1905.SetRequestPDU.tagSet), self._process_pdu)
+        self.engine.observer.register_observer(self._refused, "rfc3412.prepareDataElements:sm-failure")
+
+    def admit(self, header: UsmHeader, datagram: bytes) -> None:
+        """Raise :class:`_Drop` unless pysnmp should see this message (see the rules of this file)."""
+        level = _LEVELS.get(header.flags & 3)
+        if header.security_model != USM_MODEL or level is None:
+            raise _Drop(DropReason.AUTHENTICATION, f"security model {header.security_model} and msgFlags "
+                                                   f"0x{header.flags:02x}: only USM, and privacy with authentication")
+        if header.engine_id == self.engine_id:
+            if not header.user:
+                raise _Drop(DropReason.NO_USER, "no user name with this agent's engine ID")
+            if header.user == self._name and level >= self.user.security_level and self._authentic(header, datagram):
+                return
+        elif header.engine_id:
+            raise _Drop(DropReason.ENGINE_ID, f"engine ID {header.engine_id.hex()}, this agent's is "
+                                              f"{self.engine_id.hex()}: the manager must discover it again")
+        if not self.budget.take():
+            raise _Drop(DropReason.REPORTS_SPENT, f"more than {self.budget.per_second:g} a second would draw a Report "
+                                                  "(discovery, unknown user, wrong level or digest)")
+
+    def _authentic(self, header: UsmHeader, datagram: bytes) -> bool:
+        """Whether the message's HMAC-SHA-96 is the user's (RFC 3414 6.3.2): computed over the message with its
+        digest zeroed."""
+        digest = datagram[header.digest]
+        if len(digest) != 12:
+            return False
+        zeroed = datagram[:header.digest.start] + bytes(12) + datagram[header.digest.stop:]
+        return hmac.compare_digest(hmac.new(self._auth_key, zeroed, hashlib.sha1).digest()[:12], digest)
 
     def receive(self, datagram: bytes) -> tuple[list[bytes], _UsmRequest | None]:
         """The Reports pysnmp sent for ``datagram`` and the request it carried at the user's level, if any."""
-        self._sent, self._received, self._datagram = [], [], datagram
+        self._sent, self._received, self._datagram, self.failure = [], [], datagram, None
         try:
             self.engine.message_dispatcher.receive_message(self.engine, udp.DOMAIN_NAME, _NOWHERE, datagram)
         except Exception as exc:
@@ -573,6 +713,15 @@ class _Usm:
         """Expire USM's time lines as a dispatcher's timer would (pysnmp keeps one entry per message until then)."""
         for model in self.engine.security_models.values():
             model.receive_timer_tick(self.engine, 0)
+
+    def forget(self) -> None:
+        """Drop every per-message state pysnmp kept: an answer is encoded within its datagram's turn, so none is
+        needed afterwards, and pysnmp never frees that of a message nobody answers."""
+        self.engine.message_processing_subsystems[SNMP_VERSION_3]._cache = MessageStates()
+        self.engine.security_models[USM_MODEL]._cache = SecurityStates()
+
+    def _refused(self, _engine: Any, _point: str, variables: dict[str, Any], _context: Any) -> None:
+        self.failure = UsmFailure.of(variables["statusInformation"].get("errorIndication"))
 
     def _process_pdu(self, _engine: Any, *args: Any) -> None:
         # (mpModel, securityModel, securityName, securityLevel, contextEngineId, contextName, pduVersion,

@@ -2,13 +2,17 @@
 
 Rules of this file
 ------------------
-- Two things only, both for speed; everything else is pyasn1's (through
+- Three things only, all for speed; everything else is pyasn1's (through
   pysnmp) in :mod:`emulator.agent`:
   1. the message header (outer SEQUENCE, version INTEGER and, for SNMPv1/v2c,
      the community OCTET STRING), read before anything else is decoded;
   2. the fast path of the poller's request: an SNMPv1/v2c GetRequest read
      whole, and its answer (a Response with INTEGER and OCTET STRING values,
-     no error) written.
+     no error) written;
+  3. what an SNMPv3 message says of its security (:func:`read_usm`: flags,
+     security model, engine ID, user name, where its digest lies), read before
+     pysnmp decodes it, so that the agent can turn away what USM would refuse
+     at a few bytes' cost instead of pysnmp's half millisecond.
 - Reading the header costs a few bytes of work whatever the datagram's size,
   so the agent checks version and community before it decodes the rest, and a
   stream of large datagrams with a wrong community costs it next to nothing.
@@ -22,7 +26,12 @@ Rules of this file
 
 An SNMPv1/v2c message is ``SEQUENCE { version INTEGER, community OCTET STRING,
 pdu }`` (RFC 1157, RFC 1901); an SNMPv3 one is ``SEQUENCE { version INTEGER,
-msgGlobalData SEQUENCE, ... }`` (RFC 3412): its header is the version only.
+msgGlobalData SEQUENCE { msgID, msgMaxSize INTEGER, msgFlags OCTET STRING,
+msgSecurityModel INTEGER }, msgSecurityParameters OCTET STRING, msgData }``
+(RFC 3412 6), its header the version only; with USM the security parameters
+wrap ``SEQUENCE { engineID OCTET STRING, boots INTEGER, time INTEGER, userName
+OCTET STRING, authenticationParameters OCTET STRING, privacyParameters OCTET
+STRING }`` (RFC 3414 2.4).
 """
 
 from __future__ import annotations
@@ -51,6 +60,46 @@ class Header:
     version: int  # the message's version field: 0 (v1), 1 (v2c), 3 (v3) or anything a sender put there
     community: bytes | None  # None for versions without a community
     end: int = field(default=0, compare=False)  # where the community ends (the PDU starts)
+
+
+@dataclass(frozen=True, slots=True)
+class UsmHeader:
+    """What an SNMPv3 message says of its security, read without decoding (or decrypting) the rest."""
+
+    flags: int  # msgFlags: bit 0 authentication, bit 1 privacy, bit 2 reportable
+    security_model: int  # 3 is USM
+    engine_id: bytes  # msgAuthoritativeEngineID: empty when the sender discovers it
+    user: bytes  # msgUserName
+    digest: slice  # where msgAuthenticationParameters lies in the datagram
+
+
+def read_usm(datagram: bytes) -> UsmHeader:
+    """The security header of an SNMPv3 message; :class:`HeaderError` if it is not one to the user name."""
+    end, pos = _element(datagram, 0, _SEQUENCE, "message")
+    if end != len(datagram):
+        raise HeaderError(f"the message SEQUENCE ends at byte {end} of {len(datagram)}")
+    pos, _ = _element(datagram, pos, _INTEGER, "version")
+    global_end, pos = _element(datagram, pos, _SEQUENCE, "msgGlobalData")
+    pos, _ = _element(datagram, pos, _INTEGER, "msgID")
+    pos, _ = _element(datagram, pos, _INTEGER, "msgMaxSize")
+    flags_end, flags_at = _element(datagram, pos, _OCTET_STRING, "msgFlags")
+    if flags_end - flags_at != 1:
+        raise HeaderError(f"msgFlags of {flags_end - flags_at} bytes, not 1")
+    model_end, model_at = _element(datagram, flags_end, _INTEGER, "msgSecurityModel")
+    if model_end != global_end or not 1 <= model_end - model_at <= 4:
+        raise HeaderError("msgGlobalData does not end with a msgSecurityModel INTEGER")
+    params_end, pos = _element(datagram, global_end, _OCTET_STRING, "msgSecurityParameters")
+    usm_end, pos = _element(datagram, pos, _SEQUENCE, "UsmSecurityParameters")
+    if usm_end != params_end:
+        raise HeaderError("msgSecurityParameters hold more than one SEQUENCE")
+    engine_end, engine_at = _element(datagram, pos, _OCTET_STRING, "msgAuthoritativeEngineID")
+    pos, _ = _element(datagram, engine_end, _INTEGER, "msgAuthoritativeEngineBoots")
+    pos, _ = _element(datagram, pos, _INTEGER, "msgAuthoritativeEngineTime")
+    user_end, user_at = _element(datagram, pos, _OCTET_STRING, "msgUserName")
+    digest_end, digest_at = _element(datagram, user_end, _OCTET_STRING, "msgAuthenticationParameters")
+    return UsmHeader(datagram[flags_at], int.from_bytes(datagram[model_at:model_end], "big", signed=True),
+                     bytes(datagram[engine_at:engine_end]), bytes(datagram[user_at:user_end]),
+                     slice(digest_at, digest_end))
 
 
 def read_header(datagram: bytes) -> Header:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 from pathlib import Path
@@ -12,6 +13,7 @@ from hils import config as config_mod
 from hils.config import IntersectionConfig
 from hils.ntcip import AUTH_KEY_ENV, PRIV_KEY_ENV
 from hils.scenario import SCENARIOS, load_scenario
+from hils.usm import services_missing
 
 if TYPE_CHECKING:
     from emulator.agent import V3User
@@ -96,9 +98,13 @@ def _v3_user(args: argparse.Namespace) -> V3User | None:
     if not auth_key:
         raise SystemExit(f"hils emulator serve: --v3-user needs --v3-auth-key (or ${AUTH_KEY_ENV})")
     try:
-        return V3User(args.v3_user, auth_key, priv_key)
+        user = V3User(args.v3_user, auth_key, priv_key)
     except ValueError as exc:
         raise SystemExit(f"hils emulator serve: {exc}") from None
+    missing = services_missing(privacy=bool(priv_key))
+    if missing:
+        raise SystemExit(f"hils emulator serve: --v3-user {args.v3_user}: {missing}")
+    return user
 
 
 def _controllers(args: argparse.Namespace) -> list[tuple[str | None, IntersectionConfig]]:
@@ -127,8 +133,9 @@ def _serve(args: argparse.Namespace) -> int:
 
     if args.ro_community == args.rw_community:
         raise SystemExit("hils emulator serve: --ro-community and --rw-community must differ")
-    if args.latency_ms < 0 or args.jitter_ms < 0:
-        raise SystemExit("hils emulator serve: --latency-ms and --jitter-ms must not be negative")
+    if not all(math.isfinite(ms) and ms >= 0 for ms in (args.latency_ms, args.jitter_ms)):
+        raise SystemExit(f"hils emulator serve: --latency-ms {args.latency_ms:g} --jitter-ms {args.jitter_ms:g}; "
+                         "allowed: finite milliseconds >= 0")
     v3_user = _v3_user(args)
     controllers = _controllers(args)
     options = ServeOptions(host=args.host, port=args.port, ro_community=args.ro_community,

@@ -171,7 +171,8 @@ class DelayedController:
             out[p.column] = p.phases
         return out
 
-    # Writable objects of the unit go to the controller itself (the backup time through set_backup_time).
+    # Writable objects of the unit go to the controller itself (the backup time through set_backup_time): an
+    # attribute set on this wrapper would shadow the controller's and change nothing it does.
     @property
     def pattern(self) -> int:
         return self.controller.pattern
@@ -179,6 +180,15 @@ class DelayedController:
     @pattern.setter
     def pattern(self, value: int) -> None:
         self.controller.pattern = value
+
+    @property
+    def startup_flash(self) -> int:
+        """unitStartUpFlash (s): the flash the controller shows when power is restored, from its next power-up."""
+        return self.controller.startup_flash
+
+    @startup_flash.setter
+    def startup_flash(self, value: int) -> None:
+        self.controller.startup_flash = value
 
     def __getattr__(self, name: str) -> Any:
         # Only reached for attributes not defined above: status from the image, the rest from the controller.

@@ -32,7 +32,7 @@ from enum import Enum
 from pathlib import Path
 from typing import TextIO
 
-from emulator.agent import AgentStats, DropReason, RequestKind, SnmpAgent, V3User
+from emulator.agent import AgentStats, DropReason, ReportBudget, RequestKind, SnmpAgent, V3User
 from emulator.controller import TICK, Change, Controller
 from emulator.delays import DelayedController
 from emulator.mib import MibView
@@ -134,7 +134,9 @@ class ServeSummary:
             return ", ".join(f"{k.value} {counts[k]}" for k in kinds if counts[k]) or "none"
 
         t, k = self.traffic, self.ticks
-        reports = f", {t.reports} SNMPv3 reports" if t.reports else ""
+        reports = (f", {t.reports.total()} SNMPv3 reports ("
+                   + ", ".join(f"{failure.value} {n}" for failure, n in t.reports.most_common()) + ")"
+                   if t.reports else "")
         by = f" by {self.controllers} controllers" if self.controllers > 1 else ""
         return (f"served {t.answered} requests{by} ({parts(t.requests, RequestKind)}), {t.errors} answered with an "
                 f"error{reports}; dropped {t.total_dropped} datagrams ({parts(t.dropped, DropReason)}); "
@@ -144,14 +146,15 @@ class ServeSummary:
 class ServedController:
     """One controller model behind its delays, its MIB view and the SNMP agent over it."""
 
-    def __init__(self, config: IntersectionConfig, options: ServeOptions, trace: TextIO | None = None) -> None:
+    def __init__(self, config: IntersectionConfig, options: ServeOptions, trace: TextIO | None = None,
+                 reports: ReportBudget | None = None) -> None:
         self.config = config
         self._trace = trace
         self.controller = Controller(config, on_change=self._on_change)
         self.unit = DelayedController(self.controller, config.emulator)
         self.view = MibView(self.unit)
         self.agent = SnmpAgent(self.view, ro_community=options.ro_community, rw_community=options.rw_community,
-                               latency=options.latency, seed=options.seed, v3_user=options.v3_user)
+                               latency=options.latency, seed=options.seed, v3_user=options.v3_user, reports=reports)
 
     def _on_change(self, change: Change) -> None:
         log.debug("tick %d: ring %d phase %s %s", change.tick, change.ring, change.phase, change.interval.value)
@@ -183,7 +186,9 @@ class EmulatorServer:
         if self.options.trace is not None and len(configs) > 1:
             raise ServeError(f"--trace records one controller, not {len(configs)}; allowed: --trace with --count 1")
         self._trace = self.options.trace.open("w", buffering=1) if self.options.trace else None
-        self.controllers = tuple(ServedController(config, self.options, self._trace) for config in configs)
+        # The agents share the process's loop, so they share one budget of SNMPv3 Reports too.
+        reports = ReportBudget()
+        self.controllers = tuple(ServedController(config, self.options, self._trace, reports) for config in configs)
         self.ticker = WallClockTicker(*(served.unit for served in self.controllers))
         self._ticking: asyncio.Task[None] | None = None
 
@@ -232,7 +237,7 @@ def _total(stats: Iterable[AgentStats]) -> AgentStats:
         out.requests.update(st.requests)
         out.dropped.update(st.dropped)
         out.errors += st.errors
-        out.reports += st.reports
+        out.reports.update(st.reports)
     return out
 
 

@@ -16,7 +16,7 @@ from typing import Any, Protocol, runtime_checkable
 
 from hils.actions import ActionType
 from hils.config import IntersectionConfig, Pair
-from hils.errors import UserError
+from hils.errors import STOPS, AgentFailed, UserError, described
 from hils.ntcip import SignalState
 from hils.webster import webster_plan
 
@@ -48,6 +48,13 @@ class AgentError(UserError, TypeError):
     """A class that cannot serve as an agent, or an agent spec that does not load."""
 
 
+def _issues_only(name: str, allowed: ActionType, action_type: ActionType | str) -> None:
+    """Refuse a built-in agent an action type it does not issue, saying which it does."""
+    if ActionType(action_type) is not allowed:
+        raise AgentError(f"the {name} agent issues phase {allowed.value} actions only (--action-type "
+                         f"{allowed.value}), not {ActionType(action_type).value}")
+
+
 class RandomAgent:
     """Uniformly random actions of one type (a baseline, and a fuzzer of the middleware)."""
 
@@ -71,8 +78,7 @@ class FixedCycleAgent:
 
     def __init__(self, config: IntersectionConfig, action_type: ActionType | str = ActionType.SWITCH,
                  seed: int = 0) -> None:
-        if ActionType(action_type) is not ActionType.SWITCH:
-            raise AgentError("the fixed-cycle agent issues phase switch actions only (--action-type switch)")
+        _issues_only("fixed-cycle", ActionType.SWITCH, action_type)
 
     def act(self, observation: Observation) -> int:
         return 1
@@ -87,8 +93,7 @@ class MaxPressureAgent:
 
     def __init__(self, config: IntersectionConfig, action_type: ActionType | str = ActionType.SELECTION,
                  seed: int = 0) -> None:
-        if ActionType(action_type) is not ActionType.SELECTION:
-            raise AgentError("the max-pressure agent issues phase selection actions only (--action-type selection)")
+        _issues_only("max-pressure", ActionType.SELECTION, action_type)
         self.pairs = config.pairs
 
     def act(self, observation: Observation) -> Pair:
@@ -111,8 +116,7 @@ class QueueProportionalAgent:
 
     def __init__(self, config: IntersectionConfig, action_type: ActionType | str = ActionType.DURATION,
                  seed: int = 0, saturation: int = 20) -> None:
-        if ActionType(action_type) is not ActionType.DURATION:
-            raise AgentError("the queue-proportional agent issues phase duration actions only (--action-type duration)")
+        _issues_only("queue-proportional", ActionType.DURATION, action_type)
         self.saturation = saturation
 
     def act(self, observation: Observation) -> float:
@@ -139,8 +143,7 @@ class WebsterAgent:
 
     def __init__(self, config: IntersectionConfig, action_type: ActionType | str = ActionType.DURATION,
                  seed: int = 0) -> None:
-        if ActionType(action_type) is not ActionType.DURATION:
-            raise AgentError("the webster agent issues phase duration actions only (--action-type duration)")
+        _issues_only("webster", ActionType.DURATION, action_type)
         self.config = config
         self.plan = webster_plan(config)
 
@@ -191,10 +194,20 @@ def load_agent(spec: str, config: IntersectionConfig, action_type: ActionType | 
     if not callable(getattr(cls, "act", None)):
         raise AgentError(f"agent {spec!r} does not fit the agent protocol: it has no act(observation) method")
     try:
-        agent = cls(config, action_type, seed)
+        inspect.signature(cls).bind(config, action_type, seed)
     except TypeError as exc:
         raise AgentError(f"agent {spec!r} does not fit the agent protocol: its constructor must take "
                          f"(config, action_type, seed): {exc}") from None
+    except ValueError:
+        pass  # a class whose signature Python cannot tell (written in C): its constructor answers for itself
+    try:
+        agent = cls(config, action_type, seed)
+    except AgentError:
+        raise  # the agent's own refusal (a built-in asked for an action type it does not issue)
+    except STOPS:
+        raise
+    except BaseException as exc:
+        raise AgentFailed(f"agent {spec!r} could not start: its constructor raised {described(exc)}") from exc
     declared = getattr(agent, "action_type", None)
     try:
         declared = ActionType(declared)

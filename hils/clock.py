@@ -46,6 +46,7 @@ from typing import Any, Protocol
 import numpy as np
 import simpy
 
+from hils.errors import STOPS
 from hils.fastpath import StepCost, modeled_cost
 
 __all__ = ["Answer", "Clock", "LatenessStats", "LatenessSummary", "VirtualClock", "WallClockDriver"]
@@ -106,7 +107,9 @@ class VirtualClock:
         answer = Answer(self.env.now)
         try:
             answer.settle(self.env.now, fn(*args))
-        except Exception as exc:
+        except STOPS:
+            raise
+        except BaseException as exc:  # SystemExit too: an agent does not end the process
             answer.settle(self.env.now, error=exc)
         return answer
 
@@ -273,7 +276,7 @@ class WallClockDriver:
         def call() -> None:
             try:
                 outcome = (fn(*args), None)
-            except Exception as exc:
+            except BaseException as exc:  # SystemExit too: an agent does not end the process
                 outcome = (None, exc)
             self.loop.call_soon_threadsafe(self.deliver, answer.event, outcome)
 

@@ -11,8 +11,11 @@ from __future__ import annotations
 import argparse
 import contextlib
 import logging
+import math
+import os
 import signal
 import sys
+import tempfile
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -21,13 +24,15 @@ from typing import Any
 from hils import config as config_mod
 from hils import plots, summary
 from hils.actions import ActionType
-from hils.errors import UserError
+from hils.config import ConfigError, IntersectionConfig
+from hils.errors import AgentFailed, RunInterrupted, UserError
+from hils.events import Kind
 from hils.intersection import Intersection
 from hils.scenario import SCENARIOS, Scenario, load_scenario, load_targets
-from hils.status import StatusLine
+from hils.status import Notices, StatusLine
 from hils.sumo_net import scenario_config
 from hils.targets import VIRTUAL
-from hils.testbed import DEFAULT_AGENTS, AgentFailed, RunInterrupted, RunSpec, Testbed
+from hils.testbed import BLIND_AGENTS, DEFAULT_AGENTS, RunSpec, Testbed, reason_of
 from hils.webster import webster_plan
 
 log = logging.getLogger(__name__)
@@ -45,6 +50,18 @@ One flag to real hardware: --target snmp://HOST:PORT?community=NAME&version=1|2c
 runs the same agent and middleware at wall-clock time against that controller
 (or against `hils emulator serve`). For an Econolite Cobalt: version=1, port 501,
 community = the controller's user name (default administrator).
+
+A TIMEOUT is one console line when it happens, and its recovery another. Every
+way the run ends clears the calls it placed first, and a last line says how it
+ended. Exit status:
+  0    the duration passed, every controller under control to the end
+  1    an error: the agent failed, or the event log or the outputs could not be
+       written (the calls are cleared all the same)
+  2    bad input, refused before the run started
+  3    a controller was lost: the run ended in an unrecovered TIMEOUT, or its
+       calls could not be cleared (they stay until the controller's backup time)
+  130  interrupted (Ctrl-C)
+  143  terminated (SIGTERM)
 """
 
 
@@ -57,16 +74,19 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "(green time of the next pair); default: selection")
     p.add_argument("--agent", metavar="NAME|MODULE:CLASS",
                    help="built-in agent (random, fixed-cycle, max-pressure, queue-proportional, webster; actuated: "
-                        "none, the controller runs on its detectors) or your own "
-                        "package.module:Class; default: " + ", ".join(f"{k.value} -> {v}"
-                                                                      for k, v in DEFAULT_AGENTS.items()))
+                        "none, the controller runs on its detectors) or your own package.module:Class; default "
+                        "per action type: " + ", ".join(f"{k.value} -> {v}" for k, v in DEFAULT_AGENTS.items())
+                        + "; with --no-sumo (no traffic to observe): "
+                        + ", ".join(f"{k.value} -> {v}" for k, v in BLIND_AGENTS.items()))
     p.add_argument("--duration", type=float, default=3600.0, metavar="S", help="simulated seconds (3600)")
     p.add_argument("--seed", type=int, default=0, help="seed of SUMO, the emulator's latency model and random "
                                                        "agents; a virtual-time run is reproducible from it (0)")
     p.add_argument("--scenario", metavar="NAME|FILE",
                    help="a scenario of one or several signalised intersections, each controller with its own "
                         f"config and agent: {', '.join(SCENARIOS)} (corridor: four on an arterial; grid4x4: "
-                        "sixteen) or your own .scenario.toml; default: the shipped four-leg")
+                        "sixteen), resco:NAME (RESCO's benchmark: grid4x4, arterial4x4, cologne1/3/8, "
+                        "ingolstadt1/7/21; pip install 'hils[resco]') or your own .scenario.toml; default: the "
+                        "shipped four-leg")
     p.add_argument("--target", metavar="URL|FILE", help="snmp://HOST:PORT?community=NAME&version=1|2c: run at "
                                                         "wall-clock time against a real controller or "
                                                         "`hils emulator serve`; for a scenario of several "
@@ -94,7 +114,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="serve a live dashboard of the run on http://127.0.0.1:PORT/ (wall-clock runs; 0: any "
                         "free port); watch a finished or virtual-time run with `hils view RUN_DIR`")
     p.add_argument("--dashboard-control", action="store_true",
-                   help="let the dashboard's page recover the manager from TIMEOUT (default: read-only)")
+                   help="let the dashboard's page recover the manager from TIMEOUT (default: read-only); only the "
+                        "page opened from the URL printed at start may: it carries the run's secret (?token=...)")
     p.set_defaults(func=run_command)
 
 
@@ -102,21 +123,46 @@ def _window(text: str) -> tuple[float, float]:
     try:
         a, b = (float(x) for x in text.split(":"))
     except ValueError:
-        raise UsageError(f"--plot-window must be START:END in seconds, got {text!r}") from None
+        a = b = math.nan
+    if not (math.isfinite(a) and math.isfinite(b) and 0 <= a < b):
+        raise UsageError(f"--plot-window is {text!r}; allowed: START:END in simulated seconds, 0 <= START < END")
     return a, b
 
 
-def run_command(args: argparse.Namespace) -> int:
+#: The seeds a run takes: SUMO's are 32-bit signed integers, and gymnasium's are never negative.
+MAX_SEED = 2**31 - 1
+
+
+def _check_values(args: argparse.Namespace) -> None:
+    """Refuse the numbers a run cannot take, naming the option and what it allows."""
+    if not (math.isfinite(args.duration) and args.duration > 0):
+        raise UsageError(f"--duration is {args.duration:g}; allowed: a finite number of simulated seconds > 0")
+    if math.isnan(args.recover_after):
+        raise UsageError("--recover-after is nan; allowed: seconds >= 0, or negative for never")
+    if not 0 <= args.seed <= MAX_SEED:
+        raise UsageError(f"--seed is {args.seed}; allowed: 0 to {MAX_SEED}")
+
+
+def _config(args: argparse.Namespace) -> IntersectionConfig:
+    """The intersection config with the options that change it; a bad option value is blamed on the option."""
     cfg = config_mod.load(args.config)
-    if args.poll_hz is not None:
-        cfg = cfg.with_middleware(poll_hz=args.poll_hz)
+    if args.poll_hz is None:
+        return cfg
+    try:
+        return cfg.with_middleware(poll_hz=args.poll_hz)
+    except ConfigError as exc:
+        raise UsageError(f"--poll-hz {exc.message} (polls per second)") from None
+
+
+def run_command(args: argparse.Namespace) -> int:
+    _check_values(args)
+    cfg = _config(args)
     window = _window(args.plot_window)
-    if not args.duration > 0:
-        raise UsageError(f"--duration must be positive seconds, got {args.duration:g}")
     scenario = _scenario(args)
     dashboard = _dashboard(args)
     out = _run_folder(args.out, args.action_type)
     log_path = args.log or out / "events.jsonl"
+    _check_room(out, log_path)
     sumo_config = scenario_config(sumocfg=args.sumocfg, net=args.net, routes=args.routes, directory=out)
     spec = RunSpec(cfg, ActionType(args.action_type), agent=args.agent, duration=args.duration, seed=args.seed,
                    log_path=log_path, recover_after=None if args.recover_after < 0 else args.recover_after,
@@ -136,12 +182,15 @@ def run_command(args: argparse.Namespace) -> int:
     error: BaseException | None = None
     with _terminate_as_interrupt(), tb, _served(dashboard):
         try:
-            tb.reset_all()
-            if tb.mode == VIRTUAL and not args.no_progress:
-                with _progress(spec) as bar:
-                    tb.run(progress=lambda t: bar.update(t - bar.n))
-            else:
-                tb.run()
+            with status.above() if status is not None else contextlib.nullcontext():
+                tb.reset_all()
+                # From here on: a controller refused at start-up is said once, by the refusal itself.
+                tb.events.subscribe(Notices())
+                if tb.mode == VIRTUAL and not args.no_progress:
+                    with _progress(spec) as bar:
+                        tb.run(progress=lambda t: bar.update(t - bar.n))
+                else:
+                    tb.run()
         except (AgentFailed, RunInterrupted, KeyboardInterrupt) as exc:
             error = exc
         except UserError:
@@ -153,16 +202,33 @@ def run_command(args: argparse.Namespace) -> int:
         finally:
             if status is not None:
                 status.close()
-    outputs = [log_path.name if log_path.parent == out else str(log_path), "summary.json"]
-    s = summary.summarize({i.label: (i.tally, i.config) for i in tb.intersections.values()}, traffic=tb.traffic,
-                          wall_s=tb.wall_s)
-    outputs += _plots(tb, s, out, window)
-    summary.write(s, out / "summary.json")
+        if error is not None:
+            tb.finish(reason_of(error))  # a run that failed as it started is finished too (nothing stays called)
+    if not any(i.tally.kinds[Kind.RUN_STARTED] for i in tb.intersections.values()):
+        return _ending(tb, error, None, None)  # it never started: nothing to summarise
+    s, written, unwritten = _outputs(tb, out, log_path, window)
     print(summary.render(s))
     for warning in summary.warnings(s):
         print(warning)
-    print(f"Outputs in {out}/: {', '.join(outputs)}")
-    return _ending(tb.end_reason, error)
+    print(f"Outputs in {out}/: {', '.join(written) or 'none'}")
+    return _ending(tb, error, s, unwritten)
+
+
+def _outputs(tb: Testbed, out: Path, log_path: Path, window: tuple[float, float]
+             ) -> tuple[dict[str, Any], list[str], str | None]:
+    """The run's summary, and the files written (the log, summary.json, plots); the last is why the others could
+    not be written (a full disk: the console still gets the summary), or None."""
+    log_name = log_path.name if log_path.parent == out else str(log_path)
+    written = [] if tb.events.failure else [log_name]
+    s = summary.summarize({i.label: (i.tally, i.config) for i in tb.intersections.values()}, traffic=tb.traffic,
+                          wall_s=tb.wall_s)
+    try:
+        summary.write(s, out / "summary.json")
+        written.append("summary.json")
+        written += _plots(tb, s, out, window)
+    except OSError as exc:
+        return s, written, f"{exc.filename}: {exc.strerror or exc}"
+    return s, written, None
 
 
 def _plots(tb: Testbed, s: dict[str, Any], out: Path, window: tuple[float, float]) -> list[str]:
@@ -273,23 +339,61 @@ class UsageError(UserError):
     """A command-line mistake: one line on stderr, exit status 2."""
 
 
-#: Exit status per way a run ends (0 only for a normal end).
+#: Exit status per way a run ends (0 only for a normal end); see :data:`RUN_EPILOG`.
 EXIT_STATUS = {"duration": 0, "interrupted": 130, "terminated": 143, "agent_error": 1, "error": 1}
+#: A controller lost: the run ended in an unrecovered TIMEOUT, or its calls could not be cleared.
+LOST = 3
 
 
-def _ending(reason: str | None, error: BaseException | None) -> int:
-    """Say how the run ended (one line, stderr for anything but a normal end) and return the exit status."""
-    if reason == "duration" and error is None:
+def _ending(tb: Testbed, error: BaseException | None, s: dict[str, Any] | None, unwritten: str | None) -> int:
+    """Say how the run ended (one line, on stderr for anything but a normal end) and return the exit status."""
+    reason = tb.end_reason or "error"
+    lost = summary.lost(s) if s is not None else []
+    failure = tb.events.failure if tb.events is not None else None
+    if reason == "duration" and error is None and not lost and unwritten is None and failure is None:
         print("Run ended: its duration passed.")
         return 0
     cause = error.__cause__ if isinstance(error, AgentFailed) and error.__cause__ else error
-    how = {"interrupted": "interrupted (Ctrl-C)", "terminated": "terminated (SIGTERM)",
-           "agent_error": f"the agent failed: {error}", }.get(reason or "error", f"error: {cause}")
-    print(f"hils run: run ended early, {how}; calls cleared, outputs written (use -v for a traceback)",
-          file=sys.stderr)
+    if s is None:
+        how = f"the run did not start: {error}"
+    elif reason == "duration":
+        how = "its duration passed" + (", but the controller was lost" if lost else "")
+    else:
+        how = "run ended early, " + {"interrupted": "interrupted (Ctrl-C)", "terminated": "terminated (SIGTERM)",
+                                     "agent_error": f"the agent failed: {error}"}.get(reason, f"error: {cause}")
+    parts = [how]
+    if failure is not None and failure is not cause and str(failure) != str(cause):
+        parts.append(f"error: {failure}")  # the log failed as the run was ending
+    parts += lost
+    if s is not None:
+        calls = summary.cleared(s)
+        if calls is not False:  # not cleared: a line of `lost` says so
+            parts.append("calls cleared" if calls else "no call was placed")
+        parts.append(f"summary and plots not written: {unwritten}" if unwritten else "outputs written")
+    if reason in ("agent_error", "error"):
+        parts.append("use -v for a traceback")
+    print(f"hils run: {'; '.join(parts)}", file=sys.stderr)
     if isinstance(error, AgentFailed) and cause is not error:
         log.debug("agent traceback", exc_info=cause)
-    return EXIT_STATUS.get(reason or "error", 1)
+    if reason in ("interrupted", "terminated"):
+        return EXIT_STATUS[reason]
+    if lost:
+        return LOST
+    return 1 if failure is not None or unwritten is not None else EXIT_STATUS.get(reason, 1)
+
+
+def _check_room(out: Path, log_path: Path) -> None:
+    """Refuse, before anything is sent to a controller, a run whose outputs cannot be written at all: a full disk,
+    a file size limit that allows nothing, a folder that is not writable, a --log that is a folder."""
+    if log_path.is_dir():
+        raise UsageError(f"--log {log_path} is a folder; allowed: the path of a file")
+    for folder in dict.fromkeys((out, log_path.parent)):
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+            with tempfile.TemporaryFile(dir=folder) as probe:
+                os.write(probe.fileno(), b"\n")
+        except OSError as exc:
+            raise UsageError(f"no room for the run's outputs in {folder}: {exc.strerror or exc}") from None
 
 
 def _run_folder(given: Path | None, action_type: str) -> Path:
@@ -326,8 +430,13 @@ def _terminate_as_interrupt() -> Iterator[None]:
         signal.signal(signal.SIGTERM, previous)
 
 
-def _progress(spec: RunSpec):
+@contextlib.contextmanager
+def _progress(spec: RunSpec) -> Iterator[Any]:
+    """A progress bar of the simulated time, with the console's log lines written above it."""
     from tqdm import tqdm
+    from tqdm.contrib.logging import logging_redirect_tqdm
 
-    return tqdm(total=spec.duration, unit="sim s", desc=f"{spec.action_type.value}",
-                bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f} sim s [{elapsed}<{remaining}]")
+    with tqdm(total=spec.duration, unit="sim s", desc=f"{spec.action_type.value}",
+              bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f} sim s [{elapsed}<{remaining}]") as bar, \
+            logging_redirect_tqdm():
+        yield bar

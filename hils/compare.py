@@ -1,7 +1,7 @@
 """Comparing agents: the figures of several agents over several seeds, each with its 95 % confidence interval.
 
 The runs are a sweep (:mod:`hils.sweep`: one `hils run` per agent and seed, in parallel processes or on
-Ray); this module only aggregates them. Per agent and figure: the mean over the seeds and the half width
+Ray); this module only aggregates them. Per scenario, agent and figure: the mean over the seeds and the half width
 of its 95 % confidence interval, Student's t with n - 1 degrees of freedom (seeds are independent runs of
 the same demand; with one seed there is no interval and the table says so).
 """
@@ -20,13 +20,21 @@ from hils.sweep import CellResult
 _T95 = (12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228, 2.201, 2.179, 2.160, 2.145, 2.131,
         2.120, 2.110, 2.101, 2.093, 2.086, 2.080, 2.074, 2.069, 2.064, 2.060, 2.056, 2.052, 2.048, 2.045, 2.042)
 
-#: The figures compared, with how the table and the plot name them.
+#: The figures compared, with how the plot names them: RESCO's four (as RL papers report them, from SUMO's
+#: tripinfo: :mod:`hils.resco_metrics`), then hils' own.
 FIGURES = {
+    "resco_delay_s": "RESCO delay (s)",
+    "resco_trip_time_s": "RESCO trip time (s)",
+    "resco_waiting_time_s": "RESCO waiting time (s)",
+    "resco_queue": "RESCO queue (vehicles)",
     "mean_delay_s": "mean delay (s)",
     "arrived": "throughput (vehicles arrived)",
     "waiting_to_enter": "waiting to enter (vehicles)",
     "max_queue": "max queue (vehicles)",
 }
+_LABELS = {"resco_delay_s": "RESCO delay s", "resco_trip_time_s": "trip time s", "resco_waiting_time_s": "waiting s",
+           "resco_queue": "RESCO queue", "mean_delay_s": "mean delay s", "arrived": "arrived",
+           "waiting_to_enter": "waiting to enter", "max_queue": "max queue"}
 
 
 @dataclass(frozen=True, slots=True)
@@ -55,20 +63,25 @@ class Estimate:
         return f"{self.mean:.{digits}f}" + ("" if self.half_width is None else f" ± {self.half_width:.{digits}f}")
 
 
-def aggregate(results: Sequence[CellResult]) -> dict[str, dict[str, Estimate]]:
-    """Per agent (in the order first seen), per figure, including each approach's max queue."""
-    by_agent: dict[str, list[CellResult]] = {}
+Table = dict[str, dict[str, Estimate]]
+
+
+def aggregate(results: Sequence[CellResult]) -> dict[str, Table]:
+    """Per scenario, per agent (each in the order first seen), per figure, including each approach's max queue
+    (a scenario of one light)."""
+    by_cell: dict[str, dict[str, list[CellResult]]] = {}
     for r in results:
-        by_agent.setdefault(r.cell.agent, []).append(r)
-    approaches = sorted({k for r in results for k in r.figures if k.startswith("max_queue_")})
-    out: dict[str, dict[str, Estimate]] = {}
-    for agent, runs in by_agent.items():
-        ok = [r for r in runs if r.ok]
-        out[agent] = {name: Estimate.of([r.figures.get(name) for r in ok]) for name in (*FIGURES, *approaches)}
+        by_cell.setdefault(r.cell.scenario, {}).setdefault(r.cell.agent, []).append(r)
+    out: dict[str, Table] = {}
+    for scenario, by_agent in by_cell.items():
+        runs = [r for agent_runs in by_agent.values() for r in agent_runs]
+        approaches = sorted({k for r in runs for k in r.figures if k.startswith("max_queue_")})
+        out[scenario] = {agent: {name: Estimate.of([r.figures.get(name) for r in agent_runs if r.ok])
+                                 for name in (*FIGURES, *approaches)} for agent, agent_runs in by_agent.items()}
     return out
 
 
-def render(table: dict[str, dict[str, Estimate]], failed: int = 0) -> str:
+def render(table: Table, failed: int = 0) -> str:
     names = list(next(iter(table.values())))
     width = max(14, *(len(a) for a in table))
     head = f"{'agent':<{width}}  " + "  ".join(f"{_label(n):>18}" for n in names)
@@ -81,17 +94,16 @@ def render(table: dict[str, dict[str, Estimate]], failed: int = 0) -> str:
 
 
 def _label(name: str) -> str:
-    return name.replace("max_queue_", "queue ") if name.startswith("max_queue_") else {
-        "mean_delay_s": "mean delay s", "arrived": "arrived", "waiting_to_enter": "waiting to enter",
-        "max_queue": "max queue"}[name]
+    return name.replace("max_queue_", "queue ") if name.startswith("max_queue_") else _LABELS[name]
 
 
-def plot(table: dict[str, dict[str, Estimate]], path: Path, title: str) -> None:
-    """One panel per figure: a bar per agent with its 95 % confidence interval."""
+def plot(table: Table, path: Path, title: str) -> None:
+    """One panel per figure (RESCO's four above, hils' below): a bar per agent with its 95 % confidence interval."""
     plt = pyplot()
     agents = list(table)
-    fig, axes = plt.subplots(1, len(FIGURES), figsize=(3.2 * len(FIGURES), 3.6))
-    for ax, (name, label) in zip(axes, FIGURES.items(), strict=True):
+    columns = len(FIGURES) // 2
+    fig, axes = plt.subplots(2, columns, figsize=(3.2 * columns, 7.2))
+    for ax, (name, label) in zip(axes.flat, FIGURES.items(), strict=True):
         means = [table[a][name].mean or 0.0 for a in agents]
         errors = [table[a][name].half_width or 0.0 for a in agents]
         ax.bar(range(len(agents)), means, yerr=errors, capsize=4, color="#4c78a8")

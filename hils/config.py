@@ -290,7 +290,7 @@ def _phase(number: int, raw: Any, defaults: Mapping[str, Any], ring: int, source
     yellow = _number(merged, "yellow", where("yellow"), source, low=0, low_open=True, high=25.5, step=0.1)
     red_clear = _number(merged, "red_clear", where("red_clear"), source, low=0, low_open=True, high=25.5, step=0.1)
     startup = merged.get("startup", "off")
-    if startup not in _STARTUP_NAMES:
+    if not isinstance(startup, str) or startup not in _STARTUP_NAMES:
         raise ConfigError(source, f"{w}startup", f"is {startup!r}; allowed: {', '.join(_STARTUP_NAMES)}")
     tenth = {"low": 0, "high": 25.5, "step": 0.1}
     passage = _number(merged, "passage", where("passage"), source, 0, **tenth)
@@ -519,7 +519,7 @@ def _detectors(raw: Any, phases: Mapping[int, Phase], source: str) -> dict[str, 
                 lanes[int(key)] = lane
         else:
             phase = value
-        if isinstance(phase, bool) or phase not in phases:
+        if isinstance(phase, bool) or not isinstance(phase, int) or phase not in phases:
             raise ConfigError(source, where, f"calls phase {phase!r}; allowed: the configured phases "
                                              f"{', '.join(map(str, phases))}")
         out[int(key)] = phase

@@ -479,9 +479,11 @@ class Manager:
         out.append(Dropped(ev.action_id, self.mode.log_name))
 
     def _answered(self, ev: PollAnswered, out: list[Effect]) -> None:
+        # the first answer after failed polls, in poll order: one failed between the state shown and this one
+        after_failures = self.polls_failing and any(self.newest_poll < i < ev.poll_id for i in self._failed)
         self.newest_poll = ev.poll_id
         self.polls_answered += 1
-        out.append(ShowSignal(ev.poll_id, ev.state))
+        out.append(ShowSignal(ev.poll_id, ev.state, after_failures))
 
     def _late(self, ev: PollAnswered, out: list[Effect]) -> None:
         self.polls_late += 1

@@ -319,10 +319,12 @@ class Dropped:
 
 @dataclass(frozen=True, slots=True)
 class ShowSignal:
-    """What poll ``poll_id`` read is the signal state now (the cache, SUMO, the agents)."""
+    """What poll ``poll_id`` read is the signal state now (the cache, SUMO, the agents); ``after_failures``: the
+    first answer after failed polls (the state is known again)."""
 
     poll_id: int
     state: SignalState
+    after_failures: bool = False
 
 
 @dataclass(frozen=True, slots=True)

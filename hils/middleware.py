@@ -90,7 +90,7 @@ from hils.ntcip import (
 from hils.poller import Poller, SignalCache
 from hils.preflight import ControllerReading, Verdict, judge
 from hils.timegrid import Grid
-from hils.transport import CommunicationTimeout, Transport, TransportError
+from hils.transport import CommunicationTimeout, SecurityRefused, Transport, TransportError
 
 __all__ = ["READBACK_PERIOD", "Middleware", "Received", "Submission"]
 
@@ -133,7 +133,7 @@ class Middleware:
                  take_over: bool = False) -> None:
         params = config.middleware
         self.where = where  # how messages name the controller (HOST:PORT)
-        self.community = community
+        self.community = community  # SNMPv1/v2c's; "" over SNMPv3 (none), None in process
         self.startup_error: str | None = None  # why the start-up read or write failed, if it did
         self.verdict = Verdict((), ())  # the start-up checks' refusals and warnings
         self.env = env
@@ -298,8 +298,10 @@ class Middleware:
                 # The control objects are ours while we run: whatever someone else left is cleared,
                 # and this harmless SET shows whether the community may write.
                 yield self._logged_set(_cleared_control(self.config.groups), frozenset(), "startup", None)
-            except SnmpError as exc:
-                self.startup_error = _refusal_text(exc, self.where)
+            except (SnmpError, SecurityRefused) as exc:
+                # A refusal, not a loss: asking again gets the same answer.
+                self.startup_error = (_refusal_text(exc, self.where) if isinstance(exc, SnmpError)
+                                      else f"the start-up read or write failed: {exc}")
                 self._feed(StartupRefused(self.env.now, self.startup_error))
                 continue
             except TransportError as exc:
@@ -401,9 +403,11 @@ class Middleware:
             return
         self._feed(PollAnswered(self.env.now, poll_id, epoch, state))
 
-    def _show(self, state: SignalState, poll_id: int) -> None:
-        """Put what a read saw into the cache, with a ``poll`` record when it changes the state."""
-        if self.cache.snapshot is None or state != self.cache.snapshot.state:
+    def _show(self, state: SignalState, poll_id: int, *, logged: bool = False) -> None:
+        """Put what a read saw into the cache, with a ``poll`` record when it changes the state, or ``logged``: the
+        first answer after failed polls (the state is known again, changed or not: the plots mark the time between
+        as no data)."""
+        if logged or self.cache.snapshot is None or state != self.cache.snapshot.state:
             fields = self._log_fields.get(state)
             if fields is None:
                 fields = self._log_fields[state] = (tuple(sorted(state.greens)), tuple(sorted(state.yellows)))
@@ -433,8 +437,8 @@ class Middleware:
             case Dispatch(command_id, action_id, command):
                 self.log.emit(Kind.COMMAND_DISPATCHED, action_id=action_id, command_id=command_id,
                               command=command.phases, green=command.green)
-            case ShowSignal(poll_id, state):
-                self._show(state, poll_id)
+            case ShowSignal(poll_id, state, after_failures):
+                self._show(state, poll_id, logged=after_failures)
             case PollFailureSeen(poll_id, error, consecutive):
                 self.log.emit(Kind.POLL_FAILED, poll_id=poll_id, error=error, consecutive=consecutive)
             case SendCall(phases, purpose, command_id):
@@ -479,9 +483,12 @@ class Middleware:
                 self.startup_error = (f"the controller at {self.where}: {detail}; stop that run, or take the "
                                       "controller over (hils run --take-over, Testbed(take_over=True))")
             case ControllerUnreachable(attempts):
+                credentials = {None: "?", "": ", and are the SNMPv3 user and its keys right (an agent may "
+                                              "drop what it cannot decrypt without a word)?"}
                 self.startup_error = (f"no answer from {self.where} within {attempts} x tau_udp = "
                                       f"{attempts * self.config.middleware.tau_udp:g} s: is the controller there, "
-                                      "at that address and port, and is the community right?")
+                                      "at that address and port"
+                                      + credentials.get(self.community, ", and is the community right?"))
             case StartupDone():
                 self._startup_over = True
                 self.env.process(self.poller.run())

@@ -15,9 +15,12 @@ from pathlib import Path
 from typing import Any
 
 from hils.config import IntersectionConfig
-from hils.events import Kind
+from hils.events import Kind, signal_known
+from hils.outfiles import write_whole
 
-COLORS = {"G": "#2ca02c", "Y": "#ffbf00", "r": "#d62728"}
+#: An indication nobody verified: polls failing, or halted in TIMEOUT (see :func:`hils.events.signal_known`).
+NO_DATA = "-"
+COLORS = {"G": "#2ca02c", "Y": "#ffbf00", "r": "#d62728", NO_DATA: "#d9d9d9"}
 
 
 def pyplot() -> Any:
@@ -34,15 +37,26 @@ def pyplot() -> Any:
 def signal_intervals(records: Sequence[dict[str, Any]], phases: Sequence[int], start: float, end: float
                      ) -> dict[int, list[tuple[float, float, str]]]:
     """Per phase, (from, to, indication) spans as the polls saw them within [start, end], merged
-    so that a span lasts as long as the indication does."""
+    so that a span lasts as long as the indication does; :data:`NO_DATA` while the state was not
+    verified (from a failed poll with no newer answer, or a TIMEOUT, to the next answer), never the
+    last state seen."""
+    changes: list[tuple[float, dict[int, str] | None]] = []  # (t, indication per phase, None: no data)
+    shown: dict[int, str] | None = None
+    for r in records:
+        if r["t"] > end:
+            break
+        known = signal_known(r)
+        if known is None:
+            continue
+        if r["kind"] == Kind.POLL:
+            shown = {p: "G" if p in r["greens"] else "Y" if p in r["yellows"] else "r" for p in phases}
+        changes.append((r["t"], shown if known else None))
     spans: dict[int, list[tuple[float, float, str]]] = {p: [] for p in phases}
-    polls = [r for r in records if r["kind"] == Kind.POLL and r["t"] <= end]
-    for a, b in zip(polls, [*polls[1:], None], strict=True):
-        t0, t1 = a["t"], (b["t"] if b else end)
+    for (t0, at), (t1, _) in zip(changes, [*changes[1:], (end, None)], strict=True):
         if t1 < start:
             continue
         for p in phases:
-            ind = "G" if p in a["greens"] else "Y" if p in a["yellows"] else "r"
+            ind = NO_DATA if at is None else at[p]
             row = spans[p]
             if row and row[-1][2] == ind:
                 row[-1] = (row[-1][0], min(t1, end), ind)
@@ -99,7 +113,13 @@ def signal_timeline(records: Sequence[dict[str, Any]], config: IntersectionConfi
     for row, p in enumerate(phases):
         y = top + row * row_h
         for t0, t1, ind in spans[p]:
-            svg.rect(chart.x(t0), y + 4, chart.x(t1) - chart.x(t0), row_h - 8, COLORS[ind])
+            x0, x1 = chart.x(t0), chart.x(t1)
+            if ind == NO_DATA:
+                svg.rect(x0, y + 4, x1 - x0, row_h - 8, svg.hatch())
+                if x1 - x0 >= 48:
+                    svg.text((x0 + x1) / 2, y + row_h / 2 + 4, "no data", size=11, anchor="middle")
+            else:
+                svg.rect(x0, y + 4, x1 - x0, row_h - 8, COLORS[ind])
         svg.text(left - 8, y + row_h / 2 + 4, movement_label(config, p), anchor="end")
     for r in records:
         if r["kind"] == Kind.COMMAND_DISPATCHED and start <= r["t"] <= end:
@@ -118,7 +138,9 @@ def signal_timeline(records: Sequence[dict[str, Any]], config: IntersectionConfi
         y = top + (sum(members) / len(members) + 0.5) * row_h
         svg.text(left + width + 8, y - 3, f"ring {ring}", size=11)
         svg.text(left + width + 8, y + 11, f"barrier {barrier}", size=11)
-    chart.axes(svg, "simulation time (s); dashed: command dispatched; green, yellow, red as polled")
+    unverified = any(ind == NO_DATA for row in spans.values() for _, _, ind in row)
+    chart.axes(svg, "simulation time (s); dashed: command dispatched; green, yellow, red as polled"
+               + ("; hatched: no data (polls failing or halted in TIMEOUT)" if unverified else ""))
     return svg.write(path)
 
 
@@ -193,6 +215,15 @@ class Svg:
     def __init__(self, width: float, height: float) -> None:
         self.width, self.height = width, height
         self.parts: list[str] = []
+        self.defs: list[str] = []
+
+    def hatch(self) -> str:
+        """The fill of a stretch without data: grey diagonal hatching (defined once per picture)."""
+        if not self.defs:
+            self.defs.append('<pattern id="no-data" width="7" height="7" patternUnits="userSpaceOnUse" '
+                             'patternTransform="rotate(45)"><rect width="7" height="7" fill="#f0f0f0"/>'
+                             '<line x1="0" y1="0" x2="0" y2="7" stroke="#9a9a9a" stroke-width="2.5"/></pattern>')
+        return "url(#no-data)"
 
     def rect(self, x: float, y: float, w: float, h: float, fill: str) -> None:
         self.parts.append(f'<rect x="{x:.2f}" y="{y:.2f}" width="{max(w, 0.0):.2f}" height="{h:.2f}" '
@@ -215,11 +246,12 @@ class Svg:
                           f"{escape(text)}</text>")
 
     def write(self, path: Path) -> Path:
-        path.write_text(
-            f'<svg xmlns="http://www.w3.org/2000/svg" width="{self.width:.0f}" height="{self.height:.0f}" '
-            f'viewBox="0 0 {self.width:.0f} {self.height:.0f}" font-family="DejaVu Sans, Helvetica, Arial, '
-            f'sans-serif">\n<rect width="100%" height="100%" fill="white"/>\n' + "\n".join(self.parts) + "\n</svg>\n",
-            encoding="utf-8")
+        """Write the picture whole (a file that cannot take all of it is removed: no half picture is left)."""
+        w, h = f"{self.width:.0f}", f"{self.height:.0f}"
+        write_whole(path, f'<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" viewBox="0 0 {w} {h}" '
+                    'font-family="DejaVu Sans, Helvetica, Arial, sans-serif">\n'
+                    + (f"<defs>{''.join(self.defs)}</defs>\n" if self.defs else "")
+                    + '<rect width="100%" height="100%" fill="white"/>\n' + "\n".join(self.parts) + "\n</svg>\n")
         return path
 
 

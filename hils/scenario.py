@@ -12,8 +12,11 @@ its controller runs; several lights may share one config file. Paths are relativ
     J2 = "corridor_arterial.toml"
 
 The shipped scenarios (:data:`SCENARIOS`) live in ``hils/data``; the single-intersection ones are
-scenarios of one light, "C". This module belongs to the shared layer (it reads files and imports only
-the config and the error base class), so the emulator serves a scenario's controllers without loading
+scenarios of one light, "C". RESCO's eight benchmark scenarios load by name too (``resco:grid4x4``,
+:mod:`hils.resco`): read from the installed sumo-rl, each light's config derived from its SUMO program,
+with its signal links bound to the phases (:class:`SignalLink`) rather than mapped by compass geometry.
+This module belongs to the shared layer (it reads files and imports only the config, the RESCO
+derivation and the error base class), so the emulator serves a scenario's controllers without loading
 the middleware or SUMO; :func:`hils.sumo_net.check_scenario` checks a scenario against its network.
 """
 
@@ -21,7 +24,7 @@ from __future__ import annotations
 
 import tomllib
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 from types import MappingProxyType
@@ -31,19 +34,47 @@ from hils.config import ConfigError, IntersectionConfig, load
 
 #: The shipped scenarios, each ``hils/data/NAME.scenario.toml``.
 SCENARIOS = ("four_leg", "four_phase", "corridor", "grid4x4")
+#: Scenarios derived from RESCO's networks are named ``resco:NAME`` (:data:`hils.resco.MAPS`).
+RESCO_PREFIX = "resco:"
 SUFFIX = ".scenario.toml"
 _FIELDS = ("name", "sumocfg", "intersections")
-_ALLOWED = f"a shipped scenario ({', '.join(SCENARIOS)}) or a path to a {SUFFIX} file"
+_ALLOWED = (f"a shipped scenario ({', '.join(SCENARIOS)}), {RESCO_PREFIX}NAME (RESCO's benchmark) or a path to a "
+            f"{SUFFIX} file")
+
+
+@dataclass(frozen=True, slots=True)
+class SignalLink:
+    """How one signal link index of a traffic light follows its controller, when bound explicitly.
+
+    Green ('G') while ``phase`` or one of ``also`` (an overlap, as a cabinet wires a right turn to two
+    phases) is green, 'g' (yielding) instead when ``yields``; otherwise 'g' while one of ``yields_with`` is
+    green (a permissive left beside its through); yellow while one of them is yellow; red otherwise.
+    ``phase`` None: an index that controls no connection, always red."""
+
+    phase: int | None
+    yields: bool = False
+    also: tuple[int, ...] = ()
+    yields_with: tuple[int, ...] = ()
+
+    @property
+    def parents(self) -> tuple[int, ...]:
+        """Every phase whose indication this link shows."""
+        return tuple(p for p in (self.phase, *self.also, *self.yields_with) if p is not None)
 
 
 @dataclass(frozen=True)
 class Scenario:
-    """A SUMO simulation and, per traffic light (SUMO tls id, in the file's order), its controller config."""
+    """A SUMO simulation and, per traffic light (SUMO tls id, in the file's order), its controller config.
+
+    ``links``: per traffic light whose signal links are bound explicitly, one :class:`SignalLink` per link
+    index (a derived RESCO scenario); a light not in it has its links mapped by the compass geometry of its
+    network and its config's approaches and turns (:func:`hils.sumo_net.derive_phase_map`)."""
 
     name: str
     source: str
     sumo_config: Path
     intersections: Mapping[str, IntersectionConfig]
+    links: Mapping[str, tuple[SignalLink, ...]] = field(default_factory=dict)
 
     @property
     def tls_ids(self) -> tuple[str, ...]:
@@ -69,7 +100,12 @@ def scenario_path(name_or_path: str | Path) -> Path:
 
 
 def load_scenario(name_or_path: str | Path) -> Scenario:
-    """Load a shipped scenario by name, or a ``.scenario.toml`` file, with the config of every intersection."""
+    """Load a shipped scenario by name, RESCO's by ``resco:NAME``, or a ``.scenario.toml`` file, with the config
+    of every intersection."""
+    if isinstance(name_or_path, str) and name_or_path.startswith(RESCO_PREFIX):
+        from hils import resco  # here: it reads networks with sumolib, which a file scenario never needs
+
+        return resco.load(name_or_path.removeprefix(RESCO_PREFIX))
     path = scenario_path(name_or_path)
     source = str(path)
     try:

@@ -23,6 +23,12 @@ Rules of this module:
   for GETs (each session discovers the agent's engine first), pysnmp's
   ``UsmUserData`` for SETs. Keys missing from the target URL come from the
   environment variables ``HILS_SNMP_AUTH_KEY`` and ``HILS_SNMP_PRIV_KEY``.
+  A target is refused when pysnmp cannot secure its level here (:func:`hils.usm.services_missing`).
+- A v3 exchange the agent refuses fails with :class:`SecurityRefused` naming the usmStats counter of
+  its Report (:class:`hils.usm.UsmFailure`): wrong digest, decryption error, unknown user, time
+  window, security level. gufo-snmp says only that a Report came, so its session is dropped and the
+  GET is sent once more through pysnmp, which reads the Report (or, the session having gone stale,
+  gets the answer).
 - Several objects per PDU: the poller's reds, yellows and greens in one GET,
   a phase call's groups in one SET (INTEGER values).
 - No retries: one datagram per request, and no answer within ``tau_udp``
@@ -45,6 +51,7 @@ from __future__ import annotations
 import asyncio
 import operator
 import os
+import re
 import socket
 import weakref
 from collections.abc import Awaitable, Callable, Mapping, Sequence
@@ -54,7 +61,7 @@ from typing import Any
 from urllib.parse import unquote, urlsplit
 
 import simpy
-from gufo.snmp import Aes128Key, Sha1Key, User
+from gufo.snmp import Aes128Key, Sha1Key, SnmpAuthError, User
 from gufo.snmp import SnmpError as GufoError
 from gufo.snmp import SnmpVersion as GufoVersion
 from gufo.snmp.aio.client import SnmpSession
@@ -80,7 +87,8 @@ from pysnmp.proto import errind
 
 from hils.clock import WallClockDriver
 from hils.ntcip import AUTH_KEY_ENV, PRIV_KEY_ENV, ErrorStatus, Oid, SnmpError, oid_str
-from hils.transport import CommunicationTimeout, TransportError, Value, VarBind
+from hils.transport import CommunicationTimeout, SecurityRefused, TransportError, Value, VarBind
+from hils.usm import UsmFailure, services_missing
 
 __all__ = ["AUTH_KEY_ENV", "PRIV_KEY_ENV", "AuthProtocol", "PrivProtocol", "SnmpTarget", "SnmpTransport", "SnmpVersion"]
 
@@ -92,6 +100,9 @@ _LIBRARY_TIMEOUT_MARGIN = 1.0
 # Distinct requests whose varbinds are kept; a run uses a handful (poll, calls).
 _VARBIND_CACHE_SIZE = 1024
 _EXCEPTION_VALUES = (NoSuchObject, NoSuchInstance, EndOfMibView)
+# pysnmp's indications of a message this end could not secure (its ciphers missing, say).
+_LOCAL_SECURITY_FAILURES = (errind.EncryptionError, errind.AuthenticationError, errind.UnsupportedAuthProtocol,
+                            errind.UnsupportedPrivProtocol, errind.NoEncryption, errind.NoAuthentication)
 
 
 class SnmpVersion(Enum):
@@ -125,6 +136,7 @@ MIN_KEY_LENGTH = 8
 _COMMUNITY_KEYS = ("community", "version")
 _V3_KEYS = ("version", "user", "auth", "auth_key", "priv", "priv_key")
 _QUERY_KEYS = tuple(dict.fromkeys(_COMMUNITY_KEYS + _V3_KEYS))
+_KEYS_IN_URL = re.compile(r"\b(auth_key|priv_key)=[^&#]*")
 _FORM = ("snmp://HOST[:PORT][?community=NAME&version=1|2c] or "
          "snmp://HOST[:PORT]?version=3&user=U&auth=SHA[&auth_key=K][&priv=AES[&priv_key=K]]")
 
@@ -135,7 +147,8 @@ class SnmpTarget:
 
     SNMPv1/v2c use ``community``; SNMPv3 uses the user-based security model with ``user``,
     authentication (``auth``, ``auth_key``) and optionally privacy (``priv``, ``priv_key``):
-    authNoPriv or authPriv. Keys are pass phrases; they never appear in the repr.
+    authNoPriv or authPriv, and has no community (``""``). Keys are pass phrases; they never appear in
+    the repr.
     """
 
     host: str
@@ -154,6 +167,8 @@ class SnmpTarget:
         if not 1 <= self.port <= 65535:
             raise ValueError(f"SNMP target port {self.port} is outside 1..65535")
         if self.version is SnmpVersion.V3:
+            # Messages name a community only where there is one (start-up advice, snmpset hints).
+            object.__setattr__(self, "community", "")
             if not self.user:
                 raise ValueError("an SNMPv3 target needs a user")
             if self.auth is None:
@@ -178,54 +193,63 @@ class SnmpTarget:
         default): :data:`AUTH_KEY_ENV` and :data:`PRIV_KEY_ENV`.
         """
         env = os.environ if environ is None else environ
+        shown = _KEYS_IN_URL.sub(r"\1=...", url)  # how messages quote the URL: without its keys
         parts = urlsplit(url.strip())
         if parts.scheme != "snmp":
-            raise ValueError(f"SNMP target {url!r} must start with snmp:// (form: {_FORM})")
+            raise ValueError(f"SNMP target {shown!r} must start with snmp:// (form: {_FORM})")
         if parts.username is not None or parts.password is not None:
-            raise ValueError(f"SNMP target {url!r}: give the community as ?community=NAME, not before the host")
+            raise ValueError(f"SNMP target {shown!r}: give the community as ?community=NAME, not before the host")
         if parts.path not in ("", "/") or parts.fragment:
-            raise ValueError(f"SNMP target {url!r} has a path or fragment; the form is {_FORM}")
+            raise ValueError(f"SNMP target {shown!r} has a path or fragment; the form is {_FORM}")
         host = parts.hostname
         if not host:
-            raise ValueError(f"SNMP target {url!r} has no host (form: {_FORM})")
+            raise ValueError(f"SNMP target {shown!r} has no host (form: {_FORM})")
         if ":" in host:
-            raise ValueError(f"SNMP target {url!r}: IPv6 addresses are not supported; give an IPv4 address or a name")
+            raise ValueError(f"SNMP target {shown!r}: IPv6 addresses are not supported; give an IPv4 address or a name")
         try:
             port = parts.port
         except ValueError:
-            raise ValueError(f"SNMP target {url!r}: the port must be a number in 1..65535") from None
+            raise ValueError(f"SNMP target {shown!r}: the port must be a number in 1..65535") from None
         port = DEFAULT_PORT if port is None else port
-        options = _parse_query(url, parts.query)
+        options = _parse_query(shown, parts.query)
         version_text = options.get("version", SnmpVersion.V2C.value).lower()
         try:
             version = SnmpVersion(version_text)
         except ValueError:
             allowed = ", ".join(v.value for v in SnmpVersion)
-            raise ValueError(f"SNMP target {url!r}: version {version_text!r} is not one of {allowed}") from None
+            raise ValueError(f"SNMP target {shown!r}: version {version_text!r} is not one of {allowed}") from None
         allowed_keys = _V3_KEYS if version is SnmpVersion.V3 else _COMMUNITY_KEYS
         for key in options:
             if key not in allowed_keys:
-                raise ValueError(f"SNMP target {url!r}: option {key!r} does not go with version {version.value}; "
+                raise ValueError(f"SNMP target {shown!r}: option {key!r} does not go with version {version.value}; "
                                  f"allowed: {', '.join(allowed_keys)}")
         if version is not SnmpVersion.V3:
             community = options.get("community", DEFAULT_COMMUNITY)
             if not community:
-                raise ValueError(f"SNMP target {url!r}: the community is empty")
+                raise ValueError(f"SNMP target {shown!r}: the community is empty")
             return cls(host, port, community, version)
-        auth = _protocol(url, "auth", options.get("auth"), AuthProtocol)
-        priv = _protocol(url, "priv", options.get("priv"), PrivProtocol)
+        auth = _protocol(shown, "auth", options.get("auth"), AuthProtocol)
+        priv = _protocol(shown, "priv", options.get("priv"), PrivProtocol)
+        for name, protocol, kind in (("auth", auth, AuthProtocol), ("priv", priv, PrivProtocol)):
+            if f"{name}_key" in options and protocol is None:
+                raise ValueError(f"SNMP target {shown!r}: {name}_key without {name}: add {name}="
+                                 f"{'|'.join(p.value for p in kind)}, or leave the key out")
         auth_key = options.get("auth_key") or env.get(AUTH_KEY_ENV, "") if auth else ""
         priv_key = options.get("priv_key") or env.get(PRIV_KEY_ENV, "") if priv else ""
         for name, protocol, key, variable in (("auth", auth, auth_key, AUTH_KEY_ENV),
                                               ("priv", priv, priv_key, PRIV_KEY_ENV)):
             if protocol is not None and not key:
-                raise ValueError(f"SNMP target {url!r}: {name}={protocol.value} needs a key: give {name}_key=K "
+                raise ValueError(f"SNMP target {shown!r}: {name}={protocol.value} needs a key: give {name}_key=K "
                                  f"or set {variable}")
         try:
-            return cls(host, port, version=version, user=options.get("user", ""), auth=auth, auth_key=auth_key,
-                       priv=priv, priv_key=priv_key)
+            target = cls(host, port, version=version, user=options.get("user", ""), auth=auth, auth_key=auth_key,
+                         priv=priv, priv_key=priv_key)
         except ValueError as exc:
-            raise ValueError(f"SNMP target {url!r}: {exc}") from None
+            raise ValueError(f"SNMP target {shown!r}: {exc}") from None
+        missing = services_missing(privacy=priv is not None)
+        if missing:
+            raise ValueError(f"SNMP target {shown!r}: {missing}")
+        return target
 
 
 def _protocol(url: str, name: str, text: str | None, kind: type[AuthProtocol] | type[PrivProtocol]) -> Any:
@@ -298,19 +322,14 @@ class SnmpTransport:
     def get(self, oids: Sequence[Oid]) -> simpy.Event:
         """GET of several objects in one PDU; the event's value is a tuple of int/bytes in the same order."""
         key = tuple(tuple(oid) for oid in oids)
+        if not key:
+            raise ValueError("a GET needs at least one OID")
         if self.target.version is not SnmpVersion.V1:
             names = self._get_names.get(key)
             if names is None:
-                if not key:
-                    raise ValueError("a GET needs at least one OID")
                 names = _remember(self._get_names, key, tuple(oid_str(oid) for oid in key))
-            return self._submit(self._gufo_get, names)
-        varbinds = self._get_varbinds.get(key)
-        if varbinds is None:
-            if not key:
-                raise ValueError("a GET needs at least one OID")
-            varbinds = _remember(self._get_varbinds, key, tuple(ObjectType(ObjectIdentity(oid)) for oid in key))
-        return self._submit(self._pysnmp, get_cmd, varbinds, _decode_values)
+            return self._submit(self._gufo_get, key, names)
+        return self._submit(self._pysnmp, get_cmd, self._varbinds(key), _decode_values)
 
     def set(self, varbinds: Sequence[VarBind]) -> simpy.Event:
         """SET of several INTEGER objects in one PDU; the event's value is None."""
@@ -334,6 +353,13 @@ class SnmpTransport:
         # gufo-snmp closes a session's socket when the session is dropped.
         self._sessions.clear()
         _ENGINES.give_back(self.driver, _credentials(self.target))
+
+    def _varbinds(self, key: tuple[Oid, ...]) -> tuple[ObjectType, ...]:
+        """pysnmp's varbinds of a GET of ``key``, built once."""
+        varbinds = self._get_varbinds.get(key)
+        if varbinds is None:
+            varbinds = _remember(self._get_varbinds, key, tuple(ObjectType(ObjectIdentity(oid)) for oid in key))
+        return varbinds
 
     def _submit(self, work: Callable[..., Awaitable[Any]], *args: Any) -> simpy.Event:
         if self._closed:
@@ -360,10 +386,14 @@ class SnmpTransport:
         else:
             self.driver.deliver(event, value)
 
-    async def _gufo_get(self, names: tuple[str, ...]) -> tuple[Value, ...]:
+    async def _gufo_get(self, key: tuple[Oid, ...], names: tuple[str, ...]) -> tuple[Value, ...]:
         session = self._sessions.pop() if self._sessions else await self._new_session()
         try:
             answer = await session.get_many(names)
+        except SnmpAuthError:
+            # A Report (SNMPv3): gufo-snmp does not say which, pysnmp does. The session stays dropped: if
+            # it had only gone stale (the agent restarted), the next one discovers the agent afresh.
+            return await self._pysnmp(get_cmd, self._varbinds(key), _decode_values)
         except GufoError as exc:
             # An answer came (an error status): the session is clean for the next request.
             self._sessions.append(session)
@@ -390,7 +420,21 @@ class SnmpTransport:
         udp = self._udp or await self._open()
         indication, status, index, answer = await command(
             self._engine, self._auth, udp, self._context, *varbinds, lookupMib=False)
+        if indication and not isinstance(indication, errind.RequestTimedOut):
+            self._refused(indication)
         return _check_answer(indication, status, index, answer, len(varbinds), decode)
+
+    def _refused(self, indication: Any) -> None:
+        """Raise :class:`SecurityRefused` if pysnmp's ``indication`` is a USM refusal or this end cannot secure
+        the message; return for anything else."""
+        target = self.target
+        failure = UsmFailure.of(indication)
+        if failure is not None:
+            raise SecurityRefused(f"{target.host}:{target.port} refused SNMPv3 user {target.user!r} at "
+                                  f"{target.security_level}: {failure}")
+        if isinstance(indication, _LOCAL_SECURITY_FAILURES):
+            raise SecurityRefused(services_missing(privacy=target.priv is not None)
+                                  or f"SNMPv3 security failed: {indication}")
 
     async def _open(self) -> _ResolvedUdpTarget:
         # create() does not suspend (the address is already resolved), so no

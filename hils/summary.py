@@ -13,6 +13,7 @@ from hils.config import IntersectionConfig
 from hils.detectors import actuations_per_phase
 from hils.events import Kind
 from hils.latency import Stats, internal_latencies_ms, transition_holds
+from hils.outfiles import write_whole
 
 __all__ = ["Tally", "render", "summarize", "warnings", "write"]
 
@@ -25,19 +26,43 @@ class Tally:
     keeps the few records the figures come from, so that the end of a run re-reads nothing: a long
     run's log is mostly polls and SETs, none of which the summary needs one by one."""
 
+    # Polls, their failures and recoveries: what the signal timeline draws (a poll record is a change of the
+    # state seen; failures are few when a link works, and each one is part of the timeline when it fails).
     KEPT = frozenset({Kind.RUN_STARTED, Kind.RUN_ENDED, Kind.ACTION_RECEIVED, Kind.COMMAND_DISPATCHED,
-                      Kind.TRANSITION_VERIFIED, Kind.TIMEOUT_ENTERED, Kind.DETECTORS, Kind.POLL})
+                      Kind.TRANSITION_VERIFIED, Kind.TIMEOUT_ENTERED, Kind.DETECTORS, Kind.POLL, Kind.POLL_FAILED,
+                      Kind.RECOVERED})
 
     def __init__(self, intersection: str | None = None) -> None:
         self.intersection = intersection  # in a run of several controllers: whose records it is handed
         self.kinds: Counter[str] = Counter()
         self.records: list[dict[str, Any]] = []
+        self.timeout: dict[str, Any] | None = None  # the TIMEOUT the manager is in (its record), None when not in one
+        self.clear: dict[str, Any] | None = None  # the closing clear's last SET record (sent, answered or failed)
+        self.first_refusal: dict[str, Any] | None = None
 
     def __call__(self, record: dict[str, Any]) -> None:
         kind = record["kind"]
         self.kinds[kind] += 1
         if kind in self.KEPT:
             self.records.append(record)
+        if kind in self._WATCHED:
+            self._watch(kind, record)
+
+    _WATCHED = frozenset({Kind.TIMEOUT_ENTERED, Kind.STATE, Kind.SET_SENT, Kind.SET_ANSWERED, Kind.SET_FAILED,
+                          Kind.ACTION_REFUSED})
+
+    def _watch(self, kind: str, record: dict[str, Any]) -> None:
+        """How the run stands at its end: in TIMEOUT or not, its calls cleared or not, why an action was refused."""
+        if kind == Kind.TIMEOUT_ENTERED:
+            self.timeout = record
+        elif kind == Kind.STATE and record["to"] != "timeout":
+            self.timeout = None  # recovered (a close leaves the state as it was: no record)
+        elif kind in (Kind.SET_SENT, Kind.SET_ANSWERED, Kind.SET_FAILED) and record.get("purpose") == "clear":
+            if self.clear is None:
+                self.records.append(record)  # polling halted with the close: the timeline's no data from here
+            self.clear = record
+        elif kind == Kind.ACTION_REFUSED and self.first_refusal is None:
+            self.first_refusal = record
 
 
 def summarize(intersections: Mapping[str | None, tuple[Tally, IntersectionConfig]], *, traffic: Any = None,
@@ -96,10 +121,35 @@ def _control(tally: Tally, config: IntersectionConfig) -> dict[str, Any]:
         "polls": _polls(ended[-1] if ended else {}, tally.intersection),
         "drifted_steps": kinds[Kind.DRIFT],
         "internal_latency_ms": latency,
+        "first_refusal": _refusal(tally.first_refusal),
+        "timeout_at_end": _timeout_at_end(tally.timeout),
+        "calls_cleared": _cleared(tally.clear),
+        "clear_error": tally.clear.get("error") if tally.clear else None,
     }
     if kinds[Kind.DETECTORS]:
         out["detector_actuations"] = actuations_per_phase(records, config)
     return out
+
+
+def _refusal(record: Mapping[str, Any] | None) -> dict[str, Any] | None:
+    if record is None:
+        return None
+    return {"t": record["t"], "action_id": record["action_id"], "error": record["error"],
+            "message": record.get("message") or record["reason"]}
+
+
+def _timeout_at_end(record: Mapping[str, Any] | None) -> dict[str, Any] | None:
+    """The TIMEOUT a run ended in, unrecovered (None when it ended out of TIMEOUT)."""
+    if record is None:
+        return None
+    return {"t": record["t"], "reason": record["reason"], "detail": record.get("detail")}
+
+
+def _cleared(record: Mapping[str, Any] | None) -> bool | None:
+    """Whether the closing clear was answered (None: the run placed no call, there was nothing to clear)."""
+    if record is None:
+        return None
+    return record["kind"] == Kind.SET_ANSWERED
 
 
 def _polls(ended: Mapping[str, Any], intersection: str | None) -> dict[str, int]:
@@ -128,8 +178,10 @@ def _render_one(summary: Mapping[str, Any]) -> str:
         "Signal control",
         f"  actions              {s['actions']} ({s['actions_refused']} refused, {s['actions_dropped']} dropped"
         + (f"; the agent answered late {s['agent_late']} times" if s.get("agent_late") else "") + ")",
-        f"  transitions          {s['transitions_verified']} verified of {s['commands_dispatched']} commanded",
     ]
+    if s["first_refusal"]:
+        lines.append(f"  first refused        {_refused(s['first_refusal'])}")
+    lines.append(f"  transitions          {s['transitions_verified']} verified of {s['commands_dispatched']} commanded")
     if h["n"]:
         lines.append(f"  hold per transition  mean {h['mean']:.3f} s, min {h['min']:.3f} s, max {h['max']:.3f} s")
     lines.append(f"  timeouts             {_timeouts(s)}")
@@ -196,6 +248,14 @@ def _traffic_lines(t: Mapping[str, Any]) -> list[str]:
         "(departure delay + time loss, so far for those not arrived)",
         f"  arrived only         time loss {_fmt(t['mean_time_loss'])}, waiting time {_fmt(t['mean_waiting_time'])}"
         " (SUMO trip statistics)",
+    ]
+    r = t.get("resco")
+    if r:
+        queue = "n/a" if r["queue"] is None else f"{r['queue']:.2f}"
+        lines.append(f"  RESCO's figures      delay {_fmt(r['delay_s'])}, trip time {_fmt(r['trip_time_s'])}, "
+                     f"waiting time {_fmt(r['waiting_time_s'])}, queue {queue} (SUMO tripinfo of {r['vehicles']} "
+                     f"vehicles, {r['never_entered']} never entered; queue over {r['queue_steps']} decision steps)")
+    lines += [
         "  per approach         arrived  running  waiting  mean delay  max queue  minutes with a lane full",
     ]
     for name, a in t["approaches"].items():
@@ -206,17 +266,56 @@ def _traffic_lines(t: Mapping[str, Any]) -> list[str]:
     return lines
 
 
+def _refused(refusal: Mapping[str, Any]) -> str:
+    return f"at {refusal['t']:.1f} s, action {refusal['action_id']}: {refusal['error']}: {refusal['message']}"
+
+
+def _controls(summary: Mapping[str, Any]) -> dict[str, Mapping[str, Any]]:
+    """Each controller's signal control in a summary, by how a message names it ('' for a run of one)."""
+    if "intersections" in summary:
+        return {f"{tls}: ": c for tls, c in summary["intersections"].items()}
+    return {"": summary}
+
+
 def warnings(summary: Mapping[str, Any]) -> list[str]:
-    """What a reader must not miss: vehicles that could not enter, naming their approaches."""
+    """What a reader must not miss: vehicles that could not enter, naming their approaches; an agent whose every
+    action was refused, and why the first one was."""
+    out = []
+    for name, c in _controls(summary).items():
+        if c["actions"] and c["actions_refused"] == c["actions"]:
+            out.append(f"WARNING: {name}every action of the agent was refused ({c['actions']} of {c['actions']}): "
+                       f"it never commanded the controller; the first was refused "
+                       f"{_refused(c['first_refusal'])}")
     t = summary.get("traffic")
-    if not t or not t["waiting_to_enter"]:
-        return []
-    blocked = [f"{name} {a['waiting_to_enter']}" for name, a in t["approaches"].items() if a["waiting_to_enter"]]
-    return [f"WARNING: {t['waiting_to_enter']} vehicles could not enter the network by the end "
-            f"({', '.join(blocked)}): their approaches were not served enough; their delay so far is "
-            "in the mean delay"]
+    if t and t["waiting_to_enter"]:
+        blocked = [f"{name} {a['waiting_to_enter']}" for name, a in t["approaches"].items() if a["waiting_to_enter"]]
+        out.append(f"WARNING: {t['waiting_to_enter']} vehicles could not enter the network by the end "
+                   f"({', '.join(blocked)}): their approaches were not served enough; their delay so far is "
+                   "in the mean delay")
+    return out
+
+
+def cleared(summary: Mapping[str, Any]) -> bool | None:
+    """Whether every controller that was given calls had them cleared at the end (None: none was given any)."""
+    placed = [c["calls_cleared"] for c in _controls(summary).values() if c["calls_cleared"] is not None]
+    return all(placed) if placed else None
+
+
+def lost(summary: Mapping[str, Any]) -> list[str]:
+    """The controllers a run lost, each in a few words: ended in TIMEOUT, or calls it could not clear (empty when
+    every controller was still under control at the end and cleared)."""
+    out = []
+    for name, c in _controls(summary).items():
+        timeout = c["timeout_at_end"]
+        if timeout:
+            out.append(f"{name}ended in TIMEOUT since {timeout['t']:.1f} s ({timeout['reason']}: {timeout['detail']}), "
+                       "not recovered")
+        if c["calls_cleared"] is False:
+            out.append(f"{name}calls NOT cleared ({c['clear_error'] or 'no answer in time'}): they stay on the "
+                       "controller until its backup time")
+    return out
 
 
 def write(summary: Mapping[str, Any], path: Path) -> None:
     """summary.json, without NaN (see :mod:`hils.jsonout`)."""
-    path.write_text(jsonout.dumps(summary) + "\n", encoding="utf-8")
+    write_whole(path, jsonout.dumps(summary) + "\n")

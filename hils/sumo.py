@@ -14,11 +14,13 @@ for and, for the end-of-run maximum, sampled once per ``queue_sample_period``.
 
 from __future__ import annotations
 
+import dataclasses
 import operator
 import os
 import sys
 import tempfile
 import time
+import xml.etree.ElementTree as ET
 from collections import Counter
 from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
@@ -31,7 +33,9 @@ import libsumo
 from hils.config import IntersectionConfig, load
 from hils.errors import UserError
 from hils.ntcip import SignalState
-from hils.scenario import labels
+from hils.resco_metrics import QueueTracker, RescoMetrics, read_tripinfo
+from hils.resco_metrics import metrics as resco_metrics
+from hils.scenario import SignalLink, labels
 from hils.sumo_net import SUMO_CONFIG, TLS_ID, PhaseMap, data_path, derive_phase_map, read_net
 from hils.webster import webster_plan
 
@@ -101,6 +105,8 @@ class RunSummary:
     an arrived vehicle's last period before it left is not counted. ``mean_time_loss`` and
     ``mean_waiting_time`` are SUMO's own trip statistics over the arrived vehicles only (None
     before any arrived). ``notes`` says what each figure counts and why any is None.
+    ``sim_time`` is the simulated seconds since SUMO's ``begin``; ``resco`` RESCO's figures, from SUMO's
+    tripinfo once the simulation has ended (:meth:`SumoSimulation.finish`; None before, and when not measured).
     """
 
     sim_time: float
@@ -116,6 +122,8 @@ class RunSummary:
     collisions: int
     teleports: int
     notes: tuple[str, ...]
+    begin: float = 0.0
+    resco: RescoMetrics | None = None
 
 
 DELAY_NOTE = ("mean_delay: per vehicle that departed or is waiting to enter, departure delay (desired to actual "
@@ -163,10 +171,10 @@ class Light:
         self.approach_lanes = tuple((self.prefix + approach, lanes)
                                     for approach, lanes in phase_map.approach_lanes.items())
         self._movement_lanes = tuple((p, phase_map.incoming_lanes(p), phase_map.outgoing_lanes(p))
-                                     for p in phase_map.phases)
+                                     for p in config.phase_numbers)
         self._lanes = tuple(dict.fromkeys(lane for _, inc, out in self._movement_lanes for lane in (*inc, *out)))
         self._lane_length = {lane: libsumo.lane.getLength(lane) for lane in self._lanes}
-        self._incoming = tuple(dict.fromkeys(lane for _, inc, _ in self._movement_lanes for lane in inc))
+        self.incoming_lanes = tuple(dict.fromkeys(lane for _, inc, _ in self._movement_lanes for lane in inc))
 
     def apply(self, state: SignalState) -> bool:
         """Show ``state`` on the traffic light; True when SUMO's state had to change."""
@@ -196,7 +204,7 @@ class Light:
         cabinet (a vehicle's front is past the zone's start)."""
         position, vehicles, length = libsumo.vehicle.getLanePosition, libsumo.lane.getLastStepVehicleIDs, \
             self._lane_length
-        return frozenset(lane for lane in self._incoming
+        return frozenset(lane for lane in self.incoming_lanes
                          if any(position(v) >= length[lane] - zone for v in vehicles(lane)))
 
     def queues(self) -> dict[int, int]:
@@ -222,24 +230,35 @@ class SumoSimulation:
     holds what it shows for each intersection (:class:`Light`), by its traffic light's id.
 
     ``sumo_config`` defaults to the shipped four-leg scenario (``hils/data/four_leg.sumocfg``,
-    one hour of demand). ``end`` (s) is passed to SUMO as ``--end`` for its own outputs; how
+    one hour of demand). The simulation starts at the ``.sumocfg``'s ``begin`` (:attr:`begin`, 0 when it
+    gives none); ``end`` (s after it) is passed to SUMO as ``--end`` for its own outputs; how
     far to step is the caller's choice, since libsumo steps on past it. ``time_to_teleport``
     < 0 keeps vehicles that wait at a red in place however long it lasts, so delays are never
-    cut short by teleports.
+    cut short by teleports. ``links``: per light whose signal links are bound explicitly, its
+    :class:`hils.scenario.SignalLink` s (a derived RESCO light). When measuring, SUMO writes its tripinfo
+    (``tripinfo``, or a temporary file) for RESCO's figures, which :meth:`finish` reads once SUMO has ended.
     """
 
     def __init__(self, config: IntersectionConfig | None = None, *, seed: int = 0, end: float | None = None,
                  step_length: float | None = None, sumo_config: str | Path | None = None,
                  time_to_teleport: float = -1.0, quiet: bool = True, queue_sample_period: float = 1.0,
                  tls_id: str = TLS_ID, lights: Mapping[str, IntersectionConfig] | None = None,
-                 measure: bool = True, extra_args: Sequence[str] = ()) -> None:
+                 measure: bool = True, extra_args: Sequence[str] = (),
+                 links: Mapping[str, Sequence[SignalLink]] | None = None, tripinfo: str | Path | None = None) -> None:
         self.configs: dict[str, IntersectionConfig] = dict(lights) if lights else {tls_id: config or load()}
         self.config = next(iter(self.configs.values()))
+        self.links = dict(links or {})
         self.lights: dict[str, Light] = {}
         self.seed = seed
         self.end = end
         self.step_length = step_length if step_length is not None else self.config.middleware.sumo_step
         self.sumo_config = Path(sumo_config) if sumo_config is not None else data_path(SUMO_CONFIG)
+        self.begin = sumocfg_begin(self.sumo_config)
+        self.tripinfo = Path(tripinfo) if tripinfo is not None else None
+        self._tripinfo_dir: tempfile.TemporaryDirectory | None = None
+        self._queue: QueueTracker | None = None
+        self._resco_every = max(1, round(self.config.middleware.control_interval / queue_sample_period))
+        self._until_resco = self._resco_every
         self.time_to_teleport = time_to_teleport
         self.quiet = quiet
         self.measure = measure
@@ -264,11 +283,13 @@ class SumoSimulation:
                "--seed", str(self.seed), "--time-to-teleport", repr(self.time_to_teleport),
                "--no-step-log", "true"]
         if self.measure:
-            # the tripinfo statistics give the mean delay of arrived vehicles during the run; a run that measures
-            # nothing (training) spares SUMO a tripinfo device per vehicle
-            cmd += ["--duration-log.statistics", "true"]
+            # the tripinfo statistics give the mean delay of arrived vehicles during the run, and the tripinfo
+            # RESCO's figures at its end; a run that measures nothing (training) spares SUMO a tripinfo device
+            # per vehicle
+            cmd += ["--duration-log.statistics", "true", "--tripinfo-output", str(self._tripinfo_path()),
+                    "--tripinfo-output.write-unfinished", "true", "--tripinfo-output.write-undeparted", "true"]
         if self.end is not None:
-            cmd += ["--end", repr(self.end)]
+            cmd += ["--end", repr(self.begin + self.end)]
         if self.quiet:
             cmd += ["--no-warnings", "true"]
         return cmd + list(self.extra_args)
@@ -285,7 +306,7 @@ class SumoSimulation:
             try:
                 libsumo.start(self.command())
             except libsumo.TraCIException as exc:
-                raise SumoError(f"SUMO did not start: {console.text() or exc}") from None
+                raise SumoError(f"SUMO did not start: {_start_error(console.text(), str(exc))}") from None
         _active = self
         try:
             self._setup()
@@ -302,9 +323,13 @@ class SumoSimulation:
         net = read_net(libsumo.simulation.getOption("net-file"))
         named = labels(list(self.configs))
         self.lights = {tls: Light(tls, cfg, derive_phase_map(cfg, net, libsumo.trafficlight.getControlledLinks(tls),
-                                                             tls), label=named[tls])
+                                                             tls, self.links.get(tls)), label=named[tls])
                        for tls, cfg in self.configs.items()}
         self._until_sample = self._sample_every
+        self._until_resco = self._resco_every
+        incoming = {tls: light.incoming_lanes for tls, light in self.lights.items()}
+        self._queue = QueueTracker(incoming, {lane: libsumo.lane.getLength(lane) for lanes in incoming.values()
+                                              for lane in lanes})
         approach_lanes = [item for light in self.lights.values() for item in light.approach_lanes]
         self._max_queue = {approach: 0 for approach, _ in approach_lanes}
         self._approach_of_edge = {link.from_lane.rsplit("_", 1)[0]: light.prefix + link.approach
@@ -325,6 +350,29 @@ class SumoSimulation:
         _active = None
         with _console(self.quiet):
             libsumo.close()
+
+    def finish(self) -> RunSummary:
+        """The end-of-run summary (:meth:`summary`), then end the simulation, so that SUMO writes the tripinfo of the
+        vehicles still running or never entered, and add RESCO's figures from it (when measuring)."""
+        summary = self.summary()
+        self.close()
+        if not self.measure or self._queue is None:
+            return summary
+        path = self._tripinfo_path()
+        try:
+            resco = resco_metrics(read_tripinfo(path), self._queue)
+        finally:
+            if self._tripinfo_dir is not None:
+                self._tripinfo_dir.cleanup()
+                self._tripinfo_dir = None
+        return dataclasses.replace(summary, resco=resco)
+
+    def _tripinfo_path(self) -> Path:
+        if self.tripinfo is not None:
+            return self.tripinfo
+        if self._tripinfo_dir is None:
+            self._tripinfo_dir = tempfile.TemporaryDirectory(prefix="hils-tripinfo-")
+        return Path(self._tripinfo_dir.name) / "tripinfo.xml"
 
     @property
     def running(self) -> bool:
@@ -364,6 +412,10 @@ class SumoSimulation:
                 if not self._until_sample:
                     self._until_sample = self._sample_every
                     self._sample_queues()
+                    self._until_resco -= 1
+                    if not self._until_resco:  # once per decision step, as RESCO observes
+                        self._until_resco = self._resco_every
+                        self._queue.sample()
 
     def _sample_queues(self) -> None:
         # Once a second, for the whole run. The getters are libsumo's own C functions mapped over the lanes
@@ -375,7 +427,7 @@ class SumoSimulation:
                 top[approach] = queue
             # a lane holding as many vehicles as fit on it: the queue reaches back beyond the network
             if any(map(operator.ge, map(_lane_vehicles, lanes), capacities)):
-                self._spill_minutes[approach].add(int(self.time // 60.0))
+                self._spill_minutes[approach].add(int((self.time - self.begin) // 60.0))
         self._sample_vehicles()
 
     def _sample_vehicles(self) -> None:
@@ -386,7 +438,7 @@ class SumoSimulation:
         seen, last = self._seen, self._time_loss
         for vid in [v for v in last if v not in time_loss]:
             approach, depart_delay = seen.pop(vid)
-            self._finished[approach].append(depart_delay + last[vid])
+            self._finished.setdefault(approach, []).append(depart_delay + last[vid])
         for vid in [v for v in ids if v not in seen]:
             seen[vid] = (self._approach(vid), libsumo.vehicle.getDepartDelay(vid))
         self._time_loss = time_loss
@@ -403,9 +455,10 @@ class SumoSimulation:
         running = int(_stat("stats.vehicles.running"))
         arrived = departed - running
         if not self.measure:
-            return RunSummary(self.time, departed, arrived, running, len(libsumo.simulation.getPendingVehicles()),
-                              None, None, None, {}, {}, int(_stat("stats.safety.collisions")),
-                              int(_stat("stats.teleports.total")), (NOT_MEASURED_NOTE,))
+            return RunSummary(self.time - self.begin, departed, arrived, running,
+                              len(libsumo.simulation.getPendingVehicles()), None, None, None, {}, {},
+                              int(_stat("stats.safety.collisions")), int(_stat("stats.teleports.total")),
+                              (NOT_MEASURED_NOTE,), self.begin)
         self._sample_vehicles()
         delays = {a: list(done) for a, done in self._finished.items()}
         counts = {a: Counter() for a in delays}
@@ -431,7 +484,7 @@ class SumoSimulation:
         if not every:
             notes.append("mean_delay: null because no vehicle was due to enter yet")
         return RunSummary(
-            sim_time=self.time,
+            sim_time=self.time - self.begin,
             departed=departed,
             arrived=arrived,
             running=running,
@@ -444,6 +497,7 @@ class SumoSimulation:
             collisions=int(_stat("stats.safety.collisions")),
             teleports=int(_stat("stats.teleports.total")),
             notes=tuple(notes),
+            begin=self.begin,
         )
 
     def run_fixed_time(self) -> None:
@@ -456,6 +510,21 @@ class SumoSimulation:
             libsumo.trafficlight.setProgramLogic(light.tls_id, logic)
             libsumo.trafficlight.setProgram(light.tls_id, "hils-fixed")
             light.release()
+
+
+def sumocfg_begin(sumocfg: Path) -> float:
+    """The ``time/begin`` of a ``.sumocfg`` in seconds (SUMO's default 0 when it has none or cannot be read here:
+    SUMO itself then says what is wrong)."""
+    try:
+        value = ET.parse(sumocfg).find("time/begin")
+    except (OSError, ET.ParseError):
+        return 0.0
+    text = value.get("value", "0") if value is not None else "0"
+    try:
+        # SUMO takes seconds or H:M:S
+        return sum(float(part) * 60.0 ** i for i, part in enumerate(reversed(text.split(":"))))
+    except ValueError:
+        raise SumoError(f"{sumocfg}: time/begin: {text!r} is not a time; allowed: seconds or H:M:S") from None
 
 
 def fixed_time_states(config: IntersectionConfig) -> list[tuple[float, SignalState]]:
@@ -524,6 +593,16 @@ class _Console:
         if self.path is None:
             return ""
         return self.path.read_text(encoding="utf-8", errors="replace").strip()
+
+
+def _start_error(console: str, exception: str) -> str:
+    """Why SUMO did not start, on one line: the errors it printed (from its first ``Error:`` line on) and the
+    exception's own text (an error in a route file, say, is only there)."""
+    lines = console.splitlines()
+    first = next((i for i, line in enumerate(lines) if line.startswith("Error")), len(lines))
+    told = [line.strip() for line in lines[first:] if line.strip()]
+    told += [line.strip() for line in exception.splitlines() if line.strip() and line.strip() not in told]
+    return " ".join(told) or console.replace("\n", " ") or "no reason given"
 
 
 @contextmanager

@@ -6,11 +6,14 @@ so the committed file is always reproducible from its sources.
 
 The phase of each traffic-light link is derived, never typed: the approach of a link is the
 compass side of the junction its incoming edge comes from (geometry), its turn is SUMO's
-connection direction (right turns run with the through of their approach), and the
+connection direction (right turns run with the through of their approach, U-turns with its left), and the
 intersection config says which phase serves each (approach, turn), protected, or permissive
 (``permissive = ["left"]`` on a through phase: the left yields, SUMO's lower-case 'g'). A
 link that no phase serves, or a phase that serves no link, is an error: either would leave a
 movement on red for good or a commanded phase without effect.
+
+A light whose links a scenario binds explicitly (:class:`hils.scenario.SignalLink`: RESCO's, derived from
+their programs by :mod:`hils.resco`) is mapped by that binding instead, with overlaps and permissive yields.
 
 A scenario of your own is a ``.sumocfg``, or a network and a demand file, resolved by
 :func:`scenario_config` into the ``.sumocfg`` SUMO starts with. A scenario of many intersections
@@ -37,7 +40,7 @@ import sumolib
 from hils.config import IntersectionConfig
 from hils.errors import UserError
 from hils.ntcip import SignalState
-from hils.scenario import Scenario
+from hils.scenario import Scenario, SignalLink
 
 TLS_ID = "C"
 NET_FILE = "four_leg.net.xml"
@@ -47,8 +50,9 @@ SUMO_CONFIG = "four_leg.sumocfg"
 #: (.scenario.toml, naming the config of each traffic light).
 NETWORKS = ("four_leg", "four_phase", "corridor", "grid4x4")
 
-# SUMO's connection directions: l/L (partly) left, s straight, r/R (partly) right, t turnaround.
-_TURN_OF_DIRECTION = {"l": "left", "L": "left", "s": "through", "r": "through", "R": "through"}
+# SUMO's connection directions: l/L (partly) left, s straight, r/R (partly) right, t turnaround (a U-turn runs with
+# the left of its approach).
+_TURN_OF_DIRECTION = {"l": "left", "L": "left", "t": "left", "s": "through", "r": "through", "R": "through"}
 # Approaches within this many degrees of a diagonal have no clear compass side.
 _DIAGONAL_MARGIN_DEG = 10.0
 
@@ -81,16 +85,20 @@ class Link:
 
 @dataclass(frozen=True)
 class PhaseMap:
-    """Which NEMA phase drives each link index of one traffic light."""
+    """Which NEMA phase drives each link index of one traffic light (0: an index that controls no connection);
+    ``link_also`` and ``link_yields_with``, where a light's links are bound explicitly (:class:`SignalLink`), the
+    further phases each link shows green with (an overlap) and runs permissive beside."""
 
     tls_id: str
     links: tuple[Link, ...]
     link_phases: tuple[int, ...]
     link_permissive: tuple[bool, ...] = ()
+    link_also: tuple[tuple[int, ...], ...] = ()
+    link_yields_with: tuple[tuple[int, ...], ...] = ()
 
     @property
     def phases(self) -> tuple[int, ...]:
-        return tuple(sorted(set(self.link_phases)))
+        return tuple(sorted(set(self.link_phases) - {0}))
 
     def links_of(self, phase: int) -> tuple[Link, ...]:
         return tuple(link for link in self.links if link.phase == phase)
@@ -119,8 +127,23 @@ class PhaseMap:
         """
         greens, yellows = state.greens, state.yellows
         permissive = self.link_permissive or (False,) * len(self.link_phases)
-        return "".join(("g" if yields else "G") if p in greens else "y" if p in yellows else "r"
-                       for p, yields in zip(self.link_phases, permissive, strict=True))
+        if not self.link_also:
+            return "".join(("g" if yields else "G") if p in greens else "y" if p in yellows else "r"
+                           for p, yields in zip(self.link_phases, permissive, strict=True))
+        return "".join(_bound_state(p, yields, also, yields_with, greens, yellows) for p, yields, also, yields_with
+                       in zip(self.link_phases, permissive, self.link_also, self.link_yields_with, strict=True))
+
+
+def _bound_state(phase: int, yields: bool, also: tuple[int, ...], yields_with: tuple[int, ...],
+                 greens: frozenset[int], yellows: frozenset[int]) -> str:
+    """SUMO's state of an explicitly bound link (:class:`hils.scenario.SignalLink`)."""
+    if phase in greens or not greens.isdisjoint(also):
+        return "g" if yields else "G"
+    if not greens.isdisjoint(yields_with):
+        return "g"
+    if phase in yellows or not yellows.isdisjoint(also) or not yellows.isdisjoint(yields_with):
+        return "y"
+    return "r"
 
 
 def _unique(items: Iterable[str]) -> tuple[str, ...]:
@@ -166,14 +189,18 @@ def controlled_links_from_net(net: Any, tls_id: str = TLS_ID) -> list[list[tuple
 
 
 def derive_phase_map(config: IntersectionConfig, net: Any, controlled_links: ControlledLinks | None = None,
-                     tls_id: str = TLS_ID) -> PhaseMap:
+                     tls_id: str = TLS_ID, bound: Sequence[SignalLink] | None = None) -> PhaseMap:
     """Map every link index of ``tls_id`` to the phase that serves its movement.
 
     ``controlled_links`` is the link table of the running simulation
-    (``trafficlight.getControlledLinks``); without it the table is read from ``net``.
+    (``trafficlight.getControlledLinks``); without it the table is read from ``net``. ``bound``: the light's
+    links bound explicitly, one :class:`hils.scenario.SignalLink` per index (a derived RESCO light), instead
+    of by the compass geometry of the config's approaches and turns.
     """
     if controlled_links is None:
         controlled_links = controlled_links_from_net(net, tls_id)
+    if bound is not None:
+        return _bound_phase_map(config, net, controlled_links, tls_id, bound)
     served: dict[tuple[str, str], int] = {}
     for number, phase in config.phases.items():
         if phase.approach is None or phase.turn is None:
@@ -232,8 +259,8 @@ def _link(net: Any, index: int, from_lane: str, to_lane: str, via: str,
         raise NetworkError(f"{where}: the network file has no such connection")
     direction = conn.getDirection()
     if direction not in _TURN_OF_DIRECTION:
-        raise NetworkError(f"{where}: direction {direction!r} (turnaround or invalid) has no phase; "
-                           "allowed: left, straight, right")
+        raise NetworkError(f"{where}: direction {direction!r} (invalid) has no phase; "
+                           "allowed: left, straight, right, turnaround")
     edge = lane.getEdge()
     jx, jy = edge.getToNode().getCoord()
     fx, fy = edge.getFromNode().getCoord()
@@ -247,6 +274,40 @@ def _link(net: Any, index: int, from_lane: str, to_lane: str, via: str,
             f'turn of that approach carry it permissive (permissive = ["{turn}"])')
     return Link(index, from_lane, to_lane, via, approach, direction, phase,
                 permissive=(approach, turn) in permissive_of)
+
+
+def _bound_phase_map(config: IntersectionConfig, net: Any, controlled_links: ControlledLinks, tls_id: str,
+                     bound: Sequence[SignalLink]) -> PhaseMap:
+    """The phase map of a light whose links are bound explicitly: checked against its link table and config."""
+    where = f"traffic light {tls_id}"
+    if len(bound) != len(controlled_links):
+        raise NetworkError(f"{where}: {len(bound)} signal links bound, but the light has {len(controlled_links)}")
+    labels = _approach_labels(net, {lane.rsplit("_", 1)[0] for triples in controlled_links for lane, _, _ in triples})
+    links: list[Link] = []
+    for index, (triples, signal) in enumerate(zip(controlled_links, bound, strict=True)):
+        unknown = [p for p in signal.parents if p not in config.phases]
+        if unknown or (triples and signal.phase is None):
+            raise NetworkError(f"{where}: link {index} is bound to phase(s) {unknown or [None]}; allowed: the "
+                               f"config's phases {', '.join(map(str, config.phase_numbers))}")
+        for from_lane, to_lane, via in triples:
+            conn = net.getLane(from_lane).getConnection(net.getLane(to_lane))
+            links.append(Link(index, from_lane, to_lane, via, labels[from_lane.rsplit("_", 1)[0]],
+                              conn.getDirection() if conn is not None else "s", signal.phase or 0, signal.yields))
+    return PhaseMap(tls_id, tuple(links), tuple(s.phase or 0 for s in bound), tuple(s.yields for s in bound),
+                    tuple(s.also for s in bound), tuple(s.yields_with for s in bound))
+
+
+def _approach_labels(net: Any, edges: Iterable[str]) -> dict[str, str]:
+    """A name per incoming edge for the summary: its compass point (north-east on a diagonal), with the edge's id
+    where two edges come from the same one."""
+    points = ("east", "north-east", "north", "north-west", "west", "south-west", "south", "south-east")
+    side = {}
+    for edge_id in edges:
+        edge = net.getEdge(edge_id)
+        (jx, jy), (fx, fy) = edge.getToNode().getCoord(), edge.getFromNode().getCoord()
+        side[edge_id] = points[round(math.degrees(math.atan2(fy - jy, fx - jx)) / 45.0) % 8]
+    taken = list(side.values())
+    return {e: s if taken.count(s) == 1 else f"{s} {e}" for e, s in side.items()}
 
 
 def scenario_config(*, sumocfg: str | Path | None = None, net: str | Path | None = None,
@@ -307,7 +368,8 @@ def check_scenario(scenario: Scenario) -> dict[str, PhaseMap]:
         raise NetworkError(f"{scenario.source}: intersections: traffic light(s) {', '.join(missing)} of "
                            f"{net_file.name} have no controller config; allowed: a config for every traffic light "
                            f"of the network ({', '.join(lights)})")
-    return {tls: derive_phase_map(cfg, net, tls_id=tls) for tls, cfg in scenario.intersections.items()}
+    return {tls: derive_phase_map(cfg, net, tls_id=tls, bound=scenario.links.get(tls))
+            for tls, cfg in scenario.intersections.items()}
 
 
 def light_positions(scenario: Scenario) -> dict[str, tuple[float, float]]:

@@ -34,14 +34,20 @@ from hils import jsonout
 from hils.actions import ActionType
 from hils.agents import BUILTIN
 from hils.errors import UserError
+from hils.resco import NAMES as RESCO_NAMES
+from hils.scenario import RESCO_PREFIX, SCENARIOS, SUFFIX
 
 __all__ = [
     "COLUMNS", "SHIPPED", "Cell", "CellResult", "Progress", "SweepError", "figures", "grid", "native_action_type",
     "parse_seeds", "render", "rows", "run_cell", "run_grid", "scenario_arguments", "write_table",
 ]
 
-#: The shipped scenarios: `hils run` arguments that select them (the four-leg is the default run).
+#: The shipped scenarios of one light: `hils run` arguments that select them (the four-leg is the default run).
 SHIPPED = ("four_leg", "four_phase")
+#: Scenarios of several lights, run with `hils run --scenario`: the shipped ones and RESCO's (resco:NAME).
+NETWORKS = tuple(s for s in SCENARIOS if s not in SHIPPED)
+_ALLOWED = (f"{', '.join(SHIPPED + NETWORKS)}, {', '.join(RESCO_PREFIX + n for n in RESCO_NAMES)}, a .scenario.toml "
+            "file or CONFIG.toml[@SCENARIO.sumocfg]")
 
 
 class SweepError(UserError):
@@ -79,15 +85,19 @@ class CellResult:
 
 
 def scenario_arguments(scenario: str) -> list[str]:
-    """`hils run` arguments of a scenario: a shipped name, or CONFIG.toml[@SCENARIO.sumocfg]."""
+    """`hils run` arguments of a scenario: a shipped name, resco:NAME, a .scenario.toml file, or
+    CONFIG.toml[@SCENARIO.sumocfg]."""
     if scenario == "four_leg":
         return []
     if scenario in SHIPPED:
         data = resources.files("hils.data")
         return ["--config", str(data / f"{scenario}.toml"), "--sumocfg", str(data / f"{scenario}.sumocfg")]
+    if scenario in NETWORKS or scenario.endswith(SUFFIX) or (
+            scenario.startswith(RESCO_PREFIX) and scenario.removeprefix(RESCO_PREFIX) in RESCO_NAMES):
+        return ["--scenario", scenario]
     config, _, sumocfg = scenario.partition("@")
-    if not config.endswith(".toml"):
-        raise SweepError(f"scenario {scenario!r}: allowed: {', '.join(SHIPPED)} or CONFIG.toml[@SCENARIO.sumocfg]")
+    if not config.endswith(".toml") or config.endswith(SUFFIX):
+        raise SweepError(f"scenario {scenario!r}: allowed: {_ALLOWED}")
     return ["--config", config, *(["--sumocfg", sumocfg] if sumocfg else [])]
 
 
@@ -135,14 +145,21 @@ def figures(summary: dict[str, Any]) -> dict[str, Any]:
     """The per-run figures a sweep's table shows, from one summary.json."""
     traffic = summary.get("traffic") or {}
     queues = traffic.get("max_queue") or {}
+    resco = traffic.get("resco") or {}
+    controls = list((summary.get("intersections") or {"": summary}).values())
     return {
+        "resco_delay_s": resco.get("delay_s"),
+        "resco_trip_time_s": resco.get("trip_time_s"),
+        "resco_waiting_time_s": resco.get("waiting_time_s"),
+        "resco_queue": resco.get("queue"),
         "mean_delay_s": traffic.get("mean_delay"),
         "arrived": traffic.get("arrived"),
         "departed": traffic.get("departed"),
         "waiting_to_enter": traffic.get("waiting_to_enter"),
         "max_queue": max(queues.values()) if queues else None,
-        **{f"max_queue_{a}": q for a, q in sorted(queues.items())},
-        "timeouts": sum((summary.get("timeouts") or {}).values()),
+        # per approach only for a light alone: a network's dozens of approaches make no table
+        **({f"max_queue_{a}": q for a, q in sorted(queues.items())} if "intersections" not in summary else {}),
+        "timeouts": sum(sum((c.get("timeouts") or {}).values()) for c in controls),
         "wall_s": summary.get("wall_time_s"),
     }
 
@@ -202,8 +219,9 @@ def _on_ray(cells: Sequence[Cell], root: str, address: str, finished: Callable[[
 
 # --- the table -------------------------------------------------------------------------------------
 
-COLUMNS = ("scenario", "action_type", "agent", "seed", "ok", "mean_delay_s", "arrived", "waiting_to_enter",
-           "max_queue", "timeouts", "wall_s", "folder", "error")
+COLUMNS = ("scenario", "action_type", "agent", "seed", "ok", "resco_delay_s", "resco_trip_time_s",
+           "resco_waiting_time_s", "resco_queue", "mean_delay_s", "arrived", "waiting_to_enter", "max_queue",
+           "timeouts", "wall_s", "folder", "error")
 
 
 def rows(results: Iterable[CellResult]) -> list[dict[str, Any]]:
@@ -226,18 +244,23 @@ def write_table(results: Sequence[CellResult], root: str | Path) -> tuple[Path, 
 
 def render(results: Sequence[CellResult]) -> str:
     """The console table: one line per cell."""
-    head = f"{'scenario':<12} {'agent':<20} {'seed':>4}  {'mean delay s':>12} {'arrived':>8} {'waiting':>8} " \
-           f"{'max queue':>9} {'timeouts':>8}"
+    width = max(12, *(len(Path(r.cell.scenario).stem) for r in results))
+    head = f"{'scenario':<{width}} {'agent':<20} {'seed':>4}  {'RESCO delay s':>13} {'mean delay s':>12} " \
+           f"{'arrived':>8} {'waiting':>8} {'max queue':>9} {'timeouts':>8}"
     lines = [head, "-" * len(head)]
     for r in results:
         c, f = r.cell, r.figures
         if not r.ok:
-            lines.append(f"{Path(c.scenario).stem:<12} {c.agent:<20} {c.seed:>4}  FAILED: {r.error}")
+            lines.append(f"{Path(c.scenario).stem:<{width}} {c.agent:<20} {c.seed:>4}  FAILED: {r.error}")
             continue
-        delay = "-" if f["mean_delay_s"] is None else f"{f['mean_delay_s']:.1f}"
-        lines.append(f"{Path(c.scenario).stem:<12} {c.agent:<20} {c.seed:>4}  {delay:>12} {_n(f['arrived']):>8} "
-                     f"{_n(f['waiting_to_enter']):>8} {_n(f['max_queue']):>9} {_n(f['timeouts']):>8}")
+        lines.append(f"{Path(c.scenario).stem:<{width}} {c.agent:<20} {c.seed:>4}  {_s(f['resco_delay_s']):>13} "
+                     f"{_s(f['mean_delay_s']):>12} {_n(f['arrived']):>8} {_n(f['waiting_to_enter']):>8} "
+                     f"{_n(f['max_queue']):>9} {_n(f['timeouts']):>8}")
     return "\n".join(lines)
+
+
+def _s(x: float | None) -> str:
+    return "-" if x is None else f"{x:.1f}"
 
 
 def _n(x: Any) -> str:

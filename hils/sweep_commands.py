@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import re
 import time
 from pathlib import Path
 from typing import Any
@@ -22,37 +23,36 @@ Example: hils sweep --agents max-pressure,webster,random --seeds 0-4 --duration 
 """
 
 COMPARE_HELP = """\
-Compare agents over several seeds: each agent runs once per seed (a sweep, in parallel processes), and a
-table gives each figure's mean with the half width of its 95 % confidence interval over the seeds
-(Student's t): mean delay, throughput, vehicles waiting to enter, max queue overall and per approach.
-Writes compare.md, compare.json and compare.png beside the sweep's table and run folders.
+Compare agents over several seeds: each agent runs once per seed and scenario (a sweep, in parallel
+processes), and a table per scenario gives each figure's mean with the half width of its 95 % confidence
+interval over the seeds (Student's t): RESCO's average delay, trip time, waiting time and queue (as RL
+papers report them, from SUMO's tripinfo), then hils' mean delay, throughput, vehicles waiting to enter,
+max queue (and per approach, for one light). Writes compare.md, compare.json and a plot per scenario
+(compare.png for one) beside the sweep's table and run folders.
 
-Example: hils compare --agents max-pressure,webster --seeds 0-4
+Examples: hils compare --agents max-pressure,webster --seeds 0-4
+          hils compare --scenarios resco:cologne8 --agents max-pressure,actuated,fixed-cycle --seeds 0-4
 """
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("sweep", help="a grid of agents x seeds x scenarios on a process pool or Ray",
                        description=SWEEP_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
-    _grid_options(p, scenarios=True)
+    _grid_options(p)
     p.set_defaults(func=sweep_command)
     p = sub.add_parser("compare", help="agents over seeds: a table with 95 %% confidence intervals, and a plot",
                        description=COMPARE_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
-    _grid_options(p, scenarios=False)
-    p.add_argument("--scenario", default="four_leg", metavar="NAME|CONFIG.toml[@SCENARIO.sumocfg]",
-                   help=f"the scenario every agent runs ({', '.join(sweep.SHIPPED)}; default four_leg)")
+    _grid_options(p)
     p.set_defaults(func=compare_command)
 
 
-def _grid_options(p: argparse.ArgumentParser, *, scenarios: bool) -> None:
+def _grid_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--agents", required=True, metavar="A,B,...",
                    help="built-in agent names (random, fixed-cycle, max-pressure, queue-proportional, webster, "
                         "actuated) or package.module:Class, comma-separated")
     p.add_argument("--seeds", default="0-2", metavar="0-4|0,3,7", help="seeds (0-2)")
-    if scenarios:
-        p.add_argument("--scenarios", default="four_leg", metavar="S,...",
-                       help=f"{', '.join(sweep.SHIPPED)} or CONFIG.toml[@SCENARIO.sumocfg], comma-separated "
-                            "(four_leg)")
+    p.add_argument("--scenarios", "--scenario", default="four_leg", metavar="S,...",
+                   help=f"comma-separated: {sweep._ALLOWED} (four_leg)")
     p.add_argument("--action-type", choices=[t.value for t in ActionType],
                    help="the action design every agent uses (default: each agent's own, e.g. webster duration, "
                         "max-pressure selection)")
@@ -96,28 +96,37 @@ def _bar(total: int) -> Any:
     return tqdm(total=total, unit="run")
 
 
+def _scenarios(args: argparse.Namespace) -> list[str]:
+    return [s.strip() for s in args.scenarios.split(",") if s.strip()]
+
+
 def sweep_command(args: argparse.Namespace) -> int:
-    scenarios = [s.strip() for s in args.scenarios.split(",") if s.strip()]
-    results, out = _run(args, scenarios, "sweep")
+    results, out = _run(args, _scenarios(args), "sweep")
     print(sweep.render(results))
     print(f"Table in {out}/sweep.csv and sweep.json")
     return 0 if all(r.ok for r in results) else 1
 
 
 def compare_command(args: argparse.Namespace) -> int:
-    results, out = _run(args, [args.scenario], "compare")
-    failed = sum(not r.ok for r in results)
-    table = compare.aggregate(results)
-    text = compare.render(table, failed)
-    print(text)
+    scenarios = _scenarios(args)
+    results, out = _run(args, scenarios, "compare")
+    tables = compare.aggregate(results)
+    markdown, plots = [], []
+    for scenario, table in tables.items():
+        failed = sum(not r.ok for r in results if r.cell.scenario == scenario)
+        text = compare.render(table, failed)
+        print(f"{scenario}, {args.duration:g} simulated s per run\n{text}\n")
+        plot = "compare.png" if len(tables) == 1 else f"compare-{re.sub(r'[^A-Za-z0-9_.-]+', '_', scenario)}.png"
+        compare.plot(table, out / plot, f"{scenario}: mean over seeds with 95 % CI ({args.duration:g} s)")
+        markdown.append(f"## {scenario}, {args.duration:g} s\n\n```\n{text}\n```\n\n![{scenario}]({plot})\n")
+        plots.append(plot)
     for r in results:
         if not r.ok:
-            print(f"FAILED {r.cell.agent} seed {r.cell.seed}: {r.error} (see {r.folder}/console.txt)")
-    (out / "compare.md").write_text(f"# hils compare: {args.scenario}, {args.duration:g} s\n\n"
-                                    f"```\n{text}\n```\n\n![compare](compare.png)\n", encoding="utf-8")
+            print(f"FAILED {r.cell.scenario} {r.cell.agent} seed {r.cell.seed}: {r.error} "
+                  f"(see {r.folder}/console.txt)")
+    (out / "compare.md").write_text("# hils compare\n\n" + "\n".join(markdown), encoding="utf-8")
     (out / "compare.json").write_text(jsonout.dumps({
-        agent: {name: {"mean": e.mean, "ci95_half_width": e.half_width, "n": e.n} for name, e in row.items()}
-        for agent, row in table.items()}) + "\n", encoding="utf-8")
-    compare.plot(table, out / "compare.png", f"{args.scenario}: mean over seeds with 95 % CI ({args.duration:g} s)")
-    print(f"Outputs in {out}/: compare.md, compare.json, compare.png, sweep.csv and one run folder per run")
-    return 0 if failed == 0 else 1
+        scenario: {agent: {name: {"mean": e.mean, "ci95_half_width": e.half_width, "n": e.n} for name, e in row.items()}
+                   for agent, row in table.items()} for scenario, table in tables.items()}) + "\n", encoding="utf-8")
+    print(f"Outputs in {out}/: compare.md, compare.json, {', '.join(plots)}, sweep.csv and one run folder per run")
+    return 0 if all(r.ok for r in results) else 1

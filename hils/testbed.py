@@ -55,8 +55,8 @@ from hils.agents import Agent, Observation, load_agent
 from hils.clock import Answer, Clock, VirtualClock, WallClockDriver
 from hils.config import IntersectionConfig
 from hils.detectors import DetectorFeed
-from hils.errors import UserError
-from hils.events import EventLog, Kind, TaggedLog
+from hils.errors import AgentFailed, RunInterrupted, UserError, described
+from hils.events import EventLog, Kind, LogWriteError, TaggedLog
 from hils.events import read as read_events
 from hils.fastpath import StepCost, modeled_cost
 from hils.intersection import Intersection
@@ -83,18 +83,6 @@ DEFAULT_AGENTS = {ActionType.SELECTION: "max-pressure", ActionType.SWITCH: "fixe
                   ActionType.DURATION: "queue-proportional"}
 BLIND_AGENTS = {ActionType.SELECTION: "random", ActionType.SWITCH: "fixed-cycle", ActionType.DURATION: "random"}
 
-
-
-class RunInterrupted(Exception):
-    """The run was stopped from outside (Ctrl-C or SIGTERM); ``reason`` is what ``run_ended`` logs."""
-
-    def __init__(self, reason: str) -> None:
-        super().__init__(reason)
-        self.reason = reason
-
-
-class AgentFailed(Exception):
-    """The agent's ``act()`` raised; the original exception is the cause."""
 
 
 class NotStarted(RuntimeError):
@@ -349,11 +337,13 @@ class Testbed(_OneIntersection):
             self.spec = dataclasses.replace(self.spec, seed=seed)
         self._wall_t0 = time.perf_counter()
         self.ended, self.end_reason, self.traffic = False, None, None
-        env = self.env = simpy.Environment()
-        self._assemble_clock(env)
         # A run that writes its log to a file does not also keep it in memory: a long run's records
         # would grow the heap that every full garbage collection walks, in the middle of the hot path.
+        # Opened first: a log that cannot be written stops the run before anything is assembled.
         self.events = EventLog(self.log_path, keep=self.log_path is None)
+        self.events.on_failure = self._log_failed
+        env = self.env = simpy.Environment()
+        self._assemble_clock(env)
         self.intersections = {name: self._assemble_intersection(env, name, index)
                               for index, name in enumerate(self.configs)}
         self._assemble_simulation()
@@ -365,6 +355,12 @@ class Testbed(_OneIntersection):
         self._advance(None, *(i.middleware.ready for i in self.intersections.values()), every=True)
         self._check_controllers()
         return self.observe_all()
+
+    def _log_failed(self, failure: LogWriteError) -> None:
+        """The log's file stopped taking records: the run ends as an error at its next event, and finish() clears
+        the calls all the same (the clearing SET never waits on the log). During finish() the run is ending."""
+        if not self.ended:
+            self.env.event().fail(failure)  # raised by the environment's next step, between two events
 
     def _check_controllers(self) -> None:
         """The start-up checks: refuse a controller unfit for a run (one line each), warn about the rest."""
@@ -399,8 +395,11 @@ class Testbed(_OneIntersection):
         if sumo is True:
             from hils.sumo import SumoSimulation
 
+            # SUMO's tripinfo (RESCO's figures) goes beside the event log
+            tripinfo = self.log_path.with_name("tripinfo.xml") if self.log_path is not None else None
             sim = SumoSimulation(seed=self.seed, end=self.duration, sumo_config=self.sumo_config, lights=self.configs,
-                                 measure=self.measure)
+                                 measure=self.measure, links=self.scenario.links if self.scenario else None,
+                                 tripinfo=tripinfo)
             sim.start()  # a SUMO that fails to start (e.g. a network the config does not fit) closes itself
             self.simulation = sim
             self._owns_sumo = True
@@ -493,7 +492,8 @@ class Testbed(_OneIntersection):
     def _collect_traffic(self) -> None:
         summary = getattr(self.simulation, "summary", None)
         if summary is not None and getattr(self.simulation, "running", False):
-            self.traffic = summary()
+            # the run's own SUMO ends here, so that its tripinfo (RESCO's figures) is complete
+            self.traffic = self.simulation.finish() if self._owns_sumo else summary()
 
     def close(self) -> None:
         """Finish the run if it is still going, then release the transports, the clock and SUMO."""
@@ -516,7 +516,7 @@ class Testbed(_OneIntersection):
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
                  tb: TracebackType | None) -> None:
         if self.env is not None and not self.ended:
-            self.finish(_reason_of(exc) if exc is not None else None)
+            self.finish(reason_of(exc) if exc is not None else None)
         self.close()
 
     # --- stepping ---------------------------------------------------------------------------------
@@ -605,7 +605,7 @@ class Testbed(_OneIntersection):
                 if progress is not None:
                     progress(self._env.now)
         except BaseException as exc:
-            self.finish(_reason_of(exc))
+            self.finish(reason_of(exc))
             raise
         self.finish("duration")
         return "duration"
@@ -629,8 +629,7 @@ class Testbed(_OneIntersection):
                 continue
             del asked[name]
             if answer.error is not None:
-                raise AgentFailed(f"the agent's act() raised {type(answer.error).__name__}: {answer.error}"
-                                  ) from answer.error
+                raise AgentFailed(f"the agent's act() raised {described(answer.error)}") from answer.error
             took = answer.answered_at - answer.asked_at
             if took > params.sumo_step:
                 intersection.events.emit(Kind.AGENT_LATE, took_s=took, discarded=answer.overdue)
@@ -708,7 +707,7 @@ def _agent_name(given: str | Agent | None, spec: RunSpec) -> str:
     return spec.agent_spec if given is None or isinstance(given, str) else type(given).__name__
 
 
-def _reason_of(exc: BaseException) -> str:
+def reason_of(exc: BaseException) -> str:
     """The ``run_ended`` reason for what ended a run."""
     if isinstance(exc, RunInterrupted):
         return exc.reason

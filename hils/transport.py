@@ -30,6 +30,7 @@ __all__ = [
     "Latency",
     "LocalTransport",
     "ObjectSurface",
+    "SecurityRefused",
     "SnmpError",
     "Transport",
     "TransportError",
@@ -42,6 +43,11 @@ class TransportError(Exception):
 
 class CommunicationTimeout(TransportError):
     """No answer within tau_udp."""
+
+
+class SecurityRefused(TransportError):
+    """SNMPv3's user-based security refused the exchange (the agent's Report says why), or this end cannot
+    secure it at all: sending again does not help until the user, its keys or the environment change."""
 
 
 class Transport(Protocol):

@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import re
 import select
+import signal
 import subprocess
 import sys
 import urllib.error
@@ -23,6 +24,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from harness.processes import start_emulator
 from hils.config import IntersectionConfig, parse
 from hils.dashboard.board import STRIP_S, Board, Panels, Replay, map_cells
 from hils.dashboard.cabinet import COLUMNS as CABINET_COLUMNS
@@ -210,8 +212,8 @@ def test_panels_fold_each_intersection_s_records_into_its_own_board(paper_config
     assert second["comms"]["polls_failed"] == 1 and first["comms"]["polls_failed"] == 0
     assert [c["phases"] for c in first["commands"]] == [[3, 7]] and second["commands"] == []
     assert first["queues"] == {"north": 3} and second["queues"] is None
-    # A quiet intersection's strip ends at the run's now, not at its own last record.
-    assert second["strip"]["segments"] == [[0.0, {"4": "G", "8": "G"}]] and "t" not in second
+    # A quiet intersection's strip ends at the run's now, not at its own last record; in TIMEOUT it has no data.
+    assert second["strip"]["segments"] == [[0.0, {"4": "G", "8": "G"}], [3.0, None]] and "t" not in second
     # run_ended counts the polls of each controller: each panel shows its own.
     panels.feed({"t": 6.0, "kind": "run_ended", "reason": "duration",
                  "polls": {"J1": {"polls": 60, "failed": 0}, "J2": {"polls": 60, "failed": 9}}})
@@ -263,7 +265,9 @@ def test_a_corridor_run_replays_panel_by_panel(corridor_run: tuple[Path, Panels]
         assert {p["phase"] for p in panel["phases"] if p["shown"] == "G"} == set(last_poll["greens"])
         assert panel["comms"]["polls_ok"] == 1200  # ten a second for 120 s: its own controller's count
         assert panel["commands"] and set(panel["queues"]) == {"north", "south", "east", "west"}
-        assert len({tuple(sorted(s)) for _, s in panel["strip"]["segments"]}) > 2  # its phases changed
+        *polled, (_, closed) = panel["strip"]["segments"]
+        assert len({tuple(sorted(s)) for _, s in polled}) > 2  # its phases changed
+        assert closed is None  # polling stopped with the close: no data
     assert end["panels"][2]["name"] == "corridor crossroad"  # J3's own config
 
 
@@ -313,12 +317,59 @@ def test_dashboard_options_refuse_what_cannot_work(tmp_path: Path) -> None:
     assert empty.returncode == 2 and "no event log" in empty.stderr and "events.jsonl" in empty.stderr
 
 
+def test_only_the_dashboards_own_page_with_the_runs_secret_may_recover(tmp_path: Path) -> None:
+    """A live run with --dashboard-control: the URL printed at start carries the run's secret; a POST without it,
+    with another one, or from a page of another origin (another site, another port here) is refused with 403, and
+    so is every request naming another host (DNS rebinding). The page itself, and curl with the secret, may."""
+    served = start_emulator(tmp_path / "serve.log")
+    proc = None
+    try:
+        proc, url = start_dashboard(sys.executable, "-m", "hils", "run", "--no-sumo", "--no-progress", "--target",
+                                    f"snmp://127.0.0.1:{served.port}?community=private&version=2c", "--duration",
+                                    "60", "--dashboard", "0", "--dashboard-control", "--out", str(tmp_path / "run"))
+        root, secret = page_root(url), secret_of(url)
+        port = root.rsplit(":", 1)[1].rstrip("/")
+        recover = root + "api/recover"
+        assert get(root + "api/meta")[1]["control"] is True
+        refused = {
+            "no secret": get(recover, "POST"),
+            "another secret": get(recover, "POST", {"X-Hils-Token": "guessed"}),
+            "another site": get(recover, "POST", {**secret, "Origin": "http://evil.example"}),
+            "another port": get(recover, "POST", {**secret, "Origin": "http://127.0.0.1:9"}),
+            "rebound name, page": get(root, "GET", {"Host": "evil.example"}),
+            "rebound name, board": get(root + "api/snapshot", "GET", {"Host": f"evil.example:{port}"}),
+            "rebound name, recover": get(recover, "POST", {**secret, "Host": "evil.example"}),
+        }
+        for why, (status, body) in refused.items():
+            assert status == 403, (why, status, body)
+        assert "needs its secret" in refused["no secret"][1]["error"]
+        assert "may not use this dashboard" in refused["another site"][1]["error"]
+        assert "is not this dashboard's" in refused["rebound name, page"][1]["error"]
+        for allowed in (secret, {**secret, "Origin": root.rstrip("/")}):  # curl with the secret, the page
+            status, said = get(recover, "POST", allowed)
+            assert status == 200 and said["recover"].startswith("nothing to recover: the manager is "), said
+        assert get(f"http://localhost:{port}/api/meta", "GET")[0] == 200
+    finally:
+        if proc is not None:
+            proc.send_signal(signal.SIGINT)
+            proc.communicate(timeout=30)
+        served.stop()
+
+
+def test_a_read_only_dashboard_prints_no_secret_and_refuses_control(tmp_path: Path, viewed: str) -> None:
+    assert "token" not in viewed
+    assert get(viewed + "api/snapshot", "GET", {"Host": "evil.example"})[0] == 403
+    status, err = get(viewed + "api/recover", "POST", {"Origin": viewed.rstrip("/")})
+    assert status == 403 and "--dashboard-control" in err["error"]
+
+
 def start_dashboard(*cmd: str) -> tuple[subprocess.Popen[str], str]:
-    """A command that serves the dashboard, started; the page's URL once it prints it."""
+    """A command that serves the dashboard, started; the page's URL once it prints it (with the run's secret,
+    ``?token=...``, when the page may control the run)."""
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     ready, _, _ = select.select([proc.stdout], [], [], 30)
     line = proc.stdout.readline() if ready else ""
-    match = re.match(r"dashboard: (http://127\.0\.0\.1:\d+/)", line)
+    match = re.match(r"dashboard: (http://127\.0\.0\.1:\d+/(\?token=[\w-]+)?)(\s|$)", line)
     if match is None:
         proc.kill()
         raise AssertionError(f"{' '.join(cmd[1:])}: printed no dashboard URL: {line!r} {proc.stderr.read()}")
@@ -337,12 +388,23 @@ def viewed(run: tuple[Path, dict[str, Any]]) -> Iterator[str]:
     proc.wait(timeout=10)
 
 
-def get(url: str, method: str = "GET") -> tuple[int, Any]:
+def get(url: str, method: str = "GET", headers: dict[str, str] | None = None) -> tuple[int, Any]:
     try:
-        with urllib.request.urlopen(urllib.request.Request(url, method=method), timeout=10) as res:
+        with urllib.request.urlopen(urllib.request.Request(url, method=method, headers=headers or {}),
+                                    timeout=10) as res:
             return res.status, json.loads(res.read())
     except urllib.error.HTTPError as err:
         return err.code, json.loads(err.read())
+
+
+def page_root(url: str) -> str:
+    """The dashboard's root (``http://HOST:PORT/``) of the URL it printed."""
+    return url.split("?", 1)[0]
+
+
+def secret_of(url: str) -> dict[str, str]:
+    """The header that controls the run, with the secret of the URL it printed."""
+    return {"X-Hils-Token": url.split("?token=", 1)[1]}
 
 
 def test_replay_server_serves_the_board_at_an_instant_and_refuses_control(viewed: str,
@@ -360,3 +422,20 @@ def test_replay_server_serves_the_board_at_an_instant_and_refuses_control(viewed
     with urllib.request.urlopen(viewed, timeout=10) as page:
         html = page.read().decode()
     assert "/static/app.js" in html and "http" not in html.split("<body>", 1)[1]  # nothing from the internet
+
+
+def test_the_strip_shows_no_data_while_the_signal_state_is_not_verified(paper_config: IntersectionConfig) -> None:
+    board = Board(paper_config)
+    board.feed_all([
+        _poll(0.0, [2, 6]),
+        {"t": 1.0, "kind": "poll_failed", "poll_id": 9, "error": "CommunicationTimeout", "consecutive": 0},  # overtaken
+        {"t": 2.0, "kind": "poll_failed", "poll_id": 10, "error": "CommunicationTimeout", "consecutive": 1},
+        {"t": 2.1, "kind": "poll_failed", "poll_id": 11, "error": "CommunicationTimeout", "consecutive": 2},
+        _poll(2.5, [2, 6]),  # known again, unchanged
+        {"t": 4.0, "kind": "timeout_entered", "reason": "transition", "detail": "x", "command_id": 3},
+        {"t": 9.0, "kind": "recovered", "greens": [2, 6]},
+        {"t": 12.0, "kind": "set_sent", "command_id": None, "phases": [], "purpose": "clear"},
+    ])
+    segments = board.snapshot()["strip"]["segments"]
+    green = {"2": "G", "6": "G"}
+    assert segments == [[0.0, green], [2.0, None], [2.5, green], [4.0, None], [9.0, green], [12.0, None]]

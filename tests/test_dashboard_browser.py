@@ -13,6 +13,9 @@ Makefile's deps target.
 
 from __future__ import annotations
 
+import contextlib
+import functools
+import http.server
 import json
 import os
 import re
@@ -20,13 +23,14 @@ import select
 import signal
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 from playwright.sync_api import Browser, Page, sync_playwright
-from test_dashboard import get, start_dashboard, start_view
+from test_dashboard import get, page_root, secret_of, start_dashboard, start_view
 
 from harness.processes import start_emulator
 
@@ -86,6 +90,7 @@ def test_live_page_shows_phases_change_timeout_and_recovery(tmp_path: Path, brow
                                     "--duration", "120", "--recover-after", "-1", "--dashboard", "0",
                                     "--dashboard-control", "--out", str(run_dir))
         page.goto(url)
+        assert "token" not in page.url  # kept by the tab, out of the address bar
         watch(page, lambda: "G" in shown(page).values(), 15, "a green phase")
         first = shown(page)
         greens_seen = {tuple(sorted(p for p, s in first.items() if s == "G"))}
@@ -117,10 +122,22 @@ def test_live_page_shows_phases_change_timeout_and_recovery(tmp_path: Path, brow
             page.screenshot(path=str(tmp_path / "timeout.png"), full_page=True)
         finally:
             served.proc.send_signal(signal.SIGCONT)
+        # A page served from another port of this machine tries the Recover request as the issue's attacker did
+        # (no-cors: the browser sends it and hides only the answer, opaque): the manager stays in TIMEOUT.
+        with elsewhere(tmp_path) as hostile_url:
+            hostile = browser.new_page()
+            hostile.goto(hostile_url)
+            sent = hostile.evaluate("""async (root) => Promise.all([undefined, "recover"].map((body) =>
+                fetch(root + "api/recover", { method: "POST", mode: "no-cors", body })
+                    .then((res) => res.type, (error) => String(error))))""", page_root(url))
+            hostile.close()
+        assert sent == ["opaque", "opaque"]  # the requests reached the dashboard
+        page.wait_for_timeout(1500)
+        assert state(page) == "TIMEOUT"
         page.locator("[data-testid=recover]").click()
         watch(page, lambda: state(page) in {"IDLE", "ON_HOLD"}, 20, "IDLE after Recover")
         assert page.locator("#recover-said").inner_text() == "requested"
-        status, err = get(url + "api/recover?intersection=J1", method="POST")
+        status, err = get(page_root(url) + "api/recover?intersection=J1", "POST", secret_of(url))
         assert status == 400 and "a run of one intersection" in err["error"]
     finally:
         page.close()
@@ -152,6 +169,23 @@ def test_live_page_shows_phases_change_timeout_and_recovery(tmp_path: Path, brow
         page.close()
         view.terminate()
         view.wait(timeout=10)
+
+
+@contextlib.contextmanager
+def elsewhere(tmp_path: Path) -> Iterator[str]:
+    """The URL of a page served by another web server of this machine (another origin than the dashboard's)."""
+    root = tmp_path / "elsewhere"
+    root.mkdir()
+    (root / "index.html").write_text("<p>another page of this machine</p>")
+    handler = functools.partial(http.server.SimpleHTTPRequestHandler, directory=str(root))
+    with http.server.ThreadingHTTPServer(("127.0.0.1", 0), handler) as server:
+        thread = threading.Thread(target=server.serve_forever, daemon=True)
+        thread.start()
+        try:
+            yield f"http://127.0.0.1:{server.server_address[1]}/"
+        finally:
+            server.shutdown()
+            thread.join(5)
 
 
 def start_proxy(upstream: int, *rules: str) -> tuple[subprocess.Popen[str], int]:
@@ -225,7 +259,7 @@ def test_corridor_page_has_a_panel_per_intersection_and_recovers_one(tmp_path: P
         assert j2_panel.locator(".said").inner_text() == "requested"
         # Whose manager to recover must be said, and be one of the run's.
         for query in ("", "?intersection=J9"):
-            status, err = get(url + "api/recover" + query, method="POST")
+            status, err = get(page_root(url) + "api/recover" + query, "POST", secret_of(url))
             assert status == 400 and "allowed: J1, J2, J3, J4" in err["error"]
     finally:
         page.close()

@@ -1,7 +1,8 @@
 """The layers of the design hold by themselves: hils never imports emulator or harness; the emulator
 imports nothing of hils but the shared layer (the NTCIP object model with its value types and latency
-model, the intersection config, the scenario files that name the config of each intersection, the user-error
-base class), which imports nothing else of hils."""
+model, the intersection config, the scenario files that name the config of each intersection, the scenarios
+derived from RESCO's networks, the user-error base class, SNMPv3's security failures and services), which
+imports nothing else of hils."""
 
 from __future__ import annotations
 
@@ -13,7 +14,8 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-SHARED = {"hils", "hils.ntcip", "hils.config", "hils.scenario", "hils.errors", "hils.timegrid"}
+SHARED = {"hils", "hils.ntcip", "hils.config", "hils.scenario", "hils.resco", "hils.errors", "hils.usm",
+          "hils.timegrid"}
 
 
 def imports_of(path: Path) -> set[str]:

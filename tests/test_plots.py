@@ -61,3 +61,18 @@ def test_a_partial_last_bin_joins_the_one_before_instead_of_dropping(tmp_path):
     assert len(lines) == 1 and len(lines[0].get("points").split()) == 2 * 60  # one step per bin
     assert len(marks) == 2  # the bins with a full lane: the third minute's and the last
     assert "west" in [t.text for t in svg.iter(f"{SVG}text")]
+
+
+def test_the_timeline_draws_no_data_where_the_state_was_not_verified_never_the_last_state(tmp_path):
+    records = [{"kind": Kind.POLL, "t": 0.0, "greens": [4, 8], "yellows": []},
+               {"kind": Kind.POLL_FAILED, "t": 12.0, "consecutive": 1},
+               {"kind": Kind.TIMEOUT_ENTERED, "t": 12.4, "reason": "communication"},
+               {"kind": Kind.POLL, "t": 17.0, "greens": [4, 8], "yellows": []},
+               {"kind": Kind.POLL_FAILED, "t": 20.0, "consecutive": 0},  # overtaken by a newer answer: no gap
+               {"kind": Kind.RUN_ENDED, "t": 30.0}]
+    spans = plots.signal_intervals(records, CFG.phase_numbers, 0.0, 30.0)
+    assert spans[4] == [(0.0, 12.0, "G"), (12.0, 17.0, plots.NO_DATA), (17.0, 30.0, "G")]
+    assert spans[1] == [(0.0, 12.0, "r"), (12.0, 17.0, plots.NO_DATA), (17.0, 30.0, "r")]
+    svg = ElementTree.parse(plots.signal_timeline(records, CFG, tmp_path / "t.svg", start=0, end=30)).getroot()
+    assert len([r for r in svg.iter(f"{SVG}rect") if r.get("fill") == "url(#no-data)"]) == len(CFG.phase_numbers)
+    assert [t.text for t in svg.iter(f"{SVG}text")].count("no data") == len(CFG.phase_numbers)

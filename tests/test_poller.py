@@ -270,3 +270,17 @@ def test_an_answer_older_than_the_newest_applied_is_discarded(paper_config) -> N
     env.run(until=1.0)
     assert 2 not in applied and applied == sorted(applied) and applied[:4] == [0, 1, 3, 4]
     assert mw.poll_counts["late"] == 1 and mw.cache.snapshot.seq == applied[-1]
+
+
+def test_the_first_answer_after_failed_polls_is_logged_even_when_nothing_changed(paper_config) -> None:
+    """The state seen is known again from that answer on: the log says when, so that the plots' no-data stretch
+    ends there and not at the next change of the signal."""
+    rig = Rig(paper_config)
+    rig.surface.plan = [False] * 4 + [True] * 2 + [False] * 5  # the start-up read, polls 1-3, then 4 and 5 fail
+    rig.middleware(n_timeout=5)
+    rig.env.run(until=1.0)  # the start-up green rests: no change at all after the start-up read
+    polls = rig.log.of(Kind.POLL)
+    failed = rig.log.of(Kind.POLL_FAILED)
+    assert [r["poll_id"] for r in failed] == [4, 5]
+    assert [r["poll_id"] for r in polls] == [0, 6], "the start-up read, and the first answer after the failures"
+    assert polls[1]["greens"] == polls[0]["greens"]

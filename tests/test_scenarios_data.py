@@ -131,8 +131,8 @@ def arterial() -> dict[str, str]:
 
 
 @pytest.mark.parametrize(("make", "field", "allowed"), [
-    (lambda tmp: "corridoor", "<scenario>", "allowed: a shipped scenario (four_leg, four_phase, corridor, grid4x4) "
-                                            "or a path to a .scenario.toml file"),
+    (lambda tmp: "corridoor", "<scenario>", "allowed: a shipped scenario (four_leg, four_phase, corridor, grid4x4), "
+                                            "resco:NAME (RESCO's benchmark) or a path to a .scenario.toml file"),
     (lambda tmp: tmp / "absent.scenario.toml", "<file>", "cannot be read (No such file or directory); allowed: a "
                                                          "shipped scenario"),
     (lambda tmp: scenario_file(tmp, arterial(), extra='target = "snmp://x"'), "target",

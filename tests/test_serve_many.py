@@ -85,8 +85,8 @@ def test_the_controllers_are_on_consecutive_ports_from_the_first(tmp_path: Path)
     (["--scenario", "corridor", "--count", "3"], "hils: --count 3 with --scenario corridor, which has 4 "
                                                  "intersections; allowed: --count 4, or no --count"),
     (["--scenario", "corridr"], "hils: corridr: <scenario>: no shipped scenario of that name; allowed: a "
-                                "shipped scenario (four_leg, four_phase, corridor, grid4x4) or a path to a "
-                                ".scenario.toml file"),
+                                "shipped scenario (four_leg, four_phase, corridor, grid4x4), resco:NAME (RESCO's "
+                                "benchmark) or a path to a .scenario.toml file"),
     (["--count", "2", "--trace", "t.jsonl"], "hils: --trace records one controller, not 2; allowed: --trace with "
                                              "--count 1"),
 ], ids=["count-0", "ports-beyond-65535", "count-not-the-scenario's", "unknown-scenario", "trace-of-many"])

@@ -26,7 +26,8 @@ from harness.processes import SNMPD_V3_USERS, snmpd, tool
 from hils.clock import WallClockDriver
 from hils.ntcip import ErrorStatus, SnmpError
 from hils.snmp import AUTH_KEY_ENV, PRIV_KEY_ENV, AuthProtocol, PrivProtocol, SnmpTarget, SnmpTransport, SnmpVersion
-from hils.transport import CommunicationTimeout, TransportError
+from hils.transport import CommunicationTimeout, SecurityRefused, TransportError
+from hils.usm import UsmFailure
 
 SYS_DESCR = (1, 3, 6, 1, 2, 1, 1, 1, 0)
 SYS_UPTIME = (1, 3, 6, 1, 2, 1, 1, 3, 0)
@@ -360,6 +361,22 @@ def test_v3_keys_from_the_environment_and_never_in_the_repr():
     assert (target.auth_key, target.priv, target.security_level) == ("auth-in-url", None, "authNoPriv")
 
 
+@pytest.mark.parametrize("url", [
+    "snmp://h?version=3&user=ops&auth=SHA&auth_key=secret-one&priv=DES&priv_key=secret-two",  # DES: not offered
+    "snmp://h?version=3&user=ops&auth=SHA&auth_key=secret-one&priv_key=secret-two",  # a key without its protocol
+    "snmp://h?version=3&auth=SHA&auth_key=secret-one",  # no user
+])
+def test_target_errors_quote_the_url_without_its_keys(url):
+    with pytest.raises(ValueError) as refused:
+        SnmpTarget.parse(url, environ={})
+    assert "secret" not in str(refused.value) and "auth_key=..." in str(refused.value)
+
+
+def test_a_v3_target_has_no_community():
+    target = SnmpTarget.parse("snmp://h?version=3&user=ops&auth=SHA&auth_key=auth-pass-phrase")
+    assert target.community == ""
+
+
 @pytest.mark.parametrize("user", sorted(SNMPD_V3_USERS))
 def test_v3_get_and_set_against_snmpd(driver, snmpd_port, user):
     level, auth_key, priv_key = SNMPD_V3_USERS[user]
@@ -392,26 +409,67 @@ def test_v3_get_and_set_against_snmpd(driver, snmpd_port, user):
     assert out.stdout.strip() == ".1.3.6.1.2.1.11.30.0 = INTEGER: 2", out.stderr
 
 
-@pytest.mark.parametrize("wrong", ["auth", "priv"])
-def test_v3_wrong_key_fails_the_request(driver, snmpd_port, wrong):
-    _, auth_key, priv_key = SNMPD_V3_USERS["hilspriv"]
-    keys = {"auth": ("not-the-auth-key", priv_key), "priv": (auth_key, "not-the-priv-key")}[wrong]
-    transport = SnmpTransport(driver.env, driver, SnmpTarget.parse(v3_url(snmpd_port, "hilspriv", *keys)),
+@pytest.mark.parametrize(("user", "auth_key", "priv_key", "failure"), [
+    ("hilspriv", "not-the-auth-key", "hils-priv-key", UsmFailure.WRONG_DIGEST),
+    ("nobody", "hils-auth-key", "hils-priv-key", UsmFailure.UNKNOWN_USER_NAME),
+    ("hilsauth", "hils-auth-key", "hils-priv-key", UsmFailure.UNSUPPORTED_SEC_LEVEL),  # a user without privacy
+    ("hilspriv", "hils-auth-key", "not-the-priv-key", None),  # snmpd drops what it cannot decrypt: no Report
+], ids=["wrong-auth-key", "unknown-user", "priv-for-auth-only-user", "wrong-priv-key"])
+@pytest.mark.parametrize("request_kind", ["get", "set"])
+def test_v3_refusals_say_why_from_the_report(driver, snmpd_port, user, auth_key, priv_key, failure, request_kind):
+    """GETs go through gufo-snmp and SETs through pysnmp: both name the usmStats counter of snmpd's Report."""
+    transport = SnmpTransport(driver.env, driver, SnmpTarget.parse(v3_url(snmpd_port, user, auth_key, priv_key)),
                               tau_udp=0.5)
 
     def scenario():
         try:
-            yield transport.get([SYS_UPTIME])
+            yield transport.get([SYS_UPTIME]) if request_kind == "get" else transport.set([(DO_DEBUGGING, 0)])
         except TransportError as exc:
             return exc
-        pytest.fail("a GET with a wrong key succeeded")
+        pytest.fail("a request with wrong credentials succeeded")
 
     try:
-        failure = run_process(driver, scenario())
+        error = run_process(driver, scenario())
     finally:
         transport.close()
-    # A wrong authentication key is reported by the agent; a wrong privacy key leaves it unable to read us.
-    assert isinstance(failure, TransportError)
+    if failure is None:
+        assert isinstance(error, CommunicationTimeout)
+        return
+    assert isinstance(error, SecurityRefused), error
+    assert str(error) == f"127.0.0.1:{snmpd_port} refused SNMPv3 user {user!r} at authPriv: {failure}"
+    assert failure.value in str(error) and "community" not in str(error)
+
+
+def test_a_user_removed_mid_run_fails_each_request_with_the_reason(driver, tmp_path):
+    """The agent's administrator deletes the user while a run polls and sets (net-snmp's snmpusm, on an snmpd of
+    this test's own): the next GET and SET fail as unknown user, not as a lost datagram."""
+    _, auth_key, _ = SNMPD_V3_USERS["hilsauth"]
+    admin, admin_auth, admin_priv = "hilspriv", *SNMPD_V3_USERS["hilspriv"][1:]
+    with snmpd(tmp_path) as port:
+        transport = SnmpTransport(driver.env, driver, SnmpTarget.parse(v3_url(port, "hilsauth", auth_key, "")),
+                                  tau_udp=0.5)
+
+        def scenario():
+            yield transport.get([SYS_UPTIME])
+            yield transport.set([(DO_DEBUGGING, 0)])
+            deleted = subprocess.run([tool("snmpusm"), "-v3", "-l", "authPriv", "-u", admin, "-a", "SHA", "-A",
+                                      admin_auth, "-x", "AES", "-X", admin_priv, f"127.0.0.1:{port}", "delete",
+                                      "hilsauth"], capture_output=True, text=True, timeout=10)
+            assert deleted.returncode == 0, deleted.stderr
+            errors = []
+            for request in (lambda: transport.get([SYS_UPTIME]), lambda: transport.set([(DO_DEBUGGING, 0)])):
+                try:
+                    yield request()
+                except TransportError as exc:
+                    errors.append(exc)
+            return errors
+
+        try:
+            errors = run_process(driver, scenario())
+        finally:
+            transport.close()
+    assert [type(e) for e in errors] == [SecurityRefused, SecurityRefused]
+    assert all(str(e).endswith(f"authNoPriv: {UsmFailure.UNKNOWN_USER_NAME}") for e in errors), errors
 
 
 def test_the_transports_of_one_run_share_an_engine_and_keep_their_communities_apart(driver, connect, snmpd_port):

@@ -28,7 +28,8 @@ def test_a_grid_is_every_combination_with_each_agents_own_action_type() -> None:
 @pytest.mark.parametrize(("call", "message"), [
     (lambda: parse_seeds("a-b"), "allowed: integers and ranges"),
     (lambda: grid([], [0]), "at least one agent"),
-    (lambda: scenario_arguments("nowhere"), "allowed: four_leg, four_phase or CONFIG.toml"),
+    (lambda: scenario_arguments("nowhere"),
+     "allowed: four_leg, four_phase, corridor, grid4x4, resco:grid4x4, .* or CONFIG.toml"),
 ])
 def test_a_bad_grid_is_refused_saying_what_is_allowed(call, message: str) -> None:
     with pytest.raises(SweepError, match=message):
@@ -61,7 +62,8 @@ def test_a_sweep_on_a_process_pool_keeps_every_cell_in_grid_order(pooled) -> Non
     mp = [r.figures["arrived"] for r in ok if r.cell.agent == "max-pressure"]
     assert mp[0] != mp[1]
     table = aggregate(results)
-    assert table["max-pressure"]["mean_delay_s"].n == 2 and table["no.such:Agent"]["mean_delay_s"].n == 0
+    assert table["four_leg"]["max-pressure"]["mean_delay_s"].n == 2
+    assert table["four_leg"]["no.such:Agent"]["mean_delay_s"].n == 0
 
 
 def test_the_same_sweep_on_a_local_ray_instance_gives_the_same_results(pooled, tmp_path: Path) -> None:
@@ -83,7 +85,7 @@ def test_compare_writes_its_table_and_plot_from_another_folder(tmp_path: Path) -
     assert done.returncode == 0, done.stderr
     assert "95 % confidence interval over 2 seeds" in done.stdout
     out = tmp_path / "cmp"
-    table = json.loads((out / "compare.json").read_text())
+    table = json.loads((out / "compare.json").read_text())["four_leg"]
     assert set(table) == {"max-pressure", "webster"}
     assert table["webster"]["mean_delay_s"]["n"] == 2 and table["webster"]["mean_delay_s"]["ci95_half_width"] > 0
     assert (out / "compare.png").stat().st_size > 10_000 and (out / "sweep.csv").exists()

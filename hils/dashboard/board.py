@@ -17,7 +17,9 @@ Theory of operation
 Each kind of record updates one part of the board (see ``_HANDLERS``):
 
 - ``poll``: the indication of every phase (green, yellow, else red); a change opens a segment of the
-  strip, which keeps the last :data:`STRIP_S` seconds.
+  strip, which keeps the last :data:`STRIP_S` seconds. A record after which the signal state is not
+  verified (:func:`hils.events.signal_known`: polls failing, halted in TIMEOUT or by the close) opens a
+  segment without indications, drawn as no data, until the next poll or recovery.
 - ``cabinet`` (dashboard runs only, :mod:`hils.dashboard.cabinet`): walks, pedestrian clearances
   (flashing don't walk), the controller's vehicle and pedestrian calls and PhaseNext; a run logged
   without a dashboard has none, and the page says so.
@@ -42,6 +44,7 @@ from typing import Any
 
 from hils.config import IntersectionConfig
 from hils.dashboard.cabinet import COLUMNS as CABINET_COLUMNS
+from hils.events import signal_known
 
 #: Seconds of signal history in the strip.
 STRIP_S = 120.0
@@ -92,7 +95,8 @@ class Board:
     last_lag: float | None = None  # the last transition's dispatch-to-verification time
     queues: dict[str, int] | None = None
     cabinet: dict[str, list[int]] | None = None  # the last cabinet record's phase lists
-    strip: deque[tuple[float, dict[int, str]]] = field(default_factory=deque)  # (start, indications)
+    # (start, indications; None: no verified signal state)
+    strip: deque[tuple[float, dict[int, str] | None]] = field(default_factory=deque)
     records: int = 0
     _pending: list[int] = field(default_factory=list)  # the last converted command, for a keep
 
@@ -103,11 +107,19 @@ class Board:
         handler = _HANDLERS.get(record["kind"])
         if handler is not None:
             handler(self, record)
+        known = signal_known(record)
+        if known is not None:
+            self._segment(float(record["t"]), self.shown if known and self.polled else None)
 
     def feed_all(self, records: Iterable[Mapping[str, Any]]) -> Board:
         for record in records:
             self.feed(record)
         return self
+
+    @staticmethod
+    def refuses(record: Mapping[str, Any]) -> str | None:
+        """Why the board cannot fold ``record`` (a field it reads missing or of another type), or None."""
+        return _refused(record, _READS)
 
     # --- handlers -------------------------------------------------------------------------------
 
@@ -122,11 +134,7 @@ class Board:
         self.last_poll = max(self.last_poll, int(r["poll_id"]))
         self.failing = 0
         greens, yellows = set(r["greens"]), set(r["yellows"])
-        shown = {p: GREEN if p in greens else YELLOW if p in yellows else RED for p in self.config.phase_numbers}
-        if shown != self.shown or not self.polled:
-            self.shown = shown
-            self.strip.append((float(r["t"]), shown))
-            self._trim()
+        self.shown = {p: GREEN if p in greens else YELLOW if p in yellows else RED for p in self.config.phase_numbers}
         self.polled = True
 
     def _poll_failed(self, r: Mapping[str, Any]) -> None:
@@ -209,6 +217,12 @@ class Board:
         return {"ped": ped, "call": phase in c["veh_calls"], "ped_call": phase in c["ped_calls"],
                 "next": phase in c["nexts"]}
 
+    def _segment(self, t: float, shown: dict[int, str] | None) -> None:
+        """The strip from ``t`` on shows ``shown`` (None: no data), unless it shows that already."""
+        if not self.strip or self.strip[-1][1] != shown:
+            self.strip.append((t, shown))
+            self._trim()
+
     def _trim(self) -> None:
         # Drop segments that ended before the strip's window (a segment ends where the next starts).
         horizon = self.t - STRIP_S
@@ -242,8 +256,8 @@ class Board:
                       "drifts": self.drifts, "last_lag_s": _r(self.last_lag)},
             "queues": self.queues,
             "strip": {"window_s": STRIP_S,
-                      "segments": [[round(t0, 3), {str(p): s for p, s in shown.items() if s != RED}]
-                                   for t0, shown in self.strip]},
+                      "segments": [[round(t0, 3), None if shown is None else
+                                    {str(p): s for p, s in shown.items() if s != RED}] for t0, shown in self.strip]},
         }
 
 
@@ -257,6 +271,71 @@ class Board:
 
 def _r(x: float | None) -> float | None:
     return None if x is None else round(x, 3)
+
+
+def _integer(v: Any) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def _number(v: Any) -> bool:
+    return isinstance(v, int | float) and not isinstance(v, bool)
+
+
+def _phases(v: Any) -> bool:
+    return isinstance(v, list) and all(_integer(p) for p in v)
+
+
+def _text(v: Any) -> bool:
+    return isinstance(v, str)
+
+
+def _counts(v: Any) -> bool:
+    """A poller's counts, as run_ended has them."""
+    return isinstance(v, dict) and {"polls", "failed"} <= v.keys() and all(_integer(n) for n in v.values())
+
+
+def _optional(check: Callable[[Any], bool]) -> Callable[[Any], bool]:
+    return lambda v: v is None or check(v)
+
+
+_MISSING = object()
+
+#: What the board reads of each kind it folds, and what each field must be. A finished run's log is checked
+#: against it before it is replayed (:meth:`Board.refuses`): a record that would not fold is left out and
+#: named, never half applied. Records of a live run are the run's own and are not checked.
+_READS: dict[str, dict[str, Callable[[Any], bool]]] = {
+    "run_ended": {"reason": _text, "polls": _optional(_counts)},
+    "poll": {"poll_id": _integer, "greens": _phases, "yellows": _phases},
+    "poll_failed": {"poll_id": _optional(_integer), "consecutive": _optional(_integer)},
+    "set_sent": {"phases": _phases},
+    "action_converted": {"command": _phases},
+    "command_dispatched": {"command_id": _optional(_integer), "command": _phases, "green": _optional(_number)},
+    "transition_verified": {"command_id": _optional(_integer), "hold_s": _number},
+    "hold_released": {"command_id": _optional(_integer), "hold_s": _number, "reason": _text},
+    "state": {"to": _text},
+    "timeout_entered": {"reason": _text},
+    "queues": {"queues": lambda v: isinstance(v, dict) and all(_integer(n) for n in v.values())},
+    "cabinet": dict.fromkeys(CABINET_COLUMNS, _phases),
+}
+# A run of several controllers: its run_ended has each intersection's counts.
+_READS_OF_RUN = {"run_ended": {"reason": _text,
+                               "polls": _optional(lambda v: isinstance(v, dict) and all(map(_optional(_counts),
+                                                                                            v.values())))}}
+_OPTIONAL_FIELDS = {("poll_failed", "poll_id"), ("poll_failed", "consecutive"), ("run_ended", "polls")}
+
+
+def _refused(record: Mapping[str, Any], reads: Mapping[str, Mapping[str, Callable[[Any], bool]]]) -> str | None:
+    """Why a record does not give what ``reads`` says its kind must give (None when it does)."""
+    kind = record["kind"]
+    for name, check in reads.get(kind, {}).items():
+        value = record.get(name, _MISSING)
+        if value is _MISSING:
+            if (kind, name) in _OPTIONAL_FIELDS:
+                continue
+            return f"{kind} without {name}"
+        if not check(value):
+            return f"{kind}.{name} is {repr(value)[:40]}"
+    return None
 
 
 _HANDLERS: dict[str, Callable[[Board, Mapping[str, Any]], None]] = {
@@ -324,6 +403,15 @@ class Panels:
             self.feed(record)
         return self
 
+    def refuses(self, record: Mapping[str, Any]) -> str | None:
+        """Why these panels cannot fold ``record`` (an intersection not of the run, or what a board refuses)."""
+        tls = record.get("intersection")
+        if tls is None:
+            return _refused(record, _READS_OF_RUN)
+        if tls not in self.boards:
+            return f"intersection {repr(tls)[:20]} is not one of the run's ({', '.join(self.boards)})"
+        return Board.refuses(record)
+
     def snapshot(self) -> dict[str, Any]:
         """The run and each intersection's board, with its cell on the page (see ``static/app.js``)."""
         panels = []
@@ -367,7 +455,15 @@ class Replay:
     ``empty`` is the board the run starts from: a :class:`Board`, or :class:`Panels` for a run of several."""
 
     def __init__(self, empty: Board | Panels, records: Iterable[Mapping[str, Any]], *, every: int = 2000) -> None:
-        self.records = list(records)
+        #: (seq, why) of the records left out: the board could not fold them (a log not written by a run).
+        self.skipped: list[tuple[Any, str]] = []
+        self.records = []
+        for record in records:
+            why = empty.refuses(record)
+            if why is None:
+                self.records.append(record)
+            else:
+                self.skipped.append((record.get("seq"), why))
         if not self.records:
             raise ValueError("the event log has no records")
         self.times = [float(r["t"]) for r in self.records]

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import math
+import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -13,7 +15,8 @@ from hils.dashboard import DashboardError
 from hils.scenario import Scenario, load_scenario
 
 if TYPE_CHECKING:  # the dashboard's modules load when a page is served, not for `hils --help`
-    from hils.dashboard.board import Panels
+    from hils.dashboard.board import Panels, Replay
+    from hils.events import BadLine
 
 VIEW_HELP = """\
 Replay a finished run (a run folder of `hils run`, or its events.jsonl) in the dashboard's page:
@@ -39,32 +42,61 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def view_command(args: argparse.Namespace) -> int:
-    from hils.dashboard.board import Board, Replay
-    from hils.dashboard.server import bind, create_app, server, url
-    from hils.events import read
+    from hils.dashboard.server import address, bind, create_app, server, url
 
-    if not args.realtime > 0:
-        raise DashboardError(f"--realtime must be a positive factor (1 = sim speed), got {args.realtime:g}")
-    log_path = args.run / "events.jsonl" if args.run.is_dir() else args.run
-    if not log_path.is_file():
-        raise DashboardError(f"{args.run}: no event log there; allowed: a run folder holding events.jsonl, "
-                             "or an events.jsonl file")
-    records = list(read(log_path))
-    if not records or records[0].get("kind") != "run_started":
-        raise DashboardError(f"{log_path}: first record: not run_started; allowed: an event log written by a run")
-    started = records[0]
-    if "intersections" in started:
-        empty: Board | Panels = _panels(_scenario(started, args.scenario, log_path), started["intersections"], log_path)
-    else:
-        empty = Board(_config(started, args.config, log_path))
-    replay = Replay(empty, records)
+    if not (math.isfinite(args.realtime) and args.realtime > 0):
+        raise DashboardError(f"--realtime is {args.realtime:g}; allowed: a positive factor (1 = sim speed)")
+    if not 0 <= args.port <= 65535:
+        raise DashboardError(f"--port is {args.port}; allowed: a TCP port from 0 to 65535 (0: any free one)")
+    replay, log_path, skipped = load_replay(args.run, config=args.config, scenario=args.scenario)
+    if skipped:
+        print(f"hils view: left out {len(skipped)} line{'s' if len(skipped) > 1 else ''} of {log_path} that "
+              f"{'are' if len(skipped) > 1 else 'is'} not a record of a run: {'; '.join(skipped[:3])}"
+              f"{'; ...' if len(skipped) > 3 else ''}", file=sys.stderr)
     sock = bind("127.0.0.1", args.port)
     print(f"dashboard: {url(sock)} (replay of {log_path}, {replay.end:.0f} sim s; Ctrl-C stops)", flush=True)
     try:
-        asyncio.run(server(create_app(replay, realtime=args.realtime), own_signals=True).serve(sockets=[sock]))
+        app = create_app(replay, address(sock), realtime=args.realtime)
+        asyncio.run(server(app, own_signals=True).serve(sockets=[sock]))
     finally:
         sock.close()
     return 0
+
+
+def load_replay(run: Path, *, config: str | None = None, scenario: str | None = None
+                ) -> tuple[Replay, Path, list[str]]:
+    """The replay of a run folder (or its event log), the log's path, and the lines left out of it, each named
+    with why: a line that is not a record, or a record the board cannot fold. A log that cannot be replayed at
+    all (none there, no run_started first, nothing but bad lines) is refused in one line."""
+    from hils.dashboard.board import Board, Replay
+    from hils.events import read
+
+    log_path = run / "events.jsonl" if run.is_dir() else run
+    if not log_path.is_file():
+        raise DashboardError(f"{run}: no event log there; allowed: a run folder holding events.jsonl, "
+                             "or an events.jsonl file")
+    bad: list[BadLine] = []
+    try:
+        records = list(read(log_path, on_bad=bad.append))
+    except OSError as exc:
+        raise DashboardError(f"{log_path}: cannot be read ({exc.strerror}); allowed: an event log") from None
+    if not records or records[0]["kind"] != "run_started":
+        first = f"line {bad[0].line}: {bad[0].why}" if bad and (not records or bad[0].line == 1) else \
+            f"a {records[0]['kind']} record" if records else "empty"
+        raise DashboardError(f"{log_path}: its first record is not run_started ({first}); allowed: an event log "
+                             "written by a run")
+    started = records[0]
+    intersections = started.get("intersections")
+    if intersections is not None:
+        if not (isinstance(intersections, list) and intersections and all(isinstance(t, str) for t in intersections)):
+            raise DashboardError(f"{log_path}: run_started.intersections is {repr(intersections)[:40]}; allowed: "
+                                 "the traffic lights of the run, a list of names")
+        empty: Board | Panels = _panels(_scenario(started, scenario, log_path), intersections, log_path)
+    else:
+        empty = Board(_config(started, config, log_path))
+    replay = Replay(empty, records)
+    skipped = [f"line {b.line}: {b.why}" for b in bad] + [f"record seq {seq}: {why}" for seq, why in replay.skipped]
+    return replay, log_path, skipped
 
 
 def _config(started: dict, given: str | None, log_path: Path) -> IntersectionConfig:
@@ -75,7 +107,7 @@ def _config(started: dict, given: str | None, log_path: Path) -> IntersectionCon
     default = config_mod.load(None)
     if source in (None, default.source):
         return default
-    if Path(source).is_file():
+    if isinstance(source, str) and Path(source).is_file():
         return config_mod.load(source)
     raise DashboardError(f"{log_path}: run_started.source: {source} is not a file here; allowed: give the run's "
                          "config with --config FILE")
@@ -86,7 +118,7 @@ def _scenario(started: dict, given: str | None, log_path: Path) -> Scenario:
     if given is not None:
         return load_scenario(given)
     source = started.get("source")
-    if source is not None and Path(source).is_file():
+    if isinstance(source, str) and Path(source).is_file():
         return load_scenario(source)
     raise DashboardError(f"{log_path}: run_started.source: {source} is not a file here; allowed: give the run's "
                          "scenario with --scenario NAME|FILE")

@@ -9,6 +9,15 @@ Routes::
     GET  /api/stream         live: server-sent events, one board snapshot per change, at most 4 a second
     POST /api/recover        live with control: ask the manager to recover from TIMEOUT; 403 otherwise
          ?intersection=TLS   (a run of several: whose manager; required there, refused with one)
+         X-Hils-Token: SECRET  the run's secret (below)
+
+Only the page this server serves may use it (:class:`_Guard`, before any route): a request naming another
+host (``Host: evil.example``, a DNS name rebound to 127.0.0.1) or sent by a page of another origin (another
+site, or another port of this machine) is answered 403, whatever it asks for. A live run that may be
+controlled has a secret, drawn at start and printed in the page's URL (``?token=...``, as Jupyter does); the
+page sends it with every POST, and a POST without it is answered 403 too. A page of another origin cannot
+read the secret (same-origin policy) and cannot send the header without the server's leave (CORS preflight,
+which nothing here grants), so it cannot press Recover even with ``fetch(..., {mode: "no-cors"})``.
 
 A live run serves from the run's own asyncio loop (the wall-clock driver's): :class:`LiveServer`
 starts uvicorn's ``Server.serve()`` as a task there, so every handler runs on the thread that steps
@@ -20,6 +29,8 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import hmac
+import secrets
 import socket
 from collections.abc import AsyncIterator, Callable, Iterator
 from dataclasses import dataclass
@@ -29,9 +40,11 @@ from typing import Any
 import orjson
 import uvicorn
 from starlette.applications import Starlette
+from starlette.datastructures import Headers
 from starlette.requests import Request
 from starlette.responses import Response, StreamingResponse
 from starlette.routing import Route
+from starlette.types import ASGIApp, Receive, Scope, Send
 
 from hils.dashboard import DashboardError
 from hils.dashboard.board import Board, Panels, Replay
@@ -40,6 +53,9 @@ from hils.dashboard.board import Board, Panels, Replay
 STREAM_PERIOD = 0.25
 
 _ASSETS = {"app.js": "text/javascript", "style.css": "text/css", "index.html": "text/html"}
+#: The header that carries the run's secret (see the module's doc).
+TOKEN_HEADER = "X-Hils-Token"
+_SAFE_METHODS = frozenset({"GET", "HEAD"})
 
 
 @dataclass
@@ -64,8 +80,45 @@ def _asset(name: str) -> Response:
     return Response(body, media_type=_ASSETS[name], headers={"Cache-Control": "no-cache"})
 
 
-def create_app(source: Live | Replay, *, realtime: float = 1.0) -> Starlette:
-    """The app serving ``source``: a live run's board, or a finished run's replay."""
+class _Guard:
+    """403 for a request to another host, from a page of another origin, or controlling the run without its secret
+    (ASGI middleware in front of every route)."""
+
+    def __init__(self, app: ASGIApp, address: tuple[str, int], secret: str | None) -> None:
+        host, port = address
+        names = {host, "localhost"} if host == "127.0.0.1" else {host}
+        self.app = app
+        self.hosts = frozenset(f"{name}:{port}" for name in names)
+        self.origins = frozenset(f"http://{h}" for h in self.hosts)
+        self.secret = secret
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] == "http":
+            refusal = self._refusal(scope["method"], Headers(scope=scope))
+            if refusal is not None:
+                await _json({"error": refusal}, 403)(scope, receive, send)
+                return
+        await self.app(scope, receive, send)
+
+    def _refusal(self, method: str, headers: Headers) -> str | None:
+        host = headers.get("host", "")
+        if host not in self.hosts:
+            return f"Host {host!r} is not this dashboard's; allowed: {', '.join(sorted(self.hosts))}"
+        origin = headers.get("origin")
+        if origin is not None and origin not in self.origins:
+            return f"a page of {origin} may not use this dashboard; allowed: its own page"
+        if method in _SAFE_METHODS or self.secret is None:
+            return None
+        if not hmac.compare_digest(headers.get(TOKEN_HEADER, "").encode(), self.secret.encode()):
+            return (f"controlling the run needs its secret in {TOKEN_HEADER}: open the dashboard's URL printed at "
+                    "start (…/?token=…)")
+        return None
+
+
+def create_app(source: Live | Replay, address: tuple[str, int], *, realtime: float = 1.0,
+               secret: str | None = None) -> Starlette:
+    """The app serving ``source`` (a live run's board, or a finished run's replay) on ``address``, the host and
+    port it is reached at; ``secret``: what a POST must carry to control a live run (see the module's doc)."""
     live = source if isinstance(source, Live) else None
     replay = source if isinstance(source, Replay) else None
 
@@ -107,11 +160,13 @@ def create_app(source: Live | Replay, *, realtime: float = 1.0) -> Starlette:
             return _json({"error": f"intersection={tls}: a run of one intersection; allowed: no intersection"}, 400)
         return _json({"recover": live.recover(tls)})
 
-    return Starlette(routes=[
+    app = Starlette(routes=[
         Route("/", page), Route("/static/{name}", static), Route("/api/meta", meta),
         Route("/api/snapshot", snapshot), Route("/api/stream", stream), Route("/api/recover", recover,
                                                                               methods=["POST"]),
     ])
+    app.add_middleware(_Guard, address=address, secret=secret)
+    return app
 
 
 async def _events(live: Live) -> AsyncIterator[bytes]:
@@ -141,9 +196,15 @@ def bind(host: str, port: int) -> socket.socket:
     return sock
 
 
-def url(sock: socket.socket) -> str:
+def url(sock: socket.socket, secret: str | None = None) -> str:
+    """The page's URL on ``sock``, with the run's secret when it has one."""
     host, port = sock.getsockname()[:2]
-    return f"http://{host}:{port}/"
+    return f"http://{host}:{port}/" + (f"?token={secret}" if secret else "")
+
+
+def address(sock: socket.socket) -> tuple[str, int]:
+    host, port = sock.getsockname()[:2]
+    return host, port
 
 
 class _Server(uvicorn.Server):
@@ -167,13 +228,15 @@ class LiveServer:
         self.live = live
         self.sock = sock
         self.loop = loop
-        self.server = server(create_app(live))
+        # Drawn afresh for every run: only who saw the URL printed at start may recover from the page.
+        self.secret = secrets.token_urlsafe(24) if live.recover is not None else None
+        self.server = server(create_app(live, address(sock), secret=self.secret))
         # The task runs whenever the loop does: while the driver steps SimPy to the wall clock.
         self.task = loop.create_task(self.server.serve(sockets=[sock]))
 
     @property
     def url(self) -> str:
-        return url(self.sock)
+        return url(self.sock, self.secret)
 
     def stop(self) -> None:
         """End the event streams and the server; call while the loop is not running (after the run)."""

@@ -5,9 +5,26 @@
 
 const $ = (id) => document.getElementById(id);
 const NAMES = { G: "green", Y: "yellow", r: "red" };
-const COLORS = { G: "#1fa64a", Y: "#f2c21b", r: "#c8322b" };
+// "-": no verified signal state (polls failing, halted in TIMEOUT or by the close): hatched, never the last state.
+const COLORS = { G: "#1fa64a", Y: "#f2c21b", r: "#c8322b", "-": "url(#no-data)" };
+const HATCH = '<defs><pattern id="no-data" width="6" height="6" patternUnits="userSpaceOnUse" ' +
+  'patternTransform="rotate(45)"><rect width="6" height="6" fill="#eceef1"/>' +
+  '<line x1="0" y1="0" x2="0" y2="6" stroke="#9aa1ad" stroke-width="2"/></pattern></defs>';
 const STATES = { idle: "IDLE", on_hold: "ON_HOLD", timeout: "TIMEOUT", closed: "CLOSED" };
 let meta = null;
+
+// The run's secret, printed at start in the page's URL (?token=..., as Jupyter does): kept for this tab, taken out
+// of the address bar (it is not for screenshots or links), and sent with the requests that control the run.
+const token = (() => {
+  const here = new URL(location.href);
+  const given = here.searchParams.get("token");
+  if (given) {
+    sessionStorage.setItem("hils-token", given);
+    here.searchParams.delete("token");
+    history.replaceState(null, "", here.pathname + here.search + here.hash);
+  }
+  return sessionStorage.getItem("hils-token");
+})();
 
 function el(tag, attrs, ...children) {
   const node = document.createElement(tag);
@@ -108,7 +125,7 @@ function drawStrip(v, snap) {
   svg.setAttribute("viewBox", `0 0 ${width} ${height}`);
   const w = snap.strip.window_s, t1 = snap.t, t0 = t1 - w;
   const x = (t) => left + ((Math.max(t, t0) - t0) / w) * (width - left - 6);
-  const parts = [];
+  const parts = [HATCH];
   const segs = snap.strip.segments;
   phases.forEach((n, i) => {
     const y = top + i * rowH;
@@ -122,12 +139,19 @@ function drawStrip(v, snap) {
                  `height="${bar}" fill="${COLORS[runShown]}" shape-rendering="crispEdges"/>`);
     };
     segs.forEach(([start, shown]) => {
-      const s = shown[String(n)] || "r";
+      const s = shown === null ? "-" : shown[String(n)] || "r";
       if (s === runShown) return;
       flush(start);
       runStart = start; runShown = s;
     });
     flush(t1);
+  });
+  // Each stretch without data says so once, across the rows, where it is wide enough to read.
+  segs.forEach(([start, shown], k) => {
+    const end = k + 1 < segs.length ? segs[k + 1][0] : t1;
+    if (shown !== null || end < t0 || x(end) - x(start) < (c ? 34 : 48)) return;
+    parts.push(`<text x="${(x(start) + x(end)) / 2}" y="${top + (rowH * phases.length) / 2 + 4}" ` +
+               `font-size="${font}" fill="#1d2330" text-anchor="middle" data-testid="no-data">no data</text>`);
   });
   const axisY = top + rowH * phases.length + (c ? 10 : 12);
   for (let s = 0; s <= w; s += c ? 60 : 30) {
@@ -145,7 +169,7 @@ function drawManager(v, snap) {
   const to = snap.timeout;
   v.reason.textContent = to ? `reason: ${to.reason}${to.detail ? " — " + to.detail : ""}` +
                               (to.recovering ? " (recovering…)" : "") : "";
-  v.recover.hidden = !(meta && meta.control && snap.state === "timeout" && !snap.ended);
+  v.recover.hidden = !(meta && meta.control && token && snap.state === "timeout" && !snap.ended);
 }
 
 function drawCommands(v, snap) {
@@ -228,8 +252,10 @@ function draw(snap) {
 }
 
 async function recover(v) {
-  const res = await fetch("/api/recover" + (v.tls ? `?intersection=${encodeURIComponent(v.tls)}` : ""), { method: "POST" });
-  v.said.textContent = (await res.json()).recover || "refused";
+  const res = await fetch("/api/recover" + (v.tls ? `?intersection=${encodeURIComponent(v.tls)}` : ""),
+                          { method: "POST", headers: { "X-Hils-Token": token } });
+  const said = await res.json();
+  v.said.textContent = said.recover || `refused: ${said.error}`;
 }
 
 function live() {
