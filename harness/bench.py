@@ -12,10 +12,6 @@ import argparse
 import contextlib
 import json
 import logging
-import re
-import statistics
-import subprocess
-import sys
 import tempfile
 import time
 from collections.abc import Iterator, Sequence
@@ -26,7 +22,8 @@ from typing import Any
 
 import simpy
 
-from harness import bench_corridor, floods, machine
+from harness import bench_corridor, bench_seeds, floods, machine
+from harness.bench_seeds import Spread
 from harness.bench_serve import resident_mb
 from harness.processes import snmpd, start_emulator
 from hils import config as config_mod
@@ -60,12 +57,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                                            "every 10 s) in virtual time, divided by the wall time of libsumo alone "
                                            "replaying, step for step, the signal states the loop showed (same "
                                            "seed: same vehicles; same_traffic checks equal departed and arrived "
-                                           "counts). Measured alternately, side by side, several times; the ratio "
-                                           "of medians is reported, and the old baseline (libsumo running a fixed "
-                                           "cycle at maximum green: other traffic) for the record.")
+                                           "counts). Each side once per seed, every run in a fresh process, "
+                                           "alternately; the ratio is taken seed by seed and reported as its median "
+                                           "and min-max, and the old baseline (libsumo running a fixed cycle at "
+                                           "maximum green: other traffic) for the record.")
     over.add_argument("--duration", type=float, default=3600.0, metavar="S", help="simulated seconds (3600)")
-    over.add_argument("--repeat", type=int, default=3, help="alternating measurements of each (3)")
-    over.add_argument("--seed", type=int, default=0)
+    bench_seeds.seeds_option(over)
     over.add_argument("--instructions", action="store_true",
                       help="also count the instructions of each side under valgrind's callgrind (minutes; "
                            "exact and repeatable on a busy machine, where seconds are not)")
@@ -96,7 +93,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                               description="Environment steps per second and wall time per simulated hour of "
                                           "hils/Intersection-v0 beside sumo-rl's SumoEnvironment on the shipped "
                                           "four-leg network and demand: 0.25 s SUMO steps, a decision every 10 s, "
-                                          "a seeded random policy, each episode in a fresh process, alternately. "
+                                          "a seeded random policy; one episode of each side per seed, each in a "
+                                          "fresh process, alternately; medians and min-max over the seeds, and "
+                                          "hils' ratio to sumo-rl seed by seed (wall time, SUMO's part, own work). "
                                           "hils' controller enforces minimum green, yellow and red clearance; "
                                           "sumo-rl inserts its own yellow (the config's 3 s, and its 3 s minimum "
                                           "green, given in SUMO steps: sumo-rl counts them so) and no all-red, so "
@@ -104,8 +103,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                                           "are shown). Needs "
                                           "sumo-rl: pip install 'hils[bench]'.")
     env.add_argument("--duration", type=float, default=3600.0, metavar="S", help="simulated seconds per episode (3600)")
-    env.add_argument("--repeat", type=int, default=3, help="alternating episodes of each (3)")
-    env.add_argument("--seed", type=int, default=0)
+    bench_seeds.seeds_option(env, "0-7")
     env.add_argument("--out", type=Path, default=REPORT_DIR / "env.json", metavar="FILE")
     env.set_defaults(func=_env_command)
     corridor = commands.add_parser("corridor", help="controllers one process drives at wall clock; virtual time and "
@@ -172,165 +170,30 @@ def _latency_command(args: argparse.Namespace) -> int:
     return 0
 
 
-class _Recording:
-    """A SUMO simulation of one intersection that notes, step by step, each change of the light's state string it
-    was given.
-
-    Only changes are noted (a few hundred per hour), so the recording costs the measured run nothing
-    on the steps where the controller's indications stay as they are."""
-
-    def __init__(self, sim: Any) -> None:
-        self.sim = sim
-        self.steps = 0
-        self.changes: list[tuple[int, str]] = []
-        self.lights = {name: _RecordedLight(light, self) for name, light in sim.lights.items()}
-
-    def step(self) -> Any:
-        self.steps += 1
-        return self.sim.step()
-
-    def advance(self, steps: int) -> None:
-        self.steps += steps
-        self.sim.advance(steps)
-
-
-class _RecordedLight:
-    """A light of a :class:`_Recording`: what it is given to show goes to the recording when it changes SUMO's."""
-
-    def __init__(self, light: Any, recording: _Recording) -> None:
-        self.light, self.recording = light, recording
-
-    def apply(self, state: Any) -> None:
-        if self.light.apply(state):
-            self.recording.changes.append((self.recording.steps, self.light.indications()))
-
-    def traffic_state(self) -> Any:
-        return self.light.traffic_state()
-
-    def queues(self) -> Any:
-        return self.light.queues()
-
-
-def _replay(cfg: Any, seed: int, duration: float, changes: list[tuple[int, str]]) -> tuple[float, Any]:
-    """Bare libsumo stepping the same scenario and seed, showing the recorded state strings at the same
-    steps: the same-traffic floor. Between two changes SUMO steps in one call (to the next change's
-    time), as cheaply as libsumo allows. Returns the wall seconds of the stepping and SUMO's end figures."""
-    import libsumo
-
-    from hils.sumo import SumoSimulation, step_on
-
-    sim = SumoSimulation(cfg, seed=seed, end=duration)
-    with sim:
-        steps = round(duration / sim.step_length)
-        (tls,) = sim.lights
-        show, length = libsumo.trafficlight.setRedYellowGreenState, sim.step_length
-        shown = [(k, text) for k, text in changes if k < steps]
-        begins = [0, *(k for k, _ in shown)]
-        ends = [*begins[1:], steps]
-        texts = [None, *(text for _, text in shown)]
-        t0 = time.perf_counter()
-        for text, begin, end in zip(texts, begins, ends, strict=True):
-            if text is not None:
-                show(tls, text)
-            if end > begin:
-                step_on(end - begin, length)
-        wall = time.perf_counter() - t0
-        return wall, sim.summary()
-
-
-def record_full_loop(cfg: Any, seed: int, duration: float) -> tuple[float, list[tuple[int, str]], Any]:
-    """The benchmark's full loop (four-leg, max-pressure, SUMO, event log to a file): its wall seconds, the
-    signal states it showed step by step (for :func:`_replay`) and SUMO's end figures."""
-    from hils.sumo import SumoSimulation
-
-    sim = SumoSimulation(cfg, seed=seed, end=duration)
-    sim.start()
-    recording = _Recording(sim)
-    try:
-        with tempfile.TemporaryDirectory() as tmp:
-            spec = RunSpec(cfg, ActionType.SELECTION, duration=duration, seed=seed, sumo=True,
-                           log_path=Path(tmp) / "events.jsonl")
-            wall = run_spec(spec, simulation=recording).wall_s
-        return wall, recording.changes, sim.summary()
-    finally:
-        sim.close()
-
-
-def measure_overhead(duration: float, repeat: int, seed: int) -> dict[str, Any]:
-    """Alternating timings of the full loop and of bare libsumo replaying the very signal states the
-    loop showed (same vehicles, same traffic), and, for the record, of libsumo running the config's
-    fixed cycle at maximum green (other traffic: the comparison this benchmark used to make)."""
-    from hils.sumo import time_bare_sumo
-
-    cfg = config_mod.load()
-    full, floor, fixed = [], [], []
-    same_traffic = True
-    traffic: dict[str, Any] = {}
-    for _ in range(repeat):
-        wall, changes, hils_traffic = record_full_loop(cfg, seed, duration)
-        full.append(wall)
-        wall, bare_traffic = _replay(cfg, seed, duration, changes)
-        floor.append(wall)
-        fixed.append(time_bare_sumo(duration, seed=seed, config=cfg))
-        same = (hils_traffic.departed, hils_traffic.arrived) == (bare_traffic.departed, bare_traffic.arrived)
-        same_traffic = same_traffic and same
-        traffic = {"hils": {"departed": hils_traffic.departed, "arrived": hils_traffic.arrived},
-                   "replay": {"departed": bare_traffic.departed, "arrived": bare_traffic.arrived},
-                   "signal_changes": len(changes)}
-    full_s, floor_s, fixed_s = (statistics.median(x) for x in (full, floor, fixed))
-    return {"duration_s": duration, "hils_s": full, "same_traffic_floor_s": floor, "same_traffic": same_traffic,
-            "traffic": traffic, "hils_median_s": full_s, "floor_median_s": floor_s, "ratio": full_s / floor_s,
-            "fixed_cycle_at_max_green_s": fixed, "fixed_cycle_median_s": fixed_s,
-            "ratio_vs_fixed_cycle_at_max_green": full_s / fixed_s}
-
-
-def measure_instructions(duration: float, warm: float = 10.0) -> dict[str, Any]:
-    """Instructions of the full loop and of its same-traffic floor per ``duration`` simulated seconds, each
-    counted by callgrind in a process of its own, less the same process run for ``warm`` s (start-up out)."""
-    counts: dict[str, float] = {}
-    with tempfile.TemporaryDirectory() as tmp:
-        changes = Path(tmp) / "changes.json"
-        for seconds in (duration, warm):
-            for side in ("hils", "floor"):  # the floor replays what the loop just showed
-                counts[f"{side}_{seconds:g}"] = _callgrind(["-m", "harness.overhead_probe", side, str(seconds),
-                                                            str(changes)])
-    hils = counts[f"hils_{duration:g}"] - counts[f"hils_{warm:g}"]
-    floor = counts[f"floor_{duration:g}"] - counts[f"floor_{warm:g}"]
-    return {"duration_s": duration, "warm_s": warm, "counts": counts, "hils_instructions": hils,
-            "floor_instructions": floor, "ratio": hils / floor}
-
-
-def _callgrind(args: list[str]) -> float:
-    """Instructions a Python process executes, as valgrind's callgrind counts them (its 'Collected' line)."""
-    done = subprocess.run(["valgrind", "--tool=callgrind", "--callgrind-out-file=/dev/null", sys.executable, *args],
-                          capture_output=True, text=True, check=False)
-    found = re.search(r"Collected : (\d+)", done.stderr)
-    if done.returncode != 0 or found is None:
-        raise SystemExit(f"hils bench overhead --instructions: valgrind failed ({done.returncode}): "
-                         f"{done.stderr.strip()[-300:]}")
-    return float(found[1])
-
-
 def _overhead_command(args: argparse.Namespace) -> int:
+    from harness.bench_overhead import measure_instructions, measure_overhead
+
     info = machine.describe()
-    f = measure_overhead(args.duration, args.repeat, args.seed)
+    f = measure_overhead(args.duration, args.seeds)
     print(machine.header(info))
-    print(f"one simulated {f['duration_s']:g} s, {args.repeat} alternating runs each (medians; every run listed):")
-    print(f"  full HILS loop                      {f['hils_median_s']:.2f} s  "
-          + " ".join(f"{x:.2f}" for x in f["hils_s"]))
-    print(f"  bare libsumo, same signal states    {f['floor_median_s']:.2f} s  "
-          + " ".join(f"{x:.2f}" for x in f["same_traffic_floor_s"]))
-    t = f["traffic"]
-    print(f"    same traffic: {str(f['same_traffic']).lower()} (departed {t['hils']['departed']} / "
-          f"{t['replay']['departed']}, arrived {t['hils']['arrived']} / {t['replay']['arrived']}; "
-          f"{t['signal_changes']} signal changes replayed)")
-    print(f"  ratio to the same-traffic floor     {f['ratio']:.2f} (goal <= 1.15)")
-    print(f"  for the record, libsumo running a fixed cycle at maximum green (other traffic): "
-          f"{f['fixed_cycle_median_s']:.2f} s, ratio {f['ratio_vs_fixed_cycle_at_max_green']:.2f}")
+    print(f"one simulated {f['duration_s']:g} s per run, seeds {_seed_list(f['seeds'])}, every run in a fresh process, "
+          "alternately; median [min-max] over the seeds:")
+    runs = f["runs"]
+    for side, label in (("hils", "full HILS loop"), ("floor", "bare libsumo, same signal states"),
+                        ("fixed_cycle", "bare libsumo, fixed cycle at max green")):
+        per_seed = " ".join(f"{runs[side][s]['wall_s']:.2f}" for s in f["seeds"])
+        print(f"  {label:40} {Spread(**f[f'{side}_s']).text()} s   per seed: {per_seed}")
+    same = ", ".join(f"{s}: {runs['hils'][s]['departed']}/{runs['floor'][s]['departed']} departed, "
+                     f"{runs['hils'][s]['arrived']}/{runs['floor'][s]['arrived']} arrived" for s in f["seeds"])
+    print(f"    same traffic: {str(f['same_traffic']).lower()} (loop/floor by seed: {same})")
+    print(f"  ratio to the same-traffic floor, per seed   {Spread(**f['ratio']).text()} (goal <= 1.15)")
+    print(f"  for the record, ratio to the fixed cycle at maximum green (other traffic): "
+          f"{Spread(**f['ratio_vs_fixed_cycle_at_max_green']).text()}")
     if args.instructions:
         ins = f["instructions"] = measure_instructions(args.duration)
-        print(f"  instructions (callgrind, start-up counted out): full loop {ins['hils_instructions'] / 1e9:.2f} G, "
-              f"same-traffic floor {ins['floor_instructions'] / 1e9:.2f} G, ratio {ins['ratio']:.2f}")
+        print(f"  instructions (callgrind, seed 0, start-up counted out): full loop "
+              f"{ins['hils_instructions'] / 1e9:.2f} G, same-traffic floor {ins['floor_instructions'] / 1e9:.2f} G, "
+              f"ratio {ins['ratio']:.2f}")
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(jsonout.dumps({"machine": info, "overhead": f}) + "\n", encoding="utf-8")
     print(f"written: {args.out}")
@@ -564,35 +427,34 @@ def _env_command(args: argparse.Namespace) -> int:
         if "SUMO_HOME" not in str(exc):
             raise SystemExit("hils bench env compares with sumo-rl: pip install 'hils[bench]'") from None
     info = machine.describe()
-    f = measure_env(args.repeat, args.seed, args.duration)
+    f = measure_env(args.seeds, args.duration)
     print(machine.header(info))
-    print(f"one {f['episode_s']:g} s episode, {f['sumo_step_s']} s SUMO steps, a decision every {f['decision_s']:g} s, "
-          f"random policy; {args.repeat} alternating episodes each, medians:")
+    print(f"one {f['episode_s']:g} s episode per side and seed (seeds {_seed_list(f['seeds'])}), each in a fresh "
+          f"process, alternately; {f['sumo_step_s']} s SUMO steps, a decision every {f['decision_s']:g} s, random "
+          "policy; median [min-max] over the seeds:")
     t, c = f["sumo_rl_timing_steps"], f["config_timing_s"]
     print(f"  sumo-rl counts its yellow and minimum green in SUMO steps: it is given the config's {c['yellow']:g} s "
           f"and {c['min_green']:g} s as {t['yellow']} and {t['min_green']} steps; 'unconverted' is the same numbers "
           f"as steps (a {c['yellow'] * f['sumo_step_s']:g} s yellow), as its own docs suggest writing them")
-    print(f"  {'':20} {'steps':>6} {'steps/s':>8} {'wall s / sim h':>15} {'of it SUMO':>11} {'own work':>9} "
-          f"{'inserted':>9} {'arrived':>8}")
-    for side, label in (("hils", "hils"), ("sumo_rl", "sumo-rl"), ("sumo_rl_unconverted", "sumo-rl, unconverted")):
-        r = f[side]
-        print(f"  {label:20} {r['steps']:>6} {r['steps_per_s']:>8.1f} {r['wall_per_sim_hour_s']:>15.2f} "
-              f"{r['sumo_per_sim_hour_s']:>11.2f} {r['own_per_sim_hour_s']:>9.2f} "
-              f"{_or_dash(r['inserted']):>9} {_or_dash(r['arrived']):>8}")
-    print(f"  hils / sumo-rl speed: {f['speed_ratio_hils_to_sumo_rl']:.2f} (goal >= 1; hils' controller adds a 2 s "
-          "all-red to every change and serves the config's pairs: other signals, other traffic, which SUMO steps at "
-          "its own cost)")
-    print(f"  hils / sumo-rl unconverted: {f['speed_ratio_hils_to_sumo_rl_unconverted']:.2f} (shorter clearances, "
-          "lighter traffic)")
-    print(f"  the environments' own work per simulated hour, sumo-rl / hils: {f['own_work_ratio_sumo_rl_to_hils']:.2f}")
+    labels = {"hils": "hils", "sumo_rl": "sumo-rl", "sumo_rl_unconverted": "sumo-rl, unconverted"}
+    for line in bench_seeds.episode_table({labels[side]: figures for side, figures in f["sides"].items()}):
+        print(line)
+    print(bench_seeds.ratio_line("hils / sumo-rl", f["hils_to_sumo_rl"])
+          + " (goal: wall <= 1; hils' controller adds a 2 s all-red to every change and serves the config's pairs: "
+            "other signals, other traffic, which SUMO steps at its own cost)")
+    print(bench_seeds.ratio_line("hils / sumo-rl unconverted", f["hils_to_sumo_rl_unconverted"])
+          + " (shorter clearances, lighter traffic)")
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(jsonout.dumps({"machine": info, "env": f}) + "\n", encoding="utf-8")
     print(f"written: {args.out}")
     return 0
 
 
-def _or_dash(x: Any) -> str:
-    return "-" if x is None else str(x)
+def _seed_list(seeds: Sequence[int]) -> str:
+    """``0-7`` for consecutive seeds, else ``0,3,7``."""
+    if len(seeds) > 2 and list(seeds) == list(range(seeds[0], seeds[0] + len(seeds))):
+        return f"{seeds[0]}-{seeds[-1]}"
+    return ",".join(map(str, seeds))
 
 
 def _corridor_command(args: argparse.Namespace) -> int:

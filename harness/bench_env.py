@@ -1,9 +1,10 @@
 """`hils bench env`: the gymnasium environment's speed beside sumo-rl's, on the same network and demand.
 
 Both environments run the shipped four-leg network and its routes with a 0.25 s SUMO step, a decision
-every 10 s and a seeded random policy, for one simulated hour per episode, each in a fresh process (one
-libsumo per process), alternately and several times; the medians are compared. What differs, on
-purpose, is the controller: hils' emulator enforces minimum green, yellow and red clearance itself
+every 10 s and a seeded random policy, for one simulated hour per episode: one episode of each per seed
+(seeds 0-7 by default), each in a fresh process (one libsumo per process), alternately
+(:mod:`harness.bench_seeds`); medians and spread over the seeds, and hils' ratio to sumo-rl seed by seed.
+What differs, on purpose, is the controller: hils' emulator enforces minimum green, yellow and red clearance itself
 (10 Hz polls, NTCIP objects, the manager), while sumo-rl switches SUMO's program directly and inserts a
 yellow of its own without an all-red. sumo-rl gets the shipped config's yellow and minimum green (3 s
 each), converted to its unit: it counts both in SUMO steps (one per ``simulationStep``) although its docs
@@ -21,13 +22,14 @@ from __future__ import annotations
 import contextlib
 import io
 import os
-import statistics
 import sys
 import time
+from collections.abc import Sequence
+from functools import partial
 from importlib import resources
 from typing import Any
 
-from harness.processes import in_fresh_process
+from harness.bench_seeds import alternate, compare_episodes, episode_figures
 
 EPISODE_S = 3600.0
 SUMO_STEP = 0.25
@@ -129,29 +131,17 @@ def _random_episode(env: Any, seed: int) -> tuple[int, float]:
     return steps, time.perf_counter() - started
 
 
-def measure_env(repeat: int = 3, seed: int = 0, duration: float = EPISODE_S) -> dict[str, Any]:
-    """Alternating episodes of each; per side every run and the medians."""
-    runs: dict[str, list[dict[str, Any]]] = {"hils": [], "sumo_rl": [], "sumo_rl_unconverted": []}
-    for _ in range(repeat):
-        runs["hils"].append(in_fresh_process(hils_episode, seed, duration))
-        runs["sumo_rl"].append(in_fresh_process(sumo_rl_episode, seed, duration))
-        runs["sumo_rl_unconverted"].append(in_fresh_process(sumo_rl_episode, seed, duration, False))
-    out: dict[str, Any] = {"episode_s": duration, "sumo_step_s": SUMO_STEP, "decision_s": DECISION_S,
-                           "policy": "random (seeded)", "repeat": repeat,
-                           "config_timing_s": dict(zip(TIMINGS, _config_timing(), strict=True)),
-                           "sumo_rl_timing_steps": dict(zip(TIMINGS, sumo_rl_timing(), strict=True)),
-                           "runs": runs}
-    for side, rs in runs.items():
-        wall = statistics.median(r["wall_s"] for r in rs)
-        steps = rs[0]["steps"]
-        own = statistics.median(r["wall_s"] - r["sumo_s"] for r in rs)
-        out[side] = {"steps": steps, "wall_median_s": wall, "steps_per_s": steps / wall,
-                     "wall_per_sim_hour_s": wall * 3600.0 / duration,
-                     "sumo_per_sim_hour_s": statistics.median(r["sumo_s"] for r in rs) * 3600.0 / duration,
-                     "own_per_sim_hour_s": own * 3600.0 / duration,
-                     "inserted": rs[0]["inserted"], "arrived": rs[0]["arrived"]}
-    out["speed_ratio_hils_to_sumo_rl"] = out["hils"]["steps_per_s"] / out["sumo_rl"]["steps_per_s"]
-    out["speed_ratio_hils_to_sumo_rl_unconverted"] = (out["hils"]["steps_per_s"]
-                                                      / out["sumo_rl_unconverted"]["steps_per_s"])
-    out["own_work_ratio_sumo_rl_to_hils"] = out["sumo_rl"]["own_per_sim_hour_s"] / out["hils"]["own_per_sim_hour_s"]
-    return out
+def measure_env(seeds: Sequence[int], duration: float = EPISODE_S, *, progress: bool = True) -> dict[str, Any]:
+    """One episode of each side per seed, alternately, each in a fresh process (:mod:`harness.bench_seeds`): every
+    run, each side's figures over the seeds, and hils' per-seed ratios to each sumo-rl side."""
+    runs = alternate(seeds, {"hils": partial(hils_episode, duration=duration),
+                             "sumo_rl": partial(sumo_rl_episode, duration=duration),
+                             "sumo_rl_unconverted": partial(sumo_rl_episode, duration=duration, converted=False)},
+                     progress=progress)
+    sides = {side: episode_figures(by_seed, duration) for side, by_seed in runs.items()}
+    return {"episode_s": duration, "sumo_step_s": SUMO_STEP, "decision_s": DECISION_S, "policy": "random (seeded)",
+            "seeds": list(seeds), "config_timing_s": dict(zip(TIMINGS, _config_timing(), strict=True)),
+            "sumo_rl_timing_steps": dict(zip(TIMINGS, sumo_rl_timing(), strict=True)),
+            "runs": runs, "sides": sides,
+            "hils_to_sumo_rl": compare_episodes(sides["hils"], sides["sumo_rl"]),
+            "hils_to_sumo_rl_unconverted": compare_episodes(sides["hils"], sides["sumo_rl_unconverted"])}

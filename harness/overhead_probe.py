@@ -14,7 +14,7 @@ import json
 import sys
 from pathlib import Path
 
-from harness.bench import _replay, record_full_loop
+from harness.bench_overhead import _replay, record_full_loop
 from hils import config as config_mod
 
 
