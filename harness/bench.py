@@ -112,11 +112,14 @@ def register(sub: argparse._SubParsersAction) -> None:
                                                "on loopback, driven by one middleware process at 10 Hz polling each "
                                                "(four-leg config, fixed-cycle agent, no SUMO), for N = 1, 4, 16, ... "
                                                "until a count fails: it passes without any TIMEOUT and with the "
-                                               "driver's event lateness p99 under 20 ms (goal: 64 or more). (2) "
+                                               "driver's event lateness p99 under 20 ms (goal: 64 or more); the climb "
+                                               "is made several times, and the count that passes is reported with "
+                                               "its spread and what stopped each climb. (2) "
                                                "Virtual time: wall seconds per simulated controller-hour for 1, 4 "
                                                "and 16 controllers, with SUMO (four_leg, corridor, grid4x4) and "
-                                               "without. (3) Resident memory of the middleware and of the serve "
-                                               "process as N grows (goal: at most 10 MB per added controller). "
+                                               "without, one run per seed, alternately. (3) Resident memory of the "
+                                               "middleware and of the serve process as N grows (goal: at most 10 MB "
+                                               "per added controller). "
                                                "Every run in a fresh process.")
     corridor.add_argument("--counts", type=_counts, default=list(bench_corridor.WALL_COUNTS), metavar="N,...",
                           help="wall-clock controller counts, tried in order until one fails "
@@ -125,7 +128,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                           help="wall-clock seconds per count (30)")
     corridor.add_argument("--virtual-duration", type=float, default=600.0, metavar="S",
                           help="simulated seconds per virtual-time run (600)")
-    corridor.add_argument("--repeat", type=int, default=3, metavar="N", help="virtual-time runs of each, medians (3)")
+    corridor.add_argument("--climbs", type=_positive, default=3, metavar="N",
+                          help="times the wall-clock counts are climbed, each until one fails (3)")
+    bench_seeds.seeds_option(corridor)
     corridor.add_argument("--out", type=Path, default=REPORT_DIR / "corridor.json", metavar="FILE",
                           help="where the figures go (reports/bench/corridor.json)")
     corridor.set_defaults(func=_corridor_command)
@@ -460,25 +465,43 @@ def _seed_list(seeds: Sequence[int]) -> str:
 def _corridor_command(args: argparse.Namespace) -> int:
     info = machine.describe()
     print(machine.header(info))
-    f = bench_corridor.measure_corridor(args.counts, args.duration, args.virtual_duration, args.repeat)
+    f = bench_corridor.measure_corridor(args.counts, args.duration, args.virtual_duration, args.seeds, args.climbs)
     w = f["wall_clock"]
     print(f"wall clock: one middleware process, 10 Hz polling each controller, {args.duration:g} s per count, "
-          "against one `hils emulator serve --count N` on loopback:")
-    print(f"  {'N':>4} {'lateness p99 ms':>16} {'max ms':>8} {'TIMEOUTs':>9} {'polls answered':>15} {'failed':>7} "
-          f"{'CPU hils':>9} {'CPU serve':>10} {'RSS hils MB':>12} {'RSS serve MB':>13}  passes")
-    for r in w["runs"]:
-        polls = r["polls"]
-        print(f"  {r['controllers']:>4} {r['lateness_p99_ms']:>16.2f} {r['lateness_max_ms']:>8.1f} "
-              f"{sum(r['timeouts'].values()):>9} {polls.get('answered', 0):>15} {polls.get('failed', 0):>7} "
-              f"{r['cpu_share']:>9.0%} {r['serve_cpu_share']:>10.0%} {r['rss_mb']:>12.1f} {r['serve_rss_mb']:>13.1f}  "
-              f"{'yes' if r['passes'] else 'no'}")
-    print(f"  most controllers passing: {w['most_controllers_passing']} (goal >= {w['goal_controllers']}: no TIMEOUT, "
+          f"against one `hils emulator serve --count N` on loopback; {args.climbs} climbs of the counts, each "
+          "until a count fails:")
+    print(f"  {'climb':>5} {'N':>4} {'lateness p99 ms':>16} {'max ms':>8} {'TIMEOUTs':>9} {'polls answered':>15} "
+          f"{'failed':>7} {'CPU hils':>9} {'CPU serve':>10} {'RSS hils MB':>12} {'RSS serve MB':>13}  passes")
+    for climb, ladder in enumerate(w["climbs"], 1):
+        for r in ladder:
+            if not r["started"]:
+                print(f"  {climb:>5} {r['controllers']:>4}  did not start: {r['refused']} controllers refused at "
+                      f"start-up ({r['refusal']})")
+                continue
+            polls = r["polls"]
+            print(f"  {climb:>5} {r['controllers']:>4} {r['lateness_p99_ms']:>16.2f} {r['lateness_max_ms']:>8.1f} "
+                  f"{sum(r['timeouts'].values()):>9} {polls.get('answered', 0):>15} {polls.get('failed', 0):>7} "
+                  f"{r['cpu_share']:>9.0%} {r['serve_cpu_share']:>10.0%} {r['rss_mb']:>12.1f} "
+                  f"{r['serve_rss_mb']:>13.1f}  {'yes' if r['passes'] else 'no'}")
+    print(f"  most controllers passing, per climb: {', '.join(map(str, w['most_controllers_passing']))}; median "
+          f"{Spread(**w['most_controllers_passing_spread']).text(0)} (goal >= {w['goal_controllers']}: no TIMEOUT, "
           f"p99 < {w['goal_p99_ms']:g} ms)")
-    print(f"virtual time, {args.virtual_duration:g} simulated s, median of {args.repeat}:")
+    for lim in w["limits"]:
+        if not lim["started"]:
+            print(f"  what stopped a climb at {lim['controllers']}: {lim['refused']} controllers unanswered at "
+                  "start-up")
+            continue
+        reasons = ", ".join(f"{n} {reason}" for reason, n in lim["timeouts"].items()) or "none"
+        print(f"  what stopped a climb at {lim['controllers']}: lateness p99 {lim['lateness_p99_ms']:.1f} ms, "
+              f"TIMEOUTs {reasons}, {lim['polls_per_s']:.0f} polls/s ({lim['failed_polls']} failed); the "
+              f"middleware's one thread busy {lim['cpu_share']:.0%}, the serve process {lim['serve_cpu_share']:.0%} "
+              f"(on {info['cores']} cores)")
+    print(f"virtual time, {args.virtual_duration:g} simulated s, seeds {_seed_list(f['seeds'])}, median [min-max]:")
     for key, label in (("with_sumo", "with SUMO"), ("controllers_only", "no SUMO")):
         for r in f["virtual"][key]:
-            print(f"  {label:9} {r['controllers']:>3} controllers ({r['scenario']}): {r['wall_s']:.2f} s wall, "
-                  f"{r['wall_per_controller_hour_s']:.2f} s per controller-hour")
+            print(f"  {label:9} {r['controllers']:>3} controllers ({r['scenario']}): "
+                  f"{Spread(**r['wall_s']).text()} s wall, {Spread(**r['wall_per_controller_hour_s']).text()} s per "
+                  "controller-hour")
     m = f["memory"]
     for side in ("middleware", "serve"):
         per = m[side]["mb_per_controller"]
@@ -488,6 +511,17 @@ def _corridor_command(args: argparse.Namespace) -> int:
     args.out.write_text(jsonout.dumps({"machine": info, "corridor": f}) + "\n", encoding="utf-8")
     print(f"written: {args.out}")
     return 0
+
+
+def _positive(text: str) -> int:
+    """A count of 1 or more."""
+    try:
+        n = int(text)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"{text!r}: allowed: a whole number of 1 or more")
+    return n
 
 
 def _counts(text: str) -> list[int]:

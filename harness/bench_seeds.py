@@ -80,7 +80,7 @@ def alternate(seeds: Sequence[int], runs: Mapping[str, Run], *, progress: bool =
 
     out: dict[str, dict[int, dict[str, Any]]] = {side: {} for side in runs}
     plan = order(seeds, list(runs))
-    with tqdm(plan, unit="run", disable=not progress, file=sys.stderr, leave=False) as bar:
+    with tqdm(plan, unit="run", disable=None if progress else True, file=sys.stderr, leave=False) as bar:
         for seed, side in bar:
             bar.set_description(f"{side}, seed {seed}")
             out[side][seed] = fresh(runs[side], seed)
