@@ -106,6 +106,26 @@ def register(sub: argparse._SubParsersAction) -> None:
     bench_seeds.seeds_option(env, "0-7")
     env.add_argument("--out", type=Path, default=REPORT_DIR / "env.json", metavar="FILE")
     env.set_defaults(func=_env_command)
+    res = commands.add_parser("resco", help="hils' PettingZoo environment beside sumo-rl's on RESCO's networks",
+                              description=(
+                                          "Wall time per simulated hour of "
+                                          "hils.envs.parallel_env(scenario='resco:NAME') (every light an emulated NEMA"
+                                          " controller) beside sumo-rl's multi-agent SumoEnvironment on the same "
+                                          "network and demand: 0.25 s SUMO steps, a decision every RESCO step length "
+                                          "(10 s, 5 s on arterial4x4), sumo-rl given each light's yellow and minimum "
+                                          "green in its unit (SUMO steps), a seeded random policy; one episode of each"
+                                          " side per seed, each in a fresh process, alternately. Each side's time is "
+                                          "split into SUMO's steps and its own work (also per controller-hour); "
+                                          "vehicles inserted and arrived are shown. sumo-rl's PettingZoo wrapper does "
+                                          "not start with pettingzoo 1.27 (agent_selector is now AgentSelector): its "
+                                          "SumoEnvironment(single_agent=False) is stepped directly. Needs sumo-rl: pip"
+                                          " install 'hils[bench]'."))
+    res.add_argument("--scenarios", type=_resco_names, default="grid4x4,cologne8", metavar="NAME,...|all",
+                     help="RESCO scenarios (grid4x4,cologne8; all: the eight)")
+    res.add_argument("--duration", type=float, default=3600.0, metavar="S", help="simulated seconds per episode (3600)")
+    bench_seeds.seeds_option(res)
+    res.add_argument("--out", type=Path, default=REPORT_DIR / "resco.json", metavar="FILE")
+    res.set_defaults(func=_resco_command)
     corridor = commands.add_parser("corridor", help="controllers one process drives at wall clock; virtual time and "
                                                     "memory per controller",
                                    description="(1) Wall clock: N controllers of one `hils emulator serve --count N` "
@@ -460,6 +480,39 @@ def _seed_list(seeds: Sequence[int]) -> str:
     if len(seeds) > 2 and list(seeds) == list(range(seeds[0], seeds[0] + len(seeds))):
         return f"{seeds[0]}-{seeds[-1]}"
     return ",".join(map(str, seeds))
+
+
+def _resco_command(args: argparse.Namespace) -> int:
+    from harness.bench_resco import measure_resco
+
+    info = machine.describe()
+    f = measure_resco(args.scenarios, args.seeds, args.duration)
+    print(machine.header(info))
+    print(f"one {f['episode_s']:g} s episode per side, scenario and seed (seeds {_seed_list(f['seeds'])}), each in a "
+          f"fresh process, alternately; {f['sumo_step_s']} s SUMO steps, random policy; median [min-max] over the "
+          "seeds:")
+    print(f"  the peer: {f['peer']}")
+    for name, sc in f["scenarios"].items():
+        print(f"resco:{name} ({sc['controllers']} lights, a decision every {sc['decision_s']:g} s):")
+        for line in bench_seeds.episode_table({"hils": sc["sides"]["hils"], "sumo-rl": sc["sides"]["sumo_rl"]},
+                                              per_controller=True):
+            print(line)
+        print(bench_seeds.ratio_line("hils / sumo-rl", sc["hils_to_sumo_rl"]) + " (goal: wall <= 1)")
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(jsonout.dumps({"machine": info, "resco": f}) + "\n", encoding="utf-8")
+    print(f"written: {args.out}")
+    return 0
+
+
+def _resco_names(text: str) -> list[str]:
+    """``--scenarios`` of the RESCO bench: names of RESCO's scenarios, comma-separated, or all."""
+    from hils.resco import NAMES
+
+    names = list(NAMES) if text == "all" else [n.strip().removeprefix("resco:") for n in text.split(",")]
+    unknown = [n for n in names if n not in NAMES]
+    if unknown or not names:
+        raise argparse.ArgumentTypeError(f"{text!r}: allowed: all, or some of {','.join(NAMES)}")
+    return names
 
 
 def _corridor_command(args: argparse.Namespace) -> int:

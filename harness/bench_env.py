@@ -19,17 +19,13 @@ sumo-rl is the `bench` extra (`pip install 'hils[bench]'`).
 
 from __future__ import annotations
 
-import contextlib
-import io
-import os
-import sys
 import time
 from collections.abc import Sequence
 from functools import partial
 from importlib import resources
 from typing import Any
 
-from harness.bench_seeds import alternate, compare_episodes, episode_figures
+from harness.bench_seeds import alternate, compare_episodes, episode_figures, time_sumo_steps
 
 EPISODE_S = 3600.0
 SUMO_STEP = 0.25
@@ -43,7 +39,7 @@ def hils_episode(seed: int, duration: float = EPISODE_S) -> dict[str, Any]:
 
     import hils.envs  # noqa: F401  (registers the environment)
 
-    sumo_s = _time_sumo_steps()
+    sumo_s = time_sumo_steps()
     env = gym.make("hils/Intersection-v0", action_type="selection", sumo_step=SUMO_STEP,
                    control_interval=DECISION_S, episode_length=duration)
     steps, wall = _random_episode(env, seed)
@@ -58,14 +54,10 @@ def sumo_rl_episode(seed: int, duration: float = EPISODE_S, converted: bool = Tr
 
     ``converted``: the config's timings in sumo-rl's unit (:func:`sumo_rl_timing`); else the same numbers
     as seconds would be written, which sumo-rl takes as steps (a 0.75 s yellow at 0.25 s steps)."""
-    import sumo
+    from harness.sumo_rl_peer import sumo_rl as sumo_rl_module
 
-    os.environ.setdefault("SUMO_HOME", sumo.SUMO_HOME)
-    os.environ["LIBSUMO_AS_TRACI"] = "1"
-    with contextlib.redirect_stdout(io.StringIO()):  # traci's "Using libsumo as traci as requested ..."
-        import sumo_rl
-
-    sumo_s = _time_sumo_steps()  # after sumo_rl's import: it must find libsumo as traci untouched
+    sumo_rl = sumo_rl_module()
+    sumo_s = time_sumo_steps()  # after sumo_rl's import: it must find libsumo as traci untouched
 
     data = resources.files("hils.data")
     env = sumo_rl.SumoEnvironment(net_file=str(data / "four_leg.net.xml"), route_file=str(data / "four_leg.rou.xml"),
@@ -95,29 +87,6 @@ def _config_timing() -> tuple[float, float, float]:
 
     phase = load().phases[2]
     return phase.yellow, phase.min_green, phase.max_green
-
-
-def _time_sumo_steps() -> list[float]:
-    """From now on in this (fresh) process, the wall seconds libsumo's simulationStep takes are summed into the
-    list returned: both environments step SUMO through it, so what is left of an episode's wall time is the
-    environment's own work, whatever traffic its signals made."""
-    import libsumo
-
-    total = [0.0]
-    step = libsumo.simulationStep
-
-    def timed(*args: Any) -> Any:
-        t0 = time.perf_counter()
-        try:
-            return step(*args)
-        finally:
-            total[0] += time.perf_counter() - t0
-
-    # sumo-rl reaches libsumo through traci, which (LIBSUMO_AS_TRACI) holds libsumo's functions as its own.
-    for module in (libsumo, sys.modules.get("traci")):
-        if module is not None and getattr(module, "simulationStep", None) is step:
-            module.simulationStep = timed
-    return total
 
 
 def _random_episode(env: Any, seed: int) -> tuple[int, float]:

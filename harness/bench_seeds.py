@@ -22,13 +22,17 @@ from __future__ import annotations
 import argparse
 import statistics
 import sys
+import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
 
 from harness.processes import in_fresh_process
 
-__all__ = ["DEFAULT_SEEDS", "Spread", "alternate", "episode_figures", "order", "ratios", "seeds_option"]
+__all__ = [
+    "DEFAULT_SEEDS", "Spread", "alternate", "compare_episodes", "episode_figures", "episode_table", "order",
+    "ratio_line", "ratios", "seeds_option", "time_sumo_steps",
+]
 
 
 #: The seeds a benchmark that runs traffic measures unless told otherwise.
@@ -107,6 +111,29 @@ def episode_figures(runs: Mapping[int, Mapping[str, Any]], duration: float, cont
     figures = next(iter(per_seed.values())).keys()
     return {"per_seed": per_seed,
             **{f: Spread.of([v[f] for v in per_seed.values()]).as_dict() for f in figures}}
+
+
+def time_sumo_steps() -> list[float]:
+    """From now on in this (fresh) process, the wall seconds libsumo's simulationStep takes are summed into the
+    list returned: both environments step SUMO through it, so what is left of an episode's wall time is the
+    environment's own work, whatever traffic its signals made."""
+    import libsumo
+
+    total = [0.0]
+    step = libsumo.simulationStep
+
+    def timed(*args: Any) -> Any:
+        t0 = time.perf_counter()
+        try:
+            return step(*args)
+        finally:
+            total[0] += time.perf_counter() - t0
+
+    # sumo-rl reaches libsumo through traci, which (LIBSUMO_AS_TRACI) holds libsumo's functions as its own.
+    for module in (libsumo, sys.modules.get("traci")):
+        if module is not None and getattr(module, "simulationStep", None) is step:
+            module.simulationStep = timed
+    return total
 
 
 #: What :func:`compare_episodes` compares, and the figure of :func:`episode_figures` each is the ratio of.
