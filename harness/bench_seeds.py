@@ -129,7 +129,8 @@ def time_sumo_steps() -> list[float]:
         finally:
             total[0] += time.perf_counter() - t0
 
-    # sumo-rl reaches libsumo through traci, which (LIBSUMO_AS_TRACI) holds libsumo's functions as its own.
+    # sumo-rl calls traci, which is libsumo itself (harness.sumo_rl_peer.sumo_rl) or, where LIBSUMO_AS_TRACI was set
+    # before traci's first import, a module holding libsumo's functions as its own.
     for module in (libsumo, sys.modules.get("traci")):
         if module is not None and getattr(module, "simulationStep", None) is step:
             module.simulationStep = timed

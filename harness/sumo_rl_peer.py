@@ -45,9 +45,8 @@ call and verifies it by 10 Hz polls; the controller acts on its 0.1 s tick).
 
 from __future__ import annotations
 
-import contextlib
-import io
 import os
+import sys
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -69,13 +68,28 @@ SUMO_STEP = 0.25
 
 
 def sumo_rl() -> ModuleType:
-    """sumo-rl, imported to run through libsumo (its traci import then prints a line, kept off the console)."""
+    """sumo-rl, running through libsumo.
+
+    sumo-rl reads ``LIBSUMO_AS_TRACI`` when it is imported and then calls ``traci``, which that variable makes
+    libsumo only if set before traci's first import; libsumo itself imports traci (its helper modules), as does
+    any part of hils that touches SUMO. So sumo-rl is imported here with ``traci`` being libsumo, as the variable
+    would have made it, whatever was imported before."""
+    if "sumo_rl" in sys.modules:
+        return sys.modules["sumo_rl"]
+    import libsumo
     import sumo
 
     os.environ.setdefault("SUMO_HOME", sumo.SUMO_HOME)
     os.environ["LIBSUMO_AS_TRACI"] = "1"
-    with contextlib.redirect_stdout(io.StringIO()):  # traci's "Using libsumo as traci as requested ..."
+    traci = sys.modules.get("traci")
+    sys.modules["traci"] = libsumo
+    try:
         import sumo_rl as module
+    finally:
+        if traci is not None:
+            sys.modules["traci"] = traci
+        else:
+            del sys.modules["traci"]
     return module
 
 
