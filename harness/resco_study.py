@@ -10,9 +10,11 @@ Rules of this module
 - A *cell* is one run: scenario x agent x side x seed (:class:`Cell`). Each runs in a fresh process (a pool of
   ``--workers``, one task per process: libsumo holds one simulation per process) and leaves one small JSON file,
   ``cells/SCENARIO/SIDE-AGENT-seedN.json``, with its figures, its wall time, the commit it ran at and the machine.
-  A cell whose file exists for the same duration is not run again: the study resumes where it stopped, and grows
-  with new seeds or scenarios; ``--force`` runs every asked cell again. A cell that fails leaves no file (it is run
-  at the next call) and the study says which, and exits with status 1.
+  A cell whose file exists for the same run is not run again: the same duration and the same code
+  (:func:`code_digest`: hils', the emulator's and the peer's files, sumo-rl's and SUMO's versions). The study
+  resumes where it stopped and grows with new seeds or scenarios; a change of the code runs every cell again (a
+  cell kept from other code would mix two controllers in one table); ``--force`` runs every asked cell again. A
+  cell that fails leaves no file (it is run at the next call) and the study says which, and exits with status 1.
 - hils' side is one `hils run` per cell (:func:`hils.sweep.run_cell`, as `hils compare` runs it); sumo-rl's side
   is :func:`harness.sumo_rl_peer.episode` (how it runs and what is matched: that module's header). Both give
   RESCO's four figures from SUMO's tripinfo and the queue sampled at every decision, by
@@ -20,7 +22,8 @@ Rules of this module
 - The figures are the mean over the seeds with the half width of its 95 % confidence interval (Student's t,
   :class:`hils.compare.Estimate`). A gain is computed seed by seed (fixed-time's delay minus max-pressure's at the
   same seed, on the same side) and estimated the same way; what survives is the ratio of hils' mean gain to
-  sumo-rl's.
+  sumo-rl's, where sumo-rl's is a gain (positive): where max-pressure does worse than fixed-time under sumo-rl,
+  there is nothing to survive and the study says so.
 """
 
 from __future__ import annotations
@@ -99,8 +102,30 @@ def run_cell(cell: Cell) -> dict[str, Any]:
                           tripinfo=Path(tmp) / "tripinfo.xml")
             resco = {k: v for k, v in asdict(run["resco"]).items() if k != "notes"}
             extra = {}
-    return {"cell": asdict(cell), "resco": resco, **extra, "wall_s": time.perf_counter() - started,
-            "commit": _commit(), "machine": machine.describe()}
+    return {"cell": asdict(cell), "code": code_digest(), "resco": resco, **extra,
+            "wall_s": time.perf_counter() - started, "commit": _commit(), "machine": machine.describe()}
+
+
+def code_digest() -> str:
+    """What a run's figures depend on besides its cell: every file of hils and of the emulator (code and data), the
+    peer's module, and the versions of sumo-rl and SUMO."""
+    import hashlib
+    import importlib.metadata
+
+    import emulator
+    import hils
+
+    digest = hashlib.sha256()
+    roots = [Path(hils.__file__).parent, Path(emulator.__file__).parent]
+    files = [(root.name, f) for root in roots for f in sorted(root.rglob("*"))
+             if f.is_file() and "__pycache__" not in f.parts]
+    files.append(("harness", Path(__file__).with_name("sumo_rl_peer.py")))
+    for top, f in files:
+        digest.update(f"{top}/{f.name}\0".encode())
+        digest.update(f.read_bytes())
+    for dist in ("sumo-rl", "eclipse-sumo", "libsumo"):
+        digest.update(f"{dist}=={importlib.metadata.version(dist)}\0".encode())
+    return digest.hexdigest()[:16]
 
 
 def _commit() -> str | None:
@@ -112,14 +137,16 @@ def _commit() -> str | None:
 
 def run(todo: Sequence[Cell], root: Path, *, workers: int, force: bool = False, progress: bool = True
         ) -> tuple[list[dict[str, Any]], dict[Cell, str]]:
-    """Every cell of ``todo``: read from its file when it ran before for the same duration (unless ``force``), else
-    run in a fresh process and written. Returns the results in the order of ``todo`` and the failures."""
+    """Every cell of ``todo``: read from its file when it ran before with the same duration and code (unless
+    ``force``), else run in a fresh process and written. Returns the results in the order of ``todo`` and the
+    failures."""
     from tqdm import tqdm
 
     done: dict[Cell, dict[str, Any]] = {}
     pending = []
+    code = code_digest()
     for cell in todo:
-        cached = _cached(cell, root) if not force else None
+        cached = _cached(cell, root, code) if not force else None
         if cached is not None:
             done[cell] = cached
         else:
@@ -144,7 +171,7 @@ def run(todo: Sequence[Cell], root: Path, *, workers: int, force: bool = False, 
     return [done[c] for c in todo if c in done], failed
 
 
-def _cached(cell: Cell, root: Path) -> dict[str, Any] | None:
+def _cached(cell: Cell, root: Path, code: str) -> dict[str, Any] | None:
     path = cell.path(root)
     if not path.is_file():
         return None
@@ -152,7 +179,7 @@ def _cached(cell: Cell, root: Path) -> dict[str, Any] | None:
         result = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return None  # unreadable: run it again
-    return result if result.get("cell") == asdict(cell) else None
+    return result if result.get("cell") == asdict(cell) and result.get("code") == code else None
 
 
 # --- aggregates ------------------------------------------------------------------------------------
@@ -182,7 +209,8 @@ def aggregate(results: Iterable[Mapping[str, Any]]) -> dict[str, Any]:
             common = sorted(set(h) & set(p))
             costs[agent] = _estimate(h[s]["delay_s"] - p[s]["delay_s"] for s in common)
         peer, ours = gains["sumo_rl"]["delay_s"], gains["hils"]["delay_s"]
-        survives = ours["mean"] / peer["mean"] if peer["mean"] and ours["mean"] is not None else None
+        gained = peer["mean"] is not None and peer["mean"] > 0 and ours["mean"] is not None
+        survives = ours["mean"] / peer["mean"] if gained else None
         out[scenario] = {"figures": figures, "gain": gains, "hils_minus_sumo_rl_delay_s": costs,
                          "gain_surviving": survives,
                          "seeds": sorted({s for seeds in runs.values() for s in seeds})}
@@ -194,7 +222,10 @@ def _estimate(values: Iterable[float | None]) -> dict[str, Any]:
 
 
 def _text(e: Mapping[str, Any], digits: int = 1, scale: float = 1.0) -> str:
-    return Estimate(*(None if x is None else x * scale for x in (e["mean"], e["half_width"])), e["n"]).text(digits)
+    """An estimate as the tables print it, ``mean ± half width``, both scaled (a negative scale turns the sign)."""
+    mean, half = e["mean"], e["half_width"]
+    return Estimate(None if mean is None else mean * scale, None if half is None else abs(half * scale),
+                    e["n"]).text(digits)
 
 
 # --- the README ------------------------------------------------------------------------------------
@@ -299,7 +330,8 @@ def render_readme(table: Mapping[str, Any], meta: Mapping[str, Any]) -> str:
         lines.append(f"| {scenario} | {_text(g['sumo_rl']['delay_s'])} | {_text(g['hils']['delay_s'])} | "
                      f"{_text(g['sumo_rl']['share'], 0, 100)} | {_text(g['hils']['share'], 0, 100)} | {survives} | "
                      f"{_text(c['max-pressure'])} | {_text(c['fixed-cycle'])} |")
-    lines += ["", "*surviving*: hils' mean gain over sumo-rl's. The last two columns: what a real controller costs "
+    lines += ["", "*surviving*: hils' mean gain over sumo-rl's (none where sumo-rl's is no gain). A gain below zero: "
+              "max-pressure's delay above fixed-time's. The last two columns: what a real controller costs "
               "each agent in RESCO delay (hils' minus sumo-rl's, seed by seed).", ""]
     lines += _findings(table)
     return "\n".join(lines).rstrip() + "\n"
@@ -310,16 +342,25 @@ def _findings(table: Mapping[str, Any]) -> list[str]:
     out = ["## In one sentence per scenario", ""]
     for scenario, s in table.items():
         g = s["gain"]
-        peer, ours = g["sumo_rl"]["delay_s"]["mean"], g["hils"]["delay_s"]["mean"]
-        if peer is None or ours is None:
+        if g["sumo_rl"]["delay_s"]["mean"] is None or g["hils"]["delay_s"]["mean"] is None:
             out.append(f"- {scenario}: incomplete (a side or an agent has no run).")
             continue
-        share = "" if s["gain_surviving"] is None else f": {s['gain_surviving']:.0%} of the gain survives"
-        out.append(f"- {scenario}: max-pressure cuts RESCO's delay by {_text(g['sumo_rl']['delay_s'])} s "
-                   f"({_text(g['sumo_rl']['share'], 0, 100)} %) under sumo-rl's switching and by "
-                   f"{_text(g['hils']['delay_s'])} s ({_text(g['hils']['share'], 0, 100)} %) under hils' NEMA "
-                   f"controllers{share}.")
+        if s["gain_surviving"] is not None:
+            tail = f": {s['gain_surviving']:.0%} of the gain survives."
+        else:
+            tail = ": under sumo-rl max-pressure does not beat fixed-time, so there is no gain to survive."
+        out.append(f"- {scenario}: max-pressure {_effect(g['sumo_rl'])} under sumo-rl's switching and "
+                   f"{_effect(g['hils'])} under hils' NEMA controllers{tail}")
     return out
+
+
+def _effect(gain: Mapping[str, Any]) -> str:
+    """A gain in words: a cut in delay, or (negative) an addition to it."""
+    delay, share = gain["delay_s"], gain["share"]
+    if delay["mean"] >= 0:
+        return f"cuts RESCO's delay by {_text(delay)} s ({_text(share, 0, 100)} %)"
+    return (f"adds {_text(delay, 1, -1)} s to it ({_text(share, 0, -100)} % of fixed-time's delay, "
+            "seed by seed)")
 
 
 def _meta(results: Sequence[Mapping[str, Any]], seeds: Sequence[int], duration: float,

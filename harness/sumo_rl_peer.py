@@ -190,9 +190,10 @@ def episode(seed: int, *, scenario: str, duration: float, agent: str = "random",
     the queue sampled at every decision)."""
     from harness.bench_seeds import time_sumo_steps
     from hils import resco
+    from hils.sumo import _console
 
     module = sumo_rl()
-    sumo_s = time_sumo_steps()  # after sumo_rl's import: it must find libsumo as traci untouched
+    sumo_s = time_sumo_steps()
     scenario_ = resco.load(scenario)
     configs = scenario_.intersections
     first = next(iter(configs.values()))
@@ -201,9 +202,11 @@ def episode(seed: int, *, scenario: str, duration: float, agent: str = "random",
     options = ["--step-length", repr(SUMO_STEP), "--end", repr(begin + duration), "--no-step-log", "true"]
     if tripinfo is not None:
         options += ["--tripinfo-output", str(tripinfo), *TRIPINFO_OPTIONS]
-    env = module.SumoEnvironment(net_file=str(net), route_file=str(routes), begin_time=int(begin),
-                                 num_seconds=int(duration), delta_time=int(interval), single_agent=False,
-                                 sumo_seed=seed, sumo_warnings=False, additional_sumo_cmd=" ".join(options))
+    # Its constructor starts SUMO on the network alone, without --no-warnings: SUMO's console is kept quiet as hils'.
+    with _console(quiet=True):
+        env = module.SumoEnvironment(net_file=str(net), route_file=str(routes), begin_time=int(begin),
+                                     num_seconds=int(duration), delta_time=int(interval), single_agent=False,
+                                     sumo_seed=seed, sumo_warnings=False, additional_sumo_cmd=" ".join(options))
     started = time.perf_counter()
     env.reset(seed=seed)
     lights = _lights(env, configs)

@@ -12,9 +12,12 @@ import pytest
 
 from harness.resco_study import Cell, _cached, aggregate, cells, render_readme
 
+CODE = "0123456789abcdef"
+
 
 def _result(scenario: str, agent: str, side: str, seed: int, delay: float) -> dict:
     return {"cell": {"scenario": scenario, "agent": agent, "side": side, "seed": seed, "duration": 3600.0},
+            "code": CODE,
             "resco": {"delay_s": delay, "trip_time_s": delay + 100, "waiting_time_s": delay / 2, "queue": 1.0},
             "wall_s": 10.0, "commit": "abc1234", "machine": {"cpu": "test", "cores": 2}}
 
@@ -45,16 +48,31 @@ def test_the_gain_is_taken_seed_by_seed_and_what_survives_is_the_ratio_of_the_me
     assert "by 30.0 ± 24.8 s" in readme and "64% of the gain survives" in readme
 
 
+def test_where_max_pressure_does_worse_under_sumo_rl_there_is_no_gain_to_survive() -> None:
+    delays = {("max-pressure", "sumo_rl"): (250.0, 270.0), ("fixed-cycle", "sumo_rl"): (60.0, 50.0),
+              ("max-pressure", "hils"): (260.0, 280.0), ("fixed-cycle", "hils"): (62.0, 58.0)}
+    table = aggregate([_result("cologne8", agent, side, seed, d) for (agent, side), ds in delays.items()
+                       for seed, d in enumerate(ds)])
+    assert table["cologne8"]["gain"]["sumo_rl"]["delay_s"]["mean"] == pytest.approx(-205.0)
+    assert table["cologne8"]["gain_surviving"] is None  # not -210 / -205: no gain, nothing survives
+    readme = render_readme(table, {"scenarios": "cologne8", "sumo_rl": "1.4.5", "duration": "3600", "seeds": "0,1",
+                                   "seeds_arg": "0,1", "duration_arg": "3600", "timing": ""})
+    assert "- cologne8: max-pressure adds 205.0 ± " in readme and "there is no gain to survive" in readme
+    assert "| cologne8 | -205.0 ± " in readme
+
+
 def test_a_cell_is_read_back_only_for_the_same_run(tmp_path: Path) -> None:
     cell = Cell("cologne1", "max-pressure", "hils", 3, 600.0)
-    assert _cached(cell, tmp_path) is None
+    assert _cached(cell, tmp_path, CODE) is None
     path = cell.path(tmp_path)
     path.parent.mkdir(parents=True)
     path.write_text(json.dumps(_result("cologne1", "max-pressure", "hils", 3, 12.0)))  # an hour, not 600 s
-    assert _cached(cell, tmp_path) is None
-    assert _cached(Cell("cologne1", "max-pressure", "hils", 3, 3600.0), tmp_path)["resco"]["delay_s"] == 12.0
+    assert _cached(cell, tmp_path, CODE) is None
+    assert _cached(Cell("cologne1", "max-pressure", "hils", 3, 3600.0), tmp_path, CODE)["resco"]["delay_s"] == 12.0
+    # other code: hils' or the emulator's files, the peer, sumo-rl or SUMO changed
+    assert _cached(Cell("cologne1", "max-pressure", "hils", 3, 3600.0), tmp_path, "other code") is None
     path.write_text('{"cell": ')  # torn: run it again
-    assert _cached(cell, tmp_path) is None
+    assert _cached(cell, tmp_path, CODE) is None
 
 
 def test_the_cells_put_both_sides_of_a_seed_side_by_side() -> None:
