@@ -57,7 +57,7 @@ def sumo_rl_episode(seed: int, duration: float = EPISODE_S, converted: bool = Tr
     from harness.sumo_rl_peer import sumo_rl as sumo_rl_module
 
     sumo_rl = sumo_rl_module()
-    sumo_s = time_sumo_steps()  # after sumo_rl's import: it must find libsumo as traci untouched
+    sumo_s = time_sumo_steps()
 
     data = resources.files("hils.data")
     env = sumo_rl.SumoEnvironment(net_file=str(data / "four_leg.net.xml"), route_file=str(data / "four_leg.rou.xml"),

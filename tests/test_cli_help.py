@@ -7,6 +7,7 @@ import pytest
 from hils.cli import build_parser, main
 
 COMMANDS = ["run", "sweep", "compare", "view", "bench", "bench env", "bench overhead", "bench wire", "bench latency",
+            "bench resco", "bench corridor",
             "emulator", "emulator serve", "emulator demo", "faults", "faults run", "report", "report paper"]
 
 
