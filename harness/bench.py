@@ -23,7 +23,7 @@ from typing import Any
 import simpy
 
 from harness import bench_corridor, bench_seeds, floods, machine
-from harness.bench_seeds import Spread
+from harness.bench_seeds import Spread, seeds_text
 from harness.bench_serve import resident_mb
 from harness.processes import snmpd, start_emulator
 from hils import config as config_mod
@@ -201,7 +201,7 @@ def _overhead_command(args: argparse.Namespace) -> int:
     info = machine.describe()
     f = measure_overhead(args.duration, args.seeds)
     print(machine.header(info))
-    print(f"one simulated {f['duration_s']:g} s per run, seeds {_seed_list(f['seeds'])}, every run in a fresh process, "
+    print(f"one simulated {f['duration_s']:g} s per run, seeds {seeds_text(f['seeds'])}, every run in a fresh process, "
           "alternately; median [min-max] over the seeds:")
     runs = f["runs"]
     for side, label in (("hils", "full HILS loop"), ("floor", "bare libsumo, same signal states"),
@@ -454,7 +454,7 @@ def _env_command(args: argparse.Namespace) -> int:
     info = machine.describe()
     f = measure_env(args.seeds, args.duration)
     print(machine.header(info))
-    print(f"one {f['episode_s']:g} s episode per side and seed (seeds {_seed_list(f['seeds'])}), each in a fresh "
+    print(f"one {f['episode_s']:g} s episode per side and seed (seeds {seeds_text(f['seeds'])}), each in a fresh "
           f"process, alternately; {f['sumo_step_s']} s SUMO steps, a decision every {f['decision_s']:g} s, random "
           "policy; median [min-max] over the seeds:")
     t, c = f["sumo_rl_timing_steps"], f["config_timing_s"]
@@ -475,20 +475,13 @@ def _env_command(args: argparse.Namespace) -> int:
     return 0
 
 
-def _seed_list(seeds: Sequence[int]) -> str:
-    """``0-7`` for consecutive seeds, else ``0,3,7``."""
-    if len(seeds) > 2 and list(seeds) == list(range(seeds[0], seeds[0] + len(seeds))):
-        return f"{seeds[0]}-{seeds[-1]}"
-    return ",".join(map(str, seeds))
-
-
 def _resco_command(args: argparse.Namespace) -> int:
     from harness.bench_resco import measure_resco
 
     info = machine.describe()
     f = measure_resco(args.scenarios, args.seeds, args.duration)
     print(machine.header(info))
-    print(f"one {f['episode_s']:g} s episode per side, scenario and seed (seeds {_seed_list(f['seeds'])}), each in a "
+    print(f"one {f['episode_s']:g} s episode per side, scenario and seed (seeds {seeds_text(f['seeds'])}), each in a "
           f"fresh process, alternately; {f['sumo_step_s']} s SUMO steps, random policy; median [min-max] over the "
           "seeds:")
     print(f"  the peer: {f['peer']}")
@@ -549,7 +542,7 @@ def _corridor_command(args: argparse.Namespace) -> int:
               f"TIMEOUTs {reasons}, {lim['polls_per_s']:.0f} polls/s ({lim['failed_polls']} failed); the "
               f"middleware's one thread busy {lim['cpu_share']:.0%}, the serve process {lim['serve_cpu_share']:.0%} "
               f"(on {info['cores']} cores)")
-    print(f"virtual time, {args.virtual_duration:g} simulated s, seeds {_seed_list(f['seeds'])}, median [min-max]:")
+    print(f"virtual time, {args.virtual_duration:g} simulated s, seeds {seeds_text(f['seeds'])}, median [min-max]:")
     for key, label in (("with_sumo", "with SUMO"), ("controllers_only", "no SUMO")):
         for r in f["virtual"][key]:
             print(f"  {label:9} {r['controllers']:>3} controllers ({r['scenario']}): "

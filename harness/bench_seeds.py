@@ -31,7 +31,7 @@ from harness.processes import in_fresh_process
 
 __all__ = [
     "DEFAULT_SEEDS", "Spread", "alternate", "compare_episodes", "episode_figures", "episode_table", "order",
-    "ratio_line", "ratios", "seeds_option", "time_sumo_steps",
+    "ratio_line", "ratios", "seeds_option", "seeds_text", "time_sumo_steps",
 ]
 
 
@@ -173,6 +173,13 @@ def ratio_line(label: str, compared: Mapping[str, Mapping[str, float]]) -> str:
 
 def _spread(figure: Mapping[str, float], digits: int = 2) -> str:
     return Spread(**figure).text(digits)
+
+
+def seeds_text(seeds: Sequence[int]) -> str:
+    """Seeds as a command line takes them: ``0-7`` when consecutive, else ``0,3,7``."""
+    if len(seeds) > 2 and list(seeds) == list(range(seeds[0], seeds[0] + len(seeds))):
+        return f"{seeds[0]}-{seeds[-1]}"
+    return ",".join(map(str, seeds))
 
 
 def seeds_option(parser: argparse.ArgumentParser, default: str = DEFAULT_SEEDS) -> None:

@@ -43,6 +43,7 @@ from pathlib import Path
 from typing import Any
 
 from harness import machine
+from harness.bench_seeds import seeds_text
 from hils import jsonout
 from hils.compare import Estimate
 
@@ -294,7 +295,7 @@ controller is not, on purpose: that is the question.
 
 ```sh
 pip install -e '.[resco]'
-python -m harness.resco_study --seeds {seeds_arg} --duration {duration_arg}   # resumes: cells already run are read back
+python -m harness.resco_study --seeds {seeds} --duration {duration_arg}   # resumes: cells already run are read back
 ```
 
 Each run (cell) is one fresh process; its figures go to `cells/SCENARIO/SIDE-AGENT-seedN.json` as it finishes, so
@@ -371,7 +372,7 @@ def _meta(results: Sequence[Mapping[str, Any]], seeds: Sequence[int], duration: 
 
     chosen = "" if list(scenarios) == list(resco.NAMES) else f" --scenarios {','.join(scenarios)}"
     return {"scenarios": ", ".join(scenarios), "sumo_rl": importlib.metadata.version("sumo-rl"),
-            "duration": f"{duration:g}", "seeds": _seeds_text(seeds), "seeds_arg": _seeds_text(seeds),
+            "duration": f"{duration:g}", "seeds": seeds_text(seeds),
             "duration_arg": f"{duration:g}{chosen}", "timing": _timing(results)}
 
 
@@ -394,12 +395,6 @@ def _timing(results: Sequence[Mapping[str, Any]]) -> str:
         lines.append(f"| {scenario} | " + " | ".join(f"{statistics.median(by_side[s]):.0f}" if s in by_side else "-"
                                                      for s in SIDES) + " |")
     return "\n".join(lines)
-
-
-def _seeds_text(seeds: Sequence[int], dash: str = "-") -> str:
-    if len(seeds) > 2 and list(seeds) == list(range(seeds[0], seeds[0] + len(seeds))):
-        return f"{seeds[0]}{dash}{seeds[-1]}"
-    return ",".join(map(str, seeds))
 
 
 # --- the command -----------------------------------------------------------------------------------

@@ -42,7 +42,7 @@ def test_the_gain_is_taken_seed_by_seed_and_what_survives_is_the_ratio_of_the_me
     assert table["hils_minus_sumo_rl_delay_s"]["fixed-cycle"]["mean"] == pytest.approx(7.0 / 3)
     assert table["figures"]["max-pressure/hils"]["trip_time_s"]["mean"] == pytest.approx(143.0)
     readme = render_readme({"grid4x4": table}, {"scenarios": "grid4x4", "sumo_rl": "1.4.5", "duration": "3600",
-                                                "seeds": "0-2", "seeds_arg": "0-2", "duration_arg": "3600",
+                                                "seeds": "0-2", "duration_arg": "3600",
                                                 "timing": ""})
     assert "| grid4x4 | max-pressure | hils | 43.0 ± " in readme and "| 3 |" in readme
     assert "by 30.0 ± 24.8 s" in readme and "64% of the gain survives" in readme
@@ -56,7 +56,7 @@ def test_where_max_pressure_does_worse_under_sumo_rl_there_is_no_gain_to_survive
     assert table["cologne8"]["gain"]["sumo_rl"]["delay_s"]["mean"] == pytest.approx(-205.0)
     assert table["cologne8"]["gain_surviving"] is None  # not -210 / -205: no gain, nothing survives
     readme = render_readme(table, {"scenarios": "cologne8", "sumo_rl": "1.4.5", "duration": "3600", "seeds": "0,1",
-                                   "seeds_arg": "0,1", "duration_arg": "3600", "timing": ""})
+                                   "duration_arg": "3600", "timing": ""})
     assert "- cologne8: max-pressure adds 205.0 ± " in readme and "there is no gain to survive" in readme
     assert "| cologne8 | -205.0 ± " in readme
 
