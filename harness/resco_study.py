@@ -308,7 +308,11 @@ def render_readme(table: Mapping[str, Any], meta: Mapping[str, Any]) -> str:
     """The study's README from its aggregates (:func:`aggregate`) and what it ran (seeds, duration, versions)."""
     text = _METHOD.format(**meta)
     lines = [text, "## Results", "",
-             "RESCO's figures, mean ± 95 % confidence half width over the seeds (n per cell in the last column).", ""]
+             "RESCO's figures, mean ± 95 % confidence half width over the seeds (n per cell in the last column)."]
+    if any(f["delay_s"]["n"] < 2 for s in table.values() for f in s["figures"].values()):
+        lines.append("Where n is 1 there is no interval: the figure is one run, and every comparison below is as "
+                     "uncertain as that.")
+    lines.append("")
     lines += ["| scenario | agent | side | " + " | ".join(FIGURES.values()) + " | n |",
               "|---|---|---|" + "---:|" * len(FIGURES) + "---:|"]
     for scenario, s in table.items():
@@ -346,22 +350,25 @@ def _findings(table: Mapping[str, Any]) -> list[str]:
         if g["sumo_rl"]["delay_s"]["mean"] is None or g["hils"]["delay_s"]["mean"] is None:
             out.append(f"- {scenario}: incomplete (a side or an agent has no run).")
             continue
+        peer, ours = (_effect(g[side]) for side in SIDES)
+        if peer[0] == ours[0]:  # the same verb: said once
+            said = f"{peer[0]} {peer[1]} under sumo-rl's switching and {ours[1]} under hils' NEMA controllers"
+        else:
+            said = f"{' '.join(peer)} under sumo-rl's switching but {' '.join(ours)} under hils' NEMA controllers"
         if s["gain_surviving"] is not None:
             tail = f": {s['gain_surviving']:.0%} of the gain survives."
         else:
-            tail = ": under sumo-rl max-pressure does not beat fixed-time, so there is no gain to survive."
-        out.append(f"- {scenario}: max-pressure {_effect(g['sumo_rl'])} under sumo-rl's switching and "
-                   f"{_effect(g['hils'])} under hils' NEMA controllers{tail}")
+            tail = ": with no gain under sumo-rl, there is none to survive."
+        out.append(f"- {scenario}: max-pressure {said}{tail}")
     return out
 
 
-def _effect(gain: Mapping[str, Any]) -> str:
-    """A gain in words: a cut in delay, or (negative) an addition to it."""
+def _effect(gain: Mapping[str, Any]) -> tuple[str, str]:
+    """A gain in words: a cut in RESCO's delay, or (below zero) an addition to it; the verb and the amount."""
     delay, share = gain["delay_s"], gain["share"]
     if delay["mean"] >= 0:
-        return f"cuts RESCO's delay by {_text(delay)} s ({_text(share, 0, 100)} %)"
-    return (f"adds {_text(delay, 1, -1)} s to it ({_text(share, 0, -100)} % of fixed-time's delay, "
-            "seed by seed)")
+        return "cuts RESCO's delay", f"by {_text(delay)} s ({_text(share, 0, 100)} %)"
+    return "adds to RESCO's delay", f"{_text(delay, 1, -1)} s (+{_text(share, 0, -100)} % of fixed-time's)"
 
 
 def _meta(results: Sequence[Mapping[str, Any]], seeds: Sequence[int], duration: float,

@@ -57,7 +57,7 @@ def test_where_max_pressure_does_worse_under_sumo_rl_there_is_no_gain_to_survive
     assert table["cologne8"]["gain_surviving"] is None  # not -210 / -205: no gain, nothing survives
     readme = render_readme(table, {"scenarios": "cologne8", "sumo_rl": "1.4.5", "duration": "3600", "seeds": "0,1",
                                    "duration_arg": "3600", "timing": ""})
-    assert "- cologne8: max-pressure adds 205.0 ± " in readme and "there is no gain to survive" in readme
+    assert "- cologne8: max-pressure adds to RESCO's delay 205.0 ± " in readme and "there is none to survive" in readme
     assert "| cologne8 | -205.0 ± " in readme
 
 
