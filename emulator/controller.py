@@ -36,19 +36,27 @@ it). A green without anywhere to go rests in green.
 A ready ring *wishes* for the nearest phase with demand in its ring order after
 its own (1, 2, 3, 4, 1, ...). Within the barrier group it goes there at once:
 forward, or backing into an earlier phase of the group while the other ring
-still times (not when both rings are ready and a ring wishes across the
-barrier: crossing goes first). A ring may not back from a phase with
-``backup_prevent``: that demand counts as lying beyond the barrier, so both
-rings clear and restart the group for it. A wish beyond the barrier is served
+still times, but only when no demand waits across the barrier: a controller
+backs "into a protected left-turn phase when the cross street phases and the
+opposing left-turn are skipped" (Naztec TecNote 3013), not when they are
+called. A ring may not back from a phase with ``backup_prevent`` either. A
+backing refused counts as a wish beyond the barrier (the phase waits for the
+group's next visit, or, with nothing across, both rings clear and restart the
+group for it); when both rings are ready and one wishes beyond, the other does
+not back either (crossing goes first). A wish beyond the barrier is served
 only when every ring is ready (or idle in red) and wishes beyond or nowhere:
-then all rings clear together into the new group,
-a ring without demand there taking its ``dual_entry`` phase if it has one and
-resting in red otherwise. Until then the ring wishing across keeps its green
-(it waits at the barrier).
+then all rings clear together into the new group, a ring without demand there
+taking its ``dual_entry`` phase if it has one and resting in red otherwise.
+Until then the ring wishing across keeps its green (it waits at the barrier).
 
 The next phase is *committed at the start of yellow* (shown in
-phaseStatusGroupPhaseNexts from then) and a call arriving during the clearance
-does not redirect it. A committed phase that loses its call during the
+phaseStatusGroupPhaseNexts from then). With ``next_phase_lock = "green_end"``
+(the default; NTCIP 1202: PhaseNext "shall be determined at the end of the
+green interval of the terminating phase") a call arriving during the clearance
+does not redirect it. With ``"red_end"`` (controllers that lock their detectors
+at the start of red, SUMO issue 9989) a call during the yellow or red
+clearance redirects the ring to the nearest phase with demand on the committed
+phase's side of the barrier. A committed phase that loses its call during the
 clearance is still served (its minimum green, then it ends as usual): NEMA TS 2
 commits Phase Next at the end of the green, and SUMO's NEMA controller, validated
 against Econolite SIL, does the same (NEMAController.cpp, NEMAPhase::exit enters
@@ -100,7 +108,7 @@ from enum import StrEnum
 
 import simpy
 
-from hils.config import IntersectionConfig, Phase, Recall
+from hils.config import IntersectionConfig, NextPhaseLock, Phase, Recall
 from hils.ntcip import ControlColumn, PhaseStartup, UnitControlStatus, UnitFlashStatus
 
 log = logging.getLogger(__name__)
@@ -120,6 +128,8 @@ _NEXT: dict[Interval, Interval] = {
     Interval.YELLOW: Interval.RED_CLEAR,
     Interval.RED_CLEAR: Interval.DWELL,
 }
+
+_CLEARANCE = (Interval.YELLOW, Interval.RED_CLEAR)
 
 _STARTUP_INTERVAL = {
     PhaseStartup.GREEN_WALK: Interval.GREEN,
@@ -222,6 +232,7 @@ class Controller:
         self._since_set: int | None = None  # ticks since the last control SET; None = backup timer disarmed
         self.rings = [Ring(i + 1, order) for i, order in enumerate(self.config.rings)]
         self.group = 0
+        self._waiting_across = False  # demand on a phase of another barrier group, this tick
         self._quiet = False  # the last step changed nothing discrete, and no input came since
         self._settled: tuple | None = None  # the discrete state the last step left, if nothing changed it since
         if not self.flashing:
@@ -364,6 +375,7 @@ class Controller:
             return
         calls = self.calls
         demand = self._demand(calls)
+        self._waiting_across = any(self._barrier[q] != self.group for q in demand)
         for r in self.rings:
             self._time(r, demand, calls)
         self._decide(demand)
@@ -466,14 +478,19 @@ class Controller:
             demand |= soft
         return frozenset(demand)
 
+    def _backing(self, r: Ring, q: int) -> bool:
+        """Serving ``q`` next would back ``r`` up: ``q`` comes before the ring's phase in their barrier group."""
+        p = r.phase
+        return p is not None and self._barrier[p] == self._barrier[q] and self._order[q] < self._order[p]
+
     def _beyond(self, q: int) -> bool:
         """True when a phase with demand cannot be served in this visit of the barrier group: it lies across
-        the barrier, or its ring would have to back into it from a green with ``backup_prevent``."""
+        the barrier, or its ring would have to back into it while demand waits across the barrier or from a
+        phase with ``backup_prevent``."""
         if self._barrier[q] != self.group:
             return True
         r = self.rings[self._ring_of[q] - 1]
-        return (r.interval is Interval.GREEN and self.config.phases[r.phase].backup_prevent
-                and self._order[q] < self._order[r.phase])
+        return self._backing(r, q) and (self._waiting_across or self.config.phases[r.phase].backup_prevent)
 
     def _conflicting(self, r: Ring, demand: frozenset[int]) -> bool:
         return any(q != r.phase and (self._ring_of[q] == r.number or self._beyond(q)) for q in demand)
@@ -520,7 +537,23 @@ class Controller:
                 return q
         return None
 
+    def _redirect(self, r: Ring, demand: frozenset[int]) -> None:
+        """``red_end`` lock: a ring in its clearance takes the nearest phase with demand after its own on the
+        committed phase's side of the barrier (SUMO's ``NEMAPhase::trySwitch`` lets a later call override the
+        decision "only if the new transition is on the same side of a barrier"); without one it keeps it."""
+        side = self._barrier[r.target]
+        n, i = len(r.order), self._order[r.phase]
+        for k in range(1, n):
+            q = r.order[(i + k) % n]
+            if q in demand and self._barrier[q] == side and (side != self.group or not self._beyond(q)):
+                r.target = q
+                return
+
     def _decide(self, demand: frozenset[int]) -> None:
+        if self.config.next_phase_lock is NextPhaseLock.RED_END:
+            for r in self.rings:
+                if r.interval in _CLEARANCE and r.target is not None:
+                    self._redirect(r, demand)
         ready = {r.number: self._ready(r) for r in self.rings}
         wish = {r.number: self._wish(r, demand) for r in self.rings if ready[r.number]}
         across = {n: q for n, q in wish.items() if q is not None and self._beyond(q)}

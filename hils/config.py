@@ -46,10 +46,23 @@ class Recall(StrEnum):
     SOFT = "soft"  # a vehicle call only while no other phase has demand
 
 
+class NextPhaseLock(StrEnum):
+    """Until when a call may still change a ring's committed next phase (``timing.next_phase_lock``).
+
+    NTCIP 1202 phaseStatusGroupPhaseNexts: the next phase "shall be determined at the end of the green
+    interval of the terminating phase"; controllers make the lock a setting (SUMO issue 9989, from an
+    Econolite test bench: detector lock "a choice between the start of yellow or the start of red")."""
+
+    GREEN_END = "green_end"  # committed when the green ends; calls during the clearance wait
+    RED_END = "red_end"      # a call during the clearance may still redirect it on the same side of the barrier
+
+
 # Per-phase timings and options a phase may set itself or inherit from [timing].
 _PHASE_OPTIONS = ("min_green", "max_green", "max2", "passage", "walk", "ped_clear", "yellow", "red_clear",
                   "red_revert", "recall", "dual_entry", "backup_prevent")
 TURNS = ("left", "through")
+# Options of the whole controller unit that [timing] holds beside the phase defaults.
+_UNIT_OPTIONS = ("startup_flash", "next_phase_lock")
 
 
 class ConfigError(UserError, ValueError):
@@ -141,6 +154,7 @@ class IntersectionConfig:
     middleware: MiddlewareParams = field(default_factory=MiddlewareParams)
     source: str = "<memory>"
     startup_flash: int = 0  # s of start-up flash after power-up (unitStartUpFlash)
+    next_phase_lock: NextPhaseLock = NextPhaseLock.GREEN_END
     emulator: EmulatorParams = field(default_factory=EmulatorParams)
     detector_phases: Mapping[int, int] = field(default_factory=dict)  # the [detectors] table, if any
     detector_lanes: Mapping[int, str] = field(default_factory=dict)  # the SUMO lane of a detector given one
@@ -426,9 +440,13 @@ def from_dict(raw: Mapping[str, Any], source: str = "<memory>") -> IntersectionC
     timing = raw.get("timing", {})
     if not isinstance(timing, dict):
         raise ConfigError(source, "timing", "must be a table of default phase timings")
-    _unknown(timing, (*_PHASE_OPTIONS, "startup_flash"), "timing.", source)
+    _unknown(timing, (*_PHASE_OPTIONS, *_UNIT_OPTIONS), "timing.", source)
     startup_flash = _number(timing, "startup_flash", "timing.", source, 0, integer=True, low=0, high=255)
-    phase_timing = {k: v for k, v in timing.items() if k != "startup_flash"}
+    lock = timing.get("next_phase_lock", NextPhaseLock.GREEN_END.value)
+    if lock not in tuple(NextPhaseLock):
+        raise ConfigError(source, "timing.next_phase_lock",
+                          f"is {lock!r}; allowed: {', '.join(x.value for x in NextPhaseLock)}")
+    phase_timing = {k: v for k, v in timing.items() if k not in _UNIT_OPTIONS}
     phases = {p: _phase(p, raw_phases[str(p)], phase_timing, ring_of[p], source) for p in numbers}
 
     barriers_raw = structure.get("barriers")
@@ -493,6 +511,7 @@ def from_dict(raw: Mapping[str, Any], source: str = "<memory>") -> IntersectionC
         middleware=_middleware(middleware, source),
         source=source,
         startup_flash=startup_flash,
+        next_phase_lock=NextPhaseLock(lock),
         emulator=_emulator(raw.get("emulator", {}), source),
         **_detectors(raw.get("detectors", {}), phases, source),
     )

@@ -458,6 +458,7 @@ def test_the_paper_config_keeps_the_paper_behaviour(paper_config) -> None:
         assert (ph.passage, ph.recall, ph.walk, ph.ped_clear, ph.dual_entry, ph.backup_prevent, ph.red_revert) == (
             0, Recall.NONE, 0, 0, False, False, 0)
     assert paper_config.startup_flash == 0
+    assert paper_config.next_phase_lock == "green_end"
 
 
 @pytest.mark.parametrize(("phases", "timing_extra", "field", "allowed"), [
@@ -471,6 +472,7 @@ def test_the_paper_config_keeps_the_paper_behaviour(paper_config) -> None:
     ({4: '{ dual_entry = "yes" }'}, "", "phases.4.dual_entry", "true, false"),
     ({}, "\nbackup_prevent = 1", "timing.backup_prevent", "true, false"),
     ({}, "\nstartup_flash = 300", "timing.startup_flash", "<= 255"),
+    ({}, '\nnext_phase_lock = "yellow_end"', "timing.next_phase_lock", "green_end, red_end"),
     ({}, "\nwalk = 30\nped_clear = 5", "timing.walk", "walk + ped_clear <= max_green"),
 ])
 def test_contradicting_phase_options_are_rejected(phases: dict[int, str], timing_extra: str, field: str,

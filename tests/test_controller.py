@@ -577,6 +577,55 @@ def test_a_ring_backs_into_its_earlier_phase_while_the_other_rests(controller: C
     assert (2, "Y") not in seen  # 2 stays green all along
 
 
+def test_no_backing_while_a_call_waits_across_the_barrier(controller: Controller) -> None:
+    """Issue 24's sequence: 2 held, 6's call drops, calls on 5 and 4 at 15 s. A controller backs into a phase
+    only "when the cross street phases and the opposing left-turn are skipped" (Naztec TecNote 3013): 6 waits
+    at the barrier, 2 maxes out 20 s after the call on 4 and both cross at 35 s (backing into 5 made it 40 s)."""
+    controller.backup_time = 0
+    seen = onsets(controller, 700, {0: {2, 6}, 150: {2, 4, 5}})
+    assert seen[(2, "Y")] == seen[(6, "Y")] == 150 + MAX
+    assert seen[(4, "G")] == 150 + MAX + YELLOW + RED
+    assert seen[(5, "G")] > seen[(4, "G")]  # 5 waits for the group's next visit
+
+
+def test_backing_resumes_once_nothing_waits_across(controller: Controller) -> None:
+    controller.backup_time = 0
+    seen = onsets(controller, 400, {0: {2, 6}, 150: {2, 4, 5}, 200: {2, 5}})
+    assert seen[(6, "Y")] == 201 and seen[(5, "G")] == 201 + YELLOW + RED and (2, "Y") not in seen
+
+
+def test_red_end_lock_lets_a_call_in_the_clearance_redirect_on_the_same_side(paper_toml: str) -> None:
+    c = Controller(variant(paper_toml, replace={"[timing]": '[timing]\nnext_phase_lock = "red_end"'}))
+    c.backup_time = 0
+    c.set_control(CALL, {4, 8})
+    onsets(c, MIN)
+    assert c.yellows == {2, 6} and c.phase_nexts == {4, 8}
+    c.set_control(CALL, {3, 4, 8})  # 3 precedes 4 in ring 1 and lies on 4's side of the barrier
+    onsets(c, 5)
+    assert c.phase_nexts == {3, 8}
+    seen = onsets(c, YELLOW + RED)
+    assert seen[(3, "G")] == seen[(8, "G")] == MIN + YELLOW + RED and (4, "G") not in seen
+
+
+def test_red_end_lock_never_redirects_across_the_barrier(paper_toml: str) -> None:
+    c = Controller(variant(paper_toml, replace={"[timing]": '[timing]\nnext_phase_lock = "red_end"'}))
+    c.backup_time = 0
+    serve(c, {2, 6})
+    c.set_control(CALL, {1, 6})  # ring 1 backs from 2 into 1 (nothing waits across)
+    onsets(c, 5)
+    assert c.phase_nexts == {1}
+    c.set_control(CALL, {1, 3, 6})  # 3 comes before 1 after 2, but across the barrier from the committed 1
+    seen = onsets(c, YELLOW + RED)
+    assert c.greens == {1, 6} and (3, "G") not in seen
+
+
+def test_red_end_lock_keeps_a_committed_phase_without_a_better_call(paper_toml: str) -> None:
+    c = Controller(variant(paper_toml, replace={"[timing]": '[timing]\nnext_phase_lock = "red_end"'}))
+    c.backup_time = 0
+    seen = onsets(c, 300, {0: {4, 8}, MIN + 5: set()})
+    assert seen[(4, "G")] == seen[(8, "G")] == MIN + YELLOW + RED
+
+
 def test_dual_entry_serves_the_other_ring_with_the_called_one(paper_toml: str) -> None:
     c = with_options(paper_toml, {p: "dual_entry = true" for p in (2, 4, 6, 8)})
     seen = onsets(c, 200, {0: {4}})
