@@ -376,6 +376,11 @@ class Controller:
         calls = self.calls
         demand = self._demand(calls)
         self._waiting_across = any(self._barrier[q] != self.group for q in demand)
+        if self.config.next_phase_lock is NextPhaseLock.RED_END:
+            # before timing: the tick that ends a red clearance still reads the calls of that clearance
+            for r in self.rings:
+                if r.interval in _CLEARANCE and r.target is not None:
+                    self._redirect(r, demand)
         for r in self.rings:
             self._time(r, demand, calls)
         self._decide(demand)
@@ -550,10 +555,6 @@ class Controller:
                 return
 
     def _decide(self, demand: frozenset[int]) -> None:
-        if self.config.next_phase_lock is NextPhaseLock.RED_END:
-            for r in self.rings:
-                if r.interval in _CLEARANCE and r.target is not None:
-                    self._redirect(r, demand)
         ready = {r.number: self._ready(r) for r in self.rings}
         wish = {r.number: self._wish(r, demand) for r in self.rings if ready[r.number]}
         across = {n: q for n, q in wish.items() if q is not None and self._beyond(q)}

@@ -29,13 +29,18 @@ shortest SUMO times correctly (with 0 a green would end at once despite its call
 held call extends a green as a presence call does in ours. SUMO's default of minimum recall
 on every phase is switched off (``minRecall`` empty), as our controller serves only calls.
 In free mode SUMO starts in the first phase of each ring; :func:`comparable_config` gives
-our controller the same start-up and no backup timer (the sequences never refresh a SET).
+our controller the same start-up, SUMO's next-phase lock (``red_end``: a call during the
+clearance may still change the decision on the same side of the barrier) and no backup timer
+(the sequences never refresh a SET).
 
-:func:`compare` pairs the changes of the two timelines (same phase, same colour, at most
-``tolerance`` ticks apart, in order) and reports the agreement: matched changes over all
-distinct changes (matched + unmatched on either side), so a change only one side makes
-counts against it. ``python -m harness.nema_reference`` prints the figure for the targeted
-scenarios and for seeded random call sequences.
+:func:`compare` pairs the changes of the two timelines over whole sequences (same phase, same
+colour, at most ``tolerance`` ticks apart, in order; no cut-off) and reports the agreement:
+matched changes over all distinct changes (matched + unmatched on either side), so a change
+only one side makes counts against it. :func:`differential` also judges the first difference
+by the sourced rules of :mod:`harness.nema_rules`. Calls come from a :data:`CallSequence`
+(targeted scenarios, seeded random sequences) or from SUMO's own detectors while it serves the
+shipped demand (:func:`run_traffic`). ``python -m harness.nema_reference`` prints the figures and
+the classes of the first differences.
 """
 
 from __future__ import annotations
@@ -43,28 +48,40 @@ from __future__ import annotations
 import argparse
 import contextlib
 import dataclasses
-import itertools
 import random
 import sys
 import tempfile
 from collections import Counter
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
-from enum import StrEnum
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
 import libsumo
 
-from emulator.controller import Controller, tenths
-from hils.config import IntersectionConfig, load
+from emulator.controller import Controller
+from harness.nema_rules import (
+    BACKED_WITH_CALL_ACROSS,
+    ENDED_BEFORE_MIN,
+    ENDED_WHILE_EXTENDING,
+    HELD_PAST_MAXIMUM,
+    PULLED_ACROSS,
+    RE_EXTENDED,
+    SKIPPED,
+    Color,
+    ColorChange,
+    DifferenceClass,
+    Judgement,
+    Timeline,
+    classify,
+)
+from hils.config import IntersectionConfig, NextPhaseLock, load
 from hils.ntcip import ControlColumn, PhaseStartup
-from hils.sumo_net import NET_FILE, PhaseMap, data_path, derive_phase_map, read_net
+from hils.sumo_net import NET_FILE, ROUTE_FILE, PhaseMap, data_path, derive_phase_map, read_net
 
 TICK = 0.1  # seconds per step, both controllers
 PROGRAM_ID = "NEMA"
 SUMO_PASSAGE = 0.1  # s: SUMO's vehicle extension, one step (see the theory of operation)
-AGREEMENT_REQUIRED = 0.95
 
 CallSequence = tuple[tuple[int, frozenset[int]], ...]
 """``(tick, phases)`` in ascending tick order: from that tick on exactly these phases are called."""
@@ -72,27 +89,6 @@ CallSequence = tuple[tuple[int, frozenset[int]], ...]
 
 class NemaReferenceError(ValueError):
     """A config or call sequence SUMO's NEMA controller cannot be given; says what is allowed."""
-
-
-class Color(StrEnum):
-    GREEN = "green"
-    YELLOW = "yellow"
-    RED = "red"
-
-
-@dataclass(frozen=True, slots=True, order=True)
-class ColorChange:
-    """A phase starts showing a colour at a tick."""
-
-    tick: int
-    phase: int
-    color: Color
-
-    def __str__(self) -> str:
-        return f"{self.tick / 10:.1f}s {self.phase} {self.color}"
-
-
-Timeline = tuple[ColorChange, ...]
 
 
 @dataclass(frozen=True)
@@ -147,7 +143,8 @@ def comparable_config(config: IntersectionConfig) -> IntersectionConfig:
     phases = {p: dataclasses.replace(ph, startup=PhaseStartup.GREEN_NO_WALK if p in firsts
                                      else PhaseStartup.PHASE_NOT_ON, dual_entry=p in duals)
               for p, ph in config.phases.items()}
-    return dataclasses.replace(config, phases=phases).with_middleware(backup_time=0)
+    return dataclasses.replace(config, phases=phases, next_phase_lock=NextPhaseLock.RED_END).with_middleware(
+        backup_time=0)
 
 
 def _ring_slots(config: IntersectionConfig) -> list[list[int]]:
@@ -248,7 +245,7 @@ _SUMO_COLOR = {"G": Color.GREEN, "g": Color.GREEN, "y": Color.YELLOW, "Y": Color
 
 
 @contextlib.contextmanager
-def _sumo(program: str) -> Iterator[None]:
+def _sumo(program: str, *extra: str) -> Iterator[None]:
     if libsumo.simulation.isLoaded():
         raise NemaReferenceError("a SUMO simulation is already running in this process (libsumo runs one at a "
                              "time); close it before running the reference")
@@ -256,57 +253,90 @@ def _sumo(program: str) -> Iterator[None]:
         additional = Path(tmp) / "nema.add.xml"
         additional.write_text(program, encoding="utf-8")
         libsumo.start(["sumo", "-n", str(data_path(NET_FILE)), "-a", str(additional), "--step-length", str(TICK),
-                       "--no-step-log", "true", "--no-warnings", "true", "--duration-log.disable", "true"])
+                       "--no-step-log", "true", "--no-warnings", "true", "--duration-log.disable", "true", *extra])
         try:
             yield
         finally:
             libsumo.close()
 
 
+class _Junction:
+    """SUMO's NEMA-controlled junction while a simulation runs: its detectors per phase and its colours."""
+
+    def __init__(self, config: IntersectionConfig, phase_map: PhaseMap) -> None:
+        self.tls = phase_map.tls_id
+        if libsumo.trafficlight.getProgram(self.tls) != PROGRAM_ID:
+            libsumo.trafficlight.setProgram(self.tls, PROGRAM_ID)
+        self.first_link = {p: phase_map.link_phases.index(p) for p in config.phases}
+        lane_detector = {libsumo.lanearea.getLaneID(d): d for d in libsumo.lanearea.getIDList()}
+        self.detectors = {p: [lane_detector[lane] for lane in phase_map.incoming_lanes(p)] for p in config.phases}
+
+    def colors(self) -> dict[int, Color]:
+        state = libsumo.trafficlight.getRedYellowGreenState(self.tls)
+        return {p: _SUMO_COLOR.get(state[i], Color.RED) for p, i in self.first_link.items()}
+
+    def occupied(self) -> frozenset[int]:
+        """The phases with a vehicle on one of their detectors now (what the NEMA logic reads as a call)."""
+        return frozenset(p for p, ds in self.detectors.items()
+                         if any(libsumo.lanearea.getLastStepVehicleNumber(d) for d in ds))
+
+
 def run_reference(config: IntersectionConfig, calls: CallSequence, ticks: int) -> Timeline:
     """SUMO's NEMA controller under ``calls`` for ``ticks`` steps of 0.1 s."""
     _check(calls, ticks, config)
     phase_map = derive_phase_map(config, read_net())
-    first_link = {p: phase_map.link_phases.index(p) for p in config.phases}
     pending = dict(calls)
     out: list[ColorChange] = []
     with _sumo(sumo_program(config, phase_map)):
-        if libsumo.trafficlight.getProgram(phase_map.tls_id) != PROGRAM_ID:
-            libsumo.trafficlight.setProgram(phase_map.tls_id, PROGRAM_ID)
-        lane_detector = {libsumo.lanearea.getLaneID(d): d for d in libsumo.lanearea.getIDList()}
-        detectors = {p: [lane_detector[lane] for lane in phase_map.incoming_lanes(p)] for p in config.phases}
-
-        def colors() -> dict[int, Color]:
-            state = libsumo.trafficlight.getRedYellowGreenState(phase_map.tls_id)
-            return {p: _SUMO_COLOR.get(state[i], Color.RED) for p, i in first_link.items()}
-
+        junction = _Junction(config, phase_map)
         # SUMO's start-up greens count their minimum from its first step, not from time 0: one
         # step without calls first puts its clock on our tick 0 (start-up greens then end together)
         libsumo.simulationStep()
-        shown = colors()
+        shown = junction.colors()
         called: frozenset[int] = frozenset()
         for k in range(ticks):
             if k in pending:
                 for p in called ^ pending[k]:
-                    for d in detectors[p]:
+                    for d in junction.detectors[p]:
                         libsumo.lanearea.overrideVehicleNumber(d, 1 if p in pending[k] else -1)
                 called = pending[k]
             libsumo.simulationStep()
-            now = colors()
+            now = junction.colors()
             out += _changes(shown, now, k + 1)
             shown = now
     return tuple(out)
 
 
+def run_traffic(config: IntersectionConfig, ticks: int, seed: int) -> tuple[CallSequence, Timeline]:
+    """SUMO's NEMA controller serving the shipped demand (its own vehicles on its own detectors) for ``ticks``
+    steps: the calls its detectors placed, as a sequence our controller can be given, and its timeline."""
+    if ticks <= 0:
+        raise NemaReferenceError(f"run length {ticks} ticks; allowed: > 0")
+    phase_map = derive_phase_map(config, read_net())
+    calls: list[tuple[int, frozenset[int]]] = []
+    out: list[ColorChange] = []
+    with _sumo(sumo_program(config, phase_map), "-r", str(data_path(ROUTE_FILE)), "--seed", str(seed)):
+        junction = _Junction(config, phase_map)
+        libsumo.simulationStep()  # as in run_reference: SUMO's clock one step ahead of ours
+        shown = junction.colors()
+        for k in range(ticks):
+            # what the detectors hold after step k is what the NEMA logic reads in step k + 1
+            occupied = junction.occupied()
+            if not calls or calls[-1][1] != occupied:
+                calls.append((k, occupied))
+            libsumo.simulationStep()
+            now = junction.colors()
+            out += _changes(shown, now, k + 1)
+            shown = now
+    return tuple(calls), tuple(out)
+
+
 # --- comparison ------------------------------------------------------------------------
 
 
-def compare(ours: Timeline, reference: Timeline, tolerance: int = 1, until: int | None = None) -> Comparison:
-    """Pair changes of the same phase and colour at most ``tolerance`` ticks apart, in order;
-    with ``until``, only the changes before that tick take part."""
-    if until is not None:
-        ours = tuple(c for c in ours if c.tick < until)
-        reference = tuple(c for c in reference if c.tick < until)
+def compare(ours: Timeline, reference: Timeline, tolerance: int = 1) -> Comparison:
+    """Pair changes of the same phase and colour at most ``tolerance`` ticks apart, in order, over the whole
+    timelines."""
     matched: list[tuple[ColorChange, ColorChange]] = []
     only_ours: list[ColorChange] = []
     only_ref: list[ColorChange] = []
@@ -330,128 +360,37 @@ def compare(ours: Timeline, reference: Timeline, tolerance: int = 1, until: int 
     return Comparison(ours, reference, tuple(sorted(matched)), tuple(sorted(only_ours)), tuple(sorted(only_ref)))
 
 
-def differential(config: IntersectionConfig, calls: CallSequence, ticks: int, *,
-                 stop_at_quirk: bool = False) -> Comparison:
-    """Both controllers under the same calls, compared within 0.1 s; with ``stop_at_quirk``, only
-    up to the first of SUMO's documented quirks (:func:`reference_quirks`)."""
-    reference = run_reference(config, calls, ticks)
-    quirks = reference_quirks(config, calls, reference, ticks) if stop_at_quirk else ()
-    return compare(run_ours(config, calls, ticks), reference, until=quirks[0].since if quirks else None)
+@dataclass(frozen=True)
+class Differential:
+    """Both controllers under one call sequence: the comparison over the whole sequence and the judged first
+    difference (None when they agree throughout)."""
+
+    calls: CallSequence
+    comparison: Comparison
+    first: Judgement | None
 
 
-class Quirk(StrEnum):
-    """Where SUMO's NEMA logic departs from NEMA TS2 operation as our controller implements it
-    (docs/nema_differences.md gives an example of each and the source)."""
-
-    REDIRECTED = "next phase changed during clearance"
-    PULLED_ACROSS = "clearing ring pulled across the barrier"
-    FORCED_END = "green ended early by the other ring"
-    SKIPPED = "called phase skipped to cross the barrier"
+def differential(config: IntersectionConfig, calls: CallSequence, ticks: int) -> Differential:
+    """Both controllers under the same calls, compared within 0.1 s over the whole sequence; the first
+    difference judged by :func:`harness.nema_rules.classify`."""
+    return _judged(config, calls, ticks, run_ours(config, calls, ticks), run_reference(config, calls, ticks))
 
 
-@dataclass(frozen=True, slots=True)
-class QuirkSighting:
-    """A quirk seen at ``tick`` in SUMO's timeline; from ``since`` on the controllers may differ."""
-
-    since: int
-    tick: int
-    phase: int
-    kind: Quirk
+def traffic_differential(config: IntersectionConfig, ticks: int, seed: int) -> Differential:
+    """SUMO's NEMA controller serving traffic, and ours given the calls its detectors placed."""
+    calls, reference = run_traffic(config, ticks, seed)
+    return _judged(config, calls, ticks, run_ours(config, calls, ticks), reference)
 
 
-def reference_quirks(config: IntersectionConfig, calls: CallSequence, reference: Timeline,
-                     ticks: int) -> tuple[QuirkSighting, ...]:
-    """SUMO's departures from the NEMA rules our controller keeps, found in its timeline and calls.
-
-    - REDIRECTED: a ring enters another phase than the one it chose at the start of its yellow,
-      i.e. the first phase called then on the entered phase's side in ring order after the one
-      that ended (or that side's dual-entry phase when none was called). SUMO lets later calls
-      change a decision while the new target is on the same barrier side
-      (``NEMAPhase::trySwitch``); rule 2 of issue 9 keeps it.
-    - PULLED_ACROSS: a ring that began its yellow alone (a move on its side of the barrier) enters
-      a phase across the barrier, because the other ring became ready to cross meanwhile
-      (``NEMALogic::getNextPhases`` gives the clearing ring its default transition across).
-    - FORCED_END: a green ends while its own call is on, before its minimum, or before its
-      maximum timed from the conflicting call, without having gapped out: the other ring's
-      green-rest max-out sets it ready too (``NEMAPhase::update``, "force the counterparty to be
-      ready to switch").
-    - SKIPPED: both rings cross the barrier while one of them had a call on a phase after its
-      own before the barrier (1 -> 4 with 2 called): the crossing pair has the smaller summed
-      ring distance (``NEMALogic::getNextPhases``) because a green-rest phase staying counts the
-      full ring (``PhaseTransitionLogic::getDistance``); a NEMA ring serves its called phases in
-      sequence before the barrier.
-    """
-    called = _calls_read(calls, ticks)
-    side = {p: config.barrier_of(p) for p in config.phases}
-    ring_of = {p: config.ring_of(p) - 1 for p in config.phases}
-    order = [list(r) for r in config.rings]
-    defaults = _default_phases(config)
-    shown = {ring[0]: Color.GREEN for ring in config.rings}
-    green_since = {r: 0 for r in range(len(order))}
-    phase = {r: order[r][0] for r in range(len(order))}
-    yellow: dict[int, tuple[int, bool]] = {}  # ring -> (yellow onset, began alone)
-    out: list[QuirkSighting] = []
-
-    def after(p: int) -> list[int]:
-        ring = order[ring_of[p]]
-        i = ring.index(p)
-        return [ring[(i + k) % len(ring)] for k in range(1, len(ring))]
-
-    def conflict(p: int, k: int) -> bool:
-        return any(q != p and (ring_of[q] == ring_of[p] or side[q] != side[p]) for q in called[k])
-
-    by_tick: dict[int, list[ColorChange]] = {}
-    for c in reference:
-        by_tick.setdefault(c.tick, []).append(c)
-    for t in sorted(by_tick):
-        changes = by_tick[t]
-        turning = {c.phase for c in changes if c.color is Color.YELLOW}
-        for c in changes:
-            r = ring_of[c.phase]
-            if c.color is Color.YELLOW:
-                p, g = c.phase, green_since[r]
-                ph = config.phases[p]
-                if p in called[t] and not _legitimate_end(p, g, t, ph.min_green, ph.max_green, called, conflict):
-                    out.append(QuirkSighting(t, t, p, Quirk.FORCED_END))
-                yellow[r] = (t, phase[1 - r] not in turning)
-            elif c.color is Color.GREEN and r in yellow:
-                y, alone = yellow.pop(r)
-                p, q = phase[r], c.phase
-                ahead = list(itertools.takewhile(side[p].__eq__, (side[x] for x in after(p))))
-                ahead = after(p)[:len(ahead)]
-                if alone and side[q] != side[p]:
-                    out.append(QuirkSighting(y + 1, t, q, Quirk.PULLED_ACROSS))
-                elif side[q] != side[p] and any(x in called[y] for x in ahead):
-                    out.append(QuirkSighting(y, t, q, Quirk.SKIPPED))
-                else:
-                    chosen = next((x for x in after(p) if x in called[y] and side[x] == side[q]),
-                                  defaults[r][side[q]])
-                    if q != chosen:
-                        out.append(QuirkSighting(y + 1, t, q, Quirk.REDIRECTED))
-                phase[r], green_since[r] = q, t
-        for c in changes:
-            shown[c.phase] = c.color
-    return tuple(sorted(out, key=lambda s: s.since))
+def _judged(config: IntersectionConfig, calls: CallSequence, ticks: int, ours: Timeline,
+            reference: Timeline) -> Differential:
+    comparison = compare(ours, reference)
+    first = comparison.first_difference
+    judged = None if first is None else classify(config, calls_read(calls, ticks), ours, reference, first.tick)
+    return Differential(calls, comparison, judged)
 
 
-def _legitimate_end(p: int, green: int, end: int, min_green: float, max_green: float,
-                    called: Sequence[frozenset[int]], conflict: Callable[[int, int], bool]) -> bool:
-    """A green of ``p`` from ``green`` ending at ``end`` with its call on: after its minimum, and
-    either maxed out (conflicting demand for its maximum without a break) or gapped out earlier
-    (call off with conflicting demand after the minimum: the gap-out is kept)."""
-    if end - green < tenths(min_green):
-        return False
-    run = 0
-    for k in range(end, green, -1):
-        if not conflict(p, k):
-            break
-        run += 1
-    if run >= tenths(max_green):
-        return True
-    return any(p not in called[k] and conflict(p, k) for k in range(green + tenths(min_green), end))
-
-
-def _calls_read(calls: CallSequence, ticks: int) -> list[frozenset[int]]:
+def calls_read(calls: CallSequence, ticks: int) -> list[frozenset[int]]:
     """Per tick k, the calls the step ending at tick k reads (those placed at tick k - 1 or before)."""
     out = [frozenset()] * (ticks + 1)
     pending = dict(calls)
@@ -493,6 +432,28 @@ SCENARIOS: dict[str, tuple[CallSequence, int]] = {
 }
 
 
+# A minimal sequence for each class of first difference (docs/nema_differences.md shows them): on the paper's
+# intersection SUMO's NEMA controller makes the difference and its rule names it.
+EXAMPLES: dict[DifferenceClass, tuple[CallSequence, int]] = {
+    # 2+6 green, 6's call drops as 4 (across) and 5 are called: SUMO backs ring 2 from 6 into 5
+    BACKED_WITH_CALL_ACROSS: (seconds((0, [2, 6]), (15, [2, 4, 5]), (45, [])), 500),
+    # 3+7 green; calls on 1, 5 and 8: SUMO crosses to 1+5 and leaves 8 (after 7, before the barrier) unserved
+    SKIPPED: (seconds((0, [3, 7]), (12, [1, 5, 8]), (30, [])), 400),
+    # 2+5 green; 5 ends alone toward 6 (called), then 2 can go with 3 called: SUMO takes ring 2 across with ring 1
+    PULLED_ACROSS: (seconds((0, [2, 5]), (9, [3, 6]), (30, [])), 400),
+    # 3+8 -> 4+8; 8's green-rest max-out (timed from the call on 4, its concurrent phase) ends 4 with its call on
+    ENDED_WHILE_EXTENDING: (seconds((0, [3, 8]), (12, [4, 8]), (15, [2, 4, 8]), (45, [])), 500),
+    # 4+7 with a call on 1 across; ring 2 moves 7 -> 8 as 4 maxes out: SUMO ends 8 1.9 s into its green
+    ENDED_BEFORE_MIN: (seconds((0, [2, 6]), (10, [4, 7]), (20, [1, 4, 7]), (33, [1, 4, 8]), (60, [])), 700),
+    # 6 rests green with its call, 3 called across from 11.2 s; ring 1 changes 2 -> 1 meanwhile: SUMO times 6's
+    # maximum from 1's start (36 s), not from the call on 3 (31.2 s)
+    HELD_PAST_MAXIMUM: (seconds((0, [2, 6]), (10, [1]), (11.2, [3, 6]), (45, [])), 500),
+    # 2 gaps out while only its concurrent 5 and 6 are called; its call returns with one on 1: SUMO ends it, ours
+    # extends it
+    RE_EXTENDED: (seconds((0, [2, 6]), (10, [5, 6]), (19.5, [1, 2, 5, 6]), (40, [])), 500),
+}
+
+
 WARM_UP: CallSequence = ((0, frozenset({2, 6})),)
 """Calls that move both controllers off their start-up greens (1+5) first: SUMO times the maximum
 of a start-up green from the end of its minimum (docs/nema_differences.md, start-up)."""
@@ -515,13 +476,21 @@ def pooled(results: Sequence[Comparison]) -> tuple[int, int]:
     return matched, matched + sum(len(r.only_ours) + len(r.only_reference) for r in results)
 
 
+def tally(results: Sequence[Differential]) -> Counter[tuple[str, str]]:
+    """First differences per class and the side that broke its rule."""
+    return Counter((str(d.first.kind), str(d.first.breaker or d.first.kind.right)) for d in results if d.first)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m harness.nema_reference",
-                                     description="Agreement of our controller with SUMO's NEMA controller.")
+                                     description="Agreement of our controller with SUMO's NEMA controller over whole "
+                                                 "call sequences, and the class of each first difference.")
     parser.add_argument("--config", help="intersection TOML (default: the shipped four-leg intersection)")
     parser.add_argument("--random", type=int, default=50, help="random call sequences (default 50)")
     parser.add_argument("--length", type=float, default=300.0, help="seconds per random sequence (default 300)")
     parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--traffic", type=int, default=10,
+                        help="runs of SUMO serving the shipped demand on its detectors (default 10, seeds 0..N-1)")
     parser.add_argument("-v", "--verbose", action="store_true", help="show where each sequence first differs")
     args = parser.parse_args(argv)
     try:
@@ -529,31 +498,28 @@ def main(argv: Sequence[str] | None = None) -> int:
         targeted = []
         for name, (calls, ticks) in SCENARIOS.items():
             targeted.append(differential(config, calls, ticks))
-            print(f"{name:45s} {targeted[-1].agreement:6.1%}")
-            if args.verbose and targeted[-1].agreement < 1:
-                print(targeted[-1].report(calls))
+            print(f"{name:45s} {targeted[-1].comparison.agreement:6.1%}")
         rng = random.Random(args.seed)
         ticks = round(args.length * 10)
-        whole, until_quirk, kinds = [], [], Counter[Quirk]()
+        randoms = []
         for i in range(args.random):
-            calls = random_calls(rng, ticks, sorted(config.phases))
-            ours, reference = run_ours(config, calls, ticks), run_reference(config, calls, ticks)
-            quirks = reference_quirks(config, calls, reference, ticks)
-            whole.append(compare(ours, reference))
-            until_quirk.append(compare(ours, reference, until=quirks[0].since if quirks else None))
-            kinds.update(q.kind for q in quirks[:1])
-            if args.verbose and until_quirk[-1].agreement < 1:
-                print(f"random {i}: " + until_quirk[-1].report(calls))
+            randoms.append(differential(config, random_calls(rng, ticks, sorted(config.phases)), ticks))
+            if args.verbose and randoms[-1].first:
+                print(f"random {i}: {randoms[-1].first}\n" + randoms[-1].comparison.report(randoms[-1].calls))
+        traffic = [traffic_differential(config, ticks, seed) for seed in range(args.traffic)]
     except (NemaReferenceError, ValueError) as exc:
         print(f"nema_reference: {exc}", file=sys.stderr)
         return 1
     for label, results in ((f"targeted scenarios ({len(targeted)})", targeted),
-                           (f"{args.random} random sequences of {args.length:g} s", whole),
-                           ("  the same, up to SUMO's first quirk", until_quirk)):
-        matched, total = pooled(results)
-        print(f"{label:45s} {matched / max(total, 1):6.1%} of {total} changes")
-    if kinds:
-        print("  first quirks: " + ", ".join(f"{k} {n}" for k, n in kinds.most_common()))
+                           (f"{args.random} random sequences of {args.length:g} s", randoms),
+                           (f"{args.traffic} runs of {args.length:g} s of detector-driven traffic", traffic)):
+        matched, total = pooled([d.comparison for d in results])
+        print(f"{label:52s} {matched / max(total, 1):6.1%} of {total} changes, whole sequences")
+    for label, results in (("random sequences", randoms), ("traffic", traffic)):
+        classes = tally(results)
+        print(f"first differences, {label}: {sum(classes.values())} of {len(results)}")
+        for (kind, who), n in classes.most_common():
+            print(f"  {n:3d}  {kind} ({who})")
     return 0
 
 

@@ -619,6 +619,14 @@ def test_red_end_lock_never_redirects_across_the_barrier(paper_toml: str) -> Non
     assert c.greens == {1, 6} and (3, "G") not in seen
 
 
+def test_red_end_lock_reads_the_calls_of_the_tick_that_ends_the_red(paper_toml: str) -> None:
+    c = Controller(variant(paper_toml, replace={"[timing]": '[timing]\nnext_phase_lock = "red_end"'}))
+    c.backup_time = 0
+    end_of_red = MIN + YELLOW + RED
+    seen = onsets(c, 200, {0: {4, 8}, end_of_red - 1: {3, 4, 8}})
+    assert seen[(3, "G")] == seen[(8, "G")] == end_of_red and (4, "G") not in seen
+
+
 def test_red_end_lock_keeps_a_committed_phase_without_a_better_call(paper_toml: str) -> None:
     c = Controller(variant(paper_toml, replace={"[timing]": '[timing]\nnext_phase_lock = "red_end"'}))
     c.backup_time = 0
