@@ -108,8 +108,9 @@ from enum import StrEnum
 
 import simpy
 
+from emulator.coordination import Coordinator
 from hils.config import IntersectionConfig, NextPhaseLock, Phase, Recall
-from hils.ntcip import ControlColumn, PhaseStartup, UnitControlStatus, UnitFlashStatus
+from hils.ntcip import ControlColumn, CoordForceMode, PhaseStartup, UnitControlStatus, UnitFlashStatus
 
 log = logging.getLogger(__name__)
 
@@ -183,6 +184,12 @@ class Ring:
     gap: int = 0  # ticks since the green's own vehicle call was last present
     gapped: bool = False  # gapped out with conflicting demand: latched until the green ends
     target: int | None = None  # the committed next phase (PhaseNext), from the start of yellow
+    # Coordination (a pattern running): this green passed its force-off point or started past it; the green
+    # ticks a floating force-off allows (0: none); the ring's yield point passed since its coordinated phase
+    # last ended (its coordinated phase may then end).
+    forced: bool = False
+    limit: int = 0
+    yielded: bool = False
 
 
 @dataclass(frozen=True, slots=True)
@@ -209,7 +216,7 @@ class Controller:
         self._detector_phase = config.detectors
         self.backup_time = config.middleware.backup_time
         self.startup_flash = config.startup_flash
-        self.pattern = 254  # free
+        self.coordinator = Coordinator(config)
         # Counts changes of the status objects (what a poll reads), across power cycles too.
         # Inputs count too: they change the calls the status shows.
         self.status_version = 0
@@ -231,6 +238,7 @@ class Controller:
         self._yellow_end: dict[int, int] = {}  # tick each phase's last yellow ended (red revert)
         self._since_set: int | None = None  # ticks since the last control SET; None = backup timer disarmed
         self.rings = [Ring(i + 1, order) for i, order in enumerate(self.config.rings)]
+        self.coordinator.reset()
         self.group = 0
         self._waiting_across = False  # demand on a phase of another barrier group, this tick
         self._quiet = False  # the last step changed nothing discrete, and no input came since
@@ -274,6 +282,12 @@ class Controller:
         """A SET of unitBackupTime: the backup timer's threshold moves at once."""
         self.backup_time = seconds
         self.touch()
+
+    def set_pattern_control(self, value: int) -> None:
+        """A SET of systemPatternControl: the system calls a pattern (1-253), free (254) or none (0: the local
+        plan runs); like any control SET it restarts the backup timer."""
+        self.coordinator.set_command(value)
+        self._system_set()
 
     def set_max2(self, rings: Iterable[int]) -> None:
         """A SET of ringControlGroupMax2: these rings time Maximum 2 from their next green."""
@@ -366,6 +380,7 @@ class Controller:
     def _step(self) -> None:
         self.tick += 1
         self._backup_timer()
+        self._coordinate()
         if self.flash_status is UnitFlashStatus.STARTUP and self.tick >= self.startup_flash * 10:
             self.flash_status = UnitFlashStatus.NOT_FLASH
             self._power_up()
@@ -375,7 +390,12 @@ class Controller:
             return
         calls = self.calls
         demand = self._demand(calls)
-        self._waiting_across = any(self._barrier[q] != self.group for q in demand)
+        # Demand waiting across the barrier forbids backing; while a pattern runs only demand that can still be
+        # served in this cycle counts (a phase past its permissive period is skipped anyway).
+        plan, timer = self.coordinator.plan, self.coordinator.timer
+        clear = max(self._clearance_left(r) for r in self.rings) if plan is not None else 0
+        self._waiting_across = any(self._barrier[q] != self.group and (plan is None or plan.fits(q, timer, clear))
+                                   for q in demand)
         if self.config.next_phase_lock is NextPhaseLock.RED_END:
             # before timing: the tick that ends a red clearance still reads the calls of that clearance
             for r in self.rings:
@@ -392,7 +412,8 @@ class Controller:
     def _discrete(self) -> tuple:
         """Everything a step can change but counters (see "Quiet time" above)."""
         return (self.group, self.flash_status, self.control_status, self.ped_calls, self.status_version,
-                tuple(self.control.values()), tuple((r.phase, r.interval, r.target, r.gapped) for r in self.rings))
+                tuple(self.control.values()), self.coordinator.discrete(),
+                tuple((r.phase, r.interval, r.target, r.gapped, r.forced, r.yielded) for r in self.rings))
 
     # --- quiet time ----------------------------------------------------------------------
 
@@ -411,11 +432,14 @@ class Controller:
             until(self._since_set, self.backup_time * 10)
         if self.flash_status is UnitFlashStatus.STARTUP:
             until(self.tick, self.startup_flash * 10)
+        coordination = self.coordinator.quiet_ticks()
+        if coordination is not None:
+            ahead.append(coordination)
         if self.flashing:
             return min(ahead, default=None)
         for r in self.rings:
             if r.interval is Interval.GREEN:
-                for threshold in (r.minimum, r.walk, r.walk + r.ped_clear):
+                for threshold in (r.minimum, r.walk, r.walk + r.ped_clear, r.limit):
                     until(r.ticks, threshold)
                 if r.gap:
                     until(r.gap, r.passage)
@@ -434,6 +458,7 @@ class Controller:
         if n <= 0:
             return
         self.tick += n
+        self.coordinator.skip(n)
         if self._since_set is not None and self.backup_time:
             self._since_set += n
         if self.flashing:
@@ -466,18 +491,23 @@ class Controller:
                         self.backup_time)
             self.control = {c: frozenset() for c in ControlColumn}
             self.max2_rings = frozenset()
+            self.coordinator.set_command(0)  # systemPatternControl: "reset ... to ZERO when in BACKUP Mode"
             self.control_status = UnitControlStatus.BACKUP_MODE
             self._since_set = None
             self.touch()  # the calls it shows are gone
 
     def _demand(self, calls: frozenset[int]) -> frozenset[int]:
-        """Phases wanting service this tick; latches pedestrian calls of phases not showing green."""
-        omit = self.control[ControlColumn.PHASE_OMIT]
+        """Phases wanting service this tick; latches pedestrian calls of phases not showing green. While a
+        pattern runs its coordinated phases and its split-mode recalls are demand too."""
+        co = self.coordinator
+        omit = self.control[ControlColumn.PHASE_OMIT] | co.omitted()
         ped_omit = omit | self.control[ControlColumn.PED_OMIT]
         greens = {r.phase for r in self.rings if r.interval is Interval.GREEN}
-        peds = (self.control[ControlColumn.PED_CALL].intersection(self.config.phases) | self._recall[Recall.PED])
+        peds = (self.control[ControlColumn.PED_CALL].intersection(self.config.phases) | self._recall[Recall.PED]
+                | co.ped_recalled())
         self.ped_calls = (self.ped_calls | (peds - greens)) - ped_omit
-        demand = calls | self.ped_calls | ((self._recall[Recall.MIN] | self._recall[Recall.MAX]) - omit)
+        recalled = self._recall[Recall.MIN] | self._recall[Recall.MAX] | co.recalled()
+        demand = (calls - omit) | self.ped_calls | (recalled - omit)
         soft = self._recall[Recall.SOFT] - omit
         if soft and not demand - soft:
             demand |= soft
@@ -511,7 +541,7 @@ class Controller:
                 self._enter(r, _NEXT[r.interval])
             return
         p = r.phase
-        extending = p in calls or p in self._recall[Recall.MAX]
+        extending = p in calls or p in self._recall[Recall.MAX] or p in self.coordinator.max_recalled()
         r.gap = 0 if extending else r.gap + 1
         conflict = self._conflicting(r, demand)
         r.max_ticks = r.max_ticks + 1 if conflict else 0
@@ -526,21 +556,55 @@ class Controller:
             return r.target is None
         if r.interval is not Interval.GREEN or r.ticks < r.minimum or r.phase in self.control[ControlColumn.HOLD]:
             return False
+        if r.phase in self.control[ControlColumn.FORCE_OFF]:
+            return True
+        plan = self.coordinator.plan
+        if plan is not None and r.phase == plan.coord[r.number]:
+            return r.yielded  # a coordinated phase ends only after its yield point, never gapped or maxed out
         gapped = r.gapped or (r.gap > 0 and r.gap >= r.passage)
-        return gapped or r.max_ticks >= r.maximum or r.phase in self.control[ControlColumn.FORCE_OFF]
+        if plan is not None:  # coordination inhibits the maximum: the force-off points limit a green
+            return gapped or r.forced or (r.limit > 0 and r.ticks >= r.limit)
+        return gapped or r.max_ticks >= r.maximum
 
     def _wish(self, r: Ring, demand: frozenset[int]) -> int | None:
         """The nearest phase with demand after the ring's own, in ring order.
 
-        A ring resting in red may re-serve its own phase (last in the order)."""
+        A ring resting in red may re-serve its own phase (last in the order). A ring leaves its coordinated
+        phase for a phase only in that phase's permissive period (:meth:`Plan.permitted`: sequential
+        periods, as SUMO's ``PhaseTransitionLogic::fromCoord``, written to match Econolite
+        software-in-the-loop, SUMO pull request 10082)."""
         n = len(r.order)
         i = 0 if r.phase is None else self._order[r.phase]
         stop = n + 1 if r.interval is Interval.DWELL else n
+        plan = self.coordinator.plan
+        leaving = plan is not None and r.interval is Interval.GREEN and r.phase == plan.coord[r.number]
         for k in range(1, stop):
             q = r.order[(i + k) % n]
-            if q in demand:
+            if self._serviceable(r, q, demand):
+                if leaving and not plan.permitted(r.order[(i + k - 1) % n], self.coordinator.timer):
+                    return None  # outside q's permissive period the coordinated phase stays
                 return q
         return None
+
+    def _serviceable(self, r: Ring, q: int, demand: frozenset[int]) -> bool:
+        """``q`` has demand and, while a pattern runs, still fits before its force-off point once ``r`` has
+        cleared (a phase that does not fit is skipped: its time goes to the phases after it)."""
+        if q not in demand:
+            return False
+        plan = self.coordinator.plan
+        if plan is None:
+            return True
+        return plan.fits(q, self.coordinator.timer, self._clearance_left(r))
+
+    def _clearance_left(self, r: Ring) -> int:
+        tm = None if r.phase is None else self.timing[r.phase]
+        if r.interval is Interval.GREEN:
+            return tm.yellow + tm.red_clear
+        if r.interval is Interval.YELLOW:
+            return r.length - r.ticks + tm.red_clear
+        if r.interval is Interval.RED_CLEAR:
+            return r.length - r.ticks
+        return 0
 
     def _redirect(self, r: Ring, demand: frozenset[int]) -> None:
         """``red_end`` lock: a ring in its clearance takes the nearest phase with demand after its own on the
@@ -550,7 +614,8 @@ class Controller:
         n, i = len(r.order), self._order[r.phase]
         for k in range(1, n):
             q = r.order[(i + k) % n]
-            if q in demand and self._barrier[q] == side and (side != self.group or not self._beyond(q)):
+            if (self._barrier[q] == side and self._serviceable(r, q, demand)
+                    and (side != self.group or not self._beyond(q))):
                 r.target = q
                 return
 
@@ -579,7 +644,8 @@ class Controller:
             target = across.get(r.number)
             if target is None or self._barrier[target] != self.group:
                 # Nearest demand of the ring in the new group; a restarted group serves its own phase again.
-                target = next((q for q in r.order if q in demand and self._barrier[q] == self.group), None)
+                target = next((q for q in r.order if self._barrier[q] == self.group
+                               and self._serviceable(r, q, demand)), None)
             if target is None:
                 omit = self.control[ControlColumn.PHASE_OMIT]
                 target = next((q for q in r.order if self._barrier[q] == self.group
@@ -611,7 +677,11 @@ class Controller:
     def _enter(self, r: Ring, interval: Interval, *, notify: bool = True) -> None:
         r.interval, r.ticks, r.max_ticks, r.gap, r.gapped = interval, 0, 0, 0, False
         tm = self.timing[r.phase]
+        plan = self.coordinator.plan
+        if plan is not None and r.phase == plan.coord[r.number] and interval is Interval.YELLOW:
+            r.yielded = False
         if interval is Interval.GREEN:
+            self._place(r)
             served = r.phase in self.ped_calls and tm.walk > 0
             self.ped_calls -= {r.phase}
             r.walk, r.ped_clear = (tm.walk, tm.ped_clear) if served else (0, 0)
@@ -622,6 +692,39 @@ class Controller:
             r.length = {Interval.YELLOW: tm.yellow, Interval.RED_CLEAR: tm.red_clear}.get(interval, 0)
         if notify and self.on_change is not None:
             self.on_change(Change(self.tick, r.number, r.phase, interval))
+
+    # --- coordination --------------------------------------------------------------------------
+
+    def _coordinate(self) -> None:
+        """One tick of the coordinator; the rings' force-off and yield latches follow the points it passed."""
+        co = self.coordinator
+        before = co.plan
+        co.step()
+        plan = co.plan
+        if plan is None:
+            return
+        if plan is not before:  # a pattern started: where is each ring in its cycle?
+            for r in self.rings:
+                c = plan.coord[r.number]
+                r.yielded = not plan.held(c, co.timer)
+                self._place(r)
+            return
+        for r in self.rings:
+            if plan.force_off[plan.coord[r.number]] in co.passed:
+                r.yielded = True
+            if (r.interval is Interval.GREEN and r.phase not in plan.coord.values()
+                    and plan.force_off[r.phase] in co.passed):
+                r.forced = True
+
+    def _place(self, r: Ring) -> None:
+        """A green starts (or a pattern starts under it): its force-off latch and floating limit."""
+        plan, co = self.coordinator.plan, self.coordinator
+        if plan is None or r.interval is not Interval.GREEN or r.phase in plan.coord.values():
+            r.forced, r.limit = False, 0
+            return
+        r.forced = not plan.in_window(r.phase, co.timer)
+        floating = co.force_mode is CoordForceMode.FLOATING
+        r.limit = plan.split[r.phase] - plan.clearance[r.phase] if floating else 0
 
     def _monitor(self) -> None:
         shown = sorted(self.greens | self.yellows)

@@ -171,15 +171,6 @@ class DelayedController:
             out[p.column] = p.phases
         return out
 
-    # Writable objects of the unit go to the controller itself (the backup time through set_backup_time).
-    @property
-    def pattern(self) -> int:
-        return self.controller.pattern
-
-    @pattern.setter
-    def pattern(self, value: int) -> None:
-        self.controller.pattern = value
-
     def __getattr__(self, name: str) -> Any:
         # Only reached for attributes not defined above: status from the image, the rest from the controller.
         if name.startswith("_"):

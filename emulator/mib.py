@@ -21,6 +21,7 @@ import bisect
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import Any
 
 from emulator.controller import Controller
 from emulator.delays import DelayedController
@@ -28,14 +29,25 @@ from hils.config import Phase, Recall
 from hils.ntcip import (
     CHANNEL_TABLE,
     CONTROL_TABLE,
+    COORD_CORRECTION_MODE,
+    COORD_CYCLE_STATUS,
+    COORD_FORCE_MODE,
+    COORD_PATTERN_STATUS,
+    COORD_SYNC_STATUS,
     DETECTOR_ACTUATION,
     DETECTOR_STATUS_ACTIVE,
+    LOCAL_FREE_STATUS,
+    MAX_PATTERNS,
     MAX_PHASE_GROUPS,
     MAX_PHASES,
+    MAX_SPLITS,
     MAX_VEHICLE_DETECTORS,
+    PATTERN_TABLE,
+    PATTERN_TABLE_TYPE,
     PHASE_TABLE,
     RING_CONTROL_MAX2,
     SEQUENCE_DATA,
+    SPLIT_TABLE,
     STATUS_TABLE,
     SYSTEM_PATTERN_CONTROL,
     UNIT_BACKUP_TIME,
@@ -47,12 +59,17 @@ from hils.ntcip import (
     Access,
     ChannelColumn,
     ControlColumn,
+    CoordCorrectionMode,
+    CoordForceMode,
     ErrorStatus,
     ObjectDef,
     Oid,
+    PatternColumn,
     PhaseColumn,
     PhaseOption,
     SnmpError,
+    SplitColumn,
+    SplitMode,
     StatusColumn,
     Syntax,
     Value,
@@ -170,8 +187,9 @@ class MibView:
                      lambda v: c.set_backup_time(v)),
             Instance(UNIT_CONTROL_STATUS.instance(), UNIT_CONTROL_STATUS, lambda: int(c.control_status)),
             Instance(UNIT_FLASH_STATUS.instance(), UNIT_FLASH_STATUS, lambda: int(c.flash_status)),
-            Instance(SYSTEM_PATTERN_CONTROL.instance(), SYSTEM_PATTERN_CONTROL, lambda: c.pattern,
-                     lambda v: setattr(c, "pattern", v)),
+            Instance(SYSTEM_PATTERN_CONTROL.instance(), SYSTEM_PATTERN_CONTROL, lambda: c.coordinator.command,
+                     c.set_pattern_control),
+            *_coordination(c),
         ]
         for p, ph in cfg.phases.items():
             concurrent = bytes(sorted(q for q in cfg.phases if cfg.compatible(p, q)))
@@ -229,6 +247,55 @@ class MibView:
             out.append(Instance(DETECTOR_ACTUATION.instance(g), DETECTOR_ACTUATION, read,
                                 _group_writer(lambda: c.actuations, c.set_actuations, g)))
         return out
+
+
+def _coordination(c: Controller | DelayedController) -> list[Instance]:
+    """The coordination node: modes, the pattern and split tables (writable with NTCIP's ranges; a SET takes
+    effect at the running pattern's next local zero), and the coordination status."""
+    co = c.coordinator
+
+    def table(apply: Callable[[int], None]) -> Callable[[int], None]:
+        def write(value: int) -> None:
+            apply(value)
+            co.tables_changed()
+            c.touch()
+        return write
+
+    out = [
+        Instance(COORD_CORRECTION_MODE.instance(), COORD_CORRECTION_MODE, lambda: int(co.correction),
+                 table(lambda v: setattr(co, "correction", CoordCorrectionMode(v)))),
+        Instance(COORD_FORCE_MODE.instance(), COORD_FORCE_MODE, lambda: int(co.force_mode),
+                 table(lambda v: setattr(co, "force_mode", CoordForceMode(v)))),
+        Instance(MAX_PATTERNS.instance(), MAX_PATTERNS, lambda: len(co.patterns)),
+        Instance(PATTERN_TABLE_TYPE.instance(), PATTERN_TABLE_TYPE, lambda: 2),  # patterns(2): a row per pattern
+        Instance(MAX_SPLITS.instance(), MAX_SPLITS, lambda: len(co.splits)),
+        Instance(COORD_PATTERN_STATUS.instance(), COORD_PATTERN_STATUS, lambda: co.running),
+        Instance(LOCAL_FREE_STATUS.instance(), LOCAL_FREE_STATUS, lambda: int(co.free_status)),
+        Instance(COORD_CYCLE_STATUS.instance(), COORD_CYCLE_STATUS, lambda: co.cycle_status),
+        Instance(COORD_SYNC_STATUS.instance(), COORD_SYNC_STATUS, lambda: co.sync_status),
+    ]
+    pattern_fields = {PatternColumn.CYCLE_TIME: "cycle", PatternColumn.OFFSET_TIME: "offset",
+                      PatternColumn.SPLIT_NUMBER: "split", PatternColumn.SEQUENCE_NUMBER: "sequence"}
+    for n, row in co.patterns.items():
+        out.append(Instance(PATTERN_TABLE[PatternColumn.NUMBER].instance(n), PATTERN_TABLE[PatternColumn.NUMBER],
+                            lambda n=n: n))
+        out += [Instance(PATTERN_TABLE[col].instance(n), PATTERN_TABLE[col], lambda row=row, f=f: getattr(row, f),
+                         table(lambda v, row=row, f=f: setattr(row, f, v)))
+                for col, f in pattern_fields.items()]
+    split_fields: dict[SplitColumn, tuple[str, Callable[[int], Any]]] = {
+        SplitColumn.TIME: ("time", int), SplitColumn.MODE: ("mode", SplitMode),
+        SplitColumn.COORD_PHASE: ("coord", bool)}
+    for s, rows in co.splits.items():
+        for p, row in rows.items():
+            out.append(Instance(SPLIT_TABLE[SplitColumn.NUMBER].instance(s, p), SPLIT_TABLE[SplitColumn.NUMBER],
+                                lambda s=s: s))
+            out.append(Instance(SPLIT_TABLE[SplitColumn.PHASE].instance(s, p), SPLIT_TABLE[SplitColumn.PHASE],
+                                lambda p=p: p))
+            out += [Instance(SPLIT_TABLE[col].instance(s, p), SPLIT_TABLE[col],
+                             lambda row=row, f=f: int(getattr(row, f)),
+                             table(lambda v, row=row, f=f, kind=kind: setattr(row, f, kind(v))))
+                    for col, (f, kind) in split_fields.items()]
+    return out
 
 
 # Status is read at 10-100 Hz and takes few distinct values: convert each phase set once.

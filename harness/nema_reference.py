@@ -75,7 +75,7 @@ from harness.nema_rules import (
     Timeline,
     classify,
 )
-from hils.config import IntersectionConfig, NextPhaseLock, load
+from hils.config import ForceOff, IntersectionConfig, NextPhaseLock, OffsetReference, Pattern, load
 from hils.ntcip import ControlColumn, PhaseStartup
 from hils.sumo_net import NET_FILE, ROUTE_FILE, PhaseMap, data_path, derive_phase_map, read_net
 
@@ -133,11 +133,18 @@ class Comparison:
 # --- the two configs -------------------------------------------------------------------
 
 
+def running_pattern(config: IntersectionConfig) -> Pattern | None:
+    """The pattern the controller runs from power-up (None: free)."""
+    return config.coordination.patterns.get(config.coordination.pattern)
+
+
 def comparable_config(config: IntersectionConfig) -> IntersectionConfig:
-    """Our side of the comparison: SUMO's free-mode start-up (first phase of each ring green), its
-    hard-coded dual entry (the last phase of each ring in each barrier group: the throughs) and no
-    backup timer, everything else as given."""
-    firsts = {ring[0] for ring in config.rings}
+    """Our side of the comparison: SUMO's start-up (free mode: the first phase of each ring green;
+    coordinated: the coordinated phases, where SUMO's ``calculateInitialPhases`` starts on the local zero),
+    its hard-coded dual entry (the last phase of each ring in each barrier group: the throughs), its
+    next-phase lock and no backup timer, everything else as given."""
+    pattern = running_pattern(config)
+    firsts = set(pattern.coord_phases) if pattern else {ring[0] for ring in config.rings}
     duals = {[p for p in ring if config.barrier_of(p) == b][-1] for ring in config.rings
              for b in range(len(config.barriers)) if any(config.barrier_of(p) == b for p in ring)}
     phases = {p: dataclasses.replace(ph, startup=PhaseStartup.GREEN_NO_WALK if p in firsts
@@ -176,22 +183,44 @@ def _default_phases(config: IntersectionConfig) -> list[list[int]]:
 
 
 def sumo_program(config: IntersectionConfig, phase_map: PhaseMap) -> str:
-    """The additional file with SUMO's NEMA program for ``config`` (see the theory of operation)."""
+    """The additional file with SUMO's NEMA program for ``config`` (see the theory of operation).
+
+    With a pattern running from power-up SUMO runs coordinated: ``coordinate-mode``, the pattern's cycle,
+    offset and coordinated phases, a phase's maximum its split less its clearance (SUMO's force-offs are
+    laid out from those: ``NEMALogic::calculateForceOffs170``), ``fixForceOff`` from the force-off mode and
+    ``controllerType`` TS2 (zero at the coordinated green) or Type170 (zero at its yellow) from the offset
+    reference. SUMO's clock runs one step ahead of ours, so its offset is one step later."""
     slots = _ring_slots(config)
     last = _default_phases(config)
+    pattern = running_pattern(config)
+    coord = [next(p for p in pattern.coord_phases if config.ring_of(p) == r) for r in (1, 2)] if pattern else None
+    side = None if coord is None else config.barrier_of(coord[0])
+    defaults = [[next(p for p in reversed(row[2 * g:2 * g + 2]) if p) for g in range(2)] for row in slots]
+    coordinate = coord or [last[r][0] for r in range(2)]
+    barrier = [defaults[r][1 - side] for r in range(2)] if coord else [last[r][1] for r in range(2)]
     params = {
         "ring1": ",".join(map(str, slots[0])),
         "ring2": ",".join(map(str, slots[1])),
-        "barrierPhases": f"{last[0][1]},{last[1][1]}",
-        "coordinatePhases": f"{last[0][0]},{last[1][0]}",
+        "barrierPhases": ",".join(map(str, barrier)),
+        "coordinatePhases": ",".join(map(str, coordinate)),
         "minRecall": "",
         "maxRecall": "",
     }
-    lines = [f'<additional>\n  <tlLogic id="{phase_map.tls_id}" programID="{PROGRAM_ID}" type="NEMA" offset="0">']
+    offset = 0.0
+    if pattern:
+        c = config.coordination
+        params |= {"coordinate-mode": "true", "cycle-length": str(pattern.cycle),
+                   "minRecall": ",".join(map(str, coordinate)),
+                   "fixForceOff": "true" if c.force_off is ForceOff.FIXED else "false",
+                   "controllerType": "TS2" if c.offset_reference is OffsetReference.LEAD_GREEN else "Type170"}
+        offset = pattern.offset
+    lines = [f'<additional>\n  <tlLogic id="{phase_map.tls_id}" programID="{PROGRAM_ID}" type="NEMA" '
+             f'offset="{offset:g}">']
     lines += [f"    <param key={quoteattr(k)} value={quoteattr(v)}/>" for k, v in params.items()]
     for p, ph in sorted(config.phases.items()):
         state = "".join("G" if q == p else "r" for q in phase_map.link_phases)
-        lines.append(f'    <phase duration="99" minDur="{ph.min_green:g}" maxDur="{ph.max_green:g}" '
+        maximum = pattern.splits[p] - ph.clearance if pattern else ph.max_green
+        lines.append(f'    <phase duration="99" minDur="{ph.min_green:g}" maxDur="{maximum:g}" '
                      f'vehext="{SUMO_PASSAGE:g}" yellow="{ph.yellow:g}" red="{ph.red_clear:g}" '
                      f'name="{p}" state="{state}"/>')
     lines.append("  </tlLogic>\n</additional>\n")

@@ -61,6 +61,70 @@ class NextPhaseLock(StrEnum):
 _PHASE_OPTIONS = ("min_green", "max_green", "max2", "passage", "walk", "ped_clear", "yellow", "red_clear",
                   "red_revert", "recall", "dual_entry", "backup_prevent")
 TURNS = ("left", "through")
+FREE = 254  # NTCIP's pattern number of free operation (systemPatternControl, coordPatternStatus)
+
+
+class ForceOff(StrEnum):
+    """coordForceMode (NTCIP 1202): where a non-coordinated phase is forced off."""
+
+    FLOATING = "floating"  # "forced to limit its time to the split time value": unused time reverts to the coord phase
+    FIXED = "fixed"        # "forced at a fixed position in the cycle": unused time reverts to the following phase
+
+
+class OffsetReference(StrEnum):
+    """The point of the coordinated phase that the local cycle's zero (and so the offset) refers to."""
+
+    LEAD_GREEN = "lead_green"  # start of the first coordinated phase's green (NEMA TS 2)
+    YELLOW = "yellow"          # start of the first coordinated phase's yellow (as 170 controllers count)
+
+
+class Correction(StrEnum):
+    """coordCorrectionMode (NTCIP 1202): how a new offset is reached."""
+
+    SHORTWAY = "shortway"  # "adding or subtracting to/from the timings in a manner that limits the cycle change"
+    DWELL = "dwell"        # "dwelling in the coord phase(s) until the desired offset is reached"
+    ADD = "add"            # "adding to the timings in a manner that limits the cycle change"
+
+
+@dataclass(frozen=True, slots=True)
+class Pattern:
+    """One coordination pattern: cycle, offset, coordinated phases and a split per phase, all in seconds."""
+
+    number: int
+    cycle: int
+    offset: int
+    coord_phases: tuple[int, ...]
+    splits: Mapping[int, int]  # each including the phase's yellow and red clearance
+
+
+@dataclass(frozen=True, slots=True)
+class ScheduleEntry:
+    """From a time of day (seconds after midnight), run a pattern (or :data:`FREE`)."""
+
+    start: int
+    pattern: int
+
+
+@dataclass(frozen=True)
+class Coordination:
+    """The ``[coordination]`` section: the timing plans a city programs, and which runs when."""
+
+    pattern: int = FREE  # in effect at power-up (until the schedule changes it)
+    force_off: ForceOff = ForceOff.FIXED
+    offset_reference: OffsetReference = OffsetReference.LEAD_GREEN
+    correction: Correction = Correction.SHORTWAY
+    patterns: Mapping[int, Pattern] = field(default_factory=dict)
+    schedule: tuple[ScheduleEntry, ...] = ()
+
+    def planned(self) -> Coordination:
+        """A copy that runs its plan from power-up: the schedule's pattern of midnight, or else the lowest-numbered
+        pattern, when free was the power-up pattern (what ``--agent coordinated`` runs)."""
+        if self.pattern != FREE or not self.patterns:
+            return self
+        at_midnight = self.schedule[-1].pattern if self.schedule else min(self.patterns)
+        return replace(self, pattern=at_midnight if at_midnight != FREE else min(self.patterns))
+
+
 # Options of the whole controller unit that [timing] holds beside the phase defaults.
 _UNIT_OPTIONS = ("startup_flash", "next_phase_lock")
 
@@ -155,6 +219,7 @@ class IntersectionConfig:
     source: str = "<memory>"
     startup_flash: int = 0  # s of start-up flash after power-up (unitStartUpFlash)
     next_phase_lock: NextPhaseLock = NextPhaseLock.GREEN_END
+    coordination: Coordination = field(default_factory=Coordination)
     emulator: EmulatorParams = field(default_factory=EmulatorParams)
     detector_phases: Mapping[int, int] = field(default_factory=dict)  # the [detectors] table, if any
     detector_lanes: Mapping[int, str] = field(default_factory=dict)  # the SUMO lane of a detector given one
@@ -191,6 +256,11 @@ class IntersectionConfig:
         raw = {f: getattr(self.middleware, f) for f in MiddlewareParams.__dataclass_fields__} | changes
         params = _middleware(raw, self.source)
         return replace(self, middleware=params)
+
+
+    def planned(self) -> IntersectionConfig:
+        """A copy whose controller runs its coordination plan from power-up (see :meth:`Coordination.planned`)."""
+        return replace(self, coordination=self.coordination.planned())
 
 
 def load(path: str | Path | None = None) -> IntersectionConfig:
@@ -398,7 +468,8 @@ def _matrix(raw: Mapping[str, Any], numbers: list[int], source: str) -> frozense
 
 
 def from_dict(raw: Mapping[str, Any], source: str = "<memory>") -> IntersectionConfig:
-    _unknown(raw, ("name", "timing", "phases", "structure", "middleware", "emulator", "detectors"), "", source)
+    _unknown(raw, ("name", "timing", "phases", "structure", "middleware", "emulator", "detectors", "coordination"), "",
+             source)
     name = raw.get("name", Path(source).stem)
     if not isinstance(name, str):
         raise ConfigError(source, "name", "must be a string")
@@ -500,11 +571,13 @@ def from_dict(raw: Mapping[str, Any], source: str = "<memory>") -> IntersectionC
     middleware = raw.get("middleware", {})
     if not isinstance(middleware, dict):
         raise ConfigError(source, "middleware", "must be a table of middleware parameters")
+    rings_t = tuple(rings)
+    barriers_t = tuple(frozenset(b) for b in barriers_raw)
     return IntersectionConfig(
         name=name,
         phases=phases,
-        rings=tuple(rings),
-        barriers=tuple(frozenset(b) for b in barriers_raw),
+        rings=rings_t,
+        barriers=barriers_t,
         sequence=sequence,
         pairs=pairs,
         compatibility=compatibility,
@@ -512,6 +585,7 @@ def from_dict(raw: Mapping[str, Any], source: str = "<memory>") -> IntersectionC
         source=source,
         startup_flash=startup_flash,
         next_phase_lock=NextPhaseLock(lock),
+        coordination=_coordination(raw.get("coordination", {}), phases, rings_t, barriers_t, source),
         emulator=_emulator(raw.get("emulator", {}), source),
         **_detectors(raw.get("detectors", {}), phases, source),
     )
@@ -543,3 +617,124 @@ def _detectors(raw: Any, phases: Mapping[int, Phase], source: str) -> dict[str, 
                                              f"{', '.join(map(str, phases))}")
         out[int(key)] = phase
     return {"detector_phases": out, "detector_lanes": lanes}
+
+
+# --- [coordination] ----------------------------------------------------------------------------
+
+
+def _coordination(raw: Any, phases: Mapping[int, Phase], rings: tuple[tuple[int, ...], ...],
+                  barriers: tuple[frozenset[int], ...], source: str) -> Coordination:
+    """``[coordination]``: a pattern, force-off mode, offset reference, correction, ``[[coordination.patterns]]``
+    and ``[[coordination.schedule]]``. Validated against the phases: every split serves its phase's minimum and
+    clearances, each ring's splits add up to the cycle and reach each barrier together, the coordinated phases
+    are one per ring and concurrent."""
+    w = "coordination."
+    if not isinstance(raw, dict):
+        raise ConfigError(source, "coordination", "must be a table (pattern, force_off, offset_reference, "
+                                                  "correction, [[coordination.patterns]], [[coordination.schedule]])")
+    _unknown(raw, ("pattern", "force_off", "offset_reference", "correction", "patterns", "schedule"), w, source)
+    modes = {}
+    for key, kind, default in (("force_off", ForceOff, ForceOff.FIXED),
+                               ("offset_reference", OffsetReference, OffsetReference.LEAD_GREEN),
+                               ("correction", Correction, Correction.SHORTWAY)):
+        value = raw.get(key, default.value)
+        if value not in tuple(kind):
+            raise ConfigError(source, f"{w}{key}", f"is {value!r}; allowed: {', '.join(x.value for x in kind)}")
+        modes[key] = kind(value)
+    listed = raw.get("patterns", [])
+    if not isinstance(listed, list) or not all(isinstance(p, dict) for p in listed):
+        raise ConfigError(source, f"{w}patterns", "must be an array of tables: [[coordination.patterns]]")
+    patterns: dict[int, Pattern] = {}
+    for i, item in enumerate(listed):
+        pattern = _pattern(item, f"{w}patterns[{i}].", phases, rings, barriers, source)
+        if pattern.number in patterns:
+            raise ConfigError(source, f"{w}patterns[{i}].number", f"pattern {pattern.number} is given twice; allowed: "
+                                                                   "one table per pattern number")
+        patterns[pattern.number] = pattern
+
+    def pattern_number(value: Any, name: str) -> int:
+        if value == "free" or (type(value) is int and value in (0, FREE)):
+            return FREE
+        if type(value) is not int or value not in patterns:
+            known = ", ".join(map(str, sorted(patterns))) or "none"
+            raise ConfigError(source, name, f"is {value!r}; allowed: \"free\" (or 0) or a pattern of "
+                                            f"[[coordination.patterns]] ({known})")
+        return value
+
+    schedule_raw = raw.get("schedule", [])
+    if not isinstance(schedule_raw, list) or not all(isinstance(e, dict) for e in schedule_raw):
+        raise ConfigError(source, f"{w}schedule", "must be an array of tables: [[coordination.schedule]] with "
+                                                  "from = \"HH:MM\" and pattern = N or \"free\"")
+    schedule = []
+    for i, entry in enumerate(schedule_raw):
+        where = f"{w}schedule[{i}]."
+        _unknown(entry, ("from", "pattern"), where, source)
+        if "pattern" not in entry:
+            raise ConfigError(source, f"{where}pattern", "is required: a pattern number or \"free\"")
+        schedule.append(ScheduleEntry(_time_of_day(entry.get("from"), f"{where}from", source),
+                                      pattern_number(entry["pattern"], f"{where}pattern")))
+    starts = [e.start for e in schedule]
+    if len(set(starts)) != len(starts):
+        raise ConfigError(source, f"{w}schedule", "two entries start at the same time; allowed: one entry per time")
+    return Coordination(pattern_number(raw.get("pattern", "free"), f"{w}pattern"), patterns=patterns,
+                        schedule=tuple(sorted(schedule, key=lambda e: e.start)), **modes)
+
+
+def _time_of_day(value: Any, name: str, source: str) -> int:
+    parts = value.split(":") if isinstance(value, str) else []
+    ok = 2 <= len(parts) <= 3 and all(p.isdigit() and len(p) == 2 for p in parts)
+    h, m, sec = (int(p) for p in [*parts, "00"][:3]) if ok else (99, 0, 0)
+    if not (ok and h < 24 and m < 60 and sec < 60):
+        raise ConfigError(source, name, f"is {value!r}; allowed: a time of day \"HH:MM\" or \"HH:MM:SS\" "
+                                        "(00:00 to 23:59:59)")
+    return 3600 * h + 60 * m + sec
+
+
+def _pattern(raw: Mapping[str, Any], w: str, phases: Mapping[int, Phase], rings: tuple[tuple[int, ...], ...],
+             barriers: tuple[frozenset[int], ...], source: str) -> Pattern:
+    _unknown(raw, ("number", "cycle", "offset", "coord_phases", "splits"), w, source)
+    number = _number(raw, "number", w, source, integer=True, low=1, high=253)
+    # NTCIP 1202 patternCycleTime: "NEMA TS 2 range: 30-255"; an offset at or past the cycle "shall result in Free".
+    cycle = _number(raw, "cycle", w, source, integer=True, low=30, high=255)
+    offset = _number(raw, "offset", w, source, 0, integer=True, low=0, high=cycle - 1)
+    coord = _int_list(raw.get("coord_phases"), f"{w}coord_phases", source)
+    ring_of = {p: ph.ring for p, ph in phases.items()}
+    if sorted(ring_of.get(p) for p in coord) != list(range(1, len(rings) + 1)) or any(p not in phases for p in coord):
+        raise ConfigError(source, f"{w}coord_phases", f"is {coord}; allowed: one configured phase per ring "
+                                                      f"(rings {[list(r) for r in rings]})")
+    if len({next(i for i, b in enumerate(barriers) if p in b) for p in coord}) != 1:
+        raise ConfigError(source, f"{w}coord_phases", f"phases {coord} are not concurrent (they lie in different "
+                                                      "barrier groups); allowed: coordinated phases that show together")
+    splits_raw = raw.get("splits")
+    if not isinstance(splits_raw, dict):
+        raise ConfigError(source, f"{w}splits", "is required: a table of split seconds per phase, e.g. "
+                                                "{ 1 = 15, 2 = 35, ... }")
+    splits: dict[int, int] = {}
+    for key in splits_raw:
+        if not key.isdigit() or int(key) not in phases:
+            raise ConfigError(source, f"{w}splits.{key}", f"unknown phase; allowed: {', '.join(map(str, phases))}")
+        splits[int(key)] = _number(splits_raw, key, f"{w}splits.", source, integer=True, low=1, high=255)
+    missing = sorted(set(phases) - set(splits))
+    if missing:
+        raise ConfigError(source, f"{w}splits", f"has no split for phase(s) {missing}; allowed: a split for every "
+                                                f"phase ({', '.join(map(str, phases))})")
+    for p, split in splits.items():
+        ph = phases[p]
+        # NTCIP 1202 splitTime: "The split time shall be longer than the sum of the phase minimum service
+        # requirements"; a not-actuated (recalled) pedestrian adds its walk and clearance.
+        need = ph.min_green + (ph.walk + ph.ped_clear if ph.recall is Recall.PED else 0) + ph.yellow + ph.red_clear
+        if split < need:
+            raise ConfigError(source, f"{w}splits.{p}", f"is {split} s, shorter than phase {p}'s minimum green, "
+                                                        f"yellow and red clearance ({need:g} s); "
+                                                        f"allowed: >= {need:g} s")
+    for r, ring in enumerate(rings, start=1):
+        total = sum(splits[p] for p in ring)
+        if total != cycle:
+            raise ConfigError(source, f"{w}splits", f"ring {r} ({', '.join(map(str, ring))}) adds up to {total} s, "
+                                                    f"not the cycle of {cycle} s; allowed: each ring's splits = cycle")
+    for b, group in enumerate(barriers, start=1):
+        sums = {r: sum(splits[p] for p in ring if p in group) for r, ring in enumerate(rings, start=1)}
+        if len(set(sums.values())) > 1:
+            raise ConfigError(source, f"{w}splits", f"the rings reach barrier {b} at different times (ring sums in its "
+                                                    f"group: {sums}); allowed: equal sums in every barrier group")
+    return Pattern(number, cycle, offset, tuple(coord), splits)

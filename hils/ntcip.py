@@ -182,6 +182,51 @@ class UnitFlashStatus(IntEnum):
     PREEMPT = 8
 
 
+class LocalFreeStatus(IntEnum):
+    """localFreeStatus (NTCIP 1202 v02 A.4.11): why the unit runs free, or notFree while it coordinates."""
+
+    OTHER = 1
+    NOT_FREE = 2
+    COMMAND_FREE = 3
+    TRANSITION_FREE = 4
+    INPUT_FREE = 5
+    COORD_FREE = 6
+    BAD_PLAN = 7
+    BAD_CYCLE_TIME = 8
+    SPLIT_OVERRUN = 9
+    INVALID_OFFSET = 10
+    FAILED = 11
+
+
+class SplitMode(IntEnum):
+    """splitMode (NTCIP 1202 v02 A.4.9.1.4): a phase's operation while its pattern runs."""
+
+    OTHER = 1
+    NONE = 2
+    MIN_RECALL = 3
+    MAX_RECALL = 4
+    PED_RECALL = 5
+    MAX_AND_PED_RECALL = 6
+    OMITTED = 7
+
+
+class CoordCorrectionMode(IntEnum):
+    """coordCorrectionMode (NTCIP 1202 v02 A.4.2)."""
+
+    OTHER = 1
+    DWELL = 2
+    SHORTWAY = 3
+    ADD_ONLY = 4
+
+
+class CoordForceMode(IntEnum):
+    """coordForceMode (NTCIP 1202 v02 A.4.4)."""
+
+    OTHER = 1
+    FLOATING = 2
+    FIXED = 3
+
+
 @dataclass(frozen=True, slots=True)
 class ObjectDef:
     """One NTCIP object type: its name, OID prefix and SNMP properties.
@@ -213,6 +258,55 @@ UNIT_BACKUP_TIME = _o("unitBackupTime", (3, 3), access=Access.READ_WRITE, high=6
 UNIT_CONTROL_STATUS = _o("unitControlStatus", (3, 5), low=1, high=8)
 UNIT_FLASH_STATUS = _o("unitFlashStatus", (3, 6), low=1, high=8)
 SYSTEM_PATTERN_CONTROL = _o("systemPatternControl", (4, 14), access=Access.READ_WRITE)
+
+# Coordination (NTCIP 1202 v02 node coord, A.4; OIDs and ranges from the standard's ASC MIB, 1202ASC.mib as
+# compiled by pysmi into ASC_MIB1, the enumerations named there). The pattern table is indexed by pattern
+# number, the split table by split number and phase.
+COORD_CORRECTION_MODE = _o("coordCorrectionMode", (4, 2), access=Access.READ_WRITE, low=1, high=4)
+COORD_FORCE_MODE = _o("coordForceMode", (4, 4), access=Access.READ_WRITE, low=1, high=3)
+MAX_PATTERNS = _o("maxPatterns", (4, 5), high=253)
+PATTERN_TABLE_TYPE = _o("patternTableType", (4, 6), low=1, high=4)
+MAX_SPLITS = _o("maxSplits", (4, 8))
+COORD_PATTERN_STATUS = _o("coordPatternStatus", (4, 10))
+LOCAL_FREE_STATUS = _o("localFreeStatus", (4, 11), low=1, high=11)
+COORD_CYCLE_STATUS = _o("coordCycleStatus", (4, 12), high=65535)
+COORD_SYNC_STATUS = _o("coordSyncStatus", (4, 13), high=65535)
+
+
+class PatternColumn(IntEnum):
+    """Columns of patternTable (A.4.7.1.c.pattern)."""
+
+    NUMBER = 1
+    CYCLE_TIME = 2
+    OFFSET_TIME = 3
+    SPLIT_NUMBER = 4
+    SEQUENCE_NUMBER = 5
+
+
+class SplitColumn(IntEnum):
+    """Columns of splitTable (A.4.9.1.c.split.phase)."""
+
+    NUMBER = 1
+    PHASE = 2
+    TIME = 3
+    MODE = 4
+    COORD_PHASE = 5
+
+
+PATTERN_TABLE: dict[PatternColumn, ObjectDef] = {
+    PatternColumn.NUMBER: _o("patternNumber", (4, 7, 1, 1), low=1, high=253),
+    PatternColumn.CYCLE_TIME: _o("patternCycleTime", (4, 7, 1, 2), access=Access.READ_WRITE),
+    PatternColumn.OFFSET_TIME: _o("patternOffsetTime", (4, 7, 1, 3), access=Access.READ_WRITE),
+    PatternColumn.SPLIT_NUMBER: _o("patternSplitNumber", (4, 7, 1, 4), access=Access.READ_WRITE),
+    PatternColumn.SEQUENCE_NUMBER: _o("patternSequenceNumber", (4, 7, 1, 5), access=Access.READ_WRITE),
+}
+SPLIT_TABLE: dict[SplitColumn, ObjectDef] = {
+    SplitColumn.NUMBER: _o("splitNumber", (4, 9, 1, 1), low=1),
+    SplitColumn.PHASE: _o("splitPhase", (4, 9, 1, 2), low=1),
+    SplitColumn.TIME: _o("splitTime", (4, 9, 1, 3), access=Access.READ_WRITE),
+    SplitColumn.MODE: _o("splitMode", (4, 9, 1, 4), access=Access.READ_WRITE, low=1, high=7),
+    SplitColumn.COORD_PHASE: _o("splitCoordPhase", (4, 9, 1, 5), access=Access.READ_WRITE, high=1),
+}
 
 # The timing columns are writable with NTCIP 1202's ranges (seconds, or tenths for passage and clearances).
 _RW = Access.READ_WRITE
@@ -263,7 +357,9 @@ DETECTOR_ACTUATION = _o("vehicleDetectorControlGroupActuation", (2, 12, 1, 2), a
 
 ALL_OBJECTS: tuple[ObjectDef, ...] = (
     MAX_PHASES, MAX_PHASE_GROUPS, UNIT_STARTUP_FLASH, UNIT_BACKUP_TIME, UNIT_CONTROL_STATUS, UNIT_FLASH_STATUS,
-    SYSTEM_PATTERN_CONTROL, SEQUENCE_DATA, RING_CONTROL_MAX2, MAX_VEHICLE_DETECTORS, VEHICLE_DETECTOR_OPTIONS,
+    SYSTEM_PATTERN_CONTROL, COORD_CORRECTION_MODE, COORD_FORCE_MODE, MAX_PATTERNS, PATTERN_TABLE_TYPE, MAX_SPLITS,
+    COORD_PATTERN_STATUS, LOCAL_FREE_STATUS, COORD_CYCLE_STATUS, COORD_SYNC_STATUS, *PATTERN_TABLE.values(),
+    *SPLIT_TABLE.values(), SEQUENCE_DATA, RING_CONTROL_MAX2, MAX_VEHICLE_DETECTORS, VEHICLE_DETECTOR_OPTIONS,
     VEHICLE_DETECTOR_CALL_PHASE, DETECTOR_STATUS_ACTIVE, DETECTOR_ACTUATION,
     *PHASE_TABLE.values(), *STATUS_TABLE.values(), *CONTROL_TABLE.values(), *CHANNEL_TABLE.values(),
 )

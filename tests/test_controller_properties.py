@@ -14,6 +14,8 @@ within a bound derived from the timings.
 
 from __future__ import annotations
 
+import itertools
+import math
 from dataclasses import dataclass, field
 
 from hypothesis import given, settings
@@ -54,8 +56,9 @@ def timings(draw: st.DrawFn) -> dict[str, object]:
 
 
 @st.composite
-def configs(draw: st.DrawFn) -> IntersectionConfig:
-    """Dual-ring two-barrier eight-phase intersections with random barrier positions and timings."""
+def configs(draw: st.DrawFn, coordinated: bool = False) -> IntersectionConfig:
+    """Dual-ring two-barrier eight-phase intersections with random barrier positions and timings; with
+    ``coordinated``, a [coordination] section whose patterns fit them."""
     k1, k2 = draw(st.integers(1, 3)), draw(st.integers(1, 3))
     barriers = [list(RING1[:k1] + RING2[:k2]), list(RING1[k1:] + RING2[k2:])]
     compatible = [[a, b] for group in barriers for a in RING1 for b in RING2 if a in group and b in group]
@@ -77,7 +80,53 @@ def configs(draw: st.DrawFn) -> IntersectionConfig:
             "pairs": compatible,
         },
     }
+    if coordinated:
+        raw["coordination"] = draw(coordinations(phases, barriers))
     return from_dict(raw, "random.toml")
+
+
+@st.composite
+def patterns(draw: st.DrawFn, number: int, phases: dict[str, dict], barriers: list[list[int]]) -> dict:
+    """A pattern that fits the phases: each split at least its phase's minimum service, each ring's splits
+    reaching each barrier together."""
+    def least(p: int) -> int:
+        t = phases[str(p)]
+        walk = t.get("walk", 0) + t.get("ped_clear", 0) if t.get("recall") == "ped" else 0
+        return math.ceil(t["min_green"] + walk + t["yellow"] + t["red_clear"])
+
+    splits: dict[str, int] = {}
+    for group in barriers:
+        rings = [[p for p in ring if p in group] for ring in (RING1, RING2)]
+        length = max(sum(least(p) for p in ring) for ring in rings) + draw(st.integers(0, 20))
+        for ring in rings:
+            spare = length - sum(least(p) for p in ring)
+            shares = sorted(draw(st.lists(st.integers(0, spare), min_size=len(ring) - 1, max_size=len(ring) - 1)))
+            cuts = [0, *shares, spare]
+            for p, extra in zip(ring, (b - a for a, b in itertools.pairwise(cuts)), strict=True):
+                splits[str(p)] = least(p) + extra
+    short = 30 - sum(splits[str(p)] for p in RING1)  # NEMA TS 2's shortest cycle
+    if short > 0:
+        for ring in (RING1, RING2):
+            splits[str(next(p for p in ring if p in barriers[0]))] += short
+    cycle = sum(splits[str(p)] for p in RING1)
+    group = draw(st.sampled_from(barriers))
+    coord = [draw(st.sampled_from([p for p in ring if p in group])) for ring in (RING1, RING2)]
+    return {"number": number, "cycle": cycle, "offset": draw(st.integers(0, cycle - 1)), "coord_phases": coord,
+            "splits": splits}
+
+
+@st.composite
+def coordinations(draw: st.DrawFn, phases: dict[str, dict], barriers: list[list[int]]) -> dict:
+    """A [coordination] section: one or two patterns, the modes, maybe a time-of-day change a minute in."""
+    listed = [draw(patterns(n, phases, barriers)) for n in range(1, draw(st.integers(1, 2)) + 1)]
+    out: dict = {"pattern": draw(st.sampled_from(["free", *[p["number"] for p in listed]])),
+                 "force_off": draw(st.sampled_from(["fixed", "floating"])),
+                 "offset_reference": draw(st.sampled_from(["lead_green", "yellow"])),
+                 "correction": draw(st.sampled_from(["shortway", "dwell", "add"])), "patterns": listed}
+    if listed and draw(st.booleans()):
+        out["schedule"] = [{"from": f"00:0{draw(st.integers(1, 3))}:00",
+                            "pattern": draw(st.sampled_from(["free", *[p["number"] for p in listed]]))}]
+    return out
 
 
 # Calls are listed twice: they are what the middleware SETs most, and what moves the controller.
