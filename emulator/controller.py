@@ -108,7 +108,7 @@ from enum import StrEnum
 
 import simpy
 
-from emulator.coordination import Coordinator
+from emulator.coordination import Coordinator, Plan
 from hils.config import IntersectionConfig, NextPhaseLock, Phase, Recall
 from hils.ntcip import ControlColumn, CoordForceMode, PhaseStartup, UnitControlStatus, UnitFlashStatus
 
@@ -239,6 +239,7 @@ class Controller:
         self._since_set: int | None = None  # ticks since the last control SET; None = backup timer disarmed
         self.rings = [Ring(i + 1, order) for i, order in enumerate(self.config.rings)]
         self.coordinator.reset()
+        self._placed: Plan | None = None  # the plan the rings' coordination latches were placed under
         self.group = 0
         self._waiting_across = False  # demand on a phase of another barrier group, this tick
         self._quiet = False  # the last step changed nothing discrete, and no input came since
@@ -698,16 +699,15 @@ class Controller:
     def _coordinate(self) -> None:
         """One tick of the coordinator; the rings' force-off and yield latches follow the points it passed."""
         co = self.coordinator
-        before = co.plan
         co.step()
         plan = co.plan
-        if plan is None:
-            return
-        if plan is not before:  # a pattern started: where is each ring in its cycle?
+        if plan is not self._placed:  # a pattern started (or the unit powered up in one): where is each ring?
+            self._placed = plan
             for r in self.rings:
-                c = plan.coord[r.number]
-                r.yielded = not plan.held(c, co.timer)
+                r.yielded = plan is not None and not plan.held(plan.coord[r.number], co.timer)
                 self._place(r)
+            return
+        if plan is None:
             return
         for r in self.rings:
             if plan.force_off[plan.coord[r.number]] in co.passed:

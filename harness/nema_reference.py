@@ -54,17 +54,22 @@ import tempfile
 from collections import Counter
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
+from enum import StrEnum
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
 import libsumo
 
 from emulator.controller import Controller
+from emulator.coordination import Coordinator
 from harness.nema_rules import (
     BACKED_WITH_CALL_ACROSS,
+    COORD_WAITS_FOR_OTHER_RING,
     ENDED_BEFORE_MIN,
     ENDED_WHILE_EXTENDING,
+    ENTERED_PAST_FORCE_OFF,
     HELD_PAST_MAXIMUM,
+    PERMISSIVE_PERIOD,
     PULLED_ACROSS,
     RE_EXTENDED,
     SKIPPED,
@@ -75,7 +80,7 @@ from harness.nema_rules import (
     Timeline,
     classify,
 )
-from hils.config import ForceOff, IntersectionConfig, NextPhaseLock, OffsetReference, Pattern, load
+from hils.config import FREE, ForceOff, IntersectionConfig, NextPhaseLock, OffsetReference, Pattern, load
 from hils.ntcip import ControlColumn, PhaseStartup
 from hils.sumo_net import NET_FILE, ROUTE_FILE, PhaseMap, data_path, derive_phase_map, read_net
 
@@ -214,6 +219,11 @@ def sumo_program(config: IntersectionConfig, phase_map: PhaseMap) -> str:
                    "fixForceOff": "true" if c.force_off is ForceOff.FIXED else "false",
                    "controllerType": "TS2" if c.offset_reference is OffsetReference.LEAD_GREEN else "Type170"}
         offset = pattern.offset
+        if c.offset_reference is OffsetReference.YELLOW:
+            # SUMO's Type170 zero is the end of the coordinated phase's clearance (calculateForceOffs170 adds
+            # the transition time before taking zeroTime, against its own comment "the cycle 'starts' when
+            # the coordinated phase goes to yellow"): a later offset puts it on the yellow, as ours.
+            offset += max(config.phases[p].clearance for p in coordinate)
     lines = [f'<additional>\n  <tlLogic id="{phase_map.tls_id}" programID="{PROGRAM_ID}" type="NEMA" '
              f'offset="{offset:g}">']
     lines += [f"    <param key={quoteattr(k)} value={quoteattr(v)}/>" for k, v in params.items()]
@@ -414,8 +424,11 @@ def traffic_differential(config: IntersectionConfig, ticks: int, seed: int) -> D
 def _judged(config: IntersectionConfig, calls: CallSequence, ticks: int, ours: Timeline,
             reference: Timeline) -> Differential:
     comparison = compare(ours, reference)
+    pattern = running_pattern(config)
+    plan = None if pattern is None else Coordinator(config).plan
     first = comparison.first_difference
-    judged = None if first is None else classify(config, calls_read(calls, ticks), ours, reference, first.tick)
+    judged = None if first is None else classify(config, calls_read(calls, ticks), ours, reference, first.tick,
+                                                 plan=plan)
     return Differential(calls, comparison, judged)
 
 
@@ -461,25 +474,58 @@ SCENARIOS: dict[str, tuple[CallSequence, int]] = {
 }
 
 
+class Mode(StrEnum):
+    """How the controllers run: free, or the config's coordination plan with TS2 or Type 170 offsets."""
+
+    FREE = "free"
+    TS2 = "coordinated TS2 (lead_green), fixed force-offs"
+    TS2_FLOATING = "coordinated TS2 (lead_green), floating force-offs"
+    TYPE170 = "coordinated Type 170 (yellow), fixed force-offs"
+
+
+def in_mode(config: IntersectionConfig, mode: Mode) -> IntersectionConfig:
+    """``config`` running free, or its plan from power-up with the mode's offset reference and force-off mode."""
+    if mode is Mode.FREE:
+        return dataclasses.replace(config, coordination=dataclasses.replace(config.coordination, pattern=FREE))
+    if not config.coordination.patterns:
+        raise NemaReferenceError(f"{config.source}: coordination: no [[coordination.patterns]] to compare in "
+                                 f"{mode.value} mode; allowed: a config with a plan (the shipped four-leg has one)")
+    c = config.planned().coordination
+    reference = OffsetReference.YELLOW if mode is Mode.TYPE170 else OffsetReference.LEAD_GREEN
+    force = ForceOff.FLOATING if mode is Mode.TS2_FLOATING else ForceOff.FIXED
+    return dataclasses.replace(config, coordination=dataclasses.replace(c, offset_reference=reference,
+                                                                        force_off=force))
+
+
 # A minimal sequence for each class of first difference (docs/nema_differences.md shows them): on the paper's
-# intersection SUMO's NEMA controller makes the difference and its rule names it.
-EXAMPLES: dict[DifferenceClass, tuple[CallSequence, int]] = {
+# intersection, free or running its plan, SUMO's NEMA controller makes the difference and its rule names it.
+EXAMPLES: dict[DifferenceClass, tuple[Mode, CallSequence, int]] = {
     # 2+6 green, 6's call drops as 4 (across) and 5 are called: SUMO backs ring 2 from 6 into 5
-    BACKED_WITH_CALL_ACROSS: (seconds((0, [2, 6]), (15, [2, 4, 5]), (45, [])), 500),
+    BACKED_WITH_CALL_ACROSS: (Mode.FREE, seconds((0, [2, 6]), (15, [2, 4, 5]), (45, [])), 500),
     # 3+7 green; calls on 1, 5 and 8: SUMO crosses to 1+5 and leaves 8 (after 7, before the barrier) unserved
-    SKIPPED: (seconds((0, [3, 7]), (12, [1, 5, 8]), (30, [])), 400),
+    SKIPPED: (Mode.FREE, seconds((0, [3, 7]), (12, [1, 5, 8]), (30, [])), 400),
     # 2+5 green; 5 ends alone toward 6 (called), then 2 can go with 3 called: SUMO takes ring 2 across with ring 1
-    PULLED_ACROSS: (seconds((0, [2, 5]), (9, [3, 6]), (30, [])), 400),
+    PULLED_ACROSS: (Mode.FREE, seconds((0, [2, 5]), (9, [3, 6]), (30, [])), 400),
     # 3+8 -> 4+8; 8's green-rest max-out (timed from the call on 4, its concurrent phase) ends 4 with its call on
-    ENDED_WHILE_EXTENDING: (seconds((0, [3, 8]), (12, [4, 8]), (15, [2, 4, 8]), (45, [])), 500),
+    ENDED_WHILE_EXTENDING: (Mode.FREE, seconds((0, [3, 8]), (12, [4, 8]), (15, [2, 4, 8]), (45, [])), 500),
     # 4+7 with a call on 1 across; ring 2 moves 7 -> 8 as 4 maxes out: SUMO ends 8 1.9 s into its green
-    ENDED_BEFORE_MIN: (seconds((0, [2, 6]), (10, [4, 7]), (20, [1, 4, 7]), (33, [1, 4, 8]), (60, [])), 700),
+    ENDED_BEFORE_MIN: (Mode.FREE, seconds((0, [2, 6]), (10, [4, 7]), (20, [1, 4, 7]), (33, [1, 4, 8]), (60, [])),
+                       700),
     # 6 rests green with its call, 3 called across from 11.2 s; ring 1 changes 2 -> 1 meanwhile: SUMO times 6's
     # maximum from 1's start (36 s), not from the call on 3 (31.2 s)
-    HELD_PAST_MAXIMUM: (seconds((0, [2, 6]), (10, [1]), (11.2, [3, 6]), (45, [])), 500),
+    HELD_PAST_MAXIMUM: (Mode.FREE, seconds((0, [2, 6]), (10, [1]), (11.2, [3, 6]), (45, [])), 500),
     # 2 gaps out while only its concurrent 5 and 6 are called; its call returns with one on 1: SUMO ends it, ours
     # extends it
-    RE_EXTENDED: (seconds((0, [2, 6]), (10, [5, 6]), (19.5, [1, 2, 5, 6]), (40, [])), 500),
+    RE_EXTENDED: (Mode.FREE, seconds((0, [2, 6]), (10, [5, 6]), (19.5, [1, 2, 5, 6]), (40, [])), 500),
+    # Pattern 1 (70 s): 2+6 yield at 32.3 s for 3 and 8; 3's force-off point is at 37 s, too soon for its minimum
+    # after the clearance: SUMO serves it (from 37.3 s), ours skips it for 4
+    ENTERED_PAST_FORCE_OFF: (Mode.TS2, seconds((0, [2, 6]), (32.2, [3, 8]), (60, [])), 800),
+    # Pattern 1: ring 1 serves 1 from 50.1 s; 5 is called at 54.5 s in its permissive period: ours ends 6 for it,
+    # SUMO keeps 6 until ring 1 is ready too
+    COORD_WAITS_FOR_OTHER_RING: (Mode.TS2, seconds((0, [2, 6]), (40, [1]), (54.5, [1, 5]), (70, [])), 900),
+    # Pattern 1 with Type 170 offsets: 4 is called at 10 s, 3 (before it) no longer fits: ours ends 2+6 for it,
+    # SUMO does not
+    PERMISSIVE_PERIOD: (Mode.TYPE170, seconds((0, [2, 6]), (10, [4]), (60, [])), 800),
 }
 
 
@@ -513,43 +559,52 @@ def tally(results: Sequence[Differential]) -> Counter[tuple[str, str]]:
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m harness.nema_reference",
                                      description="Agreement of our controller with SUMO's NEMA controller over whole "
-                                                 "call sequences, and the class of each first difference.")
+                                                 "call sequences, free and running the config's coordination plan, "
+                                                 "and the class of each first difference.")
     parser.add_argument("--config", help="intersection TOML (default: the shipped four-leg intersection)")
-    parser.add_argument("--random", type=int, default=50, help="random call sequences (default 50)")
+    parser.add_argument("--random", type=int, default=50, help="random call sequences per mode (default 50)")
     parser.add_argument("--length", type=float, default=300.0, help="seconds per random sequence (default 300)")
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--traffic", type=int, default=10,
-                        help="runs of SUMO serving the shipped demand on its detectors (default 10, seeds 0..N-1)")
+                        help="runs of SUMO serving the shipped demand on its detectors per mode (default 10, "
+                             "seeds 0..N-1)")
+    parser.add_argument("--mode", choices=[m.name.lower() for m in Mode], action="append",
+                        help="compare in this mode only (repeatable; default: every mode, coordinated ones when the "
+                             "config has a plan)")
     parser.add_argument("-v", "--verbose", action="store_true", help="show where each sequence first differs")
     args = parser.parse_args(argv)
+    ticks = round(args.length * 10)
     try:
         config = load(args.config)
-        targeted = []
-        for name, (calls, ticks) in SCENARIOS.items():
-            targeted.append(differential(config, calls, ticks))
-            print(f"{name:45s} {targeted[-1].comparison.agreement:6.1%}")
-        rng = random.Random(args.seed)
-        ticks = round(args.length * 10)
-        randoms = []
-        for i in range(args.random):
-            randoms.append(differential(config, random_calls(rng, ticks, sorted(config.phases)), ticks))
-            if args.verbose and randoms[-1].first:
-                print(f"random {i}: {randoms[-1].first}\n" + randoms[-1].comparison.report(randoms[-1].calls))
-        traffic = [traffic_differential(config, ticks, seed) for seed in range(args.traffic)]
+        modes = [Mode[m.upper()] for m in args.mode] if args.mode else [
+            m for m in Mode if m is Mode.FREE or config.coordination.patterns]
+        for mode in modes:
+            cfg = in_mode(config, mode)
+            print(f"== {mode.value}")
+            if mode is Mode.FREE:
+                targeted = [differential(cfg, calls, t) for calls, t in SCENARIOS.values()]
+                _figure(f"targeted scenarios ({len(targeted)})", targeted)
+            rng = random.Random(args.seed)
+            randoms = []
+            for i in range(args.random):
+                randoms.append(differential(cfg, random_calls(rng, ticks, sorted(cfg.phases)), ticks))
+                if args.verbose and randoms[-1].first:
+                    print(f"random {i}: {randoms[-1].first}\n" + randoms[-1].comparison.report(randoms[-1].calls))
+            traffic = [traffic_differential(cfg, ticks, seed) for seed in range(args.traffic)]
+            _figure(f"{args.random} random sequences of {args.length:g} s", randoms)
+            _figure(f"{args.traffic} runs of {args.length:g} s of detector-driven traffic", traffic)
     except (NemaReferenceError, ValueError) as exc:
         print(f"nema_reference: {exc}", file=sys.stderr)
         return 1
-    for label, results in ((f"targeted scenarios ({len(targeted)})", targeted),
-                           (f"{args.random} random sequences of {args.length:g} s", randoms),
-                           (f"{args.traffic} runs of {args.length:g} s of detector-driven traffic", traffic)):
-        matched, total = pooled([d.comparison for d in results])
-        print(f"{label:52s} {matched / max(total, 1):6.1%} of {total} changes, whole sequences")
-    for label, results in (("random sequences", randoms), ("traffic", traffic)):
-        classes = tally(results)
-        print(f"first differences, {label}: {sum(classes.values())} of {len(results)}")
-        for (kind, who), n in classes.most_common():
-            print(f"  {n:3d}  {kind} ({who})")
     return 0
+
+
+def _figure(label: str, results: Sequence[Differential]) -> None:
+    matched, total = pooled([d.comparison for d in results])
+    print(f"{label:52s} {matched / max(total, 1):6.1%} of {total} changes, whole sequences")
+    classes = tally(results)
+    for (kind, who), n in classes.most_common():
+        print(f"  {n:3d}  first difference: {kind} ({who})")
 
 
 if __name__ == "__main__":

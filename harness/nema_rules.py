@@ -32,7 +32,8 @@ from dataclasses import dataclass
 from enum import StrEnum
 
 from emulator.controller import tenths
-from hils.config import IntersectionConfig
+from emulator.coordination import Plan
+from hils.config import ForceOff, IntersectionConfig
 
 
 class Color(StrEnum):
@@ -72,6 +73,9 @@ TECNOTE_3013 = ("Naztec TecNote 3013: \"Any controller can 'back into' a protect
 NTCIP_PHASE_NEXT = ("NTCIP 1202 v02 phaseStatusGroupPhaseNexts: the next phase \"shall be determined at the end of "
                     "the green interval of the terminating phase\"; SUMO's own NEMAPhase::trySwitch lets a later "
                     "call change the decision \"only if the new transition is on the same side of a barrier\"")
+NTCIP_SPLIT = ("NTCIP 1202 v02 splitTime: \"The time in seconds the splitPhase is allowed to receive (i.e. before a "
+               "Force Off is applied)\"; coordForceMode fixed: \"each non-coord phase will be forced at a fixed "
+               "position in the cycle\"")
 NTCIP_GAP_DISABLE = ("NTCIP 1202 v02 phaseOptions bit 11 (Simultaneous Gap Disable, optional): \"disables a gapped "
                      "out phase from reverting to the extensible portion\"; phasePassage: the extensible portion "
                      "\"shall be reset with each subsequent vehicle actuation\"")
@@ -126,11 +130,31 @@ HELD_PAST_MAXIMUM = DifferenceClass(
     "a green stays on after its maximum, timed from a serviceable conflicting call, where the other side ends it "
     "and its ring goes on (within its group, or across the barrier with the other ring)", Right.KEEPER,
     NTCIP_MAXIMUM)
+ENTERED_PAST_FORCE_OFF = DifferenceClass(
+    "phase entered too late to serve its minimum before its force-off",
+    "while a pattern runs, a non-coordinated phase starts green where its minimum green no longer ends by its "
+    "force-off point in the cycle", Right.KEEPER, NTCIP_SPLIT)
+COORD_WAITS_FOR_OTHER_RING = DifferenceClass(
+    "coordinated phase held for the other ring",
+    "a coordinated phase past its yield point, with a call on a phase of its own barrier group in that phase's "
+    "permissive period, ends on one side while the other ring's green goes on, and waits for the other ring on "
+    "the other side", Right.BOTH,
+    "NTCIP 1202 v02 phaseConcurrency: phases of different rings in one group \"may run concurrently\" (rings "
+    "time independently between barriers); SUMO's PhaseTransitionLogic::fromCoord: \"Determine if the other "
+    "phase is also ready to switch\" before leaving the coordinated phase")
+PERMISSIVE_PERIOD = DifferenceClass(
+    "coordinated phase left or kept outside a permissive period",
+    "a coordinated phase past its yield point ends on one side and goes on on the other, neither because of the "
+    "rules above: one side gives the phase it leaves for a (sequential) permissive period, the other does not",
+    Right.BOTH,
+    "permissive periods are a controller setting NTCIP 1202 does not define; SUMO's PhaseTransitionLogic::fromCoord "
+    "applies them to TS2 only: \"Dr. Wang had the Type-170 code setup in a way that it could transition whenever\"")
 UNEXPLAINED = DifferenceClass("unexplained", "no rule explains the difference", Right.BOTH, "")
 
 #: The classes in the order their rules are checked.
 CLASSES: tuple[DifferenceClass, ...] = (ENDED_BEFORE_MIN, ENDED_WHILE_EXTENDING, PULLED_ACROSS, SKIPPED,
-                                        BACKED_WITH_CALL_ACROSS, HELD_PAST_MAXIMUM, RE_EXTENDED)
+                                        BACKED_WITH_CALL_ACROSS, ENTERED_PAST_FORCE_OFF, COORD_WAITS_FOR_OTHER_RING,
+                                        PERMISSIVE_PERIOD, HELD_PAST_MAXIMUM, RE_EXTENDED)
 
 
 class Side(StrEnum):
@@ -168,9 +192,10 @@ class Judgement:
 class Rules:
     """The rules on one config and one sequence of calls (``called[k]``: the calls the step ending at ``k`` read)."""
 
-    def __init__(self, config: IntersectionConfig, called: Sequence[frozenset[int]]) -> None:
+    def __init__(self, config: IntersectionConfig, called: Sequence[frozenset[int]], plan: Plan | None = None) -> None:
         self.config = config
         self.called = called
+        self.plan = plan
         self.ring = {p: config.ring_of(p) for p in config.phases}
         self.side = {p: config.barrier_of(p) for p in config.phases}
         self.order = {p: ring.index(p) for ring in config.rings for p in ring}
@@ -184,14 +209,38 @@ class Rules:
         """A serviceable conflicting call on ``p`` at tick ``k``: a call on a phase that may not show with it."""
         return any(q != p and (self.ring[q] == self.ring[p] or self.side[q] != self.side[p]) for q in self.calls(k))
 
+    def local(self, k: int) -> int:
+        """The running pattern's cycle position at tick ``k`` (in step with the system: the sequences keep their
+        power-up pattern)."""
+        return (k - self.plan.offset) % self.plan.cycle
+
+    def serviceable(self, q: int, k: int, clearance: int) -> bool:
+        """``q`` is called at ``k`` and, while a pattern runs, can still be served to its minimum after
+        ``clearance`` ticks before its force-off point (a phase that cannot is skipped: splitTime)."""
+        return q in self.calls(k) and (self.plan is None or self.plan.fits(q, self.local(k), clearance))
+
     def maxed(self, p: int, green: int, end: int) -> bool:
-        """The green of ``p`` from ``green`` reached its maximum by ``end``: a conflicting call for max ticks."""
+        """The green of ``p`` from ``green`` reached its limit by ``end``: its maximum (a conflicting call for max
+        ticks); while a pattern runs, its force-off point (a coordinated phase: its yield point), which replaces
+        the maximum."""
+        if self.plan is not None:
+            if p not in self.plan.coord.values() and not self.plan.in_window(p, self.local(green)):
+                return True  # started past its force-off point: forced off at its minimum
+            return self._passes(p, green, end)
         for run, k in enumerate(range(end, green, -1), start=1):
             if not self.conflicting(p, k):
                 return False
             if run >= self.max[p] - 1:
                 return True
         return False
+
+    def _passes(self, p: int, green: int, end: int) -> bool:
+        """The green from ``green`` to ``end`` reached ``p``'s force-off point (or outlasted its split, floating)."""
+        plan = self.plan
+        to_point = (plan.force_off[p] - self.local(green)) % plan.cycle
+        floating = self.config.coordination.force_off is ForceOff.FLOATING and p not in plan.coord.values()
+        limit = plan.split[p] - plan.clearance[p] if floating else plan.cycle
+        return end - green >= min(to_point, limit) - 1
 
     # --- the rules, each on one ending ---------------------------------------------------------
 
@@ -219,16 +268,27 @@ class Rules:
         return (e.phase in self.calls(e.yellow) and not self.maxed(e.phase, e.green, e.yellow)
                 and not self.latched(e) and not self.returning(e))
 
+    def clearance(self, p: int) -> int:
+        ph = self.config.phases[p]
+        return tenths(ph.yellow) + tenths(ph.red_clear)
+
     def skipped(self, e: Ending) -> bool:
         p = e.phase
         return (e.next is not None and self.side[e.next] != self.side[p]
                 and any(self.ring[x] == self.ring[p] and self.side[x] == self.side[p] and self.order[x] > self.order[p]
-                        for x in self.calls(e.yellow)))
+                        and self.serviceable(x, e.yellow, self.clearance(p)) for x in self.config.phases))
 
     def backed_with_call_across(self, e: Ending) -> bool:
         p = e.phase
         return (e.next is not None and self.side[e.next] == self.side[p] and self.order[e.next] < self.order[p]
-                and any(self.side[x] != self.side[p] for x in self.calls(e.yellow)))
+                and any(self.side[x] != self.side[p] and self.serviceable(x, e.yellow, self.clearance(p))
+                        for x in self.config.phases))
+
+    def entered_past_force_off(self, e: Ending) -> bool:
+        plan, q = self.plan, e.next
+        if plan is None or q is None or q in plan.coord.values():
+            return False
+        return not plan.fits(q, self.local(e.next_green), 0)
 
     def pulled_across(self, e: Ending) -> bool:
         return e.alone and e.next is not None and self.side[e.next] != self.side[e.phase]
@@ -240,6 +300,7 @@ _CHECKS: dict[DifferenceClass, Callable[[Rules, Ending], bool]] = {
     PULLED_ACROSS: Rules.pulled_across,
     SKIPPED: Rules.skipped,
     BACKED_WITH_CALL_ACROSS: Rules.backed_with_call_across,
+    ENTERED_PAST_FORCE_OFF: Rules.entered_past_force_off,
 }
 
 
@@ -265,9 +326,11 @@ def endings(config: IntersectionConfig, timeline: Timeline, side: Side) -> list[
 
 
 def classify(config: IntersectionConfig, called: Sequence[frozenset[int]], ours: Timeline, reference: Timeline,
-             tick: int, tolerance: int = 1) -> Judgement:
-    """The class of the first difference (at ``tick``) between ``ours`` and SUMO's ``reference``."""
-    rules = Rules(config, called)
+             tick: int, tolerance: int = 1, plan: Plan | None = None) -> Judgement:
+    """The class of the first difference (at ``tick``) between ``ours`` and SUMO's ``reference``; ``plan``: the
+    pattern both run (its force-off points, which SUMO lays out the same way: a sequence with every phase
+    called agrees change for change)."""
+    rules = Rules(config, called, plan)
     near = [e for timeline, side in ((reference, Side.SUMO), (ours, Side.OURS))
             for e in endings(config, timeline, side)
             if e.yellow - tolerance <= tick <= (e.next_green if e.next_green is not None else e.yellow) + tolerance]
@@ -280,6 +343,12 @@ def classify(config: IntersectionConfig, called: Sequence[frozenset[int]], ours:
         kept = reference if other is Side.SUMO else ours
         if any(c.phase == e.phase and c.color is Color.YELLOW and abs(c.tick - e.yellow) <= tolerance for c in kept):
             continue
+        plan = rules.plan
+        if (plan is not None and e.phase in plan.coord.values() and e.alone and e.next is not None
+                and rules.side[e.next] == rules.side[e.phase]):
+            return Judgement(tick, COORD_WAITS_FOR_OTHER_RING, None, e.phase)
+        if plan is not None and e.phase in plan.coord.values():
+            return Judgement(tick, PERMISSIVE_PERIOD, None, e.phase)
         if rules.maxed(e.phase, e.green, e.yellow) and _could_go_on(rules, e, kept):
             return Judgement(tick, HELD_PAST_MAXIMUM, other, e.phase)
         if rules.returning(e) or (e.phase in rules.calls(e.yellow) and rules.latched(e)):
