@@ -21,6 +21,7 @@ from typing import Any
 from hils import config as config_mod
 from hils import plots, summary
 from hils.actions import ActionType
+from hils.agents import controller_config, describe_plan
 from hils.errors import UserError
 from hils.junction import Junction
 from hils.scenario import SCENARIOS, Scenario, load_scenario, load_targets
@@ -56,7 +57,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "(green time of the next pair); default: selection")
     p.add_argument("--agent", metavar="NAME|MODULE:CLASS",
                    help="built-in agent (random, fixed-cycle, max-pressure, queue-proportional, webster; actuated: "
-                        "none, the controller runs on its detectors) or your own "
+                        "none, the controller runs on its detectors; coordinated: none, the controller runs its "
+                        "config's timing plan on its detectors) or your own "
                         "package.module:Class; default: " + ", ".join(f"{k.value} -> {v}"
                                                                       for k, v in DEFAULT_AGENTS.items()))
     p.add_argument("--duration", type=float, default=3600.0, metavar="S", help="simulated seconds (3600)")
@@ -124,6 +126,10 @@ def run_command(args: argparse.Namespace) -> int:
             raise UsageError("--agent webster plans from the shipped four-leg network and demand; it cannot "
                              "plan for --scenario/--net/--routes/--sumocfg yet: run it without them")
         print(webster_plan(cfg).describe())
+    if spec.agent_spec == "coordinated":
+        print(describe_plan(controller_config(spec.agent_spec, cfg)) if scenario is None else
+              "\n".join(f"{tls}: {describe_plan(controller_config(spec.agent_spec, c))}"
+                        for tls, c in scenario.intersections.items()))
     # A wall-clock run is never silent: a live status line (periodic log lines when not on a terminal).
     status = StatusLine() if args.target and not args.no_progress else None
     tb = Testbed(None if scenario else cfg, scenario=scenario, action_type=spec.action_type,

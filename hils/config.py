@@ -262,6 +262,13 @@ class IntersectionConfig:
         """A copy whose controller runs its coordination plan from power-up (see :meth:`Coordination.planned`)."""
         return replace(self, coordination=self.coordination.planned())
 
+    def with_offset(self, seconds: int) -> IntersectionConfig:
+        """A copy whose patterns all have this offset (modulo each cycle): one intersection's place in a
+        corridor's progression, given by its scenario."""
+        c = self.coordination
+        patterns = {n: replace(p, offset=seconds % p.cycle) for n, p in c.patterns.items()}
+        return replace(self, coordination=replace(c, patterns=patterns))
+
 
 def load(path: str | Path | None = None) -> IntersectionConfig:
     """Load and validate a TOML config; the shipped four-leg intersection when path is None."""

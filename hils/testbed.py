@@ -48,7 +48,7 @@ import simpy
 
 from hils import config as config_mod
 from hils.actions import ActionError, ActionType
-from hils.agents import Agent, Observation, load_agent
+from hils.agents import CONTROLLER_AGENTS, Agent, Observation, controller_config, load_agent
 from hils.config import IntersectionConfig
 from hils.detectors import DetectorFeed
 from hils.errors import UserError
@@ -211,11 +211,11 @@ class Testbed:
             raise ValueError("give a config (one intersection) or a scenario (its intersections), not both")
         self.scenario = _scenario(scenario)
         if self.scenario is not None:
-            self.configs = dict(self.scenario.intersections)
+            self.configs = {tls: controller_config(agent, c) for tls, c in self.scenario.intersections.items()}
             sumo_config = sumo_config if sumo_config is not None else self.scenario.sumo_config
         else:
             cfg = config if isinstance(config, IntersectionConfig) else config_mod.load(config)
-            self.configs = {TLS_ID: cfg}
+            self.configs = {TLS_ID: controller_config(agent, cfg)}
         self.config = next(iter(self.configs.values()))
         self.action_type = ActionType(action_type)
         self._targets = _target_specs(target, self.configs)
@@ -229,8 +229,9 @@ class Testbed:
         self.sumo_config = sumo_config
         self.seed = seed
         self._agent_spec = agent
-        # Detector actuations from SUMO feed the controller when asked, and by default for the actuated agent.
-        self.detectors = agent == "actuated" if detectors is None else detectors
+        # Detector actuations from SUMO feed the controller when asked, and by default for the agents that leave
+        # the controller to its own operation (actuated, coordinated).
+        self.detectors = agent in CONTROLLER_AGENTS if detectors is None else detectors
         self.duration = duration
         self.log_path = Path(log_path) if log_path is not None else None
         self.recover_after = recover_after

@@ -34,15 +34,23 @@ from harness.processes import Served, start_emulator, tool
 from hils.config import IntersectionConfig
 from hils.ntcip import (
     ASC,
+    COORD_FORCE_MODE,
+    COORD_PATTERN_STATUS,
+    LOCAL_FREE_STATUS,
     MAX_PHASE_GROUPS,
     MAX_PHASES,
+    PATTERN_TABLE,
+    SPLIT_TABLE,
     SYSTEM_PATTERN_CONTROL,
     UNIT_BACKUP_TIME,
     ControlColumn,
     ErrorStatus,
+    LocalFreeStatus,
     Oid,
+    PatternColumn,
     PhaseColumn,
     PhaseOption,
+    SplitColumn,
     StatusColumn,
     control_oid,
     oid_str,
@@ -214,6 +222,34 @@ def test_walk_of_the_phase_table_gives_every_column_and_the_options(server: Serv
     assert {got[oid_str(phase_oid(PhaseColumn.OPTIONS, p))] for p in range(1, 9)} == {f"INTEGER: {options}"}
     assert got[oid_str(phase_oid(PhaseColumn.PASSAGE, 4))] == "INTEGER: 0"
     assert got[oid_str(phase_oid(PhaseColumn.WALK, 4))] == "INTEGER: 0"
+
+
+def test_the_coordination_objects_walk_and_set_within_ntcip_ranges(tmp_path: Path) -> None:
+    """The coord node (A.4) of the shipped four-leg: its pattern 1 and split table 1 walked by snmpwalk;
+    systemPatternControl starts the pattern, out-of-range values are refused."""
+    served = start_emulator(tmp_path / "serve.log")
+    try:
+        coord = A + ".4"
+        done = run("snmpwalk", "2c", "public", served.port, coord)
+        assert done.returncode == 0, done.stderr
+        got = values(done.stdout)
+        cycle, split_2 = oid_str(PATTERN_TABLE[PatternColumn.CYCLE_TIME].instance(1)), SPLIT_TABLE[SplitColumn.TIME]
+        assert got[cycle] == "INTEGER: 70" and got[oid_str(split_2.instance(1, 2))] == "INTEGER: 28"
+        assert got[oid_str(SPLIT_TABLE[SplitColumn.COORD_PHASE].instance(1, 6))] == "INTEGER: 1"
+        assert got[oid_str(COORD_FORCE_MODE.instance())] == "INTEGER: 3"  # fixed
+        assert got[oid_str(COORD_PATTERN_STATUS.instance())] == "INTEGER: 254"  # free at power-up
+        assert len([o for o in got if o.startswith(oid_str(SPLIT_TABLE[SplitColumn.NUMBER].prefix))]) == 8
+        done = run("snmpset", "2c", "private", served.port, oid_str(SYSTEM_PATTERN_CONTROL.instance()), "i", "1")
+        assert done.returncode == 0, done.stderr
+        status = [oid_str(o.instance()) for o in (COORD_PATTERN_STATUS, LOCAL_FREE_STATUS)]
+        assert integers(served.port, *status) == [1, int(LocalFreeStatus.NOT_FREE)]
+        for oid, value in ((cycle, "256"), (oid_str(COORD_FORCE_MODE.instance()), "4")):
+            done = run("snmpset", "2c", "private", served.port, oid, "i", value)
+            assert "wrongValue" in done.stderr, done.stderr
+        done = run("snmpset", "2c", "private", served.port, oid_str(COORD_FORCE_MODE.instance()), "i", "2")
+        assert done.returncode == 0 and integers(served.port, oid_str(COORD_FORCE_MODE.instance())) == [2]
+    finally:
+        served.stop()
 
 
 def test_a_phase_timing_set_is_range_checked_and_read_back(server: Served) -> None:
