@@ -70,8 +70,10 @@ together) and its red revert since its own last yellow has passed.
 
 A walk is served when the phase's green starts with a pedestrian call (latched
 from phaseControlGroupPedCall or ped recall, not on a PedOmit phase); a call
-arriving later in the green waits for the next service (no recycling). PedOmit
-stops new walks only; a walk being timed completes.
+arriving later in the green waits for the next service (no recycling). A push
+button (a pedestrian detector, pedestrianDetectorControlGroupActuation) latches
+its phase's call at once, during that phase's green too: the walk comes at the
+phase's next green. PedOmit stops new walks only; a walk being timed completes.
 
 Omitted phases never start. ForceOff bits clear themselves when that phase's
 green ends. unitBackupTime is armed by the first SET of a control object; when
@@ -104,7 +106,9 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
+from datetime import datetime
 from enum import StrEnum
+from typing import Protocol
 
 import simpy
 
@@ -192,31 +196,60 @@ class Ring:
     yielded: bool = False
 
 
+class Termination(StrEnum):
+    """Why a green ended (the hi-res log's gap-out, max-out and force-off events)."""
+
+    GAP_OUT = "gap_out"
+    MAX_OUT = "max_out"
+    FORCE_OFF = "force_off"  # the coordinator's force-off point (or floating split), or phaseControlGroupForceOff
+    YIELD = "yield"  # a coordinated phase ending after its yield point
+
+
 @dataclass(frozen=True, slots=True)
 class Change:
-    """One interval change, for timelines and logs."""
+    """One interval change, for timelines and logs (a yellow says why its green ended)."""
 
     tick: int
     ring: int
     phase: int | None
     interval: Interval
+    reason: Termination | None = None
+
+
+class Recorder(Protocol):
+    """What watches the controller as a controller's data logger does (:mod:`emulator.datalogger`)."""
+
+    def changed(self, change: Change) -> None:
+        """An interval change, as the tick makes it."""
+
+    def stepped(self) -> None:
+        """A tick is done: what else it changed is there to read."""
+
+    def powered_up(self) -> None:
+        """The unit powered up again (:meth:`Controller.reset` after the first)."""
 
 
 class Controller:
     """The controller model: state, control objects and the tick."""
 
-    def __init__(self, config: IntersectionConfig, *, on_change: Callable[[Change], None] | None = None) -> None:
+    def __init__(self, config: IntersectionConfig, *, on_change: Callable[[Change], None] | None = None,
+                 start: datetime | None = None) -> None:
         self.config = config
         self.on_change = on_change
+        self.recorder: Recorder | None = None
         self.timing = {p: Timing.of(ph) for p, ph in config.phases.items()}
         self._barrier = {p: config.barrier_of(p) for p in config.phases}
         self._order = {p: ring.index(p) for ring in config.rings for p in ring}
         self._ring_of = {p: config.ring_of(p) for p in config.phases}
         self._recall = {rc: frozenset(p for p, ph in config.phases.items() if ph.recall is rc) for rc in Recall}
         self._detector_phase = config.detectors
+        self._ped_detector_phase = config.ped_detectors
         self.backup_time = config.middleware.backup_time
         self.startup_flash = config.startup_flash
-        self.coordinator = Coordinator(config)
+        # The controller's clock: local time, in ticks since midnight of the day it first powered up.
+        start = start or config.emulator.start
+        self.day0 = datetime.combine(start.date(), datetime.min.time())
+        self.coordinator = Coordinator(config, clock=tenths((start - self.day0).total_seconds()))
         # Counts changes of the status objects (what a poll reads), across power cycles too.
         # Inputs count too: they change the calls the status shows.
         self.status_version = 0
@@ -235,6 +268,7 @@ class Controller:
         self.flash_status = UnitFlashStatus.STARTUP if self.startup_flash else UnitFlashStatus.NOT_FLASH
         self.ped_calls: frozenset[int] = frozenset()  # latched pedestrian calls
         self.actuations: frozenset[int] = frozenset()  # vehicle detectors actuated now
+        self.ped_actuations: frozenset[int] = frozenset()  # pedestrian detectors actuated now
         self._yellow_end: dict[int, int] = {}  # tick each phase's last yellow ended (red revert)
         self._since_set: int | None = None  # ticks since the last control SET; None = backup timer disarmed
         self.rings = [Ring(i + 1, order) for i, order in enumerate(self.config.rings)]
@@ -247,6 +281,8 @@ class Controller:
         if not self.flashing:
             self._power_up()
         self._refresh_status()
+        if self.recorder is not None:
+            self.recorder.powered_up()
 
     def _power_up(self) -> None:
         started = [p for p, ph in self.config.phases.items() if ph.startup in _STARTUP_INTERVAL]
@@ -316,6 +352,12 @@ class Controller:
         self.actuations = frozenset(detectors)
         self.touch()
 
+    def set_ped_actuations(self, detectors: Iterable[int]) -> None:
+        """The pedestrian detectors (push buttons) actuated now: each latches a pedestrian call on its phase, as
+        phaseControlGroupPedCall does (an input, like a vehicle detector: no backup timer restart)."""
+        self.ped_actuations = frozenset(detectors)
+        self.touch()
+
     @property
     def calls(self) -> frozenset[int]:
         """Vehicle calls the controller acts on: SET (VehCall) or from an actuated detector, configured and
@@ -377,6 +419,8 @@ class Controller:
         self._step()
         self._settled = self._discrete()
         self._quiet = self._settled == before
+        if self.recorder is not None:
+            self.recorder.stepped()
 
     def _step(self) -> None:
         self.tick += 1
@@ -506,7 +550,8 @@ class Controller:
         greens = {r.phase for r in self.rings if r.interval is Interval.GREEN}
         peds = (self.control[ControlColumn.PED_CALL].intersection(self.config.phases) | self._recall[Recall.PED]
                 | co.ped_recalled())
-        self.ped_calls = (self.ped_calls | (peds - greens)) - ped_omit
+        pushed = {self._ped_detector_phase[d] for d in self.ped_actuations if d in self._ped_detector_phase}
+        self.ped_calls = (self.ped_calls | (peds - greens) | pushed) - ped_omit
         recalled = self._recall[Recall.MIN] | self._recall[Recall.MAX] | co.recalled()
         demand = (calls - omit) | self.ped_calls | (recalled - omit)
         soft = self._recall[Recall.SOFT] - omit
@@ -555,17 +600,23 @@ class Controller:
         """A green that may end now, or a ring resting in red with nothing committed."""
         if r.interval is Interval.DWELL:
             return r.target is None
+        return self._ending(r) is not None
+
+    def _ending(self, r: Ring) -> Termination | None:
+        """Why the ring's green may end now (None: it may not); a force-off before a gap-out before a max-out."""
         if r.interval is not Interval.GREEN or r.ticks < r.minimum or r.phase in self.control[ControlColumn.HOLD]:
-            return False
+            return None
         if r.phase in self.control[ControlColumn.FORCE_OFF]:
-            return True
+            return Termination.FORCE_OFF
         plan = self.coordinator.plan
         if plan is not None and r.phase == plan.coord[r.number]:
-            return r.yielded  # a coordinated phase ends only after its yield point, never gapped or maxed out
-        gapped = r.gapped or (r.gap > 0 and r.gap >= r.passage)
+            # a coordinated phase ends only after its yield point, never gapped or maxed out
+            return Termination.YIELD if r.yielded else None
+        if r.gapped or (r.gap > 0 and r.gap >= r.passage):
+            return Termination.GAP_OUT
         if plan is not None:  # coordination inhibits the maximum: the force-off points limit a green
-            return gapped or r.forced or (r.limit > 0 and r.ticks >= r.limit)
-        return gapped or r.max_ticks >= r.maximum
+            return Termination.FORCE_OFF if r.forced or (r.limit > 0 and r.ticks >= r.limit) else None
+        return Termination.MAX_OUT if r.max_ticks >= r.maximum else None
 
     def _wish(self, r: Ring, demand: frozenset[int]) -> int | None:
         """The nearest phase with demand after the ring's own, in ring order.
@@ -657,8 +708,9 @@ class Controller:
         """Commit the ring's next phase: a green ends (yellow starts), a resting red ring takes it."""
         r.target = target
         if r.interval is Interval.GREEN:
+            reason = self._ending(r)
             self.control[ControlColumn.FORCE_OFF] -= {r.phase}
-            self._enter(r, Interval.YELLOW)
+            self._enter(r, Interval.YELLOW, reason=reason)
 
     def _enter_target(self, r: Ring) -> None:
         if r.interval is not Interval.DWELL or r.target is None:
@@ -675,7 +727,7 @@ class Controller:
         r.phase, r.target = t, None
         self._enter(r, Interval.GREEN)
 
-    def _enter(self, r: Ring, interval: Interval, *, notify: bool = True) -> None:
+    def _enter(self, r: Ring, interval: Interval, *, notify: bool = True, reason: Termination | None = None) -> None:
         r.interval, r.ticks, r.max_ticks, r.gap, r.gapped = interval, 0, 0, 0, False
         tm = self.timing[r.phase]
         plan = self.coordinator.plan
@@ -691,8 +743,12 @@ class Controller:
             r.passage = tm.passage
         else:
             r.length = {Interval.YELLOW: tm.yellow, Interval.RED_CLEAR: tm.red_clear}.get(interval, 0)
-        if notify and self.on_change is not None:
-            self.on_change(Change(self.tick, r.number, r.phase, interval))
+        if notify and (self.on_change is not None or self.recorder is not None):
+            change = Change(self.tick, r.number, r.phase, interval, reason)
+            if self.on_change is not None:
+                self.on_change(change)
+            if self.recorder is not None:
+                self.recorder.changed(change)
 
     # --- coordination --------------------------------------------------------------------------
 

@@ -331,6 +331,11 @@ class Coordinator:
         if 0 in self.passed:
             self._new_cycle()
 
+    @property
+    def subtracting(self) -> bool:
+        """A correction under way shortens cycles (shortway, when going back is the short way)."""
+        return self.plan is not None and bool(self.lag) and self._subtracting(self.plan, self.lag)
+
     def _subtracting(self, plan: Plan, lag: int) -> bool:
         return (self.correction is CorrectionMode.SHORTWAY and plan.subtract_cap > 0
                 and plan.cycle - lag < lag)

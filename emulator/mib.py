@@ -38,12 +38,17 @@ from hils.ntcip import (
     DETECTOR_STATUS_ACTIVE,
     LOCAL_FREE_STATUS,
     MAX_PATTERNS,
+    MAX_PED_DETECTOR_GROUPS,
+    MAX_PED_DETECTORS,
     MAX_PHASE_GROUPS,
     MAX_PHASES,
     MAX_SPLITS,
     MAX_VEHICLE_DETECTORS,
     PATTERN_TABLE,
     PATTERN_TABLE_TYPE,
+    PED_DETECTOR_ACTUATION,
+    PED_DETECTOR_CALL_PHASE,
+    PED_DETECTOR_STATUS_ACTIVE,
     PHASE_TABLE,
     RING_CONTROL_MAX2,
     SEQUENCE_DATA,
@@ -234,19 +239,31 @@ class MibView:
                     for col in ControlColumn]
         for r, order in enumerate(cfg.rings, start=1):
             out.append(Instance(sequence_oid(1, r), SEQUENCE_DATA, lambda o=order: bytes(o)))
-        detectors = cfg.detectors
-        out.append(Instance(MAX_VEHICLE_DETECTORS.instance(), MAX_VEHICLE_DETECTORS, lambda: max(detectors)))
-        for d, phase in detectors.items():
-            out.append(Instance(VEHICLE_DETECTOR_OPTIONS.instance(d), VEHICLE_DETECTOR_OPTIONS, lambda: 0))
-            out.append(Instance(VEHICLE_DETECTOR_CALL_PHASE.instance(d), VEHICLE_DETECTOR_CALL_PHASE,
-                                lambda phase=phase: phase))
-        detector_groups = (max(detectors) + 7) // 8
-        for g in range(1, detector_groups + 1):
-            read = _group_reader(lambda: c.actuations, g, detector_groups)
-            out.append(Instance(DETECTOR_STATUS_ACTIVE.instance(g), DETECTOR_STATUS_ACTIVE, read))
-            out.append(Instance(DETECTOR_ACTUATION.instance(g), DETECTOR_ACTUATION, read,
-                                _group_writer(lambda: c.actuations, c.set_actuations, g)))
+        out += _detectors(cfg.detectors, MAX_VEHICLE_DETECTORS, VEHICLE_DETECTOR_CALL_PHASE, None,
+                          DETECTOR_STATUS_ACTIVE, DETECTOR_ACTUATION, lambda: c.actuations, c.set_actuations)
+        out.extend(Instance(VEHICLE_DETECTOR_OPTIONS.instance(d), VEHICLE_DETECTOR_OPTIONS, lambda: 0)
+                   for d in cfg.detectors)
+        out += _detectors(cfg.ped_detectors, MAX_PED_DETECTORS, PED_DETECTOR_CALL_PHASE, MAX_PED_DETECTOR_GROUPS,
+                          PED_DETECTOR_STATUS_ACTIVE, PED_DETECTOR_ACTUATION, lambda: c.ped_actuations,
+                          c.set_ped_actuations)
         return out
+
+
+def _detectors(call_phases: dict[int, int], maximum: ObjectDef, call_phase: ObjectDef, max_groups: ObjectDef | None,
+               active: ObjectDef, actuation: ObjectDef, read: Callable[[], frozenset[int]],
+               write: Callable[[frozenset[int]], None]) -> list[Instance]:
+    """One kind of detector: how many, the phase each calls, and by group of 8 the active ones and their remote
+    actuation (a SET of a group past the last is noSuchName in SNMPv1: that group does not exist)."""
+    groups = (max(call_phases) + 7) // 8
+    out = [Instance(maximum.instance(), maximum, lambda: max(call_phases))]
+    if max_groups is not None:
+        out.append(Instance(max_groups.instance(), max_groups, lambda: groups))
+    out += [Instance(call_phase.instance(d), call_phase, lambda phase=phase: phase) for d, phase in call_phases.items()]
+    for g in range(1, groups + 1):
+        reader = _group_reader(read, g, groups)
+        out.append(Instance(active.instance(g), active, reader))
+        out.append(Instance(actuation.instance(g), actuation, reader, _group_writer(read, write, g)))
+    return out
 
 
 def _coordination(c: Controller | DelayedController) -> list[Instance]:

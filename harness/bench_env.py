@@ -99,7 +99,7 @@ def _time_sumo_steps() -> list[float]:
     """From now on in this (fresh) process, the wall seconds libsumo's simulationStep takes are summed into the
     list returned: both environments step SUMO through it, so what is left of an episode's wall time is the
     environment's own work, whatever traffic its signals made."""
-    import libsumo
+    from hils.sumo import libsumo  # imported quietly there
 
     total = [0.0]
     step = libsumo.simulationStep

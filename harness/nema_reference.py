@@ -58,8 +58,6 @@ from enum import StrEnum
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
-import libsumo
-
 from emulator.controller import Controller
 from emulator.coordination import Coordinator
 from harness.nema_rules import (
@@ -82,6 +80,7 @@ from harness.nema_rules import (
 )
 from hils.config import FREE, ForceOff, IntersectionConfig, NextPhaseLock, OffsetReference, Pattern, load
 from hils.ntcip import ControlColumn, PhaseStartup
+from hils.sumo import libsumo
 from hils.sumo_net import NET_FILE, ROUTE_FILE, PhaseMap, data_path, derive_phase_map, read_net
 
 TICK = 0.1  # seconds per step, both controllers

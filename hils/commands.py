@@ -15,11 +15,12 @@ import signal
 import sys
 import time
 from collections.abc import Iterator
+from datetime import datetime, timedelta
 from pathlib import Path
 from typing import Any
 
 from hils import config as config_mod
-from hils import plots, summary
+from hils import plots, record, summary
 from hils.actions import ActionType
 from hils.agents import controller_config, describe_plan
 from hils.errors import UserError
@@ -95,6 +96,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--dashboard-control", action="store_true",
                    help="let the dashboard's page recover the manager from TIMEOUT (default: read-only); only the "
                         "page opened from the URL printed at start may: it carries the run's secret (?token=...)")
+    p.add_argument("--asclog", metavar="http://HOST:PORT",
+                   help="wall-clock runs of one controller: after the run, collect the controller's own hi-res log "
+                        "from its MaxTime event-log endpoint (`hils emulator serve --http`, an Intelight MaxTime) "
+                        "into the run folder, with its ATSPM measures; virtual-time runs keep the emulator's anyway")
     p.set_defaults(func=run_command)
 
 
@@ -115,6 +120,9 @@ def run_command(args: argparse.Namespace) -> int:
         raise UsageError(f"--duration must be positive seconds, got {args.duration:g}")
     scenario = _scenario(args)
     dashboard = _dashboard(args)
+    if args.asclog is not None and (not args.target or scenario is not None):
+        raise UsageError("--asclog collects the log of the one controller a wall-clock run drives: use it with "
+                         "--target snmp://... and without --scenario")
     out = _run_folder(args.out, args.action_type)
     log_path = args.log or out / "events.jsonl"
     sumo_config = scenario_config(sumocfg=args.sumocfg, net=args.net, routes=args.routes, directory=out)
@@ -138,6 +146,7 @@ def run_command(args: argparse.Namespace) -> int:
                  on_reset=_hooks(status.start if status else None, dashboard.attach if dashboard else None),
                  sumo_config=sumo_config)
     error: BaseException | None = None
+    started = datetime.now()  # the controller's clock is the host's when it is `hils emulator serve`
     with _terminate_as_interrupt(), tb, _served(dashboard):
         try:
             tb.reset()
@@ -165,8 +174,12 @@ def run_command(args: argparse.Namespace) -> int:
     else:
         s = summary.summarize(tb.tally, tb.config, traffic=tb.traffic, wall_s=tb.wall_s)
         outputs += _plots(tb.junction, s, out, window)
+    s["record"], kept = record.keep(tb.hires(), tb.configs, out, several=tb.several, asclog=args.asclog,
+                                    since=started - timedelta(seconds=1))
+    outputs += kept
     summary.write(s, out / "summary.json")
     print(summary.render_network(s) if tb.several else summary.render(s))
+    print("\n".join(record.describe(s["record"])))
     for warning in summary.warnings(s):
         print(warning)
     print(f"Outputs in {out}/: {', '.join(outputs)}")

@@ -15,6 +15,7 @@ import math
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
+from datetime import date, datetime
 from enum import StrEnum
 from importlib import resources
 from pathlib import Path
@@ -34,6 +35,8 @@ _STARTUP_NAMES = {
     "red_clear": PhaseStartup.RED_CLEAR,
 }
 APPROACHES = ("north", "south", "east", "west")
+#: The emulator's local date and time at power-up in virtual time, unless ``[emulator] start`` says otherwise.
+DEFAULT_START = datetime(2024, 1, 1)
 
 
 class Recall(StrEnum):
@@ -197,13 +200,16 @@ class MiddlewareParams:
 
 @dataclass(frozen=True, slots=True)
 class EmulatorParams:
-    """How the emulator models a real controller's own latency (``[emulator]``), in 0.1 s ticks.
+    """How the emulator models a real controller (``[emulator]``): its own latency, in 0.1 s ticks, and the
+    local date and time of its clock at power-up in virtual time (its hi-res log's timestamps, the time of day
+    its coordination and schedule follow; ``hils emulator serve`` sets the clock to the host's time instead).
 
     A real controller has these delays without any table: they only tell the emulator how late to be.
     The defaults are calibrated on the paper's Cobalt (see :mod:`emulator.delays`)."""
 
     call_processing_ticks: int = 1  # a SET reaches the phase logic this many ticks after the next tick
     status_update_ticks: int = 0  # status objects lag the lamps by this many ticks
+    start: datetime = DEFAULT_START
 
 
 @dataclass(frozen=True)
@@ -223,6 +229,7 @@ class IntersectionConfig:
     emulator: EmulatorParams = field(default_factory=EmulatorParams)
     detector_phases: Mapping[int, int] = field(default_factory=dict)  # the [detectors] table, if any
     detector_lanes: Mapping[int, str] = field(default_factory=dict)  # the SUMO lane of a detector given one
+    ped_detector_phases: Mapping[int, int] = field(default_factory=dict)  # the [pedestrian_detectors] table, if any
 
     @property
     def detectors(self) -> dict[int, int]:
@@ -230,6 +237,12 @@ class IntersectionConfig:
         table, or one detector per phase numbered as the phase (the stop-bar loops of a phase's approach lanes
         wired to one input, as in many cabinets)."""
         return dict(self.detector_phases) or {p: p for p in self.phases}
+
+    @property
+    def ped_detectors(self) -> dict[int, int]:
+        """Pedestrian detector (push button) number -> the phase it calls (``pedestrianDetectorCallPhase``): the
+        ``[pedestrian_detectors]`` table, or one per phase numbered as the phase."""
+        return dict(self.ped_detector_phases) or {p: p for p in self.phases}
 
     @property
     def groups(self) -> int:
@@ -358,7 +371,23 @@ def _emulator(raw: Any, source: str) -> EmulatorParams:
                                       integer=True, low=0, high=10),
         status_update_ticks=_number(raw, "status_update_ticks", w, source, d.status_update_ticks,
                                     integer=True, low=0, high=10),
+        start=_start(raw.get("start", d.start), source),
     )
+
+
+def _start(value: Any, source: str) -> datetime:
+    """``[emulator] start``: a TOML local date-time (or a date: its midnight) on the controller's 0.1 s grid."""
+    allowed = "allowed: a local date and time without offset, e.g. 2024-04-15T07:00:00, or a date"
+    if isinstance(value, date) and not isinstance(value, datetime):
+        value = datetime.combine(value, datetime.min.time())
+    if not isinstance(value, datetime):
+        raise ConfigError(source, "emulator.start", f"is {value!r}; {allowed}")
+    if value.tzinfo is not None:
+        raise ConfigError(source, "emulator.start", f"is {value.isoformat()}, with an offset: the controller keeps "
+                                                    f"local time; {allowed}")
+    if value.microsecond % 100_000:
+        raise ConfigError(source, "emulator.start", f"is {value.isoformat()}; allowed: whole tenths of a second")
+    return value
 
 
 def _phase(number: int, raw: Any, defaults: Mapping[str, Any], ring: int, source: str) -> Phase:
@@ -475,8 +504,8 @@ def _matrix(raw: Mapping[str, Any], numbers: list[int], source: str) -> frozense
 
 
 def from_dict(raw: Mapping[str, Any], source: str = "<memory>") -> IntersectionConfig:
-    _unknown(raw, ("name", "timing", "phases", "structure", "middleware", "emulator", "detectors", "coordination"), "",
-             source)
+    _unknown(raw, ("name", "timing", "phases", "structure", "middleware", "emulator", "detectors",
+                   "pedestrian_detectors", "coordination"), "", source)
     name = raw.get("name", Path(source).stem)
     if not isinstance(name, str):
         raise ConfigError(source, "name", "must be a string")
@@ -595,7 +624,25 @@ def from_dict(raw: Mapping[str, Any], source: str = "<memory>") -> IntersectionC
         coordination=_coordination(raw.get("coordination", {}), phases, rings_t, barriers_t, source),
         emulator=_emulator(raw.get("emulator", {}), source),
         **_detectors(raw.get("detectors", {}), phases, source),
+        ped_detector_phases=_ped_detectors(raw.get("pedestrian_detectors", {}), phases, source),
     )
+
+
+def _ped_detectors(raw: Any, phases: Mapping[int, Phase], source: str) -> dict[int, int]:
+    """``[pedestrian_detectors]``: push button number (1-64) = the phase whose pedestrian call it places."""
+    if not isinstance(raw, dict):
+        raise ConfigError(source, "pedestrian_detectors", "must be a table: push button number = phase it calls, "
+                                                          "e.g. 1 = 2")
+    out: dict[int, int] = {}
+    for key, phase in raw.items():
+        where = f"pedestrian_detectors.{key}"
+        if not (key.isdigit() and 1 <= int(key) <= 64):
+            raise ConfigError(source, where, "unknown pedestrian detector; allowed: numbers 1-64")
+        if isinstance(phase, bool) or phase not in phases:
+            raise ConfigError(source, where, f"calls phase {phase!r}; allowed: the configured phases "
+                                             f"{', '.join(map(str, phases))}")
+        out[int(key)] = phase
+    return out
 
 
 def _detectors(raw: Any, phases: Mapping[int, Phase], source: str) -> dict[str, dict[int, Any]]:

@@ -354,13 +354,22 @@ VEHICLE_DETECTOR_OPTIONS = _o("vehicleDetectorOptions", (2, 2, 1, 2))
 VEHICLE_DETECTOR_CALL_PHASE = _o("vehicleDetectorCallPhase", (2, 2, 1, 4))
 DETECTOR_STATUS_ACTIVE = _o("vehicleDetectorStatusGroupActive", (2, 4, 1, 2))
 DETECTOR_ACTUATION = _o("vehicleDetectorControlGroupActuation", (2, 12, 1, 2), access=Access.READ_WRITE)
+# Pedestrian detectors (push buttons) likewise: the table's call phase, the active ones by group of 8, and v03's
+# remote actuation (pedestrianDetectorControlGroupActuation, what Signal-Replay SETs to replay a field log's
+# pedestrian detector events).
+MAX_PED_DETECTORS = _o("maxPedestrianDetectors", (2, 6))
+PED_DETECTOR_CALL_PHASE = _o("pedestrianDetectorCallPhase", (2, 7, 1, 2))
+MAX_PED_DETECTOR_GROUPS = _o("maxPedestrianDetectorGroups", (2, 8))
+PED_DETECTOR_STATUS_ACTIVE = _o("pedestrianDetectorStatusGroupActive", (2, 9, 1, 2))
+PED_DETECTOR_ACTUATION = _o("pedestrianDetectorControlGroupActuation", (2, 13, 1, 2), access=Access.READ_WRITE)
 
 ALL_OBJECTS: tuple[ObjectDef, ...] = (
     MAX_PHASES, MAX_PHASE_GROUPS, UNIT_STARTUP_FLASH, UNIT_BACKUP_TIME, UNIT_CONTROL_STATUS, UNIT_FLASH_STATUS,
     SYSTEM_PATTERN_CONTROL, COORD_CORRECTION_MODE, COORD_FORCE_MODE, MAX_PATTERNS, PATTERN_TABLE_TYPE, MAX_SPLITS,
     COORD_PATTERN_STATUS, LOCAL_FREE_STATUS, COORD_CYCLE_STATUS, COORD_SYNC_STATUS, *PATTERN_TABLE.values(),
     *SPLIT_TABLE.values(), SEQUENCE_DATA, RING_CONTROL_MAX2, MAX_VEHICLE_DETECTORS, VEHICLE_DETECTOR_OPTIONS,
-    VEHICLE_DETECTOR_CALL_PHASE, DETECTOR_STATUS_ACTIVE, DETECTOR_ACTUATION,
+    VEHICLE_DETECTOR_CALL_PHASE, DETECTOR_STATUS_ACTIVE, DETECTOR_ACTUATION, MAX_PED_DETECTORS,
+    PED_DETECTOR_CALL_PHASE, MAX_PED_DETECTOR_GROUPS, PED_DETECTOR_STATUS_ACTIVE, PED_DETECTOR_ACTUATION,
     *PHASE_TABLE.values(), *STATUS_TABLE.values(), *CONTROL_TABLE.values(), *CHANNEL_TABLE.values(),
 )
 

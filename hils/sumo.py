@@ -15,6 +15,8 @@ for and, for the end-of-run maximum, sampled once per ``queue_sample_period``.
 from __future__ import annotations
 
 import dataclasses
+import io
+import logging
 import operator
 import os
 import sys
@@ -23,12 +25,17 @@ import time
 import xml.etree.ElementTree as ET
 from collections import Counter
 from collections.abc import Iterator, Mapping, Sequence
-from contextlib import contextmanager
+from contextlib import contextmanager, redirect_stdout
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
 
-import libsumo
+# libsumo prints a caution on stdout when it is imported beside a pyarrow other than the one it was built with
+# (the atspm extra brings pyarrow): kept off stdout, where scripts read what hils prints, and logged.
+with redirect_stdout(io.StringIO()) as _import_note:
+    import libsumo
+if _import_note.getvalue().strip():
+    logging.getLogger(__name__).debug("libsumo on import: %s", " ".join(_import_note.getvalue().split()))
 
 from hils.config import IntersectionConfig, load
 from hils.errors import UserError

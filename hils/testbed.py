@@ -54,6 +54,7 @@ from hils.detectors import DetectorFeed
 from hils.errors import UserError
 from hils.events import EventLog, Kind, TaggedLog
 from hils.events import read as read_events
+from hils.hires import Event
 from hils.junction import Junction
 from hils.manager import CLEAR_ATTEMPTS, State
 from hils.middleware import Middleware, Submission
@@ -321,6 +322,13 @@ class Testbed:
         if log_ is None:
             return []
         return log_.records if log_.keep else list(read_events(log_.path))
+
+    def hires(self) -> dict[str, list[Event]]:
+        """Each controller's own hi-res event log, where the run can read it: the in-process emulator's (a target
+        with a ``hires()`` method, see :mod:`hils.hires`). A controller reached at the wall clock keeps its own,
+        which a field tool collects from it (:func:`hils.hires.collect` for a MaxTime endpoint)."""
+        return {tls: j.target.hires() for tls, j in self.junctions.items()
+                if callable(getattr(j.target, "hires", None))}
 
     @property
     def driver(self) -> Any:

@@ -11,7 +11,7 @@ import itertools
 import pytest
 import simpy
 
-from emulator.controller import Change, Controller, Interval
+from emulator.controller import Change, Controller, Interval, Termination
 from emulator.mib import MibView
 from hils.config import IntersectionConfig, parse
 from hils.ntcip import UNIT_BACKUP_TIME, ControlColumn, UnitControlStatus, UnitFlashStatus
@@ -478,7 +478,9 @@ def test_on_change_reports_every_interval_change(paper_config: IntersectionConfi
     c.set_control(CALL, {3, 7})
     record(c, MIN + YELLOW + RED)
     assert changes == [
-        Change(MIN, 1, 2, Interval.YELLOW), Change(MIN, 2, 6, Interval.YELLOW),
+        # a yellow says why its green ended: no call on 2 or 6, so both gapped out at their minimum
+        Change(MIN, 1, 2, Interval.YELLOW, Termination.GAP_OUT),
+        Change(MIN, 2, 6, Interval.YELLOW, Termination.GAP_OUT),
         Change(MIN + YELLOW, 1, 2, Interval.RED_CLEAR), Change(MIN + YELLOW, 2, 6, Interval.RED_CLEAR),
         Change(MIN + YELLOW + RED, 1, 2, Interval.DWELL), Change(MIN + YELLOW + RED, 2, 6, Interval.DWELL),
         Change(MIN + YELLOW + RED, 1, 3, Interval.GREEN), Change(MIN + YELLOW + RED, 2, 7, Interval.GREEN),

@@ -14,7 +14,8 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-SHARED = {"hils", "hils.ntcip", "hils.config", "hils.scenario", "hils.resco", "hils.errors", "hils.usm"}
+SHARED = {"hils", "hils.ntcip", "hils.config", "hils.scenario", "hils.resco", "hils.errors", "hils.usm",
+          "hils.hires"}
 
 
 def imports_of(path: Path) -> set[str]:
