@@ -10,12 +10,17 @@ from typing import TYPE_CHECKING
 
 from hils import config as config_mod
 from hils.config import IntersectionConfig
+from hils.hires import ASCLOG_PATH
 from hils.ntcip import AUTH_KEY_ENV, PRIV_KEY_ENV
 from hils.scenario import SCENARIOS, load_scenario
 from hils.usm import services_missing
 
 if TYPE_CHECKING:
     from emulator.agent import V3User
+    from emulator.serve import EmulatorServer
+
+#: ``--http`` without a port: each controller's event log on the TCP port numbered as its UDP port.
+SAME_PORTS = -1
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -82,6 +87,12 @@ def _register_serve(commands: argparse._SubParsersAction) -> None:
                             "and without either authNoPriv is enough")
     serve.add_argument("--trace", type=Path, metavar="FILE",
                        help="write every interval change as JSON Lines, stamped with the monotonic clock")
+    serve.add_argument("--http", type=int, nargs="?", const=SAME_PORTS, metavar="PORT",
+                       help="also serve each controller's hi-res event log as an Intelight MaxTime does "
+                            f"(GET http://HOST:PORT{ASCLOG_PATH}[?since=MM-DD-YYYY HH:MM:SS.0], the Indiana "
+                            "enumerations), on TCP ports PORT.. (0: free ones); without PORT on the same numbers as "
+                            "the UDP ports, where Signal-Replay looks for a controller on this host. The controllers' "
+                            "clocks are the host's local time")
     serve.set_defaults(func=_serve)
 
 
@@ -136,11 +147,12 @@ def _serve(args: argparse.Namespace) -> int:
         raise SystemExit("hils emulator serve: --latency-ms and --jitter-ms must not be negative")
     v3_user = _v3_user(args)
     controllers = _controllers(args)
+    http = args.port if args.http == SAME_PORTS else args.http
     options = ServeOptions(host=args.host, port=args.port, ro_community=args.ro_community,
                            rw_community=args.rw_community, latency=Latency(args.latency_ms / 1e3, args.jitter_ms / 1e3),
-                           trace=args.trace, v3_user=v3_user)
+                           trace=args.trace, v3_user=v3_user, http=http)
 
-    def ready(addresses: list[tuple[str, int]]) -> None:
+    def ready(server: EmulatorServer, addresses: list[tuple[str, int]]) -> None:
         # Scripts and tests wait for these lines: they are printed only once requests are answered.
         v3 = f" v3={v3_user.name}/{'authPriv' if v3_user.priv_key else 'authNoPriv'}" if v3_user else ""
         for (tls, cfg), (host, port) in zip(controllers, addresses, strict=True):
@@ -150,6 +162,9 @@ def _serve(args: argparse.Namespace) -> int:
         if len(addresses) > 1:
             print(f"serving {len(addresses)} controllers on udp:{addresses[0][0]}:"
                   f"{_port_range([port for _, port in addresses])}")
+        for (tls, cfg), (host, port) in zip(controllers, server.http_addresses, strict=False):
+            label = f" [{tls}]" if tls is not None else ""
+            print(f"event log of {cfg.name}{label}: http://{host}:{port}{ASCLOG_PATH}")
         sys.stdout.flush()
 
     try:

@@ -27,7 +27,8 @@ events                                     from
 9, 10 end yellow, begin red clearance      the change into red clearance (10 only when it has a length: "Set
                                            only if phase red clearance is served")
 11, 12 end red clearance, phase inactive   the change to rest in red (the ring no longer times the phase)
-2 phase check                              the green's max timer starting: conflicting demand registered
+2 phase check                              the green's max timer starting: conflicting demand registered (at
+                                           the latest on the tick the green ends, as field logs show it)
 3 min complete                             the green's minimum (with walk and pedestrian clearance) timed
 31 barrier termination                     a green starting in another barrier group than the last one;
                                            parameter: the group that ended (1 = the first), as field logs show
@@ -154,6 +155,8 @@ class DataLogger:
             green = self._greens.pop(change.ring, None)
             if green is not None:
                 self._min_complete(green, p)
+                if not green.checking:  # the conflicting call came on the tick that ends the green
+                    self._add(E.PHASE_CHECK, p)
             if change.reason in _TERMINATIONS:
                 self._add(_TERMINATIONS[change.reason], p)
             self._add(E.PHASE_GREEN_TERMINATION, p)
