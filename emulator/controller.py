@@ -14,6 +14,13 @@ Rules of this file
 - :meth:`Controller.advance` (n ticks) is exactly n calls of :meth:`Controller.step`:
   it only skips ticks that :meth:`Controller.quiet_ticks` proves change
   nothing but counters (a property test holds the two together).
+- A recorder (the data logger, :mod:`emulator.datalogger`) hears every
+  interval change, a yellow with why its green ended (``_ending``, the very
+  reason ``_ready`` acts on), the end of every step and a power-up; it reads
+  and never acts.
+- The controller's clock is the coordinator's: local time in ticks since
+  midnight of the day it first powered up (``start``: ``[emulator] start``, or
+  the host's time when served). A power cycle resets ``tick``, not the clock.
 
 Theory of operation
 -------------------

@@ -71,11 +71,15 @@ class Measures:
         return out
 
     def run_figures(self) -> dict[str, Any]:
-        """The run's headline figures over every controller and phase: split failures, percent on green."""
+        """The run's headline figures over every controller and phase: split failures and percent on green (None
+        when no detector was actuated: a controller run on the middleware's calls alone reads no detectors), and the
+        terminations."""
         totals = [t for phases in self.totals().values() for t in phases.values()]
-        return {"split_failures": sum(t["split_failures"] for t in totals),
-                "percent_on_green": _share(sum(t["arrivals_on_green"] for t in totals),
-                                           sum(t["arrivals"] for t in totals))}
+        detected = any(t["actuations"] for t in totals)
+        out = {"split_failures": sum(t["split_failures"] for t in totals) if detected else None,
+               "percent_on_green": _share(sum(t["arrivals_on_green"] for t in totals),
+                                          sum(t["arrivals"] for t in totals))}
+        return out | {name: sum(t[name] for t in totals) for name in ("gap_outs", "max_outs", "force_offs")}
 
     def write(self, path: Path) -> None:
         with path.open("w", newline="", encoding="utf-8") as f:
@@ -88,7 +92,7 @@ def detector_config(configs: Mapping[int, IntersectionConfig]) -> list[tuple[int
     """``(DeviceId, Phase, Parameter, Function)`` of every vehicle detector: presence and arrival detector of its
     phase."""
     return [(device, phase, detector, function) for device, cfg in configs.items()
-            for detector, phase in sorted(cfg.detectors.items()) for function in ("Presence", "Advance")]
+            for detector, phase in sorted(cfg.detectors.items()) if phase for function in ("Presence", "Advance")]
 
 
 def measures(rows: Iterable[tuple[datetime, int, int, int]], configs: Mapping[int, IntersectionConfig]) -> Measures:

@@ -647,7 +647,8 @@ def _ped_detectors(raw: Any, phases: Mapping[int, Phase], source: str) -> dict[i
 
 def _detectors(raw: Any, phases: Mapping[int, Phase], source: str) -> dict[str, dict[int, Any]]:
     """``[detectors]``: vehicle detector number (1-64) = the phase it calls, or ``{ phase = P, lane = "ID" }``
-    for a loop on one SUMO lane (without a lane, the detector sees every approach lane of its phase)."""
+    for a loop on one SUMO lane (without a lane, the detector sees every approach lane of its phase). Phase 0 is
+    NTCIP's vehicleDetectorCallPhase 0: the controller logs the detector and places no call (a count station)."""
     if not isinstance(raw, dict):
         raise ConfigError(source, "detectors", "must be a table: detector number = phase it calls, e.g. 1 = 2, or "
                                                "1 = { phase = 2, lane = \"E2C_0\" }")
@@ -666,9 +667,9 @@ def _detectors(raw: Any, phases: Mapping[int, Phase], source: str) -> dict[str, 
                 lanes[int(key)] = lane
         else:
             phase = value
-        if isinstance(phase, bool) or phase not in phases:
+        if isinstance(phase, bool) or (phase not in phases and phase != 0):
             raise ConfigError(source, where, f"calls phase {phase!r}; allowed: the configured phases "
-                                             f"{', '.join(map(str, phases))}")
+                                             f"{', '.join(map(str, phases))}, or 0 (logged, calls no phase)")
         out[int(key)] = phase
     return {"detector_phases": out, "detector_lanes": lanes}
 

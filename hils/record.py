@@ -86,8 +86,15 @@ def describe(section: Mapping[str, Any]) -> list[str]:
         lines.append(f"ATSPM measures: not computed, {measured['missing']}")
         return lines
     aog = measured["percent_on_green"]
-    lines.append(f"ATSPM ({measured['bin_minutes']}-minute bins in atspm.csv): {measured['split_failures']} split "
-                 f"failures, {'-' if aog is None else f'{aog:.1f} %'} of arrivals on green (stop-bar detectors)")
+    if measured["split_failures"] is None:
+        detectors = ("no detector actuations in the log: the controller ran on the middleware's calls alone, so "
+                     "split failures and arrivals on green are not measured (--agent actuated or coordinated runs "
+                     "the controller on its detectors)")
+    else:
+        detectors = (f"{measured['split_failures']} split failures, {'-' if aog is None else f'{aog:.1f} %'} of "
+                     "arrivals on green (stop-bar detectors)")
+    lines.append(f"ATSPM ({measured['bin_minutes']}-minute bins in atspm.csv): {detectors}; {measured['gap_outs']} "
+                 f"gap-outs, {measured['max_outs']} max-outs, {measured['force_offs']} force-offs")
     for device, phases in measured["per_phase"].items():
         name = section["devices"][device]
         rows = ", ".join(f"{p}: {t['split_failures']} SF, {t['gap_outs']}/{t['max_outs']}/{t['force_offs']}"

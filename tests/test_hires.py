@@ -95,16 +95,19 @@ def test_the_log_says_every_interval_change_at_its_tick_skipped_or_stepped(
     assert times == sorted(times)  # the clock never goes back, power cycles included
 
 
-def config_with(text: str = "") -> IntersectionConfig:
-    """The shipped four-leg with walks on its throughs, a passage time and some TOML added (after its last table,
-    [emulator], without a plan)."""
+def config_text(text: str = "", timing: str = "") -> str:
+    """The shipped four-leg with walks on its throughs, a passage time and some TOML added (``text`` after its last
+    table, [emulator], without a plan; ``timing`` in [timing])."""
     base = (Path(__file__).parents[1] / "hils/data/four_leg.toml").read_text()
     base = base.replace('[timing]            # shared by every phase, as in the paper',
-                        '[timing]\npassage = 2.0')
+                        f'[timing]\npassage = 2.0\n{timing}')
     for p in (2, 4, 6, 8):
         base = base.replace(f'{p} = {{ approach', f'{p} = {{ walk = 4, ped_clear = 5, approach', 1)
-    base = base[:base.index("[coordination]")]
-    return parse(base + text, "four_leg_peds.toml")
+    return base[:base.index("[coordination]")] + text
+
+
+def config_with(text: str = "", timing: str = "") -> IntersectionConfig:
+    return parse(config_text(text, timing), "four_leg_peds.toml")
 
 
 def run(c: Controller, ticks: int) -> None:
