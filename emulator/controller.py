@@ -88,8 +88,14 @@ it passes without another, the controller reports backupMode and clears every
 control object. After power-up the controller flashes for unitStartUpFlash
 seconds, then starts its start-up intervals. A conflict monitor, like an MMU,
 checks every tick that no two phases showing green or yellow are incompatible
-under the configured matrix; if they are, the controller goes to flash (all
-red) and stops timing.
+under the configured matrix, and that no overlap showing green or yellow
+stands beside a phase it conflicts with (:mod:`emulator.overlaps`); if they
+are, the controller goes to flash (all red) and stops timing.
+
+Overlaps follow the phases at the end of each tick; a trailing overlap (its
+own green, yellow and red after its parents ended) holds back a committed
+phase that conflicts with it until it has cleared, as controllers do when
+their overlap clearance locks the next phase.
 
 Quiet time. Most ticks change nothing but counters: a green resting on its
 call, a yellow timing its length. A tick's discrete effects (intervals,
@@ -120,6 +126,7 @@ from typing import Protocol
 import simpy
 
 from emulator.coordination import Coordinator, Plan
+from emulator.overlaps import Overlaps
 from hils.config import IntersectionConfig, NextPhaseLock, Phase, Recall
 from hils.ntcip import ControlColumn, CoordForceMode, PhaseStartup, UnitControlStatus, UnitFlashStatus
 
@@ -257,6 +264,7 @@ class Controller:
         start = start or config.emulator.start
         self.day0 = datetime.combine(start.date(), datetime.min.time())
         self.coordinator = Coordinator(config, clock=tenths((start - self.day0).total_seconds()))
+        self.overlaps = Overlaps(config)
         # Counts changes of the status objects (what a poll reads), across power cycles too.
         # Inputs count too: they change the calls the status shows.
         self.status_version = 0
@@ -280,6 +288,7 @@ class Controller:
         self._since_set: int | None = None  # ticks since the last control SET; None = backup timer disarmed
         self.rings = [Ring(i + 1, order) for i, order in enumerate(self.config.rings)]
         self.coordinator.reset()
+        self.overlaps.reset()
         self._placed: Plan | None = None  # the plan the rings' coordination latches were placed under
         self.group = 0
         self._waiting_across = False  # demand on a phase of another barrier group, this tick
@@ -298,6 +307,7 @@ class Controller:
             ring = self.rings[self._ring_of[p] - 1]
             ring.phase = p
             self._enter(ring, _STARTUP_INTERVAL[self.config.phases[p].startup], notify=False)
+        self._step_overlaps()
 
     def process(self, env: simpy.Environment, phase: float = 0.0):
         """SimPy process ticking the controller every 0.1 s, without accumulating float error.
@@ -382,15 +392,15 @@ class Controller:
     def _refresh_status(self) -> None:
         # A controller shows a handful of distinct status images: each is built once, keyed by what it is
         # made of (every ring's interval, phase, next phase and pedestrian interval).
-        key = None if self.flashing else tuple(
+        key = None if self.flashing else (tuple(
             (r.interval, r.phase, r.target,
              r.interval is Interval.GREEN and (r.ticks < r.walk) + (r.ticks < r.walk + r.ped_clear))
-            for r in self.rings)
+            for r in self.rings), self.overlaps.discrete())
         status = self._images.get(key)
         if status is None:
             status = self._images[key] = self._status_image()
         (self.greens, self.yellows, self.phase_ons, self.reds, self.walks, self.ped_clears, self.dont_walks,
-         self.phase_nexts) = status
+         self.phase_nexts, self.overlap_greens, self.overlap_yellows, self.overlap_reds) = status
         seen = (status, self.ped_calls)
         if seen != self._status_seen:
             self._status_seen = seen
@@ -413,10 +423,14 @@ class Controller:
                 if r.target is not None:
                     nexts.add(r.target)
         every = frozenset(self.config.phases)
-        # greens, yellows, phase ons, reds, walks, pedestrian clears, don't walks, and the phase each clearing
-        # ring has committed to serve next (decided at the start of its yellow)
+        ov = self.overlaps
+        overlaps = (frozenset(), frozenset()) if self.flashing else (ov.greens, ov.yellows)
+        # greens, yellows, phase ons, reds, walks, pedestrian clears, don't walks, the phase each clearing
+        # ring has committed to serve next (decided at the start of its yellow), and the overlaps' greens,
+        # yellows and reds
         return (frozenset(greens), frozenset(yellows), frozenset(ons), every - greens - yellows, frozenset(walks),
-                frozenset(clears), every - walks - clears, frozenset(nexts))
+                frozenset(clears), every - walks - clears, frozenset(nexts), *overlaps,
+                frozenset(self.config.overlaps) - overlaps[0] - overlaps[1])
 
     # --- the tick -------------------------------------------------------------------------
 
@@ -458,13 +472,14 @@ class Controller:
         self._decide(demand)
         for r in self.rings:
             self._enter_target(r)
+        self._step_overlaps()
         self._refresh_status()
         self._monitor()
 
     def _discrete(self) -> tuple:
         """Everything a step can change but counters (see "Quiet time" above)."""
         return (self.group, self.flash_status, self.control_status, self.ped_calls, self.status_version,
-                tuple(self.control.values()), self.coordinator.discrete(),
+                tuple(self.control.values()), self.coordinator.discrete(), self.overlaps.discrete(),
                 tuple((r.phase, r.interval, r.target, r.gapped, r.forced, r.yielded) for r in self.rings))
 
     # --- quiet time ----------------------------------------------------------------------
@@ -489,6 +504,9 @@ class Controller:
             ahead.append(coordination)
         if self.flashing:
             return min(ahead, default=None)
+        trailing = self.overlaps.quiet_ticks()
+        if trailing is not None:
+            ahead.append(max(1, trailing))
         for r in self.rings:
             if r.interval is Interval.GREEN:
                 for threshold in (r.minimum, r.walk, r.walk + r.ped_clear, r.limit):
@@ -515,6 +533,7 @@ class Controller:
             self._since_set += n
         if self.flashing:
             return
+        self.overlaps.skip(n)
         for r in self.rings:
             if r.interval is not Interval.DWELL:
                 r.ticks += n
@@ -731,6 +750,8 @@ class Controller:
         revert = self._yellow_end.get(t)
         if others_elsewhere or (revert is not None and self.tick - revert < self.timing[t].red_revert):
             return
+        if self.overlaps.blocks(t):
+            return  # a trailing overlap it conflicts with still shows
         r.phase, r.target = t, None
         self._enter(r, Interval.GREEN)
 
@@ -789,12 +810,25 @@ class Controller:
         floating = co.force_mode is CoordForceMode.FLOATING
         r.limit = plan.split[r.phase] - plan.clearance[r.phase] if floating else 0
 
+    def _step_overlaps(self) -> None:
+        """The overlaps follow what the phases show after this tick's timing."""
+        if not self.config.overlaps:
+            return
+        greens = frozenset(r.phase for r in self.rings if r.interval is Interval.GREEN)
+        yellows = frozenset(r.phase for r in self.rings if r.interval is Interval.YELLOW)
+        nexts = {r.phase: r.target for r in self.rings if r.interval is not Interval.GREEN and r.phase is not None}
+        self.overlaps.step(greens, yellows, nexts)
+
     def _monitor(self) -> None:
         shown = sorted(self.greens | self.yellows)
-        for i, a in enumerate(shown):
-            for b in shown[i + 1:]:
-                if not self.config.compatible(a, b):
-                    log.error("conflict monitor: phases %d and %d shown together at tick %d: flash", a, b, self.tick)
-                    self.flash_status = UnitFlashStatus.MMU
-                    self._refresh_status()
-                    return
+        cfg = self.config
+        conflict = next((f"phases {a} and {b}" for i, a in enumerate(shown) for b in shown[i + 1:]
+                         if not cfg.compatible(a, b)), None)
+        if conflict is None and cfg.overlaps:
+            conflict = next((f"overlap {cfg.overlaps[o].letter} and phase {p}"
+                             for o in sorted(self.overlap_greens | self.overlap_yellows) for p in shown
+                             if p in self.overlaps.conflicting[o]), None)
+        if conflict is not None:
+            log.error("conflict monitor: %s shown together at tick %d: flash", conflict, self.tick)
+            self.flash_status = UnitFlashStatus.MMU
+            self._refresh_status()

@@ -39,6 +39,10 @@ events                                     from
 41/42, 46/47, 48/49 hold, omit, ped omit   the hold, omit (with the running pattern's split-mode omits) and
                                            pedestrian omit objects as the controller applies them
 81, 82 / 89, 90 detector off, on           the vehicle and pedestrian detector inputs as the controller reads them
+61-65, 32/33 overlaps                      each overlap's display (:mod:`emulator.overlaps`) as it changes: begin green,
+                                           trailing green, yellow (its parent's or its own trailing one),
+                                           trailing red, off (red); a flashing yellow arrow's flashing begins and
+                                           ends the permissive (32, 33), numbered as the overlap (1 = A)
 131-149 pattern, cycle, offset, splits     a pattern starting (or laid out anew); 131 also when going free (254)
 150 cycle state                            its changes (free, in step, add, subtract, dwell) and each local zero
 151 yield point                            each coordinated phase's yield point
@@ -60,6 +64,7 @@ from datetime import datetime, timedelta
 
 from emulator.controller import Change, Controller, Interval, Termination
 from emulator.coordination import Coordinator
+from emulator.overlaps import Show
 from hils.config import Recall
 from hils.hires import MAX_PARAMETER, CycleState, Event, EventCode, split_code
 from hils.ntcip import ControlColumn, CoordCorrectionMode, UnitFlashStatus
@@ -68,6 +73,11 @@ E = EventCode
 
 _TERMINATIONS = {Termination.GAP_OUT: E.PHASE_GAP_OUT, Termination.MAX_OUT: E.PHASE_MAX_OUT,
                  Termination.FORCE_OFF: E.PHASE_FORCE_OFF}
+# What an overlap logs as it enters a display (Show.GREEN from a trailing green: it stays green, nothing).
+_OVERLAP = {Show.GREEN: E.OVERLAP_BEGIN_GREEN, Show.TRAIL_GREEN: E.OVERLAP_BEGIN_TRAILING_GREEN,
+            Show.YELLOW: E.OVERLAP_BEGIN_YELLOW, Show.TRAIL_YELLOW: E.OVERLAP_BEGIN_YELLOW,
+            Show.TRAIL_RED: E.OVERLAP_BEGIN_RED_CLEARANCE, Show.RED: E.OVERLAP_OFF,
+            Show.FLASHING: E.FYA_BEGIN_PERMISSIVE}
 # The on/off events of a set of numbers that the controller reads after each step.
 _ON_OFF = {
     "calls": (E.PHASE_CALL_REGISTERED, E.PHASE_CALL_DROPPED),
@@ -102,6 +112,7 @@ class _Seen:
     pattern: int | None = None
     plan: object = None
     state: CycleState | None = None
+    overlaps: dict[int, Show] = field(default_factory=dict)
 
 
 class DataLogger:
@@ -262,6 +273,15 @@ class DataLogger:
         for p in (seen.walks | seen.clears) - c.walks - c.ped_clears:
             self._add(E.PED_BEGIN_SOLID_DONT_WALK, p)
         seen.walks, seen.clears = c.walks, c.ped_clears
+        for n, shown in c.overlaps.shown.items():
+            before = seen.overlaps.get(n, Show.RED)
+            if shown is before:
+                continue
+            if before is Show.FLASHING:
+                self._add(E.FYA_END_PERMISSIVE, n)
+            if not (shown is Show.GREEN and before is Show.TRAIL_GREEN):
+                self._add(_OVERLAP[shown], n)
+        seen.overlaps = dict(c.overlaps.shown)
         if int(c.flash_status) != seen.flash:
             seen.flash = int(c.flash_status)
             self._add(E.UNIT_FLASH_STATUS_CHANGE, seen.flash)

@@ -68,7 +68,7 @@ from hils.ntcip import ControlColumn
 
 #: Controller attributes the NTCIP agent reads as status: published once per tick, late by the status delay.
 STATUS_ATTRIBUTES = ("reds", "yellows", "greens", "phase_ons", "phase_nexts", "calls", "walks", "ped_clears",
-                     "dont_walks", "ped_calls")
+                     "dont_walks", "ped_calls", "overlap_reds", "overlap_yellows", "overlap_greens")
 
 
 @dataclass(frozen=True, slots=True)

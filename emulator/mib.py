@@ -25,7 +25,7 @@ from typing import Any
 
 from emulator.controller import Controller
 from emulator.delays import DelayedController
-from hils.config import Phase, Recall
+from hils.config import OverlapKind, Phase, Recall
 from hils.ntcip import (
     CHANNEL_TABLE,
     CONTROL_TABLE,
@@ -37,6 +37,8 @@ from hils.ntcip import (
     DETECTOR_ACTUATION,
     DETECTOR_STATUS_ACTIVE,
     LOCAL_FREE_STATUS,
+    MAX_OVERLAP_STATUS_GROUPS,
+    MAX_OVERLAPS,
     MAX_PATTERNS,
     MAX_PED_DETECTOR_GROUPS,
     MAX_PED_DETECTORS,
@@ -44,6 +46,8 @@ from hils.ntcip import (
     MAX_PHASES,
     MAX_SPLITS,
     MAX_VEHICLE_DETECTORS,
+    OVERLAP_STATUS_TABLE,
+    OVERLAP_TABLE,
     PATTERN_TABLE,
     PATTERN_TABLE_TYPE,
     PED_DETECTOR_ACTUATION,
@@ -69,6 +73,9 @@ from hils.ntcip import (
     ErrorStatus,
     ObjectDef,
     Oid,
+    OverlapColumn,
+    OverlapStatusColumn,
+    OverlapType,
     PatternColumn,
     PhaseColumn,
     PhaseOption,
@@ -237,6 +244,7 @@ class MibView:
                              _group_writer(lambda col=col: c.control[col],
                                            lambda phases, col=col: c.set_control(col, phases), g))
                     for col in ControlColumn]
+        out += _overlaps(c, st)
         for r, order in enumerate(cfg.rings, start=1):
             out.append(Instance(sequence_oid(1, r), SEQUENCE_DATA, lambda o=order: bytes(o)))
         out += _detectors(cfg.detectors, MAX_VEHICLE_DETECTORS, VEHICLE_DETECTOR_CALL_PHASE, None,
@@ -315,6 +323,45 @@ def _coordination(c: Controller | DelayedController) -> list[Instance]:
     return out
 
 
+_OVERLAP_TYPES = {OverlapKind.NORMAL: OverlapType.NORMAL,
+                  OverlapKind.MINUS_GREEN_YELLOW: OverlapType.MINUS_GREEN_YELLOW,
+                  OverlapKind.FYA: OverlapType.OTHER}
+# Writable overlap columns: the OverlapTiming field each sets, and ticks per unit of the NTCIP value.
+_OVERLAP_TIMING: dict[OverlapColumn, tuple[str, int]] = {
+    OverlapColumn.TRAIL_GREEN: ("trail_green", 10),
+    OverlapColumn.TRAIL_YELLOW: ("trail_yellow", 1),
+    OverlapColumn.TRAIL_RED: ("trail_red", 1),
+}
+
+
+def _overlaps(c: Controller | DelayedController, st: Controller | DelayedController) -> list[Instance]:
+    """The overlap node: the overlap table (type and phases from the config, the trailing times writable, acting
+    from the next trailing interval on) and the overlap status by group of 8."""
+    cfg = c.config
+    groups = cfg.overlap_groups
+    out = [Instance(MAX_OVERLAPS.instance(), MAX_OVERLAPS, lambda: max(cfg.overlaps, default=0)),
+           Instance(MAX_OVERLAP_STATUS_GROUPS.instance(), MAX_OVERLAP_STATUS_GROUPS, lambda: groups)]
+    for n, o in cfg.overlaps.items():
+        fixed: dict[OverlapColumn, Value] = {
+            OverlapColumn.NUMBER: n, OverlapColumn.TYPE: int(_OVERLAP_TYPES[o.kind]),
+            OverlapColumn.INCLUDED_PHASES: bytes(o.included), OverlapColumn.MODIFIER_PHASES: bytes(o.modifiers)}
+        out += [Instance(OVERLAP_TABLE[col].instance(n), OVERLAP_TABLE[col], lambda v=v: v) for col, v in fixed.items()]
+        out += [Instance(OVERLAP_TABLE[col].instance(n), OVERLAP_TABLE[col],
+                         *_field_access(c, c.overlaps.timing[n], name, unit))
+                for col, (name, unit) in _OVERLAP_TIMING.items()]
+    status: dict[OverlapStatusColumn, Callable[[], frozenset[int]]] = {
+        OverlapStatusColumn.REDS: lambda: st.overlap_reds,
+        OverlapStatusColumn.YELLOWS: lambda: st.overlap_yellows,
+        OverlapStatusColumn.GREENS: lambda: st.overlap_greens,
+    }
+    for g in range(1, groups + 1):
+        out.append(Instance(OVERLAP_STATUS_TABLE[OverlapStatusColumn.NUMBER].instance(g),
+                            OVERLAP_STATUS_TABLE[OverlapStatusColumn.NUMBER], lambda g=g: g))
+        out += [Instance(OVERLAP_STATUS_TABLE[col].instance(g), OVERLAP_STATUS_TABLE[col],
+                         _group_reader(read, g, groups)) for col, read in status.items()]
+    return out
+
+
 # Status is read at 10-100 Hz and takes few distinct values: convert each phase set once.
 _masks = lru_cache(maxsize=1024)(phases_to_groups)
 
@@ -324,6 +371,17 @@ def _timing_access(c: Controller | DelayedController, phase: int, name: str, uni
     """Read and write one timing field in NTCIP units (seconds or tenths); the controller counts ticks."""
     timing = c.timing[phase]
     return lambda: getattr(timing, name) // unit, lambda v: c.set_timing(phase, name, v * unit)
+
+
+def _field_access(c: Controller | DelayedController, row: Any, name: str, unit: int
+                  ) -> tuple[Callable[[], int], Callable[[int], None]]:
+    """Read and write one field of a timing row in NTCIP units; a write wakes the controller (a threshold moved)."""
+
+    def write(v: int) -> None:
+        setattr(row, name, v * unit)
+        c.touch()
+
+    return lambda: getattr(row, name) // unit, write
 
 
 def _group_reader(read: Callable[[], frozenset[int]], group: int, groups: int) -> Callable[[], int]:

@@ -128,6 +128,40 @@ class Coordination:
         return replace(self, pattern=at_midnight if at_midnight != FREE else min(self.patterns))
 
 
+class OverlapKind(StrEnum):
+    """An overlap's type (NTCIP 1202 overlapType; ``fya`` is a vendor type there, other(1))."""
+
+    NORMAL = "normal"                          # green with its included phases (and while they cycle among them)
+    MINUS_GREEN_YELLOW = "minus_green_yellow"  # as normal, but not while a modifier phase is green
+    FYA = "fya"  # a flashing yellow arrow: green arrow with its protected (included) phases, flashing yellow while a
+    # modifier (the opposing through, the movement it yields to) is green
+
+
+OVERLAP_TURNS = ("left", "right")
+
+
+@dataclass(frozen=True, slots=True)
+class Overlap:
+    """One row of the overlap table: a signal output driven by its included (parent) phases.
+
+    ``approach`` and ``turn`` name the movement it shows in SUMO (a right turn, or an FYA's left): those links
+    follow the overlap instead of the phase of their approach."""
+
+    number: int  # 1 = Overlap A
+    kind: OverlapKind
+    included: tuple[int, ...]
+    modifiers: tuple[int, ...] = ()
+    trail_green: int = 0       # s the green goes on after its included phases end (0: it clears with them)
+    trail_yellow: float = 3.0  # s of the overlap's own yellow after a trailing green
+    trail_red: float = 0.0     # s of the overlap's own red clearance after a trailing green
+    approach: str | None = None
+    turn: str | None = None
+
+    @property
+    def letter(self) -> str:
+        return chr(ord("A") + self.number - 1)
+
+
 # Options of the whole controller unit that [timing] holds beside the phase defaults.
 _UNIT_OPTIONS = ("startup_flash", "next_phase_lock")
 
@@ -230,6 +264,7 @@ class IntersectionConfig:
     detector_phases: Mapping[int, int] = field(default_factory=dict)  # the [detectors] table, if any
     detector_lanes: Mapping[int, str] = field(default_factory=dict)  # the SUMO lane of a detector given one
     ped_detector_phases: Mapping[int, int] = field(default_factory=dict)  # the [pedestrian_detectors] table, if any
+    overlaps: Mapping[int, Overlap] = field(default_factory=dict)  # by overlap number (1 = A)
 
     @property
     def detectors(self) -> dict[int, int]:
@@ -248,6 +283,20 @@ class IntersectionConfig:
     def groups(self) -> int:
         """Number of NTCIP phase groups (8 phases each) this intersection needs."""
         return group_count(max(self.phases))
+
+    @property
+    def overlap_groups(self) -> int:
+        """Number of NTCIP overlap status groups (8 overlaps each) this intersection needs (0 without overlaps)."""
+        return group_count(max(self.overlaps, default=0))
+
+    def overlap_allows(self, overlap: int, phase: int) -> bool:
+        """True when ``phase`` may show green or yellow beside the overlap's green or yellow: it is one of the
+        overlap's included phases (or, for a flashing yellow arrow, its permissive modifiers) or runs beside one
+        of them. Phases outside that set conflict with it (what the conflict monitor checks, and what waits for a
+        trailing overlap to clear)."""
+        o = self.overlaps[overlap]
+        parents = o.included + (o.modifiers if o.kind is OverlapKind.FYA else ())
+        return any(phase == q or self.compatible(phase, q) for q in parents)
 
     @property
     def phase_numbers(self) -> tuple[int, ...]:
@@ -505,7 +554,7 @@ def _matrix(raw: Mapping[str, Any], numbers: list[int], source: str) -> frozense
 
 def from_dict(raw: Mapping[str, Any], source: str = "<memory>") -> IntersectionConfig:
     _unknown(raw, ("name", "timing", "phases", "structure", "middleware", "emulator", "detectors",
-                   "pedestrian_detectors", "coordination"), "", source)
+                   "pedestrian_detectors", "coordination", "overlaps"), "", source)
     name = raw.get("name", Path(source).stem)
     if not isinstance(name, str):
         raise ConfigError(source, "name", "must be a string")
@@ -625,6 +674,7 @@ def from_dict(raw: Mapping[str, Any], source: str = "<memory>") -> IntersectionC
         emulator=_emulator(raw.get("emulator", {}), source),
         **_detectors(raw.get("detectors", {}), phases, source),
         ped_detector_phases=_ped_detectors(raw.get("pedestrian_detectors", {}), phases, source),
+        overlaps=_overlaps(raw.get("overlaps", {}), phases, compatibility, source),
     )
 
 
@@ -793,3 +843,94 @@ def _pattern(raw: Mapping[str, Any], w: str, phases: Mapping[int, Phase], rings:
             raise ConfigError(source, f"{w}splits", f"the rings reach barrier {b} at different times (ring sums in its "
                                                     f"group: {sums}); allowed: equal sums in every barrier group")
     return Pattern(number, cycle, offset, tuple(coord), splits)
+
+
+# --- [overlaps] -----------------------------------------------------------------------------------
+
+
+def _overlaps(raw: Any, phases: Mapping[int, Phase], compatibility: frozenset[frozenset[int]],
+              source: str) -> dict[int, Overlap]:
+    """``[overlaps]``: a table per overlap letter (A-P; NTCIP numbers them 1 = A), e.g.
+    ``A = { included = [8, 5], approach = "south", turn = "right" }``."""
+    if not isinstance(raw, dict):
+        raise ConfigError(source, "overlaps", "must be a table of overlaps by letter, e.g. A = { included = [8, 5] }")
+    out = {}
+    for key, item in raw.items():
+        if not (len(key) == 1 and "A" <= key <= "P"):
+            raise ConfigError(source, f"overlaps.{key}", "is not an overlap letter; allowed: A to P")
+        out[ord(key) - ord("A") + 1] = _overlap(ord(key) - ord("A") + 1, item, f"overlaps.{key}.", phases,
+                                                 compatibility, source)
+    claimed: dict[tuple[str, str], str] = {}
+    for o in out.values():
+        if o.approach is not None:
+            movement = (o.approach, o.turn)
+            if movement in claimed:
+                raise ConfigError(source, f"overlaps.{o.letter}.turn", f"overlap {claimed[movement]} already shows the "
+                                                                     f"{o.turn} turn of the {o.approach} approach")
+            claimed[movement] = o.letter
+    return dict(sorted(out.items()))
+
+
+def _overlap(number: int, raw: Any, w: str, phases: Mapping[int, Phase], compatibility: frozenset[frozenset[int]],
+             source: str) -> Overlap:
+    if not isinstance(raw, dict):
+        raise ConfigError(source, w[:-1], "must be a table: included, modifiers, type, trail_green, trail_yellow, "
+                                          "trail_red, approach, turn")
+    _unknown(raw, ("type", "included", "modifiers", "trail_green", "trail_yellow", "trail_red", "approach", "turn"),
+             w, source)
+    kind = raw.get("type", OverlapKind.NORMAL.value)
+    if kind not in tuple(OverlapKind):
+        raise ConfigError(source, f"{w}type", f"is {kind!r}; allowed: {', '.join(k.value for k in OverlapKind)}")
+    kind = OverlapKind(kind)
+    lists = {}
+    for key in ("included", "modifiers"):
+        value = _int_list(raw.get(key, []), f"{w}{key}", source)
+        unknown = [p for p in value if p not in phases]
+        if unknown or len(set(value)) != len(value):
+            raise ConfigError(source, f"{w}{key}", f"is {value}; allowed: distinct configured phases "
+                                                   f"({', '.join(map(str, phases))})")
+        lists[key] = tuple(value)
+    included, modifiers = lists["included"], lists["modifiers"]
+    if not included:
+        raise ConfigError(source, f"{w}included", "is required: the phases (parents) whose green the overlap shows")
+    both = sorted(set(included) & set(modifiers))
+    if both:
+        raise ConfigError(source, f"{w}modifiers", f"phase(s) {both} are also included; allowed: phases not included")
+    # NTCIP 1202 overlapModifierPhases: "A null value provides a normal overlap type. A non-null value provides a
+    # minusGreenYellow overlap type."
+    if kind is OverlapKind.NORMAL and modifiers:
+        raise ConfigError(source, f"{w}modifiers", "is given for a normal overlap; allowed: none (modifiers make a "
+                                                   "minus_green_yellow or fya overlap)")
+    if kind is not OverlapKind.NORMAL and not modifiers:
+        raise ConfigError(source, f"{w}modifiers", f"is required for type {kind.value!r}: "
+                                                   + ("the phases whose green holds the overlap red"
+                                                      if kind is OverlapKind.MINUS_GREEN_YELLOW else
+                                                      "the permissive phases (the opposing through the turn yields "
+                                                      "to) during whose green the arrow flashes"))
+    if kind is OverlapKind.FYA:
+        # The arrow flashes while the opposing through is green: that phase never runs beside the protected turn.
+        bad = [(m, p) for m in modifiers for p in included if frozenset((m, p)) in compatibility]
+        if bad:
+            m, p = bad[0]
+            raise ConfigError(source, f"{w}modifiers", f"phase {m} runs beside protected phase {p}; allowed: "
+                                                       "permissive phases that conflict with every included phase")
+    trail_green = _number(raw, "trail_green", w, source, 0, integer=True, low=0, high=255)
+    if trail_green and kind is OverlapKind.FYA:
+        raise ConfigError(source, f"{w}trail_green", "is given for an fya overlap; allowed: 0 (a flashing yellow "
+                                                     "arrow clears with its phases)")
+    # NTCIP 1202 overlapTrailYellow: "NEMA range: 3.0-25.5 sec"; overlapTrailRed 0-25.5 s.
+    trail_yellow = _number(raw, "trail_yellow", w, source, 3.0, low=3.0, high=25.5, step=0.1)
+    trail_red = _number(raw, "trail_red", w, source, 0.0, low=0.0, high=25.5, step=0.1)
+    approach, turn = raw.get("approach"), raw.get("turn")
+    if (approach is None) != (turn is None):
+        missing, given = ("turn", "approach") if turn is None else ("approach", "turn")
+        raise ConfigError(source, f"{w}{missing}", f"is required with {given}: both name the movement shown")
+    if approach is not None and approach not in APPROACHES:
+        raise ConfigError(source, f"{w}approach", f"is {approach!r}; allowed: {', '.join(APPROACHES)}")
+    allowed_turns = ("left",) if kind is OverlapKind.FYA else OVERLAP_TURNS
+    if turn is not None and turn not in allowed_turns:
+        raise ConfigError(source, f"{w}turn", f"is {turn!r}; allowed: {', '.join(allowed_turns)}"
+                                              + (" (a flashing yellow arrow shows a left turn)"
+                                                 if kind is OverlapKind.FYA else ""))
+    return Overlap(number, kind, included, modifiers, trail_green, float(trail_yellow), float(trail_red), approach,
+                   turn)

@@ -346,6 +346,58 @@ SEQUENCE_DATA = _o("sequenceData", (7, 3, 1, 3), Syntax.OCTET_STRING)
 # ringControlGroupMax2 (A.1.7.5.1.4.g): bit k-1 of group 1 selects Maximum 2 for ring k.
 RING_CONTROL_MAX2 = _o("ringControlGroupMax2", (7, 5, 1, 4), access=Access.READ_WRITE)
 
+# Overlaps (NTCIP 1202 v02 node overlap, A.9; OIDs, ranges and the overlapType enumeration from the same ASC
+# MIB): the overlap table by overlap number (1 = Overlap A) and the overlap status by group of 8 overlaps.
+MAX_OVERLAPS = _o("maxOverlaps", (9, 1))
+MAX_OVERLAP_STATUS_GROUPS = _o("maxOverlapStatusGroups", (9, 3))
+
+
+class OverlapType(IntEnum):
+    """overlapType (A.9.2.1.2). NTCIP 1202 v02 knows normal and minusGreenYellow; a flashing yellow arrow is a
+    vendor's type there, other(1)."""
+
+    OTHER = 1
+    NORMAL = 2
+    MINUS_GREEN_YELLOW = 3
+
+
+class OverlapColumn(IntEnum):
+    """Columns of overlapTable (A.9.2.1.c.overlap)."""
+
+    NUMBER = 1
+    TYPE = 2
+    INCLUDED_PHASES = 3
+    MODIFIER_PHASES = 4
+    TRAIL_GREEN = 5
+    TRAIL_YELLOW = 6
+    TRAIL_RED = 7
+
+
+class OverlapStatusColumn(IntEnum):
+    """Columns of overlapStatusGroupTable (A.9.4.1.c.group); bit k of group g is overlap 8(g-1)+k+1."""
+
+    NUMBER = 1
+    REDS = 2
+    YELLOWS = 3
+    GREENS = 4
+
+
+# Type and phases come from the intersection config (read-only here, like a phase's ring and concurrency);
+# the trailing times are writable with the MIB's ranges (green in seconds, yellow and red in tenths; the yellow
+# from 3.0 s, "NEMA range: 3.0-25.5 sec", as the phase table's yellow change).
+OVERLAP_TABLE: dict[OverlapColumn, ObjectDef] = {
+    OverlapColumn.NUMBER: _o("overlapNumber", (9, 2, 1, 1), low=1),
+    OverlapColumn.TYPE: _o("overlapType", (9, 2, 1, 2), low=1, high=3),
+    OverlapColumn.INCLUDED_PHASES: _o("overlapIncludedPhases", (9, 2, 1, 3), Syntax.OCTET_STRING),
+    OverlapColumn.MODIFIER_PHASES: _o("overlapModifierPhases", (9, 2, 1, 4), Syntax.OCTET_STRING),
+    OverlapColumn.TRAIL_GREEN: _o("overlapTrailGreen", (9, 2, 1, 5), access=Access.READ_WRITE),
+    OverlapColumn.TRAIL_YELLOW: _o("overlapTrailYellow", (9, 2, 1, 6), access=Access.READ_WRITE, low=30),
+    OverlapColumn.TRAIL_RED: _o("overlapTrailRed", (9, 2, 1, 7), access=Access.READ_WRITE),
+}
+OVERLAP_STATUS_TABLE: dict[OverlapStatusColumn, ObjectDef] = {
+    col: _o("overlapStatusGroup" + col.name.title(), (9, 4, 1, int(col))) for col in OverlapStatusColumn
+}
+
 # Vehicle detectors (A.1.2): the detector table (call phase, options), the active detectors by group of 8
 # (vehicleDetectorStatusGroupActive) and NTCIP 1202 v03's remote actuation by group of 8
 # (vehicleDetectorControlGroupActuation: a set bit forces that detector's actuation, as a cabinet input would).
@@ -371,6 +423,7 @@ ALL_OBJECTS: tuple[ObjectDef, ...] = (
     VEHICLE_DETECTOR_CALL_PHASE, DETECTOR_STATUS_ACTIVE, DETECTOR_ACTUATION, MAX_PED_DETECTORS,
     PED_DETECTOR_CALL_PHASE, MAX_PED_DETECTOR_GROUPS, PED_DETECTOR_STATUS_ACTIVE, PED_DETECTOR_ACTUATION,
     *PHASE_TABLE.values(), *STATUS_TABLE.values(), *CONTROL_TABLE.values(), *CHANNEL_TABLE.values(),
+    MAX_OVERLAPS, MAX_OVERLAP_STATUS_GROUPS, *OVERLAP_TABLE.values(), *OVERLAP_STATUS_TABLE.values(),
 )
 
 
@@ -438,25 +491,47 @@ def object_for(oid: Oid) -> ObjectDef | None:
 SIGNAL_COLUMNS = (StatusColumn.REDS, StatusColumn.YELLOWS, StatusColumn.GREENS)
 
 
-def signal_oids(groups: int) -> tuple[Oid, ...]:
-    """The OIDs of one signal-state poll: reds, yellows, greens, each for groups 1..n."""
-    return tuple(status_oid(col, g) for col in SIGNAL_COLUMNS for g in range(1, groups + 1))
+OVERLAP_SIGNAL_COLUMNS = (OverlapStatusColumn.REDS, OverlapStatusColumn.YELLOWS, OverlapStatusColumn.GREENS)
+
+
+def signal_oids(groups: int, overlap_groups: int = 0) -> tuple[Oid, ...]:
+    """The OIDs of one signal-state poll: reds, yellows, greens, each for groups 1..n; then, when the
+    intersection has overlaps, the overlaps' reds, yellows and greens by overlap status group."""
+    return (tuple(status_oid(col, g) for col in SIGNAL_COLUMNS for g in range(1, groups + 1))
+            + tuple(OVERLAP_STATUS_TABLE[col].instance(g) for col in OVERLAP_SIGNAL_COLUMNS
+                    for g in range(1, overlap_groups + 1)))
 
 
 @dataclass(frozen=True, slots=True)
-class SignalState:
-    """The phases showing red, yellow and green, as read in one poll."""
+class OverlapState:
+    """The overlaps (by number, 1 = A) showing red, yellow and green, as read in one poll."""
 
     reds: frozenset[int]
     yellows: frozenset[int]
     greens: frozenset[int]
 
+
+@dataclass(frozen=True, slots=True)
+class SignalState:
+    """The phases showing red, yellow and green, as read in one poll; the overlaps' when the poll read them."""
+
+    reds: frozenset[int]
+    yellows: frozenset[int]
+    greens: frozenset[int]
+    overlaps: OverlapState | None = None
+
     @classmethod
-    def from_values(cls, values: Sequence[int], groups: int) -> SignalState:
+    def from_values(cls, values: Sequence[int], groups: int, overlap_groups: int = 0) -> SignalState:
         """Decode the values of a poll of :func:`signal_oids` (same order)."""
-        if len(values) != 3 * groups:
-            raise ValueError(f"a signal poll has {3 * groups} values, got {len(values)}")
-        return cls(*(groups_to_phases(values[i * groups:(i + 1) * groups]) for i in range(3)))
+        if len(values) != 3 * (groups + overlap_groups):
+            raise ValueError(f"a signal poll has {3 * (groups + overlap_groups)} values, got {len(values)}")
+        phases = [groups_to_phases(values[i * groups:(i + 1) * groups]) for i in range(3)]
+        if not overlap_groups:
+            return cls(*phases)
+        rest = values[3 * groups:]
+        overlaps = OverlapState(*(groups_to_phases(rest[i * overlap_groups:(i + 1) * overlap_groups])
+                                  for i in range(3)))
+        return cls(*phases, overlaps)
 
     def indication(self, phase: int) -> str:
         """'G', 'Y' or 'r' for one phase (SUMO's letters)."""

@@ -37,8 +37,11 @@ from hils.ntcip import (
     COORD_FORCE_MODE,
     COORD_PATTERN_STATUS,
     LOCAL_FREE_STATUS,
+    MAX_OVERLAPS,
     MAX_PHASE_GROUPS,
     MAX_PHASES,
+    OVERLAP_STATUS_TABLE,
+    OVERLAP_TABLE,
     PATTERN_TABLE,
     SPLIT_TABLE,
     SYSTEM_PATTERN_CONTROL,
@@ -47,6 +50,8 @@ from hils.ntcip import (
     ErrorStatus,
     LocalFreeStatus,
     Oid,
+    OverlapColumn,
+    OverlapStatusColumn,
     PatternColumn,
     PhaseColumn,
     PhaseOption,
@@ -58,6 +63,7 @@ from hils.ntcip import (
     phase_oid,
     status_oid,
 )
+from hils.sumo_net import data_path
 from hils.transport import Latency
 
 A = oid_str(ASC)
@@ -248,6 +254,34 @@ def test_the_coordination_objects_walk_and_set_within_ntcip_ranges(tmp_path: Pat
             assert "wrongValue" in done.stderr, done.stderr
         done = run("snmpset", "2c", "private", served.port, oid_str(COORD_FORCE_MODE.instance()), "i", "2")
         assert done.returncode == 0 and integers(served.port, oid_str(COORD_FORCE_MODE.instance())) == [2]
+    finally:
+        served.stop()
+
+
+def test_the_overlap_objects_walk_and_the_trailing_times_set_within_ntcip_ranges(tmp_path: Path) -> None:
+    """The overlap node (A.9) of the city four-leg walked by snmpwalk: its table (types, included and modifier
+    phases) and its status with 2+6 green at start-up; a trailing yellow below NEMA's 3.0 s is refused."""
+    served = start_emulator(tmp_path / "serve.log", "--config", str(data_path("four_leg_city.toml")))
+    try:
+        done = run("snmpwalk", "2c", "public", served.port, A + ".9")
+        assert done.returncode == 0, done.stderr
+        got = values(done.stdout)
+        assert got[oid_str(MAX_OVERLAPS.instance())] == "INTEGER: 8"
+        types = [got[oid_str(OVERLAP_TABLE[OverlapColumn.TYPE].instance(n))] for n in range(1, 9)]
+        assert types == ["INTEGER: 2"] * 4 + ["INTEGER: 1"] * 4  # normal right turns, fya (other) lefts
+        assert got[oid_str(OVERLAP_TABLE[OverlapColumn.INCLUDED_PHASES].instance(1))] == 'Hex-STRING: 08 05 '
+        # The node ends the MIB: the walk's last answer is endOfMibView.
+        assert done.stdout.rstrip().endswith("No more variables left in this MIB View (It is past the end of the "
+                                             "MIB tree)")
+        # C (6, 3) and D (2, 7) green with 2+6; E and F flash beside them (their yellow bit).
+        status = [oid_str(OVERLAP_STATUS_TABLE[col].instance(1)) for col in
+                  (OverlapStatusColumn.REDS, OverlapStatusColumn.YELLOWS, OverlapStatusColumn.GREENS)]
+        assert integers(served.port, *status) == [195, 48, 12]
+        trail_yellow = oid_str(OVERLAP_TABLE[OverlapColumn.TRAIL_YELLOW].instance(1))
+        done = run("snmpset", "2c", "private", served.port, trail_yellow, "i", "29")
+        assert "wrongValue" in done.stderr, done.stderr
+        done = run("snmpset", "2c", "private", served.port, trail_yellow, "i", "40")
+        assert done.returncode == 0 and integers(served.port, trail_yellow) == [40]
     finally:
         served.stop()
 

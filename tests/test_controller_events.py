@@ -28,9 +28,9 @@ TIMING_FIELDS = ("min_green", "max1", "max2", "passage", "walk", "ped_clear", "y
 
 @st.composite
 def units(draw: st.DrawFn) -> IntersectionConfig:
-    """A random config with a start-up flash, a backup time and the controller's delays drawn too, and half the
-    time a coordination plan (patterns, modes, maybe a time-of-day change)."""
-    cfg = draw(configs(coordinated=draw(st.booleans())))
+    """A random config with a start-up flash, a backup time and the controller's delays drawn too, half the
+    time a coordination plan (patterns, modes, maybe a time-of-day change) and half the time overlaps."""
+    cfg = draw(configs(coordinated=draw(st.booleans()), overlapped=draw(st.booleans())))
     return dataclasses.replace(
         cfg, startup_flash=draw(st.sampled_from([0, 0, 1, 3])),
         middleware=dataclasses.replace(cfg.middleware, backup_time=draw(st.sampled_from([0, 2, 5, 30]))),
@@ -92,7 +92,8 @@ def memory(c: Controller) -> dict[str, object]:
     return {"tick": c.tick, "rings": [dataclasses.astuple(r) for r in c.rings], "group": c.group,
             "since_set": c._since_set, "yellow_end": dict(c._yellow_end), "ped_calls": c.ped_calls,
             "coordination": (co.clock, co.command, co.local, co.running, co.timer, co.budget, co.free_status,
-                             co.replan)}
+                             co.replan),
+            "overlaps": (dict(c.overlaps.shown), dict(c.overlaps.ticks))}
 
 
 def twins(config: IntersectionConfig, delayed: bool) -> list[tuple[Controller | DelayedController, list[Change]]]:

@@ -22,7 +22,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from emulator.controller import Controller, tenths
-from hils.config import IntersectionConfig, from_dict
+from hils.config import IntersectionConfig, OverlapKind, from_dict
 from hils.ntcip import ControlColumn, UnitFlashStatus
 
 RING1, RING2 = (1, 2, 3, 4), (5, 6, 7, 8)
@@ -56,9 +56,10 @@ def timings(draw: st.DrawFn) -> dict[str, object]:
 
 
 @st.composite
-def configs(draw: st.DrawFn, coordinated: bool = False) -> IntersectionConfig:
+def configs(draw: st.DrawFn, coordinated: bool = False, overlapped: bool = False) -> IntersectionConfig:
     """Dual-ring two-barrier eight-phase intersections with random barrier positions and timings; with
-    ``coordinated``, a [coordination] section whose patterns fit them."""
+    ``coordinated``, a [coordination] section whose patterns fit them; with ``overlapped``, up to three
+    overlaps of every type."""
     k1, k2 = draw(st.integers(1, 3)), draw(st.integers(1, 3))
     barriers = [list(RING1[:k1] + RING2[:k2]), list(RING1[k1:] + RING2[k2:])]
     compatible = [[a, b] for group in barriers for a in RING1 for b in RING2 if a in group and b in group]
@@ -82,7 +83,35 @@ def configs(draw: st.DrawFn, coordinated: bool = False) -> IntersectionConfig:
     }
     if coordinated:
         raw["coordination"] = draw(coordinations(phases, barriers))
+    if overlapped:
+        raw["overlaps"] = draw(overlap_tables(compatible))
     return from_dict(raw, "random.toml")
+
+
+@st.composite
+def overlap_tables(draw: st.DrawFn, compatible: list[list[int]]) -> dict:
+    """Up to three overlaps: normal or minus-green-yellow ones with random parents (and maybe a trailing green),
+    flashing yellow arrows with a protected phase and permissive phases that conflict with it."""
+    out = {}
+    for letter in "ABC"[:draw(st.integers(0, 3))]:
+        kind = draw(st.sampled_from(["normal", "minus_green_yellow", "fya"]))
+        if kind == "fya":
+            p = draw(st.sampled_from(sorted(ALL_PHASES)))
+            conflicting = [q for q in sorted(ALL_PHASES) if q != p and sorted((p, q)) not in compatible
+                           and [q, p] not in compatible]
+            out[letter] = {"type": kind, "included": [p], "modifiers": draw(
+                st.lists(st.sampled_from(conflicting), min_size=1, max_size=2, unique=True))}
+            continue
+        included = draw(st.lists(st.sampled_from(sorted(ALL_PHASES)), min_size=1, max_size=3, unique=True))
+        entry: dict = {"type": kind, "included": included}
+        if kind == "minus_green_yellow":
+            entry["modifiers"] = draw(st.lists(st.sampled_from(sorted(ALL_PHASES - set(included))), min_size=1,
+                                               max_size=2, unique=True))
+        if draw(st.booleans()):
+            entry |= {"trail_green": draw(st.integers(1, 5)), "trail_yellow": draw(st.integers(30, 50)) / 10,
+                      "trail_red": draw(st.integers(0, 20)) / 10}
+        out[letter] = entry
+    return out
 
 
 @st.composite
@@ -150,6 +179,8 @@ class Monitor:
     yellow_since: dict[int, int] = field(default_factory=dict)
     clear_at: dict[int, int] = field(default_factory=dict)  # first tick a conflicting green may start
     shown: dict[int, str] = field(default_factory=dict)
+    overlaps: dict[int, str] = field(default_factory=dict)  # each overlap's G, Y or r (its status bits)
+    flashing: frozenset[int] = frozenset()  # flashing yellow arrows flashing
     walked: set[int] = field(default_factory=set)  # greens that showed a walk
     yellow_end: dict[int, int] = field(default_factory=dict)
     last_green: dict[int, tuple[int, int]] = field(default_factory=dict)  # ring -> (start, end) in this group
@@ -158,6 +189,7 @@ class Monitor:
 
     def __post_init__(self) -> None:
         self.shown = self._display()
+        self.overlaps = self._overlap_display()
         self.green_since = {p: 0 for p in self.c.greens}
         self.group = next((self.c.config.barrier_of(p) for p in self.c.greens), None)
         self.check_instant()
@@ -165,6 +197,10 @@ class Monitor:
     def _display(self) -> dict[int, str]:
         c = self.c
         return {p: "G" if p in c.greens else "Y" if p in c.yellows else "r" for p in ALL_PHASES}
+
+    def _overlap_display(self) -> dict[int, str]:
+        c = self.c
+        return {o: "G" if o in c.overlap_greens else "Y" if o in c.overlap_yellows else "r" for o in c.config.overlaps}
 
     def conflicting(self, a: int, b: int) -> bool:
         return a == b or not self.c.config.compatible(a, b)
@@ -178,6 +214,9 @@ class Monitor:
         for i, a in enumerate(lit):
             for b in lit[i + 1:]:
                 assert not self.conflicting(a, b), f"phases {a} and {b} shown together at tick {c.tick}"
+        for o in c.overlap_greens | c.overlap_yellows:
+            for p in lit:
+                assert c.config.overlap_allows(o, p), f"overlap {o} and phase {p} shown together at tick {c.tick}"
 
     def step(self, ticks: int = 1) -> None:
         for _ in range(ticks):
@@ -223,6 +262,21 @@ class Monitor:
                         assert t >= ready, f"phase {p} green at tick {t} before {q} cleared at {ready}"
                 self.green_since[p] = t
         self.shown = now
+        self.observe_overlaps()
+
+    def observe_overlaps(self) -> None:
+        """An overlap goes green, yellow, red: never from red to a steady yellow, never from yellow to green (a
+        flashing yellow arrow's flashing, on its yellow bit, starts from red and may give way to the green
+        arrow), and from green to red only when a minus-green-yellow overlap's modifier turns green."""
+        c, now = self.c, self._overlap_display()
+        for o, before in self.overlaps.items():
+            after, ov = now[o], c.config.overlaps[o]
+            step = f"overlap {ov.letter} ({ov.kind.value}) from {before} to {after} at tick {c.tick}"
+            assert (before, after) != ("r", "Y") or o in c.overlaps.flashing, step
+            assert (before, after) != ("Y", "G") or o in self.flashing, step
+            if (before, after) == ("G", "r"):
+                assert ov.kind is OverlapKind.MINUS_GREEN_YELLOW and c.greens & set(ov.modifiers), step
+        self.overlaps, self.flashing = now, c.overlaps.flashing
 
     def enter_group(self, group: int) -> None:
         """A green starts in ``group``: if that crosses a barrier, the rings' last greens, when they overlapped,
@@ -256,13 +310,15 @@ def service_bound(config: IntersectionConfig) -> int:
     visit of every group: at most one cycle of every phase at maximum, plus the
     green already running when the calls were placed.
     """
+    trailing = max((o.trail_green * 10 + tenths(o.trail_yellow) + tenths(o.trail_red) for o in config.overlaps.values()
+                    if o.trail_green), default=0)  # a phase may wait for a trailing overlap to clear
     per_phase = [tenths(max(ph.max_green, ph.maximum2)) + tenths(ph.yellow) + max(tenths(ph.red_clear),
-                 tenths(ph.red_revert)) for ph in config.phases.values()]
+                 tenths(ph.red_revert)) + trailing for ph in config.phases.values()]
     return sum(per_phase) + max(per_phase) + 10
 
 
 @SETTINGS
-@given(config=configs(), ops=operations)
+@given(config=configs(overlapped=True), ops=operations)
 def test_safety_under_random_control(config: IntersectionConfig, ops: list[tuple[object, object]]) -> None:
     monitor = Monitor(Controller(config))
     for operation in ops:
@@ -272,7 +328,7 @@ def test_safety_under_random_control(config: IntersectionConfig, ops: list[tuple
 
 
 @SETTINGS
-@given(config=configs(), prefix=operations, calls=phase_sets.filter(bool), omit=phase_sets,
+@given(config=configs(overlapped=True), prefix=operations, calls=phase_sets.filter(bool), omit=phase_sets,
        force_off=phase_sets)
 def test_every_called_phase_is_served_within_the_bound(config: IntersectionConfig,
                                                        prefix: list[tuple[object, object]],
@@ -300,7 +356,7 @@ def test_every_called_phase_is_served_within_the_bound(config: IntersectionConfi
 
 
 @SETTINGS
-@given(config=configs(), calls=phase_sets.filter(bool))
+@given(config=configs(overlapped=True), calls=phase_sets.filter(bool))
 def test_a_phase_with_hold_and_a_conflicting_call_never_ends(config: IntersectionConfig,
                                                              calls: frozenset[int]) -> None:
     c = Controller(config)

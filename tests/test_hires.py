@@ -276,3 +276,24 @@ def test_since_keeps_the_events_from_that_time_on() -> None:
     assert log.events(cut) == [e for e in events if e.time >= cut]
     assert log.events(cut + timedelta(microseconds=1)) == [e for e in events if e.time > cut]
     assert log.events(events[0].time - timedelta(days=1)) == events
+
+
+def test_overlaps_are_logged_with_the_phases_that_drive_them() -> None:
+    """The four-leg as a city runs it: right-turn overlaps A-D and flashing yellow arrows E-H (numbered 1-8)."""
+    c = Controller(config_mod.load(Path(__file__).parents[1] / "hils/data/four_leg_city.toml"))
+    log, timeline = logged(c)
+    run(c, 50)
+    c.set_control(ControlColumn.VEH_CALL, {4, 8})
+    run(c, 120)
+    yellow = next(clock for clock, ch in timeline if ch.interval is Interval.YELLOW and ch.phase == 2)
+    green = next(clock for clock, ch in timeline if ch.interval is Interval.GREEN and ch.phase == 4)
+    A, B, C, D, E_, F, G, H = range(1, 9)  # noqa: N806 - the overlaps' letters
+    # 2 and 6 clear: their right turns C and D turn yellow; the arrows E and F, flashing while 2 and 6 were green,
+    # end their permissive and show a steady yellow.
+    assert {(E.OVERLAP_BEGIN_YELLOW, C), (E.OVERLAP_BEGIN_YELLOW, D), (E.FYA_END_PERMISSIVE, E_),
+            (E.FYA_END_PERMISSIVE, F), (E.OVERLAP_BEGIN_YELLOW, E_), (E.OVERLAP_BEGIN_YELLOW, F)} <= at(log, yellow)
+    # 4 and 8 start: their right turns A and B green, the arrows G and H (yielding to 4 and 8) flash.
+    assert {(E.OVERLAP_BEGIN_GREEN, A), (E.OVERLAP_BEGIN_GREEN, B), (E.FYA_BEGIN_PERMISSIVE, G),
+            (E.FYA_BEGIN_PERMISSIVE, H)} <= at(log, green)
+    offs = {e.parameter for e in log.events() if e.code == E.OVERLAP_OFF}
+    assert {C, D, E_, F} <= offs  # each went red when its yellow ended

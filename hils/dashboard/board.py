@@ -19,8 +19,9 @@ Each kind of record updates one part of the board (see ``_HANDLERS``):
 - ``poll``: the indication of every phase (green, yellow, else red); a change opens a segment of the
   strip, which keeps the last :data:`STRIP_S` seconds.
 - ``cabinet`` (dashboard runs only, :mod:`hils.dashboard.cabinet`): walks, pedestrian clearances
-  (flashing don't walk), the controller's vehicle and pedestrian calls and PhaseNext; a run logged
-  without a dashboard has none, and the page says so.
+  (flashing don't walk), the controller's vehicle and pedestrian calls and PhaseNext, and the
+  overlaps' greens and yellows; a run logged without a dashboard has none, and the page says so. A
+  flashing yellow arrow is told from a steady one by its permissive phase's green in the last poll.
 - ``set_sent``: VehCall as last SET (the calls the middleware places), and the SET counts.
 - ``command_dispatched`` / ``hold_released`` / ``transition_verified``: the last commands with their
   hold times; a command kept without a SET (``keep``) appears when its hold is released.
@@ -40,8 +41,9 @@ from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from hils.config import IntersectionConfig
+from hils.config import IntersectionConfig, OverlapKind
 from hils.dashboard.cabinet import COLUMNS as CABINET_COLUMNS
+from hils.dashboard.cabinet import OVERLAP_COLUMNS
 
 #: Seconds of signal history in the strip.
 STRIP_S = 120.0
@@ -49,6 +51,7 @@ STRIP_S = 120.0
 LAST_COMMANDS = 8
 
 GREEN, YELLOW, RED = "G", "Y", "r"
+FLASHING = "F"  # a flashing yellow arrow (an overlap's permissive indication)
 
 
 @dataclass
@@ -193,7 +196,9 @@ class Board:
         self.queues = dict(r["queues"])
 
     def _cabinet(self, r: Mapping[str, Any]) -> None:
-        self.cabinet = {name: list(r[name]) for name in CABINET_COLUMNS}
+        # Logs from before overlaps were read have no overlap fields: no overlap shown.
+        self.cabinet = {name: list(r[name]) for name in CABINET_COLUMNS} | {name: list(r.get(name, ()))
+                                                                           for name in OVERLAP_COLUMNS}
 
     # --- helpers ----------------------------------------------------------------------------------
 
@@ -208,6 +213,20 @@ class Board:
         ped = "walk" if phase in c["walks"] else "ped_clear" if phase in c["ped_clears"] else "dont_walk"
         return {"ped": ped, "call": phase in c["veh_calls"], "ped_call": phase in c["ped_calls"],
                 "next": phase in c["nexts"]}
+
+    def _overlaps(self) -> list[dict[str, Any]]:
+        """Each overlap, its parents and what it showed at the last cabinet read (None before a read)."""
+        c = self.cabinet
+        out = []
+        for n, o in self.config.overlaps.items():
+            shown = None
+            if c is not None:
+                flashing = o.kind is OverlapKind.FYA and any(self.shown.get(p) == GREEN for p in o.modifiers)
+                shown = (GREEN if n in c["overlap_greens"] else
+                         (FLASHING if flashing else YELLOW) if n in c["overlap_yellows"] else RED)
+            out.append({"overlap": n, "letter": o.letter, "type": o.kind.value, "included": list(o.included),
+                        "modifiers": list(o.modifiers), "approach": o.approach, "turn": o.turn, "shown": shown})
+        return out
 
     def _trim(self) -> None:
         # Drop segments that ended before the strip's window (a segment ends where the next starts).
@@ -229,6 +248,7 @@ class Board:
                         "turn": ph.turn, "shown": self.shown.get(p) if self.polled else None,
                         "vehcall": p in self.vehcall, **self._cabinet_of(p)} for p, ph in sorted(cfg.phases.items())],
             "cabinet_read": self.cabinet is not None,
+            "overlaps": self._overlaps(),
             "rings": [list(r) for r in cfg.rings],
             "barriers": len(cfg.barriers),
             "state": self.state,

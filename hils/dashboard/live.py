@@ -52,7 +52,8 @@ class LiveDashboard:
             board = Board(testbed.config, counter=_counter(testbed.junction))
         testbed.events.subscribe(board.feed)
         for j in junctions.values():
-            testbed.env.process(read_cabinet(testbed.env, j.transport, j.events, j.config.groups))
+            testbed.env.process(read_cabinet(testbed.env, j.transport, j.events, j.config.groups,
+                                             overlap_groups=j.config.overlap_groups))
         live = Live(board, recover=(lambda tls: _request_recovery(testbed, tls)) if self.control else None)
         self.server = LiveServer(live, bind(self.host, self.port), driver.loop)
         print(f"dashboard: {self.server.url}", flush=True)
