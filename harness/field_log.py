@@ -16,6 +16,8 @@ the log's own events (Indiana enumerations) and says which values it had to gues
 - **detectors**: a detector calls the phase whose call registrations (43) its actuations (82) bring most often, at
   the same tick or the next, when they do for at least a tenth of them; the others are logged but call nothing
   (phase 0, as a count station). Push buttons likewise with pedestrian calls (90 with 45);
+- **overlaps**: an overlap that begins green (61) with phases (1, the same tick, nine times in ten) includes them
+  (a normal overlap);
 - **coordination**: the cycle is the spacing of the local zeros (event 150, parameter 5), the offset their time of
   day modulo the cycle with the local zero at the start of the coordinated greens (NEMA TS 2's lead-green
   reference); the coordinated phases have yield point events (151), the other ring's is the phase of the same
@@ -195,10 +197,12 @@ def infer(rows: Sequence[Row], name: str = "field controller") -> Inferred:
     out.guessed.append("every calling detector also extends its phase's green (detector delay and extension are not "
                        "in the log: its detector events come after them)")
     coordination = _coordination(rows, structure, timing, greens, out)
+    overlaps = _overlaps(rows, phases, out)
     out.guessed.append("no recalls, red revert, max 2 or dual entry (the log shows the service, not the settings); "
-                       "overlaps and dynamic omits are not modelled")
+                       "dynamic omits (46-49 logged by the field controller's own logic) are not modelled")
     start = rows[0].time.replace(microsecond=rows[0].time.microsecond // 100_000 * 100_000)
-    out.toml = _toml(name, structure, timing, detectors, pushes, coordination, _startup(greens, structure), start)
+    out.toml = _toml(name, structure, timing, detectors, pushes, coordination, overlaps, _startup(greens, structure),
+                     start)
     return out
 
 
@@ -389,6 +393,33 @@ def _splits(structure: Structure, coord: Mapping[int, int], ends: Mapping[int, f
     return dict(sorted(splits.items()))
 
 
+def _overlaps(rows: Sequence[Row], phases: Sequence[int], out: Inferred) -> dict[int, list[int]]:
+    """Normal overlaps: an overlap whose begin greens (61) come with the begin greens of phases (1, the same tick,
+    at least nine times in ten) includes those phases. An overlap that never begins green is not inferred."""
+    begins = defaultdict(list)
+    for r in rows:
+        if r.code in (E.OVERLAP_BEGIN_GREEN, E.PHASE_BEGIN_GREEN):
+            begins[r.time].append(r)
+    starts: Counter[int] = Counter()
+    with_phase: Counter[tuple[int, int]] = Counter()
+    for same in begins.values():
+        for r in same:
+            if r.code == E.OVERLAP_BEGIN_GREEN:
+                starts[r.parameter] += 1
+                for q in same:
+                    if q.code == E.PHASE_BEGIN_GREEN:
+                        with_phase[(r.parameter, q.parameter)] += 1
+    overlaps = {o: [p for p in phases if with_phase[(o, p)] >= 0.9 * n] for o, n in starts.items()}
+    overlaps = {o: included for o, included in overlaps.items() if included}
+    for o, included in overlaps.items():
+        out.read.append(f"overlap {chr(64 + o)} ({o}): begins green with phase(s) {included}: a normal overlap of them")
+    seen = {r.parameter for r in rows if E.OVERLAP_BEGIN_GREEN <= r.code <= E.OVERLAP_DARK}
+    for o in sorted(seen - set(overlaps)):
+        out.guessed.append(f"overlap {chr(64 + o)} ({o}): not modelled (it never begins green in the log; its other "
+                           "events fit none of the types: normal, minus green-yellow, flashing yellow arrow)")
+    return overlaps
+
+
 def _startup(greens: Mapping[int, list[tuple[datetime, datetime]]], structure: Structure) -> list[int]:
     """The phases to power up in: the first phase served in each ring of the group served first."""
     first = min((t0, p) for p, spans in greens.items() for t0, _ in spans)[1]
@@ -397,8 +428,8 @@ def _startup(greens: Mapping[int, list[tuple[datetime, datetime]]], structure: S
 
 
 def _toml(name: str, structure: Structure, timing: Mapping[int, dict[str, Any]], detectors: Mapping[int, int],
-          pushes: Mapping[int, int], coordination: Mapping[str, Any] | None, startup: Sequence[int],
-          start: datetime) -> str:
+          pushes: Mapping[int, int], coordination: Mapping[str, Any] | None, overlaps: Mapping[int, list[int]],
+          startup: Sequence[int], start: datetime) -> str:
     def value(v: Any) -> str:
         return f"{v:g}" if isinstance(v, float) else str(v)
 
@@ -419,6 +450,9 @@ def _toml(name: str, structure: Structure, timing: Mapping[int, dict[str, Any]],
     lines += [f"{d} = {q}" for d, q in sorted(detectors.items())]
     if pushes:
         lines += ["", "[pedestrian_detectors]", *(f"{d} = {q}" for d, q in sorted(pushes.items()) if q)]
+    if overlaps:
+        lines += ["", "[overlaps]", *(f"{chr(64 + o)} = {{ included = {included} }}"
+                                      for o, included in sorted(overlaps.items()))]
     if coordination is not None:
         c = coordination
         lines += ["", "[coordination]", "pattern = 1", 'force_off = "fixed"', 'offset_reference = "lead_green"',
