@@ -93,6 +93,9 @@ def _register_serve(commands: argparse._SubParsersAction) -> None:
                             "enumerations), on TCP ports PORT.. (0: free ones); without PORT on the same numbers as "
                             "the UDP ports, where Signal-Replay looks for a controller on this host. The controllers' "
                             "clocks are the host's local time")
+    serve.add_argument("--log-events", type=int, default=100_000, metavar="N",
+                       help="hi-res events each controller keeps, its last ones, as a controller's ring buffer "
+                            "(100000; an Intelight MaxTime keeps about 10000)")
     serve.set_defaults(func=_serve)
 
 
@@ -145,12 +148,14 @@ def _serve(args: argparse.Namespace) -> int:
         raise SystemExit("hils emulator serve: --ro-community and --rw-community must differ")
     if args.latency_ms < 0 or args.jitter_ms < 0:
         raise SystemExit("hils emulator serve: --latency-ms and --jitter-ms must not be negative")
+    if args.log_events < 1:
+        raise SystemExit(f"hils emulator serve: --log-events {args.log_events}: allowed: 1 or more")
     v3_user = _v3_user(args)
     controllers = _controllers(args)
     http = args.port if args.http == SAME_PORTS else args.http
     options = ServeOptions(host=args.host, port=args.port, ro_community=args.ro_community,
                            rw_community=args.rw_community, latency=Latency(args.latency_ms / 1e3, args.jitter_ms / 1e3),
-                           trace=args.trace, v3_user=v3_user, http=http)
+                           trace=args.trace, v3_user=v3_user, http=http, log_events=args.log_events)
 
     def ready(server: EmulatorServer, addresses: list[tuple[str, int]]) -> None:
         # Scripts and tests wait for these lines: they are printed only once requests are answered.

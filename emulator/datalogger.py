@@ -52,8 +52,9 @@ events                                     from
 
 At power-up the log records the state the unit starts in (the phases starting in green, yellow or red
 clearance, the pattern) as events of that tick, so a log read from its start tells the whole story.
-The log keeps every event of the unit's life in memory (a real controller keeps a ring buffer of its
-last events; MaxTime's holds about 10,000).
+Without a ``capacity`` the log keeps every event of the unit's life (a run hands it over at its end); with
+one it keeps the last ``capacity`` events, as a real controller keeps a ring buffer of its last events
+(MaxTime's holds about 10,000): a served controller's memory stays bounded however long it runs.
 """
 
 from __future__ import annotations
@@ -118,8 +119,9 @@ class _Seen:
 class DataLogger:
     """The hi-res event log of one controller, attached to it as its recorder."""
 
-    def __init__(self, controller: Controller) -> None:
+    def __init__(self, controller: Controller, capacity: int | None = None) -> None:
         self.controller = controller
+        self.capacity = capacity
         self.day0: datetime = controller.day0
         self._log: list[tuple[int, int, int]] = []  # (clock tick, code, parameter)
         self._tick: list[tuple[int, int]] = []  # events of the tick being stepped
@@ -212,6 +214,8 @@ class DataLogger:
         clock = self._clock
         self._log.extend((clock, code, p) for code, p in sorted(set(self._tick)))
         self._tick.clear()
+        if self.capacity is not None and len(self._log) > self.capacity + self.capacity // 4:
+            del self._log[:len(self._log) - self.capacity]  # the oldest go, a quarter at a time
 
     def _power_up(self, *, first: bool) -> None:
         if not first:

@@ -136,6 +136,7 @@ class ServeOptions:
     trace: Path | None = None  # JSON Lines of every interval change, stamped with time.monotonic_ns(); one controller
     v3_user: V3User | None = None  # the SNMPv3 user accepted besides the communities; None: v1/v2c only
     http: int | None = None  # TCP port of the first controller's MaxTime event-log endpoint; None: no endpoint
+    log_events: int = 100_000  # the hi-res events each controller keeps (its last ones, as a controller's ring buffer)
 
 
 @dataclass(frozen=True, slots=True)
@@ -168,7 +169,7 @@ class ServedController:
         self.config = config
         self._trace = trace
         self.controller = Controller(config, on_change=self._on_change, start=start)
-        self.log = DataLogger(self.controller)
+        self.log = DataLogger(self.controller, capacity=options.log_events)
         self.asclog = AsclogServer(self.log.events)
         self.unit = DelayedController(self.controller, config.emulator)
         self.view = MibView(self.unit)

@@ -24,6 +24,7 @@ from hils import plots, record, summary
 from hils.actions import ActionType
 from hils.agents import controller_config, describe_plan
 from hils.errors import UserError
+from hils.events import Kind
 from hils.junction import Junction
 from hils.scenario import SCENARIOS, Scenario, load_scenario, load_targets
 from hils.status import StatusLine
@@ -150,6 +151,8 @@ def run_command(args: argparse.Namespace) -> int:
     with _terminate_as_interrupt(), tb, _served(dashboard):
         try:
             tb.reset()
+            if tb.mode != VIRTUAL and args.asclog is None:
+                tb.events.emit(Kind.NOTE, message=record.KEPT_BY_CONTROLLER)
             if tb.mode == VIRTUAL and not args.no_progress:
                 with _progress(spec) as bar:
                     tb.run(progress=lambda t: bar.update(t - bar.n))

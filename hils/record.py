@@ -12,7 +12,6 @@ summary under ``record``.
 
 from __future__ import annotations
 
-import logging
 from collections.abc import Mapping
 from datetime import datetime
 from pathlib import Path
@@ -22,7 +21,10 @@ from hils import atspm, atspm_charts, hires
 from hils.config import IntersectionConfig
 from hils.hires import Event
 
-log = logging.getLogger(__name__)
+#: Where a run at the wall clock finds its controller's log when it does not collect it (summary and event log).
+KEPT_BY_CONTROLLER = ("the controller keeps its own hi-res log: collect it from the controller for the run's window "
+                      f"(MaxTime: GET http://CONTROLLER{hires.ASCLOG_PATH}?since=MM-DD-YYYY HH:MM:SS.0; others: the "
+                      "vendor's tool), or give hils run --asclog http://HOST:PORT")
 
 
 def keep(logs: Mapping[str, list[Event]], configs: Mapping[str, IntersectionConfig], folder: Path, *,
@@ -42,9 +44,7 @@ def keep(logs: Mapping[str, list[Event]], configs: Mapping[str, IntersectionConf
             section["missing"] = f"could not collect the controller's log from {asclog}: {exc}"
             return section, []
     if not logs:
-        section["missing"] = ("the controller keeps its own hi-res log: collect it from the controller for the run's "
-                              "window (MaxTime: GET http://CONTROLLER" + hires.ASCLOG_PATH + "?since=MM-DD-YYYY "
-                              "HH:MM:SS.0; others: the vendor's tool), or give hils run --asclog http://HOST:PORT")
+        section["missing"] = KEPT_BY_CONTROLLER
         return section, []
     by_device = {devices[tls]: events for tls, events in logs.items()}
     path = hires.write(by_device, folder)

@@ -297,3 +297,13 @@ def test_overlaps_are_logged_with_the_phases_that_drive_them() -> None:
             (E.FYA_BEGIN_PERMISSIVE, H)} <= at(log, green)
     offs = {e.parameter for e in log.events() if e.code == E.OVERLAP_OFF}
     assert {C, D, E_, F} <= offs  # each went red when its yellow ended
+
+
+def test_a_bounded_log_keeps_the_last_events_as_a_ring_buffer() -> None:
+    twins = [Controller(config_with()) for _ in range(2)]
+    whole, ring = DataLogger(twins[0]), DataLogger(twins[1], capacity=100)
+    for c in twins:
+        c.set_actuations({1, 2, 3, 4, 5, 6, 7, 8})  # every phase called, each green to its maximum
+        run(c, 3000)
+    assert len(whole) > 250 and 100 <= len(ring) <= 125
+    assert ring.events() == whole.events()[-len(ring):]

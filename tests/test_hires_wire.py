@@ -115,7 +115,9 @@ def test_a_wall_clock_run_collects_the_controllers_log_into_its_folder(tmp_path:
     assert "Hi-res log:" in done.stdout and (out / "hires.parquet").exists()
     pd = pytest.importorskip("pandas")
     frame = pd.read_parquet(out / "hires.parquet")
-    assert set(frame.DeviceId) == {1} and (frame.EventId == E.PHASE_BEGIN_GREEN).any()
+    # The run's own SETs put the controller under system control: its record says so, in the run's window.
+    assert set(frame.DeviceId) == {1}
+    assert ((frame.EventId == E.UNIT_CONTROL_STATUS_CHANGE) & (frame.Parameter == 2)).any()
 
 
 def test_asclog_needs_a_wall_clock_run_of_one_controller(tmp_path: Path) -> None:
