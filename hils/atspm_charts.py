@@ -1,7 +1,8 @@
 """The two ATSPM charts of a controller's hi-res log: the Purdue coordination diagram and the split monitor.
 
-Both are drawn from the log's own events (no other source), one panel per phase, the way UDOT's ATSPM
-draws them:
+Both are drawn from the log's own events (no other source), one panel per phase, as UDOT's ATSPM draws them,
+in SVG written directly like the run folder's other pictures (:mod:`hils.plots`: no plotting library, drawn
+in milliseconds, opened by any browser):
 
 - **Purdue coordination diagram** (Day, Bullock et al., Purdue University): each cycle of a phase runs from
   the start of its red (end of yellow, event 9) to the next; the x axis is the time of day, the y axis the
@@ -9,65 +10,77 @@ draws them:
   (event 8); every vehicle detector actuation of the phase (event 82) is a black dot where it fell in its
   cycle, so a platoon arriving on green shows as dots between the green and yellow lines.
 - **Split monitor**: each service of a phase, its split (green, yellow and red clearance: begin green to
-  the end of its red clearance) over the time of day, coloured by how the green ended (gap-out, max-out,
+  the phase going inactive) over the time of day, coloured by how the green ended (gap-out, max-out,
   force-off, or none: a coordinated phase yielding or a green with nowhere to go), with the programmed
-  split of the pattern running (events 134-149) as a line.
+  split of the pattern running (events 134-149) as a dashed line.
 
 A coordinated phase (one with yield point events, 151) says so in its panel's title.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+import itertools
+from collections.abc import Callable, Mapping, Sequence
 from datetime import datetime
 from pathlib import Path
 
 from hils.config import IntersectionConfig
-from hils.hires import Event, EventCode
-from hils.plots import pyplot
+from hils.hires import Event, EventCode, split_code
+from hils.plots import Chart, Svg
 
 E = EventCode
-TERMINATION_COLORS = {E.PHASE_GAP_OUT: ("gap-out", "#2ca02c"), E.PHASE_MAX_OUT: ("max-out", "#d62728"),
-                      E.PHASE_FORCE_OFF: ("force-off", "#1f77b4"), None: ("none (yield, rest)", "#7f7f7f")}
+TERMINATIONS = {E.PHASE_GAP_OUT: ("gap-out", "#2ca02c"), E.PHASE_MAX_OUT: ("max-out", "#d62728"),
+                E.PHASE_FORCE_OFF: ("force-off", "#1f77b4"), None: ("none (yield, rest)", "#7f7f7f")}
+GREEN, YELLOW = "#2ca02c", "#e6a800"
+_PANEL_W, _PANEL_H, _LEFT, _TOP, _GAP = 520.0, 190.0, 70.0, 70.0, 95.0
+
+Panel = Callable[[Svg, Chart], None]
 
 
 def _hours(t: datetime, day0: datetime) -> float:
     return (t - day0).total_seconds() / 3600
 
 
-def _grid(n: int) -> tuple[int, int]:
-    cols = 2 if n > 1 else 1
-    return (n + cols - 1) // cols, cols
-
-
 def _coordinated(events: Sequence[Event]) -> set[int]:
     return {e.parameter for e in events if e.code == E.COORD_YIELD_POINT}
 
 
-def _axis_hours(ax: object, day0: datetime) -> None:
-    ax.set_xlabel(f"time of day (h), {day0:%Y-%m-%d}")
+def _draw(path: Path, title: str, legend: Sequence[tuple[str, str]], x_label: str, y_label: str,
+          panels: Sequence[tuple[str, tuple[float, float], tuple[float, float], Panel]]) -> Path:
+    """Panels two by two, each with its axes; a legend of (label, colour) under the title."""
+    columns = 1 if len(panels) == 1 else 2
+    rows = (len(panels) + columns - 1) // columns
+    svg = Svg(_LEFT + columns * (_PANEL_W + _LEFT), _TOP + rows * (_PANEL_H + _GAP))
+    svg.text(svg.width / 2, 24, title, size=15, anchor="middle")
+    x = _LEFT
+    for label, color in legend:
+        svg.dots([(x, 46)], color, radius=4)
+        svg.text(x + 8, 50, label, size=12)
+        x += 24 + 7 * len(label)
+    for k, (name, xs, ys, draw) in enumerate(panels):
+        left = _LEFT + (k % columns) * (_PANEL_W + _LEFT)
+        top = _TOP + (k // columns) * (_PANEL_H + _GAP) + 18
+        chart = Chart(left, top, _PANEL_W, _PANEL_H, xs, ys)
+        svg.text(left + _PANEL_W / 2, top - 6, name, size=13, anchor="middle")
+        draw(svg, chart)
+        chart.axes(svg, x_label, y_label=y_label)
+    return svg.write(path)
 
 
 def coordination_diagram(events: Sequence[Event], config: IntersectionConfig, path: Path, title: str) -> bool:
-    """Draw the Purdue coordination diagram of every phase with detectors to ``path`` (PNG); False when no phase
+    """Draw the Purdue coordination diagram of every phase with detectors to ``path`` (SVG); False when no phase
     has a whole cycle to show."""
     detectors: dict[int, set[int]] = {}
     for d, phase in config.detectors.items():
         detectors.setdefault(phase, set()).add(d)
-    panels = []
-    for phase in sorted(detectors):
-        reds = [e.time for e in events if e.code == E.PHASE_END_YELLOW and e.parameter == phase]
-        if len(reds) >= 2:
-            panels.append((phase, reds))
-    if not panels:
-        return False
-    day0 = datetime.combine(events[0].time.date(), datetime.min.time())
+    day0 = datetime.combine(events[0].time.date(), datetime.min.time()) if events else datetime.min
     coordinated = _coordinated(events)
-    plt = pyplot()
-    rows, cols = _grid(len(panels))
-    fig, axes = plt.subplots(rows, cols, figsize=(6.4 * cols, 2.9 * rows), squeeze=False)
-    for ax, (phase, reds) in zip(axes.flat, panels, strict=False):
-        marks: dict[str, tuple[list[float], list[float]]] = {"green": ([], []), "yellow": ([], []), "arrival": ([], [])}
+    panels = []
+    for phase in sorted(p for p in detectors if p):
+        reds = [e.time for e in events if e.code == E.PHASE_END_YELLOW and e.parameter == phase]
+        if len(reds) < 2:
+            continue
+        marks: dict[str, list[tuple[float, float]]] = {"green": [], "yellow": [], "arrival": []}
         kinds = {E.PHASE_BEGIN_GREEN: "green", E.PHASE_BEGIN_YELLOW: "yellow"}
         k = 0
         for e in events:
@@ -79,23 +92,24 @@ def coordination_diagram(events: Sequence[Event], config: IntersectionConfig, pa
             if e.code == E.DETECTOR_ON and e.parameter in detectors[phase]:
                 kind = "arrival"
             if kind is not None:
-                xs, ys = marks[kind]
-                xs.append(_hours(e.time, day0))
-                ys.append((e.time - reds[k]).total_seconds())
-        ax.scatter(*marks["arrival"], s=3, color="black", label="detector on (arrival)", zorder=2)
-        ax.plot(*marks["green"], color="#2ca02c", marker="o", markersize=2.5, linewidth=1, label="begin green")
-        ax.plot(*marks["yellow"], color="#e6a800", marker="o", markersize=2.5, linewidth=1, label="begin yellow")
-        ax.set_title(f"phase {phase}" + (" (coordinated)" if phase in coordinated else ""), fontsize=9)
-        ax.set_ylabel("time in cycle (s) from start of red", fontsize=8)
-        _axis_hours(ax, day0)
-        ax.set_ylim(bottom=0)
-    for ax in list(axes.flat)[len(panels):]:
-        ax.axis("off")
-    axes.flat[0].legend(fontsize=7, loc="upper right")
-    fig.suptitle(f"Purdue coordination diagram, {title}", fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+                marks[kind].append((_hours(e.time, day0), (e.time - reds[k]).total_seconds()))
+        longest = max((b - a).total_seconds() for a, b in itertools.pairwise(reds))
+
+        def draw(svg: Svg, chart: Chart, marks: dict[str, list[tuple[float, float]]] = marks) -> None:
+            svg.dots([(chart.x(x), chart.y(y)) for x, y in marks["arrival"]], "black", radius=1.3)
+            for kind, color in (("green", GREEN), ("yellow", YELLOW)):
+                points = [(chart.x(x), chart.y(y)) for x, y in marks[kind]]
+                svg.polyline(points, color)
+                svg.dots(points, color, radius=2.2)
+
+        span = (_hours(reds[0], day0), _hours(reds[-1], day0))
+        panels.append((f"phase {phase}" + (" (coordinated)" if phase in coordinated else ""), span,
+                       (0.0, longest * 1.05), draw))
+    if not panels:
+        return False
+    _draw(path, f"Purdue coordination diagram, {title}", [("begin green", GREEN), ("begin yellow", YELLOW),
+                                                         ("detector on (arrival)", "black")],
+          f"time of day (h), {day0:%Y-%m-%d}", "time in cycle (s)", panels)
     return True
 
 
@@ -107,7 +121,7 @@ def _services(events: Sequence[Event], phase: int) -> list[tuple[datetime, float
             continue
         if e.code == E.PHASE_BEGIN_GREEN:
             start, reason = e.time, None
-        elif e.code in TERMINATION_COLORS and start is not None:
+        elif e.code in TERMINATIONS and start is not None:
             reason = e.code
         elif e.code == E.PHASE_INACTIVE and start is not None:
             out.append((start, (e.time - start).total_seconds(), reason))
@@ -118,9 +132,8 @@ def _services(events: Sequence[Event], phase: int) -> list[tuple[datetime, float
 def _programmed(events: Sequence[Event], phase: int) -> list[tuple[datetime, float | None]]:
     """The programmed split of ``phase`` over time: each split change (None when the pattern goes free)."""
     out: list[tuple[datetime, float | None]] = []
-    code = E.SPLIT_1_CHANGE + phase - 1
     for e in events:
-        if e.code == code:
+        if e.code == split_code(phase):
             out.append((e.time, float(e.parameter)))
         elif e.code == E.COORD_PATTERN_CHANGE and e.parameter == 254:
             out.append((e.time, None))
@@ -128,41 +141,37 @@ def _programmed(events: Sequence[Event], phase: int) -> list[tuple[datetime, flo
 
 
 def split_monitor(events: Sequence[Event], config: IntersectionConfig, path: Path, title: str) -> bool:
-    """Draw the split monitor of every phase served to ``path`` (PNG); False when no phase was served."""
-    panels = [(p, s) for p in config.phase_numbers if (s := _services(events, p))]
-    if not panels:
+    """Draw the split monitor of every phase served to ``path`` (SVG); False when no phase was served."""
+    if not events:
         return False
     day0 = datetime.combine(events[0].time.date(), datetime.min.time())
-    end = _hours(events[-1].time, day0)
+    span = (_hours(events[0].time, day0), _hours(events[-1].time, day0))
     coordinated = _coordinated(events)
-    plt = pyplot()
-    rows, cols = _grid(len(panels))
-    fig, axes = plt.subplots(rows, cols, figsize=(6.4 * cols, 2.7 * rows), squeeze=False)
-    for ax, (phase, services) in zip(axes.flat, panels, strict=False):
-        for reason, (label, color) in TERMINATION_COLORS.items():
-            mine = [(_hours(t, day0), s) for t, s, r in services if r == reason]
-            if mine:
-                ax.scatter(*zip(*mine, strict=True), s=8, color=color, label=label)
+    panels = []
+    for phase in config.phase_numbers:
+        services = _services(events, phase)
+        if not services:
+            continue
         plan = _programmed(events, phase)
-        for (t0, split), nxt in zip(plan, [*plan[1:], None], strict=True):
-            if split is not None:
-                t1 = end if nxt is None else _hours(nxt[0], day0)
-                ax.hlines(split, _hours(t0, day0), t1, colors="#555555", linestyles="dashed", linewidth=1,
-                          label="programmed split")
-        ax.set_title(f"phase {phase}" + (" (coordinated)" if phase in coordinated else ""), fontsize=9)
-        ax.set_ylabel("split (s)", fontsize=8)
-        _axis_hours(ax, day0)
         top = max([s for _, s, _ in services] + [s for _, s in plan if s is not None])
-        ax.set_ylim(0, top * 1.15)
-        handles, labels = ax.get_legend_handles_labels()
-        unique = dict(zip(labels, handles, strict=True))
-        ax.legend(unique.values(), unique.keys(), fontsize=7, loc="upper right")
-    for ax in list(axes.flat)[len(panels):]:
-        ax.axis("off")
-    fig.suptitle(f"Split monitor, {title}", fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+
+        def draw(svg: Svg, chart: Chart, services: list = services, plan: list = plan) -> None:
+            for (t0, split), after in zip(plan, [*plan[1:], None], strict=True):
+                if split is not None:
+                    t1 = span[1] if after is None else _hours(after[0], day0)
+                    svg.line(chart.x(_hours(t0, day0)), chart.y(split), chart.x(t1), chart.y(split), color="#555555",
+                             dash="5 3")
+            for reason, (_, color) in TERMINATIONS.items():
+                svg.dots([(chart.x(_hours(t, day0)), chart.y(s)) for t, s, r in services if r == reason], color,
+                         radius=2.4)
+
+        panels.append((f"phase {phase}" + (" (coordinated)" if phase in coordinated else ""), span,
+                       (0.0, top * 1.15), draw))
+    if not panels:
+        return False
+    _draw(path, f"Split monitor, {title}: each service's split by how its green ended; dashed: programmed split",
+          [(label, color) for label, color in TERMINATIONS.values()], f"time of day (h), {day0:%Y-%m-%d}",
+          "split (s)", panels)
     return True
 
 
@@ -171,9 +180,7 @@ def draw(logs: Mapping[str, Sequence[Event]], configs: Mapping[str, Intersection
     """Both charts of each controller's log in its folder; the files written."""
     written = []
     for tls, events in logs.items():
-        if not events:
-            continue
-        for name, chart in (("coordination_diagram.png", coordination_diagram), ("split_monitor.png", split_monitor)):
+        for name, chart in (("coordination_diagram.svg", coordination_diagram), ("split_monitor.svg", split_monitor)):
             path = folders[tls] / name
             if chart(events, configs[tls], path, names[tls]):
                 written.append(path)

@@ -81,7 +81,7 @@ def test_a_run_keeps_its_controllers_record(tmp_path: Path) -> None:
                            "--no-progress", "--out", str(out)], capture_output=True, text=True, timeout=300,
                           cwd=tmp_path)
     assert done.returncode == 0, done.stderr
-    for name in ("hires.parquet", "atspm.csv", "coordination_diagram.png", "split_monitor.png"):
+    for name in ("hires.parquet", "atspm.csv", "coordination_diagram.svg", "split_monitor.svg"):
         assert (out / name).stat().st_size > 0, name
     record = json.loads((out / "summary.json").read_text())["record"]
     assert record["devices"] == {"1": "C"} and record["file"] == "hires.parquet"
@@ -107,4 +107,4 @@ def test_a_run_of_several_controllers_names_one_device_each(tmp_path: Path) -> N
     import pandas as pd
 
     assert sorted(pd.read_parquet(out / "hires.parquet").DeviceId.unique()) == [1, 2, 3, 4]
-    assert all((out / tls / "split_monitor.png").exists() for tls in ("J1", "J2", "J3", "J4"))
+    assert all((out / tls / "split_monitor.svg").exists() for tls in ("J1", "J2", "J3", "J4"))
