@@ -12,7 +12,8 @@ the log's own events (Indiana enumerations) and says which values it had to gues
   a split for it);
 - **timings**: yellow (8 to 9) and red clearance (10 to 11), the minimum (1 to 3, the most frequent), walk (21 to 22)
   and pedestrian clearance (22 to 23), passage (a gap-out, 4, after the last of the phase's calling detectors
-  went off, 81: the most frequent gap), the maximum (the longest green; coordination does not time it);
+  went off, 81: the most frequent gap, counted from the last tick with the call; the intersection's when a
+  phase shows too few), the maximum (the longest green; coordination does not time it);
 - **detectors**: a detector calls the phase whose call registrations (43) its actuations (82) bring most often, at
   the same tick or the next, when they do for at least a tenth of them; the others are logged but call nothing
   (phase 0, as a count station). Push buttons likewise with pedestrian calls (90 with 45);
@@ -49,6 +50,7 @@ E = EventCode
 TICK = timedelta(milliseconds=100)
 CALL_SHARE = 0.10  # a detector calls a phase when at least this share of its actuations registers the call
 LOCAL_ZERO = 5  # event 150's parameter at the local zero
+PASSAGE_SEEN = 3  # a phase's own most frequent gap counts as its passage when seen this often
 FORCE_OFF_SHARE = 0.2  # a phase's force-offs mark where its split ends when they end at least this share of its greens
 
 
@@ -182,11 +184,16 @@ def infer(rows: Sequence[Row], name: str = "field controller") -> Inferred:
     timing = {p: _timing(rows, p, greens[p], out) for p in phases}
     detectors = _detector_phases(rows, E.DETECTOR_ON, E.PHASE_CALL_REGISTERED, phases)
     pushes = _detector_phases(rows, E.PED_DETECTOR_ON, E.PED_CALL_REGISTERED, phases)
+    gaps = {p: _gaps(rows, p, [d for d, q in detectors.items() if q == p]) for p in phases}
+    shared = _mode(g for values in gaps.values() for g in values)
     for p in phases:
-        gap = _passage(rows, p, [d for d, q in detectors.items() if q == p])
-        if gap is None:
-            out.guessed.append(f"phase {p}: passage 2.0 s (no gap-out after its detectors went off)")
-        timing[p]["passage"] = gap if gap is not None else 2.0
+        counts = Counter(gaps[p])
+        if counts and counts.most_common(1)[0][1] >= PASSAGE_SEEN:
+            timing[p]["passage"] = _mode(gaps[p])
+        else:
+            timing[p]["passage"] = shared if shared is not None else 2.0
+            out.guessed.append(f"phase {p}: passage {timing[p]['passage']:g} s (the intersection's most frequent: "
+                               f"no gap of its own seen {PASSAGE_SEEN} times)")
     for p, twin in structure.phantom.items():
         timing[p] = {k: v for k, v in timing[twin].items() if k not in ("walk", "ped_clear")}
     logged = sorted(d for d, q in detectors.items() if q == 0)
@@ -272,7 +279,7 @@ def _timing(rows: Sequence[Row], p: int, greens: Sequence[tuple[datetime, dateti
     t: dict[str, Any] = {}
     found = {"yellow": _mode(_durations(rows, p, E.PHASE_BEGIN_YELLOW, E.PHASE_END_YELLOW)),
              "red_clear": _mode(_durations(rows, p, E.PHASE_BEGIN_RED_CLEARANCE, E.PHASE_END_RED_CLEARANCE)),
-             "min_green": _mode(_durations(rows, p, E.PHASE_BEGIN_GREEN, E.PHASE_MIN_COMPLETE))}
+             "min_green": _mode(_minimums(rows, p))}
     for key, default in (("yellow", 4.0), ("red_clear", 1.0), ("min_green", 5)):
         if found[key] is None:
             out.guessed.append(f"phase {p}: {key} {default} (its events are not in the log)")
@@ -285,6 +292,21 @@ def _timing(rows: Sequence[Row], p: int, greens: Sequence[tuple[datetime, dateti
     longest = max(((b - a).total_seconds() for a, b in greens), default=0.0)
     t["max_green"] = max(t["min_green"], t.get("walk", 0) + t.get("ped_clear", 0), math.ceil(longest))
     return t
+
+
+def _minimums(rows: Sequence[Row], p: int) -> list[float]:
+    """Begin green to min complete of the greens of ``p`` that served no walk (a walk's timing is its minimum)."""
+    walks = {r.time for r in rows if r.code == E.PED_BEGIN_WALK and r.parameter == p}
+    out, since = [], None
+    for r in rows:
+        if r.parameter != p:
+            continue
+        if r.code == E.PHASE_BEGIN_GREEN:
+            since = None if r.time in walks else r.time
+        elif r.code == E.PHASE_MIN_COMPLETE and since is not None:
+            out.append(round((r.time - since).total_seconds(), 1))
+            since = None
+    return out or _durations(rows, p, E.PHASE_BEGIN_GREEN, E.PHASE_MIN_COMPLETE)
 
 
 def _detector_phases(rows: Sequence[Row], on: int, call: int, phases: Sequence[int]) -> dict[int, int]:
@@ -305,10 +327,11 @@ def _detector_phases(rows: Sequence[Row], on: int, call: int, phases: Sequence[i
     return out
 
 
-def _passage(rows: Sequence[Row], p: int, detectors: Sequence[int]) -> float | None:
-    """The most frequent time from the last of the phase's detectors going off to its gap-out."""
+def _gaps(rows: Sequence[Row], p: int, detectors: Sequence[int]) -> list[float]:
+    """Each time from the last of the phase's detectors going off to its gap-out (a gap-out logged when the green
+    ends may come later than the gap: at a barrier, the green waits for the other ring)."""
     if not detectors:
-        return None
+        return []
     mine, on, gaps = set(detectors), set(), []
     last_off: datetime | None = None
     for r in rows:
@@ -317,8 +340,9 @@ def _passage(rows: Sequence[Row], p: int, detectors: Sequence[int]) -> float | N
             if r.code == E.DETECTOR_OFF and not on:
                 last_off = r.time
         elif r.code == E.PHASE_GAP_OUT and r.parameter == p and not on and last_off is not None:
-            gaps.append(round((r.time - last_off).total_seconds(), 1))
-    return _mode(gaps)
+            # the off event is the first tick without the call; passage counts from the last tick with it
+            gaps.append(round((r.time - last_off + TICK).total_seconds(), 1))
+    return gaps
 
 
 def _coordination(rows: Sequence[Row], structure: Structure, timing: Mapping[int, dict[str, Any]],
