@@ -115,6 +115,9 @@ def plot(table: Table, path: Path, title: str) -> None:
         means = [table[a][name].mean or 0.0 for a in agents]
         errors = [table[a][name].half_width or 0.0 for a in agents]
         ax.bar(range(len(agents)), means, yerr=errors, capsize=4, color="#4c78a8")
+        for i, agent in enumerate(agents):
+            if table[agent][name].n == 0:  # no run gave the figure (an ATSPM detector measure without detectors)
+                ax.text(i, 0, "not\nmeasured", ha="center", va="bottom", fontsize=7, color="#555")
         ax.set_xticks(range(len(agents)), agents, rotation=30, ha="right", fontsize=8)
         ax.set_title(label, fontsize=9)
         if not any(means):

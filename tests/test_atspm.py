@@ -12,7 +12,7 @@ import pytest
 
 from emulator.controller import Controller
 from emulator.datalogger import DataLogger
-from hils import atspm, hires
+from hils import atspm, hires, sweep
 from hils.hires import EventCode
 from tests.test_hires import config_with
 
@@ -83,8 +83,13 @@ def test_a_run_keeps_its_controllers_record(tmp_path: Path) -> None:
     assert done.returncode == 0, done.stderr
     for name in ("hires.parquet", "atspm.csv", "coordination_diagram.svg", "split_monitor.svg"):
         assert (out / name).stat().st_size > 0, name
-    record = json.loads((out / "summary.json").read_text())["record"]
+    summary = json.loads((out / "summary.json").read_text())
+    record = summary["record"]
     assert record["devices"] == {"1": "C"} and record["file"] == "hires.parquet"
+    # what sweeps and `hils compare` show beside SUMO's delays
+    figures = sweep.figures(summary)
+    assert figures["atspm_split_failures"] == record["atspm"]["split_failures"] is not None
+    assert figures["atspm_percent_on_green"] == record["atspm"]["percent_on_green"]
     assert record["atspm"]["bin_minutes"] == 15 and set(record["atspm"]["per_phase"]["1"]) == {str(p)
                                                                                              for p in range(1, 9)}
     assert "ATSPM (15-minute bins in atspm.csv)" in done.stdout and "split failures" in done.stdout
