@@ -22,8 +22,9 @@ events                                     from
 =========================================  ======================================================================
 0, 1 phase on, begin green                 the change into green
 7, 8 and 4/5/6 green termination, yellow   the change into yellow, with why the green ended (gap-out, max-out,
-                                           force-off: the coordinator's or phaseControlGroupForceOff; none for a
-                                           coordinated phase ending after its yield point)
+                                           force-off: the coordinator's or phaseControlGroupForceOff; a
+                                           coordinated phase ending at its yield point is forced off there, as
+                                           field controllers log it; none when it ends later)
 9, 10 end yellow, begin red clearance      the change into red clearance (10 only when it has a length: "Set
                                            only if phase red clearance is served")
 11, 12 end red clearance, phase inactive   the change to rest in red (the ring no longer times the phase)
@@ -172,6 +173,8 @@ class DataLogger:
                     self._add(E.PHASE_CHECK, p)
             if change.reason in _TERMINATIONS:
                 self._add(_TERMINATIONS[change.reason], p)
+            elif change.reason is Termination.YIELD and self._at_force_off(p):
+                self._add(E.PHASE_FORCE_OFF, p)
             self._add(E.PHASE_GREEN_TERMINATION, p)
             self._add(E.PHASE_BEGIN_YELLOW, p)
         elif change.interval is Interval.RED_CLEAR:
@@ -240,6 +243,11 @@ class DataLogger:
                 self._add(E.PHASE_ON, ring.phase)
                 self._add(E.PHASE_BEGIN_YELLOW if ring.interval is Interval.YELLOW else E.PHASE_BEGIN_RED_CLEARANCE,
                           ring.phase)
+
+    def _at_force_off(self, phase: int) -> bool:
+        """The coordinator's force-off point of ``phase`` passed this tick (a coordinated phase's yield point)."""
+        co = self.controller.coordinator
+        return co.plan is not None and co.plan.force_off.get(phase) in co.passed
 
     def _min_complete(self, green: _Green, phase: int) -> None:
         if not green.min_logged and self._clock >= green.start + green.minimum:

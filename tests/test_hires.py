@@ -192,6 +192,11 @@ def test_coordination_events_follow_the_running_pattern() -> None:
     assert len(zeros) == 10 and {b - a for a, b in itertools.pairwise(zeros)} == {timedelta(seconds=70)}
     yields = Counter(e.parameter for e in events if e.code == E.COORD_YIELD_POINT)
     assert yields == {2: 10, 6: 10}
+    # a coordinated phase that ends at its yield point is forced off there; one held past it ends without a reason
+    for e in events:
+        if e.code == E.PHASE_GREEN_TERMINATION and e.parameter in (2, 6):
+            here = {(x.code, x.parameter) for x in events if x.time == e.time}
+            assert ((E.PHASE_FORCE_OFF, e.parameter) in here) == ((E.COORD_YIELD_POINT, e.parameter) in here)
     c.set_pattern_control(254)
     run(c, 1)
     assert (E.COORD_PATTERN_CHANGE, 254) in at(log, c.coordinator.clock)
