@@ -65,7 +65,7 @@ from dataclasses import dataclass, field
 from datetime import datetime, timedelta
 
 from emulator.controller import Change, Controller, Interval, Termination
-from emulator.coordination import Coordinator
+from emulator.coordination import Coordinator, Plan
 from emulator.overlaps import Show
 from hils.config import Recall
 from hils.hires import MAX_PARAMETER, CycleState, Event, EventCode, split_code
@@ -112,7 +112,7 @@ class _Seen:
     flash: int = 0
     control: int = 0
     pattern: int | None = None
-    plan: object = None
+    plan: Plan | None = None
     state: CycleState | None = None
     overlaps: dict[int, Show] = field(default_factory=dict)
 
