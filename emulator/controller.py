@@ -127,8 +127,17 @@ import simpy
 
 from emulator.coordination import Coordinator, Plan
 from emulator.overlaps import Overlaps
+from emulator.preemption import Event, Preemptor
 from hils.config import IntersectionConfig, NextPhaseLock, Phase, Recall
-from hils.ntcip import ControlColumn, CoordForceMode, PhaseStartup, UnitControlStatus, UnitFlashStatus
+from hils.ntcip import (
+    ControlColumn,
+    CoordForceMode,
+    PhaseStartup,
+    PreemptState,
+    ShortAlarm,
+    UnitControlStatus,
+    UnitFlashStatus,
+)
 
 log = logging.getLogger(__name__)
 
@@ -208,6 +217,9 @@ class Ring:
     forced: bool = False
     limit: int = 0
     yielded: bool = False
+    # Preemption: the ticks the green must show before a preempt's entry may end it (lesser of the minimum and
+    # the preempt's entry minimums).
+    cut: int = 0
 
 
 class Termination(StrEnum):
@@ -265,6 +277,7 @@ class Controller:
         self.day0 = datetime.combine(start.date(), datetime.min.time())
         self.coordinator = Coordinator(config, clock=tenths((start - self.day0).total_seconds()))
         self.overlaps = Overlaps(config)
+        self.preemptor = Preemptor(config)
         # Counts changes of the status objects (what a poll reads), across power cycles too.
         # Inputs count too: they change the calls the status shows.
         self.status_version = 0
@@ -289,6 +302,8 @@ class Controller:
         self.rings = [Ring(i + 1, order) for i, order in enumerate(self.config.rings)]
         self.coordinator.reset()
         self.overlaps.reset()
+        self.preemptor.reset()
+        self._caps: tuple[int, int] | None = None  # a preempt's caps on the yellow and red clearance, in ticks
         self._placed: Plan | None = None  # the plan the rings' coordination latches were placed under
         self.group = 0
         self._waiting_across = False  # demand on a phase of another barrier group, this tick
@@ -343,6 +358,12 @@ class Controller:
         self.coordinator.set_command(value)
         self._system_set()
 
+    def set_preempt_control(self, preempts: Iterable[int]) -> None:
+        """A SET of preemptControlState: these preempts are called (ON); like any control SET it restarts the
+        backup timer ("A write to this object shall reset the Backup timer")."""
+        self.preemptor.set_control(frozenset(preempts))
+        self._system_set()
+
     def set_max2(self, rings: Iterable[int]) -> None:
         """A SET of ringControlGroupMax2: these rings time Maximum 2 from their next green."""
         self.max2_rings = frozenset(rings)
@@ -388,6 +409,17 @@ class Controller:
     @property
     def flashing(self) -> bool:
         return self.flash_status is not UnitFlashStatus.NOT_FLASH
+
+    @property
+    def short_alarm(self) -> ShortAlarm:
+        """shortAlarmStatus: a preempt input is on; the MMU has put the unit in flash."""
+        alarm = ShortAlarm.PREEMPT if self.preemptor.control else ShortAlarm(0)
+        return alarm | ShortAlarm.TF_FLASH if self.flash_status is UnitFlashStatus.MMU else alarm
+
+    @property
+    def preempted(self) -> bool:
+        """A preempt drives the rings (its entry, track clearance, dwell or exit)."""
+        return self.preemptor.serving is not None
 
     def _refresh_status(self) -> None:
         # A controller shows a handful of distinct status images: each is built once, keyed by what it is
@@ -456,22 +488,32 @@ class Controller:
             return
         calls = self.calls
         demand = self._demand(calls)
+        pe = self.preemptor
+        pe.step()
+        self._caps = self._preempt_caps()
+        if pe.started:
+            self._preempt_entry()
         # Demand waiting across the barrier forbids backing; while a pattern runs only demand that can still be
         # served in this cycle counts (a phase past its permissive period is skipped anyway).
         plan, timer = self.coordinator.plan, self.coordinator.timer
         clear = max(self._clearance_left(r) for r in self.rings) if plan is not None else 0
         self._waiting_across = any(self._barrier[q] != self.group and (plan is None or plan.fits(q, timer, clear))
                                    for q in demand)
-        if self.config.next_phase_lock is NextPhaseLock.RED_END:
+        if self.config.next_phase_lock is NextPhaseLock.RED_END and pe.serving is None:
             # before timing: the tick that ends a red clearance still reads the calls of that clearance
             for r in self.rings:
                 if r.interval in _CLEARANCE and r.target is not None:
                     self._redirect(r, demand)
         for r in self.rings:
             self._time(r, demand, calls)
-        self._decide(demand)
+        if pe.serving is None:
+            self._decide(demand)
+        else:
+            self._preempt()
         for r in self.rings:
             self._enter_target(r)
+        if pe.serving is not None:
+            self._preempt_progress()
         self._step_overlaps()
         self._refresh_status()
         self._monitor()
@@ -480,7 +522,8 @@ class Controller:
         """Everything a step can change but counters (see "Quiet time" above)."""
         return (self.group, self.flash_status, self.control_status, self.ped_calls, self.status_version,
                 tuple(self.control.values()), self.coordinator.discrete(), self.overlaps.discrete(),
-                tuple((r.phase, r.interval, r.target, r.gapped, r.forced, r.yielded) for r in self.rings))
+                self.preemptor.discrete(),
+                tuple((r.phase, r.interval, r.target, r.gapped, r.forced, r.yielded, r.cut) for r in self.rings))
 
     # --- quiet time ----------------------------------------------------------------------
 
@@ -504,12 +547,15 @@ class Controller:
             ahead.append(coordination)
         if self.flashing:
             return min(ahead, default=None)
+        preempt = self.preemptor.quiet_ticks()
+        if preempt is not None:
+            ahead.append(preempt)
         trailing = self.overlaps.quiet_ticks()
         if trailing is not None:
             ahead.append(max(1, trailing))
         for r in self.rings:
             if r.interval is Interval.GREEN:
-                for threshold in (r.minimum, r.walk, r.walk + r.ped_clear, r.limit):
+                for threshold in (r.minimum, r.walk, r.walk + r.ped_clear, r.limit, r.cut):
                     until(r.ticks, threshold)
                 if r.gap:
                     until(r.gap, r.passage)
@@ -534,6 +580,7 @@ class Controller:
         if self.flashing:
             return
         self.overlaps.skip(n)
+        self.preemptor.skip(n)
         for r in self.rings:
             if r.interval is not Interval.DWELL:
                 r.ticks += n
@@ -563,6 +610,7 @@ class Controller:
             self.control = {c: frozenset() for c in ControlColumn}
             self.max2_rings = frozenset()
             self.coordinator.set_command(0)  # systemPatternControl: "reset ... to ZERO when in BACKUP Mode"
+            self.preemptor.set_control(frozenset())  # preemptControlState, likewise
             self.control_status = UnitControlStatus.BACKUP_MODE
             self._since_set = None
             self.touch()  # the calls it shows are gone
@@ -611,6 +659,8 @@ class Controller:
                 if r.interval is Interval.YELLOW:
                     self._yellow_end[r.phase] = self.tick
                 self._enter(r, _NEXT[r.interval])
+                if r.interval is Interval.RED_CLEAR and r.length == 0:
+                    self._enter(r, Interval.DWELL)  # a red clearance a preempt's entry cut to nothing
             return
         p = r.phase
         extending = p in calls or p in self._recall[Recall.MAX] or p in self.coordinator.max_recalled()
@@ -742,8 +792,8 @@ class Controller:
         if r.interval is not Interval.DWELL or r.target is None:
             return
         t = r.target
-        if t in self.control[ControlColumn.PHASE_OMIT]:
-            r.target = None  # omitted during the clearance: not serviced, choose again
+        if t in self.control[ControlColumn.PHASE_OMIT] and self.preemptor.serving is None:
+            r.target = None  # omitted during the clearance: not serviced, choose again (a preempt overrides omits)
             return
         others_elsewhere = any(o is not r and o.interval is not Interval.DWELL
                                and self._barrier[o.phase] != self._barrier[t] for o in self.rings)
@@ -763,6 +813,7 @@ class Controller:
             r.yielded = False
         if interval is Interval.GREEN:
             self._place(r)
+            r.cut = 0
             served = r.phase in self.ped_calls and tm.walk > 0
             self.ped_calls -= {r.phase}
             r.walk, r.ped_clear = (tm.walk, tm.ped_clear) if served else (0, 0)
@@ -771,12 +822,106 @@ class Controller:
             r.passage = tm.passage
         else:
             r.length = {Interval.YELLOW: tm.yellow, Interval.RED_CLEAR: tm.red_clear}.get(interval, 0)
+            if self._caps is not None and interval in _CLEARANCE:
+                r.length = min(r.length, self._caps[interval is Interval.RED_CLEAR])
         if notify and (self.on_change is not None or self.recorder is not None):
             change = Change(self.tick, r.number, r.phase, interval, reason)
             if self.on_change is not None:
                 self.on_change(change)
             if self.recorder is not None:
                 self.recorder.changed(change)
+
+    # --- preemption ------------------------------------------------------------------------------
+
+    def _preempt_targets(self) -> dict[int, int]:
+        """Per ring, the phase the preempt being served wants green now (a ring without one rests in red; in
+        the exit, it is left to itself)."""
+        pe = self.preemptor
+        n, state = pe.serving, pe.state
+        p, tm = self.config.preempts[n], pe.timing[n]
+        if state is PreemptState.ENTRY_STARTED:
+            phases = p.track_phases if tm.track_green and p.track_phases else p.dwell_phases
+        elif state is PreemptState.TRACK_SERVICE:
+            phases = p.track_phases if pe.stage[n] < tm.track_green else p.dwell_phases
+        elif state is PreemptState.DWELL:
+            phases = p.dwell_phases
+        else:
+            phases = p.exit_phases
+        return {self._ring_of[q]: q for q in phases}
+
+    def _preempt_caps(self) -> tuple[int, int] | None:
+        """The yellow and red clearance a preempt-initiated transition may shorten to (entry, track), or None."""
+        pe = self.preemptor
+        if pe.state is PreemptState.ENTRY_STARTED:
+            tm = pe.timing[pe.serving]
+            return tm.enter_yellow, tm.enter_red
+        if pe.state is PreemptState.TRACK_SERVICE:
+            tm = pe.timing[pe.serving]
+            return tm.track_yellow, tm.track_red
+        return None
+
+    def _preempt_entry(self) -> None:
+        """A preempt's entry starts: running clearances shorten to its caps, and each green's end is set to the
+        lesser of its minimum green and the preempt's, its walk and pedestrian clearance likewise."""
+        tm = self.preemptor.timing[self.preemptor.serving]
+        for r in self.rings:
+            if r.interval in _CLEARANCE:
+                r.length = min(r.length, self._caps[r.interval is Interval.RED_CLEAR])
+            elif r.interval is Interval.GREEN:
+                walked = r.walk > 0  # this green serves a walk (its walk may be cut to nothing below)
+                if walked and r.ticks < r.walk:
+                    r.walk = max(r.ticks, min(r.walk, tm.min_walk))
+                if walked and r.ticks < r.walk + r.ped_clear:
+                    r.ped_clear = max(r.ticks - r.walk, min(r.ped_clear, tm.enter_ped_clear))
+                r.cut = max(min(self.timing[r.phase].min_green, tm.min_green), r.walk + r.ped_clear)
+
+    def _preempt(self) -> None:
+        """The preempt being served drives the rings to its phases: a green of another phase ends once it may
+        (its entry minimum, the end of the track green, else its minimum), a clearing or resting ring takes the
+        preempt's phase as its next. In the exit a ring without an exit phase keeps what it shows, unless that is
+        a green across the barrier from the exit phases: it clears to red."""
+        pe = self.preemptor
+        state = pe.state
+        targets = self._preempt_targets()
+        exit_group = next((self._barrier[q] for q in targets.values()), None)
+        for r in self.rings:
+            t = targets.get(r.number)
+            if t is None and state is PreemptState.EXIT_STARTED and (
+                    r.interval is not Interval.GREEN or exit_group in (None, self._barrier[r.phase])):
+                continue  # no exit phase of its own: left to itself, unless it holds the exit across a barrier
+            if r.interval is Interval.GREEN:
+                if r.phase == t:
+                    continue
+                limit = {PreemptState.ENTRY_STARTED: r.cut, PreemptState.TRACK_SERVICE: 0}.get(state, r.minimum)
+                if r.ticks >= limit:
+                    self._commit(r, t)
+            else:
+                r.target = t
+            if t is not None:
+                self.group = self._barrier[t]
+
+    def _preempt_progress(self) -> None:
+        """After the rings moved: the entry, track clearance or exit is done when every ring shows its phase (or,
+        without one, rests in red)."""
+        pe = self.preemptor
+        n, state = pe.serving, pe.state
+        targets = self._preempt_targets()
+
+        def there(r: Ring) -> bool:
+            t = targets.get(r.number)
+            if t is None:
+                return state is PreemptState.EXIT_STARTED or (r.interval is Interval.DWELL and r.target is None)
+            return r.interval is Interval.GREEN and r.phase == t
+
+        if not all(there(r) for r in self.rings):
+            return
+        if state is PreemptState.ENTRY_STARTED:
+            track = pe.timing[n].track_green and self.config.preempts[n].track_phases
+            pe.event(n, Event.CLEARED_TO_TRACK if track else Event.CLEARED)
+        elif state is PreemptState.TRACK_SERVICE and pe.stage[n] >= pe.timing[n].track_green:
+            pe.event(n, Event.TRACKED)
+        elif state is PreemptState.EXIT_STARTED:
+            pe.event(n, Event.EXITED)
 
     # --- coordination --------------------------------------------------------------------------
 

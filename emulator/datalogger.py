@@ -44,6 +44,9 @@ events                                     from
                                            trailing green, yellow (its parent's or its own trailing one),
                                            trailing red, off (red); a flashing yellow arrow's flashing begins and
                                            ends the permissive (32, 33), numbered as the overlap (1 = A)
+102, 104 preempt input on, off             preemptControlState as the controller reads it
+105, 106, 107, 110, 111 preemption         a preempt's service (:mod:`emulator.preemption`, preemptState) entering
+                                           entry, track clearance, dwell, maximum presence, exit
 131-149 pattern, cycle, offset, splits     a pattern starting (or laid out anew); 131 also when going free (254)
 150 cycle state                            its changes (free, in step, add, subtract, dwell) and each local zero
 151 yield point                            each coordinated phase's yield point
@@ -69,7 +72,7 @@ from emulator.coordination import Coordinator, Plan
 from emulator.overlaps import Show
 from hils.config import Recall
 from hils.hires import MAX_PARAMETER, CycleState, Event, EventCode, split_code
-from hils.ntcip import ControlColumn, CoordCorrectionMode, UnitFlashStatus
+from hils.ntcip import ControlColumn, CoordCorrectionMode, PreemptState, UnitFlashStatus
 
 E = EventCode
 
@@ -80,6 +83,10 @@ _OVERLAP = {Show.GREEN: E.OVERLAP_BEGIN_GREEN, Show.TRAIL_GREEN: E.OVERLAP_BEGIN
             Show.YELLOW: E.OVERLAP_BEGIN_YELLOW, Show.TRAIL_YELLOW: E.OVERLAP_BEGIN_YELLOW,
             Show.TRAIL_RED: E.OVERLAP_BEGIN_RED_CLEARANCE, Show.RED: E.OVERLAP_OFF,
             Show.FLASHING: E.FYA_BEGIN_PERMISSIVE}
+# What a preempt logs as its service enters a state (NTCIP preemptState).
+_PREEMPT = {PreemptState.ENTRY_STARTED: E.PREEMPT_ENTRY_STARTED,
+            PreemptState.TRACK_SERVICE: E.PREEMPT_BEGIN_TRACK_CLEARANCE, PreemptState.DWELL: E.PREEMPT_BEGIN_DWELL,
+            PreemptState.MAX_PRESENCE: E.PREEMPT_MAX_PRESENCE_EXCEEDED, PreemptState.EXIT_STARTED: E.PREEMPT_BEGIN_EXIT}
 # The on/off events of a set of numbers that the controller reads after each step.
 _ON_OFF = {
     "calls": (E.PHASE_CALL_REGISTERED, E.PHASE_CALL_DROPPED),
@@ -88,6 +95,7 @@ _ON_OFF = {
     "ped_omits": (E.PED_OMIT_ON, E.PED_OMIT_OFF),
     "detectors": (E.DETECTOR_ON, E.DETECTOR_OFF),
     "ped_detectors": (E.PED_DETECTOR_ON, E.PED_DETECTOR_OFF),
+    "preempts": (E.PREEMPT_CALL_INPUT_ON, E.PREEMPT_CALL_INPUT_OFF),
 }
 
 
@@ -115,6 +123,7 @@ class _Seen:
     plan: Plan | None = None
     state: CycleState | None = None
     overlaps: dict[int, Show] = field(default_factory=dict)
+    preempts: dict[int, PreemptState] = field(default_factory=dict)
 
 
 class DataLogger:
@@ -265,6 +274,7 @@ class DataLogger:
             "ped_omits": control[ControlColumn.PED_OMIT],
             "detectors": c.actuations,
             "ped_detectors": c.ped_actuations,
+            "preempts": c.preemptor.control,
         }
         for name, numbers in now.items():
             before = seen.sets.get(name, frozenset())
@@ -294,6 +304,10 @@ class DataLogger:
             if not (shown is Show.GREEN and before is Show.TRAIL_GREEN):
                 self._add(_OVERLAP[shown], n)
         seen.overlaps = dict(c.overlaps.shown)
+        for n, state in c.preemptor.states.items():
+            if state is not seen.preempts.get(n, PreemptState.NOT_ACTIVE) and state in _PREEMPT:
+                self._add(_PREEMPT[state], n)
+        seen.preempts = dict(c.preemptor.states)
         if int(c.flash_status) != seen.flash:
             seen.flash = int(c.flash_status)
             self._add(E.UNIT_FLASH_STATUS_CHANGE, seen.flash)

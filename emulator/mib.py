@@ -44,6 +44,7 @@ from hils.ntcip import (
     MAX_PED_DETECTORS,
     MAX_PHASE_GROUPS,
     MAX_PHASES,
+    MAX_PREEMPTS,
     MAX_SPLITS,
     MAX_VEHICLE_DETECTORS,
     OVERLAP_STATUS_TABLE,
@@ -54,8 +55,12 @@ from hils.ntcip import (
     PED_DETECTOR_CALL_PHASE,
     PED_DETECTOR_STATUS_ACTIVE,
     PHASE_TABLE,
+    PREEMPT_CONTROL_NUMBER,
+    PREEMPT_CONTROL_STATE,
+    PREEMPT_TABLE,
     RING_CONTROL_MAX2,
     SEQUENCE_DATA,
+    SHORT_ALARM_STATUS,
     SPLIT_TABLE,
     STATUS_TABLE,
     SYSTEM_PATTERN_CONTROL,
@@ -79,6 +84,7 @@ from hils.ntcip import (
     PatternColumn,
     PhaseColumn,
     PhaseOption,
+    PreemptColumn,
     SnmpError,
     SplitColumn,
     SplitMode,
@@ -199,6 +205,7 @@ class MibView:
                      lambda v: c.set_backup_time(v)),
             Instance(UNIT_CONTROL_STATUS.instance(), UNIT_CONTROL_STATUS, lambda: int(c.control_status)),
             Instance(UNIT_FLASH_STATUS.instance(), UNIT_FLASH_STATUS, lambda: int(c.flash_status)),
+            Instance(SHORT_ALARM_STATUS.instance(), SHORT_ALARM_STATUS, lambda: int(c.short_alarm)),
             Instance(SYSTEM_PATTERN_CONTROL.instance(), SYSTEM_PATTERN_CONTROL, lambda: c.coordinator.command,
                      c.set_pattern_control),
             *_coordination(c),
@@ -245,6 +252,7 @@ class MibView:
                                            lambda phases, col=col: c.set_control(col, phases), g))
                     for col in ControlColumn]
         out += _overlaps(c, st)
+        out += _preempts(c)
         for r, order in enumerate(cfg.rings, start=1):
             out.append(Instance(sequence_oid(1, r), SEQUENCE_DATA, lambda o=order: bytes(o)))
         out += _detectors(cfg.detectors, MAX_VEHICLE_DETECTORS, VEHICLE_DETECTOR_CALL_PHASE, None,
@@ -359,6 +367,45 @@ def _overlaps(c: Controller | DelayedController, st: Controller | DelayedControl
                             OVERLAP_STATUS_TABLE[OverlapStatusColumn.NUMBER], lambda g=g: g))
         out += [Instance(OVERLAP_STATUS_TABLE[col].instance(g), OVERLAP_STATUS_TABLE[col],
                          _group_reader(read, g, groups)) for col, read in status.items()]
+    return out
+
+
+# Writable preempt columns: the PreemptTiming field each sets, and ticks per unit of the NTCIP value.
+_PREEMPT_TIMING: dict[PreemptColumn, tuple[str, int]] = {
+    PreemptColumn.DELAY: ("delay", 10),
+    PreemptColumn.MINIMUM_DURATION: ("min_duration", 10),
+    PreemptColumn.MINIMUM_GREEN: ("min_green", 10),
+    PreemptColumn.MINIMUM_WALK: ("min_walk", 10),
+    PreemptColumn.ENTER_PED_CLEAR: ("enter_ped_clear", 10),
+    PreemptColumn.TRACK_GREEN: ("track_green", 10),
+    PreemptColumn.DWELL_GREEN: ("dwell_green", 10),
+    PreemptColumn.MAXIMUM_PRESENCE: ("max_presence", 10),
+    PreemptColumn.ENTER_YELLOW_CHANGE: ("enter_yellow", 1),
+    PreemptColumn.ENTER_RED_CLEAR: ("enter_red", 1),
+    PreemptColumn.TRACK_YELLOW_CHANGE: ("track_yellow", 1),
+    PreemptColumn.TRACK_RED_CLEAR: ("track_red", 1),
+}
+
+
+def _preempts(c: Controller | DelayedController) -> list[Instance]:
+    """The preempt node: the preempt table (phases and control bits from the config, times writable, acting from
+    the next use), each preempt's state, and preemptControlState (a SET calls or releases the preempt)."""
+    pe = c.preemptor
+    out = [Instance(MAX_PREEMPTS.instance(), MAX_PREEMPTS, lambda: max(c.config.preempts, default=0))]
+    for n, p in c.config.preempts.items():
+        fixed: dict[PreemptColumn, Value] = {
+            PreemptColumn.NUMBER: n, PreemptColumn.CONTROL: int(p.non_locking), PreemptColumn.LINK: 0,
+            PreemptColumn.TRACK_PHASE: bytes(p.track_phases), PreemptColumn.DWELL_PHASE: bytes(p.dwell_phases),
+            PreemptColumn.DWELL_PED: b"", PreemptColumn.EXIT_PHASE: bytes(p.exit_phases)}
+        out += [Instance(PREEMPT_TABLE[col].instance(n), PREEMPT_TABLE[col], lambda v=v: v) for col, v in fixed.items()]
+        out += [Instance(PREEMPT_TABLE[col].instance(n), PREEMPT_TABLE[col],
+                         *_field_access(c, pe.timing[n], name, unit)) for col, (name, unit) in _PREEMPT_TIMING.items()]
+        out.append(Instance(PREEMPT_TABLE[PreemptColumn.STATE].instance(n), PREEMPT_TABLE[PreemptColumn.STATE],
+                            lambda n=n: int(pe.states[n])))
+        out.append(Instance(PREEMPT_CONTROL_NUMBER.instance(n), PREEMPT_CONTROL_NUMBER, lambda n=n: n))
+        out.append(Instance(PREEMPT_CONTROL_STATE.instance(n), PREEMPT_CONTROL_STATE,
+                            lambda n=n: int(n in pe.control),
+                            lambda v, n=n: c.set_preempt_control(pe.control - {n} | ({n} if v else set()))))
     return out
 
 

@@ -162,6 +162,37 @@ class Overlap:
         return chr(ord("A") + self.number - 1)
 
 
+@dataclass(frozen=True, slots=True)
+class Preempt:
+    """One row of the preempt table (NTCIP 1202 preemptTable): what a preempt input makes the controller do.
+
+    Times in seconds. The entry values cap what a preempt-initiated transition honours of the phase being
+    ended ("the lesser of the phase's ... or this period"); their defaults honour the phase's own times. With
+    ``vehicles`` and ``approach`` SUMO calls it while a vehicle of one of those classes or types is within
+    ``zone`` m of the approach's stop bar."""
+
+    number: int  # lower numbers override higher ones
+    dwell_phases: tuple[int, ...] = ()
+    track_phases: tuple[int, ...] = ()
+    exit_phases: tuple[int, ...] = ()
+    delay: int = 0
+    min_duration: int = 0
+    min_green: int = 255
+    min_walk: int = 255
+    enter_ped_clear: int = 255
+    enter_yellow: float = 25.5
+    enter_red: float = 25.5
+    track_green: int = 0
+    track_yellow: float = 25.5
+    track_red: float = 25.5
+    dwell_green: int = 1
+    max_presence: int = 0  # 0: no limit
+    non_locking: bool = False  # preemptControl bit 0: a call that goes before its delay ends is forgotten
+    vehicles: tuple[str, ...] = ()
+    approach: str | None = None
+    zone: float = 100.0
+
+
 # Options of the whole controller unit that [timing] holds beside the phase defaults.
 _UNIT_OPTIONS = ("startup_flash", "next_phase_lock")
 
@@ -265,6 +296,7 @@ class IntersectionConfig:
     detector_lanes: Mapping[int, str] = field(default_factory=dict)  # the SUMO lane of a detector given one
     ped_detector_phases: Mapping[int, int] = field(default_factory=dict)  # the [pedestrian_detectors] table, if any
     overlaps: Mapping[int, Overlap] = field(default_factory=dict)  # by overlap number (1 = A)
+    preempts: Mapping[int, Preempt] = field(default_factory=dict)  # by preempt number
 
     @property
     def detectors(self) -> dict[int, int]:
@@ -554,7 +586,7 @@ def _matrix(raw: Mapping[str, Any], numbers: list[int], source: str) -> frozense
 
 def from_dict(raw: Mapping[str, Any], source: str = "<memory>") -> IntersectionConfig:
     _unknown(raw, ("name", "timing", "phases", "structure", "middleware", "emulator", "detectors",
-                   "pedestrian_detectors", "coordination", "overlaps"), "", source)
+                   "pedestrian_detectors", "coordination", "overlaps", "preempts"), "", source)
     name = raw.get("name", Path(source).stem)
     if not isinstance(name, str):
         raise ConfigError(source, "name", "must be a string")
@@ -675,6 +707,7 @@ def from_dict(raw: Mapping[str, Any], source: str = "<memory>") -> IntersectionC
         **_detectors(raw.get("detectors", {}), phases, source),
         ped_detector_phases=_ped_detectors(raw.get("pedestrian_detectors", {}), phases, source),
         overlaps=_overlaps(raw.get("overlaps", {}), phases, compatibility, source),
+        preempts=_preempts(raw.get("preempts", {}), phases, compatibility, source),
     )
 
 
@@ -934,3 +967,71 @@ def _overlap(number: int, raw: Any, w: str, phases: Mapping[int, Phase], compati
                                                  if kind is OverlapKind.FYA else ""))
     return Overlap(number, kind, included, modifiers, trail_green, float(trail_yellow), float(trail_red), approach,
                    turn)
+
+
+# --- [preempts] -----------------------------------------------------------------------------------
+
+_PREEMPT_TIMES = {  # field: (integer, low, high); NTCIP 1202's ranges (the yellows from NEMA's 3.0 s)
+    "delay": (True, 0, 600), "min_duration": (True, 0, 65535), "min_green": (True, 0, 255),
+    "min_walk": (True, 0, 255), "enter_ped_clear": (True, 0, 255), "enter_yellow": (False, 3.0, 25.5),
+    "enter_red": (False, 0.0, 25.5), "track_green": (True, 0, 255), "track_yellow": (False, 3.0, 25.5),
+    "track_red": (False, 0.0, 25.5), "dwell_green": (True, 1, 255), "max_presence": (True, 0, 65535),
+}
+
+
+def _preempts(raw: Any, phases: Mapping[int, Phase], compatibility: frozenset[frozenset[int]],
+              source: str) -> dict[int, Preempt]:
+    """``[preempts]``: a table per preempt number (1-255; lower numbers override higher), e.g.
+    ``1 = { dwell_phases = [2, 6], exit_phases = [2, 6], vehicles = ["emergency"], approach = "east" }``."""
+    if not isinstance(raw, dict):
+        raise ConfigError(source, "preempts", "must be a table of preempts by number, e.g. "
+                                              "1 = { dwell_phases = [2, 6] }")
+    out = {}
+    for key, item in raw.items():
+        if not key.isdigit() or key != str(int(key)) or not 1 <= int(key) <= 255:
+            raise ConfigError(source, f"preempts.{key}", "is not a preempt number; allowed: 1..255")
+        out[int(key)] = _preempt(int(key), item, f"preempts.{key}.", phases, compatibility, source)
+    return dict(sorted(out.items()))
+
+
+def _preempt(number: int, raw: Any, w: str, phases: Mapping[int, Phase], compatibility: frozenset[frozenset[int]],
+             source: str) -> Preempt:
+    if not isinstance(raw, dict):
+        raise ConfigError(source, w[:-1], "must be a table of preempt settings")
+    lists = ("track_phases", "dwell_phases", "exit_phases")
+    _unknown(raw, (*lists, *_PREEMPT_TIMES, "non_locking", "vehicles", "approach", "zone"), w, source)
+    got: dict[str, Any] = {}
+    for key in lists:
+        value = _int_list(raw.get(key, []), f"{w}{key}", source)
+        # NTCIP 1202 Annex B's consistency checks: the phases of one list run together, one per ring.
+        if any(p not in phases for p in value) or len({phases[p].ring for p in value if p in phases}) != len(value):
+            raise ConfigError(source, f"{w}{key}", f"is {value}; allowed: configured phases, at most one per ring")
+        clash = next(((a, b) for i, a in enumerate(value) for b in value[i + 1:]
+                      if frozenset((a, b)) not in compatibility), None)
+        if clash:
+            raise ConfigError(source, f"{w}{key}", f"phases {clash[0]} and {clash[1]} conflict; allowed: phases that "
+                                                   "run together")
+        got[key] = tuple(value)
+    for key, (integer, low, high) in _PREEMPT_TIMES.items():
+        default = Preempt.__dataclass_fields__[key].default
+        value = _number(raw, key, w, source, default, integer=integer, low=low, high=high,
+                        step=None if integer else 0.1)
+        got[key] = value if integer else float(value)
+    if got["track_green"] and not got["track_phases"]:
+        raise ConfigError(source, f"{w}track_phases", "is required with track_green: the phases that clear the track")
+    non_locking = raw.get("non_locking", False)
+    if not isinstance(non_locking, bool):
+        raise ConfigError(source, f"{w}non_locking", f"is {non_locking!r}; allowed: true, false")
+    vehicles, approach = raw.get("vehicles", []), raw.get("approach")
+    if not isinstance(vehicles, list) or not all(isinstance(v, str) and v for v in vehicles):
+        raise ConfigError(source, f"{w}vehicles", f"is {vehicles!r}; allowed: a list of SUMO vehicle classes or "
+                                                  "vehicle type ids, e.g. [\"emergency\"]")
+    if bool(vehicles) != (approach is not None):
+        missing, given = ("approach", "vehicles") if vehicles else ("vehicles", "approach")
+        raise ConfigError(source, f"{w}{missing}", f"is required with {given}: both name the SUMO detection zone")
+    if approach is not None and approach not in APPROACHES:
+        raise ConfigError(source, f"{w}approach", f"is {approach!r}; allowed: {', '.join(APPROACHES)}")
+    zone = _number(raw, "zone", w, source, Preempt.__dataclass_fields__["zone"].default, low=1, high=2000)
+    return Preempt(number, got["dwell_phases"], got["track_phases"], got["exit_phases"],
+                   **{k: got[k] for k in _PREEMPT_TIMES}, non_locking=non_locking, vehicles=tuple(vehicles),
+                   approach=approach, zone=float(zone))

@@ -398,6 +398,96 @@ OVERLAP_STATUS_TABLE: dict[OverlapStatusColumn, ObjectDef] = {
     col: _o("overlapStatusGroup" + col.name.title(), (9, 4, 1, int(col))) for col in OverlapStatusColumn
 }
 
+# Preemption (NTCIP 1202 v02 node preempt, A.6; OIDs, ranges and the preemptState enumeration from the ASC MIB,
+# the v02 columns past .16 numbered as the standard lists them: preemptEnterYellowChange .22 and
+# preemptEnterRedClear .23 as controller firmware spells them, preemptTrackYellowChange .24 and
+# preemptTrackRedClear .25 after them). The table is indexed by preempt number: lower numbers override higher.
+MAX_PREEMPTS = _o("maxPreempts", (6, 1))
+# shortAlarmStatus (A.3.9): "Bit 1: T&F Flash - When either the Local Flash or MMU Flash input becomes active.
+# Bit 0: Preempt - When any of the CU Preempt inputs become active."
+SHORT_ALARM_STATUS = _o("shortAlarmStatus", (3, 9))
+
+
+class ShortAlarm(IntFlag):
+    """The shortAlarmStatus bits the emulator sets."""
+
+    PREEMPT = 1
+    TF_FLASH = 2
+
+
+class PreemptState(IntEnum):
+    """preemptState (A.6.2.1.16): where a preempt's service is."""
+
+    OTHER = 1
+    NOT_ACTIVE = 2
+    NOT_ACTIVE_WITH_CALL = 3
+    ENTRY_STARTED = 4
+    TRACK_SERVICE = 5
+    DWELL = 6
+    LINK_ACTIVE = 7
+    EXIT_STARTED = 8
+    MAX_PRESENCE = 9
+
+
+class PreemptColumn(IntEnum):
+    """Columns of preemptTable (A.6.2.1.c.preempt)."""
+
+    NUMBER = 1
+    CONTROL = 2
+    LINK = 3
+    DELAY = 4
+    MINIMUM_DURATION = 5
+    MINIMUM_GREEN = 6
+    MINIMUM_WALK = 7
+    ENTER_PED_CLEAR = 8
+    TRACK_GREEN = 9
+    DWELL_GREEN = 10
+    MAXIMUM_PRESENCE = 11
+    TRACK_PHASE = 12
+    DWELL_PHASE = 13
+    DWELL_PED = 14
+    EXIT_PHASE = 15
+    STATE = 16
+    ENTER_YELLOW_CHANGE = 22
+    ENTER_RED_CLEAR = 23
+    TRACK_YELLOW_CHANGE = 24
+    TRACK_RED_CLEAR = 25
+
+
+# Phases and control bits come from the intersection config (read-only here); the times are writable with the
+# standard's ranges (seconds; tenths for the clearances, the yellows from NEMA's 3.0 s as the phase table's).
+_PREEMPT_NAMES: dict[PreemptColumn, tuple[str, Syntax, Access, int, int]] = {
+    PreemptColumn.NUMBER: ("preemptNumber", Syntax.INTEGER, Access.READ_ONLY, 1, 255),
+    PreemptColumn.CONTROL: ("preemptControl", Syntax.INTEGER, Access.READ_ONLY, 0, 255),
+    PreemptColumn.LINK: ("preemptLink", Syntax.INTEGER, Access.READ_ONLY, 0, 255),
+    PreemptColumn.DELAY: ("preemptDelay", Syntax.INTEGER, _RW, 0, 600),
+    PreemptColumn.MINIMUM_DURATION: ("preemptMinimumDuration", Syntax.INTEGER, _RW, 0, 65535),
+    PreemptColumn.MINIMUM_GREEN: ("preemptMinimumGreen", Syntax.INTEGER, _RW, 0, 255),
+    PreemptColumn.MINIMUM_WALK: ("preemptMinimumWalk", Syntax.INTEGER, _RW, 0, 255),
+    PreemptColumn.ENTER_PED_CLEAR: ("preemptEnterPedClear", Syntax.INTEGER, _RW, 0, 255),
+    PreemptColumn.TRACK_GREEN: ("preemptTrackGreen", Syntax.INTEGER, _RW, 0, 255),
+    PreemptColumn.DWELL_GREEN: ("preemptDwellGreen", Syntax.INTEGER, _RW, 1, 255),
+    PreemptColumn.MAXIMUM_PRESENCE: ("preemptMaximumPresence", Syntax.INTEGER, _RW, 0, 65535),
+    PreemptColumn.TRACK_PHASE: ("preemptTrackPhase", Syntax.OCTET_STRING, Access.READ_ONLY, 0, 255),
+    PreemptColumn.DWELL_PHASE: ("preemptDwellPhase", Syntax.OCTET_STRING, Access.READ_ONLY, 0, 255),
+    PreemptColumn.DWELL_PED: ("preemptDwellPed", Syntax.OCTET_STRING, Access.READ_ONLY, 0, 255),
+    PreemptColumn.EXIT_PHASE: ("preemptExitPhase", Syntax.OCTET_STRING, Access.READ_ONLY, 0, 255),
+    PreemptColumn.STATE: ("preemptState", Syntax.INTEGER, Access.READ_ONLY, 1, 9),
+    PreemptColumn.ENTER_YELLOW_CHANGE: ("preemptEnterYellowChange", Syntax.INTEGER, _RW, 30, 255),
+    PreemptColumn.ENTER_RED_CLEAR: ("preemptEnterRedClear", Syntax.INTEGER, _RW, 0, 255),
+    PreemptColumn.TRACK_YELLOW_CHANGE: ("preemptTrackYellowChange", Syntax.INTEGER, _RW, 30, 255),
+    PreemptColumn.TRACK_RED_CLEAR: ("preemptTrackRedClear", Syntax.INTEGER, _RW, 0, 255),
+}
+PREEMPT_TABLE: dict[PreemptColumn, ObjectDef] = {
+    col: _o(name, (6, 2, 1, int(col)), syntax, access, low, high)
+    for col, (name, syntax, access, low, high) in _PREEMPT_NAMES.items()
+}
+# preemptControlTable (A.6.3.1.c.preempt): "when set to ON (one) shall cause the associated preempt actions to
+# occur ... The device shall reset this object to ZERO when in BACKUP Mode. A write to this object shall reset
+# the Backup timer".
+PREEMPT_CONTROL_NUMBER = _o("preemptControlNumber", (6, 3, 1, 1), low=1)
+PREEMPT_CONTROL_STATE = _o("preemptControlState", (6, 3, 1, 2), access=Access.READ_WRITE, high=1)
+
 # Vehicle detectors (A.1.2): the detector table (call phase, options), the active detectors by group of 8
 # (vehicleDetectorStatusGroupActive) and NTCIP 1202 v03's remote actuation by group of 8
 # (vehicleDetectorControlGroupActuation: a set bit forces that detector's actuation, as a cabinet input would).
@@ -424,6 +514,7 @@ ALL_OBJECTS: tuple[ObjectDef, ...] = (
     PED_DETECTOR_CALL_PHASE, MAX_PED_DETECTOR_GROUPS, PED_DETECTOR_STATUS_ACTIVE, PED_DETECTOR_ACTUATION,
     *PHASE_TABLE.values(), *STATUS_TABLE.values(), *CONTROL_TABLE.values(), *CHANNEL_TABLE.values(),
     MAX_OVERLAPS, MAX_OVERLAP_STATUS_GROUPS, *OVERLAP_TABLE.values(), *OVERLAP_STATUS_TABLE.values(),
+    MAX_PREEMPTS, SHORT_ALARM_STATUS, *PREEMPT_TABLE.values(), PREEMPT_CONTROL_NUMBER, PREEMPT_CONTROL_STATE,
 )
 
 

@@ -460,11 +460,13 @@ class Testbed:
         # the collector's way so that collections during the run stay short.
         gc.freeze()
         for j in self.junctions.values():
-            if self.detectors and j.view is not None:
+            zones = any(p.approach is not None for p in j.config.preempts.values())
+            if (self.detectors or zones) and j.view is not None:
                 # Built before the run starts: a detector on a lane its phase does not have is refused now.
                 pm = j.view.phase_map
                 j.detector_feed = DetectorFeed(j.transport, j.config, j.events,
-                                               {p: pm.incoming_lanes(p) for p in pm.phases})
+                                               {p: pm.incoming_lanes(p) for p in pm.phases}, detectors=self.detectors,
+                                               preempt_calls=j.view.preempt_calls if zones else None)
         cfg = self.config
         fields = ({"scenario": self.scenario.name, "source": self.scenario.source, "intersections": list(self.configs)}
                   if self.several else

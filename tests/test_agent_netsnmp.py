@@ -40,9 +40,13 @@ from hils.ntcip import (
     MAX_OVERLAPS,
     MAX_PHASE_GROUPS,
     MAX_PHASES,
+    MAX_PREEMPTS,
     OVERLAP_STATUS_TABLE,
     OVERLAP_TABLE,
     PATTERN_TABLE,
+    PREEMPT_CONTROL_STATE,
+    PREEMPT_TABLE,
+    SHORT_ALARM_STATUS,
     SPLIT_TABLE,
     SYSTEM_PATTERN_CONTROL,
     UNIT_BACKUP_TIME,
@@ -55,6 +59,9 @@ from hils.ntcip import (
     PatternColumn,
     PhaseColumn,
     PhaseOption,
+    PreemptColumn,
+    PreemptState,
+    ShortAlarm,
     SplitColumn,
     StatusColumn,
     control_oid,
@@ -282,6 +289,35 @@ def test_the_overlap_objects_walk_and_the_trailing_times_set_within_ntcip_ranges
         assert "wrongValue" in done.stderr, done.stderr
         done = run("snmpset", "2c", "private", served.port, trail_yellow, "i", "40")
         assert done.returncode == 0 and integers(served.port, trail_yellow) == [40]
+    finally:
+        served.stop()
+
+
+def test_the_preempt_objects_walk_and_a_preempt_is_called_with_snmpset(tmp_path: Path) -> None:
+    """The preempt node (A.6) of the city four-leg walked by snmpwalk; preemptControlState.1 SET to 1 with snmpset
+    calls it: shortAlarmStatus shows the preempt input, preemptState its entry, then its dwell in 2+5."""
+    served = start_emulator(tmp_path / "serve.log", "--config", str(data_path("four_leg_city.toml")))
+    try:
+        done = run("snmpwalk", "2c", "public", served.port, A + ".6")
+        assert done.returncode == 0, done.stderr
+        got = values(done.stdout)
+        state = oid_str(PREEMPT_TABLE[PreemptColumn.STATE].instance(1))
+        assert got[oid_str(MAX_PREEMPTS.instance())] == "INTEGER: 1"
+        assert got[oid_str(PREEMPT_TABLE[PreemptColumn.DWELL_PHASE].instance(1))] == "Hex-STRING: 02 05 "
+        assert got[state] == f"INTEGER: {int(PreemptState.NOT_ACTIVE)}"
+        control = oid_str(PREEMPT_CONTROL_STATE.instance(1))
+        assert got[control] == "INTEGER: 0"
+        done = run("snmpset", "2c", "private", served.port, control, "i", "2")
+        assert "wrongValue" in done.stderr, done.stderr
+        done = run("snmpset", "2c", "private", served.port, control, "i", "1")
+        assert done.returncode == 0, done.stderr
+        alarm = oid_str(SHORT_ALARM_STATUS.instance())
+        assert integers(served.port, alarm)[0] & ShortAlarm.PREEMPT
+        deadline = time.monotonic() + 15
+        while integers(served.port, state) != [int(PreemptState.DWELL)]:
+            assert time.monotonic() < deadline, "no dwell within 15 s"
+            time.sleep(0.2)
+        assert integers(served.port, GREENS_1) == [0b00010010]  # 2 and 5
     finally:
         served.stop()
 

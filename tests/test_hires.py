@@ -312,3 +312,28 @@ def test_a_bounded_log_keeps_the_last_events_as_a_ring_buffer() -> None:
         run(c, 3000)
     assert len(whole) > 250 and 100 <= len(ring) <= 125
     assert ring.events() == whole.events()[-len(ring):]
+
+
+def test_a_preempt_is_logged_from_its_input_to_its_exit() -> None:
+    """The four-leg as a city runs it: preempt 1 (no delay, 2 s entry minimum green, dwell on 2+5 at least 5 s,
+    exit to 2+6) called while 4 and 8 are green."""
+    c = Controller(config_mod.load(Path(__file__).parents[1] / "hils/data/four_leg_city.toml"))
+    log, _ = logged(c)
+    c.set_control(ControlColumn.VEH_CALL, {4, 8})
+    run(c, 120)
+    assert {4, 8} <= c.greens
+    c.set_preempt_control({1})
+    run(c, 150)
+    c.set_preempt_control(set())
+    run(c, 150)
+    order = [(e.code, e.time) for e in log.events() if e.code in (
+        E.PREEMPT_CALL_INPUT_ON, E.PREEMPT_ENTRY_STARTED, E.PREEMPT_BEGIN_DWELL, E.PREEMPT_CALL_INPUT_OFF,
+        E.PREEMPT_BEGIN_EXIT) and e.parameter == 1]
+    assert [code for code, _ in order] == [E.PREEMPT_CALL_INPUT_ON, E.PREEMPT_ENTRY_STARTED, E.PREEMPT_BEGIN_DWELL,
+                                           E.PREEMPT_CALL_INPUT_OFF, E.PREEMPT_BEGIN_EXIT]
+    times = dict(order)
+    dwell = {e.parameter for e in log.events()
+             if e.code == E.PHASE_BEGIN_GREEN and e.time == times[E.PREEMPT_BEGIN_DWELL]}
+    assert dwell == {2, 5}  # the dwell begins with its phases' green
+    assert times[E.PREEMPT_CALL_INPUT_ON] <= times[E.PREEMPT_ENTRY_STARTED]  # no delay configured
+    assert times[E.PREEMPT_BEGIN_EXIT] - times[E.PREEMPT_BEGIN_DWELL] >= timedelta(seconds=5)  # its minimum dwell

@@ -1,6 +1,6 @@
 """The controller's record and the inputs field tools send, over the wire: `hils emulator serve --http` read by
-Signal-Replay's own collector as it reads an Intelight MaxTime, and pedestrian and vehicle detector inputs SET by
-net-snmp's snmpset as Signal-Replay sends them."""
+Signal-Replay's own collector as it reads an Intelight MaxTime, and vehicle detector, push-button and preempt
+inputs SET by net-snmp's snmpset as Signal-Replay sends them."""
 
 from __future__ import annotations
 
@@ -14,7 +14,14 @@ import pytest
 
 from hils import hires
 from hils.hires import EventCode
-from hils.ntcip import DETECTOR_ACTUATION, PED_DETECTOR_ACTUATION, STATUS_TABLE, StatusColumn, oid_str
+from hils.ntcip import (
+    DETECTOR_ACTUATION,
+    PED_DETECTOR_ACTUATION,
+    PREEMPT_CONTROL_STATE,
+    STATUS_TABLE,
+    StatusColumn,
+    oid_str,
+)
 from tests.test_agent_netsnmp import run
 
 E = EventCode
@@ -127,3 +134,26 @@ def test_asclog_needs_a_wall_clock_run_of_one_controller(tmp_path: Path) -> None
     done = subprocess.run([sys.executable, "-m", "hils.cli", "run", "--no-sumo", "--duration", "1", "--asclog",
                            "http://127.0.0.1:1", "--out", str(tmp_path)], capture_output=True, text=True, timeout=60)
     assert done.returncode == 2 and "--asclog" in done.stderr and "Traceback" not in done.stderr
+
+
+def test_a_preempt_input_set_by_snmpset_reaches_the_log(tmp_path: Path) -> None:
+    """Signal-Replay replays a log's preempt inputs (102/104) as preemptControlState SETs; a preempt that does not
+    exist is noSuchName."""
+    from harness.processes import start_emulator
+
+    city = Path(__file__).parents[1] / "hils/data/four_leg_city.toml"
+    served = start_emulator(tmp_path / "serve.log", "--config", str(city), http=True)
+    try:
+        url = f"http://127.0.0.1:{served.http_ports[0]}"
+        since = datetime.now() - timedelta(seconds=1)
+        done = run("snmpset", "1", "private", served.port, oid_str(PREEMPT_CONTROL_STATE.instance(1)), "i", "1")
+        assert done.returncode == 0, done.stderr
+        wait_for(lambda: {(E.PREEMPT_CALL_INPUT_ON, 1), (E.PREEMPT_ENTRY_STARTED, 1)}
+                 <= {(e.code, e.parameter) for e in hires.collect(url, since)}, seconds=15)
+        missing = run("snmpset", "1", "private", served.port, oid_str(PREEMPT_CONTROL_STATE.instance(2)), "i", "0")
+        assert missing.returncode != 0 and "noSuchName" in missing.stderr + missing.stdout
+        assert run("snmpset", "1", "private", served.port, oid_str(PREEMPT_CONTROL_STATE.instance(1)), "i",
+                   "0").returncode == 0
+        wait_for(lambda: (E.PREEMPT_CALL_INPUT_OFF, 1) in {(e.code, e.parameter) for e in hires.collect(url, since)})
+    finally:
+        served.stop()

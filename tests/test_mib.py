@@ -262,12 +262,13 @@ def test_next_oid_walks_every_instance_in_increasing_order(mib: MibView) -> None
     assert walked == mib.oids
     assert len(set(walked)) == len(walked)
     assert all(object_for(o) is not None for o in walked)
-    # 7 unit scalars and 9 of coordination, one pattern row of 5 columns and its split table (5 columns x 8
-    # phases), 13 phase columns x 8 phases, 10 status + 3 channel + 6 control columns x 1 group, 2 rings,
-    # ringControlGroupMax2 of group 1; maxOverlaps and maxOverlapStatusGroups (no overlaps); maxVehicleDetectors,
-    # 2 detector columns x 8 detectors, detector status and actuation of group 1; maxPedestrianDetectors,
-    # maxPedestrianDetectorGroups, the call phase of 8 push buttons, their status and actuation of group 1.
-    assert len(walked) == 7 + 9 + 5 + 5 * 8 + 13 * 8 + 19 + 2 + 1 + 2 + 1 + 2 * 8 + 2 + 2 + 8 + 2
+    # 8 unit scalars (shortAlarmStatus too) and 9 of coordination, one pattern row of 5 columns and its split
+    # table (5 columns x 8 phases), 13 phase columns x 8 phases, 10 status + 3 channel + 6 control columns x 1
+    # group, 2 rings, ringControlGroupMax2 of group 1; maxOverlaps and maxOverlapStatusGroups (no overlaps),
+    # maxPreempts (no preempts); maxVehicleDetectors, 2 detector columns x 8 detectors, detector status and
+    # actuation of group 1; maxPedestrianDetectors, maxPedestrianDetectorGroups, the call phase of 8 push buttons,
+    # their status and actuation of group 1.
+    assert len(walked) == 8 + 9 + 5 + 5 * 8 + 13 * 8 + 19 + 2 + 1 + 2 + 1 + 1 + 2 * 8 + 2 + 2 + 8 + 2
 
 
 def test_next_oid_from_an_object_prefix_gives_its_first_instance(mib: MibView) -> None:
