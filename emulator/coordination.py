@@ -39,8 +39,8 @@ point.
 its offset or cycle), ``dwell`` holds the timer just before the earliest coordinated yield point until
 it is in step (the coordinated phases dwell in green); ``add`` holds there too, at most a fifth of the
 cycle per cycle; ``shortway`` adds that way or subtracts (the timer jumps forward at the start of the
-coordinated splits, shortening the coordinated greens, never below their minimum), whichever is
-shorter, at most a fifth of the cycle per cycle. The bound on the cycles a correction takes is
+coordinated splits, shortening the coordinated greens, never below their minimum), whichever reaches
+the sync in fewer cycles, at most a fifth of the cycle per cycle. The bound on the cycles a correction takes is
 :meth:`Plan.correction_cycles`.
 
 *Quiet time.* Between two real steps the timer only counts; anything discrete happens at a *mark*
@@ -337,8 +337,10 @@ class Coordinator:
         return self.plan is not None and bool(self.lag) and self._subtracting(self.plan, self.lag)
 
     def _subtracting(self, plan: Plan, lag: int) -> bool:
+        """Shortway subtracts when that reaches the sync in fewer cycles than adding (its cap is the smaller one:
+        the coordinated greens keep their minimum)."""
         return (self.correction is CorrectionMode.SHORTWAY and plan.subtract_cap > 0
-                and plan.cycle - lag < lag)
+                and math.ceil((plan.cycle - lag) / plan.subtract_cap) < math.ceil(lag / plan.add_cap))
 
     def _new_cycle(self) -> None:
         if self.called != self.running or self.replan:

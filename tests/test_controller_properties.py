@@ -18,7 +18,7 @@ import itertools
 import math
 from dataclasses import dataclass, field
 
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from emulator.controller import Controller, tenths
@@ -161,6 +161,7 @@ def patterns(draw: st.DrawFn, number: int, phases: dict[str, dict], barriers: li
         for ring in (RING1, RING2):
             splits[str(next(p for p in ring if p in barriers[0]))] += short
     cycle = sum(splits[str(p)] for p in RING1)
+    assume(cycle <= 255)  # NEMA TS 2's longest cycle: long minimums and walks can need more
     group = draw(st.sampled_from(barriers))
     coord = [draw(st.sampled_from([p for p in ring if p in group])) for ring in (RING1, RING2)]
     return {"number": number, "cycle": cycle, "offset": draw(st.integers(0, cycle - 1)), "coord_phases": coord,

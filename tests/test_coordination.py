@@ -14,8 +14,10 @@ import dataclasses
 import itertools
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from emulator.controller import Controller
+from emulator.controller import Controller, Interval
 from emulator.mib import MibView
 from hils.config import (
     FREE,
@@ -41,6 +43,7 @@ from hils.ntcip import (
     SplitColumn,
     SplitMode,
 )
+from tests.test_controller_properties import configs
 
 CALL = ControlColumn.VEH_CALL
 CYCLE = 700
@@ -219,3 +222,98 @@ def test_a_new_offset_is_reached_within_the_corrections_bound(correction: Correc
     lengths = [b - a for a, b in itertools.pairwise(zeros)]
     if correction is not Correction.DWELL:
         assert all(CYCLE - CYCLE // 5 <= n <= CYCLE + CYCLE // 5 for n in lengths), lengths
+
+
+# --- properties over random coordinated configs ---------------------------------------------------------------
+
+
+def _running(config: IntersectionConfig, **changes: object) -> IntersectionConfig:
+    """The config's first pattern in effect from power-up, no time-of-day change, coordination settings changed."""
+    co = config.coordination
+    first = min(co.patterns)
+    return dataclasses.replace(config, coordination=dataclasses.replace(co, pattern=first, schedule=(), **changes))
+
+
+@settings(max_examples=40, deadline=None)
+@given(config=configs(coordinated=True), calls=st.frozensets(st.sampled_from(range(1, 9))),
+       changes=st.lists(st.tuples(st.integers(0, 3000), st.frozensets(st.sampled_from(range(1, 9)))), max_size=4))
+def test_coordinated_phases_are_served_every_cycle_and_fixed_force_offs_hold(
+        config: IntersectionConfig, calls: frozenset[int], changes: list[tuple[int, frozenset[int]]]) -> None:
+    """Whatever the calls: every cycle (local zero to local zero) shows both coordinated phases green, and a
+    non-coordinated green past its force-off point ends within one tick, unless its ring waits at the barrier for
+    the other ring's green (it may not cross alone)."""
+    c = Controller(_running(config, force_off=ForceOff.FIXED))
+    c.backup_time = 0
+    co = c.coordinator
+    plan = co.plan
+    assert plan is not None and co.running == plan.number
+    c.set_control(CALL, calls)
+    due = dict(changes)
+    seen: set[int] = set()
+    cycles = 0
+    overdue: dict[int, int] = {}  # ring -> the last tick its green may show after passing its force-off point
+    late: dict[int, bool] = {}  # ring -> its green started past its force-off point (it ends at its minimum)
+    shown = {r.number: r.interval for r in c.rings}
+    late = {r.number: r.forced for r in c.rings if r.interval is Interval.GREEN}
+    for _ in range(6 * plan.cycle):
+        if c.tick in due:
+            c.set_control(CALL, due[c.tick])
+        c.step()
+        if 0 in co.passed:
+            if cycles:  # a whole cycle seen (the first zero closes a partial one)
+                assert set(plan.coord.values()) <= seen, f"cycle {cycles} served {sorted(seen)}"
+            cycles, seen = cycles + 1, set()
+        seen |= c.greens
+        for r in c.rings:
+            p = r.phase
+            if r.interval is Interval.GREEN and shown[r.number] is not Interval.GREEN:
+                late[r.number] = r.forced
+            shown[r.number] = r.interval
+            if r.interval is not Interval.GREEN or p in plan.coord.values() or late[r.number]:
+                overdue.pop(r.number, None)
+                continue
+            if r.number in overdue and overdue[r.number] < c.tick:
+                other = c.rings[2 - r.number]
+                waits = other.interval is not Interval.DWELL and c.config.barrier_of(other.phase) == c.group
+                assert waits, (f"phase {p} green at tick {c.tick}, past its force-off at {overdue[r.number] - 1}",
+                               [(x.phase, x.interval, x.ticks, x.target, x.forced) for x in c.rings], co.timer,
+                               dict(plan.force_off), c.calls, c.config.phases[p])
+            if plan.force_off[p] in co.passed:
+                overdue.setdefault(r.number, c.tick + 1)
+    assert cycles >= 5
+
+
+@settings(max_examples=40, deadline=None)
+@given(config=configs(coordinated=True), offset=st.integers(1, 254), at=st.integers(0, 2000),
+       correction=st.sampled_from(list(Correction)), calls=st.frozensets(st.sampled_from(range(1, 9))))
+def test_a_pattern_change_regains_the_offset_within_its_corrections_bound(
+        config: IntersectionConfig, offset: int, at: int, correction: Correction, calls: frozenset[int]) -> None:
+    """The running pattern again with another offset, called at a random instant: the local cycle reaches the
+    system's sync within the bound its correction mode gives (dwell one cycle; add and shortway a fifth of the
+    cycle per cycle, shortway the shorter way)."""
+    cfg = _running(config, correction=correction)
+    one = cfg.coordination.patterns[cfg.coordination.pattern]
+    two = dataclasses.replace(one, number=one.number + 1 if one.number < 253 else 1, offset=offset % one.cycle)
+    cfg = dataclasses.replace(cfg, coordination=dataclasses.replace(cfg.coordination,
+                                                                    patterns={one.number: one, two.number: two}))
+    c = Controller(cfg)
+    c.backup_time = 0
+    c.set_control(CALL, calls)
+    co = c.coordinator
+    for _ in range(at):
+        c.step()
+    c.set_pattern_control(two.number)
+    cycle = 10 * one.cycle  # ticks
+    for _ in range(cycle + 1):  # it starts at the running pattern's next local zero
+        c.step()
+        if co.running == two.number:
+            break
+    assert co.running == two.number
+    bound = co.plan.correction_cycles(co.lag, co.correction)
+    zeros = 0
+    for _ in range((bound + 2) * 2 * cycle):
+        if co.lag == 0:
+            break
+        c.step()
+        zeros += 0 in co.passed
+    assert co.lag == 0 and zeros <= bound, (correction, bound, zeros)
