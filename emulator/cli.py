@@ -11,12 +11,17 @@ from typing import TYPE_CHECKING
 
 from hils import config as config_mod
 from hils.config import IntersectionConfig
+from hils.hires import ASCLOG_PATH
 from hils.ntcip import AUTH_KEY_ENV, PRIV_KEY_ENV
 from hils.scenario import SCENARIOS, load_scenario
 from hils.usm import services_missing
 
 if TYPE_CHECKING:
     from emulator.agent import V3User
+    from emulator.serve import EmulatorServer
+
+#: ``--http`` without a port: each controller's event log on the TCP port numbered as its UDP port.
+SAME_PORTS = -1
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -83,6 +88,15 @@ def _register_serve(commands: argparse._SubParsersAction) -> None:
                             "and without either authNoPriv is enough")
     serve.add_argument("--trace", type=Path, metavar="FILE",
                        help="write every interval change as JSON Lines, stamped with the monotonic clock")
+    serve.add_argument("--http", type=int, nargs="?", const=SAME_PORTS, metavar="PORT",
+                       help="also serve each controller's hi-res event log as an Intelight MaxTime does "
+                            f"(GET http://HOST:PORT{ASCLOG_PATH}[?since=MM-DD-YYYY HH:MM:SS.0], the Indiana "
+                            "enumerations), on TCP ports PORT.. (0: free ones); without PORT on the same numbers as "
+                            "the UDP ports, where Signal-Replay looks for a controller on this host. The controllers' "
+                            "clocks are the host's local time")
+    serve.add_argument("--log-events", type=int, default=100_000, metavar="N",
+                       help="hi-res events each controller keeps, its last ones, as a controller's ring buffer "
+                            "(100000; an Intelight MaxTime keeps about 10000)")
     serve.set_defaults(func=_serve)
 
 
@@ -111,6 +125,8 @@ def _controllers(args: argparse.Namespace) -> list[tuple[str | None, Intersectio
     """(tls id or None, config) of each controller to serve, in port order."""
     from emulator.serve import ServeError
 
+    if args.count is not None and args.count < 1:
+        raise ServeError(f"--count {args.count}: no controller to serve; allowed: 1 or more")
     if args.scenario is None:
         return [(None, config_mod.load(args.config))] * (1 if args.count is None else args.count)
     scenario = load_scenario(args.scenario)
@@ -136,13 +152,16 @@ def _serve(args: argparse.Namespace) -> int:
     if not all(math.isfinite(ms) and ms >= 0 for ms in (args.latency_ms, args.jitter_ms)):
         raise SystemExit(f"hils emulator serve: --latency-ms {args.latency_ms:g} --jitter-ms {args.jitter_ms:g}; "
                          "allowed: finite milliseconds >= 0")
+    if args.log_events < 1:
+        raise SystemExit(f"hils emulator serve: --log-events {args.log_events}: allowed: 1 or more")
     v3_user = _v3_user(args)
     controllers = _controllers(args)
+    http = args.port if args.http == SAME_PORTS else args.http
     options = ServeOptions(host=args.host, port=args.port, ro_community=args.ro_community,
                            rw_community=args.rw_community, latency=Latency(args.latency_ms / 1e3, args.jitter_ms / 1e3),
-                           trace=args.trace, v3_user=v3_user)
+                           trace=args.trace, v3_user=v3_user, http=http, log_events=args.log_events)
 
-    def ready(addresses: list[tuple[str, int]]) -> None:
+    def ready(server: EmulatorServer, addresses: list[tuple[str, int]]) -> None:
         # Scripts and tests wait for these lines: they are printed only once requests are answered.
         v3 = f" v3={v3_user.name}/{'authPriv' if v3_user.priv_key else 'authNoPriv'}" if v3_user else ""
         for (tls, cfg), (host, port) in zip(controllers, addresses, strict=True):
@@ -152,6 +171,9 @@ def _serve(args: argparse.Namespace) -> int:
         if len(addresses) > 1:
             print(f"serving {len(addresses)} controllers on udp:{addresses[0][0]}:"
                   f"{_port_range([port for _, port in addresses])}")
+        for (tls, cfg), (host, port) in zip(controllers, server.http_addresses, strict=False):
+            label = f" [{tls}]" if tls is not None else ""
+            print(f"event log of {cfg.name}{label}: http://{host}:{port}{ASCLOG_PATH}")
         sys.stdout.flush()
 
     try:

@@ -68,7 +68,7 @@ from hils.ntcip import ControlColumn
 
 #: Controller attributes the NTCIP agent reads as status: published once per tick, late by the status delay.
 STATUS_ATTRIBUTES = ("reds", "yellows", "greens", "phase_ons", "phase_nexts", "calls", "walks", "ped_clears",
-                     "dont_walks", "ped_calls")
+                     "dont_walks", "ped_calls", "overlap_reds", "overlap_yellows", "overlap_greens")
 
 
 @dataclass(frozen=True, slots=True)
@@ -173,14 +173,6 @@ class DelayedController:
 
     # Writable objects of the unit go to the controller itself (the backup time through set_backup_time): an
     # attribute set on this wrapper would shadow the controller's and change nothing it does.
-    @property
-    def pattern(self) -> int:
-        return self.controller.pattern
-
-    @pattern.setter
-    def pattern(self, value: int) -> None:
-        self.controller.pattern = value
-
     @property
     def startup_flash(self) -> int:
         """unitStartUpFlash (s): the flash the controller shows when power is restored, from its next power-up."""

@@ -129,7 +129,9 @@ class EventClock:
         self._schedule(self.unit.quiet_ticks())
 
     def power_cycle(self) -> None:
-        """Power down and up: the unit resets and its tick grid starts now."""
+        """Power down and up: the unit resets and its tick grid starts now (its clock, which keeps counting through a
+        power cycle, brought up to the present first)."""
+        self.catch_up()
         self.unit.reset()
         self._grid = Grid(self.env.now, TICK)
         self._version.move()  # the control objects are cleared: none has phases it did not have

@@ -15,10 +15,12 @@ import random
 import simpy
 
 from emulator.controller import TICK, Controller
+from emulator.datalogger import DataLogger
 from emulator.delays import DelayedController
 from emulator.event_clock import ClockedSurface, EventClock
 from emulator.mib import MibView
 from hils.config import IntersectionConfig
+from hils.hires import Event
 from hils.ntcip import Latency
 
 #: Modeled answer times of the in-process controller: a GET of the signal state, and a SET (the
@@ -30,7 +32,9 @@ SET_LATENCY = Latency(0.0075)
 class VirtualTarget:
     """Controller model + its delays + MIB view on one environment; the MIB view is the transport's surface.
 
-    ``controller`` is the model itself (its lamps, for monitors); ``unit`` is what the agent talks to.
+    ``controller`` is the model itself (its lamps, for monitors); ``unit`` is what the agent talks to;
+    ``log`` its data logger, whose hi-res event log :meth:`hires` hands the run (the optional method of a
+    target through which a Testbed collects the controller's own record).
     On virtual time's fast path (``fast_path``, the run's flag: :mod:`hils.fastpath`) the unit's ticks run
     event by event (:mod:`emulator.event_clock`), and the clock is the change feed that lets the poller skip
     polls that cannot see a change. Without it is the reference the fast path is tested against: every tick
@@ -41,6 +45,7 @@ class VirtualTarget:
                  fast_path: bool = True) -> None:
         self.env = env
         self.controller = Controller(config)
+        self.log = DataLogger(self.controller)
         self.unit = DelayedController(self.controller, config.emulator)
         self.mib = MibView(self.unit)
         self.get_latency = GET_LATENCY
@@ -56,6 +61,10 @@ class VirtualTarget:
         else:
             self.surface = self.mib
             self._ticking = env.process(self.unit.process(env, self.tick_phase))
+
+    def hires(self) -> list[Event]:
+        """The controller's hi-res event log so far (complete: only real steps log, and they run when due)."""
+        return self.log.events()
 
     @property
     def change_feed(self) -> EventClock | None:

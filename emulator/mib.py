@@ -21,21 +21,47 @@ import bisect
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import Any
 
 from emulator.controller import Controller
 from emulator.delays import DelayedController
-from hils.config import Phase, Recall
+from hils.config import OverlapKind, Phase, Recall
 from hils.ntcip import (
     CHANNEL_TABLE,
     CONTROL_TABLE,
+    COORD_CORRECTION_MODE,
+    COORD_CYCLE_STATUS,
+    COORD_FORCE_MODE,
+    COORD_PATTERN_STATUS,
+    COORD_SYNC_STATUS,
     DETECTOR_ACTUATION,
     DETECTOR_STATUS_ACTIVE,
+    LOCAL_FREE_STATUS,
+    MAX_OVERLAP_STATUS_GROUPS,
+    MAX_OVERLAPS,
+    MAX_PATTERNS,
+    MAX_PED_DETECTOR_GROUPS,
+    MAX_PED_DETECTORS,
     MAX_PHASE_GROUPS,
     MAX_PHASES,
+    MAX_PREEMPTS,
+    MAX_SPLITS,
     MAX_VEHICLE_DETECTORS,
+    OVERLAP_STATUS_TABLE,
+    OVERLAP_TABLE,
+    PATTERN_TABLE,
+    PATTERN_TABLE_TYPE,
+    PED_DETECTOR_ACTUATION,
+    PED_DETECTOR_CALL_PHASE,
+    PED_DETECTOR_STATUS_ACTIVE,
     PHASE_TABLE,
+    PREEMPT_CONTROL_NUMBER,
+    PREEMPT_CONTROL_STATE,
+    PREEMPT_TABLE,
     RING_CONTROL_MAX2,
     SEQUENCE_DATA,
+    SHORT_ALARM_STATUS,
+    SPLIT_TABLE,
     STATUS_TABLE,
     SYSTEM_PATTERN_CONTROL,
     UNIT_BACKUP_TIME,
@@ -47,12 +73,21 @@ from hils.ntcip import (
     Access,
     ChannelColumn,
     ControlColumn,
+    CoordCorrectionMode,
+    CoordForceMode,
     ErrorStatus,
     ObjectDef,
     Oid,
+    OverlapColumn,
+    OverlapStatusColumn,
+    OverlapType,
+    PatternColumn,
     PhaseColumn,
     PhaseOption,
+    PreemptColumn,
     SnmpError,
+    SplitColumn,
+    SplitMode,
     StatusColumn,
     Syntax,
     Value,
@@ -170,8 +205,10 @@ class MibView:
                      lambda v: c.set_backup_time(v)),
             Instance(UNIT_CONTROL_STATUS.instance(), UNIT_CONTROL_STATUS, lambda: int(c.control_status)),
             Instance(UNIT_FLASH_STATUS.instance(), UNIT_FLASH_STATUS, lambda: int(c.flash_status)),
-            Instance(SYSTEM_PATTERN_CONTROL.instance(), SYSTEM_PATTERN_CONTROL, lambda: c.pattern,
-                     lambda v: setattr(c, "pattern", v)),
+            Instance(SHORT_ALARM_STATUS.instance(), SHORT_ALARM_STATUS, lambda: int(c.short_alarm)),
+            Instance(SYSTEM_PATTERN_CONTROL.instance(), SYSTEM_PATTERN_CONTROL, lambda: c.coordinator.command,
+                     c.set_pattern_control),
+            *_coordination(c),
         ]
         for p, ph in cfg.phases.items():
             concurrent = bytes(sorted(q for q in cfg.phases if cfg.compatible(p, q)))
@@ -214,21 +251,162 @@ class MibView:
                              _group_writer(lambda col=col: c.control[col],
                                            lambda phases, col=col: c.set_control(col, phases), g))
                     for col in ControlColumn]
+        out += _overlaps(c, st)
+        out += _preempts(c)
         for r, order in enumerate(cfg.rings, start=1):
             out.append(Instance(sequence_oid(1, r), SEQUENCE_DATA, lambda o=order: bytes(o)))
-        detectors = cfg.detectors
-        out.append(Instance(MAX_VEHICLE_DETECTORS.instance(), MAX_VEHICLE_DETECTORS, lambda: max(detectors)))
-        for d, phase in detectors.items():
-            out.append(Instance(VEHICLE_DETECTOR_OPTIONS.instance(d), VEHICLE_DETECTOR_OPTIONS, lambda: 0))
-            out.append(Instance(VEHICLE_DETECTOR_CALL_PHASE.instance(d), VEHICLE_DETECTOR_CALL_PHASE,
-                                lambda phase=phase: phase))
-        detector_groups = (max(detectors) + 7) // 8
-        for g in range(1, detector_groups + 1):
-            read = _group_reader(lambda: c.actuations, g, detector_groups)
-            out.append(Instance(DETECTOR_STATUS_ACTIVE.instance(g), DETECTOR_STATUS_ACTIVE, read))
-            out.append(Instance(DETECTOR_ACTUATION.instance(g), DETECTOR_ACTUATION, read,
-                                _group_writer(lambda: c.actuations, c.set_actuations, g)))
+        out += _detectors(cfg.detectors, MAX_VEHICLE_DETECTORS, VEHICLE_DETECTOR_CALL_PHASE, None,
+                          DETECTOR_STATUS_ACTIVE, DETECTOR_ACTUATION, lambda: c.actuations, c.set_actuations)
+        out.extend(Instance(VEHICLE_DETECTOR_OPTIONS.instance(d), VEHICLE_DETECTOR_OPTIONS, lambda: 0)
+                   for d in cfg.detectors)
+        out += _detectors(cfg.ped_detectors, MAX_PED_DETECTORS, PED_DETECTOR_CALL_PHASE, MAX_PED_DETECTOR_GROUPS,
+                          PED_DETECTOR_STATUS_ACTIVE, PED_DETECTOR_ACTUATION, lambda: c.ped_actuations,
+                          c.set_ped_actuations)
         return out
+
+
+def _detectors(call_phases: dict[int, int], maximum: ObjectDef, call_phase: ObjectDef, max_groups: ObjectDef | None,
+               active: ObjectDef, actuation: ObjectDef, read: Callable[[], frozenset[int]],
+               write: Callable[[frozenset[int]], None]) -> list[Instance]:
+    """One kind of detector: how many, the phase each calls, and by group of 8 the active ones and their remote
+    actuation (a SET of a group past the last is noSuchName in SNMPv1: that group does not exist)."""
+    groups = (max(call_phases) + 7) // 8
+    out = [Instance(maximum.instance(), maximum, lambda: max(call_phases))]
+    if max_groups is not None:
+        out.append(Instance(max_groups.instance(), max_groups, lambda: groups))
+    out += [Instance(call_phase.instance(d), call_phase, lambda phase=phase: phase) for d, phase in call_phases.items()]
+    for g in range(1, groups + 1):
+        reader = _group_reader(read, g, groups)
+        out.append(Instance(active.instance(g), active, reader))
+        out.append(Instance(actuation.instance(g), actuation, reader, _group_writer(read, write, g)))
+    return out
+
+
+def _coordination(c: Controller | DelayedController) -> list[Instance]:
+    """The coordination node: modes, the pattern and split tables (writable with NTCIP's ranges; a SET takes
+    effect at the running pattern's next local zero), and the coordination status."""
+    co = c.coordinator
+
+    def table(apply: Callable[[int], None]) -> Callable[[int], None]:
+        def write(value: int) -> None:
+            apply(value)
+            co.tables_changed()
+            c.touch()
+        return write
+
+    out = [
+        Instance(COORD_CORRECTION_MODE.instance(), COORD_CORRECTION_MODE, lambda: int(co.correction),
+                 table(lambda v: setattr(co, "correction", CoordCorrectionMode(v)))),
+        Instance(COORD_FORCE_MODE.instance(), COORD_FORCE_MODE, lambda: int(co.force_mode),
+                 table(lambda v: setattr(co, "force_mode", CoordForceMode(v)))),
+        Instance(MAX_PATTERNS.instance(), MAX_PATTERNS, lambda: len(co.patterns)),
+        Instance(PATTERN_TABLE_TYPE.instance(), PATTERN_TABLE_TYPE, lambda: 2),  # patterns(2): a row per pattern
+        Instance(MAX_SPLITS.instance(), MAX_SPLITS, lambda: len(co.splits)),
+        Instance(COORD_PATTERN_STATUS.instance(), COORD_PATTERN_STATUS, lambda: co.running),
+        Instance(LOCAL_FREE_STATUS.instance(), LOCAL_FREE_STATUS, lambda: int(co.free_status)),
+        Instance(COORD_CYCLE_STATUS.instance(), COORD_CYCLE_STATUS, lambda: co.cycle_status),
+        Instance(COORD_SYNC_STATUS.instance(), COORD_SYNC_STATUS, lambda: co.sync_status),
+    ]
+    pattern_fields = {PatternColumn.CYCLE_TIME: "cycle", PatternColumn.OFFSET_TIME: "offset",
+                      PatternColumn.SPLIT_NUMBER: "split", PatternColumn.SEQUENCE_NUMBER: "sequence"}
+    for n, row in co.patterns.items():
+        out.append(Instance(PATTERN_TABLE[PatternColumn.NUMBER].instance(n), PATTERN_TABLE[PatternColumn.NUMBER],
+                            lambda n=n: n))
+        out += [Instance(PATTERN_TABLE[col].instance(n), PATTERN_TABLE[col], lambda row=row, f=f: getattr(row, f),
+                         table(lambda v, row=row, f=f: setattr(row, f, v)))
+                for col, f in pattern_fields.items()]
+    split_fields: dict[SplitColumn, tuple[str, Callable[[int], Any]]] = {
+        SplitColumn.TIME: ("time", int), SplitColumn.MODE: ("mode", SplitMode),
+        SplitColumn.COORD_PHASE: ("coord", bool)}
+    for s, rows in co.splits.items():
+        for p, row in rows.items():
+            out.append(Instance(SPLIT_TABLE[SplitColumn.NUMBER].instance(s, p), SPLIT_TABLE[SplitColumn.NUMBER],
+                                lambda s=s: s))
+            out.append(Instance(SPLIT_TABLE[SplitColumn.PHASE].instance(s, p), SPLIT_TABLE[SplitColumn.PHASE],
+                                lambda p=p: p))
+            out += [Instance(SPLIT_TABLE[col].instance(s, p), SPLIT_TABLE[col],
+                             lambda row=row, f=f: int(getattr(row, f)),
+                             table(lambda v, row=row, f=f, kind=kind: setattr(row, f, kind(v))))
+                    for col, (f, kind) in split_fields.items()]
+    return out
+
+
+_OVERLAP_TYPES = {OverlapKind.NORMAL: OverlapType.NORMAL,
+                  OverlapKind.MINUS_GREEN_YELLOW: OverlapType.MINUS_GREEN_YELLOW,
+                  OverlapKind.FYA: OverlapType.OTHER}
+# Writable overlap columns: the OverlapTiming field each sets, and ticks per unit of the NTCIP value.
+_OVERLAP_TIMING: dict[OverlapColumn, tuple[str, int]] = {
+    OverlapColumn.TRAIL_GREEN: ("trail_green", 10),
+    OverlapColumn.TRAIL_YELLOW: ("trail_yellow", 1),
+    OverlapColumn.TRAIL_RED: ("trail_red", 1),
+}
+
+
+def _overlaps(c: Controller | DelayedController, st: Controller | DelayedController) -> list[Instance]:
+    """The overlap node: the overlap table (type and phases from the config, the trailing times writable, acting
+    from the next trailing interval on) and the overlap status by group of 8."""
+    cfg = c.config
+    groups = cfg.overlap_groups
+    out = [Instance(MAX_OVERLAPS.instance(), MAX_OVERLAPS, lambda: max(cfg.overlaps, default=0)),
+           Instance(MAX_OVERLAP_STATUS_GROUPS.instance(), MAX_OVERLAP_STATUS_GROUPS, lambda: groups)]
+    for n, o in cfg.overlaps.items():
+        fixed: dict[OverlapColumn, Value] = {
+            OverlapColumn.NUMBER: n, OverlapColumn.TYPE: int(_OVERLAP_TYPES[o.kind]),
+            OverlapColumn.INCLUDED_PHASES: bytes(o.included), OverlapColumn.MODIFIER_PHASES: bytes(o.modifiers)}
+        out += [Instance(OVERLAP_TABLE[col].instance(n), OVERLAP_TABLE[col], lambda v=v: v) for col, v in fixed.items()]
+        out += [Instance(OVERLAP_TABLE[col].instance(n), OVERLAP_TABLE[col],
+                         *_field_access(c, c.overlaps.timing[n], name, unit))
+                for col, (name, unit) in _OVERLAP_TIMING.items()]
+    status: dict[OverlapStatusColumn, Callable[[], frozenset[int]]] = {
+        OverlapStatusColumn.REDS: lambda: st.overlap_reds,
+        OverlapStatusColumn.YELLOWS: lambda: st.overlap_yellows,
+        OverlapStatusColumn.GREENS: lambda: st.overlap_greens,
+    }
+    for g in range(1, groups + 1):
+        out.append(Instance(OVERLAP_STATUS_TABLE[OverlapStatusColumn.NUMBER].instance(g),
+                            OVERLAP_STATUS_TABLE[OverlapStatusColumn.NUMBER], lambda g=g: g))
+        out += [Instance(OVERLAP_STATUS_TABLE[col].instance(g), OVERLAP_STATUS_TABLE[col],
+                         _group_reader(read, g, groups)) for col, read in status.items()]
+    return out
+
+
+# Writable preempt columns: the PreemptTiming field each sets, and ticks per unit of the NTCIP value.
+_PREEMPT_TIMING: dict[PreemptColumn, tuple[str, int]] = {
+    PreemptColumn.DELAY: ("delay", 10),
+    PreemptColumn.MINIMUM_DURATION: ("min_duration", 10),
+    PreemptColumn.MINIMUM_GREEN: ("min_green", 10),
+    PreemptColumn.MINIMUM_WALK: ("min_walk", 10),
+    PreemptColumn.ENTER_PED_CLEAR: ("enter_ped_clear", 10),
+    PreemptColumn.TRACK_GREEN: ("track_green", 10),
+    PreemptColumn.DWELL_GREEN: ("dwell_green", 10),
+    PreemptColumn.MAXIMUM_PRESENCE: ("max_presence", 10),
+    PreemptColumn.ENTER_YELLOW_CHANGE: ("enter_yellow", 1),
+    PreemptColumn.ENTER_RED_CLEAR: ("enter_red", 1),
+    PreemptColumn.TRACK_YELLOW_CHANGE: ("track_yellow", 1),
+    PreemptColumn.TRACK_RED_CLEAR: ("track_red", 1),
+}
+
+
+def _preempts(c: Controller | DelayedController) -> list[Instance]:
+    """The preempt node: the preempt table (phases and control bits from the config, times writable, acting from
+    the next use), each preempt's state, and preemptControlState (a SET calls or releases the preempt)."""
+    pe = c.preemptor
+    out = [Instance(MAX_PREEMPTS.instance(), MAX_PREEMPTS, lambda: max(c.config.preempts, default=0))]
+    for n, p in c.config.preempts.items():
+        fixed: dict[PreemptColumn, Value] = {
+            PreemptColumn.NUMBER: n, PreemptColumn.CONTROL: int(p.non_locking), PreemptColumn.LINK: 0,
+            PreemptColumn.TRACK_PHASE: bytes(p.track_phases), PreemptColumn.DWELL_PHASE: bytes(p.dwell_phases),
+            PreemptColumn.DWELL_PED: b"", PreemptColumn.EXIT_PHASE: bytes(p.exit_phases)}
+        out += [Instance(PREEMPT_TABLE[col].instance(n), PREEMPT_TABLE[col], lambda v=v: v) for col, v in fixed.items()]
+        out += [Instance(PREEMPT_TABLE[col].instance(n), PREEMPT_TABLE[col],
+                         *_field_access(c, pe.timing[n], name, unit)) for col, (name, unit) in _PREEMPT_TIMING.items()]
+        out.append(Instance(PREEMPT_TABLE[PreemptColumn.STATE].instance(n), PREEMPT_TABLE[PreemptColumn.STATE],
+                            lambda n=n: int(pe.states[n])))
+        out.append(Instance(PREEMPT_CONTROL_NUMBER.instance(n), PREEMPT_CONTROL_NUMBER, lambda n=n: n))
+        out.append(Instance(PREEMPT_CONTROL_STATE.instance(n), PREEMPT_CONTROL_STATE,
+                            lambda n=n: int(n in pe.control),
+                            lambda v, n=n: c.set_preempt_control(pe.control - {n} | ({n} if v else set()))))
+    return out
 
 
 # Status is read at 10-100 Hz and takes few distinct values: convert each phase set once.
@@ -240,6 +418,17 @@ def _timing_access(c: Controller | DelayedController, phase: int, name: str, uni
     """Read and write one timing field in NTCIP units (seconds or tenths); the controller counts ticks."""
     timing = c.timing[phase]
     return lambda: getattr(timing, name) // unit, lambda v: c.set_timing(phase, name, v * unit)
+
+
+def _field_access(c: Controller | DelayedController, row: Any, name: str, unit: int
+                  ) -> tuple[Callable[[], int], Callable[[int], None]]:
+    """Read and write one field of a timing row in NTCIP units; a write wakes the controller (a threshold moved)."""
+
+    def write(v: int) -> None:
+        setattr(row, name, v * unit)
+        c.touch()
+
+    return lambda: getattr(row, name) // unit, write
 
 
 def _group_reader(read: Callable[[], frozenset[int]], group: int, groups: int) -> Callable[[], int]:

@@ -14,6 +14,15 @@ adding periods up, so they do not drift. When the loop was held up past one or
 more deadlines the missed ticks are all run at once (the model stays in step
 with the wall clock), and a tick run more than ``late_after`` past its
 deadline is counted as late.
+
+The controllers' clocks are the host's: tick 0 falls on a tenth of a second of
+the host's time and each controller's clock starts at that local time, as a
+real controller's clock is set to local time. Their hi-res logs
+(:mod:`emulator.datalogger`) are therefore stamped in the host's local time, and
+a field tool that aligns a replay with the time of day (Signal-Replay's cycle
+alignment) finds the coordinated cycle where the time of day puts it. With
+``http`` each controller also serves its log as an Intelight MaxTime does
+(:mod:`emulator.asclog`), on consecutive TCP ports.
 """
 
 from __future__ import annotations
@@ -23,17 +32,21 @@ import contextlib
 import copy
 import json
 import logging
+import math
 import signal
 import time
 from collections import Counter
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
+from datetime import datetime, timedelta
 from enum import Enum
 from pathlib import Path
 from typing import TextIO
 
 from emulator.agent import AgentStats, DropReason, ReportBudget, RequestKind, SnmpAgent, V3User
+from emulator.asclog import AsclogServer
 from emulator.controller import TICK, Change, Controller
+from emulator.datalogger import DataLogger
 from emulator.delays import DelayedController
 from emulator.mib import MibView
 from hils.config import IntersectionConfig
@@ -52,15 +65,17 @@ class ServeError(UserError, ValueError):
 
 
 class BindError(OSError):
-    """A controller's UDP port could not be bound (in use, not permitted, no such address)."""
+    """A controller's UDP port (or the TCP port of its event log) could not be bound (in use, not permitted, no such
+    address)."""
 
-    def __init__(self, host: str, port: int, cause: OSError) -> None:
+    def __init__(self, host: str, port: int, cause: OSError, protocol: str = "udp") -> None:
         super().__init__(cause.errno, cause.strerror or str(cause))
         self.host = host
         self.port = port
+        self.protocol = protocol
 
     def __str__(self) -> str:
-        return f"cannot bind udp:{self.host}:{self.port}: {self.strerror}"
+        return f"cannot bind {self.protocol}:{self.host}:{self.port}: {self.strerror}"
 
 
 @dataclass(slots=True)
@@ -80,17 +95,19 @@ class WallClockTicker:
     per deadline."""
 
     def __init__(self, *controllers: Controller | DelayedController, period: float = TICK,
-                 late_after: float = TICK / 2, observe: Callable[[float], None] | None = None) -> None:
+                 late_after: float = TICK / 2, observe: Callable[[float], None] | None = None,
+                 origin: float | None = None) -> None:
         self.controllers = controllers
         self.period = period
         self.late_after = late_after
         self.observe = observe  # gets each tick's lateness (s), for benchmarks
+        self.origin = origin  # the host's time (time.time()) of tick 0; None: when run() starts
         self.stats = TickStats()
 
     async def run(self) -> None:
         """Tick until cancelled."""
         loop = asyncio.get_running_loop()
-        grid = Grid(loop.time(), self.period)
+        grid = Grid(loop.time() + (0.0 if self.origin is None else self.origin - time.time()), self.period)
         k = 1
         while True:
             await asyncio.sleep(grid.delay(k, loop.time()))
@@ -119,6 +136,8 @@ class ServeOptions:
     seed: int | None = None
     trace: Path | None = None  # JSON Lines of every interval change, stamped with time.monotonic_ns(); one controller
     v3_user: V3User | None = None  # the SNMPv3 user accepted besides the communities; None: v1/v2c only
+    http: int | None = None  # TCP port of the first controller's MaxTime event-log endpoint; None: no endpoint
+    log_events: int = 100_000  # the hi-res events each controller keeps (its last ones, as a controller's ring buffer)
 
 
 @dataclass(frozen=True, slots=True)
@@ -147,10 +166,12 @@ class ServedController:
     """One controller model behind its delays, its MIB view and the SNMP agent over it."""
 
     def __init__(self, config: IntersectionConfig, options: ServeOptions, trace: TextIO | None = None,
-                 reports: ReportBudget | None = None) -> None:
+                 reports: ReportBudget | None = None, start: datetime | None = None) -> None:
         self.config = config
         self._trace = trace
-        self.controller = Controller(config, on_change=self._on_change)
+        self.controller = Controller(config, on_change=self._on_change, start=start)
+        self.log = DataLogger(self.controller, capacity=options.log_events)
+        self.asclog = AsclogServer(self.log.events)
         self.unit = DelayedController(self.controller, config.emulator)
         self.view = MibView(self.unit)
         self.agent = SnmpAgent(self.view, ro_community=options.ro_community, rw_community=options.rw_community,
@@ -186,10 +207,17 @@ class EmulatorServer:
         if self.options.trace is not None and len(configs) > 1:
             raise ServeError(f"--trace records one controller, not {len(configs)}; allowed: --trace with --count 1")
         self._trace = self.options.trace.open("w", buffering=1) if self.options.trace else None
+        self.http_ports = None if self.options.http is None else serve_ports(self.options.http, len(configs))
+        self.http_addresses: list[tuple[str, int]] = []
+        # The controllers' clocks are the host's, as a real controller's is set: tick 0 at the next tenth of a
+        # second of the host's time, so their logs' timestamps are the host's local time too.
+        tenths = math.ceil(time.time() * 10)
+        start = datetime.fromtimestamp(tenths // 10) + timedelta(microseconds=tenths % 10 * 100_000)
         # The agents share the process's loop, so they share one budget of SNMPv3 Reports too.
         reports = ReportBudget()
-        self.controllers = tuple(ServedController(config, self.options, self._trace, reports) for config in configs)
-        self.ticker = WallClockTicker(*(served.unit for served in self.controllers))
+        self.controllers = tuple(ServedController(config, self.options, self._trace, reports, start)
+                                 for config in configs)
+        self.ticker = WallClockTicker(*(served.unit for served in self.controllers), origin=tenths / 10)
         self._ticking: asyncio.Task[None] | None = None
 
     async def start(self) -> list[tuple[str, int]]:
@@ -201,6 +229,12 @@ class EmulatorServer:
             except OSError as exc:
                 self._close()
                 raise BindError(self.options.host, port, exc) from exc
+        for served, port in zip(self.controllers, self.http_ports or (), strict=False):
+            try:
+                self.http_addresses.append(await served.asclog.start(self.options.host, port))
+            except OSError as exc:
+                self._close()
+                raise BindError(self.options.host, port, exc, "tcp") from exc
         self._ticking = asyncio.create_task(self.ticker.run(), name="controller-tick")
         return addresses
 
@@ -213,6 +247,7 @@ class EmulatorServer:
     def _close(self) -> None:
         for served in self.controllers:
             served.agent.close()
+            served.asclog.close()
         if self._trace is not None:
             self._trace.close()
 
@@ -242,15 +277,16 @@ def _total(stats: Iterable[AgentStats]) -> AgentStats:
 
 
 async def serve_until_signalled(configs: Sequence[IntersectionConfig], options: ServeOptions,
-                                on_ready: Callable[[list[tuple[str, int]]], None]) -> ServeSummary:
-    """Serve until SIGINT or SIGTERM; ``on_ready`` gets the bound addresses once requests are answered."""
+                                on_ready: Callable[[EmulatorServer, list[tuple[str, int]]], None]) -> ServeSummary:
+    """Serve until SIGINT or SIGTERM; ``on_ready`` gets the server and its agents' addresses once requests are
+    answered."""
     server = EmulatorServer(configs, options)
     loop = asyncio.get_running_loop()
     stop = asyncio.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, stop.set)
     try:
-        on_ready(await server.start())
+        on_ready(server, await server.start())
         stopping = asyncio.create_task(stop.wait())
         await asyncio.wait({stopping, server.ticking}, return_when=asyncio.FIRST_COMPLETED)
         stopping.cancel()

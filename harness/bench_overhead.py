@@ -71,8 +71,7 @@ def _replay(cfg: Any, seed: int, duration: float, changes: list[tuple[int, str]]
     """Bare libsumo stepping the same scenario and seed, showing the recorded state strings at the same
     steps: the same-traffic floor. Between two changes SUMO steps in one call (to the next change's
     time), as cheaply as libsumo allows. Returns the wall seconds of the stepping and SUMO's end figures."""
-    import libsumo
-
+    from hils.quiet_libsumo import libsumo
     from hils.sumo import SumoSimulation, step_on
 
     sim = SumoSimulation(cfg, seed=seed, end=duration)

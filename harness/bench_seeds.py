@@ -117,7 +117,7 @@ def time_sumo_steps() -> list[float]:
     """From now on in this (fresh) process, the wall seconds libsumo's simulationStep takes are summed into the
     list returned: both environments step SUMO through it, so what is left of an episode's wall time is the
     environment's own work, whatever traffic its signals made."""
-    import libsumo
+    from hils.quiet_libsumo import libsumo
 
     total = [0.0]
     step = libsumo.simulationStep

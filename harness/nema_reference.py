@@ -29,13 +29,18 @@ shortest SUMO times correctly (with 0 a green would end at once despite its call
 held call extends a green as a presence call does in ours. SUMO's default of minimum recall
 on every phase is switched off (``minRecall`` empty), as our controller serves only calls.
 In free mode SUMO starts in the first phase of each ring; :func:`comparable_config` gives
-our controller the same start-up and no backup timer (the sequences never refresh a SET).
+our controller the same start-up, SUMO's next-phase lock (``red_end``: a call during the
+clearance may still change the decision on the same side of the barrier) and no backup timer
+(the sequences never refresh a SET).
 
-:func:`compare` pairs the changes of the two timelines (same phase, same colour, at most
-``tolerance`` ticks apart, in order) and reports the agreement: matched changes over all
-distinct changes (matched + unmatched on either side), so a change only one side makes
-counts against it. ``python -m harness.nema_reference`` prints the figure for the targeted
-scenarios and for seeded random call sequences.
+:func:`compare` pairs the changes of the two timelines over whole sequences (same phase, same
+colour, at most ``tolerance`` ticks apart, in order; no cut-off) and reports the agreement:
+matched changes over all distinct changes (matched + unmatched on either side), so a change
+only one side makes counts against it. :func:`differential` also judges the first difference
+by the sourced rules of :mod:`harness.nema_rules`. Calls come from a :data:`CallSequence`
+(targeted scenarios, seeded random sequences) or from SUMO's own detectors while it serves the
+shipped demand (:func:`run_traffic`). ``python -m harness.nema_reference`` prints the figures and
+the classes of the first differences.
 """
 
 from __future__ import annotations
@@ -43,28 +48,44 @@ from __future__ import annotations
 import argparse
 import contextlib
 import dataclasses
-import itertools
 import random
 import sys
 import tempfile
 from collections import Counter
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from enum import StrEnum
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
-import libsumo
-
-from emulator.controller import Controller, tenths
-from hils.config import IntersectionConfig, load
+from emulator.controller import Controller
+from emulator.coordination import Coordinator
+from harness.nema_rules import (
+    BACKED_WITH_CALL_ACROSS,
+    COORD_WAITS_FOR_OTHER_RING,
+    ENDED_BEFORE_MIN,
+    ENDED_WHILE_EXTENDING,
+    ENTERED_PAST_FORCE_OFF,
+    HELD_PAST_MAXIMUM,
+    PERMISSIVE_PERIOD,
+    PULLED_ACROSS,
+    RE_EXTENDED,
+    SKIPPED,
+    Color,
+    ColorChange,
+    DifferenceClass,
+    Judgement,
+    Timeline,
+    classify,
+)
+from hils.config import FREE, ForceOff, IntersectionConfig, NextPhaseLock, OffsetReference, Pattern, load
 from hils.ntcip import ControlColumn, PhaseStartup
-from hils.sumo_net import NET_FILE, PhaseMap, data_path, derive_phase_map, read_net
+from hils.quiet_libsumo import libsumo
+from hils.sumo_net import NET_FILE, ROUTE_FILE, PhaseMap, data_path, derive_phase_map, read_net
 
 TICK = 0.1  # seconds per step, both controllers
 PROGRAM_ID = "NEMA"
 SUMO_PASSAGE = 0.1  # s: SUMO's vehicle extension, one step (see the theory of operation)
-AGREEMENT_REQUIRED = 0.95
 
 CallSequence = tuple[tuple[int, frozenset[int]], ...]
 """``(tick, phases)`` in ascending tick order: from that tick on exactly these phases are called."""
@@ -72,27 +93,6 @@ CallSequence = tuple[tuple[int, frozenset[int]], ...]
 
 class NemaReferenceError(ValueError):
     """A config or call sequence SUMO's NEMA controller cannot be given; says what is allowed."""
-
-
-class Color(StrEnum):
-    GREEN = "green"
-    YELLOW = "yellow"
-    RED = "red"
-
-
-@dataclass(frozen=True, slots=True, order=True)
-class ColorChange:
-    """A phase starts showing a colour at a tick."""
-
-    tick: int
-    phase: int
-    color: Color
-
-    def __str__(self) -> str:
-        return f"{self.tick / 10:.1f}s {self.phase} {self.color}"
-
-
-Timeline = tuple[ColorChange, ...]
 
 
 @dataclass(frozen=True)
@@ -137,17 +137,25 @@ class Comparison:
 # --- the two configs -------------------------------------------------------------------
 
 
+def running_pattern(config: IntersectionConfig) -> Pattern | None:
+    """The pattern the controller runs from power-up (None: free)."""
+    return config.coordination.patterns.get(config.coordination.pattern)
+
+
 def comparable_config(config: IntersectionConfig) -> IntersectionConfig:
-    """Our side of the comparison: SUMO's free-mode start-up (first phase of each ring green), its
-    hard-coded dual entry (the last phase of each ring in each barrier group: the throughs) and no
-    backup timer, everything else as given."""
-    firsts = {ring[0] for ring in config.rings}
+    """Our side of the comparison: SUMO's start-up (free mode: the first phase of each ring green;
+    coordinated: the coordinated phases, where SUMO's ``calculateInitialPhases`` starts on the local zero),
+    its hard-coded dual entry (the last phase of each ring in each barrier group: the throughs), its
+    next-phase lock and no backup timer, everything else as given."""
+    pattern = running_pattern(config)
+    firsts = set(pattern.coord_phases) if pattern else {ring[0] for ring in config.rings}
     duals = {[p for p in ring if config.barrier_of(p) == b][-1] for ring in config.rings
              for b in range(len(config.barriers)) if any(config.barrier_of(p) == b for p in ring)}
     phases = {p: dataclasses.replace(ph, startup=PhaseStartup.GREEN_NO_WALK if p in firsts
                                      else PhaseStartup.PHASE_NOT_ON, dual_entry=p in duals)
               for p, ph in config.phases.items()}
-    return dataclasses.replace(config, phases=phases).with_middleware(backup_time=0)
+    return dataclasses.replace(config, phases=phases, next_phase_lock=NextPhaseLock.RED_END).with_middleware(
+        backup_time=0)
 
 
 def _ring_slots(config: IntersectionConfig) -> list[list[int]]:
@@ -179,22 +187,49 @@ def _default_phases(config: IntersectionConfig) -> list[list[int]]:
 
 
 def sumo_program(config: IntersectionConfig, phase_map: PhaseMap) -> str:
-    """The additional file with SUMO's NEMA program for ``config`` (see the theory of operation)."""
+    """The additional file with SUMO's NEMA program for ``config`` (see the theory of operation).
+
+    With a pattern running from power-up SUMO runs coordinated: ``coordinate-mode``, the pattern's cycle,
+    offset and coordinated phases, a phase's maximum its split less its clearance (SUMO's force-offs are
+    laid out from those: ``NEMALogic::calculateForceOffs170``), ``fixForceOff`` from the force-off mode and
+    ``controllerType`` TS2 (zero at the coordinated green) or Type170 (zero at its yellow) from the offset
+    reference. SUMO's clock runs one step ahead of ours, so its offset is one step later."""
     slots = _ring_slots(config)
     last = _default_phases(config)
+    pattern = running_pattern(config)
+    coord = [next(p for p in pattern.coord_phases if config.ring_of(p) == r) for r in (1, 2)] if pattern else None
+    side = None if coord is None else config.barrier_of(coord[0])
+    defaults = [[next(p for p in reversed(row[2 * g:2 * g + 2]) if p) for g in range(2)] for row in slots]
+    coordinate = coord or [last[r][0] for r in range(2)]
+    barrier = [defaults[r][1 - side] for r in range(2)] if coord else [last[r][1] for r in range(2)]
     params = {
         "ring1": ",".join(map(str, slots[0])),
         "ring2": ",".join(map(str, slots[1])),
-        "barrierPhases": f"{last[0][1]},{last[1][1]}",
-        "coordinatePhases": f"{last[0][0]},{last[1][0]}",
+        "barrierPhases": ",".join(map(str, barrier)),
+        "coordinatePhases": ",".join(map(str, coordinate)),
         "minRecall": "",
         "maxRecall": "",
     }
-    lines = [f'<additional>\n  <tlLogic id="{phase_map.tls_id}" programID="{PROGRAM_ID}" type="NEMA" offset="0">']
+    offset = 0.0
+    if pattern:
+        c = config.coordination
+        params |= {"coordinate-mode": "true", "cycle-length": str(pattern.cycle),
+                   "minRecall": ",".join(map(str, coordinate)),
+                   "fixForceOff": "true" if c.force_off is ForceOff.FIXED else "false",
+                   "controllerType": "TS2" if c.offset_reference is OffsetReference.LEAD_GREEN else "Type170"}
+        offset = pattern.offset
+        if c.offset_reference is OffsetReference.YELLOW:
+            # SUMO's Type170 zero is the end of the coordinated phase's clearance (calculateForceOffs170 adds
+            # the transition time before taking zeroTime, against its own comment "the cycle 'starts' when
+            # the coordinated phase goes to yellow"): a later offset puts it on the yellow, as ours.
+            offset += max(config.phases[p].clearance for p in coordinate)
+    lines = [f'<additional>\n  <tlLogic id="{phase_map.tls_id}" programID="{PROGRAM_ID}" type="NEMA" '
+             f'offset="{offset:g}">']
     lines += [f"    <param key={quoteattr(k)} value={quoteattr(v)}/>" for k, v in params.items()]
     for p, ph in sorted(config.phases.items()):
         state = "".join("G" if q == p else "r" for q in phase_map.link_phases)
-        lines.append(f'    <phase duration="99" minDur="{ph.min_green:g}" maxDur="{ph.max_green:g}" '
+        maximum = pattern.splits[p] - ph.clearance if pattern else ph.max_green
+        lines.append(f'    <phase duration="99" minDur="{ph.min_green:g}" maxDur="{maximum:g}" '
                      f'vehext="{SUMO_PASSAGE:g}" yellow="{ph.yellow:g}" red="{ph.red_clear:g}" '
                      f'name="{p}" state="{state}"/>')
     lines.append("  </tlLogic>\n</additional>\n")
@@ -248,7 +283,7 @@ _SUMO_COLOR = {"G": Color.GREEN, "g": Color.GREEN, "y": Color.YELLOW, "Y": Color
 
 
 @contextlib.contextmanager
-def _sumo(program: str) -> Iterator[None]:
+def _sumo(program: str, *extra: str) -> Iterator[None]:
     if libsumo.simulation.isLoaded():
         raise NemaReferenceError("a SUMO simulation is already running in this process (libsumo runs one at a "
                              "time); close it before running the reference")
@@ -256,57 +291,90 @@ def _sumo(program: str) -> Iterator[None]:
         additional = Path(tmp) / "nema.add.xml"
         additional.write_text(program, encoding="utf-8")
         libsumo.start(["sumo", "-n", str(data_path(NET_FILE)), "-a", str(additional), "--step-length", str(TICK),
-                       "--no-step-log", "true", "--no-warnings", "true", "--duration-log.disable", "true"])
+                       "--no-step-log", "true", "--no-warnings", "true", "--duration-log.disable", "true", *extra])
         try:
             yield
         finally:
             libsumo.close()
 
 
+class _Junction:
+    """SUMO's NEMA-controlled junction while a simulation runs: its detectors per phase and its colours."""
+
+    def __init__(self, config: IntersectionConfig, phase_map: PhaseMap) -> None:
+        self.tls = phase_map.tls_id
+        if libsumo.trafficlight.getProgram(self.tls) != PROGRAM_ID:
+            libsumo.trafficlight.setProgram(self.tls, PROGRAM_ID)
+        self.first_link = {p: phase_map.link_phases.index(p) for p in config.phases}
+        lane_detector = {libsumo.lanearea.getLaneID(d): d for d in libsumo.lanearea.getIDList()}
+        self.detectors = {p: [lane_detector[lane] for lane in phase_map.incoming_lanes(p)] for p in config.phases}
+
+    def colors(self) -> dict[int, Color]:
+        state = libsumo.trafficlight.getRedYellowGreenState(self.tls)
+        return {p: _SUMO_COLOR.get(state[i], Color.RED) for p, i in self.first_link.items()}
+
+    def occupied(self) -> frozenset[int]:
+        """The phases with a vehicle on one of their detectors now (what the NEMA logic reads as a call)."""
+        return frozenset(p for p, ds in self.detectors.items()
+                         if any(libsumo.lanearea.getLastStepVehicleNumber(d) for d in ds))
+
+
 def run_reference(config: IntersectionConfig, calls: CallSequence, ticks: int) -> Timeline:
     """SUMO's NEMA controller under ``calls`` for ``ticks`` steps of 0.1 s."""
     _check(calls, ticks, config)
     phase_map = derive_phase_map(config, read_net())
-    first_link = {p: phase_map.link_phases.index(p) for p in config.phases}
     pending = dict(calls)
     out: list[ColorChange] = []
     with _sumo(sumo_program(config, phase_map)):
-        if libsumo.trafficlight.getProgram(phase_map.tls_id) != PROGRAM_ID:
-            libsumo.trafficlight.setProgram(phase_map.tls_id, PROGRAM_ID)
-        lane_detector = {libsumo.lanearea.getLaneID(d): d for d in libsumo.lanearea.getIDList()}
-        detectors = {p: [lane_detector[lane] for lane in phase_map.incoming_lanes(p)] for p in config.phases}
-
-        def colors() -> dict[int, Color]:
-            state = libsumo.trafficlight.getRedYellowGreenState(phase_map.tls_id)
-            return {p: _SUMO_COLOR.get(state[i], Color.RED) for p, i in first_link.items()}
-
+        junction = _Junction(config, phase_map)
         # SUMO's start-up greens count their minimum from its first step, not from time 0: one
         # step without calls first puts its clock on our tick 0 (start-up greens then end together)
         libsumo.simulationStep()
-        shown = colors()
+        shown = junction.colors()
         called: frozenset[int] = frozenset()
         for k in range(ticks):
             if k in pending:
                 for p in called ^ pending[k]:
-                    for d in detectors[p]:
+                    for d in junction.detectors[p]:
                         libsumo.lanearea.overrideVehicleNumber(d, 1 if p in pending[k] else -1)
                 called = pending[k]
             libsumo.simulationStep()
-            now = colors()
+            now = junction.colors()
             out += _changes(shown, now, k + 1)
             shown = now
     return tuple(out)
 
 
+def run_traffic(config: IntersectionConfig, ticks: int, seed: int) -> tuple[CallSequence, Timeline]:
+    """SUMO's NEMA controller serving the shipped demand (its own vehicles on its own detectors) for ``ticks``
+    steps: the calls its detectors placed, as a sequence our controller can be given, and its timeline."""
+    if ticks <= 0:
+        raise NemaReferenceError(f"run length {ticks} ticks; allowed: > 0")
+    phase_map = derive_phase_map(config, read_net())
+    calls: list[tuple[int, frozenset[int]]] = []
+    out: list[ColorChange] = []
+    with _sumo(sumo_program(config, phase_map), "-r", str(data_path(ROUTE_FILE)), "--seed", str(seed)):
+        junction = _Junction(config, phase_map)
+        libsumo.simulationStep()  # as in run_reference: SUMO's clock one step ahead of ours
+        shown = junction.colors()
+        for k in range(ticks):
+            # what the detectors hold after step k is what the NEMA logic reads in step k + 1
+            occupied = junction.occupied()
+            if not calls or calls[-1][1] != occupied:
+                calls.append((k, occupied))
+            libsumo.simulationStep()
+            now = junction.colors()
+            out += _changes(shown, now, k + 1)
+            shown = now
+    return tuple(calls), tuple(out)
+
+
 # --- comparison ------------------------------------------------------------------------
 
 
-def compare(ours: Timeline, reference: Timeline, tolerance: int = 1, until: int | None = None) -> Comparison:
-    """Pair changes of the same phase and colour at most ``tolerance`` ticks apart, in order;
-    with ``until``, only the changes before that tick take part."""
-    if until is not None:
-        ours = tuple(c for c in ours if c.tick < until)
-        reference = tuple(c for c in reference if c.tick < until)
+def compare(ours: Timeline, reference: Timeline, tolerance: int = 1) -> Comparison:
+    """Pair changes of the same phase and colour at most ``tolerance`` ticks apart, in order, over the whole
+    timelines."""
     matched: list[tuple[ColorChange, ColorChange]] = []
     only_ours: list[ColorChange] = []
     only_ref: list[ColorChange] = []
@@ -330,128 +398,40 @@ def compare(ours: Timeline, reference: Timeline, tolerance: int = 1, until: int 
     return Comparison(ours, reference, tuple(sorted(matched)), tuple(sorted(only_ours)), tuple(sorted(only_ref)))
 
 
-def differential(config: IntersectionConfig, calls: CallSequence, ticks: int, *,
-                 stop_at_quirk: bool = False) -> Comparison:
-    """Both controllers under the same calls, compared within 0.1 s; with ``stop_at_quirk``, only
-    up to the first of SUMO's documented quirks (:func:`reference_quirks`)."""
-    reference = run_reference(config, calls, ticks)
-    quirks = reference_quirks(config, calls, reference, ticks) if stop_at_quirk else ()
-    return compare(run_ours(config, calls, ticks), reference, until=quirks[0].since if quirks else None)
+@dataclass(frozen=True)
+class Differential:
+    """Both controllers under one call sequence: the comparison over the whole sequence and the judged first
+    difference (None when they agree throughout)."""
+
+    calls: CallSequence
+    comparison: Comparison
+    first: Judgement | None
 
 
-class Quirk(StrEnum):
-    """Where SUMO's NEMA logic departs from NEMA TS2 operation as our controller implements it
-    (docs/nema_differences.md gives an example of each and the source)."""
-
-    REDIRECTED = "next phase changed during clearance"
-    PULLED_ACROSS = "clearing ring pulled across the barrier"
-    FORCED_END = "green ended early by the other ring"
-    SKIPPED = "called phase skipped to cross the barrier"
+def differential(config: IntersectionConfig, calls: CallSequence, ticks: int) -> Differential:
+    """Both controllers under the same calls, compared within 0.1 s over the whole sequence; the first
+    difference judged by :func:`harness.nema_rules.classify`."""
+    return _judged(config, calls, ticks, run_ours(config, calls, ticks), run_reference(config, calls, ticks))
 
 
-@dataclass(frozen=True, slots=True)
-class QuirkSighting:
-    """A quirk seen at ``tick`` in SUMO's timeline; from ``since`` on the controllers may differ."""
-
-    since: int
-    tick: int
-    phase: int
-    kind: Quirk
+def traffic_differential(config: IntersectionConfig, ticks: int, seed: int) -> Differential:
+    """SUMO's NEMA controller serving traffic, and ours given the calls its detectors placed."""
+    calls, reference = run_traffic(config, ticks, seed)
+    return _judged(config, calls, ticks, run_ours(config, calls, ticks), reference)
 
 
-def reference_quirks(config: IntersectionConfig, calls: CallSequence, reference: Timeline,
-                     ticks: int) -> tuple[QuirkSighting, ...]:
-    """SUMO's departures from the NEMA rules our controller keeps, found in its timeline and calls.
-
-    - REDIRECTED: a ring enters another phase than the one it chose at the start of its yellow,
-      i.e. the first phase called then on the entered phase's side in ring order after the one
-      that ended (or that side's dual-entry phase when none was called). SUMO lets later calls
-      change a decision while the new target is on the same barrier side
-      (``NEMAPhase::trySwitch``); rule 2 of issue 9 keeps it.
-    - PULLED_ACROSS: a ring that began its yellow alone (a move on its side of the barrier) enters
-      a phase across the barrier, because the other ring became ready to cross meanwhile
-      (``NEMALogic::getNextPhases`` gives the clearing ring its default transition across).
-    - FORCED_END: a green ends while its own call is on, before its minimum, or before its
-      maximum timed from the conflicting call, without having gapped out: the other ring's
-      green-rest max-out sets it ready too (``NEMAPhase::update``, "force the counterparty to be
-      ready to switch").
-    - SKIPPED: both rings cross the barrier while one of them had a call on a phase after its
-      own before the barrier (1 -> 4 with 2 called): the crossing pair has the smaller summed
-      ring distance (``NEMALogic::getNextPhases``) because a green-rest phase staying counts the
-      full ring (``PhaseTransitionLogic::getDistance``); a NEMA ring serves its called phases in
-      sequence before the barrier.
-    """
-    called = _calls_read(calls, ticks)
-    side = {p: config.barrier_of(p) for p in config.phases}
-    ring_of = {p: config.ring_of(p) - 1 for p in config.phases}
-    order = [list(r) for r in config.rings]
-    defaults = _default_phases(config)
-    shown = {ring[0]: Color.GREEN for ring in config.rings}
-    green_since = {r: 0 for r in range(len(order))}
-    phase = {r: order[r][0] for r in range(len(order))}
-    yellow: dict[int, tuple[int, bool]] = {}  # ring -> (yellow onset, began alone)
-    out: list[QuirkSighting] = []
-
-    def after(p: int) -> list[int]:
-        ring = order[ring_of[p]]
-        i = ring.index(p)
-        return [ring[(i + k) % len(ring)] for k in range(1, len(ring))]
-
-    def conflict(p: int, k: int) -> bool:
-        return any(q != p and (ring_of[q] == ring_of[p] or side[q] != side[p]) for q in called[k])
-
-    by_tick: dict[int, list[ColorChange]] = {}
-    for c in reference:
-        by_tick.setdefault(c.tick, []).append(c)
-    for t in sorted(by_tick):
-        changes = by_tick[t]
-        turning = {c.phase for c in changes if c.color is Color.YELLOW}
-        for c in changes:
-            r = ring_of[c.phase]
-            if c.color is Color.YELLOW:
-                p, g = c.phase, green_since[r]
-                ph = config.phases[p]
-                if p in called[t] and not _legitimate_end(p, g, t, ph.min_green, ph.max_green, called, conflict):
-                    out.append(QuirkSighting(t, t, p, Quirk.FORCED_END))
-                yellow[r] = (t, phase[1 - r] not in turning)
-            elif c.color is Color.GREEN and r in yellow:
-                y, alone = yellow.pop(r)
-                p, q = phase[r], c.phase
-                ahead = list(itertools.takewhile(side[p].__eq__, (side[x] for x in after(p))))
-                ahead = after(p)[:len(ahead)]
-                if alone and side[q] != side[p]:
-                    out.append(QuirkSighting(y + 1, t, q, Quirk.PULLED_ACROSS))
-                elif side[q] != side[p] and any(x in called[y] for x in ahead):
-                    out.append(QuirkSighting(y, t, q, Quirk.SKIPPED))
-                else:
-                    chosen = next((x for x in after(p) if x in called[y] and side[x] == side[q]),
-                                  defaults[r][side[q]])
-                    if q != chosen:
-                        out.append(QuirkSighting(y + 1, t, q, Quirk.REDIRECTED))
-                phase[r], green_since[r] = q, t
-        for c in changes:
-            shown[c.phase] = c.color
-    return tuple(sorted(out, key=lambda s: s.since))
+def _judged(config: IntersectionConfig, calls: CallSequence, ticks: int, ours: Timeline,
+            reference: Timeline) -> Differential:
+    comparison = compare(ours, reference)
+    pattern = running_pattern(config)
+    plan = None if pattern is None else Coordinator(config).plan
+    first = comparison.first_difference
+    judged = None if first is None else classify(config, calls_read(calls, ticks), ours, reference, first.tick,
+                                                 plan=plan)
+    return Differential(calls, comparison, judged)
 
 
-def _legitimate_end(p: int, green: int, end: int, min_green: float, max_green: float,
-                    called: Sequence[frozenset[int]], conflict: Callable[[int, int], bool]) -> bool:
-    """A green of ``p`` from ``green`` ending at ``end`` with its call on: after its minimum, and
-    either maxed out (conflicting demand for its maximum without a break) or gapped out earlier
-    (call off with conflicting demand after the minimum: the gap-out is kept)."""
-    if end - green < tenths(min_green):
-        return False
-    run = 0
-    for k in range(end, green, -1):
-        if not conflict(p, k):
-            break
-        run += 1
-    if run >= tenths(max_green):
-        return True
-    return any(p not in called[k] and conflict(p, k) for k in range(green + tenths(min_green), end))
-
-
-def _calls_read(calls: CallSequence, ticks: int) -> list[frozenset[int]]:
+def calls_read(calls: CallSequence, ticks: int) -> list[frozenset[int]]:
     """Per tick k, the calls the step ending at tick k reads (those placed at tick k - 1 or before)."""
     out = [frozenset()] * (ticks + 1)
     pending = dict(calls)
@@ -493,6 +473,61 @@ SCENARIOS: dict[str, tuple[CallSequence, int]] = {
 }
 
 
+class Mode(StrEnum):
+    """How the controllers run: free, or the config's coordination plan with TS2 or Type 170 offsets."""
+
+    FREE = "free"
+    TS2 = "coordinated TS2 (lead_green), fixed force-offs"
+    TS2_FLOATING = "coordinated TS2 (lead_green), floating force-offs"
+    TYPE170 = "coordinated Type 170 (yellow), fixed force-offs"
+
+
+def in_mode(config: IntersectionConfig, mode: Mode) -> IntersectionConfig:
+    """``config`` running free, or its plan from power-up with the mode's offset reference and force-off mode."""
+    if mode is Mode.FREE:
+        return dataclasses.replace(config, coordination=dataclasses.replace(config.coordination, pattern=FREE))
+    if not config.coordination.patterns:
+        raise NemaReferenceError(f"{config.source}: coordination: no [[coordination.patterns]] to compare in "
+                                 f"{mode.value} mode; allowed: a config with a plan (the shipped four-leg has one)")
+    c = config.planned().coordination
+    reference = OffsetReference.YELLOW if mode is Mode.TYPE170 else OffsetReference.LEAD_GREEN
+    force = ForceOff.FLOATING if mode is Mode.TS2_FLOATING else ForceOff.FIXED
+    return dataclasses.replace(config, coordination=dataclasses.replace(c, offset_reference=reference,
+                                                                        force_off=force))
+
+
+# A minimal sequence for each class of first difference (docs/nema_differences.md shows them): on the paper's
+# intersection, free or running its plan, SUMO's NEMA controller makes the difference and its rule names it.
+EXAMPLES: dict[DifferenceClass, tuple[Mode, CallSequence, int]] = {
+    # 2+6 green, 6's call drops as 4 (across) and 5 are called: SUMO backs ring 2 from 6 into 5
+    BACKED_WITH_CALL_ACROSS: (Mode.FREE, seconds((0, [2, 6]), (15, [2, 4, 5]), (45, [])), 500),
+    # 3+7 green; calls on 1, 5 and 8: SUMO crosses to 1+5 and leaves 8 (after 7, before the barrier) unserved
+    SKIPPED: (Mode.FREE, seconds((0, [3, 7]), (12, [1, 5, 8]), (30, [])), 400),
+    # 2+5 green; 5 ends alone toward 6 (called), then 2 can go with 3 called: SUMO takes ring 2 across with ring 1
+    PULLED_ACROSS: (Mode.FREE, seconds((0, [2, 5]), (9, [3, 6]), (30, [])), 400),
+    # 3+8 -> 4+8; 8's green-rest max-out (timed from the call on 4, its concurrent phase) ends 4 with its call on
+    ENDED_WHILE_EXTENDING: (Mode.FREE, seconds((0, [3, 8]), (12, [4, 8]), (15, [2, 4, 8]), (45, [])), 500),
+    # 4+7 with a call on 1 across; ring 2 moves 7 -> 8 as 4 maxes out: SUMO ends 8 1.9 s into its green
+    ENDED_BEFORE_MIN: (Mode.FREE, seconds((0, [2, 6]), (10, [4, 7]), (20, [1, 4, 7]), (33, [1, 4, 8]), (60, [])),
+                       700),
+    # 6 rests green with its call, 3 called across from 11.2 s; ring 1 changes 2 -> 1 meanwhile: SUMO times 6's
+    # maximum from 1's start (36 s), not from the call on 3 (31.2 s)
+    HELD_PAST_MAXIMUM: (Mode.FREE, seconds((0, [2, 6]), (10, [1]), (11.2, [3, 6]), (45, [])), 500),
+    # 2 gaps out while only its concurrent 5 and 6 are called; its call returns with one on 1: SUMO ends it, ours
+    # extends it
+    RE_EXTENDED: (Mode.FREE, seconds((0, [2, 6]), (10, [5, 6]), (19.5, [1, 2, 5, 6]), (40, [])), 500),
+    # Pattern 1 (70 s): 2+6 yield at 32.3 s for 3 and 8; 3's force-off point is at 37 s, too soon for its minimum
+    # after the clearance: SUMO serves it (from 37.3 s), ours skips it for 4
+    ENTERED_PAST_FORCE_OFF: (Mode.TS2, seconds((0, [2, 6]), (32.2, [3, 8]), (60, [])), 800),
+    # Pattern 1: ring 1 serves 1 from 50.1 s; 5 is called at 54.5 s in its permissive period: ours ends 6 for it,
+    # SUMO keeps 6 until ring 1 is ready too
+    COORD_WAITS_FOR_OTHER_RING: (Mode.TS2, seconds((0, [2, 6]), (40, [1]), (54.5, [1, 5]), (70, [])), 900),
+    # Pattern 1 with Type 170 offsets: 4 is called at 10 s, 3 (before it) no longer fits: ours ends 2+6 for it,
+    # SUMO does not
+    PERMISSIVE_PERIOD: (Mode.TYPE170, seconds((0, [2, 6]), (10, [4]), (60, [])), 800),
+}
+
+
 WARM_UP: CallSequence = ((0, frozenset({2, 6})),)
 """Calls that move both controllers off their start-up greens (1+5) first: SUMO times the maximum
 of a start-up green from the end of its minimum (docs/nema_differences.md, start-up)."""
@@ -515,46 +550,60 @@ def pooled(results: Sequence[Comparison]) -> tuple[int, int]:
     return matched, matched + sum(len(r.only_ours) + len(r.only_reference) for r in results)
 
 
+def tally(results: Sequence[Differential]) -> Counter[tuple[str, str]]:
+    """First differences per class and the side that broke its rule."""
+    return Counter((str(d.first.kind), str(d.first.breaker or d.first.kind.right)) for d in results if d.first)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m harness.nema_reference",
-                                     description="Agreement of our controller with SUMO's NEMA controller.")
+                                     description="Agreement of our controller with SUMO's NEMA controller over whole "
+                                                 "call sequences, free and running the config's coordination plan, "
+                                                 "and the class of each first difference.")
     parser.add_argument("--config", help="intersection TOML (default: the shipped four-leg intersection)")
-    parser.add_argument("--random", type=int, default=50, help="random call sequences (default 50)")
+    parser.add_argument("--random", type=int, default=50, help="random call sequences per mode (default 50)")
     parser.add_argument("--length", type=float, default=300.0, help="seconds per random sequence (default 300)")
     parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--traffic", type=int, default=10,
+                        help="runs of SUMO serving the shipped demand on its detectors per mode (default 10, "
+                             "seeds 0..N-1)")
+    parser.add_argument("--mode", choices=[m.name.lower() for m in Mode], action="append",
+                        help="compare in this mode only (repeatable; default: every mode, coordinated ones when the "
+                             "config has a plan)")
     parser.add_argument("-v", "--verbose", action="store_true", help="show where each sequence first differs")
     args = parser.parse_args(argv)
+    ticks = round(args.length * 10)
     try:
         config = load(args.config)
-        targeted = []
-        for name, (calls, ticks) in SCENARIOS.items():
-            targeted.append(differential(config, calls, ticks))
-            print(f"{name:45s} {targeted[-1].agreement:6.1%}")
-            if args.verbose and targeted[-1].agreement < 1:
-                print(targeted[-1].report(calls))
-        rng = random.Random(args.seed)
-        ticks = round(args.length * 10)
-        whole, until_quirk, kinds = [], [], Counter[Quirk]()
-        for i in range(args.random):
-            calls = random_calls(rng, ticks, sorted(config.phases))
-            ours, reference = run_ours(config, calls, ticks), run_reference(config, calls, ticks)
-            quirks = reference_quirks(config, calls, reference, ticks)
-            whole.append(compare(ours, reference))
-            until_quirk.append(compare(ours, reference, until=quirks[0].since if quirks else None))
-            kinds.update(q.kind for q in quirks[:1])
-            if args.verbose and until_quirk[-1].agreement < 1:
-                print(f"random {i}: " + until_quirk[-1].report(calls))
+        modes = [Mode[m.upper()] for m in args.mode] if args.mode else [
+            m for m in Mode if m is Mode.FREE or config.coordination.patterns]
+        for mode in modes:
+            cfg = in_mode(config, mode)
+            print(f"== {mode.value}")
+            if mode is Mode.FREE:
+                targeted = [differential(cfg, calls, t) for calls, t in SCENARIOS.values()]
+                _figure(f"targeted scenarios ({len(targeted)})", targeted)
+            rng = random.Random(args.seed)
+            randoms = []
+            for i in range(args.random):
+                randoms.append(differential(cfg, random_calls(rng, ticks, sorted(cfg.phases)), ticks))
+                if args.verbose and randoms[-1].first:
+                    print(f"random {i}: {randoms[-1].first}\n" + randoms[-1].comparison.report(randoms[-1].calls))
+            traffic = [traffic_differential(cfg, ticks, seed) for seed in range(args.traffic)]
+            _figure(f"{args.random} random sequences of {args.length:g} s", randoms)
+            _figure(f"{args.traffic} runs of {args.length:g} s of detector-driven traffic", traffic)
     except (NemaReferenceError, ValueError) as exc:
         print(f"nema_reference: {exc}", file=sys.stderr)
         return 1
-    for label, results in ((f"targeted scenarios ({len(targeted)})", targeted),
-                           (f"{args.random} random sequences of {args.length:g} s", whole),
-                           ("  the same, up to SUMO's first quirk", until_quirk)):
-        matched, total = pooled(results)
-        print(f"{label:45s} {matched / max(total, 1):6.1%} of {total} changes")
-    if kinds:
-        print("  first quirks: " + ", ".join(f"{k} {n}" for k, n in kinds.most_common()))
     return 0
+
+
+def _figure(label: str, results: Sequence[Differential]) -> None:
+    matched, total = pooled([d.comparison for d in results])
+    print(f"{label:52s} {matched / max(total, 1):6.1%} of {total} changes, whole sequences")
+    classes = tally(results)
+    for (kind, who), n in classes.most_common():
+        print(f"  {n:3d}  first difference: {kind} ({who})")
 
 
 if __name__ == "__main__":

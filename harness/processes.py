@@ -45,6 +45,7 @@ class Served:
     names: tuple[str, ...]  # of each controller as its ready line gives it: "CONFIG NAME [TLS ID]" in a scenario
     ready_at: float  # time.monotonic() when the ready line was read
     log: Path
+    http_ports: tuple[int, ...] = ()  # of each controller's event log, with http=True
 
     @property
     def port(self) -> int:
@@ -58,14 +59,16 @@ class Served:
         return self.proc.returncode, out
 
 
+_LOG_LINE = re.compile(r"event log of .+: http://127\.0\.0\.1:(\d+)/v1/asclog/xml/full\n")
 _CONTROLLER_LINE = re.compile(r"serving (.+) on udp:127\.0\.0\.1:(\d+) \(ro=(\S+) rw=(\S+)( v3=\S+)?\)\n")
 
 
-def start_emulator(log: Path, *args: str, count: int = 1, verbose: bool = False) -> Served:
-    """Start `hils emulator serve --port 0 --count COUNT` (each controller on a free port) and wait until every
-    controller answers (its ready lines, and with more than one the final line); stderr goes to ``log``."""
+def start_emulator(log: Path, *args: str, count: int = 1, verbose: bool = False, http: bool = False) -> Served:
+    """Start `hils emulator serve --port 0 --count COUNT` (each controller on a free port; with ``http`` its event
+    log on a free TCP port) and wait until every controller answers (its ready lines, and with more than one the
+    final line); stderr goes to ``log``."""
     cmd = [sys.executable, "-m", "hils.cli", *(["-v"] if verbose else []), "emulator", "serve", "--port", "0",
-           "--count", str(count), *args]
+           "--count", str(count), *(["--http", "0"] if http else []), *args]
     with log.open("w") as err:
         proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=err, text=True)
     # The ready lines may come in one read: a select() per line would wait on lines already buffered,
@@ -73,16 +76,18 @@ def start_emulator(log: Path, *args: str, count: int = 1, verbose: bool = False)
     watchdog = threading.Timer(20 + 0.1 * count, proc.kill)
     watchdog.start()
     try:
-        lines = [proc.stdout.readline() for _ in range(count + (count > 1))]
+        lines = [proc.stdout.readline() for _ in range(count + (count > 1) + (count if http else 0))]
     finally:
         watchdog.cancel()
     final = rf"serving {count} controllers on udp:127\.0\.0\.1:\S+\n"
     matches = [_CONTROLLER_LINE.fullmatch(line) for line in lines[:count]]
-    if not (all(matches) and all(re.fullmatch(final, line) for line in lines[count:])):
+    logs = [_LOG_LINE.fullmatch(line) for line in lines[count + (count > 1):]]
+    if not (all(matches) and all(logs) and all(re.fullmatch(final, line) for line in lines[count:count + (count > 1)])):
         proc.kill()
         proc.wait()
         raise RuntimeError(f"hils emulator serve printed no ready line, got {lines!r}; stderr:\n{log.read_text()}")
-    return Served(proc, tuple(int(m[2]) for m in matches), tuple(m[1] for m in matches), time.monotonic(), log)
+    return Served(proc, tuple(int(m[2]) for m in matches), tuple(m[1] for m in matches), time.monotonic(), log,
+                  tuple(int(m[1]) for m in logs))
 
 
 def tool(name: str) -> str:

@@ -76,8 +76,9 @@ def sumo_rl() -> ModuleType:
     would have made it, whatever was imported before."""
     if "sumo_rl" in sys.modules:
         return sys.modules["sumo_rl"]
-    import libsumo
     import sumo
+
+    from hils.quiet_libsumo import libsumo
 
     os.environ.setdefault("SUMO_HOME", sumo.SUMO_HOME)
     os.environ["LIBSUMO_AS_TRACI"] = "1"
@@ -157,10 +158,9 @@ class _AgentBridge:
         self.position = 0  # in the config's sequence, for switch actions
 
     def act(self, t: float, shown: int) -> int:
-        import libsumo
-
         from hils.agents import Observation
         from hils.ntcip import SignalState
+        from hils.quiet_libsumo import libsumo
         from hils.sumo import MovementState
 
         halting = libsumo.lane.getLastStepHaltingNumber
@@ -257,8 +257,7 @@ def _lights(env: Any, configs: Mapping[str, IntersectionConfig]) -> dict[str, Li
 
 def _phase_maps(lights: Mapping[str, Light], scenario: Any) -> dict[str, Any]:
     """hils' phase map of every light, on the running simulation's links."""
-    import libsumo
-
+    from hils.quiet_libsumo import libsumo
     from hils.sumo_net import derive_phase_map, read_net
 
     net = read_net(libsumo.simulation.getOption("net-file"))
@@ -285,8 +284,7 @@ def _policy(env: Any, lights: Mapping[str, Light], maps: Mapping[str, Any], agen
 
 def _queue_tracker(lights: Mapping[str, Light], maps: Mapping[str, Any]) -> Any:
     """RESCO's queue over every light's incoming lanes (those of hils' phase map, as a hils run samples them)."""
-    import libsumo
-
+    from hils.quiet_libsumo import libsumo
     from hils.resco_metrics import QueueTracker
 
     incoming = {tls: tuple(dict.fromkeys(lane for p in light.config.phase_numbers

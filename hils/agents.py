@@ -170,9 +170,43 @@ class ActuatedAgent:
         return None
 
 
+class CoordinatedAgent(ActuatedAgent):
+    """No agent: the controller runs the city's coordination plan of its config (cycle, offset, splits, the
+    coordinated phases resting, force-offs) on its own detectors, as ``actuated`` does free; the middleware only
+    observes. A config without a plan is refused."""
+
+    def __init__(self, config: IntersectionConfig, action_type: ActionType | str = ActionType.SELECTION,
+                 seed: int = 0) -> None:
+        if not config.coordination.patterns:
+            raise AgentError(f"the coordinated agent runs the controller's timing plan, and {config.source} has none: "
+                             "add [[coordination.patterns]] (the shipped four-leg and corridor configs have one)")
+        super().__init__(config, action_type, seed)
+
+
 BUILTIN: dict[str, type] = {"random": RandomAgent, "fixed-cycle": FixedCycleAgent, "max-pressure": MaxPressureAgent,
                             "queue-proportional": QueueProportionalAgent, "webster": WebsterAgent,
-                            "actuated": ActuatedAgent}
+                            "actuated": ActuatedAgent, "coordinated": CoordinatedAgent}
+
+#: Built-in agents that leave the controller to its own operation on its detectors (the middleware observes).
+CONTROLLER_AGENTS = frozenset({"actuated", "coordinated"})
+
+
+def controller_config(agent: object, config: IntersectionConfig) -> IntersectionConfig:
+    """The config the controller runs for ``agent``: its coordination plan from power-up for ``coordinated``, as
+    given (free by default, as the phase-commanding agents need) for every other."""
+    return config.planned() if agent == "coordinated" else config
+
+
+def describe_plan(config: IntersectionConfig) -> str:
+    """One line on what the controller runs: its pattern (cycle, offset, coordinated phases) or free."""
+    c = config.coordination
+    p = c.patterns.get(c.pattern)
+    if p is None:
+        return "Controller plan: free (no coordination pattern)"
+    return (f"Controller plan: pattern {p.number}, cycle {p.cycle} s, offset {p.offset} s, coordinated phases "
+            f"{'+'.join(map(str, p.coord_phases))}, {c.force_off.value} force-offs, offset to the "
+            f"{'start of their green' if c.offset_reference.value == 'lead_green' else 'start of their yellow'}"
+            + (f"; {len(c.schedule)} time-of-day changes" if c.schedule else ""))
 
 
 def load_agent(spec: str, config: IntersectionConfig, action_type: ActionType | str, seed: int = 0) -> Agent:

@@ -18,12 +18,14 @@ import sys
 import tempfile
 import time
 from collections.abc import Iterator
+from datetime import datetime, timedelta
 from pathlib import Path
 from typing import Any
 
 from hils import config as config_mod
-from hils import plots, summary
+from hils import plots, record, summary
 from hils.actions import ActionType
+from hils.agents import controller_config, describe_plan
 from hils.config import ConfigError, IntersectionConfig
 from hils.errors import AgentFailed, RunInterrupted, UserError
 from hils.events import Kind
@@ -74,7 +76,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "(green time of the next pair); default: selection")
     p.add_argument("--agent", metavar="NAME|MODULE:CLASS",
                    help="built-in agent (random, fixed-cycle, max-pressure, queue-proportional, webster; actuated: "
-                        "none, the controller runs on its detectors) or your own package.module:Class; default "
+                        "none, the controller runs on its detectors; coordinated: none, the controller runs its "
+                        "config's timing plan on its detectors) or your own package.module:Class; default "
                         "per action type: " + ", ".join(f"{k.value} -> {v}" for k, v in DEFAULT_AGENTS.items())
                         + "; with --no-sumo (no traffic to observe): "
                         + ", ".join(f"{k.value} -> {v}" for k, v in BLIND_AGENTS.items()))
@@ -116,6 +119,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--dashboard-control", action="store_true",
                    help="let the dashboard's page recover the manager from TIMEOUT (default: read-only); only the "
                         "page opened from the URL printed at start may: it carries the run's secret (?token=...)")
+    p.add_argument("--asclog", metavar="http://HOST:PORT",
+                   help="wall-clock runs of one controller: after the run, collect the controller's own hi-res log "
+                        "from its MaxTime event-log endpoint (`hils emulator serve --http`, an Intelight MaxTime) "
+                        "into the run folder, with its ATSPM measures; virtual-time runs keep the emulator's anyway")
     p.set_defaults(func=run_command)
 
 
@@ -129,14 +136,18 @@ def _window(text: str) -> tuple[float, float]:
     return a, b
 
 
+#: The longest run: a year of simulated seconds (SUMO's clock and every event log stay exact far beyond it).
+MAX_DURATION = 365 * 24 * 3600.0
+
 #: The seeds a run takes: SUMO's are 32-bit signed integers, and gymnasium's are never negative.
 MAX_SEED = 2**31 - 1
 
 
 def _check_values(args: argparse.Namespace) -> None:
     """Refuse the numbers a run cannot take, naming the option and what it allows."""
-    if not (math.isfinite(args.duration) and args.duration > 0):
-        raise UsageError(f"--duration is {args.duration:g}; allowed: a finite number of simulated seconds > 0")
+    if not 0 < args.duration <= MAX_DURATION:
+        raise UsageError(f"--duration is {args.duration:g}; allowed: simulated seconds > 0, at most "
+                         f"{MAX_DURATION:g} (a year)")
     if math.isnan(args.recover_after):
         raise UsageError("--recover-after is nan; allowed: seconds >= 0, or negative for never")
     if not 0 <= args.seed <= MAX_SEED:
@@ -160,6 +171,9 @@ def run_command(args: argparse.Namespace) -> int:
     window = _window(args.plot_window)
     scenario = _scenario(args)
     dashboard = _dashboard(args)
+    if args.asclog is not None and (not args.target or scenario is not None):
+        raise UsageError("--asclog collects the log of the one controller a wall-clock run drives: use it with "
+                         "--target snmp://... and without --scenario")
     out = _run_folder(args.out, args.action_type)
     log_path = args.log or out / "events.jsonl"
     _check_room(out, log_path)
@@ -172,6 +186,10 @@ def run_command(args: argparse.Namespace) -> int:
             raise UsageError("--agent webster plans from the shipped four-leg network and demand; it cannot "
                              "plan for --scenario/--net/--routes/--sumocfg yet: run it without them")
         print(webster_plan(cfg).describe())
+    if spec.agent_spec == "coordinated":
+        print(describe_plan(controller_config(spec.agent_spec, cfg)) if scenario is None else
+              "\n".join(f"{tls}: {describe_plan(controller_config(spec.agent_spec, c))}"
+                        for tls, c in scenario.intersections.items()))
     # A wall-clock run is never silent: a live status line (periodic log lines when not on a terminal).
     status = StatusLine() if args.target and not args.no_progress else None
     tb = Testbed(None if scenario else cfg, scenario=scenario, action_type=spec.action_type,
@@ -180,12 +198,15 @@ def run_command(args: argparse.Namespace) -> int:
                  on_reset=_hooks(status.start if status else None, dashboard.attach if dashboard else None),
                  sumo_config=sumo_config, take_over=args.take_over)
     error: BaseException | None = None
+    started = datetime.now()  # the controller's clock is the host's when it is `hils emulator serve`
     with _terminate_as_interrupt(), tb, _served(dashboard):
         try:
             with status.above() if status is not None else contextlib.nullcontext():
                 tb.reset_all()
                 # From here on: a controller refused at start-up is said once, by the refusal itself.
                 tb.events.subscribe(Notices())
+                if tb.mode != VIRTUAL and args.asclog is None:
+                    tb.events.emit(Kind.NOTE, message=record.KEPT_BY_CONTROLLER)
                 if tb.mode == VIRTUAL and not args.no_progress:
                     with _progress(spec) as bar:
                         tb.run(progress=lambda t: bar.update(t - bar.n))
@@ -206,26 +227,33 @@ def run_command(args: argparse.Namespace) -> int:
             tb.finish(reason_of(error))  # a run that failed as it started is finished too (nothing stays called)
     if not any(i.tally.kinds[Kind.RUN_STARTED] for i in tb.intersections.values()):
         return _ending(tb, error, None, None)  # it never started: nothing to summarise
-    s, written, unwritten = _outputs(tb, out, log_path, window)
+    s, written, unwritten = _outputs(tb, out, log_path, window,
+                                     asclog=args.asclog, since=started - timedelta(seconds=1))
     print(summary.render(s))
+    if "record" in s:
+        print("\n".join(record.describe(s["record"])))
     for warning in summary.warnings(s):
         print(warning)
     print(f"Outputs in {out}/: {', '.join(written) or 'none'}")
     return _ending(tb, error, s, unwritten)
 
 
-def _outputs(tb: Testbed, out: Path, log_path: Path, window: tuple[float, float]
-             ) -> tuple[dict[str, Any], list[str], str | None]:
-    """The run's summary, and the files written (the log, summary.json, plots); the last is why the others could
-    not be written (a full disk: the console still gets the summary), or None."""
+def _outputs(tb: Testbed, out: Path, log_path: Path, window: tuple[float, float], *, asclog: str | None,
+             since: datetime) -> tuple[dict[str, Any], list[str], str | None]:
+    """The run's summary, and the files written (the log, summary.json, plots, the controllers' hi-res record and
+    its measures); the last is why the others could not be written (a full disk: the console still gets the
+    summary), or None."""
     log_name = log_path.name if log_path.parent == out else str(log_path)
     written = [] if tb.events.failure else [log_name]
     s = summary.summarize({i.label: (i.tally, i.config) for i in tb.intersections.values()}, traffic=tb.traffic,
                           wall_s=tb.wall_s)
     try:
+        s["record"], kept = record.keep(tb.hires(), tb.configs, out, several=len(tb.intersections) > 1,
+                                        asclog=asclog, since=since)
         summary.write(s, out / "summary.json")
         written.append("summary.json")
         written += _plots(tb, s, out, window)
+        written += kept
     except OSError as exc:
         return s, written, f"{exc.filename}: {exc.strerror or exc}"
     return s, written, None

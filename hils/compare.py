@@ -21,7 +21,9 @@ _T95 = (12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228, 2
         2.120, 2.110, 2.101, 2.093, 2.086, 2.080, 2.074, 2.069, 2.064, 2.060, 2.056, 2.052, 2.048, 2.045, 2.042)
 
 #: The figures compared, with how the plot names them: RESCO's four (as RL papers report them, from SUMO's
-#: tripinfo: :mod:`hils.resco_metrics`), then hils' own.
+#: tripinfo: :mod:`hils.resco_metrics`), then hils' own, then ATSPM's (from the controllers' own hi-res logs,
+#: :mod:`hils.atspm`: as a DOT states a signal's performance; split failures and arrivals on green need the
+#: controller to read its detectors).
 FIGURES = {
     "resco_delay_s": "RESCO delay (s)",
     "resco_trip_time_s": "RESCO trip time (s)",
@@ -31,10 +33,15 @@ FIGURES = {
     "arrived": "throughput (vehicles arrived)",
     "waiting_to_enter": "waiting to enter (vehicles)",
     "max_queue": "max queue (vehicles)",
+    "atspm_split_failures": "ATSPM split failures",
+    "atspm_percent_on_green": "ATSPM arrivals on green (%)",
+    "atspm_max_outs": "ATSPM max-outs",
+    "atspm_force_offs": "ATSPM force-offs",
 }
 _LABELS = {"resco_delay_s": "RESCO delay s", "resco_trip_time_s": "trip time s", "resco_waiting_time_s": "waiting s",
            "resco_queue": "RESCO queue", "mean_delay_s": "mean delay s", "arrived": "arrived",
-           "waiting_to_enter": "waiting to enter", "max_queue": "max queue"}
+           "waiting_to_enter": "waiting to enter", "max_queue": "max queue", "atspm_split_failures": "split failures",
+           "atspm_percent_on_green": "% on green", "atspm_max_outs": "max-outs", "atspm_force_offs": "force-offs"}
 
 
 @dataclass(frozen=True, slots=True)
@@ -98,15 +105,19 @@ def _label(name: str) -> str:
 
 
 def plot(table: Table, path: Path, title: str) -> None:
-    """One panel per figure (RESCO's four above, hils' below): a bar per agent with its 95 % confidence interval."""
+    """One panel per figure (RESCO's four on top, hils' in the middle, ATSPM's below): a bar per agent with its 95 %
+    confidence interval."""
     plt = pyplot()
     agents = list(table)
-    columns = len(FIGURES) // 2
-    fig, axes = plt.subplots(2, columns, figsize=(3.2 * columns, 7.2))
+    columns = len(FIGURES) // 3
+    fig, axes = plt.subplots(3, columns, figsize=(3.2 * columns, 10.8))
     for ax, (name, label) in zip(axes.flat, FIGURES.items(), strict=True):
         means = [table[a][name].mean or 0.0 for a in agents]
         errors = [table[a][name].half_width or 0.0 for a in agents]
         ax.bar(range(len(agents)), means, yerr=errors, capsize=4, color="#4c78a8")
+        for i, agent in enumerate(agents):
+            if table[agent][name].n == 0:  # no run gave the figure (an ATSPM detector measure without detectors)
+                ax.text(i, 0, "not\nmeasured", ha="center", va="bottom", fontsize=7, color="#555")
         ax.set_xticks(range(len(agents)), agents, rotation=30, ha="right", fontsize=8)
         ax.set_title(label, fontsize=9)
         if not any(means):

@@ -74,6 +74,8 @@ class Kind(StrEnum):
     #                                                        (dashboard runs, on change, read every 1 s)
     DETECTORS = "detectors"                    # active: vehicle detectors actuated now (on change;
     #                                                        runs on detectors, e.g. --agent actuated)
+    PREEMPT_INPUTS = "preempt_inputs"          # active: preempts SUMO calls now (on change; configs whose
+    #                                                        preempts name a detection zone)
     NOTE = "note"                              # free text for harness faults and components
 
 

@@ -182,6 +182,51 @@ class UnitFlashStatus(IntEnum):
     PREEMPT = 8
 
 
+class LocalFreeStatus(IntEnum):
+    """localFreeStatus (NTCIP 1202 v02 A.4.11): why the unit runs free, or notFree while it coordinates."""
+
+    OTHER = 1
+    NOT_FREE = 2
+    COMMAND_FREE = 3
+    TRANSITION_FREE = 4
+    INPUT_FREE = 5
+    COORD_FREE = 6
+    BAD_PLAN = 7
+    BAD_CYCLE_TIME = 8
+    SPLIT_OVERRUN = 9
+    INVALID_OFFSET = 10
+    FAILED = 11
+
+
+class SplitMode(IntEnum):
+    """splitMode (NTCIP 1202 v02 A.4.9.1.4): a phase's operation while its pattern runs."""
+
+    OTHER = 1
+    NONE = 2
+    MIN_RECALL = 3
+    MAX_RECALL = 4
+    PED_RECALL = 5
+    MAX_AND_PED_RECALL = 6
+    OMITTED = 7
+
+
+class CoordCorrectionMode(IntEnum):
+    """coordCorrectionMode (NTCIP 1202 v02 A.4.2)."""
+
+    OTHER = 1
+    DWELL = 2
+    SHORTWAY = 3
+    ADD_ONLY = 4
+
+
+class CoordForceMode(IntEnum):
+    """coordForceMode (NTCIP 1202 v02 A.4.4)."""
+
+    OTHER = 1
+    FLOATING = 2
+    FIXED = 3
+
+
 @dataclass(frozen=True, slots=True)
 class ObjectDef:
     """One NTCIP object type: its name, OID prefix and SNMP properties.
@@ -213,6 +258,55 @@ UNIT_BACKUP_TIME = _o("unitBackupTime", (3, 3), access=Access.READ_WRITE, high=6
 UNIT_CONTROL_STATUS = _o("unitControlStatus", (3, 5), low=1, high=8)
 UNIT_FLASH_STATUS = _o("unitFlashStatus", (3, 6), low=1, high=8)
 SYSTEM_PATTERN_CONTROL = _o("systemPatternControl", (4, 14), access=Access.READ_WRITE)
+
+# Coordination (NTCIP 1202 v02 node coord, A.4; OIDs and ranges from the standard's ASC MIB, 1202ASC.mib as
+# compiled by pysmi into ASC_MIB1, the enumerations named there). The pattern table is indexed by pattern
+# number, the split table by split number and phase.
+COORD_CORRECTION_MODE = _o("coordCorrectionMode", (4, 2), access=Access.READ_WRITE, low=1, high=4)
+COORD_FORCE_MODE = _o("coordForceMode", (4, 4), access=Access.READ_WRITE, low=1, high=3)
+MAX_PATTERNS = _o("maxPatterns", (4, 5), high=253)
+PATTERN_TABLE_TYPE = _o("patternTableType", (4, 6), low=1, high=4)
+MAX_SPLITS = _o("maxSplits", (4, 8))
+COORD_PATTERN_STATUS = _o("coordPatternStatus", (4, 10))
+LOCAL_FREE_STATUS = _o("localFreeStatus", (4, 11), low=1, high=11)
+COORD_CYCLE_STATUS = _o("coordCycleStatus", (4, 12), high=65535)
+COORD_SYNC_STATUS = _o("coordSyncStatus", (4, 13), high=65535)
+
+
+class PatternColumn(IntEnum):
+    """Columns of patternTable (A.4.7.1.c.pattern)."""
+
+    NUMBER = 1
+    CYCLE_TIME = 2
+    OFFSET_TIME = 3
+    SPLIT_NUMBER = 4
+    SEQUENCE_NUMBER = 5
+
+
+class SplitColumn(IntEnum):
+    """Columns of splitTable (A.4.9.1.c.split.phase)."""
+
+    NUMBER = 1
+    PHASE = 2
+    TIME = 3
+    MODE = 4
+    COORD_PHASE = 5
+
+
+PATTERN_TABLE: dict[PatternColumn, ObjectDef] = {
+    PatternColumn.NUMBER: _o("patternNumber", (4, 7, 1, 1), low=1, high=253),
+    PatternColumn.CYCLE_TIME: _o("patternCycleTime", (4, 7, 1, 2), access=Access.READ_WRITE),
+    PatternColumn.OFFSET_TIME: _o("patternOffsetTime", (4, 7, 1, 3), access=Access.READ_WRITE),
+    PatternColumn.SPLIT_NUMBER: _o("patternSplitNumber", (4, 7, 1, 4), access=Access.READ_WRITE),
+    PatternColumn.SEQUENCE_NUMBER: _o("patternSequenceNumber", (4, 7, 1, 5), access=Access.READ_WRITE),
+}
+SPLIT_TABLE: dict[SplitColumn, ObjectDef] = {
+    SplitColumn.NUMBER: _o("splitNumber", (4, 9, 1, 1), low=1),
+    SplitColumn.PHASE: _o("splitPhase", (4, 9, 1, 2), low=1),
+    SplitColumn.TIME: _o("splitTime", (4, 9, 1, 3), access=Access.READ_WRITE),
+    SplitColumn.MODE: _o("splitMode", (4, 9, 1, 4), access=Access.READ_WRITE, low=1, high=7),
+    SplitColumn.COORD_PHASE: _o("splitCoordPhase", (4, 9, 1, 5), access=Access.READ_WRITE, high=1),
+}
 
 # The timing columns are writable with NTCIP 1202's ranges (seconds, or tenths for passage and clearances).
 _RW = Access.READ_WRITE
@@ -252,6 +346,148 @@ SEQUENCE_DATA = _o("sequenceData", (7, 3, 1, 3), Syntax.OCTET_STRING)
 # ringControlGroupMax2 (A.1.7.5.1.4.g): bit k-1 of group 1 selects Maximum 2 for ring k.
 RING_CONTROL_MAX2 = _o("ringControlGroupMax2", (7, 5, 1, 4), access=Access.READ_WRITE)
 
+# Overlaps (NTCIP 1202 v02 node overlap, A.9; OIDs, ranges and the overlapType enumeration from the same ASC
+# MIB): the overlap table by overlap number (1 = Overlap A) and the overlap status by group of 8 overlaps.
+MAX_OVERLAPS = _o("maxOverlaps", (9, 1))
+MAX_OVERLAP_STATUS_GROUPS = _o("maxOverlapStatusGroups", (9, 3))
+
+
+class OverlapType(IntEnum):
+    """overlapType (A.9.2.1.2). NTCIP 1202 v02 knows normal and minusGreenYellow; a flashing yellow arrow is a
+    vendor's type there, other(1)."""
+
+    OTHER = 1
+    NORMAL = 2
+    MINUS_GREEN_YELLOW = 3
+
+
+class OverlapColumn(IntEnum):
+    """Columns of overlapTable (A.9.2.1.c.overlap)."""
+
+    NUMBER = 1
+    TYPE = 2
+    INCLUDED_PHASES = 3
+    MODIFIER_PHASES = 4
+    TRAIL_GREEN = 5
+    TRAIL_YELLOW = 6
+    TRAIL_RED = 7
+
+
+class OverlapStatusColumn(IntEnum):
+    """Columns of overlapStatusGroupTable (A.9.4.1.c.group); bit k of group g is overlap 8(g-1)+k+1."""
+
+    NUMBER = 1
+    REDS = 2
+    YELLOWS = 3
+    GREENS = 4
+
+
+# Type and phases come from the intersection config (read-only here, like a phase's ring and concurrency);
+# the trailing times are writable with the MIB's ranges (green in seconds, yellow and red in tenths; the yellow
+# from 3.0 s, "NEMA range: 3.0-25.5 sec", as the phase table's yellow change).
+OVERLAP_TABLE: dict[OverlapColumn, ObjectDef] = {
+    OverlapColumn.NUMBER: _o("overlapNumber", (9, 2, 1, 1), low=1),
+    OverlapColumn.TYPE: _o("overlapType", (9, 2, 1, 2), low=1, high=3),
+    OverlapColumn.INCLUDED_PHASES: _o("overlapIncludedPhases", (9, 2, 1, 3), Syntax.OCTET_STRING),
+    OverlapColumn.MODIFIER_PHASES: _o("overlapModifierPhases", (9, 2, 1, 4), Syntax.OCTET_STRING),
+    OverlapColumn.TRAIL_GREEN: _o("overlapTrailGreen", (9, 2, 1, 5), access=Access.READ_WRITE),
+    OverlapColumn.TRAIL_YELLOW: _o("overlapTrailYellow", (9, 2, 1, 6), access=Access.READ_WRITE, low=30),
+    OverlapColumn.TRAIL_RED: _o("overlapTrailRed", (9, 2, 1, 7), access=Access.READ_WRITE),
+}
+OVERLAP_STATUS_TABLE: dict[OverlapStatusColumn, ObjectDef] = {
+    col: _o("overlapStatusGroup" + col.name.title(), (9, 4, 1, int(col))) for col in OverlapStatusColumn
+}
+
+# Preemption (NTCIP 1202 v02 node preempt, A.6; OIDs, ranges and the preemptState enumeration from the ASC MIB,
+# the v02 columns past .16 numbered as the standard lists them: preemptEnterYellowChange .22 and
+# preemptEnterRedClear .23 as controller firmware spells them, preemptTrackYellowChange .24 and
+# preemptTrackRedClear .25 after them). The table is indexed by preempt number: lower numbers override higher.
+MAX_PREEMPTS = _o("maxPreempts", (6, 1))
+# shortAlarmStatus (A.3.9): "Bit 1: T&F Flash - When either the Local Flash or MMU Flash input becomes active.
+# Bit 0: Preempt - When any of the CU Preempt inputs become active."
+SHORT_ALARM_STATUS = _o("shortAlarmStatus", (3, 9))
+
+
+class ShortAlarm(IntFlag):
+    """The shortAlarmStatus bits the emulator sets."""
+
+    PREEMPT = 1
+    TF_FLASH = 2
+
+
+class PreemptState(IntEnum):
+    """preemptState (A.6.2.1.16): where a preempt's service is."""
+
+    OTHER = 1
+    NOT_ACTIVE = 2
+    NOT_ACTIVE_WITH_CALL = 3
+    ENTRY_STARTED = 4
+    TRACK_SERVICE = 5
+    DWELL = 6
+    LINK_ACTIVE = 7
+    EXIT_STARTED = 8
+    MAX_PRESENCE = 9
+
+
+class PreemptColumn(IntEnum):
+    """Columns of preemptTable (A.6.2.1.c.preempt)."""
+
+    NUMBER = 1
+    CONTROL = 2
+    LINK = 3
+    DELAY = 4
+    MINIMUM_DURATION = 5
+    MINIMUM_GREEN = 6
+    MINIMUM_WALK = 7
+    ENTER_PED_CLEAR = 8
+    TRACK_GREEN = 9
+    DWELL_GREEN = 10
+    MAXIMUM_PRESENCE = 11
+    TRACK_PHASE = 12
+    DWELL_PHASE = 13
+    DWELL_PED = 14
+    EXIT_PHASE = 15
+    STATE = 16
+    ENTER_YELLOW_CHANGE = 22
+    ENTER_RED_CLEAR = 23
+    TRACK_YELLOW_CHANGE = 24
+    TRACK_RED_CLEAR = 25
+
+
+# Phases and control bits come from the intersection config (read-only here); the times are writable with the
+# standard's ranges (seconds; tenths for the clearances, the yellows from NEMA's 3.0 s as the phase table's).
+_PREEMPT_NAMES: dict[PreemptColumn, tuple[str, Syntax, Access, int, int]] = {
+    PreemptColumn.NUMBER: ("preemptNumber", Syntax.INTEGER, Access.READ_ONLY, 1, 255),
+    PreemptColumn.CONTROL: ("preemptControl", Syntax.INTEGER, Access.READ_ONLY, 0, 255),
+    PreemptColumn.LINK: ("preemptLink", Syntax.INTEGER, Access.READ_ONLY, 0, 255),
+    PreemptColumn.DELAY: ("preemptDelay", Syntax.INTEGER, _RW, 0, 600),
+    PreemptColumn.MINIMUM_DURATION: ("preemptMinimumDuration", Syntax.INTEGER, _RW, 0, 65535),
+    PreemptColumn.MINIMUM_GREEN: ("preemptMinimumGreen", Syntax.INTEGER, _RW, 0, 255),
+    PreemptColumn.MINIMUM_WALK: ("preemptMinimumWalk", Syntax.INTEGER, _RW, 0, 255),
+    PreemptColumn.ENTER_PED_CLEAR: ("preemptEnterPedClear", Syntax.INTEGER, _RW, 0, 255),
+    PreemptColumn.TRACK_GREEN: ("preemptTrackGreen", Syntax.INTEGER, _RW, 0, 255),
+    PreemptColumn.DWELL_GREEN: ("preemptDwellGreen", Syntax.INTEGER, _RW, 1, 255),
+    PreemptColumn.MAXIMUM_PRESENCE: ("preemptMaximumPresence", Syntax.INTEGER, _RW, 0, 65535),
+    PreemptColumn.TRACK_PHASE: ("preemptTrackPhase", Syntax.OCTET_STRING, Access.READ_ONLY, 0, 255),
+    PreemptColumn.DWELL_PHASE: ("preemptDwellPhase", Syntax.OCTET_STRING, Access.READ_ONLY, 0, 255),
+    PreemptColumn.DWELL_PED: ("preemptDwellPed", Syntax.OCTET_STRING, Access.READ_ONLY, 0, 255),
+    PreemptColumn.EXIT_PHASE: ("preemptExitPhase", Syntax.OCTET_STRING, Access.READ_ONLY, 0, 255),
+    PreemptColumn.STATE: ("preemptState", Syntax.INTEGER, Access.READ_ONLY, 1, 9),
+    PreemptColumn.ENTER_YELLOW_CHANGE: ("preemptEnterYellowChange", Syntax.INTEGER, _RW, 30, 255),
+    PreemptColumn.ENTER_RED_CLEAR: ("preemptEnterRedClear", Syntax.INTEGER, _RW, 0, 255),
+    PreemptColumn.TRACK_YELLOW_CHANGE: ("preemptTrackYellowChange", Syntax.INTEGER, _RW, 30, 255),
+    PreemptColumn.TRACK_RED_CLEAR: ("preemptTrackRedClear", Syntax.INTEGER, _RW, 0, 255),
+}
+PREEMPT_TABLE: dict[PreemptColumn, ObjectDef] = {
+    col: _o(name, (6, 2, 1, int(col)), syntax, access, low, high)
+    for col, (name, syntax, access, low, high) in _PREEMPT_NAMES.items()
+}
+# preemptControlTable (A.6.3.1.c.preempt): "when set to ON (one) shall cause the associated preempt actions to
+# occur ... The device shall reset this object to ZERO when in BACKUP Mode. A write to this object shall reset
+# the Backup timer".
+PREEMPT_CONTROL_NUMBER = _o("preemptControlNumber", (6, 3, 1, 1), low=1)
+PREEMPT_CONTROL_STATE = _o("preemptControlState", (6, 3, 1, 2), access=Access.READ_WRITE, high=1)
+
 # Vehicle detectors (A.1.2): the detector table (call phase, options), the active detectors by group of 8
 # (vehicleDetectorStatusGroupActive) and NTCIP 1202 v03's remote actuation by group of 8
 # (vehicleDetectorControlGroupActuation: a set bit forces that detector's actuation, as a cabinet input would).
@@ -260,12 +496,25 @@ VEHICLE_DETECTOR_OPTIONS = _o("vehicleDetectorOptions", (2, 2, 1, 2))
 VEHICLE_DETECTOR_CALL_PHASE = _o("vehicleDetectorCallPhase", (2, 2, 1, 4))
 DETECTOR_STATUS_ACTIVE = _o("vehicleDetectorStatusGroupActive", (2, 4, 1, 2))
 DETECTOR_ACTUATION = _o("vehicleDetectorControlGroupActuation", (2, 12, 1, 2), access=Access.READ_WRITE)
+# Pedestrian detectors (push buttons) likewise: the table's call phase, the active ones by group of 8, and v03's
+# remote actuation (pedestrianDetectorControlGroupActuation, what Signal-Replay SETs to replay a field log's
+# pedestrian detector events).
+MAX_PED_DETECTORS = _o("maxPedestrianDetectors", (2, 6))
+PED_DETECTOR_CALL_PHASE = _o("pedestrianDetectorCallPhase", (2, 7, 1, 2))
+MAX_PED_DETECTOR_GROUPS = _o("maxPedestrianDetectorGroups", (2, 8))
+PED_DETECTOR_STATUS_ACTIVE = _o("pedestrianDetectorStatusGroupActive", (2, 9, 1, 2))
+PED_DETECTOR_ACTUATION = _o("pedestrianDetectorControlGroupActuation", (2, 13, 1, 2), access=Access.READ_WRITE)
 
 ALL_OBJECTS: tuple[ObjectDef, ...] = (
     MAX_PHASES, MAX_PHASE_GROUPS, UNIT_STARTUP_FLASH, UNIT_BACKUP_TIME, UNIT_CONTROL_STATUS, UNIT_FLASH_STATUS,
-    SYSTEM_PATTERN_CONTROL, SEQUENCE_DATA, RING_CONTROL_MAX2, MAX_VEHICLE_DETECTORS, VEHICLE_DETECTOR_OPTIONS,
-    VEHICLE_DETECTOR_CALL_PHASE, DETECTOR_STATUS_ACTIVE, DETECTOR_ACTUATION,
+    SYSTEM_PATTERN_CONTROL, COORD_CORRECTION_MODE, COORD_FORCE_MODE, MAX_PATTERNS, PATTERN_TABLE_TYPE, MAX_SPLITS,
+    COORD_PATTERN_STATUS, LOCAL_FREE_STATUS, COORD_CYCLE_STATUS, COORD_SYNC_STATUS, *PATTERN_TABLE.values(),
+    *SPLIT_TABLE.values(), SEQUENCE_DATA, RING_CONTROL_MAX2, MAX_VEHICLE_DETECTORS, VEHICLE_DETECTOR_OPTIONS,
+    VEHICLE_DETECTOR_CALL_PHASE, DETECTOR_STATUS_ACTIVE, DETECTOR_ACTUATION, MAX_PED_DETECTORS,
+    PED_DETECTOR_CALL_PHASE, MAX_PED_DETECTOR_GROUPS, PED_DETECTOR_STATUS_ACTIVE, PED_DETECTOR_ACTUATION,
     *PHASE_TABLE.values(), *STATUS_TABLE.values(), *CONTROL_TABLE.values(), *CHANNEL_TABLE.values(),
+    MAX_OVERLAPS, MAX_OVERLAP_STATUS_GROUPS, *OVERLAP_TABLE.values(), *OVERLAP_STATUS_TABLE.values(),
+    MAX_PREEMPTS, SHORT_ALARM_STATUS, *PREEMPT_TABLE.values(), PREEMPT_CONTROL_NUMBER, PREEMPT_CONTROL_STATE,
 )
 
 
@@ -333,25 +582,47 @@ def object_for(oid: Oid) -> ObjectDef | None:
 SIGNAL_COLUMNS = (StatusColumn.REDS, StatusColumn.YELLOWS, StatusColumn.GREENS)
 
 
-def signal_oids(groups: int) -> tuple[Oid, ...]:
-    """The OIDs of one signal-state poll: reds, yellows, greens, each for groups 1..n."""
-    return tuple(status_oid(col, g) for col in SIGNAL_COLUMNS for g in range(1, groups + 1))
+OVERLAP_SIGNAL_COLUMNS = (OverlapStatusColumn.REDS, OverlapStatusColumn.YELLOWS, OverlapStatusColumn.GREENS)
+
+
+def signal_oids(groups: int, overlap_groups: int = 0) -> tuple[Oid, ...]:
+    """The OIDs of one signal-state poll: reds, yellows, greens, each for groups 1..n; then, when the
+    intersection has overlaps, the overlaps' reds, yellows and greens by overlap status group."""
+    return (tuple(status_oid(col, g) for col in SIGNAL_COLUMNS for g in range(1, groups + 1))
+            + tuple(OVERLAP_STATUS_TABLE[col].instance(g) for col in OVERLAP_SIGNAL_COLUMNS
+                    for g in range(1, overlap_groups + 1)))
 
 
 @dataclass(frozen=True, slots=True)
-class SignalState:
-    """The phases showing red, yellow and green, as read in one poll."""
+class OverlapState:
+    """The overlaps (by number, 1 = A) showing red, yellow and green, as read in one poll."""
 
     reds: frozenset[int]
     yellows: frozenset[int]
     greens: frozenset[int]
 
+
+@dataclass(frozen=True, slots=True)
+class SignalState:
+    """The phases showing red, yellow and green, as read in one poll; the overlaps' when the poll read them."""
+
+    reds: frozenset[int]
+    yellows: frozenset[int]
+    greens: frozenset[int]
+    overlaps: OverlapState | None = None
+
     @classmethod
-    def from_values(cls, values: Sequence[int], groups: int) -> SignalState:
+    def from_values(cls, values: Sequence[int], groups: int, overlap_groups: int = 0) -> SignalState:
         """Decode the values of a poll of :func:`signal_oids` (same order)."""
-        if len(values) != 3 * groups:
-            raise ValueError(f"a signal poll has {3 * groups} values, got {len(values)}")
-        return cls(*(groups_to_phases(values[i * groups:(i + 1) * groups]) for i in range(3)))
+        if len(values) != 3 * (groups + overlap_groups):
+            raise ValueError(f"a signal poll has {3 * (groups + overlap_groups)} values, got {len(values)}")
+        phases = [groups_to_phases(values[i * groups:(i + 1) * groups]) for i in range(3)]
+        if not overlap_groups:
+            return cls(*phases)
+        rest = values[3 * groups:]
+        overlaps = OverlapState(*(groups_to_phases(rest[i * overlap_groups:(i + 1) * overlap_groups])
+                                  for i in range(3)))
+        return cls(*phases, overlaps)
 
     def indication(self, phase: int) -> str:
         """'G', 'Y' or 'r' for one phase (SUMO's letters)."""

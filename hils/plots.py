@@ -239,6 +239,9 @@ class Svg:
         coords = " ".join(f"{x:.2f},{y:.2f}" for x, y in points)
         self.parts.append(f'<polyline points="{coords}" fill="{fill}" stroke="{color}" stroke-width="1.6"/>')
 
+    def dots(self, points: Sequence[tuple[float, float]], color: str, *, radius: float = 1.5) -> None:
+        self.parts.extend(f'<circle cx="{x:.2f}" cy="{y:.2f}" r="{radius}" fill="{color}"/>' for x, y in points)
+
     def text(self, x: float, y: float, text: str, *, size: float = 12, anchor: str = "start",
              rotate: bool = False) -> None:
         turn = f' transform="rotate(-90 {x:.2f} {y:.2f})"' if rotate else ""

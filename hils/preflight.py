@@ -16,7 +16,8 @@ from dataclasses import dataclass
 from hils.errors import UserError
 from hils.ntcip import SYSTEM_PATTERN_CONTROL, ControlColumn, UnitFlashStatus, oid_str
 
-FREE = 254  # systemPatternControl: free mode
+FREE = 254  # systemPatternControl: the system calls free mode
+STANDBY = 0  # systemPatternControl: no system call; the controller runs its own local plan
 
 
 class ControllerCheckFailed(UserError):
@@ -42,11 +43,15 @@ class Verdict:
 def judge(reading: ControllerReading, *, where: str, community: str | None, keepalive_period: float) -> Verdict:
     """Refusals and warnings for a controller as read at start-up."""
     refusals, warnings = [], []
-    if reading.pattern != FREE:
+    # Standby is accepted: the controller then runs its local plan (the emulator's: free unless its config runs a
+    # coordination plan, as for `--agent coordinated`). The middleware reads no coordPatternStatus yet to tell a
+    # local plan that coordinates from one that runs free.
+    if reading.pattern not in (FREE, STANDBY):
         set_free = (f"snmpset -v1 -c {community} {where} {oid_str(SYSTEM_PATTERN_CONTROL.instance())} i {FREE}"
                     if community else f"SET {oid_str(SYSTEM_PATTERN_CONTROL.instance())} to {FREE}")
         refusals.append(f"the controller at {where} is not in free mode (systemPatternControl = {reading.pattern}, "
-                        f"needs {FREE}): set free mode in its coordination menu or with `{set_free}`")
+                        f"needs {FREE}, or {STANDBY} with a free local plan): set free mode in its coordination menu "
+                        f"or with `{set_free}`")
     if reading.flash_status != UnitFlashStatus.NOT_FLASH:
         try:
             why = UnitFlashStatus(reading.flash_status).name.lower()

@@ -30,9 +30,8 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-import libsumo
-
 from hils.errors import UserError
+from hils.quiet_libsumo import libsumo
 
 #: RESCO's range of a light's detection: ``max_distance=200`` in MultiSignal.
 DETECTION_RANGE_M = 200.0

@@ -37,7 +37,7 @@ SCENARIOS = ("four_leg", "four_phase", "corridor", "grid4x4")
 #: Scenarios derived from RESCO's networks are named ``resco:NAME`` (:data:`hils.resco.MAPS`).
 RESCO_PREFIX = "resco:"
 SUFFIX = ".scenario.toml"
-_FIELDS = ("name", "sumocfg", "intersections")
+_FIELDS = ("name", "sumocfg", "intersections", "offsets")
 _ALLOWED = (f"a shipped scenario ({', '.join(SCENARIOS)}), {RESCO_PREFIX}NAME (RESCO's benchmark) or a path to a "
             f"{SUFFIX} file")
 
@@ -123,7 +123,25 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
     if not isinstance(name, str):
         raise ConfigError(source, "name", f"is {name!r}; allowed: a string")
     sumocfg = _relative_file(raw.get("sumocfg"), path, source, "sumocfg", "a SUMO configuration (.sumocfg)")
-    return Scenario(name, source, sumocfg, MappingProxyType(_intersections(raw.get("intersections"), path, source)))
+    intersections = _intersections(raw.get("intersections"), path, source)
+    return Scenario(name, source, sumocfg, MappingProxyType(_offsets(raw.get("offsets", {}), intersections, source)))
+
+
+def _offsets(raw: Any, intersections: dict[str, IntersectionConfig], source: str) -> dict[str, IntersectionConfig]:
+    """``[offsets]``: a light's offset (s) in its coordination patterns, for progression along a corridor."""
+    if not isinstance(raw, dict):
+        raise ConfigError(source, "offsets", "must be a table of traffic light id = offset in seconds, e.g. J2 = 22")
+    out = dict(intersections)
+    for tls, value in raw.items():
+        if tls not in intersections:
+            raise ConfigError(source, f"offsets.{tls}", f"unknown traffic light; allowed: {', '.join(intersections)}")
+        if type(value) is not int or not 0 <= value <= 254:
+            raise ConfigError(source, f"offsets.{tls}", f"is {value!r}; allowed: whole seconds 0-254 "
+                                                        "(NTCIP patternOffsetTime)")
+        if not intersections[tls].coordination.patterns:
+            raise ConfigError(source, f"offsets.{tls}", "its config has no [[coordination.patterns]] to offset")
+        out[tls] = intersections[tls].with_offset(value)
+    return out
 
 
 def _relative_file(value: Any, scenario: Path, source: str, field_name: str, what: str) -> Path:

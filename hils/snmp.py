@@ -137,6 +137,13 @@ _COMMUNITY_KEYS = ("community", "version")
 _V3_KEYS = ("version", "user", "auth", "auth_key", "priv", "priv_key")
 _QUERY_KEYS = tuple(dict.fromkeys(_COMMUNITY_KEYS + _V3_KEYS))
 _KEYS_IN_URL = re.compile(r"\b(auth_key|priv_key)=[^&#]*")
+
+
+def url_shown(url: str) -> str:
+    """How messages and logs quote a target URL: without its keys (``auth_key=...``)."""
+    return _KEYS_IN_URL.sub(r"\1=...", url)
+
+
 _FORM = ("snmp://HOST[:PORT][?community=NAME&version=1|2c] or "
          "snmp://HOST[:PORT]?version=3&user=U&auth=SHA[&auth_key=K][&priv=AES[&priv_key=K]]")
 
@@ -193,7 +200,7 @@ class SnmpTarget:
         default): :data:`AUTH_KEY_ENV` and :data:`PRIV_KEY_ENV`.
         """
         env = os.environ if environ is None else environ
-        shown = _KEYS_IN_URL.sub(r"\1=...", url)  # how messages quote the URL: without its keys
+        shown = url_shown(url)
         parts = urlsplit(url.strip())
         if parts.scheme != "snmp":
             raise ValueError(f"SNMP target {shown!r} must start with snmp:// (form: {_FORM})")

@@ -125,6 +125,7 @@ def _control(tally: Tally, config: IntersectionConfig) -> dict[str, Any]:
         "timeout_at_end": _timeout_at_end(tally.timeout),
         "calls_cleared": _cleared(tally.clear),
         "clear_error": tally.clear.get("error") if tally.clear else None,
+        "controller_plan": _plan(config),
     }
     if kinds[Kind.DETECTORS]:
         out["detector_actuations"] = actuations_per_phase(records, config)
@@ -150,6 +151,22 @@ def _cleared(record: Mapping[str, Any] | None) -> bool | None:
     if record is None:
         return None
     return record["kind"] == Kind.SET_ANSWERED
+def _plan(config: IntersectionConfig) -> dict[str, Any]:
+    """What the controller ran from power-up: its coordination pattern (cycle, offset, coordinated phases), or free."""
+    c = config.coordination
+    p = c.patterns.get(c.pattern)
+    if p is None:
+        return {"pattern": "free"}
+    return {"pattern": p.number, "cycle_s": p.cycle, "offset_s": p.offset, "coord_phases": list(p.coord_phases),
+            "force_off": c.force_off.value, "offset_reference": c.offset_reference.value,
+            "schedule_changes": len(c.schedule)}
+
+
+def _plan_text(plan: Mapping[str, Any]) -> str:
+    if plan.get("pattern", "free") == "free":
+        return "free"
+    return (f"pattern {plan['pattern']}: cycle {plan['cycle_s']} s, offset {plan['offset_s']} s, coordinated "
+            f"{'+'.join(map(str, plan['coord_phases']))}, {plan['force_off']} force-offs")
 
 
 def _polls(ended: Mapping[str, Any], intersection: str | None) -> dict[str, int]:
@@ -185,6 +202,7 @@ def _render_one(summary: Mapping[str, Any]) -> str:
     if h["n"]:
         lines.append(f"  hold per transition  mean {h['mean']:.3f} s, min {h['min']:.3f} s, max {h['max']:.3f} s")
     lines.append(f"  timeouts             {_timeouts(s)}")
+    lines.append(f"  controller plan      {_plan_text(s.get('controller_plan', {}))}")
     polls = _polls_shown(s)
     sent = polls["polls"] - polls["elided"]
     lines.append(f"  polls                {polls['polls']} ({polls['failed']} failed"
@@ -207,6 +225,9 @@ def _render_network(summary: Mapping[str, Any]) -> str:
              _simulated(s)]
     if s.get("traffic"):
         lines += _traffic_lines(s["traffic"])
+    plans = {tls: _plan_text(c.get("controller_plan", {})) for tls, c in s["intersections"].items()}
+    if any(text != "free" for text in plans.values()):
+        lines += ["Controller plans"] + [f"  {tls:<7} {text}" for tls, text in plans.items()]
     lines += ["Signal control per intersection",
               "  light   transitions  hold mean   timeouts               polls (failed, not sent)   drifted"]
     for tls, c in s["intersections"].items():

@@ -28,11 +28,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
 
-import libsumo
-
 from hils.config import IntersectionConfig, load
 from hils.errors import UserError
 from hils.ntcip import SignalState
+from hils.quiet_libsumo import libsumo
 from hils.resco_metrics import QueueTracker, RescoMetrics, read_tripinfo
 from hils.resco_metrics import metrics as resco_metrics
 from hils.scenario import SignalLink, labels
@@ -175,6 +174,15 @@ class Light:
         self._lanes = tuple(dict.fromkeys(lane for _, inc, out in self._movement_lanes for lane in (*inc, *out)))
         self._lane_length = {lane: libsumo.lane.getLength(lane) for lane in self._lanes}
         self.incoming_lanes = tuple(dict.fromkeys(lane for _, inc, _ in self._movement_lanes for lane in inc))
+        lanes_of = phase_map.approach_lanes
+        for n, p in config.preempts.items():
+            if p.approach is not None and p.approach not in lanes_of:
+                raise SumoError(f"{config.source}: preempts.{n}.approach: traffic light {tls_id} has no {p.approach} "
+                                f"approach; allowed: {', '.join(lanes_of)}")
+        # Each preempt SUMO calls: the incoming lanes of its approach, how far up from the stop bar it looks, and
+        # the vehicle classes or types that call it.
+        self._preempt_zones = tuple((n, lanes_of[p.approach], p.zone, frozenset(p.vehicles))
+                                    for n, p in config.preempts.items() if p.approach is not None)
 
     def apply(self, state: SignalState) -> bool:
         """Show ``state`` on the traffic light; True when SUMO's state had to change."""
@@ -206,6 +214,17 @@ class Light:
             self._lane_length
         return frozenset(lane for lane in self.incoming_lanes
                          if any(position(v) >= length[lane] - zone for v in vehicles(lane)))
+
+    def preempt_calls(self) -> frozenset[int]:
+        """The preempts with a vehicle of one of their classes (SUMO's vClass, e.g. ``emergency``, ``rail``) or
+        vehicle types within their zone of their approach's stop bar (on the incoming lanes)."""
+        if not self._preempt_zones:
+            return frozenset()
+        vehicle = libsumo.vehicle
+        return frozenset(n for n, lanes, zone, kinds in self._preempt_zones
+                         if any(vehicle.getLanePosition(v) >= libsumo.lane.getLength(lane) - zone
+                                and (vehicle.getVehicleClass(v) in kinds or vehicle.getTypeID(v) in kinds)
+                                for lane in lanes for v in libsumo.lane.getLastStepVehicleIDs(lane)))
 
     def queues(self) -> dict[int, int]:
         """Halting vehicles on the incoming lanes of each phase's movement (``upstream_queue`` of the traffic

@@ -29,7 +29,7 @@ import sys
 import tempfile
 import xml.etree.ElementTree as ET
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -37,7 +37,7 @@ from typing import Any
 import sumo
 import sumolib
 
-from hils.config import IntersectionConfig
+from hils.config import IntersectionConfig, OverlapKind
 from hils.errors import UserError
 from hils.ntcip import SignalState
 from hils.scenario import Scenario, SignalLink
@@ -77,6 +77,7 @@ class Link:
     direction: str
     phase: int
     permissive: bool = False
+    overlap: int = 0  # the overlap that shows this link instead of its phase (0: none)
 
     @property
     def turn(self) -> str:
@@ -87,7 +88,9 @@ class Link:
 class PhaseMap:
     """Which NEMA phase drives each link index of one traffic light (0: an index that controls no connection);
     ``link_also`` and ``link_yields_with``, where a light's links are bound explicitly (:class:`SignalLink`), the
-    further phases each link shows green with (an overlap) and runs permissive beside."""
+    further phases each link shows green with (an overlap) and runs permissive beside. ``link_overlaps``: the
+    config's overlap (by number) that shows each link (0: none), when the poll reads the overlaps' status, and
+    ``flashes_with``: a flashing yellow arrow's permissive phases, by overlap."""
 
     tls_id: str
     links: tuple[Link, ...]
@@ -95,6 +98,8 @@ class PhaseMap:
     link_permissive: tuple[bool, ...] = ()
     link_also: tuple[tuple[int, ...], ...] = ()
     link_yields_with: tuple[tuple[int, ...], ...] = ()
+    link_overlaps: tuple[int, ...] = ()
+    flashes_with: Mapping[int, tuple[int, ...]] = field(default_factory=dict)
 
     @property
     def phases(self) -> tuple[int, ...]:
@@ -123,15 +128,31 @@ class PhaseMap:
         """SUMO's per-link state for a controller state: G green, y yellow, r red (also dark).
 
         Green is the protected 'G': the configured pairs never show conflicting protected movements
-        green together. A permissive link shows 'g' and yields to the movements it crosses.
+        green together. A permissive link shows 'g' and yields to the movements it crosses. A link an
+        overlap shows follows the overlap when the state carries the overlaps' status (and its phase when
+        not: a poll of the phases only); a flashing yellow arrow, which SUMO has no state for, shows 'g'
+        (yield to the opposing through), told from a steady yellow arrow by its permissive phase's green.
         """
         greens, yellows = state.greens, state.yellows
         permissive = self.link_permissive or (False,) * len(self.link_phases)
         if not self.link_also:
-            return "".join(("g" if yields else "G") if p in greens else "y" if p in yellows else "r"
+            text = "".join(("g" if yields else "G") if p in greens else "y" if p in yellows else "r"
                            for p, yields in zip(self.link_phases, permissive, strict=True))
-        return "".join(_bound_state(p, yields, also, yields_with, greens, yellows) for p, yields, also, yields_with
-                       in zip(self.link_phases, permissive, self.link_also, self.link_yields_with, strict=True))
+        else:
+            text = "".join(_bound_state(p, yields, also, yields_with, greens, yellows) for p, yields, also, yields_with
+                           in zip(self.link_phases, permissive, self.link_also, self.link_yields_with, strict=True))
+        if state.overlaps is None or not any(self.link_overlaps):
+            return text
+        return "".join(self._overlap_state(o, state) if o else ch for ch, o in zip(text, self.link_overlaps,
+                                                                                     strict=True))
+
+    def _overlap_state(self, overlap: int, state: SignalState) -> str:
+        shown = state.overlaps
+        if overlap in shown.greens:
+            return "G"
+        if overlap in shown.yellows:
+            return "g" if not state.greens.isdisjoint(self.flashes_with.get(overlap, ())) else "y"
+        return "r"
 
 
 def _bound_state(phase: int, yields: bool, also: tuple[int, ...], yields_with: tuple[int, ...],
@@ -220,29 +241,42 @@ def derive_phase_map(config: IntersectionConfig, net: Any, controlled_links: Con
                                    "approach")
             served[key] = number
     permissive_of = {(config.phases[n].approach, t): n for n in config.phases for t in config.phases[n].permissive}
+    overlap_of = {(o.approach, o.turn): n for n, o in config.overlaps.items() if o.approach is not None}
 
     links: list[Link] = []
     link_phases: list[int] = []
     link_permissive: list[bool] = []
+    link_overlaps: list[int] = []
     for index, triples in enumerate(controlled_links):
         if not triples:
             raise NetworkError(f"traffic light {tls_id}: link index {index} controls no connection")
-        phases_here = set()
+        phases_here, overlaps_here = set(), set()
         for from_lane, to_lane, via in triples:
             link = _link(net, index, from_lane, to_lane, via, served, permissive_of, tls_id, config.source)
+            overlap = overlap_of.get((link.approach, "right" if link.direction in "rR" else link.turn), 0)
+            link = replace(link, overlap=overlap)
             phases_here.add(link.phase)
+            overlaps_here.add(overlap)
             links.append(link)
-        if len(phases_here) > 1:
+        if len(phases_here) > 1 or len(overlaps_here) > 1:
             raise NetworkError(f"traffic light {tls_id}: link index {index} carries movements of phases "
-                               f"{sorted(phases_here)}; one signal index can show only one phase")
+                               f"{sorted(phases_here)} (overlaps {sorted(overlaps_here - {0}) or 'none'}); one "
+                               "signal index can show only one phase or overlap")
         link_phases.append(phases_here.pop())
         link_permissive.append(all(link.permissive for link in links if link.index == index))
+        link_overlaps.append(overlaps_here.pop())
 
     idle = sorted(set(config.phases) - set(link_phases))
     if idle:
         raise NetworkError(f"traffic light {tls_id}: phase(s) {idle} serve no link of the network "
                            f"({', '.join(f'{p}: {config.phases[p].approach} {config.phases[p].turn}' for p in idle)})")
-    return PhaseMap(tls_id, tuple(links), tuple(link_phases), tuple(link_permissive))
+    dark = [config.overlaps[n] for n in overlap_of.values() if n not in link_overlaps]
+    if dark:
+        raise NetworkError(f"traffic light {tls_id}: overlap(s) {', '.join(o.letter for o in dark)} show no link of "
+                           f"the network ({', '.join(f'{o.letter}: {o.approach} {o.turn}' for o in dark)})")
+    flashes_with = {n: o.modifiers for n, o in config.overlaps.items() if o.kind is OverlapKind.FYA}
+    return PhaseMap(tls_id, tuple(links), tuple(link_phases), tuple(link_permissive),
+                    link_overlaps=tuple(link_overlaps), flashes_with=flashes_with)
 
 
 def _link(net: Any, index: int, from_lane: str, to_lane: str, via: str,

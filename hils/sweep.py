@@ -38,9 +38,13 @@ from hils.resco import NAMES as RESCO_NAMES
 from hils.scenario import RESCO_PREFIX, SCENARIOS, SUFFIX
 
 __all__ = [
-    "COLUMNS", "SHIPPED", "Cell", "CellResult", "Progress", "SweepError", "figures", "grid", "native_action_type",
-    "parse_seeds", "render", "rows", "run_cell", "run_grid", "scenario_arguments", "write_table",
+    "ATSPM_FIGURES", "COLUMNS", "SHIPPED", "Cell", "CellResult", "Progress", "SweepError", "figures", "grid",
+    "native_action_type", "parse_seeds", "render", "rows", "run_cell", "run_grid", "scenario_arguments",
+    "write_table",
 ]
+
+#: The ATSPM figures of a run's record a sweep's table and `hils compare` carry (``atspm_<name>``).
+ATSPM_FIGURES = ("split_failures", "percent_on_green", "max_outs", "force_offs")
 
 #: The shipped scenarios of one light: `hils run` arguments that select them (the four-leg is the default run).
 SHIPPED = ("four_leg", "four_phase")
@@ -147,6 +151,7 @@ def figures(summary: dict[str, Any]) -> dict[str, Any]:
     queues = traffic.get("max_queue") or {}
     resco = traffic.get("resco") or {}
     controls = list((summary.get("intersections") or {"": summary}).values())
+    atspm = (summary.get("record") or {}).get("atspm") or {}
     return {
         "resco_delay_s": resco.get("delay_s"),
         "resco_trip_time_s": resco.get("trip_time_s"),
@@ -161,6 +166,8 @@ def figures(summary: dict[str, Any]) -> dict[str, Any]:
         **({f"max_queue_{a}": q for a, q in sorted(queues.items())} if "intersections" not in summary else {}),
         "timeouts": sum(sum((c.get("timeouts") or {}).values()) for c in controls),
         "wall_s": summary.get("wall_time_s"),
+        # ATSPM measures of the controllers' own hi-res logs (hils.record), as a DOT states a signal's performance
+        **{f"atspm_{name}": atspm.get(name) for name in ATSPM_FIGURES},
     }
 
 

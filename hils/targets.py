@@ -69,21 +69,21 @@ def target_specs(target: str | TargetFactory | Mapping[str, str | TargetFactory]
 def check_target(url: str, label: str | None) -> tuple[Any, tuple[str, int]]:
     """The :class:`hils.snmp.SnmpTarget` of ``url`` and its host's address; a URL that is not one, or whose host
     does not resolve, is refused (``label``: how the message names the intersection)."""
-    light = f"{label}: " if label else ""
-    if not url.startswith("snmp://"):
-        raise TargetError(f"{light}target {url!r}: allowed: 'virtual' or "
-                          "snmp://HOST[:PORT][?community=NAME&version=1|2c]")
-    from hils.snmp import SnmpTarget, resolve
+    from hils.snmp import SnmpTarget, resolve, url_shown
     from hils.transport import TransportError
 
+    light = f"{label}: " if label else ""
+    if not url.startswith("snmp://"):
+        raise TargetError(f"{light}target {url_shown(url)!r}: allowed: 'virtual' or "
+                          "snmp://HOST[:PORT][?community=NAME&version=1|2c]")
     try:
         target = SnmpTarget.parse(url)
         return target, resolve(target)
     except ValueError as exc:
         raise TargetError(f"{light}{exc}") from None
     except TransportError as exc:
-        raise TargetError(f"{light}target {url!r}: {exc}; allowed: a host name this machine resolves, or an "
-                          "IPv4 address") from None
+        raise TargetError(f"{light}target {url_shown(url)!r}: {exc}; allowed: a host name this machine resolves, "
+                          "or an IPv4 address") from None
 
 
 def connect(env: simpy.Environment, config: IntersectionConfig, spec: str | TargetFactory,

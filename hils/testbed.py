@@ -51,7 +51,7 @@ import simpy
 
 from hils import config as config_mod
 from hils.actions import ActionError, ActionType
-from hils.agents import Agent, Observation, load_agent
+from hils.agents import CONTROLLER_AGENTS, Agent, Observation, controller_config, load_agent
 from hils.clock import Answer, Clock, VirtualClock, WallClockDriver
 from hils.config import IntersectionConfig
 from hils.detectors import DetectorFeed
@@ -59,6 +59,7 @@ from hils.errors import AgentFailed, RunInterrupted, UserError, described
 from hils.events import EventLog, Kind, LogWriteError, TaggedLog
 from hils.events import read as read_events
 from hils.fastpath import StepCost, modeled_cost
+from hils.hires import Event
 from hils.intersection import Intersection
 from hils.manager import CLEAR_ATTEMPTS, State
 from hils.middleware import Middleware, Received, Submission
@@ -243,11 +244,11 @@ class Testbed(_OneIntersection):
             raise ValueError("give a config (one intersection) or a scenario (its intersections), not both")
         self.scenario = _scenario(scenario)
         if self.scenario is not None:
-            self.configs = dict(self.scenario.intersections)
+            self.configs = {tls: controller_config(agent, c) for tls, c in self.scenario.intersections.items()}
             sumo_config = sumo_config if sumo_config is not None else self.scenario.sumo_config
         else:
             cfg = config if isinstance(config, IntersectionConfig) else config_mod.load(config)
-            self.configs = {TLS_ID: cfg}
+            self.configs = {TLS_ID: controller_config(agent, cfg)}
         self.labels = labels(list(self.configs))
         first = next(iter(self.configs.values()))
         self.action_type = ActionType(action_type)
@@ -267,8 +268,9 @@ class Testbed(_OneIntersection):
         self._agent_spec = agent
         self.fast_path = fast_path
         self.take_over = take_over
-        # Detector actuations from SUMO feed the controller when asked, and by default for the actuated agent.
-        self.detectors = agent == "actuated" if detectors is None else detectors
+        # Detector actuations from SUMO feed the controller when asked, and by default for the agents that leave
+        # the controller to its own operation (actuated, coordinated).
+        self.detectors = agent in CONTROLLER_AGENTS if detectors is None else detectors
         self.duration = duration
         self.log_path = Path(log_path) if log_path is not None else None
         self.recover_after = recover_after
@@ -314,6 +316,13 @@ class Testbed(_OneIntersection):
         if log_ is None:
             return []
         return log_.records if log_.keep else list(read_events(log_.path))
+
+    def hires(self) -> dict[str, list[Event]]:
+        """Each controller's own hi-res event log, where the run can read it: the in-process emulator's (a target
+        with a ``hires()`` method, see :mod:`hils.hires`). A controller reached at the wall clock keeps its own,
+        which a field tool collects from it (:func:`hils.hires.collect` for a MaxTime endpoint)."""
+        return {name: i.target.hires() for name, i in self.intersections.items()
+                if callable(getattr(i.target, "hires", None))}
 
     @property
     def driver(self) -> Any:
@@ -424,11 +433,13 @@ class Testbed(_OneIntersection):
         # the collector's way so that collections during the run stay short.
         gc.freeze()
         for i in self.intersections.values():
-            if self.detectors and i.signals is not None:
+            zones = any(p.approach is not None for p in i.config.preempts.values())
+            if (self.detectors or zones) and i.signals is not None:
                 # Built before the run starts: a detector on a lane its phase does not have is refused now.
                 pm = i.signals.phase_map
                 i.detector_feed = DetectorFeed(i.transport, i.config, i.events,
-                                               {p: pm.incoming_lanes(p) for p in pm.phases})
+                                               {p: pm.incoming_lanes(p) for p in pm.phases}, detectors=self.detectors,
+                                               preempt_calls=i.signals.preempt_calls if zones else None)
         self.events.emit(Kind.RUN_STARTED, **self._what_runs(), seed=self.seed, mode=self.mode,
                          action_type=self.action_type.value, agent=_agent_name(self._agent_spec, self.spec),
                          duration=self.duration)

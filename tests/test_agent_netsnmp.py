@@ -34,15 +34,35 @@ from harness.processes import Served, start_emulator, tool
 from hils.config import IntersectionConfig
 from hils.ntcip import (
     ASC,
+    COORD_FORCE_MODE,
+    COORD_PATTERN_STATUS,
+    LOCAL_FREE_STATUS,
+    MAX_OVERLAPS,
     MAX_PHASE_GROUPS,
     MAX_PHASES,
+    MAX_PREEMPTS,
+    OVERLAP_STATUS_TABLE,
+    OVERLAP_TABLE,
+    PATTERN_TABLE,
+    PREEMPT_CONTROL_STATE,
+    PREEMPT_TABLE,
+    SHORT_ALARM_STATUS,
+    SPLIT_TABLE,
     SYSTEM_PATTERN_CONTROL,
     UNIT_BACKUP_TIME,
     ControlColumn,
     ErrorStatus,
+    LocalFreeStatus,
     Oid,
+    OverlapColumn,
+    OverlapStatusColumn,
+    PatternColumn,
     PhaseColumn,
     PhaseOption,
+    PreemptColumn,
+    PreemptState,
+    ShortAlarm,
+    SplitColumn,
     StatusColumn,
     control_oid,
     oid_str,
@@ -50,6 +70,7 @@ from hils.ntcip import (
     phase_oid,
     status_oid,
 )
+from hils.sumo_net import data_path
 from hils.transport import Latency
 
 A = oid_str(ASC)
@@ -214,6 +235,91 @@ def test_walk_of_the_phase_table_gives_every_column_and_the_options(server: Serv
     assert {got[oid_str(phase_oid(PhaseColumn.OPTIONS, p))] for p in range(1, 9)} == {f"INTEGER: {options}"}
     assert got[oid_str(phase_oid(PhaseColumn.PASSAGE, 4))] == "INTEGER: 0"
     assert got[oid_str(phase_oid(PhaseColumn.WALK, 4))] == "INTEGER: 0"
+
+
+def test_the_coordination_objects_walk_and_set_within_ntcip_ranges(tmp_path: Path) -> None:
+    """The coord node (A.4) of the shipped four-leg: its pattern 1 and split table 1 walked by snmpwalk;
+    systemPatternControl starts the pattern, out-of-range values are refused."""
+    served = start_emulator(tmp_path / "serve.log")
+    try:
+        coord = A + ".4"
+        done = run("snmpwalk", "2c", "public", served.port, coord)
+        assert done.returncode == 0, done.stderr
+        got = values(done.stdout)
+        cycle, split_2 = oid_str(PATTERN_TABLE[PatternColumn.CYCLE_TIME].instance(1)), SPLIT_TABLE[SplitColumn.TIME]
+        assert got[cycle] == "INTEGER: 70" and got[oid_str(split_2.instance(1, 2))] == "INTEGER: 28"
+        assert got[oid_str(SPLIT_TABLE[SplitColumn.COORD_PHASE].instance(1, 6))] == "INTEGER: 1"
+        assert got[oid_str(COORD_FORCE_MODE.instance())] == "INTEGER: 3"  # fixed
+        assert got[oid_str(COORD_PATTERN_STATUS.instance())] == "INTEGER: 254"  # free at power-up
+        assert len([o for o in got if o.startswith(oid_str(SPLIT_TABLE[SplitColumn.NUMBER].prefix))]) == 8
+        done = run("snmpset", "2c", "private", served.port, oid_str(SYSTEM_PATTERN_CONTROL.instance()), "i", "1")
+        assert done.returncode == 0, done.stderr
+        status = [oid_str(o.instance()) for o in (COORD_PATTERN_STATUS, LOCAL_FREE_STATUS)]
+        assert integers(served.port, *status) == [1, int(LocalFreeStatus.NOT_FREE)]
+        for oid, value in ((cycle, "256"), (oid_str(COORD_FORCE_MODE.instance()), "4")):
+            done = run("snmpset", "2c", "private", served.port, oid, "i", value)
+            assert "wrongValue" in done.stderr, done.stderr
+        done = run("snmpset", "2c", "private", served.port, oid_str(COORD_FORCE_MODE.instance()), "i", "2")
+        assert done.returncode == 0 and integers(served.port, oid_str(COORD_FORCE_MODE.instance())) == [2]
+    finally:
+        served.stop()
+
+
+def test_the_overlap_objects_walk_and_the_trailing_times_set_within_ntcip_ranges(tmp_path: Path) -> None:
+    """The overlap node (A.9) of the city four-leg walked by snmpwalk: its table (types, included and modifier
+    phases) and its status with 2+6 green at start-up; a trailing yellow below NEMA's 3.0 s is refused."""
+    served = start_emulator(tmp_path / "serve.log", "--config", str(data_path("four_leg_city.toml")))
+    try:
+        done = run("snmpwalk", "2c", "public", served.port, A + ".9")
+        assert done.returncode == 0, done.stderr
+        got = values(done.stdout)
+        assert got[oid_str(MAX_OVERLAPS.instance())] == "INTEGER: 8"
+        types = [got[oid_str(OVERLAP_TABLE[OverlapColumn.TYPE].instance(n))] for n in range(1, 9)]
+        assert types == ["INTEGER: 2"] * 4 + ["INTEGER: 1"] * 4  # normal right turns, fya (other) lefts
+        assert got[oid_str(OVERLAP_TABLE[OverlapColumn.INCLUDED_PHASES].instance(1))] == 'Hex-STRING: 08 05 '
+        # The node ends the MIB: the walk's last answer is endOfMibView.
+        assert done.stdout.rstrip().endswith("No more variables left in this MIB View (It is past the end of the "
+                                             "MIB tree)")
+        # C (6, 3) and D (2, 7) green with 2+6; E and F flash beside them (their yellow bit).
+        status = [oid_str(OVERLAP_STATUS_TABLE[col].instance(1)) for col in
+                  (OverlapStatusColumn.REDS, OverlapStatusColumn.YELLOWS, OverlapStatusColumn.GREENS)]
+        assert integers(served.port, *status) == [195, 48, 12]
+        trail_yellow = oid_str(OVERLAP_TABLE[OverlapColumn.TRAIL_YELLOW].instance(1))
+        done = run("snmpset", "2c", "private", served.port, trail_yellow, "i", "29")
+        assert "wrongValue" in done.stderr, done.stderr
+        done = run("snmpset", "2c", "private", served.port, trail_yellow, "i", "40")
+        assert done.returncode == 0 and integers(served.port, trail_yellow) == [40]
+    finally:
+        served.stop()
+
+
+def test_the_preempt_objects_walk_and_a_preempt_is_called_with_snmpset(tmp_path: Path) -> None:
+    """The preempt node (A.6) of the city four-leg walked by snmpwalk; preemptControlState.1 SET to 1 with snmpset
+    calls it: shortAlarmStatus shows the preempt input, preemptState its entry, then its dwell in 2+5."""
+    served = start_emulator(tmp_path / "serve.log", "--config", str(data_path("four_leg_city.toml")))
+    try:
+        done = run("snmpwalk", "2c", "public", served.port, A + ".6")
+        assert done.returncode == 0, done.stderr
+        got = values(done.stdout)
+        state = oid_str(PREEMPT_TABLE[PreemptColumn.STATE].instance(1))
+        assert got[oid_str(MAX_PREEMPTS.instance())] == "INTEGER: 1"
+        assert got[oid_str(PREEMPT_TABLE[PreemptColumn.DWELL_PHASE].instance(1))] == "Hex-STRING: 02 05 "
+        assert got[state] == f"INTEGER: {int(PreemptState.NOT_ACTIVE)}"
+        control = oid_str(PREEMPT_CONTROL_STATE.instance(1))
+        assert got[control] == "INTEGER: 0"
+        done = run("snmpset", "2c", "private", served.port, control, "i", "2")
+        assert "wrongValue" in done.stderr, done.stderr
+        done = run("snmpset", "2c", "private", served.port, control, "i", "1")
+        assert done.returncode == 0, done.stderr
+        alarm = oid_str(SHORT_ALARM_STATUS.instance())
+        assert integers(served.port, alarm)[0] & ShortAlarm.PREEMPT
+        deadline = time.monotonic() + 15
+        while integers(served.port, state) != [int(PreemptState.DWELL)]:
+            assert time.monotonic() < deadline, "no dwell within 15 s"
+            time.sleep(0.2)
+        assert integers(served.port, GREENS_1) == [0b00010010]  # 2 and 5
+    finally:
+        served.stop()
 
 
 def test_a_phase_timing_set_is_range_checked_and_read_back(server: Served) -> None:

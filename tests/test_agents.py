@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import sys
 import types
 
@@ -117,3 +118,15 @@ def test_an_agent_of_another_action_type_is_refused(user_module):
         load_agent("user_agents:Good", CFG, ActionType.SELECTION)
     with pytest.raises(AgentError, match="phase selection actions only"):
         load_agent("max-pressure", CFG, ActionType.SWITCH)
+
+
+def test_the_coordinated_agent_runs_the_plan_and_needs_one(paper_config, paper_toml) -> None:
+    from hils.agents import CONTROLLER_AGENTS, controller_config
+
+    agent = load_agent("coordinated", paper_config, "selection")
+    assert agent.act(None) is None and "coordinated" in CONTROLLER_AGENTS
+    assert controller_config("coordinated", paper_config).coordination.pattern == 1
+    assert controller_config("max-pressure", paper_config).coordination.pattern == 254
+    bare = config_mod.parse(paper_toml[:paper_toml.index("[coordination]")], "bare.toml")
+    with pytest.raises(AgentError, match=re.escape("bare.toml has none: add [[coordination.patterns]]")):
+        load_agent("coordinated", bare, "selection")

@@ -458,6 +458,7 @@ def test_the_paper_config_keeps_the_paper_behaviour(paper_config) -> None:
         assert (ph.passage, ph.recall, ph.walk, ph.ped_clear, ph.dual_entry, ph.backup_prevent, ph.red_revert) == (
             0, Recall.NONE, 0, 0, False, False, 0)
     assert paper_config.startup_flash == 0
+    assert paper_config.next_phase_lock == "green_end"
 
 
 @pytest.mark.parametrize(("phases", "timing_extra", "field", "allowed"), [
@@ -471,6 +472,7 @@ def test_the_paper_config_keeps_the_paper_behaviour(paper_config) -> None:
     ({4: '{ dual_entry = "yes" }'}, "", "phases.4.dual_entry", "true, false"),
     ({}, "\nbackup_prevent = 1", "timing.backup_prevent", "true, false"),
     ({}, "\nstartup_flash = 300", "timing.startup_flash", "<= 255"),
+    ({}, '\nnext_phase_lock = "yellow_end"', "timing.next_phase_lock", "green_end, red_end"),
     ({}, "\nwalk = 30\nped_clear = 5", "timing.walk", "walk + ped_clear <= max_green"),
 ])
 def test_contradicting_phase_options_are_rejected(phases: dict[int, str], timing_extra: str, field: str,
@@ -488,3 +490,73 @@ def test_dual_entry_on_a_phase_without_a_concurrent_partner_is_rejected() -> Non
                 pairs="[[1, 5], [3, 7], [4, 8]]", sequence="[[1, 5], [3, 7], [4, 8]]")
     err = rejected(text)
     assert err.field == "phases.6.dual_entry" and "concurrent" in err.message
+
+
+# --- [coordination] (issue 24) -------------------------------------------------------------------
+
+PLAN = ('[coordination]\npattern = 1\n[[coordination.patterns]]\nnumber = 1\ncycle = 80\noffset = 10\n'
+        'coord_phases = [2, 6]\nsplits = { 1 = 15, 2 = 25, 3 = 15, 4 = 25, 5 = 15, 6 = 25, 7 = 15, 8 = 25 }\n')
+
+
+def with_plan(text: str = PLAN) -> str:
+    return toml() + "\n" + text
+
+
+def test_a_coordination_plan_is_read() -> None:
+    from hils.config import Correction, ForceOff, OffsetReference
+
+    cfg = parse(with_plan(PLAN + '[[coordination.schedule]]\nfrom = "06:30"\npattern = 1\n'
+                          '[[coordination.schedule]]\nfrom = "22:00:30"\npattern = "free"\n'), SOURCE)
+    c = cfg.coordination
+    assert (c.pattern, c.force_off, c.offset_reference, c.correction) == (
+        1, ForceOff.FIXED, OffsetReference.LEAD_GREEN, Correction.SHORTWAY)
+    assert c.patterns[1].cycle == 80 and c.patterns[1].offset == 10 and c.patterns[1].coord_phases == (2, 6)
+    assert c.patterns[1].splits[4] == 25
+    assert [(e.start, e.pattern) for e in c.schedule] == [(6 * 3600 + 1800, 1), (22 * 3600 + 30, 254)]
+
+
+def test_without_coordination_the_controller_runs_free(paper_config) -> None:
+    assert parse(toml(), SOURCE).coordination.pattern == 254
+    assert paper_config.coordination.pattern == 254 and paper_config.coordination.patterns  # a plan, not running
+    assert paper_config.planned().coordination.pattern == 1
+
+
+@pytest.mark.parametrize(("old", "new", "field", "allowed"), [
+    ("pattern = 1\n", "pattern = 3\n", "coordination.pattern", "a pattern of [[coordination.patterns]] (1)"),
+    ("pattern = 1\n", 'force_off = "hard"\n', "coordination.force_off", "floating, fixed"),
+    ("pattern = 1\n", 'correction = "jump"\n', "coordination.correction", "shortway, dwell, add"),
+    ("pattern = 1\n", 'offset_reference = "red"\n', "coordination.offset_reference", "lead_green, yellow"),
+    ("cycle = 80", "cycle = 20", "coordination.patterns[0].cycle", ">= 30"),
+    ("offset = 10", "offset = 80", "coordination.patterns[0].offset", "<= 79"),
+    ("number = 1", "number = 254", "coordination.patterns[0].number", "<= 253"),
+    ("coord_phases = [2, 6]", "coord_phases = [2, 4]", "coordination.patterns[0].coord_phases", "one configured "
+     "phase per ring"),
+    ("coord_phases = [2, 6]", "coord_phases = [2, 7]", "coordination.patterns[0].coord_phases", "not concurrent"),
+    ("4 = 25, 5", "4 = 30, 5", "coordination.patterns[0].splits", "ring 1 (1, 2, 3, 4) adds up to 85 s, not the "
+     "cycle of 80 s"),
+    ("1 = 15, 2 = 25", "1 = 5, 2 = 35", "coordination.patterns[0].splits.1", "shorter than phase 1's minimum green"),
+    ("2 = 25, 3 = 15", "2 = 30, 3 = 10", "coordination.patterns[0].splits", "reach barrier 1 at different times"),
+    (", 8 = 25 }", " }", "coordination.patterns[0].splits", "no split for phase(s) [8]"),
+    ("offset = 10\n", "offset = 10\nsplit = 3\n", "coordination.patterns[0].split", "unknown field"),
+])
+def test_a_plan_that_cannot_run_is_refused(old: str, new: str, field: str, allowed: str) -> None:
+    assert old in PLAN
+    err = rejected(with_plan(PLAN.replace(old, new, 1)))
+    assert err.field == field and allowed in err.message, err
+
+
+@pytest.mark.parametrize(("entry", "field", "allowed"), [
+    ('from = "25:00"\npattern = 1', "coordination.schedule[0].from", '"HH:MM" or "HH:MM:SS"'),
+    ('from = "7:00"\npattern = 1', "coordination.schedule[0].from", '"HH:MM"'),
+    ('from = "07:00"\npattern = 4', "coordination.schedule[0].pattern", '"free" (or 0) or a pattern'),
+    ('from = "07:00"', "coordination.schedule[0].pattern", "is required"),
+])
+def test_a_bad_schedule_entry_is_refused(entry: str, field: str, allowed: str) -> None:
+    err = rejected(with_plan(PLAN + f"[[coordination.schedule]]\n{entry}\n"))
+    assert err.field == field and allowed in err.message, err
+
+
+def test_two_patterns_of_one_number_are_refused() -> None:
+    second = PLAN.split("[[coordination.patterns]]")[1]
+    err = rejected(with_plan(PLAN + "[[coordination.patterns]]" + second))
+    assert err.field == "coordination.patterns[1].number" and "given twice" in err.message

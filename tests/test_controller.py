@@ -11,7 +11,7 @@ import itertools
 import pytest
 import simpy
 
-from emulator.controller import Change, Controller, Interval
+from emulator.controller import Change, Controller, Interval, Termination
 from emulator.mib import MibView
 from hils.config import IntersectionConfig, parse
 from hils.ntcip import UNIT_BACKUP_TIME, ControlColumn, UnitControlStatus, UnitFlashStatus
@@ -478,7 +478,9 @@ def test_on_change_reports_every_interval_change(paper_config: IntersectionConfi
     c.set_control(CALL, {3, 7})
     record(c, MIN + YELLOW + RED)
     assert changes == [
-        Change(MIN, 1, 2, Interval.YELLOW), Change(MIN, 2, 6, Interval.YELLOW),
+        # a yellow says why its green ended: no call on 2 or 6, so both gapped out at their minimum
+        Change(MIN, 1, 2, Interval.YELLOW, Termination.GAP_OUT),
+        Change(MIN, 2, 6, Interval.YELLOW, Termination.GAP_OUT),
         Change(MIN + YELLOW, 1, 2, Interval.RED_CLEAR), Change(MIN + YELLOW, 2, 6, Interval.RED_CLEAR),
         Change(MIN + YELLOW + RED, 1, 2, Interval.DWELL), Change(MIN + YELLOW + RED, 2, 6, Interval.DWELL),
         Change(MIN + YELLOW + RED, 1, 3, Interval.GREEN), Change(MIN + YELLOW + RED, 2, 7, Interval.GREEN),
@@ -575,6 +577,63 @@ def test_a_ring_backs_into_its_earlier_phase_while_the_other_rests(controller: C
     seen = onsets(controller, 200, {0: {2, 6}, 140: {2, 5}})
     assert seen[(6, "Y")] == 141 and seen[(5, "G")] == 141 + YELLOW + RED
     assert (2, "Y") not in seen  # 2 stays green all along
+
+
+def test_no_backing_while_a_call_waits_across_the_barrier(controller: Controller) -> None:
+    """Issue 24's sequence: 2 held, 6's call drops, calls on 5 and 4 at 15 s. A controller backs into a phase
+    only "when the cross street phases and the opposing left-turn are skipped" (Naztec TecNote 3013): 6 waits
+    at the barrier, 2 maxes out 20 s after the call on 4 and both cross at 35 s (backing into 5 made it 40 s)."""
+    controller.backup_time = 0
+    seen = onsets(controller, 700, {0: {2, 6}, 150: {2, 4, 5}})
+    assert seen[(2, "Y")] == seen[(6, "Y")] == 150 + MAX
+    assert seen[(4, "G")] == 150 + MAX + YELLOW + RED
+    assert seen[(5, "G")] > seen[(4, "G")]  # 5 waits for the group's next visit
+
+
+def test_backing_resumes_once_nothing_waits_across(controller: Controller) -> None:
+    controller.backup_time = 0
+    seen = onsets(controller, 400, {0: {2, 6}, 150: {2, 4, 5}, 200: {2, 5}})
+    assert seen[(6, "Y")] == 201 and seen[(5, "G")] == 201 + YELLOW + RED and (2, "Y") not in seen
+
+
+def test_red_end_lock_lets_a_call_in_the_clearance_redirect_on_the_same_side(paper_toml: str) -> None:
+    c = Controller(variant(paper_toml, replace={"[timing]": '[timing]\nnext_phase_lock = "red_end"'}))
+    c.backup_time = 0
+    c.set_control(CALL, {4, 8})
+    onsets(c, MIN)
+    assert c.yellows == {2, 6} and c.phase_nexts == {4, 8}
+    c.set_control(CALL, {3, 4, 8})  # 3 precedes 4 in ring 1 and lies on 4's side of the barrier
+    onsets(c, 5)
+    assert c.phase_nexts == {3, 8}
+    seen = onsets(c, YELLOW + RED)
+    assert seen[(3, "G")] == seen[(8, "G")] == MIN + YELLOW + RED and (4, "G") not in seen
+
+
+def test_red_end_lock_never_redirects_across_the_barrier(paper_toml: str) -> None:
+    c = Controller(variant(paper_toml, replace={"[timing]": '[timing]\nnext_phase_lock = "red_end"'}))
+    c.backup_time = 0
+    serve(c, {2, 6})
+    c.set_control(CALL, {1, 6})  # ring 1 backs from 2 into 1 (nothing waits across)
+    onsets(c, 5)
+    assert c.phase_nexts == {1}
+    c.set_control(CALL, {1, 3, 6})  # 3 comes before 1 after 2, but across the barrier from the committed 1
+    seen = onsets(c, YELLOW + RED)
+    assert c.greens == {1, 6} and (3, "G") not in seen
+
+
+def test_red_end_lock_reads_the_calls_of_the_tick_that_ends_the_red(paper_toml: str) -> None:
+    c = Controller(variant(paper_toml, replace={"[timing]": '[timing]\nnext_phase_lock = "red_end"'}))
+    c.backup_time = 0
+    end_of_red = MIN + YELLOW + RED
+    seen = onsets(c, 200, {0: {4, 8}, end_of_red - 1: {3, 4, 8}})
+    assert seen[(3, "G")] == seen[(8, "G")] == end_of_red and (4, "G") not in seen
+
+
+def test_red_end_lock_keeps_a_committed_phase_without_a_better_call(paper_toml: str) -> None:
+    c = Controller(variant(paper_toml, replace={"[timing]": '[timing]\nnext_phase_lock = "red_end"'}))
+    c.backup_time = 0
+    seen = onsets(c, 300, {0: {4, 8}, MIN + 5: set()})
+    assert seen[(4, "G")] == seen[(8, "G")] == MIN + YELLOW + RED
 
 
 def test_dual_entry_serves_the_other_ring_with_the_called_one(paper_toml: str) -> None:

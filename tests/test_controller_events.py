@@ -28,8 +28,11 @@ TIMING_FIELDS = ("min_green", "max1", "max2", "passage", "walk", "ped_clear", "y
 
 @st.composite
 def units(draw: st.DrawFn) -> IntersectionConfig:
-    """A random config with a start-up flash, a backup time and the controller's delays drawn too."""
-    cfg = draw(configs())
+    """A random config with a start-up flash, a backup time and the controller's delays drawn too, half the
+    time a coordination plan (patterns, modes, maybe a time-of-day change), half the time overlaps and half the
+    time preempts."""
+    cfg = draw(configs(coordinated=draw(st.booleans()), overlapped=draw(st.booleans()),
+                       preempted=draw(st.booleans())))
     return dataclasses.replace(
         cfg, startup_flash=draw(st.sampled_from([0, 0, 1, 3])),
         middleware=dataclasses.replace(cfg.middleware, backup_time=draw(st.sampled_from([0, 2, 5, 30]))),
@@ -47,6 +50,9 @@ inputs = st.one_of(
                                            st.integers(0, 80))),
     st.tuples(st.just("backup_time"), st.sampled_from([0, 1, 3, 30])),
     st.tuples(st.just("power_cycle"), st.none()),
+    st.tuples(st.just("pattern"), st.sampled_from([0, 1, 2, 254, 255])),
+    st.tuples(st.just("preempt"), st.frozensets(st.sampled_from([1, 2]))),
+    st.tuples(st.just("ticks"), st.integers(600, 2400)),
 )
 
 
@@ -68,6 +74,10 @@ def apply(unit: Controller | DelayedController, op: str, value: object, *, ticke
         unit.set_backup_time(value)
     elif op == "power_cycle":
         unit.reset()
+    elif op == "pattern":
+        unit.set_pattern_control(value)
+    elif op == "preempt":
+        unit.set_preempt_control(value)
     else:
         unit.set_control(op, value)
 
@@ -83,8 +93,14 @@ def readable(unit: Controller | DelayedController) -> dict[str, object]:
 
 def memory(c: Controller) -> dict[str, object]:
     """The controller's whole working memory."""
+    co = c.coordinator
     return {"tick": c.tick, "rings": [dataclasses.astuple(r) for r in c.rings], "group": c.group,
-            "since_set": c._since_set, "yellow_end": dict(c._yellow_end), "ped_calls": c.ped_calls}
+            "since_set": c._since_set, "yellow_end": dict(c._yellow_end), "ped_calls": c.ped_calls,
+            "coordination": (co.clock, co.command, co.local, co.running, co.timer, co.budget, co.free_status,
+                             co.replan),
+            "overlaps": (dict(c.overlaps.shown), dict(c.overlaps.ticks)),
+            "preempts": (c.preemptor.discrete(), dict(c.preemptor.presence), dict(c.preemptor.waited),
+                         dict(c.preemptor.since_entry), dict(c.preemptor.stage))}
 
 
 def twins(config: IntersectionConfig, delayed: bool) -> list[tuple[Controller | DelayedController, list[Change]]]:

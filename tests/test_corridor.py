@@ -121,6 +121,10 @@ def test_targets_must_name_every_light_and_share_one_clock() -> None:
     with pytest.raises(TargetError, match=r"^J3: target 'snmp://no-such-host\.invalid': cannot resolve"):
         Testbed(scenario="corridor", target={tls: "snmp://127.0.0.1:1161" for tls in ("J1", "J2", "J4")}
                 | {"J3": "snmp://no-such-host.invalid"})
+    v3 = "snmp://no-such-host.invalid?version=3&user=u&auth=SHA&auth_key=authsecret&priv=AES&priv_key=privsecret"
+    with pytest.raises(TargetError, match="cannot resolve") as refused:
+        Testbed(scenario="corridor", target={tls: "snmp://127.0.0.1:1161" for tls in ("J1", "J2", "J4")} | {"J3": v3})
+    assert "secret" not in str(refused.value) and "auth_key=..." in str(refused.value)  # keys never printed
 
 
 def test_the_corridor_at_the_wall_clock_against_served_emulators(tmp_path: Path, capsys) -> None:

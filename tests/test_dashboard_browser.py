@@ -288,3 +288,44 @@ def test_corridor_page_has_a_panel_per_intersection_and_recovers_one(tmp_path: P
         page.close()
         view.terminate()
         view.wait(timeout=10)
+
+
+def test_the_page_shows_the_overlaps_and_a_flashing_yellow_arrow(tmp_path: Path, browser: Browser) -> None:
+    """A virtual-time run of the city four-leg whose cabinet (overlap status too) is read every second, replayed
+    with `hils view`: a row of the eight overlaps under the rings, each as the controller showed it, the flashing
+    yellow arrows blinking beside their opposing through."""
+    from hils.config import load
+    from hils.dashboard.cabinet import read_cabinet
+    from hils.sumo_net import data_path
+    from hils.testbed import Testbed
+
+    path = data_path("four_leg_city.toml")
+    config = load(path)
+
+    def attach(tb: Testbed) -> None:
+        tb.env.process(read_cabinet(tb.env, tb.transport, tb.events, config.groups,
+                                    overlap_groups=config.overlap_groups))
+
+    with Testbed(config, sumo=False, seed=1, duration=40.0, log_path=tmp_path / "events.jsonl",
+                 on_reset=attach) as tb:
+        tb.reset()
+        tb.run()
+    view, url = start_view(str(tmp_path), "--config", str(path))
+    page = browser.new_page(viewport={"width": 1280, "height": 860})
+    try:
+        page.goto(url)
+        watch(page, lambda: page.locator("[data-overlap]").count() == 8, 15, "the overlaps")
+        page.locator("[data-testid=slider]").fill("2")
+        watch(page, lambda: page.locator("[data-testid=clock]").inner_text() == "t = 2.0 s", 10, "t = 2.0 s")
+        overlaps = page.eval_on_selector_all("[data-overlap]", "els => Object.fromEntries(els.map(e => "
+                                                               "[e.dataset.overlap, e.dataset.shown]))")
+        # 2+6 green from start-up: their right turns (C, D) green, the west and east lefts (E, F) flashing.
+        assert shown(page)["2"] == "G" and shown(page)["6"] == "G"
+        assert overlaps == {"A": "r", "B": "r", "C": "G", "D": "G", "E": "F", "F": "F", "G": "r", "H": "r"}
+        assert page.locator("[data-overlap=E]").get_attribute("title") == ("overlap E (fya, included 1, modifiers "
+                                                                           "2): flashing yellow arrow")
+        page.screenshot(path=str(tmp_path / "overlaps.png"), full_page=True)
+    finally:
+        page.close()
+        view.terminate()
+        view.wait(timeout=10)

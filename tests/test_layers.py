@@ -15,7 +15,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = {"hils", "hils.ntcip", "hils.config", "hils.scenario", "hils.resco", "hils.errors", "hils.usm",
-          "hils.timegrid"}
+          "hils.timegrid", "hils.hires"}
 
 
 def imports_of(path: Path) -> set[str]:

@@ -9,6 +9,7 @@ from emulator.mib import MibView
 from hils.config import IntersectionConfig, from_dict, parse
 from hils.ntcip import (
     CHANNEL_TABLE,
+    COORD_PATTERN_STATUS,
     MAX_PHASE_GROUPS,
     MAX_PHASES,
     RING_CONTROL_MAX2,
@@ -52,11 +53,11 @@ def mask(*phases: int) -> int:
 def refused(mib: MibView, varbinds, status: ErrorStatus, index: int) -> None:
     """The SET is refused with this status at this varbind, and nothing about the controller changed."""
     c = mib.controller
-    before = (dict(c.control), c.backup_time, c.pattern, c.control_status, mib.set_count)
+    before = (dict(c.control), c.backup_time, c.coordinator.command, c.control_status, mib.set_count)
     with pytest.raises(SnmpError) as info:
         mib.set_many(varbinds)
     assert (info.value.status, info.value.index) == (status, index)
-    assert (dict(c.control), c.backup_time, c.pattern, c.control_status, mib.set_count) == before
+    assert (dict(c.control), c.backup_time, c.coordinator.command, c.control_status, mib.set_count) == before
 
 
 # --- get ------------------------------------------------------------------------------------
@@ -68,7 +69,8 @@ def test_unit_objects(mib: MibView, controller: Controller) -> None:
     assert mib.get(UNIT_BACKUP_TIME.instance()) == controller.config.middleware.backup_time == 30
     assert mib.get(UNIT_CONTROL_STATUS.instance()) == UnitControlStatus.OTHER
     assert mib.get(UNIT_FLASH_STATUS.instance()) == UnitFlashStatus.NOT_FLASH
-    assert mib.get(SYSTEM_PATTERN_CONTROL.instance()) == 254  # free
+    assert mib.get(SYSTEM_PATTERN_CONTROL.instance()) == 0  # standby: the local plan runs
+    assert mib.get(COORD_PATTERN_STATUS.instance()) == 254  # the shipped config's local plan: free
 
 
 def test_phase_timing_objects_match_the_config(mib: MibView, paper_config: IntersectionConfig) -> None:
@@ -161,7 +163,8 @@ def test_omit_hides_a_call_from_the_status(mib: MibView) -> None:
 
 def test_set_of_writable_unit_objects(mib: MibView, controller: Controller) -> None:
     mib.set_many([(UNIT_BACKUP_TIME.instance(), 65535), (SYSTEM_PATTERN_CONTROL.instance(), 255)])
-    assert (controller.backup_time, controller.pattern) == (65535, 255)
+    assert (controller.backup_time, controller.coordinator.command) == (65535, 255)
+    assert mib.get(COORD_PATTERN_STATUS.instance()) == 254  # flash is not modelled: "Free shall be the mode"
     assert mib.get(UNIT_BACKUP_TIME.instance()) == 65535
 
 
@@ -259,10 +262,13 @@ def test_next_oid_walks_every_instance_in_increasing_order(mib: MibView) -> None
     assert walked == mib.oids
     assert len(set(walked)) == len(walked)
     assert all(object_for(o) is not None for o in walked)
-    # 7 scalars, 13 phase columns x 8 phases, 10 status + 3 channel + 6 control columns x 1 group, 2 rings,
-    # ringControlGroupMax2 of group 1; maxVehicleDetectors, 2 detector columns x 8 detectors, detector status
-    # and actuation of group 1.
-    assert len(walked) == 7 + 13 * 8 + 19 + 2 + 1 + 1 + 2 * 8 + 2
+    # 8 unit scalars (shortAlarmStatus too) and 9 of coordination, one pattern row of 5 columns and its split
+    # table (5 columns x 8 phases), 13 phase columns x 8 phases, 10 status + 3 channel + 6 control columns x 1
+    # group, 2 rings, ringControlGroupMax2 of group 1; maxOverlaps and maxOverlapStatusGroups (no overlaps),
+    # maxPreempts (no preempts); maxVehicleDetectors, 2 detector columns x 8 detectors, detector status and
+    # actuation of group 1; maxPedestrianDetectors, maxPedestrianDetectorGroups, the call phase of 8 push buttons,
+    # their status and actuation of group 1.
+    assert len(walked) == 8 + 9 + 5 + 5 * 8 + 13 * 8 + 19 + 2 + 1 + 2 + 1 + 1 + 2 * 8 + 2 + 2 + 8 + 2
 
 
 def test_next_oid_from_an_object_prefix_gives_its_first_instance(mib: MibView) -> None:

@@ -85,7 +85,8 @@ def test_every_link_of_every_light_is_under_the_phase_of_its_movement(name: str,
 def test_the_corridor_times_its_arterial_longer_and_its_busy_crossroad_its_own_way() -> None:
     lights = load_scenario("corridor").intersections
     arterial, crossroad = lights["J1"], lights["J3"]
-    assert lights["J2"] is arterial and lights["J4"] is arterial  # one file, loaded once
+    # one file, loaded once; each light its own offset
+    assert lights["J2"].phases is arterial.phases and lights["J4"].phases is arterial.phases
     for cfg in (arterial, crossroad):
         assert min(cfg.phases[p].max_green for p in (2, 6)) > max(cfg.phases[p].max_green for p in (3, 4, 7, 8))
     assert crossroad.phases[4].max_green > arterial.phases[4].max_green
@@ -241,3 +242,26 @@ def test_traffic_flows_through_every_light_under_a_fixed_cycle(name: str) -> Non
     assert departed - departed_warm > 200
     assert arrived - arrived_warm > 0.8 * (departed - departed_warm), (arrived, departed, arrived_warm, departed_warm)
     assert all(crossed.values()), {tls: len(v) for tls, v in crossed.items()}
+
+
+def test_the_corridor_plan_progresses_eastbound() -> None:
+    """One cycle for the corridor; each junction's offset is the travel time from J1 at the arterial's speed
+    (300 m apart, 13.89 m/s), to the nearest second."""
+    lights = load_scenario("corridor").intersections
+    assert {cfg.coordination.patterns[1].cycle for cfg in lights.values()} == {80}
+    offsets = {tls: cfg.coordination.patterns[1].offset for tls, cfg in lights.items()}
+    assert offsets == {tls: round(i * 300 / 13.89) for i, tls in enumerate(CORRIDOR)}
+    assert all(cfg.coordination.pattern == 254 for cfg in lights.values())  # free unless --agent coordinated
+
+
+@pytest.mark.parametrize(("offsets", "field", "allowed"), [
+    ("J9 = 3", "offsets.J9", "unknown traffic light; allowed: J1, J2, J3, J4"),
+    ("J2 = 300", "offsets.J2", "whole seconds 0-254"),
+    ('J2 = "22"', "offsets.J2", "whole seconds 0-254"),
+])
+def test_a_bad_offset_is_refused(tmp_path: Path, offsets: str, field: str, allowed: str) -> None:
+    path = scenario_file(tmp_path, arterial())
+    path.write_text(path.read_text() + f"\n[offsets]\n{offsets}\n")
+    with pytest.raises(ConfigError) as caught:
+        load_scenario(path)
+    assert caught.value.field == field and allowed in caught.value.message

@@ -80,6 +80,7 @@ def test_the_controllers_are_on_consecutive_ports_from_the_first(tmp_path: Path)
 
 @pytest.mark.parametrize(("args", "message"), [
     (["--count", "0"], "hils: --count 0: no controller to serve; allowed: 1 or more"),
+    (["--count", "-3"], "hils: --count -3: no controller to serve; allowed: 1 or more"),
     (["--port", "65534", "--count", "3"], "hils: --port 65534 with --count 3 needs ports 65534..65536; allowed: "
                                           "--port 1..65533, or 0 (each controller on a free port)"),
     (["--scenario", "corridor", "--count", "3"], "hils: --count 3 with --scenario corridor, which has 4 "
@@ -89,7 +90,8 @@ def test_the_controllers_are_on_consecutive_ports_from_the_first(tmp_path: Path)
                                 "benchmark) or a path to a .scenario.toml file"),
     (["--count", "2", "--trace", "t.jsonl"], "hils: --trace records one controller, not 2; allowed: --trace with "
                                              "--count 1"),
-], ids=["count-0", "ports-beyond-65535", "count-not-the-scenario's", "unknown-scenario", "trace-of-many"])
+], ids=["count-0", "count-negative", "ports-beyond-65535", "count-not-the-scenario's", "unknown-scenario",
+        "trace-of-many"])
 def test_what_cannot_be_served_is_refused_in_one_line(args: list[str], message: str) -> None:
     done = subprocess.run([sys.executable, "-m", "hils.cli", "emulator", "serve", "--port", "0", *args],
                           capture_output=True, text=True, timeout=30)

@@ -21,8 +21,9 @@ Each kind of record updates one part of the board (see ``_HANDLERS``):
   verified (:func:`hils.events.signal_known`: polls failing, halted in TIMEOUT or by the close) opens a
   segment without indications, drawn as no data, until the next poll or recovery.
 - ``cabinet`` (dashboard runs only, :mod:`hils.dashboard.cabinet`): walks, pedestrian clearances
-  (flashing don't walk), the controller's vehicle and pedestrian calls and PhaseNext; a run logged
-  without a dashboard has none, and the page says so.
+  (flashing don't walk), the controller's vehicle and pedestrian calls and PhaseNext, and the
+  overlaps' greens and yellows; a run logged without a dashboard has none, and the page says so. A
+  flashing yellow arrow is told from a steady one by its permissive phase's green in the last poll.
 - ``set_sent``: VehCall as last SET (the calls the middleware places), and the SET counts.
 - ``command_dispatched`` / ``hold_released`` / ``transition_verified``: the last commands with their
   hold times; a command kept without a SET (``keep``) appears when its hold is released.
@@ -42,8 +43,9 @@ from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from hils.config import IntersectionConfig
+from hils.config import IntersectionConfig, OverlapKind
 from hils.dashboard.cabinet import COLUMNS as CABINET_COLUMNS
+from hils.dashboard.cabinet import OVERLAP_COLUMNS
 from hils.events import signal_known
 
 #: Seconds of signal history in the strip.
@@ -52,6 +54,7 @@ STRIP_S = 120.0
 LAST_COMMANDS = 8
 
 GREEN, YELLOW, RED = "G", "Y", "r"
+FLASHING = "F"  # a flashing yellow arrow (an overlap's permissive indication)
 
 
 @dataclass
@@ -201,7 +204,9 @@ class Board:
         self.queues = dict(r["queues"])
 
     def _cabinet(self, r: Mapping[str, Any]) -> None:
-        self.cabinet = {name: list(r[name]) for name in CABINET_COLUMNS}
+        # Logs from before overlaps were read have no overlap fields: no overlap shown.
+        self.cabinet = {name: list(r[name]) for name in CABINET_COLUMNS} | {name: list(r.get(name, ()))
+                                                                           for name in OVERLAP_COLUMNS}
 
     # --- helpers ----------------------------------------------------------------------------------
 
@@ -223,6 +228,20 @@ class Board:
             self.strip.append((t, shown))
             self._trim()
 
+    def _overlaps(self) -> list[dict[str, Any]]:
+        """Each overlap, its parents and what it showed at the last cabinet read (None before a read)."""
+        c = self.cabinet
+        out = []
+        for n, o in self.config.overlaps.items():
+            shown = None
+            if c is not None:
+                flashing = o.kind is OverlapKind.FYA and any(self.shown.get(p) == GREEN for p in o.modifiers)
+                shown = (GREEN if n in c["overlap_greens"] else
+                         (FLASHING if flashing else YELLOW) if n in c["overlap_yellows"] else RED)
+            out.append({"overlap": n, "letter": o.letter, "type": o.kind.value, "included": list(o.included),
+                        "modifiers": list(o.modifiers), "approach": o.approach, "turn": o.turn, "shown": shown})
+        return out
+
     def _trim(self) -> None:
         # Drop segments that ended before the strip's window (a segment ends where the next starts).
         horizon = self.t - STRIP_S
@@ -243,6 +262,7 @@ class Board:
                         "turn": ph.turn, "shown": self.shown.get(p) if self.polled else None,
                         "vehcall": p in self.vehcall, **self._cabinet_of(p)} for p, ph in sorted(cfg.phases.items())],
             "cabinet_read": self.cabinet is not None,
+            "overlaps": self._overlaps(),
             "rings": [list(r) for r in cfg.rings],
             "barriers": len(cfg.barriers),
             "state": self.state,

@@ -1,12 +1,13 @@
-"""What the cabinet shows beyond the signal, read for the dashboard: walks, calls and PhaseNext.
+"""What the cabinet shows beyond the signal, read for the dashboard: walks, calls, PhaseNext and overlaps.
 
 The middleware polls reds, yellows and greens only: that is what the manager verifies, ten times a
 second. The page also shows each phase's pedestrian indication, its vehicle and pedestrian calls as the
-controller holds them (from detectors and recalls too, not only the middleware's VehCall) and the
-phase the ring will serve next. A dashboard run reads those at a low rate (:data:`PERIOD_S`) on the
-run's own SimPy environment, through the run's transport, as one GET beside the polls. A change is
-logged as a ``cabinet`` record, so a replay of the run shows what the live page showed. A read that
-fails is let go: the poller counts failures and the manager decides what they mean.
+controller holds them (from detectors and recalls too, not only the middleware's VehCall), the phase the
+ring will serve next, and the overlaps' greens and yellows (overlapStatusGroup). A dashboard run reads
+those at a low rate (:data:`PERIOD_S`) on the run's own SimPy environment, through the run's transport,
+as one GET beside the polls. A change is logged as a ``cabinet`` record, so a replay of the run shows
+what the live page showed. A read that fails is let go: the poller counts failures and the manager
+decides what they mean.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ from typing import Any
 import simpy
 
 from hils.events import EventLog, Kind
-from hils.ntcip import SnmpError, StatusColumn, groups_to_phases, status_oid
+from hils.ntcip import OVERLAP_STATUS_TABLE, OverlapStatusColumn, SnmpError, StatusColumn, groups_to_phases, status_oid
 from hils.transport import Transport, TransportError
 
 #: Seconds between two reads: a walk lasts seconds, and the strip is drawn at this resolution.
@@ -31,12 +32,19 @@ COLUMNS: dict[str, StatusColumn] = {
     "ped_calls": StatusColumn.PED_CALLS,
     "nexts": StatusColumn.PHASE_NEXTS,
 }
+#: The overlap status columns read (overlap numbers, 1 = A), after the phase columns; empty lists without overlaps.
+OVERLAP_COLUMNS: dict[str, OverlapStatusColumn] = {
+    "overlap_greens": OverlapStatusColumn.GREENS,
+    "overlap_yellows": OverlapStatusColumn.YELLOWS,
+}
 
 
 def read_cabinet(env: simpy.Environment, transport: Transport, log: EventLog, groups: int,
-                 period: float = PERIOD_S) -> Generator[simpy.Event, Any, None]:
+                 period: float = PERIOD_S, *, overlap_groups: int = 0) -> Generator[simpy.Event, Any, None]:
     """A SimPy process: read the cabinet's status every ``period`` s, log a ``cabinet`` record on change."""
     oids = [status_oid(col, g) for col in COLUMNS.values() for g in range(1, groups + 1)]
+    oids += [OVERLAP_STATUS_TABLE[col].instance(g) for col in OVERLAP_COLUMNS.values()
+             for g in range(1, overlap_groups + 1)]
     last: dict[str, list[int]] | None = None
     while True:
         try:
@@ -44,8 +52,12 @@ def read_cabinet(env: simpy.Environment, transport: Transport, log: EventLog, gr
         except (TransportError, SnmpError):
             values = None
         if values is not None:
-            shown = {name: sorted(groups_to_phases([int(v) for v in values[i * groups:(i + 1) * groups]]))
+            masks = [int(v) for v in values]
+            shown = {name: sorted(groups_to_phases(masks[i * groups:(i + 1) * groups]))
                      for i, name in enumerate(COLUMNS)}
+            rest = masks[len(COLUMNS) * groups:]
+            shown |= {name: sorted(groups_to_phases(rest[i * overlap_groups:(i + 1) * overlap_groups]))
+                      for i, name in enumerate(OVERLAP_COLUMNS)}
             if shown != last:
                 log.emit(Kind.CABINET, **shown)
                 last = shown

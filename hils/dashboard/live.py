@@ -53,7 +53,8 @@ class LiveDashboard:
             board = Board(first.config, counter=_counter(first))
         testbed.events.subscribe(board.feed)
         for i in intersections.values():
-            testbed.env.process(read_cabinet(testbed.env, i.transport, i.events, i.config.groups))
+            testbed.env.process(read_cabinet(testbed.env, i.transport, i.events, i.config.groups,
+                                             overlap_groups=i.config.overlap_groups))
         live = Live(board, recover=(lambda tls: _request_recovery(testbed, tls)) if self.control else None)
         self.server = LiveServer(live, bind(self.host, self.port), driver.loop)
         print(f"dashboard: {self.server.url}", flush=True)

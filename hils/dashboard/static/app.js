@@ -4,7 +4,7 @@
 "use strict";
 
 const $ = (id) => document.getElementById(id);
-const NAMES = { G: "green", Y: "yellow", r: "red" };
+const NAMES = { G: "green", Y: "yellow", r: "red", F: "flashing yellow arrow" };
 // "-": no verified signal state (polls failing, halted in TIMEOUT or by the close): hatched, never the last state.
 const COLORS = { G: "#1fa64a", Y: "#f2c21b", r: "#c8322b", "-": "url(#no-data)" };
 const HATCH = '<defs><pattern id="no-data" width="6" height="6" patternUnits="userSpaceOnUse" ' +
@@ -107,11 +107,31 @@ function drawRings(v, snap) {
     }
     v.rings.append(row);
   });
+  if (snap.overlaps.length) v.rings.append(overlapRow(snap, c));
+}
+
+// The overlaps as the controller showed them at its last cabinet read (a flashing yellow arrow blinks).
+function overlapRow(snap, c) {
+  const row = el("div", { class: "ring overlaps" }, el("span", { class: "label" }, c ? "OL" : "Overlaps"));
+  for (const o of snap.overlaps) {
+    const shown = o.shown || "none";
+    const parents = o.included.join("+") + (o.modifiers.length ? ` ${o.type === "fya" ? "~" : "−"}${o.modifiers.join("+")}` : "");
+    const what = [o.approach, o.turn].filter(Boolean).join(" ");
+    const box = el("div", { class: `phase ${shown}`, "data-overlap": o.letter, "data-shown": shown,
+                            title: `overlap ${o.letter} (${o.type}, included ${o.included.join(", ")}` +
+                                   (o.modifiers.length ? `, modifiers ${o.modifiers.join(", ")}` : "") +
+                                   `): ${NAMES[o.shown] || "not read yet"}` },
+      el("div", { class: "num" }, `OL ${o.letter}`),
+      el("div", { class: "what" }, c ? parents : `${parents}${what ? " · " + what : ""}`));
+    if (!c) box.append(el("div", { class: "what" }, NAMES[o.shown] || "not read"));
+    row.append(box);
+  }
+  return row;
 }
 
 function cabinetNote(snap) {
   return snap.cabinet_read
-    ? "WALK, FDW (flashing don't walk), calls and next (PhaseNext) as the controller showed them at its last read (every 1 s)."
+    ? "WALK, FDW (flashing don't walk), calls, next (PhaseNext) and overlaps as the controller showed them at its last read (every 1 s)."
     : "Walks, calls and PhaseNext were not read in this run (they are read during dashboard runs).";
 }
 
