@@ -9,16 +9,16 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from hils import config as config_mod
-from hils.config import IntersectionConfig
-from hils.hires import ASCLOG_PATH
-from hils.ntcip import AUTH_KEY_ENV, PRIV_KEY_ENV
-from hils.scenario import SCENARIOS, load_scenario
-from hils.usm import services_missing
+from hils.protocol import config as config_mod
+from hils.protocol.config import IntersectionConfig
+from hils.protocol.hires import ASCLOG_PATH
+from hils.protocol.ntcip import AUTH_KEY_ENV, PRIV_KEY_ENV
+from hils.protocol.scenario import SCENARIOS, load_scenario
+from hils.protocol.usm import services_missing
 
 if TYPE_CHECKING:
-    from emulator.agent import V3User
-    from emulator.serve import EmulatorServer
+    from emulator.agent.serve import EmulatorServer
+    from emulator.agent.snmp import V3User
 
 #: ``--http`` without a port: each controller's event log on the TCP port numbered as its UDP port.
 SAME_PORTS = -1
@@ -101,7 +101,7 @@ def _register_serve(commands: argparse._SubParsersAction) -> None:
 
 
 def _v3_user(args: argparse.Namespace) -> V3User | None:
-    from emulator.agent import V3User
+    from emulator.agent.snmp import V3User
 
     auth_key = args.v3_auth_key or os.environ.get(AUTH_KEY_ENV, "")
     priv_key = args.v3_priv_key or os.environ.get(PRIV_KEY_ENV, "")
@@ -123,7 +123,7 @@ def _v3_user(args: argparse.Namespace) -> V3User | None:
 
 def _controllers(args: argparse.Namespace) -> list[tuple[str | None, IntersectionConfig]]:
     """(tls id or None, config) of each controller to serve, in port order."""
-    from emulator.serve import ServeError
+    from emulator.agent.serve import ServeError
 
     if args.count is not None and args.count < 1:
         raise ServeError(f"--count {args.count}: no controller to serve; allowed: 1 or more")
@@ -144,8 +144,8 @@ def _port_range(ports: list[int]) -> str:
 def _serve(args: argparse.Namespace) -> int:
     import asyncio
 
-    from emulator.serve import ServeOptions, serve_until_signalled
-    from hils.ntcip import Latency
+    from emulator.agent.serve import ServeOptions, serve_until_signalled
+    from hils.protocol.ntcip import Latency
 
     if args.ro_community == args.rw_community:
         raise SystemExit("hils emulator serve: --ro-community and --rw-community must differ")

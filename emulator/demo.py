@@ -12,9 +12,9 @@ from dataclasses import dataclass
 
 import simpy
 
-from emulator.controller import Controller
-from hils.config import IntersectionConfig
-from hils.ntcip import ControlColumn
+from emulator.model.controller import Controller
+from hils.protocol.config import IntersectionConfig
+from hils.protocol.ntcip import ControlColumn
 
 
 @dataclass(frozen=True, slots=True)

@@ -1,10 +1,10 @@
 """The emulator reached in process, for virtual-time runs.
 
 :class:`VirtualTarget` puts a controller model on the run's SimPy environment (ticking every
-0.1 s) behind its call-processing and status-update delays (:mod:`emulator.delays`), and
+0.1 s) behind its call-processing and status-update delays (:mod:`emulator.model.delays`), and
 offers its MIB view as the object surface the middleware's in-process transport reaches,
 with the latencies a controller's answers take. It is what a virtual-time Testbed uses (found
-through the ``hils.targets`` entry point, so the middleware never imports it); the Testbed builds
+through the ``hils.shell.targets`` entry point, so the middleware never imports it); the Testbed builds
 the transport, so this package needs nothing of the middleware.
 """
 
@@ -14,14 +14,14 @@ import random
 
 import simpy
 
-from emulator.controller import TICK, Controller
-from emulator.datalogger import DataLogger
-from emulator.delays import DelayedController
-from emulator.event_clock import ClockedSurface, EventClock
-from emulator.mib import MibView
-from hils.config import IntersectionConfig
-from hils.hires import Event
-from hils.ntcip import Latency
+from emulator.agent.mib import MibView
+from emulator.model.controller import TICK, Controller
+from emulator.model.datalogger import DataLogger
+from emulator.model.delays import DelayedController
+from emulator.model.event_clock import ClockedSurface, EventClock
+from hils.protocol.config import IntersectionConfig
+from hils.protocol.hires import Event
+from hils.protocol.ntcip import Latency
 
 #: Modeled answer times of the in-process controller: a GET of the signal state, and a SET (the
 #: paper measured 7.5 ms for a SET to a Cobalt).
@@ -35,8 +35,8 @@ class VirtualTarget:
     ``controller`` is the model itself (its lamps, for monitors); ``unit`` is what the agent talks to;
     ``log`` its data logger, whose hi-res event log :meth:`hires` hands the run (the optional method of a
     target through which a Testbed collects the controller's own record).
-    On virtual time's fast path (``fast_path``, the run's flag: :mod:`hils.fastpath`) the unit's ticks run
-    event by event (:mod:`emulator.event_clock`), and the clock is the change feed that lets the poller skip
+    On virtual time's fast path (``fast_path``, the run's flag: :mod:`hils.shell.fastpath`) the unit's ticks run
+    event by event (:mod:`emulator.model.event_clock`), and the clock is the change feed that lets the poller skip
     polls that cannot see a change. Without it is the reference the fast path is tested against: every tick
     stepped by a SimPy process, no change feed, so every poll is sent.
     """

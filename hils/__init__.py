@@ -5,8 +5,8 @@ emulator, or wall-clock time against a real controller); :class:`ActionType` nam
 designs; :class:`Observation` is what an agent sees; :class:`ActionError` is the typed refusal of an
 action that cannot be served; :func:`load_config` reads an intersection config.
 
-The names are loaded when first used, so that importing the shared layer (``hils.ntcip``,
-``hils.config``), as the emulator does, does not load the middleware.
+The names are loaded when first used, so that importing the shared layer (``hils.protocol.ntcip``,
+``hils.protocol.config``), as the emulator does, does not load the middleware.
 
 The gymnasium environment ``hils/Intersection-v0`` is registered by :mod:`hils.envs`, as gymnasium documents
 for third-party environments: ``import hils.envs`` first, or let gymnasium import it,
@@ -19,18 +19,18 @@ import importlib
 from typing import Any
 
 _EXPORTS = {
-    "ActionError": ("hils.actions", "ActionError"),
-    "ActionType": ("hils.actions", "ActionType"),
-    "Agent": ("hils.agents", "Agent"),
-    "AgentFailed": ("hils.errors", "AgentFailed"),
-    "ConfigError": ("hils.config", "ConfigError"),
-    "IntersectionConfig": ("hils.config", "IntersectionConfig"),
-    "Observation": ("hils.agents", "Observation"),
-    "RunInterrupted": ("hils.errors", "RunInterrupted"),
-    "State": ("hils.manager", "State"),
-    "Testbed": ("hils.testbed", "Testbed"),
-    "UserError": ("hils.errors", "UserError"),
-    "load_config": ("hils.config", "load"),
+    "ActionError": ("hils.control.actions", "ActionError"),
+    "ActionType": ("hils.control.actions", "ActionType"),
+    "Agent": ("hils.agents.builtin", "Agent"),
+    "AgentFailed": ("hils.protocol.errors", "AgentFailed"),
+    "ConfigError": ("hils.protocol.config", "ConfigError"),
+    "IntersectionConfig": ("hils.protocol.config", "IntersectionConfig"),
+    "Observation": ("hils.agents.builtin", "Observation"),
+    "RunInterrupted": ("hils.protocol.errors", "RunInterrupted"),
+    "State": ("hils.control.manager", "State"),
+    "Testbed": ("hils.run.testbed", "Testbed"),
+    "UserError": ("hils.protocol.errors", "UserError"),
+    "load_config": ("hils.protocol.config", "load"),
 }
 
 __all__ = sorted(_EXPORTS)

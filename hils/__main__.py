@@ -2,6 +2,6 @@
 
 import sys
 
-from hils.cli import main
+from hils.cli.main import main
 
 sys.exit(main())

@@ -6,8 +6,8 @@ from importlib import resources
 
 import pytest
 
-from emulator.controller import Controller
-from hils.config import DEFAULT_CONFIG_NAME, IntersectionConfig, load
+from emulator.model.controller import Controller
+from hils.protocol.config import DEFAULT_CONFIG_NAME, IntersectionConfig, load
 
 
 @pytest.fixture(scope="session")

@@ -1,8 +1,13 @@
-"""The layers of the design hold by themselves: hils never imports emulator or harness; the emulator
-imports nothing of hils but the shared layer (the NTCIP object model with its value types and latency
-model, the intersection config, the scenario files that name the config of each intersection, the scenarios
-derived from RESCO's networks, the user-error base class, SNMPv3's security failures and services), which
-imports nothing else of hils."""
+"""The layers of the design hold by themselves, and the folder names say what they are.
+
+- ``hils`` never imports ``emulator`` or ``harness``: the middleware runs against real hardware alone.
+- The emulator imports nothing of hils but the shared layer, ``hils.protocol`` (NTCIP objects and values, the
+  intersection config, scenario files and RESCO's derived scenarios, SNMPv3's security services, the time grid,
+  the user-error base), which imports nothing else of hils; importing the emulator loads no more of hils.
+- Inside hils the data flow of DESIGN.md is the arrows between its subpackages (:data:`ALLOWED`): the manager
+  (``control``) knows only the protocol; the I/O shell carries out its effects; a run assembles shell, SUMO
+  (``sim``), agents and reports; the environments, the dashboard, sweeps and the command line sit on a run.
+"""
 
 from __future__ import annotations
 
@@ -14,8 +19,23 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-SHARED = {"hils", "hils.ntcip", "hils.config", "hils.scenario", "hils.resco", "hils.errors", "hils.usm",
-          "hils.timegrid", "hils.hires"}
+
+#: Which subpackages of hils each subpackage may import (besides itself and the package ``hils``).
+ALLOWED: dict[str, set[str]] = {
+    "protocol": set(),
+    "control": {"protocol"},
+    "shell": {"protocol", "control"},
+    "sim": {"protocol"},
+    "agents": {"protocol", "control", "sim"},
+    "report": {"protocol", "shell"},
+    "run": {"protocol", "control", "shell", "sim", "agents", "report"},
+    "envs": {"protocol", "control", "shell", "sim", "agents", "run"},
+    "dashboard": {"protocol", "shell", "sim", "run"},
+    # a sweep's cell is one `hils run` (imported where a cell runs, so a Ray worker loads this module first)
+    "sweep": {"protocol", "control", "agents", "report", "cli"},
+    "cli": {"protocol", "control", "shell", "sim", "agents", "report", "run", "dashboard", "sweep"},
+    "data": set(),
+}
 
 
 def imports_of(path: Path) -> set[str]:
@@ -34,32 +54,48 @@ def ours(package: str) -> list[Path]:
     return sorted((ROOT / package).rglob("*.py"))
 
 
-@pytest.mark.parametrize("path", ours("hils"), ids=lambda p: p.name)
+def module_of(path: Path) -> str:
+    return ".".join(path.relative_to(ROOT).with_suffix("").parts).removesuffix(".__init__")
+
+
+def layer(module: str) -> str | None:
+    """The subpackage of hils a module belongs to (None for the package itself and its two top-level files)."""
+    parts = module.split(".")
+    return parts[1] if len(parts) > 2 or (len(parts) == 2 and parts[1] in ALLOWED) else None
+
+
+@pytest.mark.parametrize("path", ours("hils"), ids=lambda p: str(p.relative_to(ROOT)))
 def test_hils_imports_neither_the_emulator_nor_the_harness(path: Path) -> None:
     bad = {m for m in imports_of(path) if m.split(".")[0] in ("emulator", "harness")}
     assert not bad, f"{path.relative_to(ROOT)} imports {sorted(bad)}: hils must run against real hardware alone"
 
 
-@pytest.mark.parametrize("path", ours("emulator"), ids=lambda p: p.name)
+@pytest.mark.parametrize("path", ours("hils"), ids=lambda p: str(p.relative_to(ROOT)))
+def test_each_layer_of_hils_imports_only_the_layers_below_it(path: Path) -> None:
+    own = layer(module_of(path))
+    if own is None:
+        return  # hils/__init__.py and __main__.py name the public API and the entry point
+    assert own in ALLOWED, f"{path.relative_to(ROOT)}: subpackage {own!r} is not in ALLOWED: place it"
+    imported = {layer(m) for m in imports_of(path) if m.split(".")[0] == "hils"} - {None, own}
+    bad = imported - ALLOWED[own]
+    assert not bad, f"{path.relative_to(ROOT)} ({own}) imports {sorted(bad)}; allowed: {sorted(ALLOWED[own])}"
+
+
+@pytest.mark.parametrize("path", ours("emulator"), ids=lambda p: str(p.relative_to(ROOT)))
 def test_the_emulator_imports_only_the_shared_layer_of_hils(path: Path) -> None:
-    bad = {m for m in imports_of(path) if m.split(".")[0] == "hils" and m not in SHARED}
-    assert not bad, f"{path.relative_to(ROOT)} imports {sorted(bad)}; allowed of hils: {sorted(SHARED)}"
+    bad = {m for m in imports_of(path) if m.split(".")[0] == "hils" and m != "hils"
+           and not m.startswith("hils.protocol")}
+    assert not bad, f"{path.relative_to(ROOT)} imports {sorted(bad)}; allowed of hils: hils.protocol"
     assert not {m for m in imports_of(path) if m.split(".")[0] == "harness"}
-
-
-@pytest.mark.parametrize("module", sorted(SHARED - {"hils"}))
-def test_the_shared_layer_imports_nothing_else_of_hils(module: str) -> None:
-    path = ROOT / (module.replace(".", "/") + ".py")
-    bad = {m for m in imports_of(path) if m.split(".")[0] == "hils" and m not in SHARED}
-    assert not bad, f"{module} imports {sorted(bad)}"
 
 
 def test_loading_the_emulator_loads_no_middleware() -> None:
     """At run time too: importing every emulator module pulls in only the shared layer of hils."""
-    modules = [f"emulator.{p.stem}" for p in ours("emulator") if p.stem != "__init__"]
+    modules = [module_of(p) for p in ours("emulator")]
     code = ("import sys\n" + "".join(f"import {m}\n" for m in modules)
             + "print(' '.join(sorted(m for m in sys.modules if m == 'hils' or m.startswith('hils.'))))")
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=60)
     assert done.returncode == 0, done.stderr
     loaded = set(done.stdout.split())
-    assert loaded <= SHARED, f"the emulator loaded {sorted(loaded - SHARED)}"
+    assert loaded and all(m == "hils" or m.startswith("hils.protocol") for m in loaded), \
+        f"the emulator loaded {sorted(m for m in loaded if m != 'hils' and not m.startswith('hils.protocol'))}"

@@ -7,7 +7,7 @@
 - ``static/``: the page, its script and style, shipped with the package (no build step, nothing fetched).
 """
 
-from hils.errors import UserError
+from hils.protocol.errors import UserError
 
 
 class DashboardError(UserError):

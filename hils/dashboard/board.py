@@ -3,7 +3,7 @@
 Rules of this file
 ------------------
 - The event log is the only input. A live run feeds each record as it is emitted (an
-  :class:`hils.events.EventLog` subscriber); a replay feeds the records of a finished run's log. Both
+  :class:`hils.shell.events.EventLog` subscriber); a replay feeds the records of a finished run's log. Both
   go through :meth:`Board.feed`, so a replayed instant shows exactly what the live page showed then.
 - No I/O, no clock, no SimPy: time is the records' ``t`` (sim seconds).
 - Feeding a record is O(1) apart from trimming the strip: a wall-clock run feeds it on the SimPy hot
@@ -18,7 +18,7 @@ Each kind of record updates one part of the board (see ``_HANDLERS``):
 
 - ``poll``: the indication of every phase (green, yellow, else red); a change opens a segment of the
   strip, which keeps the last :data:`STRIP_S` seconds. A record after which the signal state is not
-  verified (:func:`hils.events.signal_known`: polls failing, halted in TIMEOUT or by the close) opens a
+  verified (:func:`hils.shell.events.signal_known`: polls failing, halted in TIMEOUT or by the close) opens a
   segment without indications, drawn as no data, until the next poll or recovery.
 - ``cabinet`` (dashboard runs only, :mod:`hils.dashboard.cabinet`): walks, pedestrian clearances
   (flashing don't walk), the controller's vehicle and pedestrian calls and PhaseNext, and the
@@ -43,10 +43,10 @@ from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from hils.config import IntersectionConfig, OverlapKind
 from hils.dashboard.cabinet import COLUMNS as CABINET_COLUMNS
 from hils.dashboard.cabinet import OVERLAP_COLUMNS
-from hils.events import signal_known
+from hils.protocol.config import IntersectionConfig, OverlapKind
+from hils.shell.events import signal_known
 
 #: Seconds of signal history in the strip.
 STRIP_S = 120.0

@@ -17,9 +17,16 @@ from typing import Any
 
 import simpy
 
-from hils.events import EventLog, Kind
-from hils.ntcip import OVERLAP_STATUS_TABLE, OverlapStatusColumn, SnmpError, StatusColumn, groups_to_phases, status_oid
-from hils.transport import Transport, TransportError
+from hils.protocol.ntcip import (
+    OVERLAP_STATUS_TABLE,
+    OverlapStatusColumn,
+    SnmpError,
+    StatusColumn,
+    groups_to_phases,
+    status_oid,
+)
+from hils.shell.events import EventLog, Kind
+from hils.shell.transport import Transport, TransportError
 
 #: Seconds between two reads: a walk lasts seconds, and the strip is drawn at this resolution.
 PERIOD_S = 1.0

@@ -9,14 +9,14 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from hils import config as config_mod
-from hils.config import IntersectionConfig
 from hils.dashboard import DashboardError
-from hils.scenario import Scenario, load_scenario
+from hils.protocol import config as config_mod
+from hils.protocol.config import IntersectionConfig
+from hils.protocol.scenario import Scenario, load_scenario
 
 if TYPE_CHECKING:  # the dashboard's modules load when a page is served, not for `hils --help`
     from hils.dashboard.board import Panels, Replay
-    from hils.events import BadLine
+    from hils.shell.events import BadLine
 
 VIEW_HELP = """\
 Replay a finished run (a run folder of `hils run`, or its events.jsonl) in the dashboard's page:
@@ -69,7 +69,7 @@ def load_replay(run: Path, *, config: str | None = None, scenario: str | None = 
     with why: a line that is not a record, or a record the board cannot fold. A log that cannot be replayed at
     all (none there, no run_started first, nothing but bad lines) is refused in one line."""
     from hils.dashboard.board import Board, Replay
-    from hils.events import read
+    from hils.shell.events import read
 
     log_path = run / "events.jsonl" if run.is_dir() else run
     if not log_path.is_file():
@@ -127,7 +127,7 @@ def _scenario(started: dict, given: str | None, log_path: Path) -> Scenario:
 def _panels(scenario: Scenario, intersections: list[str], log_path: Path) -> Panels:
     """Empty panels of the scenario's intersections, placed as on its network's map."""
     from hils.dashboard.board import Panels
-    from hils.sumo_net import light_positions
+    from hils.sim.network import light_positions
 
     if sorted(intersections) != sorted(scenario.intersections):
         raise DashboardError(f"{log_path}: the run's intersections {', '.join(intersections)} are not those of "

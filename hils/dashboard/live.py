@@ -21,7 +21,7 @@ from hils.dashboard.cabinet import read_cabinet
 from hils.dashboard.server import Live, LiveServer, bind
 
 if TYPE_CHECKING:
-    from hils.intersection import Intersection
+    from hils.run.intersection import Intersection
 
 
 @dataclass
@@ -44,7 +44,7 @@ class LiveDashboard:
         intersections = testbed.intersections
         first = next(iter(intersections.values()))
         if first.label is not None:
-            from hils.sumo_net import light_positions
+            from hils.sim.network import light_positions
 
             board: Board | Panels = Panels.of({name: i.config for name, i in intersections.items()},
                                               light_positions(testbed.scenario),

@@ -18,9 +18,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from hils.actions import ActionType
+    from hils.control.actions import ActionType
     from hils.envs.parallel import IntersectionsEnv
-    from hils.scenario import Scenario
+    from hils.protocol.scenario import Scenario
 
 
 __all__ = ["ENV_ID", "parallel_env", "register"]

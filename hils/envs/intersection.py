@@ -43,16 +43,16 @@ import gymnasium
 import numpy as np
 from gymnasium import spaces
 
-from hils import config as config_mod
-from hils.actions import ActionError, ActionType
-from hils.agents import Observation
-from hils.config import IntersectionConfig
-from hils.errors import UserError
-from hils.manager import State
-from hils.poller import SignalCache, Snapshot
-from hils.sumo_net import TLS_ID, derive_phase_map, read_net, scenario_config
-from hils.targets import VIRTUAL
-from hils.testbed import Testbed
+from hils.agents.builtin import Observation
+from hils.control.actions import ActionError, ActionType
+from hils.control.manager import State
+from hils.protocol import config as config_mod
+from hils.protocol.config import IntersectionConfig
+from hils.protocol.errors import UserError
+from hils.run.testbed import Testbed
+from hils.shell.poller import SignalCache, Snapshot
+from hils.shell.targets import VIRTUAL
+from hils.sim.network import TLS_ID, derive_phase_map, read_net, scenario_config
 
 __all__ = [
     "REWARDS", "STATES", "EnvOptionError", "IntersectionAdapter", "IntersectionEnv", "Reward", "action_type_of",

@@ -16,7 +16,7 @@ Rules
   it was given is served whole, as the paper's ON_HOLD prescribes). Every live agent gets an observation
   and a reward at every step.
 - An action outside the agent's space is refused with a typed error (:class:`EnvOptionError`, or the
-  middleware's :class:`hils.actions.ActionError`) naming the agent; nothing is sent to any controller
+  middleware's :class:`hils.control.actions.ActionError`) naming the agent; nothing is sent to any controller
   and no time passes.
 - An episode is ``episode_length`` simulated seconds and is *truncated* for every agent at its end
   (``agents`` then empties); it is never *terminated*. A TIMEOUT of one controller shows in that agent's
@@ -38,8 +38,8 @@ from gymnasium import spaces
 from gymnasium.utils import seeding
 from pettingzoo import ParallelEnv
 
-from hils.actions import ActionType
-from hils.agents import Observation
+from hils.agents.builtin import Observation
+from hils.control.actions import ActionType
 from hils.envs.intersection import (
     EnvOptionError,
     IntersectionAdapter,
@@ -50,9 +50,9 @@ from hils.envs.intersection import (
     reward_of,
     with_timing,
 )
-from hils.scenario import Scenario, load_scenario
-from hils.targets import VIRTUAL
-from hils.testbed import NotStarted, Testbed
+from hils.protocol.scenario import Scenario, load_scenario
+from hils.run.testbed import NotStarted, Testbed
+from hils.shell.targets import VIRTUAL
 
 __all__ = ["IntersectionsEnv", "Targets"]
 
@@ -62,7 +62,7 @@ Targets = str | Mapping[str, str]
 class IntersectionsEnv(ParallelEnv[str, np.ndarray, Any]):
     """``hils.envs.parallel_env(scenario="corridor" | "grid4x4" | PATH, action_type=..., ...)``.
 
-    ``scenario``: a shipped scenario's name, a ``.scenario.toml`` path or a :class:`hils.scenario.Scenario`.
+    ``scenario``: a shipped scenario's name, a ``.scenario.toml`` path or a :class:`hils.protocol.scenario.Scenario`.
     ``target``: ``"virtual"``, or a mapping from every traffic light to its ``snmp://`` URL (wall clock).
     ``sumo_step``, ``control_interval``: override every intersection's config. ``episode_length``:
     simulated seconds. ``reward``: a name of :data:`hils.envs.intersection.REWARDS` or a callable

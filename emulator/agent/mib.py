@@ -1,0 +1,447 @@
+"""The emulator's MIB view: NTCIP get and set by OID over a live controller model.
+
+This is the single surface that both the in-process transport (virtual time)
+and the SNMP agent (wall-clock time) use. Outcomes are SNMP-style: an unknown
+object raises ``SnmpError(NO_SUCH_NAME)``, a read-only one ``NOT_WRITABLE``, a
+value of the wrong type ``WRONG_TYPE`` and one out of range ``WRONG_VALUE``; the
+agent maps these to each SNMP version's codes. A multi-varbind SET is checked
+whole before anything is applied, so a refused SET changes nothing.
+
+The phase table's timing columns are writable with NTCIP 1202's ranges, as on
+a real controller, so a lab can retime the emulator live; a SET acts from the
+next interval of that phase on (a green or clearance being timed keeps the
+lengths it started with). Start-up, options, ring and concurrency are read-only
+here: they come from the intersection config. ringControlGroupMax2 selects
+Maximum 2 per ring (bit 0 = ring 1) from the ring's next green.
+"""
+
+from __future__ import annotations
+
+import bisect
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from functools import lru_cache
+from typing import Any
+
+from emulator.model.controller import Controller
+from emulator.model.delays import DelayedController
+from hils.protocol.config import OverlapKind, Phase, Recall
+from hils.protocol.ntcip import (
+    CHANNEL_TABLE,
+    CONTROL_TABLE,
+    COORD_CORRECTION_MODE,
+    COORD_CYCLE_STATUS,
+    COORD_FORCE_MODE,
+    COORD_PATTERN_STATUS,
+    COORD_SYNC_STATUS,
+    DETECTOR_ACTUATION,
+    DETECTOR_STATUS_ACTIVE,
+    LOCAL_FREE_STATUS,
+    MAX_OVERLAP_STATUS_GROUPS,
+    MAX_OVERLAPS,
+    MAX_PATTERNS,
+    MAX_PED_DETECTOR_GROUPS,
+    MAX_PED_DETECTORS,
+    MAX_PHASE_GROUPS,
+    MAX_PHASES,
+    MAX_PREEMPTS,
+    MAX_SPLITS,
+    MAX_VEHICLE_DETECTORS,
+    OVERLAP_STATUS_TABLE,
+    OVERLAP_TABLE,
+    PATTERN_TABLE,
+    PATTERN_TABLE_TYPE,
+    PED_DETECTOR_ACTUATION,
+    PED_DETECTOR_CALL_PHASE,
+    PED_DETECTOR_STATUS_ACTIVE,
+    PHASE_TABLE,
+    PREEMPT_CONTROL_NUMBER,
+    PREEMPT_CONTROL_STATE,
+    PREEMPT_TABLE,
+    RING_CONTROL_MAX2,
+    SEQUENCE_DATA,
+    SHORT_ALARM_STATUS,
+    SPLIT_TABLE,
+    STATUS_TABLE,
+    SYSTEM_PATTERN_CONTROL,
+    UNIT_BACKUP_TIME,
+    UNIT_CONTROL_STATUS,
+    UNIT_FLASH_STATUS,
+    UNIT_STARTUP_FLASH,
+    VEHICLE_DETECTOR_CALL_PHASE,
+    VEHICLE_DETECTOR_OPTIONS,
+    Access,
+    ChannelColumn,
+    ControlColumn,
+    CoordCorrectionMode,
+    CoordForceMode,
+    ErrorStatus,
+    ObjectDef,
+    Oid,
+    OverlapColumn,
+    OverlapStatusColumn,
+    OverlapType,
+    PatternColumn,
+    PhaseColumn,
+    PhaseOption,
+    PreemptColumn,
+    SnmpError,
+    SplitColumn,
+    SplitMode,
+    StatusColumn,
+    Syntax,
+    Value,
+    groups_to_phases,
+    phases_to_groups,
+    sequence_oid,
+)
+
+# Writable phase timing columns: the Timing field each sets, and ticks per unit of the NTCIP value.
+_TIMING_COLUMNS: dict[PhaseColumn, tuple[str, int]] = {
+    PhaseColumn.WALK: ("walk", 10),
+    PhaseColumn.PEDESTRIAN_CLEAR: ("ped_clear", 10),
+    PhaseColumn.MINIMUM_GREEN: ("min_green", 10),
+    PhaseColumn.PASSAGE: ("passage", 1),
+    PhaseColumn.MAXIMUM1: ("max1", 10),
+    PhaseColumn.MAXIMUM2: ("max2", 10),
+    PhaseColumn.YELLOW_CHANGE: ("yellow", 1),
+    PhaseColumn.RED_CLEAR: ("red_clear", 1),
+    PhaseColumn.RED_REVERT: ("red_revert", 1),
+}
+
+_RECALL_BITS = {
+    Recall.NONE: PhaseOption(0),
+    Recall.MIN: PhaseOption.MIN_VEHICLE_RECALL,
+    Recall.MAX: PhaseOption.MAX_VEHICLE_RECALL,
+    Recall.PED: PhaseOption.PED_RECALL,
+    Recall.SOFT: PhaseOption.SOFT_VEHICLE_RECALL,
+}
+
+
+def phase_options(ph: Phase) -> PhaseOption:
+    """phaseOptions of a configured phase. Simultaneous gap disable is always on: a gapped-out green
+    does not re-extend while it waits at the barrier (see emulator/model/controller.py)."""
+    bits = PhaseOption.ENABLED | PhaseOption.SIMULTANEOUS_GAP_DISABLE | _RECALL_BITS[ph.recall]
+    return bits | PhaseOption.DUAL_ENTRY if ph.dual_entry else bits
+
+
+@dataclass(frozen=True, slots=True)
+class Instance:
+    oid: Oid
+    obj: ObjectDef
+    read: Callable[[], Value]
+    write: Callable[[int], None] | None = None
+
+
+class MibView:
+    """get/set/next by OID over one controller (bare, or behind its delays)."""
+
+    def __init__(self, controller: Controller | DelayedController) -> None:
+        self.controller = controller
+        self.set_count = 0
+        instances = self._build()
+        self._by_oid = {i.oid: i for i in instances}
+        self._sorted = sorted(self._by_oid)
+
+    # --- the surface -------------------------------------------------------------------
+
+    def get(self, oid: Oid) -> Value:
+        return self.get_many((oid,))[0]
+
+    def get_many(self, oids: Sequence[Oid]) -> tuple[Value, ...]:
+        out = []
+        for index, oid in enumerate(oids, start=1):
+            inst = self._by_oid.get(tuple(oid))
+            if inst is None:
+                raise SnmpError(ErrorStatus.NO_SUCH_NAME, index, f"no object {'.'.join(map(str, oid))}")
+            out.append(inst.read())
+        return tuple(out)
+
+    def set_many(self, varbinds: Sequence[tuple[Oid, Value]]) -> None:
+        checked = []
+        for index, (oid, value) in enumerate(varbinds, start=1):
+            inst = self._by_oid.get(tuple(oid))
+            if inst is None:
+                raise SnmpError(ErrorStatus.NO_SUCH_NAME, index, f"no object {'.'.join(map(str, oid))}")
+            if inst.write is None or inst.obj.access is not Access.READ_WRITE:
+                raise SnmpError(ErrorStatus.NOT_WRITABLE, index, f"{inst.obj.name} is read-only")
+            if isinstance(value, bool) or not isinstance(value, int):
+                raise SnmpError(ErrorStatus.WRONG_TYPE, index, f"{inst.obj.name} is an INTEGER")
+            if not inst.obj.low <= value <= inst.obj.high:
+                raise SnmpError(ErrorStatus.WRONG_VALUE, index,
+                                f"{inst.obj.name} = {value} outside {inst.obj.low}..{inst.obj.high}")
+            checked.append((inst, value))
+        for inst, value in checked:
+            inst.write(value)
+        self.set_count += 1
+
+    def next_oid(self, oid: Oid) -> Oid | None:
+        """The first instance strictly after ``oid`` in OID order (GETNEXT), or None at the end."""
+        i = bisect.bisect_right(self._sorted, tuple(oid))
+        return self._sorted[i] if i < len(self._sorted) else None
+
+    def syntax(self, oid: Oid) -> Syntax:
+        return self._by_oid[tuple(oid)].obj.syntax
+
+    def __contains__(self, oid: Oid) -> bool:
+        return tuple(oid) in self._by_oid
+
+    @property
+    def oids(self) -> list[Oid]:
+        return list(self._sorted)
+
+    # --- building the instances ------------------------------------------------------------
+
+    def _build(self) -> list[Instance]:
+        c = self.controller
+        cfg = c.config
+        groups = cfg.groups
+        out = [
+            Instance(MAX_PHASES.instance(), MAX_PHASES, lambda: max(cfg.phases)),
+            Instance(MAX_PHASE_GROUPS.instance(), MAX_PHASE_GROUPS, lambda: groups),
+            Instance(UNIT_STARTUP_FLASH.instance(), UNIT_STARTUP_FLASH, lambda: c.startup_flash,
+                     lambda v: setattr(c, "startup_flash", v)),
+            Instance(UNIT_BACKUP_TIME.instance(), UNIT_BACKUP_TIME, lambda: c.backup_time,
+                     lambda v: c.set_backup_time(v)),
+            Instance(UNIT_CONTROL_STATUS.instance(), UNIT_CONTROL_STATUS, lambda: int(c.control_status)),
+            Instance(UNIT_FLASH_STATUS.instance(), UNIT_FLASH_STATUS, lambda: int(c.flash_status)),
+            Instance(SHORT_ALARM_STATUS.instance(), SHORT_ALARM_STATUS, lambda: int(c.short_alarm)),
+            Instance(SYSTEM_PATTERN_CONTROL.instance(), SYSTEM_PATTERN_CONTROL, lambda: c.coordinator.command,
+                     c.set_pattern_control),
+            *_coordination(c),
+        ]
+        for p, ph in cfg.phases.items():
+            concurrent = bytes(sorted(q for q in cfg.phases if cfg.compatible(p, q)))
+            fixed: dict[PhaseColumn, Value] = {
+                PhaseColumn.STARTUP: int(ph.startup),
+                PhaseColumn.OPTIONS: int(phase_options(ph)),
+                PhaseColumn.RING: ph.ring,
+                PhaseColumn.CONCURRENCY: concurrent,
+            }
+            out += [Instance(PHASE_TABLE[col].instance(p), PHASE_TABLE[col], lambda v=v: v)
+                    for col, v in fixed.items()]
+            out += [Instance(PHASE_TABLE[col].instance(p), PHASE_TABLE[col], *_timing_access(c, p, name, unit))
+                    for col, (name, unit) in _TIMING_COLUMNS.items()]
+        out.append(Instance(RING_CONTROL_MAX2.instance(1), RING_CONTROL_MAX2,
+                            lambda: sum(1 << (r - 1) for r in c.max2_rings),
+                            lambda v: c.set_max2(k + 1 for k in range(8) if v >> k & 1)))
+        st = c.status if isinstance(c, DelayedController) else c
+        status: dict[StatusColumn, Callable[[], frozenset[int]]] = {
+            StatusColumn.REDS: lambda: st.reds,
+            StatusColumn.YELLOWS: lambda: st.yellows,
+            StatusColumn.GREENS: lambda: st.greens,
+            StatusColumn.DONT_WALKS: lambda: st.dont_walks,
+            StatusColumn.PED_CLEARS: lambda: st.ped_clears,
+            StatusColumn.WALKS: lambda: st.walks,
+            StatusColumn.VEH_CALLS: lambda: st.calls,
+            StatusColumn.PED_CALLS: lambda: st.ped_calls,
+            StatusColumn.PHASE_ONS: lambda: st.phase_ons,
+            StatusColumn.PHASE_NEXTS: lambda: st.phase_nexts,
+        }
+        channels = {ChannelColumn.REDS: status[StatusColumn.REDS], ChannelColumn.YELLOWS: status[StatusColumn.YELLOWS],
+                    ChannelColumn.GREENS: status[StatusColumn.GREENS]}
+        for g in range(1, groups + 1):
+            out += [Instance(STATUS_TABLE[col].instance(g), STATUS_TABLE[col], _group_reader(read, g, groups))
+                    for col, read in status.items()]
+            # Channel i is driven by phase i: the emulator's load switches follow its phases one to one.
+            out += [Instance(CHANNEL_TABLE[col].instance(g), CHANNEL_TABLE[col], _group_reader(read, g, groups))
+                    for col, read in channels.items()]
+            out += [Instance(CONTROL_TABLE[col].instance(g), CONTROL_TABLE[col],
+                             _group_reader(lambda col=col: c.control[col], g, groups),
+                             _group_writer(lambda col=col: c.control[col],
+                                           lambda phases, col=col: c.set_control(col, phases), g))
+                    for col in ControlColumn]
+        out += _overlaps(c, st)
+        out += _preempts(c)
+        for r, order in enumerate(cfg.rings, start=1):
+            out.append(Instance(sequence_oid(1, r), SEQUENCE_DATA, lambda o=order: bytes(o)))
+        out += _detectors(cfg.detectors, MAX_VEHICLE_DETECTORS, VEHICLE_DETECTOR_CALL_PHASE, None,
+                          DETECTOR_STATUS_ACTIVE, DETECTOR_ACTUATION, lambda: c.actuations, c.set_actuations)
+        out.extend(Instance(VEHICLE_DETECTOR_OPTIONS.instance(d), VEHICLE_DETECTOR_OPTIONS, lambda: 0)
+                   for d in cfg.detectors)
+        out += _detectors(cfg.ped_detectors, MAX_PED_DETECTORS, PED_DETECTOR_CALL_PHASE, MAX_PED_DETECTOR_GROUPS,
+                          PED_DETECTOR_STATUS_ACTIVE, PED_DETECTOR_ACTUATION, lambda: c.ped_actuations,
+                          c.set_ped_actuations)
+        return out
+
+
+def _detectors(call_phases: dict[int, int], maximum: ObjectDef, call_phase: ObjectDef, max_groups: ObjectDef | None,
+               active: ObjectDef, actuation: ObjectDef, read: Callable[[], frozenset[int]],
+               write: Callable[[frozenset[int]], None]) -> list[Instance]:
+    """One kind of detector: how many, the phase each calls, and by group of 8 the active ones and their remote
+    actuation (a SET of a group past the last is noSuchName in SNMPv1: that group does not exist)."""
+    groups = (max(call_phases) + 7) // 8
+    out = [Instance(maximum.instance(), maximum, lambda: max(call_phases))]
+    if max_groups is not None:
+        out.append(Instance(max_groups.instance(), max_groups, lambda: groups))
+    out += [Instance(call_phase.instance(d), call_phase, lambda phase=phase: phase) for d, phase in call_phases.items()]
+    for g in range(1, groups + 1):
+        reader = _group_reader(read, g, groups)
+        out.append(Instance(active.instance(g), active, reader))
+        out.append(Instance(actuation.instance(g), actuation, reader, _group_writer(read, write, g)))
+    return out
+
+
+def _coordination(c: Controller | DelayedController) -> list[Instance]:
+    """The coordination node: modes, the pattern and split tables (writable with NTCIP's ranges; a SET takes
+    effect at the running pattern's next local zero), and the coordination status."""
+    co = c.coordinator
+
+    def table(apply: Callable[[int], None]) -> Callable[[int], None]:
+        def write(value: int) -> None:
+            apply(value)
+            co.tables_changed()
+            c.touch()
+        return write
+
+    out = [
+        Instance(COORD_CORRECTION_MODE.instance(), COORD_CORRECTION_MODE, lambda: int(co.correction),
+                 table(lambda v: setattr(co, "correction", CoordCorrectionMode(v)))),
+        Instance(COORD_FORCE_MODE.instance(), COORD_FORCE_MODE, lambda: int(co.force_mode),
+                 table(lambda v: setattr(co, "force_mode", CoordForceMode(v)))),
+        Instance(MAX_PATTERNS.instance(), MAX_PATTERNS, lambda: len(co.patterns)),
+        Instance(PATTERN_TABLE_TYPE.instance(), PATTERN_TABLE_TYPE, lambda: 2),  # patterns(2): a row per pattern
+        Instance(MAX_SPLITS.instance(), MAX_SPLITS, lambda: len(co.splits)),
+        Instance(COORD_PATTERN_STATUS.instance(), COORD_PATTERN_STATUS, lambda: co.running),
+        Instance(LOCAL_FREE_STATUS.instance(), LOCAL_FREE_STATUS, lambda: int(co.free_status)),
+        Instance(COORD_CYCLE_STATUS.instance(), COORD_CYCLE_STATUS, lambda: co.cycle_status),
+        Instance(COORD_SYNC_STATUS.instance(), COORD_SYNC_STATUS, lambda: co.sync_status),
+    ]
+    pattern_fields = {PatternColumn.CYCLE_TIME: "cycle", PatternColumn.OFFSET_TIME: "offset",
+                      PatternColumn.SPLIT_NUMBER: "split", PatternColumn.SEQUENCE_NUMBER: "sequence"}
+    for n, row in co.patterns.items():
+        out.append(Instance(PATTERN_TABLE[PatternColumn.NUMBER].instance(n), PATTERN_TABLE[PatternColumn.NUMBER],
+                            lambda n=n: n))
+        out += [Instance(PATTERN_TABLE[col].instance(n), PATTERN_TABLE[col], lambda row=row, f=f: getattr(row, f),
+                         table(lambda v, row=row, f=f: setattr(row, f, v)))
+                for col, f in pattern_fields.items()]
+    split_fields: dict[SplitColumn, tuple[str, Callable[[int], Any]]] = {
+        SplitColumn.TIME: ("time", int), SplitColumn.MODE: ("mode", SplitMode),
+        SplitColumn.COORD_PHASE: ("coord", bool)}
+    for s, rows in co.splits.items():
+        for p, row in rows.items():
+            out.append(Instance(SPLIT_TABLE[SplitColumn.NUMBER].instance(s, p), SPLIT_TABLE[SplitColumn.NUMBER],
+                                lambda s=s: s))
+            out.append(Instance(SPLIT_TABLE[SplitColumn.PHASE].instance(s, p), SPLIT_TABLE[SplitColumn.PHASE],
+                                lambda p=p: p))
+            out += [Instance(SPLIT_TABLE[col].instance(s, p), SPLIT_TABLE[col],
+                             lambda row=row, f=f: int(getattr(row, f)),
+                             table(lambda v, row=row, f=f, kind=kind: setattr(row, f, kind(v))))
+                    for col, (f, kind) in split_fields.items()]
+    return out
+
+
+_OVERLAP_TYPES = {OverlapKind.NORMAL: OverlapType.NORMAL,
+                  OverlapKind.MINUS_GREEN_YELLOW: OverlapType.MINUS_GREEN_YELLOW,
+                  OverlapKind.FYA: OverlapType.OTHER}
+# Writable overlap columns: the OverlapTiming field each sets, and ticks per unit of the NTCIP value.
+_OVERLAP_TIMING: dict[OverlapColumn, tuple[str, int]] = {
+    OverlapColumn.TRAIL_GREEN: ("trail_green", 10),
+    OverlapColumn.TRAIL_YELLOW: ("trail_yellow", 1),
+    OverlapColumn.TRAIL_RED: ("trail_red", 1),
+}
+
+
+def _overlaps(c: Controller | DelayedController, st: Controller | DelayedController) -> list[Instance]:
+    """The overlap node: the overlap table (type and phases from the config, the trailing times writable, acting
+    from the next trailing interval on) and the overlap status by group of 8."""
+    cfg = c.config
+    groups = cfg.overlap_groups
+    out = [Instance(MAX_OVERLAPS.instance(), MAX_OVERLAPS, lambda: max(cfg.overlaps, default=0)),
+           Instance(MAX_OVERLAP_STATUS_GROUPS.instance(), MAX_OVERLAP_STATUS_GROUPS, lambda: groups)]
+    for n, o in cfg.overlaps.items():
+        fixed: dict[OverlapColumn, Value] = {
+            OverlapColumn.NUMBER: n, OverlapColumn.TYPE: int(_OVERLAP_TYPES[o.kind]),
+            OverlapColumn.INCLUDED_PHASES: bytes(o.included), OverlapColumn.MODIFIER_PHASES: bytes(o.modifiers)}
+        out += [Instance(OVERLAP_TABLE[col].instance(n), OVERLAP_TABLE[col], lambda v=v: v) for col, v in fixed.items()]
+        out += [Instance(OVERLAP_TABLE[col].instance(n), OVERLAP_TABLE[col],
+                         *_field_access(c, c.overlaps.timing[n], name, unit))
+                for col, (name, unit) in _OVERLAP_TIMING.items()]
+    status: dict[OverlapStatusColumn, Callable[[], frozenset[int]]] = {
+        OverlapStatusColumn.REDS: lambda: st.overlap_reds,
+        OverlapStatusColumn.YELLOWS: lambda: st.overlap_yellows,
+        OverlapStatusColumn.GREENS: lambda: st.overlap_greens,
+    }
+    for g in range(1, groups + 1):
+        out.append(Instance(OVERLAP_STATUS_TABLE[OverlapStatusColumn.NUMBER].instance(g),
+                            OVERLAP_STATUS_TABLE[OverlapStatusColumn.NUMBER], lambda g=g: g))
+        out += [Instance(OVERLAP_STATUS_TABLE[col].instance(g), OVERLAP_STATUS_TABLE[col],
+                         _group_reader(read, g, groups)) for col, read in status.items()]
+    return out
+
+
+# Writable preempt columns: the PreemptTiming field each sets, and ticks per unit of the NTCIP value.
+_PREEMPT_TIMING: dict[PreemptColumn, tuple[str, int]] = {
+    PreemptColumn.DELAY: ("delay", 10),
+    PreemptColumn.MINIMUM_DURATION: ("min_duration", 10),
+    PreemptColumn.MINIMUM_GREEN: ("min_green", 10),
+    PreemptColumn.MINIMUM_WALK: ("min_walk", 10),
+    PreemptColumn.ENTER_PED_CLEAR: ("enter_ped_clear", 10),
+    PreemptColumn.TRACK_GREEN: ("track_green", 10),
+    PreemptColumn.DWELL_GREEN: ("dwell_green", 10),
+    PreemptColumn.MAXIMUM_PRESENCE: ("max_presence", 10),
+    PreemptColumn.ENTER_YELLOW_CHANGE: ("enter_yellow", 1),
+    PreemptColumn.ENTER_RED_CLEAR: ("enter_red", 1),
+    PreemptColumn.TRACK_YELLOW_CHANGE: ("track_yellow", 1),
+    PreemptColumn.TRACK_RED_CLEAR: ("track_red", 1),
+}
+
+
+def _preempts(c: Controller | DelayedController) -> list[Instance]:
+    """The preempt node: the preempt table (phases and control bits from the config, times writable, acting from
+    the next use), each preempt's state, and preemptControlState (a SET calls or releases the preempt)."""
+    pe = c.preemptor
+    out = [Instance(MAX_PREEMPTS.instance(), MAX_PREEMPTS, lambda: max(c.config.preempts, default=0))]
+    for n, p in c.config.preempts.items():
+        fixed: dict[PreemptColumn, Value] = {
+            PreemptColumn.NUMBER: n, PreemptColumn.CONTROL: int(p.non_locking), PreemptColumn.LINK: 0,
+            PreemptColumn.TRACK_PHASE: bytes(p.track_phases), PreemptColumn.DWELL_PHASE: bytes(p.dwell_phases),
+            PreemptColumn.DWELL_PED: b"", PreemptColumn.EXIT_PHASE: bytes(p.exit_phases)}
+        out += [Instance(PREEMPT_TABLE[col].instance(n), PREEMPT_TABLE[col], lambda v=v: v) for col, v in fixed.items()]
+        out += [Instance(PREEMPT_TABLE[col].instance(n), PREEMPT_TABLE[col],
+                         *_field_access(c, pe.timing[n], name, unit)) for col, (name, unit) in _PREEMPT_TIMING.items()]
+        out.append(Instance(PREEMPT_TABLE[PreemptColumn.STATE].instance(n), PREEMPT_TABLE[PreemptColumn.STATE],
+                            lambda n=n: int(pe.states[n])))
+        out.append(Instance(PREEMPT_CONTROL_NUMBER.instance(n), PREEMPT_CONTROL_NUMBER, lambda n=n: n))
+        out.append(Instance(PREEMPT_CONTROL_STATE.instance(n), PREEMPT_CONTROL_STATE,
+                            lambda n=n: int(n in pe.control),
+                            lambda v, n=n: c.set_preempt_control(pe.control - {n} | ({n} if v else set()))))
+    return out
+
+
+# Status is read at 10-100 Hz and takes few distinct values: convert each phase set once.
+_masks = lru_cache(maxsize=1024)(phases_to_groups)
+
+
+def _timing_access(c: Controller | DelayedController, phase: int, name: str, unit: int
+                   ) -> tuple[Callable[[], int], Callable[[int], None]]:
+    """Read and write one timing field in NTCIP units (seconds or tenths); the controller counts ticks."""
+    timing = c.timing[phase]
+    return lambda: getattr(timing, name) // unit, lambda v: c.set_timing(phase, name, v * unit)
+
+
+def _field_access(c: Controller | DelayedController, row: Any, name: str, unit: int
+                  ) -> tuple[Callable[[], int], Callable[[int], None]]:
+    """Read and write one field of a timing row in NTCIP units; a write wakes the controller (a threshold moved)."""
+
+    def write(v: int) -> None:
+        setattr(row, name, v * unit)
+        c.touch()
+
+    return lambda: getattr(row, name) // unit, write
+
+
+def _group_reader(read: Callable[[], frozenset[int]], group: int, groups: int) -> Callable[[], int]:
+    return lambda: _masks(read(), groups)[group - 1]
+
+
+def _group_writer(read: Callable[[], frozenset[int]], write: Callable[[frozenset[int]], None],
+                  group: int) -> Callable[[int], None]:
+    """SET of one group of 8 (phases or detectors): replaces that group's members, keeps the others'."""
+    base = 8 * (group - 1)
+
+    def set_group(mask: int) -> None:
+        others = {n for n in read() if not base < n <= base + 8}
+        write(frozenset(others | {base + n for n in groups_to_phases((mask,))}))
+
+    return set_group

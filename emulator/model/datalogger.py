@@ -1,0 +1,352 @@
+"""The controller's data logger: its high-resolution event log, in the Indiana enumerations.
+
+Rules of this file
+------------------
+- The logger watches and never acts. The controller tells it each interval change with the reason a green
+  ended (:meth:`DataLogger.changed`), the end of each step (:meth:`DataLogger.stepped`) and a power cycle
+  (:meth:`DataLogger.powered_up`); everything else it reads off the controller after the step. Nothing
+  here changes the controller.
+- An event's time is the controller's clock (the coordinator's: local time in ticks since midnight of the
+  day the unit first powered up, counting on through power cycles) at the tick that made it. So the log is
+  the same in virtual time and at the wall clock, and the same whether quiet ticks are stepped or skipped:
+  a skipped stretch changes nothing discrete, and every threshold the log reports (minimum green, walk,
+  pedestrian clearance, the coordinator's marks) is a real step
+  (:meth:`emulator.model.controller.Controller.quiet_ticks`).
+- The events of one tick are kept in (code, parameter) order, as field logs list them; ticks in time order.
+
+Theory of operation
+-------------------
+What is logged, and from what (codes: :class:`hils.protocol.hires.EventCode`):
+
+=========================================  ======================================================================
+events                                     from
+=========================================  ======================================================================
+0, 1 phase on, begin green                 the change into green
+7, 8 and 4/5/6 green termination, yellow   the change into yellow, with why the green ended (gap-out, max-out,
+                                           force-off: the coordinator's or phaseControlGroupForceOff; a
+                                           coordinated phase ending at its yield point is forced off there, as
+                                           field controllers log it; none when it ends later)
+9, 10 end yellow, begin red clearance      the change into red clearance (10 only when it has a length: "Set
+                                           only if phase red clearance is served")
+11, 12 end red clearance, phase inactive   the change to rest in red (the ring no longer times the phase)
+2 phase check                              the green's max timer starting: conflicting demand registered (at
+                                           the latest on the tick the green ends, as field logs show it)
+3 min complete                             the green's minimum (with walk and pedestrian clearance) timed
+31 barrier termination                     a green starting in another barrier group than the last one;
+                                           parameter: the group that ended (1 = the first), as field logs show
+21, 22, 23 walk, flashing and solid DW     the walk and pedestrian clearance intervals of a green
+43, 44 phase call registered, dropped      the vehicle calls the controller acts on (phaseStatusGroupVehCalls),
+                                           not on a phase with a minimum or maximum recall
+45 pedestrian call registered              a pedestrian call latched, not on a phase with pedestrian recall
+41/42, 46/47, 48/49 hold, omit, ped omit   the hold, omit (with the running pattern's split-mode omits) and
+                                           pedestrian omit objects as the controller applies them
+81, 82 / 89, 90 detector off, on           the vehicle and pedestrian detector inputs as the controller reads them
+61-65, 32/33 overlaps                      each overlap's display (:mod:`emulator.model.overlaps`) as it changes:
+                                           begin green, trailing green, yellow (its parent's or its own trailing one),
+                                           trailing red, off (red); a flashing yellow arrow's flashing begins and
+                                           ends the permissive (32, 33), numbered as the overlap (1 = A)
+102, 104 preempt input on, off             preemptControlState as the controller reads it
+105, 106, 107, 110, 111 preemption         a preempt's service (:mod:`emulator.model.preemption`, preemptState) entering
+                                           entry, track clearance, dwell, maximum presence, exit
+131-149 pattern, cycle, offset, splits     a pattern starting (or laid out anew); 131 also when going free (254)
+150 cycle state                            its changes (free, in step, add, subtract, dwell) and each local zero
+151 yield point                            each coordinated phase's yield point
+155, 173 unit control and flash status     their NTCIP values, on change
+182, 184 power failure, restored           a power cycle (184 alone at the first power-up)
+=========================================  ======================================================================
+
+At power-up the log records the state the unit starts in (the phases starting in green, yellow or red
+clearance, the pattern) as events of that tick, so a log read from its start tells the whole story.
+Without a ``capacity`` the log keeps every event of the unit's life (a run hands it over at its end); with
+one it keeps the last ``capacity`` events, as a real controller keeps a ring buffer of its last events
+(MaxTime's holds about 10,000): a served controller's memory stays bounded however long it runs.
+"""
+
+from __future__ import annotations
+
+import bisect
+from dataclasses import dataclass, field
+from datetime import datetime, timedelta
+
+from emulator.model.controller import Change, Controller, Interval, Termination
+from emulator.model.coordination import Coordinator, Plan
+from emulator.model.overlaps import Show
+from hils.protocol.config import Recall
+from hils.protocol.hires import MAX_PARAMETER, CycleState, Event, EventCode, split_code
+from hils.protocol.ntcip import ControlColumn, CoordCorrectionMode, PreemptState, UnitFlashStatus
+
+E = EventCode
+
+_TERMINATIONS = {Termination.GAP_OUT: E.PHASE_GAP_OUT, Termination.MAX_OUT: E.PHASE_MAX_OUT,
+                 Termination.FORCE_OFF: E.PHASE_FORCE_OFF}
+# What an overlap logs as it enters a display (Show.GREEN from a trailing green: it stays green, nothing).
+_OVERLAP = {Show.GREEN: E.OVERLAP_BEGIN_GREEN, Show.TRAIL_GREEN: E.OVERLAP_BEGIN_TRAILING_GREEN,
+            Show.YELLOW: E.OVERLAP_BEGIN_YELLOW, Show.TRAIL_YELLOW: E.OVERLAP_BEGIN_YELLOW,
+            Show.TRAIL_RED: E.OVERLAP_BEGIN_RED_CLEARANCE, Show.RED: E.OVERLAP_OFF,
+            Show.FLASHING: E.FYA_BEGIN_PERMISSIVE}
+# What a preempt logs as its service enters a state (NTCIP preemptState).
+_PREEMPT = {PreemptState.ENTRY_STARTED: E.PREEMPT_ENTRY_STARTED,
+            PreemptState.TRACK_SERVICE: E.PREEMPT_BEGIN_TRACK_CLEARANCE, PreemptState.DWELL: E.PREEMPT_BEGIN_DWELL,
+            PreemptState.MAX_PRESENCE: E.PREEMPT_MAX_PRESENCE_EXCEEDED, PreemptState.EXIT_STARTED: E.PREEMPT_BEGIN_EXIT}
+# The on/off events of a set of numbers that the controller reads after each step.
+_ON_OFF = {
+    "calls": (E.PHASE_CALL_REGISTERED, E.PHASE_CALL_DROPPED),
+    "holds": (E.PHASE_HOLD_ACTIVE, E.PHASE_HOLD_RELEASED),
+    "omits": (E.PHASE_OMIT_ON, E.PHASE_OMIT_OFF),
+    "ped_omits": (E.PED_OMIT_ON, E.PED_OMIT_OFF),
+    "detectors": (E.DETECTOR_ON, E.DETECTOR_OFF),
+    "ped_detectors": (E.PED_DETECTOR_ON, E.PED_DETECTOR_OFF),
+    "preempts": (E.PREEMPT_CALL_INPUT_ON, E.PREEMPT_CALL_INPUT_OFF),
+}
+
+
+@dataclass(slots=True)
+class _Green:
+    """What the logger remembers of the green a ring is timing (mutable: updated as it runs)."""
+
+    start: int  # clock tick it began
+    minimum: int  # ticks of its minimum
+    min_logged: bool = False
+    checking: bool = False  # its max timer is running (conflicting demand registered)
+
+
+@dataclass(slots=True)
+class _Seen:
+    """What the controller showed after the last step (mutable: the logger's memory of it)."""
+
+    sets: dict[str, frozenset[int]] = field(default_factory=dict)
+    ped_calls: frozenset[int] = frozenset()
+    walks: frozenset[int] = frozenset()
+    clears: frozenset[int] = frozenset()
+    flash: int = 0
+    control: int = 0
+    pattern: int | None = None
+    plan: Plan | None = None
+    state: CycleState | None = None
+    overlaps: dict[int, Show] = field(default_factory=dict)
+    preempts: dict[int, PreemptState] = field(default_factory=dict)
+
+
+class DataLogger:
+    """The hi-res event log of one controller, attached to it as its recorder."""
+
+    def __init__(self, controller: Controller, capacity: int | None = None) -> None:
+        self.controller = controller
+        self.capacity = capacity
+        self.day0: datetime = controller.day0
+        self._log: list[tuple[int, int, int]] = []  # (clock tick, code, parameter)
+        self._tick: list[tuple[int, int]] = []  # events of the tick being stepped
+        self._greens: dict[int, _Green] = {}  # ring number -> its green
+        self._red_served: dict[int, bool] = {}  # ring number -> its red clearance has a length
+        self._group: int | None = None  # barrier group of the last green started
+        self._seen = _Seen()
+        cfg = controller.config
+        self._no_call_events = frozenset(p for p, ph in cfg.phases.items() if ph.recall in (Recall.MIN, Recall.MAX))
+        self._no_ped_events = frozenset(p for p, ph in cfg.phases.items() if ph.recall is Recall.PED)
+        controller.recorder = self
+        self._power_up(first=True)
+
+    # --- reading the log -------------------------------------------------------------------------------
+
+    def __len__(self) -> int:
+        return len(self._log)
+
+    def time(self, clock: int) -> datetime:
+        """The local time of a clock tick."""
+        return self.day0 + timedelta(microseconds=clock * 100_000)
+
+    def events(self, since: datetime | None = None) -> list[Event]:
+        """The log in time order; from ``since`` on (inclusive) when given."""
+        start = 0
+        if since is not None:
+            clock = -(-(since - self.day0) // timedelta(microseconds=100_000))  # the first tick at or after since
+            start = bisect.bisect_left(self._log, clock, key=lambda e: e[0])
+        return [Event(self.time(c), code, p) for c, code, p in self._log[start:]]
+
+    # --- what the controller tells -------------------------------------------------------------------------
+
+    def changed(self, change: Change) -> None:
+        r, p = self.controller.rings[change.ring - 1], change.phase
+        if change.interval is Interval.GREEN:
+            group = self.controller.config.barrier_of(p)
+            if self._group is not None and group != self._group:
+                self._add(E.BARRIER_TERMINATION, self._group + 1)
+            self._group = group
+            self._greens[change.ring] = _Green(self._clock, r.minimum)
+            self._add(E.PHASE_ON, p)
+            self._add(E.PHASE_BEGIN_GREEN, p)
+        elif change.interval is Interval.YELLOW:
+            green = self._greens.pop(change.ring, None)
+            if green is not None:
+                self._min_complete(green, p)
+                if not green.checking:  # the conflicting call came on the tick that ends the green
+                    self._add(E.PHASE_CHECK, p)
+            if change.reason in _TERMINATIONS:
+                self._add(_TERMINATIONS[change.reason], p)
+            elif change.reason is Termination.YIELD and self._at_force_off(p):
+                self._add(E.PHASE_FORCE_OFF, p)
+            self._add(E.PHASE_GREEN_TERMINATION, p)
+            self._add(E.PHASE_BEGIN_YELLOW, p)
+        elif change.interval is Interval.RED_CLEAR:
+            self._add(E.PHASE_END_YELLOW, p)
+            self._red_served[change.ring] = r.length > 0
+            if r.length:
+                self._add(E.PHASE_BEGIN_RED_CLEARANCE, p)
+        else:  # rests in red: its red clearance (if served) is over and the ring no longer times the phase
+            if self._red_served.pop(change.ring, False):
+                self._add(E.PHASE_END_RED_CLEARANCE, p)
+            self._add(E.PHASE_INACTIVE, p)
+
+    def stepped(self) -> None:
+        c = self.controller
+        for number, green in self._greens.items():
+            ring = c.rings[number - 1]
+            self._min_complete(green, ring.phase)
+            checking = ring.max_ticks > 0
+            if checking and not green.checking:
+                self._add(E.PHASE_CHECK, ring.phase)
+            green.checking = checking
+        if self._seen.flash == UnitFlashStatus.STARTUP and c.flash_status is UnitFlashStatus.NOT_FLASH:
+            self._intervals()  # start-up flash over: the start-up intervals begin
+        self._read()
+        self._flush()
+
+    def powered_up(self) -> None:
+        self._power_up(first=False)
+
+    # --- internals -----------------------------------------------------------------------------------------------
+
+    @property
+    def _clock(self) -> int:
+        return self.controller.coordinator.clock
+
+    def _add(self, code: int, parameter: int) -> None:
+        self._tick.append((int(code), parameter))
+
+    def _flush(self) -> None:
+        clock = self._clock
+        self._log.extend((clock, code, p) for code, p in sorted(set(self._tick)))
+        self._tick.clear()
+        if self.capacity is not None and len(self._log) > self.capacity + self.capacity // 4:
+            del self._log[:len(self._log) - self.capacity]  # the oldest go, a quarter at a time
+
+    def _power_up(self, *, first: bool) -> None:
+        if not first:
+            self._add(E.POWER_FAILURE, 1)
+        self._add(E.POWER_RESTORED, 1)
+        self._greens.clear()
+        self._red_served.clear()
+        self._group = None
+        if not self.controller.flashing:
+            self._intervals()
+        self._read()
+        self._flush()
+
+    def _intervals(self) -> None:
+        """The intervals the rings start in (power-up and the end of start-up flash start them unannounced)."""
+        for ring in self.controller.rings:
+            if ring.interval is Interval.GREEN:
+                self.changed(Change(self.controller.tick, ring.number, ring.phase, ring.interval))
+            elif ring.interval is not Interval.DWELL:
+                if ring.interval is Interval.RED_CLEAR:
+                    self._red_served[ring.number] = ring.length > 0
+                self._add(E.PHASE_ON, ring.phase)
+                self._add(E.PHASE_BEGIN_YELLOW if ring.interval is Interval.YELLOW else E.PHASE_BEGIN_RED_CLEARANCE,
+                          ring.phase)
+
+    def _at_force_off(self, phase: int) -> bool:
+        """The coordinator's force-off point of ``phase`` passed this tick (a coordinated phase's yield point)."""
+        co = self.controller.coordinator
+        return co.plan is not None and co.plan.force_off.get(phase) in co.passed
+
+    def _min_complete(self, green: _Green, phase: int) -> None:
+        if not green.min_logged and self._clock >= green.start + green.minimum:
+            green.min_logged = True
+            self._add(E.PHASE_MIN_COMPLETE, phase)
+
+    def _read(self) -> None:
+        """Events of what the controller shows now against what it showed after the last step."""
+        c, seen = self.controller, self._seen
+        control = c.control
+        now = {
+            "calls": c.calls - self._no_call_events,
+            "holds": control[ControlColumn.HOLD],
+            "omits": control[ControlColumn.PHASE_OMIT] | c.coordinator.omitted(),
+            "ped_omits": control[ControlColumn.PED_OMIT],
+            "detectors": c.actuations,
+            "ped_detectors": c.ped_actuations,
+            "preempts": c.preemptor.control,
+        }
+        for name, numbers in now.items():
+            before = seen.sets.get(name, frozenset())
+            if numbers != before:
+                on, off = _ON_OFF[name]
+                for n in numbers - before:
+                    self._add(on, n)
+                for n in before - numbers:
+                    self._add(off, n)
+        seen.sets = now
+        for p in c.ped_calls - seen.ped_calls - self._no_ped_events:
+            self._add(E.PED_CALL_REGISTERED, p)
+        seen.ped_calls = c.ped_calls
+        for p in c.walks - seen.walks:
+            self._add(E.PED_BEGIN_WALK, p)
+        for p in c.ped_clears - seen.clears:
+            self._add(E.PED_BEGIN_CLEARANCE, p)
+        for p in (seen.walks | seen.clears) - c.walks - c.ped_clears:
+            self._add(E.PED_BEGIN_SOLID_DONT_WALK, p)
+        seen.walks, seen.clears = c.walks, c.ped_clears
+        for n, shown in c.overlaps.shown.items():
+            before = seen.overlaps.get(n, Show.RED)
+            if shown is before:
+                continue
+            if before is Show.FLASHING:
+                self._add(E.FYA_END_PERMISSIVE, n)
+            if not (shown is Show.GREEN and before is Show.TRAIL_GREEN):
+                self._add(_OVERLAP[shown], n)
+        seen.overlaps = dict(c.overlaps.shown)
+        for n, state in c.preemptor.states.items():
+            if state is not seen.preempts.get(n, PreemptState.NOT_ACTIVE) and state in _PREEMPT:
+                self._add(_PREEMPT[state], n)
+        seen.preempts = dict(c.preemptor.states)
+        if int(c.flash_status) != seen.flash:
+            seen.flash = int(c.flash_status)
+            self._add(E.UNIT_FLASH_STATUS_CHANGE, seen.flash)
+        if int(c.control_status) != seen.control:
+            seen.control = int(c.control_status)
+            self._add(E.UNIT_CONTROL_STATUS_CHANGE, seen.control)
+        self._coordination()
+
+    def _coordination(self) -> None:
+        co, seen = self.controller.coordinator, self._seen
+        plan = co.plan
+        if co.running != seen.pattern or plan is not seen.plan:
+            seen.pattern, seen.plan = co.running, plan
+            self._add(E.COORD_PATTERN_CHANGE, co.running)
+            if plan is not None:
+                self._add(E.CYCLE_LENGTH_CHANGE, min(plan.cycle // 10, MAX_PARAMETER))
+                self._add(E.OFFSET_LENGTH_CHANGE, min(plan.offset // 10, MAX_PARAMETER))
+                for phase, split in plan.split.items():
+                    self._add(split_code(phase), min(split // 10, MAX_PARAMETER))
+        state = _cycle_state(co)
+        if state is not seen.state:
+            seen.state = state
+            self._add(E.COORD_CYCLE_STATE_CHANGE, state)
+        if plan is None or not co.passed:
+            return
+        if 0 in co.passed:
+            self._add(E.COORD_CYCLE_STATE_CHANGE, CycleState.LOCAL_ZERO)
+        for phase in plan.coord.values():
+            if plan.force_off[phase] in co.passed:
+                self._add(E.COORD_YIELD_POINT, phase)
+
+
+def _cycle_state(co: Coordinator) -> CycleState:
+    """The coordinator's state as event 150 names it: free, in step, or the correction under way."""
+    if co.plan is None:
+        return CycleState.FREE
+    if not co.lag:
+        return CycleState.IN_STEP
+    if co.correction is CoordCorrectionMode.DWELL:
+        return CycleState.TRANSITION_DWELL
+    return CycleState.TRANSITION_SUBTRACT if co.subtracting else CycleState.TRANSITION_ADD

@@ -1,0 +1,210 @@
+"""Overlaps: signal outputs driven by their included (parent) phases, ticking with the controller.
+
+Rules of this file
+------------------
+- An overlap's display changes only by ``_NEXT`` below: per display, the first condition that holds gives the
+  next display (the same one: it stays). :meth:`Overlaps.step` evaluates them once per controller tick, after
+  the rings have timed, from what the phases show then.
+- Time is integer ticks, as in the controller; only the overlap's own trailing intervals count ticks.
+- An overlap turns green only from red, from its trailing green or (a flashing yellow arrow) from flashing:
+  never from a yellow.
+
+Theory of operation
+-------------------
+NTCIP 1202 v02 overlapType (A.9.2.1.2) defines the two standard types:
+
+    normal: "The overlap output shall be green in the following situations: (1) when an overlap included
+    phase is green. (2) when an overlap included phase is yellow (or red clearance) and an overlap included
+    phase is next. The overlap output shall be yellow when an included phase is yellow and an overlap included
+    phase is not next. The overlap output shall be red whenever the overlap green and yellow are not ON."
+
+    minusGreenYellow: green as normal "and an overlap modifier phase is NOT green"; yellow "when an overlap
+    included phase is yellow and an overlap modifier phase is NOT yellow and an overlap included phase is not
+    next".
+
+"Next" is read per ring: a phase clearing (or dwelling in red) whose ring has committed an included phase
+(phaseStatusGroupPhaseNexts) keeps a green overlap green, which is the standard's "the CU is cycling between
+included phases" (overlapIncludedPhases); it never starts a green before an included phase shows one. An
+overlap that was held red by its modifier does not turn yellow when its included phase clears: a yellow
+follows a green.
+
+overlapTrailGreen: "When this value is greater than zero and the overlap green would normally terminate, the
+overlap green shall be extended by this additional time", followed by the overlap's own overlapTrailYellow and
+overlapTrailRed. A trailing overlap shows beyond its parents, so a phase that conflicts with it (see
+:meth:`hils.protocol.config.IntersectionConfig.overlap_allows`) may not start until it has cleared: the default of
+controllers whose "Lock Inhibit" is off, which "insures that the overlap clearance has completed before the
+next eligible phase is serviced" (Naztec overlap programming, MM 1-5-1). Without a trailing green the overlap
+clears with its parent's yellow and is red during its parent's red clearance.
+
+The flashing yellow arrow (``fya``) is not in NTCIP 1202 v02 (a vendor's overlapType other(1) there); its
+v03 objects were found in no source we could read, so its status is served with the v02 objects: the arrow's
+yellow lamp sets the overlap's yellow bit, steady or flashing. It follows the practice the sources agree on:
+the arrow is green with its protected (included) phases, flashes while a modifier phase is green -- the
+permissive phase is "tied to the opposing through movement" (UDOT's traffic-signal guidelines), "NOT the
+straight ahead phase for the same approach" -- and shows a steady yellow arrow when the protected phase
+clears or when the opposing through clears, red otherwise. From flashing it may go straight to the green
+arrow when the protected phase starts.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from enum import Enum, StrEnum
+
+from hils.protocol.config import IntersectionConfig, Overlap, OverlapKind
+
+
+class Show(StrEnum):
+    """What an overlap displays; the TRAIL_ intervals are its own, timed after its parents ended."""
+
+    RED = "red"
+    GREEN = "green"
+    YELLOW = "yellow"  # clearing with a parent's yellow
+    FLASHING = "flashing"  # a flashing yellow arrow's permissive indication
+    TRAIL_GREEN = "trail_green"
+    TRAIL_YELLOW = "trail_yellow"
+    TRAIL_RED = "trail_red"
+
+
+class Cond(Enum):
+    """What decides an overlap's next display (see ``_NEXT``)."""
+
+    HELD = "its included phases hold it green (and no modifier of a minus-green-yellow overlap is green)"
+    FLASH = "a flashing yellow arrow's permissive (modifier) phase is green"
+    MODIFIED = "a minus-green-yellow overlap's modifier phase is green"
+    TRAILS = "it has a trailing green"
+    CLEARING = "a phase it follows is yellow (and no modifier of a minus-green-yellow overlap is)"
+    TIMED = "its trailing interval has run its length"
+    ALWAYS = "otherwise"
+
+
+_NEXT: dict[Show, tuple[tuple[Cond, Show], ...]] = {
+    Show.RED: ((Cond.HELD, Show.GREEN), (Cond.FLASH, Show.FLASHING), (Cond.ALWAYS, Show.RED)),
+    Show.GREEN: ((Cond.HELD, Show.GREEN), (Cond.MODIFIED, Show.RED), (Cond.TRAILS, Show.TRAIL_GREEN),
+                 (Cond.CLEARING, Show.YELLOW), (Cond.ALWAYS, Show.TRAIL_YELLOW)),
+    Show.FLASHING: ((Cond.HELD, Show.GREEN), (Cond.FLASH, Show.FLASHING), (Cond.CLEARING, Show.YELLOW),
+                    (Cond.ALWAYS, Show.RED)),
+    Show.YELLOW: ((Cond.CLEARING, Show.YELLOW), (Cond.ALWAYS, Show.RED)),
+    Show.TRAIL_GREEN: ((Cond.HELD, Show.GREEN), (Cond.TIMED, Show.TRAIL_YELLOW), (Cond.ALWAYS, Show.TRAIL_GREEN)),
+    Show.TRAIL_YELLOW: ((Cond.TIMED, Show.TRAIL_RED), (Cond.ALWAYS, Show.TRAIL_YELLOW)),
+    Show.TRAIL_RED: ((Cond.TIMED, Show.RED), (Cond.ALWAYS, Show.TRAIL_RED)),
+}
+
+_GREEN = frozenset({Show.GREEN, Show.TRAIL_GREEN})
+_YELLOW = frozenset({Show.YELLOW, Show.TRAIL_YELLOW, Show.FLASHING})
+#: Displays that outlast the overlap's parents: a phase conflicting with the overlap waits for them to end.
+TRAILING = frozenset({Show.TRAIL_GREEN, Show.TRAIL_YELLOW, Show.TRAIL_RED})
+
+
+@dataclass(slots=True)
+class OverlapTiming:
+    """An overlap's trailing times in ticks; mutable so the overlap table can be retimed over SNMP."""
+
+    trail_green: int
+    trail_yellow: int
+    trail_red: int
+
+    @classmethod
+    def of(cls, o: Overlap) -> OverlapTiming:
+        return cls(o.trail_green * 10, round(o.trail_yellow * 10), round(o.trail_red * 10))
+
+
+class Overlaps:
+    """The overlaps of one controller: their displays, trailing timers and status sets."""
+
+    def __init__(self, config: IntersectionConfig) -> None:
+        self.config = config
+        self.timing = {n: OverlapTiming.of(o) for n, o in config.overlaps.items()}
+        #: Per overlap, the phases that may not show green or yellow beside it.
+        self.conflicting = {n: frozenset(p for p in config.phases if not config.overlap_allows(n, p))
+                            for n in config.overlaps}
+        self.reset()
+
+    def reset(self) -> None:
+        """Power-up (and flash): every overlap red."""
+        self.shown = {n: Show.RED for n in self.config.overlaps}
+        self.ticks = {n: 0 for n in self.config.overlaps}
+
+    @property
+    def greens(self) -> frozenset[int]:
+        return frozenset(n for n, s in self.shown.items() if s in _GREEN)
+
+    @property
+    def yellows(self) -> frozenset[int]:
+        return frozenset(n for n, s in self.shown.items() if s in _YELLOW)
+
+    @property
+    def reds(self) -> frozenset[int]:
+        return frozenset(self.shown) - self.greens - self.yellows
+
+    @property
+    def flashing(self) -> frozenset[int]:
+        return frozenset(n for n, s in self.shown.items() if s is Show.FLASHING)
+
+    def discrete(self) -> tuple[Show, ...]:
+        return tuple(self.shown.values())
+
+    def blocks(self, phase: int) -> bool:
+        """A trailing overlap that ``phase`` conflicts with still shows (or clears) after this tick: the phase
+        waits. Asked before the overlaps step, like a ring's next phase that starts the tick its red ends."""
+        return any(s in TRAILING and phase in self.conflicting[n] and not self._clears_now(n, s)
+                   for n, s in self.shown.items())
+
+    def _clears_now(self, n: int, s: Show) -> bool:
+        last = s is Show.TRAIL_RED or (s is Show.TRAIL_YELLOW and self.timing[n].trail_red == 0)
+        return last and self.ticks[n] + 1 >= self._length(n, s)
+
+    def step(self, greens: frozenset[int], yellows: frozenset[int], nexts: Mapping[int, int | None]) -> None:
+        """One tick: what the phases show now (``nexts``: each phase clearing or resting in red, its ring's
+        committed next phase)."""
+        for n, o in self.config.overlaps.items():
+            s = self.shown[n]
+            if s in TRAILING:
+                self.ticks[n] += 1
+            to = next(to for cond, to in _NEXT[s] if self._holds(cond, n, o, greens, yellows, nexts))
+            if to is not s:
+                self._enter(n, to)
+
+    def _holds(self, cond: Cond, n: int, o: Overlap, greens: frozenset[int], yellows: frozenset[int],
+               nexts: Mapping[int, int | None]) -> bool:
+        minus = o.kind is OverlapKind.MINUS_GREEN_YELLOW
+        if cond is Cond.HELD:
+            # Cycling between included phases keeps a green; it does not start one (a ring resting in red that
+            # commits its own included phase again shows nothing green yet).
+            cycling = self.shown[n] in _GREEN and any(p in o.included and nexts.get(p) in o.included for p in nexts)
+            return (cycling or not greens.isdisjoint(o.included)) and not (minus and not greens.isdisjoint(o.modifiers))
+        if cond is Cond.FLASH:
+            return o.kind is OverlapKind.FYA and not greens.isdisjoint(o.modifiers)
+        if cond is Cond.MODIFIED:
+            return minus and not greens.isdisjoint(o.modifiers)
+        if cond is Cond.TRAILS:
+            return self.timing[n].trail_green > 0
+        if cond is Cond.CLEARING:
+            followed = o.included + o.modifiers if o.kind is OverlapKind.FYA else o.included
+            return not yellows.isdisjoint(followed) and not (minus and not yellows.isdisjoint(o.modifiers))
+        if cond is Cond.TIMED:
+            return self.ticks[n] >= self._length(n, self.shown[n])
+        return True
+
+    def _length(self, n: int, s: Show) -> int:
+        tm = self.timing[n]
+        return {Show.TRAIL_GREEN: tm.trail_green, Show.TRAIL_YELLOW: tm.trail_yellow, Show.TRAIL_RED: tm.trail_red}[s]
+
+    def _enter(self, n: int, s: Show) -> None:
+        # A trailing red of no length is no interval at all: the overlap is red at once.
+        if s is Show.TRAIL_RED and self.timing[n].trail_red == 0:
+            s = Show.RED
+        self.shown[n], self.ticks[n] = s, 0
+
+    # --- quiet time (see emulator/model/controller.py) -------------------------------------------------
+
+    def quiet_ticks(self) -> int | None:
+        """Steps until a trailing interval ends (None: no overlap is timing)."""
+        ahead = [self._length(n, s) - self.ticks[n] for n, s in self.shown.items() if s in TRAILING]
+        return min(ahead, default=None)
+
+    def skip(self, n: int) -> None:
+        for k, s in self.shown.items():
+            if s in TRAILING:
+                self.ticks[k] += n

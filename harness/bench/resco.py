@@ -1,0 +1,70 @@
+"""`hils bench resco`: hils' PettingZoo environment beside sumo-rl's on RESCO's networks, every light a controller.
+
+Per scenario and seed, one episode of each side, each in a fresh process, alternately (:mod:`harness.bench.seeds`):
+
+- hils: ``hils.envs.parallel_env(scenario="resco:NAME")``, every light an emulated NEMA controller derived from
+  its SUMO program, driven through the middleware (virtual time, ``measure`` off as for training);
+- sumo-rl: its multi-agent ``SumoEnvironment`` on the same network and demand, matched to hils' decisions and
+  timings, run as :mod:`harness.reference.sumo_rl_peer` says (its PettingZoo wrapper does not start with pettingzoo
+  1.27).
+
+Both at 0.25 s SUMO steps, a decision every RESCO step_length (10 s, 5 s on arterial4x4), a seeded random policy
+(each light's own action space), one simulated hour from RESCO's begin. Each side's wall time from reset to the
+episode's end is split into SUMO's steps (libsumo's ``simulationStep``, timed on both) and the environment's own
+work, per simulated hour and, for the own work, per simulated controller-hour; vehicles inserted and arrived are
+shown, since the same demand under other signals is other traffic that SUMO steps at its own cost.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from functools import partial
+from typing import Any
+
+from harness.bench.seeds import alternate, compare_episodes, episode_figures, time_sumo_steps
+from harness.reference.sumo_rl_peer import HOW_IT_RUNS
+from harness.reference.sumo_rl_peer import episode as sumo_rl_episode
+
+EPISODE_S = 3600.0
+DEFAULT_SCENARIOS = ("grid4x4", "cologne8")
+
+
+def hils_episode(seed: int, *, scenario: str, duration: float = EPISODE_S) -> dict[str, Any]:
+    """One episode of hils' PettingZoo environment on RESCO's ``scenario`` with a seeded random policy."""
+    import hils.envs
+
+    sumo_s = time_sumo_steps()
+    env = hils.envs.parallel_env(scenario=f"resco:{scenario}", action_type="selection", episode_length=duration)
+    started = time.perf_counter()
+    env.reset(seed=seed)
+    for agent in env.possible_agents:
+        env.action_space(agent).seed(seed)
+    steps = 0
+    while env.agents:
+        env.step({agent: env.action_space(agent).sample() for agent in env.agents})
+        steps += 1
+    wall = time.perf_counter() - started
+    traffic = env.testbed.traffic
+    env.close()
+    return {"steps": steps, "wall_s": wall, "sumo_s": sumo_s[0], "inserted": traffic.departed,
+            "arrived": traffic.arrived}
+
+
+def measure_resco(scenarios: Sequence[str], seeds: Sequence[int], duration: float = EPISODE_S, *,
+                  progress: bool = True) -> dict[str, Any]:
+    """Per scenario: every run, each side's figures over the seeds, and hils' ratio to sumo-rl seed by seed."""
+    from hils.protocol import resco
+
+    out: dict[str, Any] = {"episode_s": duration, "sumo_step_s": 0.25, "policy": "random (seeded)",
+                           "seeds": list(seeds), "peer": HOW_IT_RUNS, "scenarios": {}}
+    for name in scenarios:
+        controllers = len(resco.load(name).intersections)
+        runs = alternate(seeds, {"hils": partial(hils_episode, scenario=name, duration=duration),
+                                 "sumo_rl": partial(sumo_rl_episode, scenario=name, duration=duration)},
+                         progress=progress)
+        sides = {side: episode_figures(by_seed, duration, controllers) for side, by_seed in runs.items()}
+        out["scenarios"][name] = {"controllers": controllers, "decision_s": resco.MAPS[name].decision_interval,
+                                  "runs": runs, "sides": sides,
+                                  "hils_to_sumo_rl": compare_episodes(sides["hils"], sides["sumo_rl"])}
+    return out

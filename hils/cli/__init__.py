@@ -1,0 +1,1 @@
+"""The `hils` command: its parser and subcommands (run, sweep, compare), the status line."""

@@ -1,0 +1,136 @@
+"""The poll grid and the shared signal cache.
+
+The poller sends one GET of reds, yellows and greens per period; the middleware hands each poll's fate
+to the manager, which counts failures, discards late answers and says what the signal state is now
+(:class:`SignalCache`, which every other part reads: SUMO to show the lights, the agents).
+
+Rules of this module:
+
+- Polls go out on a fixed grid (:class:`hils.protocol.timegrid.Grid`), whatever the answers do: a poll that has
+  not been answered does not hold the next one back, so a lost datagram costs one poll, not tau_udp of
+  them. Requests overlap, each with its own poll id (the transport's sessions keep them apart).
+- The poller decides nothing about what an answer or a failure means: it sends (``send(poll_id)``) and
+  counts the polls of its grid. While halted (the manager in TIMEOUT) no poll goes out; polling resumes
+  on a new grid from the moment it is resumed.
+- On virtual time's fast path (:mod:`hils.shell.fastpath`, rule 2) a poll that cannot see a change is counted on
+  the grid (its poll id used up) and not sent, and the poller sleeps until one could or polling halts; the
+  next poll on the grid then goes out.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Generator
+from dataclasses import dataclass
+from typing import Any
+
+import simpy
+
+from hils.protocol.ntcip import SignalState
+from hils.protocol.timegrid import Grid
+from hils.shell.fastpath import QuietPolls
+
+__all__ = ["Poller", "SignalCache", "Snapshot"]
+
+Subscriber = Callable[["Snapshot", bool], None]
+
+
+@dataclass(frozen=True, slots=True)
+class Snapshot:
+    """The latest signal state, when it was read, and which poll read it."""
+
+    state: SignalState
+    t: float
+    seq: int
+
+
+class SignalCache:
+    """Latest signal state; notifies subscribers when it changes."""
+
+    def __init__(self) -> None:
+        self.snapshot: Snapshot | None = None
+        self._subscribers: list[Subscriber] = []
+
+    @property
+    def state(self) -> SignalState | None:
+        return self.snapshot.state if self.snapshot else None
+
+    def subscribe(self, fn: Subscriber, *, every_poll: bool = False) -> None:
+        """Call ``fn(snapshot, changed)`` on changes, or on every update with ``every_poll``."""
+        self._subscribers.append(fn if every_poll else (lambda snap, changed: changed and fn(snap, changed)))
+
+    def update(self, state: SignalState, t: float, seq: int) -> bool:
+        changed = self.snapshot is None or state != self.snapshot.state
+        self.snapshot = Snapshot(state, t, seq)
+        for fn in self._subscribers:
+            fn(self.snapshot, changed)
+        return changed
+
+
+class Poller:
+    """The poll grid: ``send(poll_id)`` once per period of ``rate_hz`` while not halted, leaving out on the fast
+    path (``quiet``) the polls that cannot see a change."""
+
+    def __init__(self, env: simpy.Environment, *, rate_hz: float, send: Callable[[int], None],
+                 quiet: QuietPolls | None = None) -> None:
+        self.env = env
+        self.period = 1.0 / rate_hz
+        self.send = send
+        self.quiet = quiet
+        self.polls = 0  # polls on the grid, sent or not
+        self.elided = 0  # polls not sent: they could not see a change
+        self.halted = False
+        self._resume = env.event()
+        self._halting: simpy.Event | None = None  # set during an elided sleep; wakes it when polling halts
+        self._grid, self._k = Grid(env.now, self.period), 0  # poll k is due at the grid's instant k
+
+    @property
+    def counts(self) -> dict[str, int]:
+        """Polls on the grid so far and those not sent (``elided``: they could not see a change)."""
+        if self._halting is not None:
+            self._pass_quiet_polls()
+        return {"polls": self.polls, "elided": self.elided}
+
+    def halt(self) -> None:
+        self.halted = True
+        if self.quiet is not None:
+            self.quiet.forget()
+        if self._halting is not None and not self._halting.triggered:
+            self._halting.succeed()
+
+    def resume(self) -> None:
+        self.halted = False
+        if not self._resume.triggered:
+            self._resume.succeed()
+
+    def run(self) -> Generator[simpy.Event, Any, None]:
+        env = self.env
+        self._grid, self._k = Grid(env.now, self.period), 0
+        while True:
+            if self.halted:
+                self._resume = env.event()
+                yield self._resume
+                self._grid, self._k = Grid(env.now, self.period), 0
+            self.polls += 1
+            if self.quiet is not None and self.quiet.leaves_out(self.polls):
+                self.elided += 1
+            else:
+                self.send(self.polls)
+            self._k += 1
+            wake = self.quiet.asleep() if self.quiet is not None else None
+            if wake is not None:
+                # Every poll until then would be this one again: sleep; the polls due meanwhile are counted as
+                # they pass (_pass_quiet_polls).
+                self._halting = env.event()
+                yield env.any_of([wake, self._halting])
+                self._pass_quiet_polls()
+                self._halting = None
+                if self.halted:
+                    continue
+            yield env.timeout(self._grid.delay(self._k, env.now))
+
+    def _pass_quiet_polls(self) -> None:
+        """Count, as elided, the polls of the grid due before now that an elided sleep passed over."""
+        due = self._grid.first_at_or_after(self.env.now, self._k)
+        self.polls += due - self._k
+        self.elided += due - self._k
+        self._k = due

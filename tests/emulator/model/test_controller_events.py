@@ -1,0 +1,161 @@
+"""The event-driven controller is the ticked one: identical timelines and identical reads.
+
+:meth:`Controller.advance` skips the ticks that :meth:`Controller.quiet_ticks` proves change nothing
+but counters. Here one controller steps every tick and its twin advances over the same stretches,
+for random configs (every phase option, start-up flash, backup time, the controller's delays) and
+random inputs (every control object, Max2, detectors, retimed phases, backup time, power cycles):
+after every stretch the two must agree on everything a read can see and on their whole working
+memory, and their interval timelines must be the same, tick for tick.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from emulator.model.controller import Change, Controller
+from emulator.model.delays import STATUS_ATTRIBUTES, DelayedController
+from hils.protocol import config as config_mod
+from hils.protocol.config import EmulatorParams, IntersectionConfig
+from hils.protocol.ntcip import ControlColumn
+from tests.emulator.model.test_controller_properties import ALL_PHASES, configs, phase_sets
+
+SETTINGS = settings(max_examples=150, deadline=None)
+TIMING_FIELDS = ("min_green", "max1", "max2", "passage", "walk", "ped_clear", "yellow", "red_clear", "red_revert")
+
+
+@st.composite
+def units(draw: st.DrawFn) -> IntersectionConfig:
+    """A random config with a start-up flash, a backup time and the controller's delays drawn too, half the
+    time a coordination plan (patterns, modes, maybe a time-of-day change), half the time overlaps and half the
+    time preempts."""
+    cfg = draw(configs(coordinated=draw(st.booleans()), overlapped=draw(st.booleans()),
+                       preempted=draw(st.booleans())))
+    return dataclasses.replace(
+        cfg, startup_flash=draw(st.sampled_from([0, 0, 1, 3])),
+        middleware=dataclasses.replace(cfg.middleware, backup_time=draw(st.sampled_from([0, 2, 5, 30]))),
+        emulator=EmulatorParams(call_processing_ticks=draw(st.integers(0, 3)),
+                                status_update_ticks=draw(st.integers(0, 3))))
+
+
+inputs = st.one_of(
+    st.tuples(st.just("ticks"), st.integers(1, 600)),
+    st.tuples(st.just("ticks"), st.integers(1, 5)),
+    st.tuples(st.sampled_from(list(ControlColumn) + [ControlColumn.VEH_CALL] * 3), phase_sets),
+    st.tuples(st.just("max2"), st.frozensets(st.sampled_from([1, 2]))),
+    st.tuples(st.just("detectors"), phase_sets),
+    st.tuples(st.just("retime"), st.tuples(st.sampled_from(sorted(ALL_PHASES)), st.sampled_from(TIMING_FIELDS),
+                                           st.integers(0, 80))),
+    st.tuples(st.just("backup_time"), st.sampled_from([0, 1, 3, 30])),
+    st.tuples(st.just("power_cycle"), st.none()),
+    st.tuples(st.just("pattern"), st.sampled_from([0, 1, 2, 254, 255])),
+    st.tuples(st.just("preempt"), st.frozensets(st.sampled_from([1, 2]))),
+    st.tuples(st.just("ticks"), st.integers(600, 2400)),
+)
+
+
+def apply(unit: Controller | DelayedController, op: str, value: object, *, ticked: bool) -> None:
+    """One input, or a stretch of ticks: stepped one by one, or advanced over."""
+    if op == "ticks":
+        if ticked:
+            for _ in range(value):
+                unit.step()
+        else:
+            unit.advance(value)
+    elif op == "max2":
+        unit.set_max2(value)
+    elif op == "detectors":
+        unit.set_actuations(value)
+    elif op == "retime":
+        unit.set_timing(*value)
+    elif op == "backup_time":
+        unit.set_backup_time(value)
+    elif op == "power_cycle":
+        unit.reset()
+    elif op == "pattern":
+        unit.set_pattern_control(value)
+    elif op == "preempt":
+        unit.set_preempt_control(value)
+    else:
+        unit.set_control(op, value)
+
+
+def readable(unit: Controller | DelayedController) -> dict[str, object]:
+    """What the NTCIP agent can read of the unit (status as the agent answers it)."""
+    out = {name: getattr(unit, name) for name in STATUS_ATTRIBUTES}
+    out |= {"control": dict(unit.control), "control_status": unit.control_status, "flash": unit.flash_status,
+            "max2": unit.max2_rings, "actuations": unit.actuations, "backup_time": unit.backup_time,
+            "status_version": unit.status_version}
+    return out
+
+
+def memory(c: Controller) -> dict[str, object]:
+    """The controller's whole working memory."""
+    co = c.coordinator
+    return {"tick": c.tick, "rings": [dataclasses.astuple(r) for r in c.rings], "group": c.group,
+            "since_set": c._since_set, "yellow_end": dict(c._yellow_end), "ped_calls": c.ped_calls,
+            "coordination": (co.clock, co.command, co.local, co.running, co.timer, co.budget, co.free_status,
+                             co.replan),
+            "overlaps": (dict(c.overlaps.shown), dict(c.overlaps.ticks)),
+            "preempts": (c.preemptor.discrete(), dict(c.preemptor.presence), dict(c.preemptor.waited),
+                         dict(c.preemptor.since_entry), dict(c.preemptor.stage))}
+
+
+def twins(config: IntersectionConfig, delayed: bool) -> list[tuple[Controller | DelayedController, list[Change]]]:
+    out = []
+    for _ in range(2):
+        timeline: list[Change] = []
+        c = Controller(config, on_change=timeline.append)
+        out.append((DelayedController(c, config.emulator) if delayed else c, timeline))
+    return out
+
+
+def check_equal(config: IntersectionConfig, ops: list[tuple[str, object]], *, delayed: bool) -> None:
+    (ticked, ticked_timeline), (evented, evented_timeline) = twins(config, delayed)
+    for op, value in ops:
+        apply(ticked, op, value, ticked=True)
+        apply(evented, op, value, ticked=False)
+        assert readable(evented) == readable(ticked), (op, value)
+        bare = [u.controller if delayed else u for u in (ticked, evented)]
+        assert memory(bare[1]) == memory(bare[0]), (op, value)
+        assert evented_timeline == ticked_timeline
+
+
+@SETTINGS
+@given(config=units(), ops=st.lists(inputs, max_size=25))
+def test_advance_is_stepping_every_tick(config: IntersectionConfig, ops: list[tuple[str, object]]) -> None:
+    check_equal(config, ops, delayed=False)
+
+
+@pytest.mark.slow
+@SETTINGS
+@given(config=units(), ops=st.lists(inputs, max_size=25))
+def test_advance_behind_the_delays_is_stepping_every_tick(config: IntersectionConfig,
+                                                          ops: list[tuple[str, object]]) -> None:
+    check_equal(config, ops, delayed=True)
+
+
+class CountingController(Controller):
+    """Counts the steps it really runs."""
+
+    steps = 0
+
+    def step(self) -> None:
+        self.steps += 1
+        super().step()
+
+
+def test_quiet_time_is_skipped() -> None:
+    """The paper's intersection resting in green, then one transition: a handful of real steps, not one per tick."""
+    c = CountingController(config_mod.load())
+    c.advance(100)
+    assert c.greens == {2, 6} and c.quiet_ticks() is None  # resting in green on the start-up pair, nothing called
+    assert c.steps <= 4  # the first ticks, and minimum green reached
+    c.set_control(ControlColumn.VEH_CALL, {4, 8})
+    c.steps = 0
+    c.advance(100)  # yellow 3 s, red clearance 2 s, then minimum green of 4 and 8, resting there
+    assert c.greens == {4, 8} and c.tick == 200
+    assert c.steps <= 12

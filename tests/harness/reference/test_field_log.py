@@ -1,0 +1,93 @@
+"""A controller config written from a controller's own hi-res log: on a log whose config is known (the emulator's),
+and on the atspm package's real field log, whose plan the log's own events show."""
+
+from __future__ import annotations
+
+import random
+import subprocess
+import sys
+from datetime import datetime
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from emulator.model.controller import Controller
+from emulator.model.datalogger import DataLogger
+from harness.reference import field_log
+from harness.reference.field_log import FieldLogError, Row
+from tests.emulator.model.test_hires import config_with
+
+atspm = pytest.importorskip("atspm")  # the test extra installs it: never skipped in CI
+SAMPLE = Path(atspm.__file__).parent / "data" / "sample_raw_data.parquet"
+
+
+def test_the_emulators_own_log_gives_back_its_config() -> None:
+    """Passage 2 s, minimum 3 s, yellow 3 s, red clearance 2 s, walk 4 s and pedestrian clearance 5 s on the
+    throughs, detector n calling phase n, push buttons on 2, 4, 6 and 8: read back from twenty minutes of log."""
+    cfg = config_with()
+    c = Controller(cfg, start=datetime(2024, 5, 1, 8))
+    log = DataLogger(c)
+    rng = random.Random(5)
+    on: set[int] = set()
+    for k in range(12_000):
+        on = {d for d in cfg.detectors if (d in on and rng.random() > 0.1) or (d not in on and rng.random() < 0.01)}
+        c.set_actuations(on)
+        c.set_ped_actuations({p for p in (2, 4, 6, 8) if k % 600 == 37 * p})
+        c.step()
+    inferred = field_log.infer([Row(e.time, e.code, e.parameter) for e in log.events()], "own")
+    got = inferred.config()
+    assert got.rings == cfg.rings and [sorted(b) for b in got.barriers] == [sorted(b) for b in cfg.barriers]
+    for p in cfg.phases:
+        mine = got.phases[p]
+        assert (mine.yellow, mine.red_clear, mine.min_green, mine.passage) == (3.0, 2.0, 3.0, 2.0), p
+        if p % 2 == 0:
+            assert (mine.walk, mine.ped_clear) == (4.0, 5.0), p
+    assert got.detectors == cfg.detectors and got.ped_detectors == {2: 2, 4: 4, 6: 6, 8: 8}
+    assert got.coordination.pattern == "free" or not got.coordination.patterns
+    assert got.emulator.start == datetime(2024, 5, 1, 8)
+
+
+def test_the_field_logs_plan_is_read_from_its_events() -> None:
+    inferred = field_log.infer(field_log.load(SAMPLE), "atspm sample 1136")
+    cfg = inferred.config()
+    assert cfg.rings == ((2, 4), (6, 5, 8))  # 5 lags 6; ring 1 has no phase of its own beside 8
+    plan = cfg.coordination.patterns[1]
+    # The local zeros (150/5) are 75 s apart at 45 s of the time of day modulo 75; 6 and 5 are forced off 24.5 s
+    # and 43.5 s after it and 8 ends with the cycle, each split ending its clearance (4 s + 1.5 s) later.
+    assert (plan.cycle, plan.offset, tuple(plan.coord_phases)) == (75, 45, (2, 6))
+    assert dict(plan.splits) == {2: 49, 4: 26, 5: 19, 6: 30, 8: 26}
+    assert all((ph.yellow, ph.red_clear) == (4.0, 1.5) for ph in cfg.phases.values())
+    assert {p: cfg.phases[p].min_green for p in (2, 5, 6, 8)} == {2: 10, 5: 4, 6: 10, 8: 6}
+    assert (cfg.phases[6].walk, cfg.phases[6].ped_clear) == (8, 26)
+    calls = {d: p for d, p in cfg.detectors.items() if p}
+    assert calls == {2: 2, 8: 8, 9: 8, 15: 5, 16: 6, 17: 6, 18: 6, 22: 8, 23: 8, 24: 8, 25: 8, 26: 8, 27: 5}
+    assert cfg.ped_detectors == {6: 6}
+    assert [o.included for o in cfg.overlaps.values()] == [(6,)]
+    said = " ".join(inferred.guessed)
+    assert "phase 4: not in the log" in said and "overlap E (5): not modelled" in said
+
+
+def test_a_log_that_cannot_make_a_config_is_refused(tmp_path: Path) -> None:
+    with pytest.raises(FieldLogError, match="at least two"):
+        field_log.infer([Row(datetime(2024, 1, 1), 82, 3)])
+    two = tmp_path / "two.parquet"
+    frame = pd.read_parquet(SAMPLE).head(100)
+    pd.concat([frame, frame.assign(DeviceId=7)]).to_parquet(two)
+    with pytest.raises(FieldLogError, match="holds 2 controllers; pick one: --device 1136, 7"):
+        field_log.load(two)
+    bad = tmp_path / "bad.csv"
+    bad.write_text("a,b\n1,2\n")
+    with pytest.raises(FieldLogError, match=r"cannot be read as an ATSPM log.*TimeStamp, DeviceId, EventId, Parameter"):
+        field_log.load(bad)
+
+
+def test_hils_replay_infer_only_from_another_folder(tmp_path: Path) -> None:
+    done = subprocess.run([sys.executable, "-m", "hils", "replay", str(SAMPLE), "--infer-only", "--out", "out"],
+                          cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert "Read from the log:" in done.stdout and "Guessed:" in done.stdout
+    assert (tmp_path / "out" / "inferred.toml").exists()
+    wrong = subprocess.run([sys.executable, "-m", "hils", "replay", "nothing.parquet", "--infer-only"],
+                           cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    assert wrong.returncode == 2 and "nothing.parquet" in wrong.stderr and "Traceback" not in wrong.stderr

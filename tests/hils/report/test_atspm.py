@@ -1,0 +1,117 @@
+"""ATSPM measures of a run, by the atspm package, on runs whose answer is known; and the run folder's record."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from collections import Counter
+from pathlib import Path
+
+import pytest
+
+from emulator.model.controller import Controller
+from emulator.model.datalogger import DataLogger
+from hils.protocol import hires
+from hils.protocol.hires import EventCode
+from hils.report import atspm
+from hils.sweep import grid as sweep
+from tests.emulator.model.test_hires import config_with
+
+E = EventCode
+pytest.importorskip("atspm")  # the test extra installs it (hils[atspm]): never skipped in CI
+
+def fixed_time_log(failing: set[int], cycles: int = 8) -> tuple[list[hires.Event], dict[str, int]]:
+    """A fixed-time controller (every phase on maximum recall: 20 s greens, 3 s yellow, 2 s red clearance, a 100 s
+    cycle) whose detector 4 is occupied from just after phase 4's green begins until 8 s into its red in the
+    cycles ``failing``, and in the others actuated for 0.5 s every 4 s of green only. Returns the log and what the
+    answer must be."""
+    c = Controller(config_with(timing='recall = "max"'))
+    log = DataLogger(c)
+    expect = Counter()
+    cycle = 0
+    while cycle < cycles:
+        while 4 not in c.greens:
+            c.step()
+        on = cycle in failing
+        for k in range(200):  # phase 4's 20 s green, tick by tick
+            if on:
+                c.set_actuations({4} if k >= 1 else set())
+            else:
+                c.set_actuations({4} if k % 40 in range(1, 6) else set())
+            if (on and k == 1) or (not on and k % 40 == 1):
+                expect["arrivals"] += 1
+                expect["on_green"] += 1
+            c.step()
+        for _ in range(50 + 80 if on else 50):  # yellow and red clearance, and 8 s of red with a queue
+            c.step()
+        c.set_actuations(set())
+        cycle += 1
+    expect["split_failures"] = len(failing)
+    return log.events(), expect
+
+
+def test_split_failures_arrivals_and_terminations_of_a_fixed_time_plan() -> None:
+    events, expect = fixed_time_log({2, 3, 6})
+    m = atspm.measures(hires.rows({7: events}), {7: config_with()})
+    assert m.missing is None
+    totals = m.totals()[7]
+    assert totals[4]["split_failures"] == expect["split_failures"] == 3
+    assert all(t["split_failures"] == 0 for p, t in totals.items() if p != 4)
+    assert totals[4]["arrivals"] == totals[4]["actuations"] == expect["arrivals"]
+    assert totals[4]["arrivals_on_green"] == expect["on_green"]
+    greens = Counter(e.parameter for e in events if e.code == E.PHASE_BEGIN_GREEN)
+    yellows = Counter(e.parameter for e in events if e.code == E.PHASE_BEGIN_YELLOW)
+    for p, t in totals.items():  # every green maxed out: 20 s of maximum recall against recalled phases
+        assert (t["max_outs"], t["gap_outs"], t["force_offs"]) == (yellows[p], 0, 0), p
+        assert greens[p] >= yellows[p]
+    assert m.run_figures()["split_failures"] == 3
+    rows = {(r["TimeStamp"], r["Phase"]) for r in m.rows}
+    assert len({t for t, _ in rows}) == 1 + (events[-1].time - events[0].time).seconds // 900  # 15-minute bins
+
+
+def test_without_the_package_the_measures_say_so(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setitem(sys.modules, "atspm", None)
+    m = atspm.measures([], {1: config_with()})
+    assert m.rows == () and "pip install 'hils[atspm]'" in m.missing
+
+
+def test_a_run_keeps_its_controllers_record(tmp_path: Path) -> None:
+    """`hils run` from another folder: the hi-res log in the ATSPM layout, the measures and both charts."""
+    out = tmp_path / "run"
+    done = subprocess.run([sys.executable, "-m", "hils", "run", "--agent", "actuated", "--duration", "600",
+                           "--no-progress", "--out", str(out)], capture_output=True, text=True, timeout=300,
+                          cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    for name in ("hires.parquet", "atspm.csv", "coordination_diagram.svg", "split_monitor.svg"):
+        assert (out / name).stat().st_size > 0, name
+    summary = json.loads((out / "summary.json").read_text())
+    record = summary["record"]
+    assert record["devices"] == {"1": "C"} and record["file"] == "hires.parquet"
+    # what sweeps and `hils compare` show beside SUMO's delays
+    figures = sweep.figures(summary)
+    assert figures["atspm_split_failures"] == record["atspm"]["split_failures"] is not None
+    assert figures["atspm_percent_on_green"] == record["atspm"]["percent_on_green"]
+    assert record["atspm"]["bin_minutes"] == 15 and set(record["atspm"]["per_phase"]["1"]) == {str(p)
+                                                                                             for p in range(1, 9)}
+    assert "ATSPM (15-minute bins in atspm.csv)" in done.stdout and "split failures" in done.stdout
+    import pandas as pd
+
+    frame = pd.read_parquet(out / "hires.parquet")
+    # the actuated controller's detectors, as SUMO actuated them, are in its record
+    actuations = sum(t["actuations"] for t in record["atspm"]["per_phase"]["1"].values())
+    assert actuations == (frame.EventId == E.DETECTOR_ON).sum() > 0
+
+
+def test_a_run_of_several_controllers_names_one_device_each(tmp_path: Path) -> None:
+    out = tmp_path / "corridor"
+    done = subprocess.run([sys.executable, "-m", "hils", "run", "--scenario", "corridor", "--agent", "actuated",
+                           "--duration", "300", "--no-progress", "--out", str(out)], capture_output=True, text=True,
+                          timeout=300, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    record = json.loads((out / "summary.json").read_text())["record"]
+    assert record["devices"] == {"1": "J1", "2": "J2", "3": "J3", "4": "J4"}
+    import pandas as pd
+
+    assert sorted(pd.read_parquet(out / "hires.parquet").DeviceId.unique()) == [1, 2, 3, 4]
+    assert all((out / tls / "split_monitor.svg").exists() for tls in ("J1", "J2", "J3", "J4"))

@@ -1,0 +1,78 @@
+"""Pictures that do not mislead: the timeline stops at the run's end, queues keep their last bin."""
+
+from __future__ import annotations
+
+from xml.etree import ElementTree
+
+import pytest
+
+from hils.protocol import config as config_mod
+from hils.report import plots
+from hils.shell.events import Kind
+
+CFG = config_mod.load()
+SVG = "{http://www.w3.org/2000/svg}"
+
+
+def polls(until: float, period: float = 0.1) -> list[dict]:
+    out = []
+    for i in range(round(until / period) + 1):
+        t = i * period
+        greens = [2, 6] if (t // 20) % 2 == 0 else [4, 8]
+        out.append({"kind": Kind.POLL, "t": t, "greens": greens, "yellows": []})
+    return out
+
+
+def test_the_timeline_never_draws_past_the_end_of_the_run(tmp_path):
+    records = [*polls(50.0), {"kind": Kind.RUN_ENDED, "t": 50.0}]
+    start, end = plots.timeline_window(records, 0.0, 180.0)
+    assert (start, end) == (0.0, 50.0)
+    spans = plots.signal_intervals(records, CFG.phase_numbers, start, end)
+    assert max(t1 for row in spans.values() for _, t1, _ in row) == 50.0
+    assert plots.timeline_window(records, 100.0, 180.0) == (0.0, 50.0)  # a window after the end shows the end
+    svg = ElementTree.parse(plots.signal_timeline(records, CFG, tmp_path / "t.svg", start=0, end=180)).getroot()
+    labels = [t.text for t in svg.iter(f"{SVG}text")]
+    assert [plots.movement_label(CFG, p) for p in CFG.phase_numbers] == [t for t in labels if t and t[0].isdigit()
+                                                                        and "  " in t]
+    colours = {r.get("fill") for r in svg.iter(f"{SVG}rect")}
+    assert {plots.COLORS["G"], plots.COLORS["r"]} <= colours
+    right = max(float(r.get("x")) + float(r.get("width")) for r in svg.iter(f"{SVG}rect")
+                if r.get("fill") in plots.COLORS.values())
+    axis = next(r for r in svg.iter(f"{SVG}rect") if r.get("fill") == "none")
+    assert right == pytest.approx(float(axis.get("x")) + float(axis.get("width")))  # 50 s: the axis ends there
+
+
+def test_rows_are_grouped_by_ring_and_barrier_and_labelled_with_their_movement():
+    rows = plots.phase_rows(CFG)
+    assert [p for p, _, _ in rows] == [1, 2, 3, 4, 5, 6, 7, 8]
+    assert [(ring, barrier) for _, ring, barrier in rows] == [(1, 1), (1, 1), (1, 2), (1, 2),
+                                                              (2, 1), (2, 1), (2, 2), (2, 2)]
+    assert plots.movement_label(CFG, 2) == "2  east through"
+
+
+def test_a_partial_last_bin_joins_the_one_before_instead_of_dropping(tmp_path):
+    samples = [(float(t), {"west": 10 if t < 3600 else 1}) for t in range(0, 3601)]
+    edges, tops = plots.queue_bins(samples, 60.0)
+    assert edges[0] == 0.0 and edges[-1] == 3600.0 and len(edges) == 61
+    assert tops["west"] == [10] * 60
+    svg = ElementTree.parse(plots.queues(samples, tmp_path / "q.svg", spillback={"west": [120.0, 3599.0]})).getroot()
+    lines = [pl for pl in svg.iter(f"{SVG}polyline") if pl.get("fill") == "none"]
+    marks = [pl for pl in svg.iter(f"{SVG}polyline") if pl.get("fill") != "none"]
+    assert len(lines) == 1 and len(lines[0].get("points").split()) == 2 * 60  # one step per bin
+    assert len(marks) == 2  # the bins with a full lane: the third minute's and the last
+    assert "west" in [t.text for t in svg.iter(f"{SVG}text")]
+
+
+def test_the_timeline_draws_no_data_where_the_state_was_not_verified_never_the_last_state(tmp_path):
+    records = [{"kind": Kind.POLL, "t": 0.0, "greens": [4, 8], "yellows": []},
+               {"kind": Kind.POLL_FAILED, "t": 12.0, "consecutive": 1},
+               {"kind": Kind.TIMEOUT_ENTERED, "t": 12.4, "reason": "communication"},
+               {"kind": Kind.POLL, "t": 17.0, "greens": [4, 8], "yellows": []},
+               {"kind": Kind.POLL_FAILED, "t": 20.0, "consecutive": 0},  # overtaken by a newer answer: no gap
+               {"kind": Kind.RUN_ENDED, "t": 30.0}]
+    spans = plots.signal_intervals(records, CFG.phase_numbers, 0.0, 30.0)
+    assert spans[4] == [(0.0, 12.0, "G"), (12.0, 17.0, plots.NO_DATA), (17.0, 30.0, "G")]
+    assert spans[1] == [(0.0, 12.0, "r"), (12.0, 17.0, plots.NO_DATA), (17.0, 30.0, "r")]
+    svg = ElementTree.parse(plots.signal_timeline(records, CFG, tmp_path / "t.svg", start=0, end=30)).getroot()
+    assert len([r for r in svg.iter(f"{SVG}rect") if r.get("fill") == "url(#no-data)"]) == len(CFG.phase_numbers)
+    assert [t.text for t in svg.iter(f"{SVG}text")].count("no data") == len(CFG.phase_numbers)

@@ -1,0 +1,94 @@
+"""`hils sweep` and `hils compare`: a grid of runs on a process pool and on a local Ray instance."""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from hils.sweep.compare import Estimate, aggregate
+from hils.sweep.grid import Cell, SweepError, grid, parse_seeds, run_grid, scenario_arguments
+
+SHORT = 120.0
+
+
+def test_a_grid_is_every_combination_with_each_agents_own_action_type() -> None:
+    cells = grid(["max-pressure", "webster"], [0, 1], ["four_leg", "four_phase"], duration=SHORT)
+    assert len(cells) == 8 and len({c.name for c in cells}) == 8
+    assert {c.action_type for c in cells if c.agent == "webster"} == {"duration"}
+    assert {c.action_type for c in cells if c.agent == "max-pressure"} == {"selection"}
+    assert grid(["random"], [3], action_type="switch")[0] == Cell("random", 3, "four_leg", "switch", 3600.0)
+    assert parse_seeds("0-2,7") == [0, 1, 2, 7]
+
+
+@pytest.mark.parametrize(("call", "message"), [
+    (lambda: parse_seeds("a-b"), "allowed: integers and ranges"),
+    (lambda: grid([], [0]), "at least one agent"),
+    (lambda: scenario_arguments("nowhere"),
+     "allowed: four_leg, four_phase, corridor, grid4x4, resco:grid4x4, .* or CONFIG.toml"),
+])
+def test_a_bad_grid_is_refused_saying_what_is_allowed(call, message: str) -> None:
+    with pytest.raises(SweepError, match=message):
+        call()
+
+
+def test_the_confidence_interval_is_students_t_over_the_seeds() -> None:
+    e = Estimate.of([1.0, 2.0, 3.0])
+    assert e.mean == 2.0 and e.n == 3 and math.isclose(e.half_width, 4.303 * 1.0 / math.sqrt(3))
+    assert Estimate.of([5.0]).half_width is None and Estimate.of([]).mean is None
+
+
+@pytest.fixture(scope="module")
+def pooled(tmp_path_factory: pytest.TempPathFactory):
+    cells = grid(["max-pressure", "webster", "no.such:Agent"], [0, 1], duration=SHORT)
+    root = tmp_path_factory.mktemp("pool")
+    return cells, run_grid(cells, root, workers=2)
+
+
+def test_a_sweep_on_a_process_pool_keeps_every_cell_in_grid_order(pooled) -> None:
+    cells, results = pooled
+    assert [r.cell for r in results] == cells
+    ok = [r for r in results if r.cell.agent != "no.such:Agent"]
+    assert all(r.ok and r.figures["arrived"] > 0 for r in ok)
+    for r in ok:  # each cell is a whole `hils run` folder
+        assert {"events.jsonl", "summary.json", "console.txt"} <= {p.name for p in Path(r.folder).iterdir()}
+    failed = [r for r in results if r.cell.agent == "no.such:Agent"]
+    assert failed and all(not r.ok and "no.such" in r.error for r in failed)
+    # Seeds matter: the two seeds of an agent ran different traffic.
+    mp = [r.figures["arrived"] for r in ok if r.cell.agent == "max-pressure"]
+    assert mp[0] != mp[1]
+    table = aggregate(results)
+    assert table["four_leg"]["max-pressure"]["mean_delay_s"].n == 2
+    assert table["four_leg"]["no.such:Agent"]["mean_delay_s"].n == 0
+
+
+@pytest.mark.slow
+def test_the_same_sweep_on_a_local_ray_instance_gives_the_same_results(pooled, tmp_path: Path) -> None:
+    cells, results = pooled
+    ok_cells = [c for c in cells if c.agent != "no.such:Agent"]
+    on_ray = run_grid(ok_cells, tmp_path, ray="local")
+    assert [r.cell for r in on_ray] == ok_cells
+    by_cell = {r.cell: r.figures for r in results}
+    for r in on_ray:
+        assert r.ok
+        same = {k: v for k, v in r.figures.items() if k != "wall_s"}
+        assert same == {k: v for k, v in by_cell[r.cell].items() if k != "wall_s"}, r.cell
+
+
+@pytest.mark.slow
+def test_compare_writes_its_table_and_plot_from_another_folder(tmp_path: Path) -> None:
+    done = subprocess.run([sys.executable, "-m", "hils", "compare", "--agents", "max-pressure,webster", "--seeds",
+                           "0-1", "--duration", f"{SHORT:g}", "--out", "cmp", "--no-progress", "--workers", "2"],
+                          cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert "95 % confidence interval over 2 seeds" in done.stdout
+    out = tmp_path / "cmp"
+    table = json.loads((out / "compare.json").read_text())["four_leg"]
+    assert set(table) == {"max-pressure", "webster"}
+    assert table["webster"]["mean_delay_s"]["n"] == 2 and table["webster"]["mean_delay_s"]["ci95_half_width"] > 0
+    assert (out / "compare.png").stat().st_size > 10_000 and (out / "sweep.csv").exists()
+    assert len(list(out.glob("four_leg-*-seed*"))) == 4
