@@ -1,13 +1,17 @@
 # `make test` installs what the tests need (Debian's net-snmp tools and chromium; the project with its test
 # extra in a fresh virtual environment, so that a dependency installed by hand on this machine can hide nothing)
 # and runs the whole suite in it.
-.PHONY: test deps lint
+.PHONY: test fast deps lint
 
 SUDO := $(shell [ "$$(id -u)" -eq 0 ] || echo sudo)
 VENV ?= .venv-test
 
 test: deps
 	$(VENV)/bin/python -m pytest -q
+
+# The fast loop: the environment `make test` made, without the wall-clock, browser and slow tests.
+fast:
+	$(VENV)/bin/python -m pytest -q -m "not wallclock and not browser and not slow"
 
 # net-snmp's snmpget/snmpset/snmpwalk are the independent client the emulator's agent is tested
 # against; snmpd is the independent agent the middleware's SNMP client is tested against.

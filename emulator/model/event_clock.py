@@ -6,7 +6,7 @@ Rules of this file
   (:meth:`emulator.model.controller.Controller.process`); the unit's own integer tick
   counter is k. No tick is ever dropped: skipped ticks are counted by
   ``unit.skip``, and the model's state after them is what stepping each would give
-  (``tests/test_controller_events.py``).
+  (``tests/emulator/model/test_controller_events.py``).
 - A real step runs at its own due time, on the environment, so everything that
   watches the model (interval changes, monitors) sees it when it happens.
 - Every write reaches the unit through :class:`ClockedSurface`: the unit is first
