@@ -1,7 +1,8 @@
 """Virtual time's fast path: what a run leaves out because nothing left out could change a result.
 
 One switch, a flag of the run: ``Testbed(fast_path=True)``, the default. ``fast_path=False`` is the reference
-every rule below is held to, record for record (``tests/hils/shell/test_poll_elision.py``, ``tests/hils/shell/test_fast_path.py``):
+every rule below is held to, record for record (``tests/hils/shell/test_poll_elision.py``,
+``tests/hils/shell/test_fast_path.py``):
 the controller stepped at every 0.1 s tick, every poll and every read-back sent, SUMO stepped one step at a
 time through the run's step cost. Nothing else chooses the path: no part compares functions or guesses from
 what it was handed, and wrapping a cost function or a transport in a fault leaves the path as the flag says

@@ -1,6 +1,7 @@
 """A wall-clock corridor run with the live dashboard, for test_dashboard_browser.py.
 
-``python tests/hils/dashboard/corridor_live_run.py RUN_DIR URL...``: one ``snmp://`` URL per traffic light of the corridor,
+``python tests/hils/dashboard/corridor_live_run.py RUN_DIR URL...``: one ``snmp://`` URL per traffic light of the
+corridor,
 in the scenario's order; prints the dashboard's URL, runs until SIGINT (or 600 s) with SUMO, the page's
 Recover button enabled and no automatic recovery. The fixed-cycle agent advances every controller at
 every decision (every 10 s, the first at once), so that every panel changes within seconds. It assembles
