@@ -90,8 +90,8 @@ __all__ = [
     "status_name",
 ]
 
-SCENARIO_KEYS = ("name", "description", "config", "scenario", "action_type", "agent", "duration", "seed",
-                 "recover_after", "middleware", "faults", "expect")
+_FILE_KEYS = ("name", "description", "config", "scenario", "action_type", "agent", "duration", "seed",
+              "recover_after", "middleware", "faults", "expect")
 
 
 def default_suite() -> Path:
@@ -270,7 +270,7 @@ def parse_fault_scenario(text: str, source: str = "<memory>", *, base: Path | No
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise FaultScenarioError(source, "<file>", f"is not valid TOML ({exc})") from None
-    r = TableReader(raw, "", source, SCENARIO_KEYS)
+    r = TableReader(raw, "", source, _FILE_KEYS)
     network = _network(r, base)
     intersections = dict(network.intersections) if network is not None else {TLS_ID: _config(r, base)}
     action_type = ActionType(r.string("action_type", ActionType.SELECTION.value, choices=[t.value for t in ActionType]))
