@@ -7,11 +7,14 @@
 - Inside hils the data flow of DESIGN.md is the arrows between its subpackages (:data:`ALLOWED`): the manager
   (``control``) knows only the protocol; the I/O shell carries out its effects; a run assembles shell, SUMO
   (``sim``), agents and reports; the environments, the dashboard, sweeps and the command line sit on a run.
+- The fault harness is a chain of jobs (:data:`FAULTS`), without a cycle: the faults, a scenario file's tables,
+  the fault types, the file's reader, the judge, the runner, the command line.
 """
 
 from __future__ import annotations
 
 import ast
+import graphlib
 import subprocess
 import sys
 from pathlib import Path
@@ -35,6 +38,18 @@ ALLOWED: dict[str, set[str]] = {
     "sweep": {"protocol", "control", "agents", "report", "cli"},
     "cli": {"protocol", "control", "shell", "sim", "agents", "report", "run", "dashboard", "sweep"},
     "data": set(),
+}
+
+#: Which modules of harness.faults each module of it may import.
+FAULTS: dict[str, set[str]] = {
+    "inject": set(),
+    "proxy": {"inject"},
+    "table": set(),
+    "registry": {"inject", "table"},
+    "reader": {"inject", "table", "registry"},
+    "judge": {"inject", "reader"},
+    "runner": {"inject", "reader", "judge"},
+    "cli": {"proxy", "reader", "judge", "runner"},
 }
 
 
@@ -99,3 +114,17 @@ def test_loading_the_emulator_loads_no_middleware() -> None:
     loaded = set(done.stdout.split())
     assert loaded and all(m == "hils" or m.startswith("hils.protocol") for m in loaded), \
         f"the emulator loaded {sorted(m for m in loaded if m != 'hils' and not m.startswith('hils.protocol'))}"
+
+
+def test_the_fault_harness_has_no_cycle() -> None:
+    graphlib.TopologicalSorter(FAULTS).prepare()  # raises CycleError, naming the cycle
+
+
+@pytest.mark.parametrize("path", [p for p in ours("harness/faults") if p.stem != "__init__"],
+                         ids=lambda p: str(p.relative_to(ROOT)))
+def test_each_module_of_the_fault_harness_imports_only_the_jobs_before_it(path: Path) -> None:
+    own = path.stem
+    assert own in FAULTS, f"{path.relative_to(ROOT)}: module {own!r} is not in FAULTS: place it"
+    imported = {m.split(".")[2] for m in imports_of(path) if m.startswith("harness.faults.")}
+    bad = imported - FAULTS[own]
+    assert not bad, f"{path.relative_to(ROOT)} imports {sorted(bad)} of harness.faults; allowed: {sorted(FAULTS[own])}"

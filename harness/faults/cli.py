@@ -19,8 +19,10 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from harness.faults.judge import FaultScenarioResult
 from harness.faults.proxy import register_proxy
-from harness.faults.scenarios import Scenario, ScenarioResult, default_suite, discover, load_scenario, run_scenario
+from harness.faults.reader import FaultScenario, default_suite, discover, load_fault_scenario
+from harness.faults.runner import run_fault_scenario
 from hils.report import jsonout
 from hils.sweep.grid import SweepError, parse_seeds
 
@@ -71,7 +73,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     register_proxy(commands)
 
 
-def _scenarios(paths: Sequence[str]) -> list[Scenario]:
+def _scenarios(paths: Sequence[str]) -> list[FaultScenario]:
     if not paths:
         suite = default_suite()
         if not suite.is_dir():
@@ -80,7 +82,7 @@ def _scenarios(paths: Sequence[str]) -> list[Scenario]:
     files = discover(paths)
     if not files:
         raise SystemExit(f"hils faults: no scenario files (*.toml) in {', '.join(paths)}")
-    return [load_scenario(f) for f in files]
+    return [load_fault_scenario(f) for f in files]
 
 
 def _list(args: argparse.Namespace) -> int:
@@ -103,7 +105,7 @@ def _run(args: argparse.Namespace) -> int:
     if args.seeds:
         scenarios = [dataclasses.replace(s, seed=seed) for s in scenarios for seed in args.seeds]
     t0 = time.perf_counter()
-    results: list[ScenarioResult] = []
+    results: list[FaultScenarioResult] = []
     # Faults make the controller model warn (backup mode after a suppressed keepalive, say): that is
     # the scenario working, and the report tells it. Only errors (an MMU trip) stay on the console.
     logging.getLogger("emulator").setLevel(max(logging.ERROR, logging.getLogger().level))
@@ -112,7 +114,7 @@ def _run(args: argparse.Namespace) -> int:
             bar.set_postfix_str(f"{scenario.name} seed {scenario.seed}")
             name = f"{scenario.name}-seed{scenario.seed}" if args.seeds else scenario.name
             log_path = None if args.log_dir is None else args.log_dir / f"{name}.jsonl"
-            results.append(run_scenario(scenario, log_path=log_path))
+            results.append(run_fault_scenario(scenario, log_path=log_path))
     wall = time.perf_counter() - t0
     print(render_table(results))
     for r in results:
@@ -129,7 +131,7 @@ def _seconds(t: float | None) -> str:
     return "-" if t is None else f"{t:.3f}"
 
 
-def _rows(results: Sequence[ScenarioResult]) -> list[list[str]]:
+def _rows(results: Sequence[FaultScenarioResult]) -> list[list[str]]:
     return [[r.scenario.name, str(r.scenario.seed), "PASS" if r.passed else "FAIL", _seconds(r.detection_s),
              _seconds(r.recovery_s), r.timeouts_text(), r.fired_text(), f"{r.wall_s:.2f}"] for r in results]
 
@@ -137,7 +139,7 @@ def _rows(results: Sequence[ScenarioResult]) -> list[list[str]]:
 HEADER = ["scenario", "seed", "result", "detection s", "recovery s", "timeouts", "faults fired", "wall s"]
 
 
-def render_table(results: Sequence[ScenarioResult]) -> str:
+def render_table(results: Sequence[FaultScenarioResult]) -> str:
     rows = [HEADER, *_rows(results)]
     widths = [max(len(row[i]) for row in rows) for i in range(len(HEADER))]
     lines = ["  ".join(cell.ljust(w) for cell, w in zip(row, widths, strict=True)).rstrip() for row in rows]
@@ -145,7 +147,7 @@ def render_table(results: Sequence[ScenarioResult]) -> str:
     return "\n".join(lines)
 
 
-def render_markdown(results: Sequence[ScenarioResult], wall_s: float) -> str:
+def render_markdown(results: Sequence[FaultScenarioResult], wall_s: float) -> str:
     failed = sum(not r.passed for r in results)
     out = [
         "# Fault scenarios",
@@ -187,7 +189,7 @@ def render_markdown(results: Sequence[ScenarioResult], wall_s: float) -> str:
     return "\n".join(out) + "\n"
 
 
-def _intersection_table(result: ScenarioResult) -> list[str]:
+def _intersection_table(result: FaultScenarioResult) -> list[str]:
     """One row per intersection of a run of several controllers: what acted on it and how it fared."""
     header = ["intersection", "result", "faults", "timeouts", "detection s", "recovery s", "transitions verified",
               "longest without one s"]
@@ -207,7 +209,7 @@ def _display(source: str) -> str:
     return str(path.relative_to(Path.cwd())) if path.is_relative_to(Path.cwd()) else source
 
 
-def write_reports(results: Sequence[ScenarioResult], report_dir: Path, wall_s: float) -> tuple[Path, Path]:
+def write_reports(results: Sequence[FaultScenarioResult], report_dir: Path, wall_s: float) -> tuple[Path, Path]:
     report_dir.mkdir(parents=True, exist_ok=True)
     md = report_dir / "faults.md"
     js = report_dir / "faults.json"

@@ -1,7 +1,7 @@
 """The shipped scenarios of many signals (corridor, grid4x4) and the scenario files that name a config per light.
 
-(The fault scenarios are in test_scenarios.py.) What a network should be is written down here from the
-junction names alone, independently of the geometry the phase map is derived from.
+(The fault scenarios are in tests/harness/faults/test_fault_scenarios.py.) What a network should be is written down
+here from the junction names alone, independently of the geometry the phase map is derived from.
 """
 
 from __future__ import annotations

@@ -10,7 +10,10 @@ from pathlib import Path
 import pytest
 
 from harness.faults.inject import FaultTarget, IndicationMonitor
-from harness.faults.scenarios import ScenarioError, default_suite, evaluate, load_scenario, parse_scenario, run_scenario
+from harness.faults.judge import evaluate
+from harness.faults.reader import default_suite, load_fault_scenario, parse_fault_scenario
+from harness.faults.runner import run_fault_scenario
+from harness.faults.table import FaultScenarioError
 from hils.cli.main import main
 from hils.run.testbed import run_spec
 from hils.shell.events import Kind
@@ -77,10 +80,10 @@ def test_the_shipped_suite_passes_at_every_seed_through_the_cli(tmp_path, capsys
     ("paper-drift", "drift", 1.0),  # the 5th consecutive slow step of 0.25 s
 ])
 def test_the_papers_three_errors_are_reproduced_with_its_parameters(name, reason, detection):
-    scenario = load_scenario(SUITE / f"{name}.toml")
+    scenario = load_fault_scenario(SUITE / f"{name}.toml")
     params = scenario.config.middleware
     assert (params.poll_hz, params.tau_udp, params.tau_trans, params.n_timeout, params.n_drift) == (10, 1, 10, 5, 5)
-    result = run_scenario(scenario)
+    result = run_fault_scenario(scenario)
     assert result.passed, [c.message for c in result.failures]
     assert [e.reason for e in result.episodes] == [reason]
     assert result.detection_s == pytest.approx(detection, abs=0.01)
@@ -89,7 +92,7 @@ def test_the_papers_three_errors_are_reproduced_with_its_parameters(name, reason
 def test_a_wrong_expectation_fails_saying_which_and_what_happened(tmp_path):
     path = tmp_path / "wrong.toml"
     path.write_text(LINK_DOWN.replace("detect_within = 5.2", "detect_within = 1.0"))
-    result = run_scenario(load_scenario(path))
+    result = run_fault_scenario(load_fault_scenario(path))
     assert not result.passed
     (failure,) = result.failures
     assert failure.expectation == "detect_within"
@@ -111,16 +114,16 @@ def test_a_scenario_expecting_no_timeout_fails_when_one_happens(tmp_path, capsys
 def test_a_fault_that_never_fires_fails_the_scenario(tmp_path):
     path = tmp_path / "late.toml"
     path.write_text(LINK_DOWN.replace("start = 20.0\nend = 35.0", "start = 90.0").split("[expect]")[0])
-    result = run_scenario(load_scenario(path))
+    result = run_fault_scenario(load_fault_scenario(path))
     (failure,) = result.failures
     assert failure.expectation == "fault link-down fired"
     assert "never fired" in failure.message
 
 
 def test_the_implicit_checks_catch_a_conflicting_command_and_a_lost_record():
-    scenario = parse_scenario(LINK_DOWN, "link.toml")
+    scenario = parse_fault_scenario(LINK_DOWN, "link.toml")
     faults = scenario.build_faults()
-    base = run_scenario(scenario)
+    base = run_fault_scenario(scenario)
     assert base.passed
     # Judge doctored records of a fresh run: one SET of conflicting phases, one record missing.
     monitors = []
@@ -142,10 +145,10 @@ def test_the_implicit_checks_catch_a_conflicting_command_and_a_lost_record():
 
 
 def test_a_scenario_is_reproducible_from_its_seed():
-    short = parse_scenario((SUITE / "loss-all-datagrams-hour.toml").read_text().replace("3600.0", "300.0"))
+    short = parse_fault_scenario((SUITE / "loss-all-datagrams-hour.toml").read_text().replace("3600.0", "300.0"))
 
     def trace():
-        result = run_scenario(short)
+        result = run_fault_scenario(short)
         return [(e.reason, e.entered) for e in result.episodes], [f.fired for f in result.faults]
 
     assert trace() == trace()
@@ -172,8 +175,8 @@ def test_a_scenario_is_reproducible_from_its_seed():
 def test_a_bad_scenario_file_is_refused_naming_the_file_and_the_key(tmp_path, edit, key, message):
     path = tmp_path / "bad.toml"
     path.write_text(edit(LINK_DOWN))
-    with pytest.raises(ScenarioError) as err:
-        load_scenario(path)
+    with pytest.raises(FaultScenarioError) as err:
+        load_fault_scenario(path)
     assert err.value.source == str(path)
     assert err.value.field == key
     assert message in str(err.value)
@@ -199,10 +202,10 @@ def test_a_config_path_is_resolved_beside_the_scenario(tmp_path, paper_toml):
     (tmp_path / "slow.toml").write_text(paper_toml.replace("n_timeout = 5 ", "n_timeout = 3 "))
     path = tmp_path / "s.toml"
     path.write_text('config = "slow.toml"\n' + LINK_DOWN)
-    assert load_scenario(path).config.middleware.n_timeout == 3
+    assert load_fault_scenario(path).config.middleware.n_timeout == 3
     path.write_text('config = "missing.toml"\n' + LINK_DOWN)
-    with pytest.raises(ScenarioError, match="config") as err:
-        load_scenario(path)
+    with pytest.raises(FaultScenarioError, match="config") as err:
+        load_fault_scenario(path)
     assert err.value.source == str(path) and "missing.toml" in str(err.value)
 
 
@@ -223,7 +226,7 @@ OTHERS = ("J1", "J3", "J4")
     ("corridor-stuck-controller", "transition"),
 ])
 def test_a_fault_on_one_corridor_controller_times_out_that_one_alone(name, reason):
-    result = run_scenario(load_scenario(SUITE / f"{name}.toml"))
+    result = run_fault_scenario(load_fault_scenario(SUITE / f"{name}.toml"))
     assert result.passed, [(c.label, c.message) for c in result.failures]
     assert [(e.intersection, e.reason) for e in result.episodes] == [("J2", reason)]
     assert all(e.recovered is not None for e in result.episodes)
@@ -242,9 +245,9 @@ def _verified(records, tls):
 
 def test_while_one_corridor_link_is_down_the_others_go_on_verifying_the_same_transitions(tmp_path):
     faulted, baseline = tmp_path / "faulted.jsonl", tmp_path / "baseline.jsonl"
-    assert run_scenario(parse_scenario(CORRIDOR_LINK_DOWN), log_path=faulted).passed
+    assert run_fault_scenario(parse_fault_scenario(CORRIDOR_LINK_DOWN), log_path=faulted).passed
     # The same run with J2's link whole: the fault's window opens after the run has ended.
-    run_scenario(parse_scenario(CORRIDOR_LINK_DOWN.replace("start = 20.0\nend = 35.0", "start = 100.0")),
+    run_fault_scenario(parse_fault_scenario(CORRIDOR_LINK_DOWN.replace("start = 20.0\nend = 35.0", "start = 100.0")),
                  log_path=baseline)
     records, clean = list(read_events(faulted)), list(read_events(baseline))
     assert {r["intersection"] for r in records if r["kind"] in (Kind.TIMEOUT_ENTERED, Kind.POLL_FAILED)} == {"J2"}
@@ -279,7 +282,7 @@ def test_a_corridor_fault_on_the_wrong_controller_fails_at_both_intersections(tm
 
 
 def test_agent_faults_act_on_their_intersection_and_slow_steps_on_every_one():
-    scenario = parse_scenario("""
+    scenario = parse_fault_scenario("""
 scenario = "corridor"
 action_type = "switch"
 duration = 30.0
@@ -312,7 +315,7 @@ timeout = "drift"
 refused = 2
 refused_reason = "wrong_type"
 """)
-    result = run_scenario(scenario)
+    result = run_fault_scenario(scenario)
     assert result.passed, [(c.label, c.message) for c in result.failures]
     assert [(e.intersection, e.reason) for e in result.episodes] == [(tls, "drift") for tls in scenario.intersections]
     assert {o.intersection: o.faults for o in result.outcomes}["J3"] == ("too-far", "slow-sumo")
@@ -363,8 +366,8 @@ timeout = "communication"
 def test_a_bad_scenario_of_several_controllers_is_refused_naming_the_file_and_the_key(tmp_path, edit, key, message):
     path = tmp_path / "bad.toml"
     path.write_text(edit(CORRIDOR_MINIMAL))
-    with pytest.raises(ScenarioError) as err:
-        load_scenario(path)
+    with pytest.raises(FaultScenarioError) as err:
+        load_fault_scenario(path)
     assert (err.value.source, err.value.field) == (str(path), key)
     assert message in str(err.value)
 
@@ -372,7 +375,7 @@ def test_a_bad_scenario_of_several_controllers_is_refused_naming_the_file_and_th
 def test_a_scenario_of_several_controllers_takes_the_middleware_overrides_in_each(tmp_path):
     path = tmp_path / "s.toml"
     path.write_text(CORRIDOR_MINIMAL + "\n[middleware]\nn_timeout = 3\n")
-    scenario = load_scenario(path)
+    scenario = load_fault_scenario(path)
     assert scenario.several and list(scenario.intersections) == ["J1", "J2", "J3", "J4"]
     assert {cfg.middleware.n_timeout for cfg in scenario.intersections.values()} == {3}
     assert scenario.network.intersections == scenario.intersections  # what the run is built from
@@ -387,7 +390,7 @@ def test_a_scenario_of_several_controllers_is_read_from_a_file_beside_the_fault_
     path = tmp_path / "s.toml"
     path.write_text(CORRIDOR_MINIMAL.replace('"corridor"', '"pair.scenario.toml"').replace('"J2"', '"A"').replace(
         '"J3"', '"B"').replace("[expect.J2]", "[expect.A]"))
-    scenario = load_scenario(path)
+    scenario = load_fault_scenario(path)
     assert list(scenario.intersections) == ["A", "B"]
     assert [f.intersection for f in scenario.faults] == ["A", "B"]
     assert scenario.expectations("A").timeout == ("communication",)
