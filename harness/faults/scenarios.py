@@ -47,6 +47,8 @@ The format (only ``duration`` and one ``[[faults]]`` are required)::
     control_status_never = ["backup_mode"] # ... and must never show
     verified_every = 20.0               # s: never longer than this without a verified transition, start to end
     recovered_greens = [2, 6]           # phases every recovery's re-read found green (after a reboot: start-up)
+    preemptions = 1                     # exactly this many PREEMPTED episodes, each ended by the controller (no
+                                        # TIMEOUT within), no command SET in it, a transition verified after it
 
     [expect.J2]                         # several controllers: J2 is judged by this table alone, and every
     timeout = "communication"           # intersection without a table of its own by [expect]
@@ -93,6 +95,7 @@ from harness.faults.inject import (
     IndicationMonitor,
     KeepaliveSuppressed,
     Op,
+    PreemptCall,
     Reboot,
     ResponseDelay,
     SlowSteps,
@@ -325,6 +328,12 @@ def _build_keepalive(r: _Reader, name: str, _seed: int, _at: ActionType) -> Faul
     return KeepaliveSuppressed(name, window=_window(r))
 
 
+def _build_preempt(r: _Reader, name: str, _seed: int, _at: ActionType) -> Fault:
+    return PreemptCall(name, preempt=r.number("preempt", 1, integer=True, low=1, high=255),
+                       start=r.number("start", 0.0, low=0), after=r.number("after", 0.5, low=0),
+                       hold=r.number("hold", low=0, low_open=True))
+
+
 _TRANSPORT = ("ops", "probability", *_WINDOW_KEYS)
 FAULT_TYPES: dict[str, FaultType] = {
     "drop": FaultType(("direction", "burst", *_TRANSPORT), _build_drop,
@@ -342,6 +351,9 @@ FAULT_TYPES: dict[str, FaultType] = {
     "actions_during_timeout": FaultType(("rate_hz", *_WINDOW_KEYS), _build_during_timeout,
                                         "agent actions at rate_hz while in TIMEOUT"),
     "keepalive_off": FaultType(("start", "end"), _build_keepalive, "the middleware's keepalive switched off"),
+    "preempt": FaultType(("preempt", "start", "after", "hold"), _build_preempt,
+                         "preempt called at the controller after s into the first commanded transition from start, "
+                         "for hold s"),
 }
 
 
@@ -405,6 +417,7 @@ class Expectations:
     control_status_never: tuple[str, ...] = ()
     verified_every: float | None = None  # s: longest stretch allowed without a verified transition
     recovered_greens: tuple[int, ...] | None = None  # what every recovery's re-read must find green
+    preemptions: int | None = None  # exact number of PREEMPTED episodes, each ended, quiet, and commanding after
     no_conflicting_command: bool = True
     no_conflicting_indication: bool = True
     no_commands_in_timeout: bool = True
@@ -467,6 +480,7 @@ def _expectations(raw: Any, where: str, source: str, fault_names: Iterable[str],
             "control_status_never") else (),
         verified_every=r.optional_number("verified_every", low=0, low_open=True),
         recovered_greens=r.phases("recovered_greens", phases) if r.has("recovered_greens") else None,
+        preemptions=r.optional_number("preemptions", integer=True, low=0),
         no_conflicting_command=r.boolean("no_conflicting_command", True),
         no_conflicting_indication=r.boolean("no_conflicting_indication", True),
         no_commands_in_timeout=r.boolean("no_commands_in_timeout", True),
@@ -914,6 +928,8 @@ def _judge(scenario: Scenario, tls: str, cfg: IntersectionConfig, records: list[
                   "" if gap <= ex.verified_every else
                   f"; got {gap:.3f} s without one, from {longest[0]:.3f} s to {longest[1]:.3f} s"))
     _check_actions(ex, by_kind, check)
+    if ex.preemptions is not None:
+        _check_preemptions(ex.preemptions, records, check)
     for kind, n in ex.records.items():
         got = len(by_kind.get(kind, []))
         check(f"records.{kind}", got == n, f"{n} {kind} records" + ("" if got == n else f"; got {got}"))
@@ -1032,6 +1048,36 @@ def _check_quiet_in_timeout(records: list[dict[str, Any]], check: Checker) -> No
             bad.append(f"{r['purpose']} SET at {r['t']:.3f} s")
     check("no_commands_in_timeout", not bad,
           "no command or keepalive SET while in TIMEOUT" + ("" if not bad else "; got: " + "; ".join(bad[:5])))
+
+
+def _check_preemptions(expected: int, records: list[dict[str, Any]], check: Checker) -> None:
+    """Each PREEMPTED episode (preempt_begin to preempt_end): ended by the controller, not by a TIMEOUT; no
+    command, retry or recovery SET within it; a transition verified after it."""
+    episodes: list[dict[str, Any]] = []
+    for r in records:
+        kind, open_ = r["kind"], episodes and episodes[-1]["end"] is None
+        if kind == Kind.PREEMPT_BEGIN:
+            episodes.append({"begin": r["t"], "end": None, "sent": [], "cut": False, "verified": False})
+        elif open_ and kind == Kind.PREEMPT_END:
+            episodes[-1]["end"] = r["t"]
+        elif open_ and kind == Kind.TIMEOUT_ENTERED:
+            episodes[-1]["cut"] = True
+        elif open_ and kind == Kind.SET_SENT and r["purpose"] in ("command", "retry", "recovery"):
+            episodes[-1]["sent"].append(f"{r['purpose']} SET at {r['t']:.3f} s")
+        elif episodes and not open_ and kind == Kind.TRANSITION_VERIFIED:
+            episodes[-1]["verified"] = True
+    problems = [f"{len(episodes)} episodes"] if len(episodes) != expected else []
+    for e in episodes:
+        at = f"the preemption at {e['begin']:.3f} s"
+        if e["end"] is None or e["cut"]:
+            problems.append(f"{at} " + ("was cut by a TIMEOUT" if e["cut"] else "never ended"))
+        if e["sent"]:
+            problems.append(f"{at} sent " + ", ".join(e["sent"][:3]))
+        if e["end"] is not None and not e["verified"]:
+            problems.append(f"no transition verified after {at}")
+    check("preemptions", not problems,
+          f"{expected} preemptions, each ended by the controller, no command SET while PREEMPTED, commanding "
+          "resumed after each" + ("" if not problems else "; got: " + "; ".join(problems)))
 
 
 def _check_controller(ex: Expectations, monitor: IndicationMonitor | None,
