@@ -244,6 +244,8 @@ class FaultType:
     build: Callable[[_Reader, str, int, ActionType], Fault]
     help: str
     per_controller: bool = True  # False: it acts on the whole run (the simulation every controller shares)
+    # What the fault needs of the config of the controller it acts on: (key, problem) when it lacks it, else None.
+    check: Callable[[Mapping[str, Any], IntersectionConfig], tuple[str, str] | None] | None = None
 
     @property
     def all_keys(self) -> tuple[str, ...]:
@@ -334,6 +336,14 @@ def _build_preempt(r: _Reader, name: str, _seed: int, _at: ActionType) -> Fault:
                        hold=r.number("hold", low=0, low_open=True))
 
 
+def _check_preempt(raw: Mapping[str, Any], config: IntersectionConfig) -> tuple[str, str] | None:
+    number = raw.get("preempt", 1)
+    if number in config.preempts:
+        return None
+    return "preempt", (f"is {number}, which the config {config.name!r} has not; allowed: its [preempts] "
+                       f"{', '.join(map(str, sorted(config.preempts))) or '(none)'}")
+
+
 _TRANSPORT = ("ops", "probability", *_WINDOW_KEYS)
 FAULT_TYPES: dict[str, FaultType] = {
     "drop": FaultType(("direction", "burst", *_TRANSPORT), _build_drop,
@@ -353,7 +363,7 @@ FAULT_TYPES: dict[str, FaultType] = {
     "keepalive_off": FaultType(("start", "end"), _build_keepalive, "the middleware's keepalive switched off"),
     "preempt": FaultType(("preempt", "start", "after", "hold"), _build_preempt,
                          "preempt called at the controller after s into the first commanded transition from start, "
-                         "for hold s"),
+                         "for hold s", check=_check_preempt),
 }
 
 
@@ -553,6 +563,11 @@ def parse_scenario(text: str, source: str = "<memory>", *, base: Path | None = N
     action_type = ActionType(r.string("action_type", ActionType.SELECTION.value, choices=[t.value for t in ActionType]))
     recover_after = r.number("recover_after", 5.0)
     faults = _fault_specs(r, source, action_type, tuple(intersections))
+    for spec in faults:
+        check = FAULT_TYPES[spec.type].check
+        problems = [check(spec.raw, cfg) for tls, cfg in intersections.items() if check and spec.acts_at(tls)]
+        if problem := next((p for p in problems if p), None):
+            raise ScenarioError(source, f"faults[{spec.index}].{problem[0]}", problem[1])
     expect, expect_at = _expect_tables(raw.get("expect", {}), source, faults, intersections)
     scenario = Scenario(
         name=r.string("name", default_name),
