@@ -23,9 +23,10 @@ from hils.protocol.ntcip import (
 )
 from hils.report import summary
 from hils.shell.events import Kind
+from hils.sim.network import data_path
 from tests.hils.shell.test_fast_path import comparable
 
-CITY = Path(__file__).parents[3] / "hils" / "data" / "four_leg_city.toml"
+CITY = data_path("four_leg_city.toml")
 CALLED, RELEASED = 10.5, 28.0  # the preempt input's window: called half a second into the transition of 10 s
 
 
