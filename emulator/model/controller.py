@@ -433,7 +433,9 @@ class Controller:
             status = self._images[key] = self._status_image()
         (self.greens, self.yellows, self.phase_ons, self.reds, self.walks, self.ped_clears, self.dont_walks,
          self.phase_nexts, self.overlap_greens, self.overlap_yellows, self.overlap_reds) = status
-        seen = (status, self.ped_calls)
+        # preemptState is status too: a poll reads it beside the signals, and a preempt's entry may start before
+        # any indication changes.
+        seen = (status, self.ped_calls, tuple(self.preemptor.states.values()))
         if seen != self._status_seen:
             self._status_seen = seen
             self.status_version += 1

@@ -53,6 +53,7 @@ from hils.control.manager import State
 from hils.protocol.config import IntersectionConfig
 from hils.protocol.ntcip import (
     CONTROL_TABLE,
+    PREEMPT_CONTROL_STATE,
     ControlColumn,
     ErrorStatus,
     Oid,
@@ -81,6 +82,7 @@ __all__ = [
     "IndicationMonitor",
     "KeepaliveSuppressed",
     "Op",
+    "PreemptCall",
     "Reboot",
     "ResponseDelay",
     "SlowSteps",
@@ -769,6 +771,48 @@ class KeepaliveSuppressed(Fault):
 
     def describe(self) -> str:
         return f"keepalive off {self.window.describe()}"
+
+
+# --- the controller's own operation ------------------------------------------------------------------------
+
+
+class PreemptCall(Fault):
+    """Preempt ``preempt`` called at the controller ``after`` s into the first commanded transition (the middleware
+    ON_HOLD) at or after ``start``, and released ``hold`` s later.
+
+    The call is a SET of preemptControlState to 1 (then 0) at the controller itself, as a central system
+    calling the preempt or the cabinet's preempt input would: it does not pass the middleware's link.
+    """
+
+    kind = "preempt"
+
+    def __init__(self, name: str, *, preempt: int, start: float, after: float, hold: float) -> None:
+        super().__init__(name, window=Window(start, math.inf), count=1)
+        self.preempt = preempt
+        self.after = after
+        self.hold = hold
+        self._target: FaultTarget | None = None
+
+    def on_target(self, target: FaultTarget) -> None:
+        self._target = target
+
+    def on_run(self, run: Testbed, intersection: Intersection) -> None:
+        intersection.env.process(self._call(intersection.middleware))
+
+    def _call(self, mw: Middleware) -> Generator[simpy.Event, Any, None]:
+        env, surface, oid = mw.env, self._target.base.surface, PREEMPT_CONTROL_STATE.instance(self.preempt)
+        yield env.timeout(self.window.start)
+        yield mw.wait_for(State.ON_HOLD)
+        yield env.timeout(self.after)
+        self.fire(env.now)
+        surface.set_many([(oid, 1)])
+        yield env.timeout(self.hold)
+        surface.set_many([(oid, 0)])
+        self.note("released")
+
+    def describe(self) -> str:
+        return (f"preempt {self.preempt} called {self.after:g} s into the first commanded transition from "
+                f"{self.window.start:g} s, for {self.hold:g} s")
 
 
 # --- the target and the monitor ---------------------------------------------------------------------------

@@ -268,6 +268,8 @@ def _judge(scenario: FaultScenario, tls: str, cfg: IntersectionConfig, records: 
                   "" if gap <= ex.verified_every else
                   f"; got {gap:.3f} s without one, from {longest[0]:.3f} s to {longest[1]:.3f} s"))
     _check_actions(ex, by_kind, check)
+    if ex.preemptions is not None:
+        _check_preemptions(ex.preemptions, records, check)
     for kind, n in ex.records.items():
         got = len(by_kind.get(kind, []))
         check(f"records.{kind}", got == n, f"{n} {kind} records" + ("" if got == n else f"; got {got}"))
@@ -386,6 +388,36 @@ def _check_quiet_in_timeout(records: list[dict[str, Any]], check: Checker) -> No
             bad.append(f"{r['purpose']} SET at {r['t']:.3f} s")
     check("no_commands_in_timeout", not bad,
           "no command or keepalive SET while in TIMEOUT" + ("" if not bad else "; got: " + "; ".join(bad[:5])))
+
+
+def _check_preemptions(expected: int, records: list[dict[str, Any]], check: Checker) -> None:
+    """Each PREEMPTED episode (preempt_begin to preempt_end): ended by the controller, not by a TIMEOUT; no
+    command, retry or recovery SET within it; a transition verified after it."""
+    episodes: list[dict[str, Any]] = []
+    for r in records:
+        kind, open_ = r["kind"], episodes and episodes[-1]["end"] is None
+        if kind == Kind.PREEMPT_BEGIN:
+            episodes.append({"begin": r["t"], "end": None, "sent": [], "cut": False, "verified": False})
+        elif open_ and kind == Kind.PREEMPT_END:
+            episodes[-1]["end"] = r["t"]
+        elif open_ and kind == Kind.TIMEOUT_ENTERED:
+            episodes[-1]["cut"] = True
+        elif open_ and kind == Kind.SET_SENT and r["purpose"] in ("command", "retry", "recovery"):
+            episodes[-1]["sent"].append(f"{r['purpose']} SET at {r['t']:.3f} s")
+        elif episodes and not open_ and kind == Kind.TRANSITION_VERIFIED:
+            episodes[-1]["verified"] = True
+    problems = [f"{len(episodes)} episodes"] if len(episodes) != expected else []
+    for e in episodes:
+        at = f"the preemption at {e['begin']:.3f} s"
+        if e["end"] is None or e["cut"]:
+            problems.append(f"{at} " + ("was cut by a TIMEOUT" if e["cut"] else "never ended"))
+        if e["sent"]:
+            problems.append(f"{at} sent " + ", ".join(e["sent"][:3]))
+        if e["end"] is not None and not e["verified"]:
+            problems.append(f"no transition verified after {at}")
+    check("preemptions", not problems,
+          f"{expected} preemptions, each ended by the controller, no command SET while PREEMPTED, commanding "
+          "resumed after each" + ("" if not problems else "; got: " + "; ".join(problems)))
 
 
 def _check_controller(ex: Expectations, monitor: IndicationMonitor | None,

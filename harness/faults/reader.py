@@ -50,6 +50,8 @@ The format (only ``duration`` and one ``[[faults]]`` are required)::
     control_status_never = ["backup_mode"] # ... and must never show
     verified_every = 20.0               # s: never longer than this without a verified transition, start to end
     recovered_greens = [2, 6]           # phases every recovery's re-read found green (after a reboot: start-up)
+    preemptions = 1                     # exactly this many PREEMPTED episodes, each ended by the controller (no
+                                        # TIMEOUT within), no command SET in it, a transition verified after it
 
     [expect.J2]                         # several controllers: J2 is judged by this table alone, and every
     timeout = "communication"           # intersection without a table of its own by [expect]
@@ -140,6 +142,7 @@ class Expectations:
     control_status_never: tuple[str, ...] = ()
     verified_every: float | None = None  # s: longest stretch allowed without a verified transition
     recovered_greens: tuple[int, ...] | None = None  # what every recovery's re-read must find green
+    preemptions: int | None = None  # exact number of PREEMPTED episodes, each ended, quiet, and commanding after
     no_conflicting_command: bool = True
     no_conflicting_indication: bool = True
     no_commands_in_timeout: bool = True
@@ -202,6 +205,7 @@ def _expectations(raw: Any, where: str, source: str, fault_names: Iterable[str],
             "control_status_never") else (),
         verified_every=r.optional_number("verified_every", low=0, low_open=True),
         recovered_greens=r.phases("recovered_greens", phases) if r.has("recovered_greens") else None,
+        preemptions=r.optional_number("preemptions", integer=True, low=0),
         no_conflicting_command=r.boolean("no_conflicting_command", True),
         no_conflicting_indication=r.boolean("no_conflicting_indication", True),
         no_commands_in_timeout=r.boolean("no_commands_in_timeout", True),
@@ -276,6 +280,11 @@ def parse_fault_scenario(text: str, source: str = "<memory>", *, base: Path | No
     action_type = ActionType(r.string("action_type", ActionType.SELECTION.value, choices=[t.value for t in ActionType]))
     recover_after = r.number("recover_after", 5.0)
     faults = _fault_specs(r, source, action_type, tuple(intersections))
+    for spec in faults:
+        check = FAULT_TYPES[spec.type].check
+        problems = [check(spec.raw, cfg) for tls, cfg in intersections.items() if check and spec.acts_at(tls)]
+        if problem := next((p for p in problems if p), None):
+            raise FaultScenarioError(source, f"faults[{spec.index}].{problem[0]}", problem[1])
     expect, expect_at = _expect_tables(raw.get("expect", {}), source, faults, intersections)
     scenario = FaultScenario(
         name=r.string("name", default_name),

@@ -25,6 +25,7 @@ from harness.faults.inject import (
     Fault,
     KeepaliveSuppressed,
     Op,
+    PreemptCall,
     Reboot,
     ResponseDelay,
     SlowSteps,
@@ -34,6 +35,7 @@ from harness.faults.inject import (
 )
 from harness.faults.table import TableReader
 from hils.control.actions import ActionType
+from hils.protocol.config import IntersectionConfig
 
 __all__ = ["FAULT_TYPES", "FaultSpec", "FaultType"]
 
@@ -49,6 +51,8 @@ class FaultType:
     build: Callable[[TableReader, str, int, ActionType], Fault]
     help: str
     per_controller: bool = True  # False: it acts on the whole run (the simulation every controller shares)
+    # What the fault needs of the config of the controller it acts on: (key, problem) when it lacks it, else None.
+    check: Callable[[Mapping[str, Any], IntersectionConfig], tuple[str, str] | None] | None = None
 
     @property
     def all_keys(self) -> tuple[str, ...]:
@@ -133,6 +137,20 @@ def _build_keepalive(r: TableReader, name: str, _seed: int, _at: ActionType) -> 
     return KeepaliveSuppressed(name, window=_window(r))
 
 
+def _build_preempt(r: TableReader, name: str, _seed: int, _at: ActionType) -> Fault:
+    return PreemptCall(name, preempt=r.number("preempt", 1, integer=True, low=1, high=255),
+                       start=r.number("start", 0.0, low=0), after=r.number("after", 0.5, low=0),
+                       hold=r.number("hold", low=0, low_open=True))
+
+
+def _check_preempt(raw: Mapping[str, Any], config: IntersectionConfig) -> tuple[str, str] | None:
+    number = raw.get("preempt", 1)
+    if number in config.preempts:
+        return None
+    return "preempt", (f"is {number}, which the config {config.name!r} has not; allowed: its [preempts] "
+                       f"{', '.join(map(str, sorted(config.preempts))) or '(none)'}")
+
+
 _TRANSPORT = ("ops", "probability", *_WINDOW_KEYS)
 FAULT_TYPES: dict[str, FaultType] = {
     "drop": FaultType(("direction", "burst", *_TRANSPORT), _build_drop,
@@ -150,6 +168,9 @@ FAULT_TYPES: dict[str, FaultType] = {
     "actions_during_timeout": FaultType(("rate_hz", *_WINDOW_KEYS), _build_during_timeout,
                                         "agent actions at rate_hz while in TIMEOUT"),
     "keepalive_off": FaultType(("start", "end"), _build_keepalive, "the middleware's keepalive switched off"),
+    "preempt": FaultType(("preempt", "start", "after", "hold"), _build_preempt,
+                         "preempt called at the controller after s into the first commanded transition from start, "
+                         "for hold s", check=_check_preempt),
 }
 
 

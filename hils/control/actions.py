@@ -18,7 +18,7 @@ from hils.protocol.config import IntersectionConfig, Pair
 
 __all__ = [
     "ActionConverter", "ActionError", "ActionType", "ActionTypeError", "Command", "ConflictError", "ConflictMatrix",
-    "DurationRangeError", "NotInActionSetError", "UnknownPhaseError",
+    "DurationRangeError", "NotInActionSetError", "PreemptedError", "UnknownPhaseError",
 ]
 
 
@@ -61,6 +61,13 @@ class NotInActionSetError(ActionError):
 
 class DurationRangeError(ActionError):
     reason = "duration_out_of_range"
+
+
+class PreemptedError(ActionError):
+    """A valid action that arrived while the controller serves a preempt: the preempt drives the signals, so the
+    middleware commands nothing until the controller reports it over (the manager's PREEMPTED)."""
+
+    reason = "preempted"
 
 
 def _short(value: object) -> str:

@@ -41,6 +41,9 @@ States (:class:`Mode`), with the paper's names (:class:`State`) that the log and
   (lost, not refused) is SET again while the transition is awaited; tau_trans still bounds the wait.
   If the transition timer expires first: TIMEOUT.
 - SERVING (paper ON_HOLD): the prescribed green is being served; back to IDLE when it has passed.
+- PREEMPTED (its own name, ``preempted``): the controller serves a preempt (a poll read a preemptState in
+  service: entry, track clearance, dwell, linked or exit; see Preemption below). Entered from IDLE,
+  IN_TRANSITION or SERVING; left for IDLE when a poll reads no preempt in service.
 - TIMEOUT (paper TIMEOUT): entered on a transition not seen within tau_trans, a communication
   failure (n_timeout consecutive failed polls, below), n_drift consecutive drifted steps, a
   control object changed by someone else (FOREIGN_CONTROL, below), or an agent that gave no action
@@ -70,20 +73,38 @@ the newest answered one has failed, the read-back waits (the failed polls speak 
 
 The control objects are ours while we run. The shell reads them back at a low rate when the
 manager says so (:class:`ReadbackDue` -> :class:`ReadControls` -> :class:`ControlsRead`). In IDLE,
-IN_TRANSITION and SERVING, any of PhaseOmit, PedOmit, Hold, ForceOff or PedCall set is a control
+IN_TRANSITION, SERVING and PREEMPTED, any of PhaseOmit, PedOmit, Hold, ForceOff or PedCall set is a control
 object changed by someone else (the run never sets them): TIMEOUT (FOREIGN_CONTROL). VehCall is ours,
 re-SET by every command and keepalive: a read of it is judged only when it cannot race with a SET of
 ours (none in flight when the read was sent, none sent before its answer, the last one answered), and
 then VehCall other than the call last SET is a change by someone else: TIMEOUT (FOREIGN_CONTROL). The
 recovery's SET and the close's clear set every control object.
 
-Commands arriving anywhere but IDLE are dropped. Every dispatched command ends exactly once
-(:class:`CommandEnded`: verified, served or timeout), except the one pending when the run closes.
+Preemption. A preempt is the controller's own operation (a train, a fire truck), not a failure of the run:
+the middleware watches and never fights it. A poll that reads a preempt in service ends the command pending, if
+any (:class:`CommandEnded` ``preempted``: the controller leaves the commanded phases for the preempt's, and no
+transition TIMEOUT follows, its timers being stale from then on), withdraws the call (VehCall SET to no phase,
+``withdraw``, unless it holds none) and enters PREEMPTED. The interrupted command is dropped, not re-issued:
+the traffic it was chosen for has changed by the end of the preemption, and a controller returning from a
+preempt serves its exit phases, which is what a field engineer expects to see; a call left standing would
+instead move the controller on from the exit phases the moment it returns, with nobody deciding it. In
+PREEMPTED no call is placed: every action is refused with :class:`hils.control.actions.PreemptedError`
+(:class:`Refused`), and :meth:`Manager.refusal` says so before anything is handed over, so that a run of
+several controllers sends none of a step's actions when one of them is refused. The keepalive goes on: it
+re-SETs the (empty) call, which changes nothing the controller does, while a backup timer that ran out would
+drop the controller to backup mode, where NTCIP 1202 resets preemptControlState ("The device shall reset this
+object to ZERO when in BACKUP Mode"). Failed polls, drift, an overdue agent and control objects set by someone
+else are TIMEOUTs as anywhere at work: a preempt explains the signals leaving the commanded phases, nothing
+else. The first poll that reads no preempt in service ends it (:class:`PreemptEnded`): the sequence position
+follows the greens shown (the exit phases), the manager is IDLE and the agent's next action is a command again.
+
+Commands arriving anywhere but IDLE and PREEMPTED are dropped. Every dispatched command ends exactly once
+(:class:`CommandEnded`: verified, served, timeout or preempted), except the one pending when the run closes.
 The keepalive re-SETs the call when no SET has gone out for a keepalive period (a third of the
 controller's backup time, or the config's, whichever is shorter), except in TIMEOUT, RECOVERING and
-CLOSED, or while switched off. An empty call is re-SET too: the start-up SET put the controller under
-system control, and a run that has placed no call yet (an agent keeping the start-up pair, the actuated
-baseline) keeps it there rather than let the backup timer drop it to backup mode.
+CLOSED (in PREEMPTED too: see Preemption), or while switched off. An empty call is re-SET too: the start-up SET
+put the controller under system control, and a run that has placed no call yet (an agent keeping the start-up
+pair, the actuated baseline) keeps it there rather than let the backup timer drop it to backup mode.
 """
 
 from __future__ import annotations
@@ -93,7 +114,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from enum import Enum, auto
 
-from hils.control.actions import Command
+from hils.control.actions import ActionError, Command, PreemptedError
 from hils.control.manager_io import (
     AgentOverdue,
     AnotherManager,
@@ -118,6 +139,8 @@ from hils.control.manager_io import (
     PollAnswered,
     PollFailed,
     PollFailureSeen,
+    PreemptBegan,
+    PreemptEnded,
     Purpose,
     ReadbackDue,
     ReadController,
@@ -125,6 +148,7 @@ from hils.control.manager_io import (
     Recovered,
     RecoveryRequested,
     RecoveryStarted,
+    Refused,
     ResumePolling,
     RetryStartup,
     SendCall,
@@ -150,11 +174,13 @@ __all__ = ["CLEAR_ATTEMPTS", "Ev", "Manager", "Mode", "Pending", "State", "graph
 
 
 class State(Enum):
-    """The paper's names of the manager's states, kept by the log, the reports and the public API."""
+    """The paper's names of the manager's states, kept by the log, the reports and the public API; and PREEMPTED,
+    which the paper's lab controller never was."""
 
     IDLE = "idle"
     ON_HOLD = "on_hold"
     TIMEOUT = "timeout"
+    PREEMPTED = "preempted"
 
 
 class Mode(Enum):
@@ -164,6 +190,7 @@ class Mode(Enum):
     IDLE = "idle"
     IN_TRANSITION = "in_transition"
     SERVING = "serving"
+    PREEMPTED = "preempted"
     TIMEOUT = "timeout"
     RECOVERING = "recovering"
     CLOSED = "closed"
@@ -180,7 +207,8 @@ class Mode(Enum):
 
 
 _PAPER = {Mode.STARTING: State.IDLE, Mode.IDLE: State.IDLE, Mode.IN_TRANSITION: State.ON_HOLD,
-          Mode.SERVING: State.ON_HOLD, Mode.TIMEOUT: State.TIMEOUT, Mode.RECOVERING: State.TIMEOUT, Mode.CLOSED: None}
+          Mode.SERVING: State.ON_HOLD, Mode.PREEMPTED: State.PREEMPTED, Mode.TIMEOUT: State.TIMEOUT,
+          Mode.RECOVERING: State.TIMEOUT, Mode.CLOSED: None}
 
 
 @dataclass(frozen=True, slots=True)
@@ -207,6 +235,8 @@ class Ev(Enum):
     KEEP = auto()  # CommandRequested that keeps what is shown (switch 0, the pair already green)
     VERIFIED = auto()  # PollAnswered in IN_TRANSITION showing the commanded phases green (a plain command)
     VERIFIED_DURATION = auto()  # the same, for a duration command
+    PREEMPT_BEGAN = auto()  # PollAnswered, not in PREEMPTED, reading a preempt in service
+    PREEMPT_ENDED = auto()  # PollAnswered in PREEMPTED reading none in service
     OBSERVED = auto()  # any other PollAnswered of this polling period, not older than the newest applied
     LATE_POLL = auto()  # PollAnswered older than the newest applied
     STALE_POLL = auto()  # PollAnswered or PollFailed sent before the last halt
@@ -289,6 +319,8 @@ class Manager:
         self._set_failed = False  # a SET failed since the last one was sent: what the controller holds is unsure
         self._readback: tuple[int, bool] = (-1, False)  # SETs sent when the read-back went out; could it judge?
         self._recovering_greens: frozenset[int] = frozenset()  # what the recovery's re-read showed
+        self.preempts: frozenset[int] = frozenset()  # the preempts in service, as last read (in PREEMPTED)
+        self.preempted_since = 0.0  # when the poll that entered PREEMPTED was answered
         self._next_command = 0
         self._next_token = 0
         self._keepalive_token: int | None = None
@@ -304,6 +336,15 @@ class Manager:
         ends a run of drifted ones. (The shell reports only those: four steps a second are timed, and an
         on-time step after an on-time step is ON_TIME with nothing to reset.)"""
         return took > step or self.drifted_in_a_row > 0
+
+    def refusal(self) -> ActionError | None:
+        """The typed error a command handed over now would be refused with (None: it would not be); looks, never
+        changes. Only PREEMPTED refuses: elsewhere a command is sent, kept or dropped."""
+        if self.mode is not Mode.PREEMPTED:
+            return None
+        return PreemptedError(f"the controller serves preempt {', '.join(map(str, sorted(self.preempts)))} (since "
+                              f"{self.preempted_since:.1f} s): nothing is commanded until it reports the preemption "
+                              "over")
 
     def handle(self, event: Event) -> list[Effect]:
         kind = self._classify(event)
@@ -324,11 +365,15 @@ class Manager:
             case CommandRequested(command=cmd, shown=shown):
                 keep = cmd.green is None and (cmd.keep or set(cmd.phases) <= shown)
                 return Ev.KEEP if keep else Ev.COMMAND
-            case PollAnswered(poll_id=poll_id, epoch=epoch, state=state):
+            case PollAnswered(poll_id=poll_id, epoch=epoch, state=state, preempts=preempts):
                 if epoch != self.poll_epoch:
                     return Ev.STALE_POLL
                 if poll_id < self.newest_poll:
                     return Ev.LATE_POLL
+                if self.mode is Mode.PREEMPTED:
+                    return Ev.OBSERVED if preempts else Ev.PREEMPT_ENDED
+                if preempts:
+                    return Ev.PREEMPT_BEGAN
                 p = self.pending
                 if self.mode is Mode.IN_TRANSITION and p is not None and set(p.command.phases) <= state.greens:
                     return Ev.VERIFIED if p.command.green is None else Ev.VERIFIED_DURATION
@@ -477,6 +522,32 @@ class Manager:
 
     def _drop(self, ev: CommandRequested, out: list[Effect]) -> None:
         out.append(Dropped(ev.action_id, self.mode.log_name))
+
+    def _refuse(self, ev: CommandRequested, out: list[Effect]) -> None:
+        out.append(Refused(ev.action_id, self.refusal()))
+
+    def _preempt_began(self, ev: PollAnswered, out: list[Effect]) -> None:
+        self._answered(ev, out)
+        p = self.pending
+        if p is not None:  # the controller leaves the commanded phases for the preempt's: no TIMEOUT will follow
+            out.append(CommandEnded(p.command_id, "preempted", ev.t - p.since))
+            self.pending = None
+        self.preempts = ev.preempts
+        self.preempted_since = ev.t
+        out.append(PreemptBegan(ev.preempts, p.command_id if p else None))
+        if self.call:
+            self._send(frozenset(), Purpose.WITHDRAW, None, ev.t, out)
+
+    def _still_preempted(self, ev: PollAnswered, out: list[Effect]) -> None:
+        self._answered(ev, out)
+        self.preempts = ev.preempts  # a lower-numbered preempt may have taken over
+
+    def _preempt_over(self, ev: PollAnswered, out: list[Effect]) -> None:
+        self._answered(ev, out)
+        greens = ev.state.greens
+        out.append(PreemptEnded(ev.t - self.preempted_since, greens))
+        self.preempts = frozenset()
+        self._sync(greens)
 
     def _answered(self, ev: PollAnswered, out: list[Effect]) -> None:
         # the first answer after failed polls, in poll order: one failed between the state shown and this one
@@ -693,8 +764,9 @@ _Handler = Callable[[Manager, Event, list[Effect]], None] | None
 M = Mode
 H = Manager
 
-# The states of a machine at work (commands, keepalive, drift, polls, read-back), and those of one halted.
+# The states of a machine commanding; at work (keepalive, drift, polls, read-back), PREEMPTED too; halted.
 _RUNNING = (M.IDLE, M.IN_TRANSITION, M.SERVING)
+_WORKING = (*_RUNNING, M.PREEMPTED)
 _DOWN = (M.TIMEOUT, M.RECOVERING)
 
 # The whole state machine, one row per line: (state, event kind) -> (next state, handler producing the effects).
@@ -729,6 +801,8 @@ _TRANSITIONS: dict[tuple[Mode, Ev], tuple[Mode, _Handler]] = {
     (M.IDLE, Ev.KEEP): (M.IDLE, H._keep),
     **{(s, Ev.COMMAND): (s, H._drop) for s in (M.STARTING, M.IN_TRANSITION, M.SERVING, *_DOWN, M.CLOSED)},
     **{(s, Ev.KEEP): (s, H._drop) for s in (M.STARTING, M.IN_TRANSITION, M.SERVING, *_DOWN, M.CLOSED)},
+    (M.PREEMPTED, Ev.COMMAND): (M.PREEMPTED, H._refuse),
+    (M.PREEMPTED, Ev.KEEP): (M.PREEMPTED, H._refuse),
     (M.IN_TRANSITION, Ev.COMMAND_SET_LOST): (M.IN_TRANSITION, H._retry),
     (M.IN_TRANSITION, Ev.TRANSITION_EXPIRED): (M.TIMEOUT, H._transition_timeout),
     (M.SERVING, Ev.DURATION_ELAPSED): (M.IDLE, H._served),
@@ -738,19 +812,23 @@ _TRANSITIONS: dict[tuple[Mode, Ev], tuple[Mode, _Handler]] = {
     (M.IN_TRANSITION, Ev.VERIFIED): (M.IDLE, H._verified),
     (M.IN_TRANSITION, Ev.VERIFIED_DURATION): (M.SERVING, H._serve),
     **{(s, Ev.OBSERVED): (s, H._answered) for s in _RUNNING},
-    **{(s, Ev.LATE_POLL): (s, H._late) for s in _RUNNING},
-    **{(s, Ev.POLL_FAILED): (s, H._poll_failed) for s in _RUNNING},
-    **{(s, Ev.POLLS_FAILED): (M.TIMEOUT, H._polls_failed) for s in _RUNNING},
-    **{(s, Ev.STALE_POLL): (s, None) for s in (*_RUNNING, *_DOWN, M.CLOSED)},
+    **{(s, Ev.LATE_POLL): (s, H._late) for s in _WORKING},
+    **{(s, Ev.POLL_FAILED): (s, H._poll_failed) for s in _WORKING},
+    **{(s, Ev.POLLS_FAILED): (M.TIMEOUT, H._polls_failed) for s in _WORKING},  # preempted or not
+    **{(s, Ev.STALE_POLL): (s, None) for s in (*_WORKING, *_DOWN, M.CLOSED)},
+    # --- preemption: the controller's own operation -----------------------------------------------------
+    **{(s, Ev.PREEMPT_BEGAN): (M.PREEMPTED, H._preempt_began) for s in _RUNNING},
+    (M.PREEMPTED, Ev.OBSERVED): (M.PREEMPTED, H._still_preempted),
+    (M.PREEMPTED, Ev.PREEMPT_ENDED): (M.IDLE, H._preempt_over),
     # --- timers -----------------------------------------------------------------------------------------
-    **{(s, Ev.KEEPALIVE_DUE): (s, H._keepalive) for s in _RUNNING},
+    **{(s, Ev.KEEPALIVE_DUE): (s, H._keepalive) for s in _WORKING},
     **{(s, Ev.KEEPALIVE_DUE): (s, None) for s in _DOWN},  # gated; the recovery SET re-arms it
     (M.TIMEOUT, Ev.RECOVERY_DUE): (M.RECOVERING, H._read_controller),
     **{(s, Ev.STALE_TIMER): (s, None) for s in Mode},
     # --- simulation steps (drift is counted while the machine works) ---------------------------------
-    **{(s, Ev.ON_TIME): (s, H._on_time) for s in (M.STARTING, *_RUNNING)},
-    **{(s, Ev.DRIFTED): (s, H._drifted) for s in (M.STARTING, *_RUNNING)},
-    **{(s, Ev.DRIFT_LIMIT): (M.TIMEOUT, H._drift_limit) for s in (M.STARTING, *_RUNNING)},
+    **{(s, Ev.ON_TIME): (s, H._on_time) for s in (M.STARTING, *_WORKING)},
+    **{(s, Ev.DRIFTED): (s, H._drifted) for s in (M.STARTING, *_WORKING)},
+    **{(s, Ev.DRIFT_LIMIT): (M.TIMEOUT, H._drift_limit) for s in (M.STARTING, *_WORKING)},
     **{(s, Ev.ON_TIME): (s, None) for s in (*_DOWN, M.CLOSED)},
     **{(s, Ev.DRIFTED): (s, None) for s in (*_DOWN, M.CLOSED)},
     **{(s, Ev.DRIFT_LIMIT): (s, None) for s in (*_DOWN, M.CLOSED)},
@@ -764,7 +842,7 @@ _TRANSITIONS: dict[tuple[Mode, Ev], tuple[Mode, _Handler]] = {
     (M.CLOSED, Ev.CLEAR_LOST): (M.CLOSED, H._clear_again),
     (M.CLOSED, Ev.CLEAR_FAILED): (M.CLOSED, H._not_cleared),
     # --- recovery ---------------------------------------------------------------------------------------
-    **{(s, Ev.RECOVERY_REQUESTED): (s, H._nothing_to_recover) for s in (M.STARTING, *_RUNNING)},
+    **{(s, Ev.RECOVERY_REQUESTED): (s, H._nothing_to_recover) for s in (M.STARTING, *_WORKING)},
     (M.TIMEOUT, Ev.RECOVERY_REQUESTED): (M.RECOVERING, H._read_controller),
     (M.RECOVERING, Ev.RECOVERY_REQUESTED): (M.RECOVERING, None),  # one recovery at a time
     (M.CLOSED, Ev.RECOVERY_REQUESTED): (M.CLOSED, None),
@@ -773,19 +851,19 @@ _TRANSITIONS: dict[tuple[Mode, Ev], tuple[Mode, _Handler]] = {
     (M.CLOSED, Ev.CONTROLLER_READ): (M.CLOSED, None),
     (M.CLOSED, Ev.CONTROLLER_UNREADABLE): (M.CLOSED, None),
     # --- the read-back of the control objects ---------------------------------------------------------
-    **{(s, Ev.READBACK): (s, H._read_controls) for s in _RUNNING},
-    **{(s, Ev.READBACK_WAITS): (s, None) for s in _RUNNING},  # polls are failing: the poll count speaks
+    **{(s, Ev.READBACK): (s, H._read_controls) for s in _WORKING},
+    **{(s, Ev.READBACK_WAITS): (s, None) for s in _WORKING},  # polls are failing: the poll count speaks
     **{(s, Ev.READBACK): (s, None) for s in (*_DOWN, M.CLOSED)},  # in TIMEOUT only recovery sends
     **{(s, Ev.READBACK_WAITS): (s, None) for s in (*_DOWN, M.CLOSED)},
-    **{(s, Ev.FOREIGN_CONTROL): (M.TIMEOUT, H._foreign_control) for s in _RUNNING},
+    **{(s, Ev.FOREIGN_CONTROL): (M.TIMEOUT, H._foreign_control) for s in _WORKING},
     **{(s, Ev.FOREIGN_CONTROL): (s, None) for s in (*_DOWN, M.CLOSED)},  # halted: the recovery clears them
-    **{(s, Ev.CONTROLS_OURS): (s, None) for s in (*_RUNNING, *_DOWN, M.CLOSED)},
+    **{(s, Ev.CONTROLS_OURS): (s, None) for s in (*_WORKING, *_DOWN, M.CLOSED)},
     # --- the agent ------------------------------------------------------------------------------------
-    **{(s, Ev.AGENT_OVERDUE): (M.TIMEOUT, H._agent_overdue) for s in _RUNNING},
+    **{(s, Ev.AGENT_OVERDUE): (M.TIMEOUT, H._agent_overdue) for s in _WORKING},
     **{(s, Ev.AGENT_OVERDUE): (s, None) for s in (*_DOWN, M.CLOSED)},  # already halted, or over
     # --- the keepalive switch and the close ---------------------------------------------------------
     **{(s, Ev.KEEPALIVE_SWITCHED): (s, H._switch_keepalive) for s in Mode},
-    **{(s, Ev.CLOSE): (M.CLOSED, H._close) for s in (M.STARTING, *_RUNNING, *_DOWN)},
+    **{(s, Ev.CLOSE): (M.CLOSED, H._close) for s in (M.STARTING, *_WORKING, *_DOWN)},
     (M.CLOSED, Ev.CLOSE): (M.CLOSED, None),
 }
 

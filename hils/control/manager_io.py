@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from enum import StrEnum
 
-from hils.control.actions import Command
+from hils.control.actions import ActionError, Command
 from hils.protocol.ntcip import SignalState
 
 __all__ = [
@@ -36,6 +36,8 @@ __all__ = [
     "PollAnswered",
     "PollFailed",
     "PollFailureSeen",
+    "PreemptBegan",
+    "PreemptEnded",
     "Purpose",
     "ReadController",
     "ReadControls",
@@ -43,6 +45,7 @@ __all__ = [
     "Recovered",
     "RecoveryRequested",
     "RecoveryStarted",
+    "Refused",
     "ResumePolling",
     "RetryStartup",
     "SendCall",
@@ -86,6 +89,7 @@ class Purpose(StrEnum):
     RETRY = "retry"
     KEEPALIVE = "keepalive"
     RECOVERY = "recovery"
+    WITHDRAW = "withdraw"  # a preempt began: the call of the command it interrupted goes
     CLEAR = "clear"
 
 
@@ -127,12 +131,13 @@ class CommandRequested:
 
 @dataclass(frozen=True, slots=True)
 class PollAnswered:
-    """Poll ``poll_id``, sent in polling period ``epoch``, read ``state``."""
+    """Poll ``poll_id``, sent in polling period ``epoch``, read ``state`` and the preempts in service (by number)."""
 
     t: float
     poll_id: int
     epoch: int
     state: SignalState
+    preempts: frozenset[int] = frozenset()
 
 
 @dataclass(frozen=True, slots=True)
@@ -312,6 +317,30 @@ class StartTimer:
 
 
 @dataclass(frozen=True, slots=True)
+class Refused:
+    """A command refused (``error``: the typed error to hand the agent); nothing is sent for it."""
+
+    action_id: int
+    error: ActionError
+
+
+@dataclass(frozen=True, slots=True)
+class PreemptBegan:
+    """The controller serves ``preempts``; ``command_id``: the command that ended because of it (None: none)."""
+
+    preempts: frozenset[int]
+    command_id: int | None
+
+
+@dataclass(frozen=True, slots=True)
+class PreemptEnded:
+    """The controller reports its preemption over after ``duration`` s, showing ``greens``."""
+
+    duration: float
+    greens: frozenset[int]
+
+
+@dataclass(frozen=True, slots=True)
 class Dropped:
     action_id: int
     state: str  # the log name of the state that dropped it
@@ -347,7 +376,7 @@ class Verified:
 @dataclass(frozen=True, slots=True)
 class CommandEnded:
     command_id: int
-    outcome: str  # verified | served | timeout | keep
+    outcome: str  # verified | served | timeout | preempted | keep
     hold: float  # seconds from dispatch (0 for a keep)
 
 
@@ -408,6 +437,6 @@ class Note:
 
 
 Effect = (RetryStartup | StartupDone | WatchCalls | AnotherManager | ControllerUnreachable | Dispatch | SendCall |
-          StartTimer | Dropped | ShowSignal | PollFailureSeen | Verified | CommandEnded | TimeoutEntered |
+          StartTimer | Refused | Dropped | ShowSignal | PollFailureSeen | Verified | CommandEnded | TimeoutEntered |
           DriftSeen | HaltPolling | ResumePolling | ReadControls | ReadController | RecoveryStarted | Recovered |
-          CloseDone | Note)
+          CloseDone | Note | PreemptBegan | PreemptEnded)

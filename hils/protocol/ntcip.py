@@ -428,6 +428,17 @@ class PreemptState(IntEnum):
     EXIT_STARTED = 8
     MAX_PRESENCE = 9
 
+    @property
+    def in_service(self) -> bool:
+        """The preempt drives the controller: its entry, track clearance, dwell, linked preempt or exit. Not while
+        its input waits out the delay (notActiveWithCall), nor once the maximum presence has returned the controller
+        to "normal operation" (maxPresence)."""
+        return self in _IN_SERVICE
+
+
+_IN_SERVICE = frozenset({PreemptState.ENTRY_STARTED, PreemptState.TRACK_SERVICE, PreemptState.DWELL,
+                         PreemptState.LINK_ACTIVE, PreemptState.EXIT_STARTED})
+
 
 class PreemptColumn(IntEnum):
     """Columns of preemptTable (A.6.2.1.c.preempt)."""
@@ -591,6 +602,21 @@ def signal_oids(groups: int, overlap_groups: int = 0) -> tuple[Oid, ...]:
     return (tuple(status_oid(col, g) for col in SIGNAL_COLUMNS for g in range(1, groups + 1))
             + tuple(OVERLAP_STATUS_TABLE[col].instance(g) for col in OVERLAP_SIGNAL_COLUMNS
                     for g in range(1, overlap_groups + 1)))
+
+
+def preempt_state_oids(preempts: Iterable[int]) -> tuple[Oid, ...]:
+    """preemptState of each of these preempts: what a poll reads after the signal state to see preemption."""
+    return tuple(PREEMPT_TABLE[PreemptColumn.STATE].instance(n) for n in preempts)
+
+
+def preempts_in_service(preempts: Sequence[int], values: Sequence[int]) -> frozenset[int]:
+    """The preempts (numbered as read by :func:`preempt_state_oids`) whose preemptState is in service."""
+    if len(values) != len(preempts):
+        raise ValueError(f"a preempt poll has {len(preempts)} values, got {len(values)}")
+    try:
+        return frozenset(n for n, v in zip(preempts, values, strict=True) if PreemptState(int(v)).in_service)
+    except ValueError:
+        raise ValueError(f"preemptState outside 1..9: {list(values)}") from None
 
 
 @dataclass(frozen=True, slots=True)

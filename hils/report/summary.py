@@ -38,6 +38,8 @@ class Tally:
         self.timeout: dict[str, Any] | None = None  # the TIMEOUT the manager is in (its record), None when not in one
         self.clear: dict[str, Any] | None = None  # the closing clear's last SET record (sent, answered or failed)
         self.first_refusal: dict[str, Any] | None = None
+        # Each PREEMPTED episode: when it began, the preempts in service, and how long it lasted (None while on).
+        self.preemptions: list[dict[str, Any]] = []
 
     def __call__(self, record: dict[str, Any]) -> None:
         kind = record["kind"]
@@ -48,13 +50,19 @@ class Tally:
             self._watch(kind, record)
 
     _WATCHED = frozenset({Kind.TIMEOUT_ENTERED, Kind.STATE, Kind.SET_SENT, Kind.SET_ANSWERED, Kind.SET_FAILED,
-                          Kind.ACTION_REFUSED})
+                          Kind.ACTION_REFUSED, Kind.PREEMPT_BEGIN})
 
     def _watch(self, kind: str, record: dict[str, Any]) -> None:
         """How the run stands at its end: in TIMEOUT or not, its calls cleared or not, why an action was refused."""
         if kind == Kind.TIMEOUT_ENTERED:
             self.timeout = record
-        elif kind == Kind.STATE and record["to"] != "timeout":
+        elif kind == Kind.PREEMPT_BEGIN:
+            self.preemptions.append({"t": record["t"], "preempts": list(record["preempts"]), "duration_s": None})
+        elif kind == Kind.STATE and record["from"] == "preempted":
+            # Over when the controller reported it (preempt_end), or cut by a TIMEOUT (then unknown beyond it).
+            self.preemptions[-1]["duration_s"] = record["t"] - self.preemptions[-1]["t"]
+            self.preemptions[-1]["ended"] = "over" if record["to"] == "idle" else record["to"]
+        if kind == Kind.STATE and record["to"] != "timeout":
             self.timeout = None  # recovered (a close leaves the state as it was: no record)
         elif kind in (Kind.SET_SENT, Kind.SET_ANSWERED, Kind.SET_FAILED) and record.get("purpose") == "clear":
             if self.clear is None:
@@ -125,10 +133,27 @@ def _control(tally: Tally, config: IntersectionConfig) -> dict[str, Any]:
         "calls_cleared": _cleared(tally.clear),
         "clear_error": tally.clear.get("error") if tally.clear else None,
         "controller_plan": _plan(config),
+        "preemptions": _preemptions(tally.preemptions, _run(tally, None)["sim_time_s"]),
     }
     if kinds[Kind.DETECTORS]:
         out["detector_actuations"] = actuations_per_phase(records, config)
     return out
+
+
+def _preemptions(episodes: list[dict[str, Any]], end: float) -> dict[str, Any]:
+    """How often the controller was preempted, when, and for how long (an episode still on at the end: until then)."""
+    shown = [{"ended": "running at the end", **e, "duration_s": end - e["t"]} if e["duration_s"] is None else e
+             for e in episodes]
+    durations = [e["duration_s"] for e in shown]
+    return {"count": len(shown), "total_s": sum(durations), "longest_s": max(durations, default=0.0),
+            "episodes": shown}
+
+
+def _preemptions_text(p: Mapping[str, Any]) -> str:
+    at = ", ".join(f"{e['t']:.1f} s for {e['duration_s']:.1f} s" + (
+        "" if e.get("ended") == "over" else f" ({e.get('ended')})") for e in p["episodes"][:5])
+    more = f" and {p['count'] - 5} more" if p["count"] > 5 else ""
+    return f"{p['count']} ({at}{more}); total {p['total_s']:.1f} s, longest {p['longest_s']:.1f} s"
 
 
 def _refusal(record: Mapping[str, Any] | None) -> dict[str, Any] | None:
@@ -201,6 +226,8 @@ def _render_one(summary: Mapping[str, Any]) -> str:
     if h["n"]:
         lines.append(f"  hold per transition  mean {h['mean']:.3f} s, min {h['min']:.3f} s, max {h['max']:.3f} s")
     lines.append(f"  timeouts             {_timeouts(s)}")
+    if s.get("preemptions", {}).get("count"):
+        lines.append(f"  preemptions          {_preemptions_text(s['preemptions'])}")
     lines.append(f"  controller plan      {_plan_text(s.get('controller_plan', {}))}")
     polls = _polls_shown(s)
     sent = polls["polls"] - polls["elided"]
@@ -235,6 +262,10 @@ def _render_network(summary: Mapping[str, Any]) -> str:
                      f"{_fmt(h['mean'] if h['n'] else None):>9}   {timeouts:<22} "
                      f"{polls['polls']:>6} ({polls['failed']}, {polls['elided']})"
                      f"{'':>10}{c['drifted_steps']:>3}")
+    preempted = {tls: c["preemptions"] for tls, c in s["intersections"].items()
+                 if c.get("preemptions", {}).get("count")}
+    if preempted:
+        lines += ["Preemptions"] + [f"  {tls:<7} {_preemptions_text(p)}" for tls, p in preempted.items()]
     return "\n".join(lines)
 
 

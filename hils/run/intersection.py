@@ -100,7 +100,7 @@ class Intersection:
             return params.control_interval, [timeout_entered]
         if mw.state is State.ON_HOLD:
             return None, [mw.entering(State.IDLE), timeout_entered]  # the prescribed green is being served
-        if mw.state is State.TIMEOUT:
+        if mw.state in (State.TIMEOUT, State.PREEMPTED):  # asked again when commanding resumes, if not before
             return params.control_interval, [mw.entering(State.IDLE)]
         return params.sumo_step, []  # nothing to serve: do not ask again at the same instant
 

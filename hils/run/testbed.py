@@ -177,9 +177,10 @@ class _OneIntersection:
         """Submit ``action`` and run to the next decision point; returns the observation and an info mapping.
 
         An action that cannot be served is refused with a typed :class:`hils.control.actions.ActionError`
-        (logged; nothing is sent, no time passes). ``info`` says what happened: ``action_id``,
-        ``dropped`` (the manager was not IDLE), ``state``, ``timeout`` (the manager entered TIMEOUT
-        during the step) and ``timeout_reason``, ``ended`` (the run's duration has passed)."""
+        (logged; nothing is sent, no time passes), :class:`hils.control.actions.PreemptedError` while the
+        controller serves a preempt. ``info`` says what happened: ``action_id``,
+        ``dropped`` (the manager was not IDLE), ``state`` (idle, on_hold, timeout or preempted), ``timeout`` (the
+        manager entered TIMEOUT during the step) and ``timeout_reason``, ``ended`` (the run's duration has passed)."""
         name = self._only()
         observations, infos = self.step_all({name: action})
         return observations[name], infos[name]

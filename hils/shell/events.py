@@ -50,7 +50,8 @@ class Kind(StrEnum):
     ACTION_DROPPED = "action_dropped"          # action_id, state
     COMMAND_DISPATCHED = "command_dispatched"  # action_id, command_id, command, green
     SET_SENT = "set_sent"                      # command_id, phases, purpose: startup|command|retry|keepalive|
-    #                                                        recovery|clear (startup: all six objects at 0)
+    #                                                        recovery|withdraw|clear (startup: all six objects
+    #                                                        at 0; withdraw: no phase, as a preempt begins)
     SET_ANSWERED = "set_answered"              # command_id, purpose
     SET_FAILED = "set_failed"                  # command_id, purpose, error
     POLL = "poll"                              # poll_id, greens, yellows: a read that changed the state seen, or
@@ -58,15 +59,20 @@ class Kind(StrEnum):
     #                                                        start-up read); counts in run_ended
     POLL_FAILED = "poll_failed"                # poll_id, error, consecutive
     TRANSITION_VERIFIED = "transition_verified"  # command_id, command, poll_id, hold_s
-    HOLD_RELEASED = "hold_released"            # command_id, reason (verified|served|timeout|keep), hold_s
+    HOLD_RELEASED = "hold_released"            # command_id, reason (verified|served|timeout|preempted|keep),
+    #                                                        hold_s
     DRIFT = "drift"                            # step_s, took_s, consecutive
     TIMEOUT_ENTERED = "timeout_entered"        # reason (communication|transition|drift|foreign_control|agent),
     #                                                        command_id, detail
     AGENT_LATE = "agent_late"                  # took_s, discarded: the agent answered after the next SUMO step was
     #                                                        due (discarded: beyond the control interval)
+    PREEMPT_BEGIN = "preempt_begin"            # preempts (in service), command_id (the command it ended, or
+    #                                                        null): a poll read a preemptState in service
+    PREEMPT_END = "preempt_end"                # duration_s, greens (shown on leaving): a poll read none in
+    #                                                        service (a TIMEOUT meanwhile leaves it unended)
     RECOVERY_STARTED = "recovery_started"      # -
     RECOVERED = "recovered"                    # greens
-    STATE = "state"                            # from, to: the paper's names (idle, on_hold, timeout)
+    STATE = "state"                            # from, to: the paper's names (idle, on_hold, timeout) and preempted
     RUN_ENDED = "run_ended"                    # reason (duration|closed|interrupted|terminated|agent_error|error),
     #                                                        polls {polls, elided, answered, failed, late}
     QUEUES = "queues"                          # queues {approach: vehicles queued upstream} (SUMO runs, every 5 s)

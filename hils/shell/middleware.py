@@ -3,7 +3,8 @@
 The manager (:mod:`hils.control.manager`) decides; this module does, and decides nothing. It turns agent
 actions into manager events, carries out the effects the manager returns (SET the call, start
 timers, halt or resume polling, read the controller, log) and feeds back what happened: the start-up
-read, every poll's answer or failure, timer expiries, the answers to SETs, the read-back of the control
+read, every poll's answer or failure (a poll reads the signal state and, when the config lists preempts, their
+preemptState in the same GET), timer expiries, the answers to SETs, the read-back of the control
 objects, the cost of simulation steps. It runs unchanged in virtual and wall-clock time: only the
 environment's driver and the transport differ.
 """
@@ -44,6 +45,8 @@ from hils.control.manager_io import (
     PollAnswered,
     PollFailed,
     PollFailureSeen,
+    PreemptBegan,
+    PreemptEnded,
     Purpose,
     ReadbackDue,
     ReadController,
@@ -51,6 +54,7 @@ from hils.control.manager_io import (
     Recovered,
     RecoveryRequested,
     RecoveryStarted,
+    Refused,
     ResumePolling,
     RetryStartup,
     SendCall,
@@ -83,6 +87,8 @@ from hils.protocol.ntcip import (
     control_oid,
     groups_to_phases,
     phases_to_groups,
+    preempt_state_oids,
+    preempts_in_service,
     signal_oids,
 )
 from hils.protocol.timegrid import Grid
@@ -107,7 +113,7 @@ class Received:
     value: Any
     wall_ns: int
     command: Command | None
-    error: ActionError | None = None  # refused by the converter: nothing will be sent
+    error: ActionError | None = None  # refused by the converter, or preempted: nothing will be sent
 
 
 @dataclass(frozen=True, slots=True)
@@ -115,7 +121,7 @@ class Submission:
     """What became of an action handed to :meth:`Middleware.submit`."""
 
     action_id: int
-    error: ActionError | None = None  # refused by the converter: nothing was sent
+    error: ActionError | None = None  # refused (by the converter, or the manager while preempted): nothing was sent
     dropped: bool = False  # converted, but the manager was not IDLE
 
 
@@ -147,7 +153,9 @@ class Middleware:
                                watch_period=params.poll_period, take_over=take_over)
         self.converter = ActionConverter(config, ActionType(action_type))
         self.cache = SignalCache()
-        self.signal_oids = signal_oids(config.groups)
+        # One GET per poll: the signal state, then the state of each preempt the config lists (none: no more).
+        self._preempts = tuple(sorted(config.preempts))
+        self.signal_oids = signal_oids(config.groups) + preempt_state_oids(self._preempts)
         self._veh_call_oids = [control_oid(ControlColumn.VEH_CALL, g) for g in range(1, config.groups + 1)]
         # The read-back: the control objects the run never sets, then VehCall.
         self._control_oids = [*(control_oid(c, g) for c in FOREIGN_COLUMNS for g in range(1, config.groups + 1)),
@@ -160,7 +168,8 @@ class Middleware:
         self._leaving_recovery: simpy.Event | None = None
         self._closed: simpy.Event | None = None
         self._startup_over = False
-        self._decoded: dict[tuple[Any, ...], SignalState] = {}  # a controller shows a handful of distinct states
+        # A controller shows a handful of distinct states: each decoded once, with the preempts in service.
+        self._decoded: dict[tuple[Any, ...], tuple[SignalState, frozenset[int]]] = {}
         self._log_fields: dict[SignalState, tuple[tuple[int, ...], tuple[int, ...]]] = {}
         self._actions = 0
         self.last_hold: float | None = None  # s from dispatch to verification of the last verified transition
@@ -216,12 +225,15 @@ class Middleware:
 
     def receive(self, value: Any) -> Received:
         """An agent's action value as it arrives, converted (logging and sending nothing yet): a run converts
-        every action of a step before it submits any, so that a refused one leaves the others unsent."""
+        every action of a step before it submits any, so that a refused one leaves the others unsent. A valid
+        action is refused too when the manager would refuse it (the controller preempted)."""
         received_ns = time.monotonic_ns()
         try:
-            return Received(value, received_ns, self.converter.convert(value, self.manager.position))
+            command = self.converter.convert(value, self.manager.position)
         except ActionError as exc:
             return Received(value, received_ns, None, exc)
+        refusal = self.manager.refusal()
+        return Received(value, received_ns, None if refusal else command, refusal)
 
     def submit(self, action: Any) -> Submission:
         """An agent's action (a value, or what :meth:`receive` made of one) logged and handed to the manager."""
@@ -232,16 +244,21 @@ class Middleware:
         self.log.emit(Kind.ACTION_RECEIVED, action_id=action_id, action_type=self.converter.action_type.value,
                       value=_plain(received.value), wall_ns=received.wall_ns)
         if received.error is not None:
-            exc = received.error
-            self.log.emit(Kind.ACTION_REFUSED, action_id=action_id, error=type(exc).__name__, reason=exc.reason,
-                          message=str(exc))
-            return Submission(action_id, error=exc)
+            return self._refused(action_id, received.error)
         command = received.command
         self.log.emit(Kind.ACTION_CONVERTED, action_id=action_id, command=command.phases, green=command.green,
                       keep=command.keep)
         shown = self.cache.state.greens if self.cache.state is not None else frozenset()
         effects = self._feed(CommandRequested(self.env.now, action_id, command, shown))
+        refused = next((e for e in effects if isinstance(e, Refused)), None)
+        if refused is not None:
+            return self._refused(action_id, refused.error)
         return Submission(action_id, dropped=any(isinstance(e, Dropped) for e in effects))
+
+    def _refused(self, action_id: int, exc: ActionError) -> Submission:
+        self.log.emit(Kind.ACTION_REFUSED, action_id=action_id, error=type(exc).__name__, reason=exc.reason,
+                      message=str(exc))
+        return Submission(action_id, error=exc)
 
     def agent_overdue(self, waited: float) -> None:
         """The agent asked ``waited`` s ago (the control interval) has given no action yet."""
@@ -317,13 +334,17 @@ class Middleware:
     def _read_signal(self) -> Generator[simpy.Event, Any, SignalState]:
         """One GET of the signal state outside the poll grid (start-up, recovery)."""
         values = yield self.transport.get(self.signal_oids)
-        return self._decode(values)
+        return self._decode(values)[0]
 
-    def _decode(self, values: tuple[Any, ...]) -> SignalState:
-        state = self._decoded.get(values)
-        if state is None:
-            state = self._decoded[tuple(values)] = SignalState.from_values(values, self.config.groups)
-        return state
+    def _decode(self, values: tuple[Any, ...]) -> tuple[SignalState, frozenset[int]]:
+        """The signal state and the preempts in service that a poll's values say."""
+        decoded = self._decoded.get(values)
+        if decoded is None:
+            n = len(self._preempts)
+            signal = values[:len(values) - n]
+            decoded = self._decoded[tuple(values)] = (SignalState.from_values(signal, self.config.groups),
+                                                      preempts_in_service(self._preempts, values[len(signal):]))
+        return decoded
 
     def _read_controller_setup(self) -> Generator[simpy.Event, Any, tuple[SignalState, ControllerReading]]:
         seen = yield from self._read_signal()
@@ -397,11 +418,11 @@ class Middleware:
         try:
             if not ev.ok:
                 raise ev.value
-            state = self._decode(ev.value)
+            state, preempts = self._decode(ev.value)
         except (TransportError, SnmpError, ValueError) as exc:
             self._feed(PollFailed(self.env.now, poll_id, epoch, type(exc).__name__, f"{type(exc).__name__}: {exc}"))
             return
-        self._feed(PollAnswered(self.env.now, poll_id, epoch, state))
+        self._feed(PollAnswered(self.env.now, poll_id, epoch, state, preempts))
 
     def _show(self, state: SignalState, poll_id: int, *, logged: bool = False) -> None:
         """Put what a read saw into the cache, with a ``poll`` record when it changes the state, or ``logged``: the
@@ -448,6 +469,15 @@ class Middleware:
                     lambda _ev, kind=kind, token=token: self._feed(TimerExpired(self.env.now, kind, token)))
             case Dropped(action_id, state):
                 self.log.emit(Kind.ACTION_DROPPED, action_id=action_id, state=state)
+            case Refused():
+                pass  # submit() logs it and hands the error back
+            case PreemptBegan(preempts, command_id):
+                log.info("preempt %s in service: the middleware commands nothing until it is over",
+                         ", ".join(map(str, sorted(preempts))))
+                self.log.emit(Kind.PREEMPT_BEGIN, preempts=preempts, command_id=command_id)
+            case PreemptEnded(duration, greens):
+                log.info("preemption over after %.1f s: resuming from phases %s", duration, sorted(greens))
+                self.log.emit(Kind.PREEMPT_END, duration_s=duration, greens=greens)
             case Verified(command_id, command, poll_id, hold):
                 self.last_hold = hold
                 self.log.emit(Kind.TRANSITION_VERIFIED, command_id=command_id, command=command.phases,

@@ -10,7 +10,7 @@ const COLORS = { G: "#1fa64a", Y: "#f2c21b", r: "#c8322b", "-": "url(#no-data)" 
 const HATCH = '<defs><pattern id="no-data" width="6" height="6" patternUnits="userSpaceOnUse" ' +
   'patternTransform="rotate(45)"><rect width="6" height="6" fill="#eceef1"/>' +
   '<line x1="0" y1="0" x2="0" y2="6" stroke="#9aa1ad" stroke-width="2"/></pattern></defs>';
-const STATES = { idle: "IDLE", on_hold: "ON_HOLD", timeout: "TIMEOUT", closed: "CLOSED" };
+const STATES = { idle: "IDLE", on_hold: "ON_HOLD", timeout: "TIMEOUT", preempted: "PREEMPTED", closed: "CLOSED" };
 let meta = null;
 
 // The run's secret, printed at start in the page's URL (?token=..., as Jupyter does): kept for this tab, taken out

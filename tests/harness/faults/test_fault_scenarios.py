@@ -171,6 +171,9 @@ def test_a_scenario_is_reproducible_from_its_seed():
         "seed = 1", 'seed = 1\naction_type = "duration"'), "faults[0].action", "a duration agent cannot issue"),
     (lambda t: t.replace('type = "drop"', 'type = "snmp_error"\nstatus = "oops"'), "faults[0].status",
      "unknown SNMP error status"),
+    (lambda t: t.replace('type = "drop"', 'type = "preempt"\nhold = 5.0').replace("end = 35.0", ""),
+     "faults[0].preempt", "is 1, which the config 'paper four-leg intersection' has not; allowed: its [preempts] "
+     "(none)"),
 ])
 def test_a_bad_scenario_file_is_refused_naming_the_file_and_the_key(tmp_path, edit, key, message):
     path = tmp_path / "bad.toml"
@@ -395,3 +398,32 @@ def test_a_scenario_of_several_controllers_is_read_from_a_file_beside_the_fault_
     assert [f.intersection for f in scenario.faults] == ["A", "B"]
     assert scenario.expectations("A").timeout == ("communication",)
     assert "faults: drop at A, stuck at B" in scenario.summary()
+
+
+def test_a_preempt_during_a_commanded_transition_is_judged_preempted_and_its_breaches_fail():
+    scenario = load_fault_scenario(SUITE / "controller-preempted-mid-transition.toml")
+    faults = scenario.build_faults()
+    monitors = []
+
+    def factory(env, config, *, seed, fast_path):
+        target = FaultTarget(env, config, seed=seed, faults=faults, fast_path=fast_path)
+        monitors.append(IndicationMonitor(env, target.controller, config))
+        return target
+
+    def configure(tb):
+        for fault in faults:
+            fault.on_run(tb, tb.intersection)
+
+    records = run_spec(scenario.spec(), target=factory, configure=configure).records
+    result = evaluate(scenario, records, faults, {TLS_ID: monitors[0]})
+    assert result.passed, [c.message for c in result.failures]
+    (began,) = [r for r in records if r["kind"] == Kind.PREEMPT_BEGIN]
+    assert began["command_id"] is not None, "the preempt came during a commanded transition"
+    # A command sent while preempted, and a preemption that never ends, each fail the check, saying what happened.
+    at = next(i for i, r in enumerate(records) if r["kind"] == Kind.PREEMPT_BEGIN)
+    sent = {**records[at + 1], "kind": Kind.SET_SENT.value, "purpose": "command", "phases": [1, 5], "command_id": 9}
+    doctored = [*records[:at + 1], sent, *(r for r in records[at + 1:] if r["kind"] != Kind.PREEMPT_END)]
+    failed = {c.expectation: c.message for c in evaluate(scenario, doctored, faults, {TLS_ID: monitors[0]}).failures}
+    assert "preemptions" in failed
+    assert re.search(r"the preemption at 20\.\d+ s never ended; the preemption at 20\.\d+ s sent command SET at",
+                     failed["preemptions"])

@@ -6,10 +6,14 @@ shipped config at the manager's sequence position, sends polls and settles them 
 failed, late, or from before a halt), fires the timers the manager asked for in random order (and stale
 tokens), answers, refuses or loses the SETs it asked for, times simulation steps (drift), asks for
 read-backs and answers them, asks for recovery and answers its re-read, switches the keepalive and
-closes the run, with time never going back. Every effect the manager returns is checked against the
+closes the run, with time never going back; some polls read a preempt in service, and any poll that reads none
+reports the preemption over. Every effect the manager returns is checked against the
 rules of the paper as it comes out: what may be sent in which state, retries, the gating of the
 keepalive and of the read-back, failed polls counted in a row, start-up attempts, drift counting,
-recovery and its timer, the close and the sequence position.
+recovery and its timer, the close and the sequence position; and preemption: PREEMPTED entered from any
+commanding state when a poll reads a preempt in service, nothing but the keepalive of no call sent in it, every
+action refused as preempted, no TIMEOUT but for failures of the run's own side, and IDLE again as soon as a poll
+reads the preemption over.
 """
 
 from __future__ import annotations
@@ -25,7 +29,7 @@ import numpy as np
 from hypothesis import HealthCheck, settings
 from hypothesis.stateful import RuleBasedStateMachine, initialize, precondition, rule
 
-from hils.control.actions import ActionConverter, ActionError, ActionType, Command
+from hils.control.actions import ActionConverter, ActionError, ActionType, Command, PreemptedError
 from hils.control.manager import CLEAR_ATTEMPTS, Ev, Manager, Mode, State, graph
 from hils.control.manager_io import (
     AgentOverdue,
@@ -51,6 +55,8 @@ from hils.control.manager_io import (
     PollAnswered,
     PollFailed,
     PollFailureSeen,
+    PreemptBegan,
+    PreemptEnded,
     Purpose,
     ReadbackDue,
     ReadController,
@@ -58,6 +64,7 @@ from hils.control.manager_io import (
     Recovered,
     RecoveryRequested,
     RecoveryStarted,
+    Refused,
     ResumePolling,
     RetryStartup,
     SendCall,
@@ -86,7 +93,7 @@ TAU_TRANS = CONFIG.middleware.tau_trans
 N_TIMEOUT = CONFIG.middleware.n_timeout
 RECOVER_AFTER = 5.0
 WATCH, WATCH_PERIOD = 20.0, 0.1
-DISPATCHED_OUTCOMES = {"verified", "served", "timeout"}
+DISPATCHED_OUTCOMES = {"verified", "served", "timeout", "preempted"}
 
 # --- action values, each tagged with whether the converter must accept it --------------------
 
@@ -128,8 +135,10 @@ GREENS = st.frozensets(st.sampled_from(PHASES), max_size=4)
 N_DRIFT = CONFIG.middleware.n_drift
 STEP = CONFIG.middleware.sumo_step
 BACKUP = st.sampled_from([0, 6, 30, 300])
-RUNNING = (Mode.IDLE, Mode.IN_TRANSITION, Mode.SERVING)
+RUNNING = (Mode.IDLE, Mode.IN_TRANSITION, Mode.SERVING)  # commanding
+WORKING = (*RUNNING, Mode.PREEMPTED)  # polling, keepalive, drift, read-back
 DOWN = (Mode.TIMEOUT, Mode.RECOVERING)
+PREEMPTS = st.frozensets(st.integers(1, 4), min_size=1, max_size=2)
 
 
 def shown(greens: frozenset[int]) -> SignalState:
@@ -192,6 +201,7 @@ class ManagerMachine(RuleBasedStateMachine):
         self.close_done = 0
         self.read_greens: frozenset[int] = frozenset()
         self.shown: frozenset[int] = frozenset()
+        self.preempted_at = 0.0  # when the manager last entered PREEMPTED
         self.consistent = True  # False once a check failed: the trackers no longer match the manager
 
     # --- the shell -----------------------------------------------------------------------------
@@ -204,7 +214,7 @@ class ManagerMachine(RuleBasedStateMachine):
     def feed(self, ev: Event) -> list[Effect]:
         m = self.manager
         self.consistent = False
-        before, open_before, position_before = m.mode, self.open, m.position
+        before, open_before, position_before, call_before = m.mode, self.open, m.position, m.call
         effects = m.handle(ev)
         after = m.mode
 
@@ -228,8 +238,14 @@ class ManagerMachine(RuleBasedStateMachine):
                     "a lost clear is sent again, CLEAR_ATTEMPTS times in all; then the close is over")
             if isinstance(ev, SetAnswered) and ev.purpose is Purpose.CLEAR:
                 assert effects == [CloseDone()]
-        if isinstance(ev, CommandRequested) and before not in (Mode.IDLE,):
+        if isinstance(ev, CommandRequested) and before is Mode.PREEMPTED:
+            (refused,) = effects
+            assert isinstance(refused, Refused) and refused.action_id == ev.action_id
+            assert isinstance(refused.error, PreemptedError) and refused.error.reason == "preempted"
+            assert after is Mode.PREEMPTED
+        elif isinstance(ev, CommandRequested) and before is not Mode.IDLE:
             assert effects == [Dropped(ev.action_id, before.log_name)]
+        assert (m.refusal() is not None) == (after is Mode.PREEMPTED), "refused exactly while PREEMPTED"
         if isinstance(ev, CloseRequested) and before is not Mode.CLOSED:
             assert after is Mode.CLOSED and effects[0] == HaltPolling()
             if self.last_set > -math.inf:
@@ -254,7 +270,7 @@ class ManagerMachine(RuleBasedStateMachine):
         if isinstance(ev, PollAnswered | PollFailed) and ev.epoch != self.epoch:
             assert effects == [] and after is before, "a poll sent before the halt changed something"
         elif isinstance(ev, PollAnswered):
-            assert before in RUNNING, f"a poll of this period answered in {before.name}"
+            assert before in WORKING, f"a poll of this period answered in {before.name}"
             if ev.poll_id < self.newest:
                 assert effects == [] and after is before, "a late answer changed something"
             else:
@@ -263,9 +279,19 @@ class ManagerMachine(RuleBasedStateMachine):
                 assert effects[0] == ShowSignal(ev.poll_id, ev.state, after_failures)
                 self.newest = ev.poll_id
                 self.shown = ev.state.greens
+                # A preempt in service is PREEMPTED from any commanding state; a poll reading none ends it.
+                assert (after is Mode.PREEMPTED) == bool(ev.preempts), f"{before.name} -> {after.name} on {ev}"
+                if before is not Mode.PREEMPTED and ev.preempts:
+                    assert PreemptBegan(ev.preempts, open_before) in effects
+                    assert m.preempts == ev.preempts and m.preempted_since == ev.t
+                    withdrawn = SendCall(frozenset(), Purpose.WITHDRAW) in effects
+                    assert withdrawn == bool(call_before), "the interrupted call is withdrawn (when there is one)"
+                elif before is Mode.PREEMPTED and not ev.preempts:
+                    assert effects[1:] == [PreemptEnded(ev.t - self.preempted_at, ev.state.greens)]
+                    assert after is Mode.IDLE
         elif isinstance(ev, PollFailed):
             # n_timeout polls of consecutive ids that all failed, in poll order, whatever order they settled in.
-            assert before in RUNNING, f"a poll of this period failed in {before.name}"
+            assert before in WORKING, f"a poll of this period failed in {before.name}"
             self.failed_ids.add(ev.poll_id)
             ids = sorted(self.failed_ids)
             blocks, start = [], 0
@@ -281,7 +307,7 @@ class ManagerMachine(RuleBasedStateMachine):
                 assert effects == [effects[0]] and after is before
         if isinstance(ev, ReadbackDue):
             failing = any(i > self.newest for i in self.failed_ids)
-            expected = [ReadControls()] if before in RUNNING and not failing else []
+            expected = [ReadControls()] if before in WORKING and not failing else []
             assert effects == expected, "the read-back goes out while working and no poll fails, and only then"
             if effects:
                 self.readback = (self.sets_sent, not self.sets and not self.set_unsure)
@@ -358,7 +384,9 @@ class ManagerMachine(RuleBasedStateMachine):
                     assert command_id == self.open, "ended a command that is not pending"
                     assert command_id not in self.ended, "a command ended twice"
                     green = self.dispatched[command_id].green
-                    if outcome == "verified":
+                    if outcome == "preempted":
+                        assert isinstance(ev, PollAnswered) and ev.preempts and after is Mode.PREEMPTED
+                    elif outcome == "verified":
                         assert green is None and isinstance(ev, PollAnswered)
                     elif outcome == "served":
                         assert green is not None and isinstance(ev, TimerExpired) and ev.kind is TimerKind.DURATION
@@ -369,7 +397,7 @@ class ManagerMachine(RuleBasedStateMachine):
                     assert isinstance(ev, CommandRequested) and action_id == ev.action_id
                     assert state == before.log_name and before is not Mode.IDLE
                 case TimeoutEntered(reason, _detail, command_id):
-                    assert after is Mode.TIMEOUT and before in (Mode.STARTING, *RUNNING)
+                    assert after is Mode.TIMEOUT and before in (Mode.STARTING, *WORKING)
                     assert command_id == open_before
                     assert HaltPolling() in effects, "polling halts in TIMEOUT"
                     if isinstance(ev, PollFailed | StartupLost | StartupRefused):
@@ -384,7 +412,7 @@ class ManagerMachine(RuleBasedStateMachine):
                         assert isinstance(ev, TimerExpired) and ev.kind is TimerKind.TRANSITION
                         assert reason is TimeoutReason.TRANSITION
                 case DriftSeen(step, took, consecutive):
-                    assert isinstance(ev, StepTimed) and took > step and before in (Mode.STARTING, *RUNNING)
+                    assert isinstance(ev, StepTimed) and took > step and before in (Mode.STARTING, *WORKING)
                     assert consecutive == self.drifted + 1
                 case RecoveryStarted() | ReadController():
                     assert before is Mode.TIMEOUT and after is Mode.RECOVERING
@@ -397,6 +425,11 @@ class ManagerMachine(RuleBasedStateMachine):
                 case HaltPolling():
                     self.epoch += 1
                     self.in_flight = []  # whatever was sent: its result is from before the halt
+                case PreemptBegan():
+                    assert before in RUNNING and after is Mode.PREEMPTED
+                    self.preempted_at = ev.t
+                case PreemptEnded() | Refused():
+                    pass  # checked above with the poll and the command that made them
                 case CloseDone():
                     self.close_done += 1
                     assert self.close_done == 1, "the close ended twice"
@@ -412,27 +445,31 @@ class ManagerMachine(RuleBasedStateMachine):
             sent_then, clean = self.readback
             foreign = any(phases for _name, phases in ev.held) or (
                 ev.veh_call is not None and clean and sent_then == self.sets_sent and ev.veh_call != m.call)
-            if before in RUNNING and foreign:
+            if before in WORKING and foreign:
                 assert after is Mode.TIMEOUT and any(isinstance(e, TimeoutEntered) for e in effects)
             else:
                 assert after is before and effects == []
         # Drift is counted while the machine works and only then; an on-time step resets the count.
-        if isinstance(ev, StepTimed) and before in (Mode.STARTING, *RUNNING):
+        if isinstance(ev, StepTimed) and before in (Mode.STARTING, *WORKING):
             self.drifted = self.drifted + 1 if ev.took > ev.step else 0
         if isinstance(ev, SetAnswered) and before is Mode.RECOVERING and ev.purpose is Purpose.RECOVERY:
             self.drifted = 0
             self.failed_ids.clear()
         if after is Mode.IDLE and before is Mode.RECOVERING:
             assert m.drifted_in_a_row == 0 and not m.polls_failing
-        if isinstance(ev, ControllerRead) and before is Mode.RECOVERING:
-            expected = next((i for i, pair in enumerate(CONFIG.sequence) if set(pair) <= ev.greens), position_before)
-            assert m.position == expected, "recovery aligns the position with what the controller shows"
+        if (before is Mode.RECOVERING and isinstance(ev, ControllerRead)) or any(
+                isinstance(e, PreemptEnded) for e in effects):
+            shows = ev.greens if isinstance(ev, ControllerRead) else ev.state.greens
+            expected = next((i for i, pair in enumerate(CONFIG.sequence) if set(pair) <= shows), position_before)
+            assert m.position == expected, "recovery and the end of preemption align the position with the greens"
         elif not any(isinstance(e, Dispatch) for e in effects) and not isinstance(ev, Started):
-            assert m.position == position_before, "only a dispatch, the start-up or a recovery moves the position"
+            assert m.position == position_before, ("only a dispatch, the start-up, a recovery or the end of preemption "
+                                                   "moves the position")
 
         assert (self.open is not None) == (after in (Mode.IN_TRANSITION, Mode.SERVING)) or after is Mode.CLOSED
         assert (m.pending is None) == (self.open is None)
         assert m.state is after.paper
+        assert after is not Mode.PREEMPTED or m.call == frozenset(), "no call stands while preempted"
         assert len(self.dispatched) - len(self.ended) <= 1
         assert m.poll_epoch == self.epoch
         self.consistent = True
@@ -453,17 +490,21 @@ class ManagerMachine(RuleBasedStateMachine):
             assert ev.command_id == command_id == self.open
             assert phases == frozenset(self.dispatched[self.open].phases)
         elif purpose is Purpose.KEEPALIVE:
-            assert before in RUNNING, f"keepalive in {before.name}"
+            assert before in WORKING, f"keepalive in {before.name}"
             assert isinstance(ev, TimerExpired) and ev.token == self.keepalive_token
             assert m.keepalive_on and phases == m.call
             assert ev.t - self.last_set >= m.keepalive_period - 1e-9, "keepalive before a period without a SET"
         elif purpose is Purpose.RECOVERY:
             assert before is Mode.RECOVERING and isinstance(ev, ControllerRead) and phases == ev.greens
+        elif purpose is Purpose.WITHDRAW:
+            assert before in RUNNING and isinstance(ev, PollAnswered) and ev.preempts and phases == frozenset()
         else:
             assert isinstance(ev, CloseRequested | SetFailed) and phases == frozenset()
             assert isinstance(ev, CloseRequested) or (ev.purpose is Purpose.CLEAR and ev.lost)
         if purpose is not Purpose.RECOVERY:
-            assert before in (*RUNNING,) or purpose is Purpose.CLEAR, f"{purpose} SET in {before.name}"
+            assert before in WORKING or purpose is Purpose.CLEAR, f"{purpose} SET in {before.name}"
+        if before is Mode.PREEMPTED:  # no command ever: the keepalive of no call, and the close's clear
+            assert purpose in (Purpose.KEEPALIVE, Purpose.CLEAR) and phases == frozenset(), f"{purpose} SET preempted"
         self.last_set = ev.t
         self.sets_sent += 1
         self.set_unsure = False
@@ -537,7 +578,7 @@ class ManagerMachine(RuleBasedStateMachine):
 
     def _send_poll(self) -> InFlight | None:
         """A poll goes out, as the poller sends one per period while polling is not halted."""
-        if self.manager.mode not in RUNNING:
+        if self.manager.mode not in WORKING:
             return None
         self.polls += 1
         poll = InFlight(self.polls, self.epoch)
@@ -554,6 +595,16 @@ class ManagerMachine(RuleBasedStateMachine):
         if with_pending and self.open is not None:
             greens |= set(self.dispatched[self.open].phases)
         self.feed(PollAnswered(self._tick(dt), poll.poll_id, poll.epoch, shown(greens)))
+
+    @rule(dt=DT, greens=GREENS, preempts=PREEMPTS)
+    def observe_preempted(self, dt: float, greens: frozenset[int], preempts: frozenset[int]) -> None:
+        """A poll answered at once reading a preempt in service (a lower-numbered one may take over)."""
+        poll = self._send_poll()
+        if poll is None:
+            return
+        self.in_flight.remove(poll)
+        effects = self.feed(PollAnswered(self._tick(dt), poll.poll_id, poll.epoch, shown(greens), preempts))
+        assert not any(isinstance(e, SendCall) and e.purpose is not Purpose.WITHDRAW for e in effects)
 
     @precondition(lambda self: self.open is not None)
     @rule(dt=DT, greens=GREENS)
@@ -656,7 +707,7 @@ class ManagerMachine(RuleBasedStateMachine):
             self.feed(ReadbackDue(t))
         elif what == "agent_overdue":
             effects = self.feed(AgentOverdue(t, 10.0))
-            if mode in RUNNING:
+            if mode in WORKING:
                 assert self.manager.mode is Mode.TIMEOUT and self.manager.timeout_reason is TimeoutReason.AGENT
             else:
                 assert effects == [] and self.manager.mode is mode
@@ -691,7 +742,7 @@ class ManagerMachine(RuleBasedStateMachine):
         if not self.consistent:
             return  # a rule failed: report that failure, not one that follows from it
         # A communication failure ends whatever is pending, so every dispatched command has now ended exactly once.
-        while self.manager.mode in RUNNING:
+        while self.manager.mode in WORKING:
             poll = self._send_poll()
             self.in_flight.remove(poll)
             self.feed(PollFailed(self._tick(0.1), poll.poll_id, poll.epoch, "CommunicationTimeout", "lost"))
@@ -988,3 +1039,27 @@ def test_every_state_names_its_paper_state_and_the_graph_reads_off_the_table() -
                          check=True).stdout
     assert dot.startswith("digraph manager {") and "TIMEOUT -> RECOVERING" in dot
     assert dot.count(" -> ") == len(edges)
+
+
+def test_a_preempt_ends_the_transition_without_a_timeout_and_only_a_failure_of_the_run_times_out_in_it() -> None:
+    m = started(backup=30, recover_after=None)
+    effects = m.handle(CommandRequested(1.0, 1, Command((3, 7)), frozenset({2, 6})))
+    transition = next(e for e in effects if isinstance(e, StartTimer) and e.kind is TimerKind.TRANSITION)
+    preempted = PollAnswered(1.5, 1, 0, shown(frozenset()), frozenset({1}))
+    effects = m.handle(preempted)
+    assert effects[1:4] == [CommandEnded(1, "preempted", 0.5), PreemptBegan(frozenset({1}), 1),
+                            SendCall(frozenset(), Purpose.WITHDRAW)]
+    assert m.mode is Mode.PREEMPTED and m.state is State.PREEMPTED and m.pending is None
+    assert m.handle(TimerExpired(11.0, TimerKind.TRANSITION, transition.token)) == [], "no transition TIMEOUT"
+    (refused,) = m.handle(CommandRequested(12.0, 2, Command((4, 8)), frozenset({2, 5})))
+    assert isinstance(refused.error, PreemptedError) and "preempt 1 (since 1.5 s)" in str(refused.error)
+    # A lower-numbered preempt taking over is still the one preemption; the end is the exit phases shown.
+    m.handle(PollAnswered(13.0, 2, 0, shown(frozenset({2, 5})), frozenset({1, 2})))
+    assert m.mode is Mode.PREEMPTED and m.preempts == frozenset({1, 2})
+    assert answered(m, 31.5, 3, frozenset({2, 6}))[1:] == [PreemptEnded(30.0, frozenset({2, 6}))]
+    assert m.mode is Mode.IDLE and m.position == CONFIG.sequence.index((2, 6)) and m.refusal() is None
+    # Polls failing while preempted are a communication failure as anywhere.
+    m.handle(PollAnswered(32.0, 4, 0, shown(frozenset({2, 5})), frozenset({1})))
+    for i in range(5, 5 + N_TIMEOUT):
+        effects = m.handle(PollFailed(33.0 + i, i, 0, "CommunicationTimeout", "lost"))
+    assert m.mode is Mode.TIMEOUT and m.timeout_reason is TimeoutReason.COMMUNICATION
