@@ -118,6 +118,7 @@ class Coordination:
     correction: Correction = Correction.SHORTWAY
     patterns: Mapping[int, Pattern] = field(default_factory=dict)
     schedule: tuple[ScheduleEntry, ...] = ()
+    unplanned: str = ""  # why a config derived from a signal program has no pattern (said where a plan is needed)
 
     def planned(self) -> Coordination:
         """A copy that runs its plan from power-up: the schedule's pattern of midnight, or else the lowest-numbered

@@ -36,6 +36,17 @@ Rules of this module
   from the stage's minDur/maxDur, or netconvert's defaults for lights with variable phase length (5 s and
   50 s: ``--tls.min-dur``, ``--tls.max-dur``) where the program gives none. The decision interval is RESCO's
   ``step_length`` (10 s; 5 s on arterial4x4).
+- The timing plan (coordination pattern 1, the program's own signal timing; the controller powers up free, as the
+  phase-commanding agents need, and ``coordinated`` and ``fixed-time`` run it): the cycle is the program's; each
+  stage's interval runs from its start to the next stage's (its yellow and all-red included), on whole seconds (the
+  stage starts rounded, so the intervals add up to the cycle); a phase's split is the sum of the intervals of the
+  stages that show it (a phase the program shows twice a cycle, as grid4x4's throughs, gets both, served once a
+  cycle as NEMA serves a phase). Every stage is one phase per ring of one barrier group, so each ring adds up to
+  the cycle and the rings reach every barrier together by construction. The coordinated phases are the pair of the
+  program's longest stage (the main street's through; the first of equals), the offset the time its green starts
+  in the program's own schedule (the program's offset plus the stages before it). A light gets no plan, and says
+  why, when its cycle is outside NTCIP's 30-255 s or a split is shorter than its phase's minimum service (minimum
+  green + yellow + red clearance).
 - The scenario's begin is its ``.sumocfg``'s (cologne 25200 s, ingolstadt 57600 s, as RESCO's map_config
   ``start_time``); a run lasts one simulated hour by default, as RESCO evaluates.
 """
@@ -43,11 +54,12 @@ Rules of this module
 from __future__ import annotations
 
 import importlib.util
+import itertools
 import math
 import sys
 import xml.etree.ElementTree as ET
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cache
 from pathlib import Path
 from types import MappingProxyType
@@ -189,6 +201,7 @@ class _Light:
     stage_at: tuple[int, ...]  # program index of each stage
     program: tuple[Any, ...]
     connections: tuple[tuple[Any, ...], ...]
+    offset: float = 0.0  # the program's offset (s)
 
     def protected(self, i: int) -> frozenset[int]:
         return frozenset(k for k, s in enumerate(self.stages) if s[i] == "G")
@@ -209,10 +222,15 @@ def derive(tls: Any, resco: RescoMap, scenario: str) -> DerivedLight:
         structure = "split phase"
     _number(phases)
     table = _table(light, phases, resco, structure)
+    plan = _plan(light, table)
+    if isinstance(plan, dict):  # free at power-up, as the phase-commanding agents need
+        table["coordination"] = {"pattern": "free", "patterns": [plan]}
     try:
         config = from_dict(table, source=f"{scenario} {light.id}")
     except UserError as exc:  # a derivation that breaks a config rule is this module's bug, said so
         raise RescoError(f"{light.where}: the derived config is not valid ({exc})") from None
+    if isinstance(plan, str):
+        config = replace(config, coordination=replace(config.coordination, unplanned=plan))
     bound = tuple(SignalLink(None) if link is None else
                   SignalLink(phases[link[0]].number, link[1], _numbers(phases, link[2]), _numbers(phases, link[3]))
                   for link in links)
@@ -247,7 +265,7 @@ def _read(tls: Any, where: str) -> _Light:
         directions.append(dirs)
     stages = tuple(program[k].state for k in stage_at)
     light = _Light(tls.getID(), where, tuple(edges), tuple(turns), tuple(directions), stages, stage_at, program,
-                   tuple(tuple(c) for c in connections))
+                   tuple(tuple(c) for c in connections), float(programs[0].getOffset() or 0))
     for i, conns in enumerate(connections):
         if conns and not light.protected(i) and not light.yielding(i):
             raise RescoError(f"{where}: link {i} ({_describe(light, i)}) is green in no phase of the program; a "
@@ -525,6 +543,38 @@ def _table(light: _Light, phases: list[_Phase], resco: RescoMap, structure: str)
     }
 
 
+def _plan(light: _Light, table: Mapping[str, Any]) -> dict[str, Any] | str:
+    """The program's own timing as coordination pattern 1 (or why no legal NEMA plan comes of it), as the module
+    header says: each stage's interval runs from its start to the next stage's (its yellow and all-red included),
+    on whole seconds (the stage starts rounded, so the intervals add up to the cycle); a phase's split is the sum of
+    the intervals of the stages that show it."""
+    table_phases, stage_pairs = table["phases"], table["structure"]["sequence"]
+    durations = [ph.duration for ph in light.program]
+    at = [sum(durations[:k]) for k in light.stage_at]
+    cycle = round(sum(durations))
+    bounds = [round(t) for t in at] + [round(at[0]) + cycle]
+    interval = [b - a for a, b in itertools.pairwise(bounds)]
+    if not 30 <= cycle <= 255:
+        return f"its program's cycle of {sum(durations):g} s is outside NTCIP's 30-255 s"
+    splits: dict[str, int] = dict.fromkeys(table_phases, 0)
+    for k, pair in enumerate(stage_pairs):
+        for p in pair:
+            splits[str(p)] += interval[k]
+    for p, split in splits.items():
+        e = table_phases[p]
+        need = e["min_green"] + e["yellow"] + e["red_clear"]
+        if split < need:
+            stages = [light.stage_at[k] for k, pair in enumerate(stage_pairs) if int(p) in pair]
+            shown = (f"program phases {', '.join(map(str, stages))} with their" if len(stages) > 1
+                     else f"program phase {stages[0]} with its")
+            return (f"phase {p}'s split of {split} s ({shown} yellow and all-red) is shorter than its minimum service "
+                    f"(minimum green + yellow + red clearance = {need:g} s)")
+    # the coordinated phases: the pair of the longest stage (the main street's through), the first of equals
+    main = max(range(len(stage_pairs)), key=lambda k: (durations[light.stage_at[k]], -k))
+    return {"number": 1, "cycle": cycle, "offset": round(light.offset + at[main]) % cycle,
+            "coord_phases": list(stage_pairs[main]), "splits": splits}
+
+
 def _clearance(light: _Light, phase: _Phase, resco: RescoMap) -> tuple[float, float]:
     """Yellow and red clearance of ``phase``: the program's after each of its stages, the longest seen."""
     # a phase driving nothing clears with the phases it runs beside
@@ -594,7 +644,7 @@ def describe_link(link: SignalLink) -> str:
 
 
 def to_toml(config: IntersectionConfig) -> str:
-    """A derived config written as an intersection config file (its phases, structure and middleware timing)."""
+    """A derived config written as an intersection config file (its phases, structure, middleware timing and plan)."""
     lines = [f'name = "{config.name}"', "", "[phases]"]
     for number, p in sorted(config.phases.items()):
         startup = ', startup = "green"' if p.startup.name != "PHASE_NOT_ON" else ""
@@ -606,6 +656,14 @@ def to_toml(config: IntersectionConfig) -> str:
               f"barriers = {[sorted(b) for b in config.barriers]}", f"sequence = [{sequence}]", f"pairs = [{pairs}]",
               "", "[middleware]", f"control_interval = {config.middleware.control_interval:g}",
               f"tau_trans = {config.middleware.tau_trans:g}"]
+    c = config.coordination
+    for pattern in c.patterns.values():
+        splits = ", ".join(f"{p} = {t}" for p, t in sorted(pattern.splits.items()))
+        lines += ["", "[coordination]", 'pattern = "free"', "", "[[coordination.patterns]]",
+                  f"number = {pattern.number}", f"cycle = {pattern.cycle}", f"offset = {pattern.offset}",
+                  f"coord_phases = {list(pattern.coord_phases)}", f"splits = {{ {splits} }}"]
+    if c.unplanned:
+        lines += ["", f"# no timing plan: {c.unplanned}"]
     return "\n".join(lines)
 
 
