@@ -422,4 +422,5 @@ class Coordinator:
 
 
 def _split_rows(pattern: Pattern) -> dict[int, SplitRow]:
-    return {p: SplitRow(t, SplitMode.NONE, p in pattern.coord_phases) for p, t in pattern.splits.items()}
+    return {p: SplitRow(t, pattern.modes.get(p, SplitMode.NONE), p in pattern.coord_phases)
+            for p, t in pattern.splits.items()}

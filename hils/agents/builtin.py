@@ -11,6 +11,7 @@ from __future__ import annotations
 import importlib
 import inspect
 import random
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, Protocol, runtime_checkable
 
@@ -21,7 +22,8 @@ from hils.protocol.ntcip import SignalState
 from hils.sim.webster import webster_plan
 
 __all__ = [
-    "BUILTIN", "ActuatedAgent", "Agent", "AgentError", "FixedCycleAgent", "MaxPressureAgent", "Observation",
+    "BUILTIN", "ActuatedAgent", "Agent", "AgentError", "CoordinatedAgent", "FixedCycleAgent", "FixedTimeAgent",
+    "MaxPressureAgent", "Observation",
     "QueueProportionalAgent", "RandomAgent", "WebsterAgent", "load_agent",
 ]
 
@@ -170,31 +172,71 @@ class ActuatedAgent:
         return None
 
 
-class CoordinatedAgent(ActuatedAgent):
-    """No agent: the controller runs the city's coordination plan of its config (cycle, offset, splits, the
-    coordinated phases resting, force-offs) on its own detectors, as ``actuated`` does free; the middleware only
-    observes. A config without a plan is refused."""
+class _PlanAgent(ActuatedAgent):
+    """No agent: the controller runs the timing plan of its config; a config without one is refused."""
+
+    name = ""
 
     def __init__(self, config: IntersectionConfig, action_type: ActionType | str = ActionType.SELECTION,
                  seed: int = 0) -> None:
         if not config.coordination.patterns:
-            raise AgentError(f"the coordinated agent runs the controller's timing plan, and {config.source} has none: "
-                             "add [[coordination.patterns]] (the shipped four-leg and corridor configs have one)")
+            raise AgentError(f"the {self.name} agent runs the controller's timing plan, and {config.source} has none"
+                             + (f" ({config.coordination.unplanned})" if config.coordination.unplanned else
+                                ": add [[coordination.patterns]] (the shipped four-leg and corridor configs have one)"))
         super().__init__(config, action_type, seed)
+
+
+class CoordinatedAgent(_PlanAgent):
+    """No agent: the controller runs the city's coordination plan of its config (cycle, offset, splits, the
+    coordinated phases resting, force-offs) on its own detectors, as ``actuated`` does free; the middleware only
+    observes. A config without a plan is refused."""
+
+    name = "coordinated"
+
+
+class FixedTimeAgent(_PlanAgent):
+    """No agent: the controller runs the timing plan of its config pretimed (every phase on maximum recall through
+    the split table's splitMode, no detectors: each phase its whole split, every cycle), RESCO's fixed-time baseline
+    on the real controller; the middleware only observes. A config without a plan is refused.
+
+    Unlike ``fixed-cycle`` and ``webster``, which command the controller phase by phase from the middleware in free
+    mode, this is the controller's own operation: its coordinator times the cycle, the splits and the offset."""
+
+    name = "fixed-time"
 
 
 BUILTIN: dict[str, type] = {"random": RandomAgent, "fixed-cycle": FixedCycleAgent, "max-pressure": MaxPressureAgent,
                             "queue-proportional": QueueProportionalAgent, "webster": WebsterAgent,
-                            "actuated": ActuatedAgent, "coordinated": CoordinatedAgent}
+                            "actuated": ActuatedAgent, "coordinated": CoordinatedAgent,
+                            "fixed-time": FixedTimeAgent}
 
-#: Built-in agents that leave the controller to its own operation on its detectors (the middleware observes).
-CONTROLLER_AGENTS = frozenset({"actuated", "coordinated"})
+#: Built-in agents that leave the controller to its own operation (the middleware observes), and the config each
+#: makes the controller run: its plan from power-up for coordinated, pretimed for fixed-time, as given (free by
+#: default) for actuated and every other agent.
+_PLANS = {"coordinated": IntersectionConfig.planned, "fixed-time": IntersectionConfig.pretimed}
+PLAN_AGENTS = frozenset(_PLANS)
+CONTROLLER_AGENTS = frozenset({"actuated", *_PLANS})
+#: Of those, the ones whose controller runs on its detectors (fixed-time's pretimed plan needs none).
+DETECTOR_AGENTS = frozenset({"actuated", "coordinated"})
 
 
 def controller_config(agent: object, config: IntersectionConfig) -> IntersectionConfig:
-    """The config the controller runs for ``agent``: its coordination plan from power-up for ``coordinated``, as
-    given (free by default, as the phase-commanding agents need) for every other."""
-    return config.planned() if agent == "coordinated" else config
+    """The config the controller runs for ``agent``: its coordination plan from power-up for ``coordinated``, that
+    plan pretimed for ``fixed-time``, as given (free by default, as the phase-commanding agents need) for every
+    other."""
+    plan = _PLANS.get(agent) if isinstance(agent, str) else None
+    return plan(config) if plan else config
+
+
+def check_plans(agent: object, scenario: str, configs: Mapping[str, IntersectionConfig]) -> None:
+    """Refuse, in one line naming every light of ``scenario`` without one and why, an agent that runs the
+    controllers' timing plans where some have none."""
+    missing = {tls: c.coordination.unplanned or "no [[coordination.patterns]]"
+               for tls, c in configs.items() if not c.coordination.patterns}
+    if agent in _PLANS and missing:
+        raise AgentError(f"the {agent} agent runs each controller's timing plan, and {len(missing)} of the "
+                         f"{len(configs)} lights of {scenario} have none: "
+                         + "; ".join(f"{tls} ({why})" for tls, why in missing.items()))
 
 
 def describe_plan(config: IntersectionConfig) -> str:
@@ -203,7 +245,9 @@ def describe_plan(config: IntersectionConfig) -> str:
     p = c.patterns.get(c.pattern)
     if p is None:
         return "Controller plan: free (no coordination pattern)"
-    return (f"Controller plan: pattern {p.number}, cycle {p.cycle} s, offset {p.offset} s, coordinated phases "
+    return (f"Controller plan: pattern {p.number}{' pretimed (every phase on max recall)' if p.pretimed else ''}, "
+            f"cycle {p.cycle} s, offset {p.offset} s, splits "
+            f"{' '.join(f'{n}:{t}' for n, t in sorted(p.splits.items()))}, coordinated phases "
             f"{'+'.join(map(str, p.coord_phases))}, {c.force_off.value} force-offs, offset to the "
             f"{'start of their green' if c.offset_reference.value == 'lead_green' else 'start of their yellow'}"
             + (f"; {len(c.schedule)} time-of-day changes" if c.schedule else ""))

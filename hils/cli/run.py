@@ -22,7 +22,7 @@ from datetime import datetime, timedelta
 from pathlib import Path
 from typing import Any
 
-from hils.agents.builtin import controller_config, describe_plan
+from hils.agents.builtin import PLAN_AGENTS, check_plans, controller_config, describe_plan
 from hils.cli.status import Notices, StatusLine
 from hils.control.actions import ActionType
 from hils.protocol import config as config_mod
@@ -77,7 +77,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--agent", metavar="NAME|MODULE:CLASS",
                    help="built-in agent (random, fixed-cycle, max-pressure, queue-proportional, webster; actuated: "
                         "none, the controller runs on its detectors; coordinated: none, the controller runs its "
-                        "config's timing plan on its detectors) or your own package.module:Class; default "
+                        "config's timing plan on its detectors; fixed-time: none, the controller runs that plan "
+                        "pretimed, every phase on max recall, no detectors) or your own package.module:Class; default "
                         "per action type: " + ", ".join(f"{k.value} -> {v}" for k, v in DEFAULT_AGENTS.items())
                         + "; with --no-sumo (no traffic to observe): "
                         + ", ".join(f"{k.value} -> {v}" for k, v in BLIND_AGENTS.items()))
@@ -186,7 +187,9 @@ def run_command(args: argparse.Namespace) -> int:
             raise UsageError("--agent webster plans from the shipped four-leg network and demand; it cannot "
                              "plan for --scenario/--net/--routes/--sumocfg yet: run it without them")
         print(webster_plan(cfg).describe())
-    if spec.agent_spec == "coordinated":
+    if spec.agent_spec in PLAN_AGENTS:
+        if scenario is not None:
+            check_plans(spec.agent_spec, scenario.name, scenario.intersections)
         print(describe_plan(controller_config(spec.agent_spec, cfg)) if scenario is None else
               "\n".join(f"{tls}: {describe_plan(controller_config(spec.agent_spec, c))}"
                         for tls, c in scenario.intersections.items()))

@@ -33,7 +33,7 @@ max queue (and per approach, for one light). Writes compare.md, compare.json and
 (compare.png for one) beside the sweep's table and run folders.
 
 Examples: hils compare --agents max-pressure,webster --seeds 0-4
-          hils compare --scenarios resco:cologne8 --agents max-pressure,actuated,fixed-cycle --seeds 0-4
+          hils compare --scenarios resco:cologne8 --agents max-pressure,actuated,coordinated,fixed-time --seeds 0-4
 """
 
 
@@ -51,7 +51,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def _grid_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--agents", required=True, metavar="A,B,...",
                    help="built-in agent names (random, fixed-cycle, max-pressure, queue-proportional, webster, "
-                        "actuated) or package.module:Class, comma-separated")
+                        "actuated, coordinated, fixed-time) or package.module:Class, comma-separated")
     p.add_argument("--seeds", default="0-2", metavar="0-4|0,3,7", help="seeds (0-2)")
     p.add_argument("--scenarios", "--scenario", default="four_leg", metavar="S,...",
                    help=f"comma-separated: {sweep._ALLOWED} (four_leg)")

@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from hils.protocol.errors import UserError
-from hils.protocol.ntcip import PhaseStartup, group_count
+from hils.protocol.ntcip import PhaseStartup, SplitMode, group_count
 
 Pair = tuple[int, int]
 
@@ -98,6 +98,12 @@ class Pattern:
     offset: int
     coord_phases: tuple[int, ...]
     splits: Mapping[int, int]  # each including the phase's yellow and red clearance
+    modes: Mapping[int, SplitMode] = field(default_factory=dict)  # splitMode of a phase, none where absent
+
+    @property
+    def pretimed(self) -> bool:
+        """Every phase on maximum recall: the pattern runs as a fixed-time plan, whatever the detectors say."""
+        return all(self.modes.get(p) is SplitMode.MAX_RECALL for p in self.splits)
 
 
 @dataclass(frozen=True, slots=True)
@@ -127,6 +133,12 @@ class Coordination:
             return self
         at_midnight = self.schedule[-1].pattern if self.schedule else min(self.patterns)
         return replace(self, pattern=at_midnight if at_midnight != FREE else min(self.patterns))
+
+    def pretimed(self) -> Coordination:
+        """:meth:`planned`, every phase of every pattern on maximum recall (splitMode maxRecall): each phase runs
+        its whole split whatever its detectors say, the controller's own pretimed operation (``--agent fixed-time``)."""
+        return replace(self.planned(), patterns={n: replace(p, modes=dict.fromkeys(p.splits, SplitMode.MAX_RECALL))
+                                                 for n, p in self.patterns.items()})
 
 
 class OverlapKind(StrEnum):
@@ -356,6 +368,10 @@ class IntersectionConfig:
     def planned(self) -> IntersectionConfig:
         """A copy whose controller runs its coordination plan from power-up (see :meth:`Coordination.planned`)."""
         return replace(self, coordination=self.coordination.planned())
+
+    def pretimed(self) -> IntersectionConfig:
+        """A copy whose controller runs its coordination plan pretimed from power-up (:meth:`Coordination.pretimed`)."""
+        return replace(self, coordination=self.coordination.pretimed())
 
     def with_offset(self, seconds: int) -> IntersectionConfig:
         """A copy whose patterns all have this offset (modulo each cycle): one intersection's place in a

@@ -183,13 +183,14 @@ def _plan(config: IntersectionConfig) -> dict[str, Any]:
         return {"pattern": "free"}
     return {"pattern": p.number, "cycle_s": p.cycle, "offset_s": p.offset, "coord_phases": list(p.coord_phases),
             "force_off": c.force_off.value, "offset_reference": c.offset_reference.value,
-            "schedule_changes": len(c.schedule)}
+            "schedule_changes": len(c.schedule), "pretimed": p.pretimed}
 
 
 def _plan_text(plan: Mapping[str, Any]) -> str:
     if plan.get("pattern", "free") == "free":
         return "free"
-    return (f"pattern {plan['pattern']}: cycle {plan['cycle_s']} s, offset {plan['offset_s']} s, coordinated "
+    return (f"pattern {plan['pattern']}{' pretimed' if plan.get('pretimed') else ''}: cycle {plan['cycle_s']} s, "
+            f"offset {plan['offset_s']} s, coordinated "
             f"{'+'.join(map(str, plan['coord_phases']))}, {plan['force_off']} force-offs")
 
 

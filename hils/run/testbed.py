@@ -49,7 +49,7 @@ from typing import Any
 
 import simpy
 
-from hils.agents.builtin import CONTROLLER_AGENTS, Agent, Observation, controller_config, load_agent
+from hils.agents.builtin import DETECTOR_AGENTS, Agent, Observation, check_plans, controller_config, load_agent
 from hils.control.actions import ActionError, ActionType
 from hils.control.manager import CLEAR_ATTEMPTS, State
 from hils.protocol import config as config_mod
@@ -245,6 +245,7 @@ class Testbed(_OneIntersection):
             raise ValueError("give a config (one intersection) or a scenario (its intersections), not both")
         self.scenario = _scenario(scenario)
         if self.scenario is not None:
+            check_plans(agent, self.scenario.name, self.scenario.intersections)
             self.configs = {tls: controller_config(agent, c) for tls, c in self.scenario.intersections.items()}
             sumo_config = sumo_config if sumo_config is not None else self.scenario.sumo_config
         else:
@@ -270,8 +271,8 @@ class Testbed(_OneIntersection):
         self.fast_path = fast_path
         self.take_over = take_over
         # Detector actuations from SUMO feed the controller when asked, and by default for the agents that leave
-        # the controller to its own operation (actuated, coordinated).
-        self.detectors = agent in CONTROLLER_AGENTS if detectors is None else detectors
+        # the controller to its own operation on them (actuated, coordinated; fixed-time's pretimed plan needs none).
+        self.detectors = agent in DETECTOR_AGENTS if detectors is None else detectors
         self.duration = duration
         self.log_path = Path(log_path) if log_path is not None else None
         self.recover_after = recover_after
