@@ -318,3 +318,21 @@ def test_a_pattern_change_regains_the_offset_within_its_corrections_bound(
         c.step()
         zeros += 0 in co.passed
     assert co.lag == 0 and zeros <= bound, (correction, bound, zeros)
+
+
+def test_a_pretimed_plan_serves_every_split_whole_every_cycle_without_a_call() -> None:
+    """``--agent fixed-time``: pattern 1 with every phase on max recall (splitMode 4 in the split table) runs as a
+    fixed-time signal: with no call at all each phase is green for its split less its 5 s clearance, once a cycle."""
+    c = Controller(load().pretimed())
+    c.backup_time = 0
+    mib = MibView(c)
+    assert {p: mib.get(SPLIT_TABLE[SplitColumn.MODE].instance(1, p)) for p in c.config.phases} == \
+        dict.fromkeys(c.config.phases, int(SplitMode.MAX_RECALL))
+    seen = run(c, 4 * CYCLE)
+    splits = c.config.coordination.patterns[1].splits
+    for p, split in splits.items():
+        yellows = onsets(seen, p, "Y")[-3:]
+        greens = [max(g for g in onsets(seen, p, "G") if g < y) for y in yellows]
+        assert [b - a for a, b in itertools.pairwise(greens)] == [CYCLE, CYCLE], p
+        assert [y - g for g, y in zip(greens, yellows, strict=True)] == [10 * split - 50] * 3, p
+        assert all(y % CYCLE == FORCE_OFF[p] for y in yellows), p  # at its force-off point, fixed in the cycle

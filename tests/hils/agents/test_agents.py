@@ -130,3 +130,20 @@ def test_the_coordinated_agent_runs_the_plan_and_needs_one(paper_config, paper_t
     bare = config_mod.parse(paper_toml[:paper_toml.index("[coordination]")], "bare.toml")
     with pytest.raises(AgentError, match=re.escape("bare.toml has none: add [[coordination.patterns]]")):
         load_agent("coordinated", bare, "selection")
+
+
+def test_the_fixed_time_agent_runs_the_plan_pretimed_and_needs_one(paper_config, paper_toml) -> None:
+    from hils.agents.builtin import CONTROLLER_AGENTS, DETECTOR_AGENTS, controller_config, describe_plan
+    from hils.protocol.ntcip import SplitMode
+
+    agent = load_agent("fixed-time", paper_config, "selection")
+    assert agent.act(None) is None and "fixed-time" in CONTROLLER_AGENTS and "fixed-time" not in DETECTOR_AGENTS
+    c = controller_config("fixed-time", paper_config).coordination
+    assert c.pattern == 1 and c.patterns[1].modes == dict.fromkeys(paper_config.phases, SplitMode.MAX_RECALL)
+    assert controller_config("coordinated", paper_config).coordination.patterns[1].modes == {}
+    assert describe_plan(controller_config("fixed-time", paper_config)).startswith(
+        "Controller plan: pattern 1 pretimed (every phase on max recall), cycle 70 s")
+    bare = config_mod.parse(paper_toml[:paper_toml.index("[coordination]")], "bare.toml")
+    with pytest.raises(AgentError, match=re.escape("the fixed-time agent runs the controller's timing plan, and "
+                                                   "bare.toml has none: add [[coordination.patterns]]")):
+        load_agent("fixed-time", bare, "selection")

@@ -1,6 +1,8 @@
 """RESCO's eight scenarios from the installed sumo-rl: every light's derived NEMA controller serves exactly the
-stages of its SUMO program, two are pinned as checked by hand, every scenario runs with max-pressure and with the
-actuated baseline from its own begin time, and RESCO's figures come from SUMO's tripinfo as its code defines them."""
+stages of its SUMO program, with the program's timing as its plan where that is a legal NEMA plan (and why not
+where it is not), two are pinned as checked by hand, every scenario runs with max-pressure and with the actuated
+baseline from its own begin time (and with fixed-time and coordinated where every light has a plan), and RESCO's
+figures come from SUMO's tripinfo as its code defines them."""
 
 from __future__ import annotations
 
@@ -12,7 +14,9 @@ from types import SimpleNamespace
 import pytest
 import sumolib
 
+from hils.agents.builtin import AgentError
 from hils.protocol import resco
+from hils.protocol.config import FREE, parse
 from hils.protocol.ntcip import SignalState
 from hils.protocol.scenario import SignalLink, load_scenario
 from hils.run.testbed import Testbed
@@ -69,7 +73,17 @@ pairs = [[2, 6], [1, 5], [2, 5], [1, 6], [4, 8], [3, 7], [3, 8], [4, 7]]
 
 [middleware]
 control_interval = 10
-tau_trans = 14"""
+tau_trans = 14
+
+[coordination]
+pattern = "free"
+
+[[coordination.patterns]]
+number = 1
+cycle = 104
+offset = 0
+coord_phases = [2, 6]
+splits = { 1 = 26, 2 = 26, 3 = 26, 4 = 26, 5 = 26, 6 = 26, 7 = 26, 8 = 26 }"""
 
 COLOGNE1 = """\
 name = "GS_cluster_357187_359543, dual-ring from its SUMO program"
@@ -92,7 +106,17 @@ pairs = [[2, 6], [1, 5], [4, 8], [3, 7]]
 
 [middleware]
 control_interval = 10
-tau_trans = 16"""
+tau_trans = 16
+
+[coordination]
+pattern = "free"
+
+[[coordination.patterns]]
+number = 1
+cycle = 90
+offset = 0
+coord_phases = [2, 6]
+splits = { 1 = 11, 2 = 34, 3 = 11, 4 = 34, 5 = 11, 6 = 34, 7 = 11, 8 = 34 }"""
 
 
 @pytest.mark.parametrize(("name", "tls", "toml", "links"), [
@@ -100,11 +124,15 @@ tau_trans = 16"""
     # (from the opposite side): phases 2 and 6; the lefts of those sides (6-8, 24-26) are 5 and 1, and each
     # side alone is 2+5 and 1+6, the four pairs of the first barrier; the cross street's the same in 3, 4, 7, 8.
     # Static program: netconvert's 5 s and 50 s; yellow 3 s as the program's; no all-red in it.
+    # Plan: eight stages of 10 s green + 3 s yellow, a cycle of 104 s; each phase green in two stages (2 in the 1st
+    # and 3rd, 1 in the 2nd and 4th, 6 in the 1st and 4th, 5 in the 2nd and 3rd; the cross street alike), 26 s
+    # each; every stage 10 s, so the first (2+6) is the coordinated pair, its green at 0 s of the program (offset 0).
     ("grid4x4", "A0", GRID_A0, "2 2 2 2 2 2 5 5 5 4 4 4 4 4 4 7 7 7 6 6 6 6 6 6 1 1 1 8 8 8 8 8 8 3 3 3"),
     # Stages: 5-7 and 15-17 (straights and rights) with their lefts and U-turns yielding (8-9, 18-19 'g'), then
     # those lefts and U-turns protected; the cross street likewise. A left and U-turn (U-turns run with the left
     # of their approach) are its protected phase, yielding beside their through (~). minDur 5/maxDur 50 and the
-    # 5 s yellow are the program's.
+    # 5 s yellow are the program's. Plan: 29+5, 6+5, 29+5, 6+5 s, a cycle of 90 s: 2 and 6 34 s, 1 and 5 11 s, the
+    # cross street alike; the longest stages (29 s) are the first and third, the first (2+6) coordinated, offset 0.
     ("cologne1", "GS_cluster_357187_359543", COLOGNE1,
      "4 4 4 7~4 7~4 2 2 2 5~2 5~2 8 8 8 3~8 3~8 6 6 6 1~6 1~6"),
 ])
@@ -115,7 +143,75 @@ def test_the_derived_configs_of_grid4x4_and_cologne1_are_as_checked_by_hand(name
     assert " ".join(resco.describe_link(link).replace(" ~", "~") for link in scenario.links[tls]) == links
 
 
-SCENARIO_RUNS = [(name, agent) for name in resco.NAMES for agent in ("max-pressure", "actuated")]
+#: Lights with a timing plan of the lights of each scenario (the rest are named, with why, in the refusals).
+PLANNED = {"grid4x4": (16, 16), "arterial4x4": (16, 16), "cologne1": (1, 1), "cologne3": (3, 3), "cologne8": (8, 8),
+           "ingolstadt1": (1, 1), "ingolstadt7": (6, 7), "ingolstadt21": (15, 21)}
+
+
+@pytest.mark.parametrize("name", resco.NAMES)
+def test_every_light_gets_its_programs_timing_as_a_plan_that_passes_the_config_checks_or_says_why_not(
+        name: str) -> None:
+    scenario = resco.load(name)
+    net = sumolib.net.readNet(str(sumocfg_net_file(scenario.sumo_config)), withPrograms=True)
+    planned = {tls: c for tls, c in scenario.intersections.items() if c.coordination.patterns}
+    assert (len(planned), len(scenario.intersections)) == PLANNED[name]
+    for tls, config in scenario.intersections.items():
+        c = config.coordination
+        assert c.pattern == FREE  # powers up free: the phase-commanding agents need it
+        if tls not in planned:
+            assert "is shorter than its minimum service" in c.unplanned, tls
+            continue
+        assert not c.unplanned and list(c.patterns) == [1]
+        pattern = c.patterns[1]
+        program = next(iter(net.getTLS(tls).getPrograms().values())).getPhases()
+        assert pattern.cycle == round(sum(p.duration for p in program)), tls
+        # the config checks again, on the plan as a config file writes it
+        assert parse(resco.to_toml(config), f"{tls}.toml").coordination.patterns[1] == pattern
+        assert set(pattern.coord_phases) in [set(pair) for pair in config.pairs]
+
+
+def test_a_plan_takes_the_programs_offset_and_its_longest_stage_and_a_short_one_or_a_long_cycle_gets_none() -> None:
+    # the triangle served split phase: stages of 20 s green + 3, 3 and 4 s of yellow; the second stage the longest
+    light = fake_light([("GGr", 20), ("yyr", 3), ("rGG", 25), ("ryy", 3), ("GrG", 20), ("yry", 4)],
+                       [("a", "s"), ("b", "s"), ("c", "s")], offset=10)
+    config = resco.derive(light, resco.MAPS["grid4x4"], "test").config
+    pattern = config.coordination.patterns[1]
+    assert pattern.cycle == 75 and pattern.offset == 10 + 23 and set(pattern.coord_phases) == set(config.sequence[1])
+    assert [pattern.splits[p] for p in config.sequence[1]] == [28, 28] and sorted(pattern.splits.values()) == [
+        23, 23, 24, 24, 28, 28]
+    short = fake_light([("Gr", 30), ("yr", 3), ("rG", 4), ("ry", 3)], [("a", "s"), ("b", "s")])
+    c = resco.derive(short, resco.MAPS["grid4x4"], "test").config.coordination
+    assert not c.patterns and c.unplanned.endswith("split of 7 s (program phase 2 with its yellow and all-red) is "
+                                                   "shorter than its minimum service (minimum green + yellow + red "
+                                                   "clearance = 8.1 s)")
+    long = fake_light([("Gr", 200), ("yr", 3), ("rG", 60), ("ry", 3)], [("a", "s"), ("b", "s")])
+    c = resco.derive(long, resco.MAPS["grid4x4"], "test").config.coordination
+    assert not c.patterns and c.unplanned == "its program's cycle of 266 s is outside NTCIP's 30-255 s"
+
+
+@pytest.mark.parametrize("agent", ["coordinated", "fixed-time"])
+def test_an_agent_that_runs_the_plans_refuses_a_scenario_naming_every_light_without_one(agent: str) -> None:
+    with pytest.raises(AgentError) as info:
+        Testbed(scenario="resco:ingolstadt21", sumo=True, agent=agent, duration=10.0)
+    message = str(info.value)
+    assert "\n" not in message and message.startswith(f"the {agent} agent runs each controller's timing plan, and 6 "
+                                                       "of the 21 lights of resco:ingolstadt21 have none: 1863241632 "
+                                                       "(phase 1's split of 11 s")
+    assert all(tls in message for tls in ("2330725114", "243749571", "89173763", "gneJ208"))
+
+
+def test_the_refusal_is_one_line_of_the_cli(tmp_path: Path) -> None:
+    done = subprocess.run([sys.executable, "-m", "hils", "run", "--scenario", "resco:ingolstadt7", "--agent",
+                           "fixed-time"], cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2 and "Traceback" not in done.stderr and len(done.stderr.strip().splitlines()) == 1
+    assert "1 of the 7 lights of resco:ingolstadt7 have none: cluster_306484187" in done.stderr
+
+
+# The plans' agents where every light has a plan; coordinated (the same plan, on detectors) not on the two sixteen-light
+# grids, to keep the tests' time.
+SCENARIO_RUNS = [(name, agent) for name in resco.NAMES for agent in ("max-pressure", "actuated")] + [
+    (name, agent) for name in resco.NAMES if PLANNED[name][0] == PLANNED[name][1]
+    for agent in ("fixed-time", "coordinated")[:1 if name in ("grid4x4", "arterial4x4") else 2]]
 
 
 @pytest.mark.parametrize(("name", "agent"), SCENARIO_RUNS, ids=[f"{n}-{a}" for n, a in SCENARIO_RUNS])
@@ -133,6 +229,16 @@ def test_every_scenario_runs_300_simulated_seconds_from_its_own_begin(name: str,
         # may still be in its transition when the run ends; one never shown would have timed out)
         assert sum(t.kinds["transition_verified"] for t in summaries) >= len(summaries)
         assert all(t.kinds["transition_verified"] >= t.kinds["command_dispatched"] - 1 for t in summaries)
+    if agent in ("coordinated", "fixed-time"):  # the controllers ran their plans, the middleware commanded nothing
+        assert all(t.kinds["command_dispatched"] == 0 for t in summaries)
+        assert all(tb.configs[tls].coordination.pattern == 1 for tls in tb.configs)
+        assert any(t.kinds["detectors"] for t in summaries) is (agent == "coordinated")  # pretimed: no detectors
+        if agent == "fixed-time":  # pretimed: every phase green within the cycle, no call needed
+            for tls, i in tb.intersections.items():
+                cycle = tb.configs[tls].coordination.patterns[1].cycle
+                shown = {p for r in i.tally.records if r["kind"] == "poll" and r["t"] >= 300.0 - cycle
+                         for p in r["greens"]}
+                assert shown == set(tb.configs[tls].phases), tls
     figures = traffic.resco
     assert figures.vehicles >= traffic.departed and figures.delay_s > 0 and figures.queue_steps == 300 // int(
         resco.MAPS[name].decision_interval)
@@ -202,14 +308,16 @@ class _Conn:
         return self.index
 
 
-def fake_light(states: list[str], links: list[tuple[str, str]], foes: bool = True) -> SimpleNamespace:
+def fake_light(states: list[tuple[str, float]], links: list[tuple[str, str]], foes: bool = True,
+               offset: float = 0) -> SimpleNamespace:
     """A sumolib-like light: per index an (edge, direction), its program's phases, and a junction whose links are
     all foes of each other (or none)."""
     junction = SimpleNamespace(areFoes=lambda a, b: foes and a != b)
     conns = [_Conn(edge, d, junction, i) for i, (edge, d) in enumerate(links)]
     lanes = [SimpleNamespace(getConnection=lambda _out, c=c: c) for c in conns]
     phases = [SimpleNamespace(state=s, duration=d, minDur=-1, maxDur=-1) for s, d in states]
-    return SimpleNamespace(getID=lambda: "X", getPrograms=lambda: {"0": SimpleNamespace(getPhases=lambda: phases)},
+    program = SimpleNamespace(getPhases=lambda: phases, getOffset=lambda: offset)
+    return SimpleNamespace(getID=lambda: "X", getPrograms=lambda: {"0": program},
                            getConnections=lambda: [(lane, None, i) for i, lane in enumerate(lanes)])
 
 
