@@ -233,7 +233,7 @@ def check_plans(agent: object, scenario: str, configs: Mapping[str, Intersection
     controllers' timing plans where some have none."""
     missing = {tls: c.coordination.unplanned or "no [[coordination.patterns]]"
                for tls, c in configs.items() if not c.coordination.patterns}
-    if agent in _PLANS and missing:
+    if isinstance(agent, str) and agent in _PLANS and missing:
         raise AgentError(f"the {agent} agent runs each controller's timing plan, and {len(missing)} of the "
                          f"{len(configs)} lights of {scenario} have none: "
                          + "; ".join(f"{tls} ({why})" for tls, why in missing.items()))

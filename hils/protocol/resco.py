@@ -44,9 +44,9 @@ Rules of this module
   cycle as NEMA serves a phase). Every stage is one phase per ring of one barrier group, so each ring adds up to
   the cycle and the rings reach every barrier together by construction. The coordinated phases are the pair of the
   program's longest stage (the main street's through; the first of equals), the offset the time its green starts
-  in the program's own schedule (the program's offset plus the stages before it). A light gets no plan, and says
-  why, when its cycle is outside NTCIP's 30-255 s or a split is shorter than its phase's minimum service (minimum
-  green + yellow + red clearance).
+  in the program's own schedule (the program's offset, when SUMO starts its first phase, plus the stages before
+  it). A light gets no plan, and says why, when its cycle is outside NTCIP's 30-255 s or a split is shorter than
+  its phase's minimum service (minimum green + yellow + red clearance).
 - The scenario's begin is its ``.sumocfg``'s (cologne 25200 s, ingolstadt 57600 s, as RESCO's map_config
   ``start_time``); a run lasts one simulated hour by default, as RESCO evaluates.
 """
@@ -657,11 +657,13 @@ def to_toml(config: IntersectionConfig) -> str:
               "", "[middleware]", f"control_interval = {config.middleware.control_interval:g}",
               f"tau_trans = {config.middleware.tau_trans:g}"]
     c = config.coordination
+    if c.patterns:
+        lines += ["", "[coordination]", 'pattern = "free"']
     for pattern in c.patterns.values():
         splits = ", ".join(f"{p} = {t}" for p, t in sorted(pattern.splits.items()))
-        lines += ["", "[coordination]", 'pattern = "free"', "", "[[coordination.patterns]]",
-                  f"number = {pattern.number}", f"cycle = {pattern.cycle}", f"offset = {pattern.offset}",
-                  f"coord_phases = {list(pattern.coord_phases)}", f"splits = {{ {splits} }}"]
+        lines += ["", "[[coordination.patterns]]", f"number = {pattern.number}", f"cycle = {pattern.cycle}",
+                  f"offset = {pattern.offset}", f"coord_phases = {list(pattern.coord_phases)}",
+                  f"splits = {{ {splits} }}"]
     if c.unplanned:
         lines += ["", f"# no timing plan: {c.unplanned}"]
     return "\n".join(lines)
