@@ -181,7 +181,7 @@ class _PlanAgent(ActuatedAgent):
                  seed: int = 0) -> None:
         if not config.coordination.patterns:
             raise AgentError(f"the {self.name} agent runs the controller's timing plan, and {config.source} has none"
-                             + (f" ({config.coordination.unplanned})" if config.coordination.unplanned else
+                             + (f": {config.coordination.unplanned}" if config.coordination.unplanned else
                                 ": add [[coordination.patterns]] (the shipped four-leg and corridor configs have one)"))
         super().__init__(config, action_type, seed)
 
@@ -235,8 +235,8 @@ def check_plans(agent: object, scenario: str, configs: Mapping[str, Intersection
                for tls, c in configs.items() if not c.coordination.patterns}
     if isinstance(agent, str) and agent in _PLANS and missing:
         raise AgentError(f"the {agent} agent runs each controller's timing plan, and {len(missing)} of the "
-                         f"{len(configs)} lights of {scenario} have none: "
-                         + "; ".join(f"{tls} ({why})" for tls, why in missing.items()))
+                         f"{len(configs)} lights of {scenario} {'has' if len(missing) == 1 else 'have'} none: "
+                         + "; ".join(f"{tls}: {why}" for tls, why in missing.items()))
 
 
 def describe_plan(config: IntersectionConfig) -> str:

@@ -568,7 +568,7 @@ def _plan(light: _Light, table: Mapping[str, Any]) -> dict[str, Any] | str:
             shown = (f"program phases {', '.join(map(str, stages))} with their" if len(stages) > 1
                      else f"program phase {stages[0]} with its")
             return (f"phase {p}'s split of {split} s ({shown} yellow and all-red) is shorter than its minimum service "
-                    f"(minimum green + yellow + red clearance = {need:g} s)")
+                    f"of {need:g} s (minimum green + yellow + red clearance)")
     # the coordinated phases: the pair of the longest stage (the main street's through), the first of equals
     main = max(range(len(stage_pairs)), key=lambda k: (durations[light.stage_at[k]], -k))
     return {"number": 1, "cycle": cycle, "offset": round(light.offset + at[main]) % cycle,

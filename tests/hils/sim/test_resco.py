@@ -182,8 +182,8 @@ def test_a_plan_takes_the_programs_offset_and_its_longest_stage_and_a_short_one_
     short = fake_light([("Gr", 30), ("yr", 3), ("rG", 4), ("ry", 3)], [("a", "s"), ("b", "s")])
     c = resco.derive(short, resco.MAPS["grid4x4"], "test").config.coordination
     assert not c.patterns and c.unplanned.endswith("split of 7 s (program phase 2 with its yellow and all-red) is "
-                                                   "shorter than its minimum service (minimum green + yellow + red "
-                                                   "clearance = 8.1 s)")
+                                                   "shorter than its minimum service of 8.1 s (minimum green + "
+                                                   "yellow + red clearance)")
     long = fake_light([("Gr", 200), ("yr", 3), ("rG", 60), ("ry", 3)], [("a", "s"), ("b", "s")])
     c = resco.derive(long, resco.MAPS["grid4x4"], "test").config.coordination
     assert not c.patterns and c.unplanned == "its program's cycle of 266 s is outside NTCIP's 30-255 s"
@@ -195,8 +195,8 @@ def test_an_agent_that_runs_the_plans_refuses_a_scenario_naming_every_light_with
         Testbed(scenario="resco:ingolstadt21", sumo=True, agent=agent, duration=10.0)
     message = str(info.value)
     assert "\n" not in message and message.startswith(f"the {agent} agent runs each controller's timing plan, and 6 "
-                                                       "of the 21 lights of resco:ingolstadt21 have none: 1863241632 "
-                                                       "(phase 1's split of 11 s")
+                                                       "of the 21 lights of resco:ingolstadt21 have none: 1863241632: "
+                                                       "phase 1's split of 11 s")
     assert all(tls in message for tls in ("2330725114", "243749571", "89173763", "gneJ208"))
 
 
@@ -204,7 +204,7 @@ def test_the_refusal_is_one_line_of_the_cli(tmp_path: Path) -> None:
     done = subprocess.run([sys.executable, "-m", "hils", "run", "--scenario", "resco:ingolstadt7", "--agent",
                            "fixed-time"], cwd=tmp_path, capture_output=True, text=True, timeout=120)
     assert done.returncode == 2 and "Traceback" not in done.stderr and len(done.stderr.strip().splitlines()) == 1
-    assert "1 of the 7 lights of resco:ingolstadt7 have none: cluster_306484187" in done.stderr
+    assert "1 of the 7 lights of resco:ingolstadt7 has none: cluster_306484187" in done.stderr
 
 
 # The plans' agents where every light has a plan; coordinated (the same plan, on detectors) not on the two sixteen-light
