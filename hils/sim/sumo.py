@@ -25,6 +25,7 @@ from collections import Counter
 from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
+from itertools import accumulate
 from pathlib import Path
 from types import TracebackType
 
@@ -288,6 +289,9 @@ class SumoSimulation:
         self._approach_of_edge: dict[str, str] = {}
         # every light's approaches (named as Light says), their lanes and how many vehicles each lane holds
         self._storage: tuple[tuple[str, tuple[str, ...], tuple[int, ...]], ...] = ()
+        # the same lanes end to end with their capacities, each approach a slice of them: the samples read them all
+        # in one pass
+        self._sampled: tuple[tuple[str, ...], tuple[int, ...], tuple[tuple[str, slice], ...]] = ((), (), ())
         self._spill_minutes: dict[str, set[int]] = {}
         # per vehicle seen in the network: its approach and departure delay, and its last sampled time loss
         self._seen: dict[str, tuple[str, float]] = {}
@@ -357,6 +361,11 @@ class SumoSimulation:
         self._storage = tuple((approach, tuple(lanes),
                                tuple(int(libsumo.lane.getLength(lane) // spacing) for lane in lanes))
                               for approach, lanes in approach_lanes)
+        ends = accumulate(len(its) for _, its, _ in self._storage)
+        self._sampled = (tuple(lane for _, its, _ in self._storage for lane in its),
+                         tuple(c for _, _, capacities in self._storage for c in capacities),
+                         tuple((a, slice(end - len(its), end))
+                               for (a, its, _), end in zip(self._storage, ends, strict=True)))
         self._spill_minutes = {approach: set() for approach, _ in approach_lanes}
         self._seen, self._time_loss = {}, {}
         self._finished = {approach: [] for approach, _ in approach_lanes}
@@ -437,16 +446,23 @@ class SumoSimulation:
                         self._queue.sample()
 
     def _sample_queues(self) -> None:
-        # Once a second, for the whole run. The getters are libsumo's own C functions mapped over the lanes
-        # and vehicles: the Python wrappers around them (a frame per call) were most of this sample's cost.
+        # Once a second, for the whole run. The getters are libsumo's own C functions mapped over every approach's
+        # lanes in one pass (a Python frame per call, or per approach, was most of this sample's cost); a full lane
+        # is looked for approach by approach only in the rare sample that has one.
+        lanes, capacities, approaches = self._sampled
+        halting = list(map(_lane_halting, lanes))
         top = self._max_queue
-        for approach, lanes, capacities in self._storage:
-            queue = sum(map(_lane_halting, lanes))
+        for approach, its in approaches:
+            queue = sum(halting[its])
             if queue > top[approach]:
                 top[approach] = queue
-            # a lane holding as many vehicles as fit on it: the queue reaches back beyond the network
-            if any(map(operator.ge, map(_lane_vehicles, lanes), capacities)):
-                self._spill_minutes[approach].add(int((self.time - self.begin) // 60.0))
+        # a lane holding as many vehicles as fit on it: the queue reaches back beyond the network
+        full = list(map(operator.ge, map(_lane_vehicles, lanes), capacities))
+        if any(full):
+            minute = int((self.time - self.begin) // 60.0)
+            for approach, its in approaches:
+                if any(full[its]):
+                    self._spill_minutes[approach].add(minute)
         self._sample_vehicles()
 
     def _sample_vehicles(self) -> None:
