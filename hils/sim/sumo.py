@@ -159,8 +159,10 @@ class Light:
     (:func:`hils.protocol.scenario.labels`): nothing in a simulation of one intersection (``west``), its name in one of
     several (``J2 north``)."""
 
-    def __init__(self, tls_id: str, config: IntersectionConfig, phase_map: PhaseMap, *, label: str | None) -> None:
+    def __init__(self, tls_id: str, config: IntersectionConfig, phase_map: PhaseMap, *, label: str | None,
+                 readings: _Readings) -> None:
         self.tls_id = tls_id
+        self._readings = readings
         self.config = config
         self.phase_map = phase_map
         self.prefix = f"{label} " if label else ""
@@ -233,16 +235,36 @@ class Light:
         return {p: sum(map(_lane_halting, inc)) for p, inc, _ in self._movement_lanes}
 
     def traffic_state(self) -> TrafficState:
-        names = self._lanes
-        lanes = dict(zip(names, map(LaneState, map(_lane_halting, names), map(_lane_waiting, names),
-                                    map(_lane_vehicles, names)), strict=True))
-        movements = {p: MovementState(p, sum(lanes[n].halting for n in inc), sum(lanes[n].halting for n in out))
+        now, read, departed, arrived = self._readings.read(self._lanes)
+        lanes = {n: read[n] for n in self._lanes}
+        movements = {p: MovementState(p, sum([lanes[n].halting for n in inc]), sum([lanes[n].halting for n in out]))
                      for p, inc, out in self._movement_lanes}
-        departed = _stat("stats.vehicles.inserted")
-        return TrafficState(libsumo.simulation.getTime(), lanes, movements, int(departed),
-                            int(departed - _stat("stats.vehicles.running")))
+        return TrafficState(now, lanes, movements, departed, arrived)
 
 
+class _Readings:
+    """The traffic state's figures, read at most once per simulated time: lights observed at the same time share
+    them (a grid's sixteen are observed at every decision point, and one light's outgoing lanes are its neighbour's
+    incoming ones). Every figure is of SUMO's last step, so it stands until the next."""
+
+    def __init__(self) -> None:
+        self._time: float | None = None
+        self._lanes: dict[str, LaneState] = {}
+        self._counts = (0, 0)
+
+    def read(self, names: Sequence[str]) -> tuple[float, dict[str, LaneState], int, int]:
+        """The time, the states of at least the lanes ``names``, and the vehicles departed and arrived."""
+        now = libsumo.simulation.getTime()
+        if now != self._time:
+            self._time, self._lanes = now, {}
+            departed = _stat("stats.vehicles.inserted")
+            self._counts = (int(departed), int(departed - _stat("stats.vehicles.running")))
+        lanes = self._lanes
+        missing = [n for n in names if n not in lanes]
+        if missing:
+            lanes.update(zip(missing, map(LaneState, map(_lane_halting, missing), map(_lane_waiting, missing),
+                                          map(_lane_vehicles, missing)), strict=True))
+        return now, lanes, *self._counts
 
 
 class SumoSimulation:
@@ -345,8 +367,10 @@ class SumoSimulation:
                             f"{', '.join(map(repr, present)) or 'none'}")
         net = read_net(libsumo.simulation.getOption("net-file"))
         named = labels(list(self.configs))
+        readings = _Readings()
         self.lights = {tls: Light(tls, cfg, derive_phase_map(cfg, net, libsumo.trafficlight.getControlledLinks(tls),
-                                                             tls, self.links.get(tls)), label=named[tls])
+                                                             tls, self.links.get(tls)), label=named[tls],
+                                  readings=readings)
                        for tls, cfg in self.configs.items()}
         self._until_sample = self._sample_every
         self._until_resco = self._resco_every
