@@ -137,6 +137,11 @@ class DelayedController:
         self.controller.step()
 
     @property
+    def tick(self) -> int:
+        """The controller's tick count (the event clock reads it at every step: not through ``__getattr__``)."""
+        return self.controller.tick
+
+    @property
     def status_version(self) -> int:
         """Counts changes of the status the agent answers (the image's, when it lags)."""
         return self._images[0].version if self._images.maxlen else self.controller.status_version

@@ -173,7 +173,14 @@ from hils.protocol.config import Pair
 __all__ = ["CLEAR_ATTEMPTS", "Ev", "Manager", "Mode", "Pending", "State", "graph"]
 
 
-class State(Enum):
+class _Singletons(Enum):
+    """An enum hashed by identity (its members are singletons): the transition table and the paper's names are looked
+    up by these at every event, and Enum's own ``__hash__`` is a Python call hashing the member's name."""
+
+    __hash__ = object.__hash__
+
+
+class State(_Singletons):
     """The paper's names of the manager's states, kept by the log, the reports and the public API; and PREEMPTED,
     which the paper's lab controller never was."""
 
@@ -183,7 +190,7 @@ class State(Enum):
     PREEMPTED = "preempted"
 
 
-class Mode(Enum):
+class Mode(_Singletons):
     """The states of the machine."""
 
     STARTING = "starting"
@@ -221,7 +228,7 @@ class Pending:
     token: int
 
 
-class Ev(Enum):
+class Ev(_Singletons):
     """The kinds an input event is classified into; the table is written in these. Each says its guard."""
 
     STARTED = auto()  # Started

@@ -25,6 +25,7 @@ from collections import Counter
 from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
+from itertools import accumulate
 from pathlib import Path
 from types import TracebackType
 
@@ -158,8 +159,10 @@ class Light:
     (:func:`hils.protocol.scenario.labels`): nothing in a simulation of one intersection (``west``), its name in one of
     several (``J2 north``)."""
 
-    def __init__(self, tls_id: str, config: IntersectionConfig, phase_map: PhaseMap, *, label: str | None) -> None:
+    def __init__(self, tls_id: str, config: IntersectionConfig, phase_map: PhaseMap, *, label: str | None,
+                 readings: _Readings) -> None:
         self.tls_id = tls_id
+        self._readings = readings
         self.config = config
         self.phase_map = phase_map
         self.prefix = f"{label} " if label else ""
@@ -232,16 +235,36 @@ class Light:
         return {p: sum(map(_lane_halting, inc)) for p, inc, _ in self._movement_lanes}
 
     def traffic_state(self) -> TrafficState:
-        names = self._lanes
-        lanes = dict(zip(names, map(LaneState, map(_lane_halting, names), map(_lane_waiting, names),
-                                    map(_lane_vehicles, names)), strict=True))
-        movements = {p: MovementState(p, sum(lanes[n].halting for n in inc), sum(lanes[n].halting for n in out))
+        now, read, departed, arrived = self._readings.read(self._lanes)
+        lanes = {n: read[n] for n in self._lanes}
+        movements = {p: MovementState(p, sum([lanes[n].halting for n in inc]), sum([lanes[n].halting for n in out]))
                      for p, inc, out in self._movement_lanes}
-        departed = _stat("stats.vehicles.inserted")
-        return TrafficState(libsumo.simulation.getTime(), lanes, movements, int(departed),
-                            int(departed - _stat("stats.vehicles.running")))
+        return TrafficState(now, lanes, movements, departed, arrived)
 
 
+class _Readings:
+    """The traffic state's figures, read at most once per simulated time: lights observed at the same time share
+    them (a grid's sixteen are observed at every decision point, and one light's outgoing lanes are its neighbour's
+    incoming ones). Every figure is of SUMO's last step, so it stands until the next."""
+
+    def __init__(self) -> None:
+        self._time: float | None = None
+        self._lanes: dict[str, LaneState] = {}
+        self._counts = (0, 0)
+
+    def read(self, names: Sequence[str]) -> tuple[float, dict[str, LaneState], int, int]:
+        """The time, the states of at least the lanes ``names``, and the vehicles departed and arrived."""
+        now = libsumo.simulation.getTime()
+        if now != self._time:
+            self._time, self._lanes = now, {}
+            departed = _stat("stats.vehicles.inserted")
+            self._counts = (int(departed), int(departed - _stat("stats.vehicles.running")))
+        lanes = self._lanes
+        missing = [n for n in names if n not in lanes]
+        if missing:
+            lanes.update(zip(missing, map(LaneState, map(_lane_halting, missing), map(_lane_waiting, missing),
+                                          map(_lane_vehicles, missing)), strict=True))
+        return now, lanes, *self._counts
 
 
 class SumoSimulation:
@@ -288,6 +311,9 @@ class SumoSimulation:
         self._approach_of_edge: dict[str, str] = {}
         # every light's approaches (named as Light says), their lanes and how many vehicles each lane holds
         self._storage: tuple[tuple[str, tuple[str, ...], tuple[int, ...]], ...] = ()
+        # the same lanes end to end with their capacities, each approach a slice of them: the samples read them all
+        # in one pass
+        self._sampled: tuple[tuple[str, ...], tuple[int, ...], tuple[tuple[str, slice], ...]] = ((), (), ())
         self._spill_minutes: dict[str, set[int]] = {}
         # per vehicle seen in the network: its approach and departure delay, and its last sampled time loss
         self._seen: dict[str, tuple[str, float]] = {}
@@ -341,8 +367,10 @@ class SumoSimulation:
                             f"{', '.join(map(repr, present)) or 'none'}")
         net = read_net(libsumo.simulation.getOption("net-file"))
         named = labels(list(self.configs))
+        readings = _Readings()
         self.lights = {tls: Light(tls, cfg, derive_phase_map(cfg, net, libsumo.trafficlight.getControlledLinks(tls),
-                                                             tls, self.links.get(tls)), label=named[tls])
+                                                             tls, self.links.get(tls)), label=named[tls],
+                                  readings=readings)
                        for tls, cfg in self.configs.items()}
         self._until_sample = self._sample_every
         self._until_resco = self._resco_every
@@ -357,6 +385,11 @@ class SumoSimulation:
         self._storage = tuple((approach, tuple(lanes),
                                tuple(int(libsumo.lane.getLength(lane) // spacing) for lane in lanes))
                               for approach, lanes in approach_lanes)
+        ends = accumulate(len(its) for _, its, _ in self._storage)
+        self._sampled = (tuple(lane for _, its, _ in self._storage for lane in its),
+                         tuple(c for _, _, capacities in self._storage for c in capacities),
+                         tuple((a, slice(end - len(its), end))
+                               for (a, its, _), end in zip(self._storage, ends, strict=True)))
         self._spill_minutes = {approach: set() for approach, _ in approach_lanes}
         self._seen, self._time_loss = {}, {}
         self._finished = {approach: [] for approach, _ in approach_lanes}
@@ -437,16 +470,23 @@ class SumoSimulation:
                         self._queue.sample()
 
     def _sample_queues(self) -> None:
-        # Once a second, for the whole run. The getters are libsumo's own C functions mapped over the lanes
-        # and vehicles: the Python wrappers around them (a frame per call) were most of this sample's cost.
+        # Once a second, for the whole run. The getters are libsumo's own C functions mapped over every approach's
+        # lanes in one pass (a Python frame per call, or per approach, was most of this sample's cost); a full lane
+        # is looked for approach by approach only in the rare sample that has one.
+        lanes, capacities, approaches = self._sampled
+        halting = list(map(_lane_halting, lanes))
         top = self._max_queue
-        for approach, lanes, capacities in self._storage:
-            queue = sum(map(_lane_halting, lanes))
+        for approach, its in approaches:
+            queue = sum(halting[its])
             if queue > top[approach]:
                 top[approach] = queue
-            # a lane holding as many vehicles as fit on it: the queue reaches back beyond the network
-            if any(map(operator.ge, map(_lane_vehicles, lanes), capacities)):
-                self._spill_minutes[approach].add(int((self.time - self.begin) // 60.0))
+        # a lane holding as many vehicles as fit on it: the queue reaches back beyond the network
+        full = list(map(operator.ge, map(_lane_vehicles, lanes), capacities))
+        if any(full):
+            minute = int((self.time - self.begin) // 60.0)
+            for approach, its in approaches:
+                if any(full[its]):
+                    self._spill_minutes[approach].add(minute)
         self._sample_vehicles()
 
     def _sample_vehicles(self) -> None:
