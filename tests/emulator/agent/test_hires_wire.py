@@ -11,6 +11,7 @@ from datetime import datetime, timedelta
 from pathlib import Path
 
 import pytest
+from signal_replay import collector
 
 from hils.protocol import hires
 from hils.protocol.hires import EventCode
@@ -27,7 +28,6 @@ from tests.emulator.agent.test_agent_netsnmp import run
 pytestmark = pytest.mark.wallclock
 
 E = EventCode
-collector = pytest.importorskip("signal_replay.collector")  # the test extra installs it: never skipped in CI
 
 
 @pytest.fixture(scope="module")
@@ -122,7 +122,7 @@ def test_a_wall_clock_run_collects_the_controllers_log_into_its_folder(tmp_path:
                           capture_output=True, text=True, timeout=120, cwd=tmp_path)
     assert done.returncode == 0, done.stderr
     assert "Hi-res log:" in done.stdout and (out / "hires.parquet").exists()
-    pd = pytest.importorskip("pandas")
+    import pandas as pd
     frame = pd.read_parquet(out / "hires.parquet")
     # The run's own SETs put the controller under system control: its record says so, in the run's window.
     assert set(frame.DeviceId) == {1}

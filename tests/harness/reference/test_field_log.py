@@ -9,6 +9,7 @@ import sys
 from datetime import datetime
 from pathlib import Path
 
+import atspm
 import pandas as pd
 import pytest
 
@@ -18,7 +19,6 @@ from harness.reference import field_log
 from harness.reference.field_log import FieldLogError, Row
 from tests.emulator.model.test_hires import config_with
 
-atspm = pytest.importorskip("atspm")  # the test extra installs it: never skipped in CI
 SAMPLE = Path(atspm.__file__).parent / "data" / "sample_raw_data.parquet"
 
 

@@ -15,6 +15,7 @@ import random
 from datetime import datetime, timedelta
 from pathlib import Path
 
+import atspm
 import pytest
 
 from emulator.model.controller import Controller
@@ -28,8 +29,6 @@ from tests.emulator.model.test_hires import config_text, config_with
 pytestmark = pytest.mark.wallclock
 
 E = EventCode
-pytest.importorskip("signal_replay")  # the test extra installs it: never skipped in CI
-atspm = pytest.importorskip("atspm")
 
 TICK = timedelta(milliseconds=100)
 LEAD_IN_S = 5  # the emulator rests in its start-up green (minimum timed) before the first input
@@ -64,7 +63,7 @@ def own_log(seconds: int, seed: int = 3) -> list[Row]:
 def test_the_emulators_own_log_replays_at_100_percent(tmp_path: Path) -> None:
     config = tmp_path / "bench.toml"
     config.write_text(config_text())
-    rows = own_log(45)
+    rows = own_log(30)
     # The bench runs on after the last input as long as the log does, so that both end at rest.
     replayed = replay(rows, config, tmp_path / "replay", warm_up_s=LEAD_IN_S + 1, settle_s=TAIL_S)
     assert replayed.signal_replay_match == 100.0
@@ -74,7 +73,7 @@ def test_the_emulators_own_log_replays_at_100_percent(tmp_path: Path) -> None:
     theirs = [(e.time - replayed.shift, e.code, e.parameter) for e in replayed.bench
               if e.code not in UNIT and first <= e.time - replayed.shift]
     mine = [(r.time, r.code, r.parameter) for r in rows if r.code not in UNIT and first <= r.time]
-    assert len(mine) > 250 and {c for _, c, _ in mine} >= {E.PHASE_BEGIN_GREEN, E.PHASE_GAP_OUT, E.PED_BEGIN_WALK,
+    assert len(mine) > 200 and {c for _, c, _ in mine} >= {E.PHASE_BEGIN_GREEN, E.PHASE_GAP_OUT, E.PED_BEGIN_WALK,
                                                            E.PED_DETECTOR_ON, E.BARRIER_TERMINATION}
     assert theirs == mine
     # and the replay's table says so: every event of the log found (from the first input on: before it each

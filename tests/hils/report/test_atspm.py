@@ -19,7 +19,6 @@ from hils.sweep import grid as sweep
 from tests.emulator.model.test_hires import config_with
 
 E = EventCode
-pytest.importorskip("atspm")  # the test extra installs it (hils[atspm]): never skipped in CI
 
 def fixed_time_log(failing: set[int], cycles: int = 8) -> tuple[list[hires.Event], dict[str, int]]:
     """A fixed-time controller (every phase on maximum recall: 20 s greens, 3 s yellow, 2 s red clearance, a 100 s

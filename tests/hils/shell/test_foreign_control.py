@@ -72,7 +72,7 @@ def test_a_second_run_on_a_controller_a_first_drives_refuses_to_start_unless_it_
         return sum(r["kind"] == kind for r in records)
 
     # The first commands a new pair every 20 s; the second watches for 2 x 10 s.
-    first = subprocess.Popen(_run_cli(tmp_path, "first", url, 20.0, "--duration", "50"),
+    first = subprocess.Popen(_run_cli(tmp_path, "first", url, 20.0, "--duration", "42"),
                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         first_has(lambda records: kinds(records, Kind.TRANSITION_VERIFIED) == 1)
