@@ -33,6 +33,7 @@ from hils.protocol import config as config_mod
 from hils.protocol.ntcip import signal_oids
 from hils.report import jsonout
 from hils.report.latency import PAPER_LATENCY_MS, Stats, internal_latencies_ms
+from hils.report.outfiles import write_whole
 from hils.run.testbed import RunSpec, run_spec
 from hils.shell.events import Kind
 
@@ -191,11 +192,16 @@ def _latency_command(args: argparse.Namespace) -> int:
         rows[name] = {"ours_ms": st.as_dict(), "paper_ms": {"n": pn, "mean": pmean, "std": pstd},
                       "paper_over_ours": ratio}
     print("target: mean < 50 us, p99 < 200 us")
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(jsonout.dumps({"machine": info, "latency": rows}) + "\n", encoding="utf-8")
-    print(f"written: {args.out}")
+    _write_figures(args.out, {"machine": info, "latency": rows})
     return 0
 
+
+
+def _write_figures(path: Path, figures: dict[str, Any]) -> None:
+    """A benchmark's figures as JSON in ``path`` (its folder made), written whole, and the console told where."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_whole(path, jsonout.dumps(figures) + "\n")
+    print(f"written: {path}")
 
 def _overhead_command(args: argparse.Namespace) -> int:
     from harness.bench.overhead import measure_instructions, measure_overhead
@@ -221,9 +227,7 @@ def _overhead_command(args: argparse.Namespace) -> int:
         print(f"  instructions (callgrind, seed 0, start-up counted out): full loop "
               f"{ins['hils_instructions'] / 1e9:.2f} G, same-traffic floor {ins['floor_instructions'] / 1e9:.2f} G, "
               f"ratio {ins['ratio']:.2f}")
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(jsonout.dumps({"machine": info, "overhead": f}) + "\n", encoding="utf-8")
-    print(f"written: {args.out}")
+    _write_figures(args.out, {"machine": info, "overhead": f})
     return 0
 
 
@@ -436,9 +440,7 @@ def _wire_command(args: argparse.Namespace) -> int:
               + (f"  dropped {st['dropped']:6d}  RSS {st['rss_growth_mb']:+6.1f} MB: {st['per_second']}/s "
                  f"{st['what']}" if name != "quiet" else ""))
     print("  target: p99 < 5 ms with the wrong community, < 20 ms with the SNMPv3 flood, no memory kept")
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(jsonout.dumps(out) + "\n", encoding="utf-8")
-    print(f"written: {args.out}")
+    _write_figures(args.out, out)
     return 0
 
 
@@ -471,9 +473,7 @@ def _env_command(args: argparse.Namespace) -> int:
             "other signals, other traffic, which SUMO steps at its own cost)")
     print(bench_seeds.ratio_line("hils / sumo-rl unconverted", f["hils_to_sumo_rl_unconverted"])
           + " (shorter clearances, lighter traffic)")
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(jsonout.dumps({"machine": info, "env": f}) + "\n", encoding="utf-8")
-    print(f"written: {args.out}")
+    _write_figures(args.out, {"machine": info, "env": f})
     return 0
 
 
@@ -493,9 +493,7 @@ def _resco_command(args: argparse.Namespace) -> int:
                                               per_controller=True):
             print(line)
         print(bench_seeds.ratio_line("hils / sumo-rl", sc["hils_to_sumo_rl"]) + " (goal: wall <= 1)")
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(jsonout.dumps({"machine": info, "resco": f}) + "\n", encoding="utf-8")
-    print(f"written: {args.out}")
+    _write_figures(args.out, {"machine": info, "resco": f})
     return 0
 
 
@@ -555,9 +553,7 @@ def _corridor_command(args: argparse.Namespace) -> int:
         per = m[side]["mb_per_controller"]
         print(f"memory, {side}: " + ("-" if per is None else f"{per:.2f} MB per added controller") +
               f" (goal <= {m['goal_mb_per_controller']:g})")
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(jsonout.dumps({"machine": info, "corridor": f}) + "\n", encoding="utf-8")
-    print(f"written: {args.out}")
+    _write_figures(args.out, {"machine": info, "corridor": f})
     return 0
 
 

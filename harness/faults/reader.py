@@ -282,9 +282,9 @@ def parse_fault_scenario(text: str, source: str = "<memory>", *, base: Path | No
     faults = _fault_specs(r, source, action_type, tuple(intersections))
     for spec in faults:
         check = FAULT_TYPES[spec.type].check
-        problems = [check(spec.raw, cfg) for tls, cfg in intersections.items() if check and spec.acts_at(tls)]
-        if problem := next((p for p in problems if p), None):
-            raise FaultScenarioError(source, f"faults[{spec.index}].{problem[0]}", problem[1])
+        for tls, cfg in intersections.items() if check is not None else ():
+            if spec.acts_at(tls) and (problem := check(spec.raw, cfg)):
+                raise FaultScenarioError(source, f"faults[{spec.index}].{problem[0]}", problem[1])
     expect, expect_at = _expect_tables(raw.get("expect", {}), source, faults, intersections)
     scenario = FaultScenario(
         name=r.string("name", default_name),
