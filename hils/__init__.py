@@ -8,9 +8,9 @@ action that cannot be served; :func:`load_config` reads an intersection config.
 The names are loaded when first used, so that importing the shared layer (``hils.protocol.ntcip``,
 ``hils.protocol.config``), as the emulator does, does not load the middleware.
 
-The gymnasium environment ``hils/Intersection-v0`` is registered by :mod:`hils.envs`, as gymnasium documents
+The gymnasium environment ``hils/Intersection-v1`` is registered by :mod:`hils.envs`, as gymnasium documents
 for third-party environments: ``import hils.envs`` first, or let gymnasium import it,
-``gymnasium.make("hils.envs:hils/Intersection-v0")``. ``import hils`` loads neither gymnasium nor the envs.
+``gymnasium.make("hils.envs:hils/Intersection-v1")``. ``import hils`` loads neither gymnasium nor the envs.
 """
 
 from __future__ import annotations

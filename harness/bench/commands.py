@@ -94,7 +94,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     wire.set_defaults(func=_wire_command)
     env = commands.add_parser("env", help="the gymnasium environment's speed beside sumo-rl's (same network, demand)",
                               description="Environment steps per second and wall time per simulated hour of "
-                                          "hils/Intersection-v0 beside sumo-rl's SumoEnvironment on the shipped "
+                                          "hils/Intersection-v1 beside sumo-rl's SumoEnvironment on the shipped "
                                           "four-leg network and demand: 0.25 s SUMO steps, a decision every 10 s, "
                                           "a seeded random policy; one episode of each side per seed, each in a "
                                           "fresh process, alternately; medians and min-max over the seeds, and "

@@ -34,13 +34,13 @@ TIMINGS = ("yellow", "min_green", "max_green")
 
 
 def hils_episode(seed: int, duration: float = EPISODE_S) -> dict[str, Any]:
-    """One episode of `hils/Intersection-v0` (selection) with a random policy."""
+    """One episode of `hils/Intersection-v1` (selection) with a random policy."""
     import gymnasium as gym
 
     import hils.envs  # noqa: F401  (registers the environment)
 
     sumo_s = time_sumo_steps()
-    env = gym.make("hils/Intersection-v0", action_type="selection", sumo_step=SUMO_STEP,
+    env = gym.make("hils/Intersection-v1", action_type="selection", sumo_step=SUMO_STEP,
                    control_interval=DECISION_S, episode_length=duration)
     steps, wall = _random_episode(env, seed)
     traffic = env.unwrapped.testbed.traffic

@@ -1,14 +1,14 @@
 """Reinforcement-learning environments on the Testbed.
 
-- gymnasium: ``gymnasium.make("hils/Intersection-v0", action_type=...)``, one intersection
+- gymnasium: ``gymnasium.make("hils/Intersection-v1", action_type=...)``, one intersection
   (:mod:`hils.envs.intersection`).
 - PettingZoo: :func:`parallel_env`, a ``ParallelEnv`` with one agent per traffic light of a scenario
   (:mod:`hils.envs.parallel`).
 
 Importing this package registers the gymnasium environment (:func:`register`, by its entry-point string, so
 that registering loads neither the Testbed nor SUMO), as gymnasium documents for third-party environments:
-``import hils.envs`` before ``gymnasium.make("hils/Intersection-v0")``, or name the package in the id,
-``gymnasium.make("hils.envs:hils/Intersection-v0")``, and gymnasium imports it. PettingZoo is imported only
+``import hils.envs`` before ``gymnasium.make("hils/Intersection-v1")``, or name the package in the id,
+``gymnasium.make("hils.envs:hils/Intersection-v1")``, and gymnasium imports it. PettingZoo is imported only
 when :func:`parallel_env` is called.
 """
 
@@ -24,7 +24,7 @@ if TYPE_CHECKING:
 
 
 __all__ = ["ENV_ID", "parallel_env", "register"]
-ENV_ID = "hils/Intersection-v0"
+ENV_ID = "hils/Intersection-v1"
 
 
 def register() -> None:

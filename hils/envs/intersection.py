@@ -14,7 +14,7 @@ slice              size        value
 ``[n, 2n)``        n           pressure of each phase's movement: incoming minus outgoing halting
 ``[2n, 3n)``       n           signal of each phase: 0 red, 0.5 yellow, 1 green
 ``3n``             1           seconds since the signal last changed (time in the current interval)
-``3n+1 .. 3n+4``   3           the manager's state, one-hot: idle, on_hold, timeout
+``[3n+1, 3n+5)``   4           the manager's state, one-hot: idle, on_hold, timeout, preempted
 =================  ==========  ==================================================================
 
 Rewards (``reward=``): ``"queue"`` minus the total queue, ``"pressure"`` minus the summed pressure,
@@ -26,6 +26,9 @@ Rules
 - An episode is ``episode_length`` simulated seconds (one hour by default) and is *truncated* at its
   end; it is never *terminated*: a TIMEOUT of the manager is reported in ``info["timeout"]`` and the
   Testbed recovers from it (``recover_after``) while training goes on.
+- An action the controller cannot take now is refused, nothing is sent, and the step runs to the next
+  decision: ``info["refused"]`` says why (None when taken). While the controller serves a preempt
+  (ambulance, train) every action is refused so; the observation's state says PREEMPTED.
 - Seeding: ``reset(seed=s)`` seeds SUMO, the latency model and the agent-facing RNG; a reset without
   a seed draws the next seed from ``np_random``, so a seeded sequence of episodes is reproducible.
 - What is said of one intersection here (spaces, conversions, rewards) lives in :class:`IntersectionAdapter`
@@ -60,7 +63,7 @@ __all__ = [
 ]
 
 Reward = Callable[[Observation, Observation], float]
-STATES = (State.IDLE, State.ON_HOLD, State.TIMEOUT)
+STATES = (State.IDLE, State.ON_HOLD, State.TIMEOUT, State.PREEMPTED)
 
 
 class EnvOptionError(UserError, ValueError):
@@ -184,7 +187,7 @@ class IntersectionAdapter:
 
 
 class IntersectionEnv(gymnasium.Env):
-    """``gymnasium.make("hils/Intersection-v0", action_type="selection" | "switch" | "duration", ...)``.
+    """``gymnasium.make("hils/Intersection-v1", action_type="selection" | "switch" | "duration", ...)``.
 
     ``config``: an intersection config (object or TOML path; default: the shipped four-leg).
     ``net``/``routes`` or ``sumocfg``: your own SUMO scenario (default: the shipped one).
@@ -237,8 +240,7 @@ class IntersectionEnv(gymnasium.Env):
         tb = self.testbed
         try:
             obs, info = tb.step(self.adapter.action(action))
-            info["refused"] = None
-        except ActionError as exc:
+        except ActionError as exc:  # refused (preempted, or not servable now), nothing sent: on to the next decision
             obs, info = tb.wait()
             info["refused"] = str(exc)
         reward = float(self.reward_fn(self._last, obs))

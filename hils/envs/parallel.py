@@ -17,7 +17,8 @@ Rules
   and a reward at every step.
 - An action outside the agent's space is refused with a typed error (:class:`EnvOptionError`, or the
   middleware's :class:`hils.control.actions.ActionError`) naming the agent; nothing is sent to any controller
-  and no time passes.
+  and no time passes. The action of an agent whose controller serves a preempt is not taken (the others'
+  are): its ``info["acted"]`` is False, ``info["refused"]`` says why, and its observation's state is PREEMPTED.
 - An episode is ``episode_length`` simulated seconds and is *truncated* for every agent at its end
   (``agents`` then empties); it is never *terminated*. A TIMEOUT of one controller shows in that agent's
   info (``timeout``, ``timeout_reason``, ``state``); the Testbed recovers it while the others run on.
@@ -71,7 +72,7 @@ class IntersectionsEnv(ParallelEnv[str, np.ndarray, Any]):
     (overwritten; every record names its intersection). ``measure``: as the single environment's (off).
     """
 
-    metadata: ClassVar[dict[str, Any]] = {"name": "hils_intersections_v0", "render_modes": [],
+    metadata: ClassVar[dict[str, Any]] = {"name": "hils_intersections_v1", "render_modes": [],
                                           "is_parallelizable": True}
     render_mode = None
 

@@ -21,6 +21,7 @@ from hils.shell.events import Kind, signal_known
 #: An indication nobody verified: polls failing, or halted in TIMEOUT (see :func:`hils.shell.events.signal_known`).
 NO_DATA = "-"
 COLORS = {"G": "#2ca02c", "Y": "#ffbf00", "r": "#d62728", NO_DATA: "#d9d9d9"}
+PREEMPTED = "#7b3294"  # the controller served a preempt: its own operation, not the agent's
 
 
 def pyplot() -> Any:
@@ -65,6 +66,24 @@ def signal_intervals(records: Sequence[dict[str, Any]], phases: Sequence[int], s
     return spans
 
 
+def preempted_spans(records: Sequence[dict[str, Any]], start: float, end: float
+                    ) -> list[tuple[float, float, tuple[int, ...]]]:
+    """(from, to, preempts) of every stretch the manager was PREEMPTED that overlaps [start, end], cut to it:
+    from its ``preempt_begin`` to the state record leaving PREEMPTED (the controller reporting it over, or a
+    TIMEOUT), or to ``end`` when it never left."""
+    spans: list[tuple[float, float, tuple[int, ...]]] = []
+    began: tuple[float, tuple[int, ...]] | None = None
+    for r in records:
+        if r["kind"] == Kind.PREEMPT_BEGIN:
+            began = (r["t"], tuple(r["preempts"]))
+        elif r["kind"] == Kind.STATE and r["from"] == "preempted" and began is not None:
+            spans.append((began[0], r["t"], began[1]))
+            began = None
+    if began is not None:
+        spans.append((began[0], end, began[1]))
+    return [(max(t0, start), min(t1, end), n) for t0, t1, n in spans if t1 > start and t0 < end]
+
+
 def run_end(records: Sequence[dict[str, Any]]) -> float:
     """Simulated time at which the run ended (its last record when it has no RUN_ENDED)."""
     ended = [r["t"] for r in records if r["kind"] == Kind.RUN_ENDED]
@@ -105,7 +124,8 @@ def signal_timeline(records: Sequence[dict[str, Any]], config: IntersectionConfi
     rows = phase_rows(config)
     phases = [p for p, _, _ in rows]
     spans = signal_intervals(records, phases, start, end)
-    row_h, left, top, width = 40.0, 150.0, 40.0, 780.0
+    preempted = preempted_spans(records, start, end)
+    row_h, left, top, width = 40.0, 150.0, 58.0 if preempted else 40.0, 780.0
     chart = Chart(left, top, width, row_h * len(rows), (start, end))
     svg = Svg(left + width + 90.0, top + chart.height + 60.0)
     svg.text(svg.width / 2, 22, f"Signal timeline, {label or config.name}: {start:.0f} to {end:.0f} s of a "
@@ -124,6 +144,12 @@ def signal_timeline(records: Sequence[dict[str, Any]], config: IntersectionConfi
     for r in records:
         if r["kind"] == Kind.COMMAND_DISPATCHED and start <= r["t"] <= end:
             svg.line(chart.x(r["t"]), top, chart.x(r["t"]), top + chart.height, dash="4 3", width=0.8)
+    for t0, t1, numbers in preempted:  # a bar above the rows and its bounds across them
+        x0, x1 = chart.x(t0), chart.x(t1)
+        svg.rect(x0, top - 10, x1 - x0, 7, PREEMPTED)
+        svg.text(x0, top - 14, f"preempt {', '.join(map(str, numbers))}", size=11)
+        for x in (x0, x1):
+            svg.line(x, top - 10, x, top + chart.height, color=PREEMPTED, dash="2 2", width=1.2)
     for row in range(1, len(rows)):
         (_, ring_a, barrier_a), (_, ring_b, barrier_b) = rows[row - 1], rows[row]
         y = top + row * row_h
@@ -138,9 +164,10 @@ def signal_timeline(records: Sequence[dict[str, Any]], config: IntersectionConfi
         y = top + (sum(members) / len(members) + 0.5) * row_h
         svg.text(left + width + 8, y - 3, f"ring {ring}", size=11)
         svg.text(left + width + 8, y + 11, f"barrier {barrier}", size=11)
-    unverified = any(ind == NO_DATA for row in spans.values() for _, _, ind in row)
-    chart.axes(svg, "simulation time (s); dashed: command dispatched; green, yellow, red as polled"
-               + ("; hatched: no data (polls failing or halted in TIMEOUT)" if unverified else ""))
+    unverified = any(ind == NO_DATA and t1 > t0 for row in spans.values() for t0, t1, ind in row)
+    chart.axes(svg, "simulation time (s); dashed: command dispatched; colours as polled"
+               + ("; hatched: no data (polls failing or halted in TIMEOUT)" if unverified else "")
+               + ("; purple: controller preempted" if preempted else ""))
     return svg.write(path)
 
 

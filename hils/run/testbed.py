@@ -50,7 +50,7 @@ from typing import Any
 import simpy
 
 from hils.agents.builtin import DETECTOR_AGENTS, Agent, Observation, check_plans, controller_config, load_agent
-from hils.control.actions import ActionError, ActionType
+from hils.control.actions import ActionError, ActionType, PreemptedError
 from hils.control.manager import CLEAR_ATTEMPTS, State
 from hils.protocol import config as config_mod
 from hils.protocol.config import IntersectionConfig
@@ -178,11 +178,11 @@ class _OneIntersection:
 
         An action that cannot be served is refused with a typed :class:`hils.control.actions.ActionError`
         (logged; nothing is sent, no time passes), :class:`hils.control.actions.PreemptedError` while the
-        controller serves a preempt. ``info`` says what happened: ``action_id``,
-        ``dropped`` (the manager was not IDLE), ``state`` (idle, on_hold, timeout or preempted), ``timeout`` (the
+        controller serves a preempt. ``info`` says what happened: ``action_id``, ``acted``,
+        ``dropped`` (the manager was not IDLE), ``refused`` (why :meth:`step_all` refused it, else None), ``state`` (idle, on_hold, timeout or preempted), ``timeout`` (the
         manager entered TIMEOUT during the step) and ``timeout_reason``, ``ended`` (the run's duration has passed)."""
         name = self._only()
-        observations, infos = self.step_all({name: action})
+        observations, infos = self._to_decision(self._submit({name: action}, preempted_raises=True))
         return observations[name], infos[name]
 
     def wait(self) -> tuple[Observation, dict[str, Any]]:
@@ -548,7 +548,16 @@ class Testbed(_OneIntersection):
         now, as the last step's infos said; every one after :meth:`reset_all`) act; the action of one that is
         not due, left out or None is not taken (``acted`` False), and its schedule runs on. Every action taken
         is converted before any is submitted: one that cannot be served raises its
-        :class:`hils.control.actions.ActionError` and nothing is sent to any controller."""
+        :class:`hils.control.actions.ActionError` and nothing is sent to any controller. The action of an
+        intersection whose controller serves a preempt is the exception: the agent did nothing wrong and the
+        others act, so it is refused alone (logged, nothing sent to it, ``acted`` False, ``refused`` saying why)
+        and the step goes on."""
+        return self._to_decision(self._submit(actions, preempted_raises=False))
+
+    def _submit(self, actions: Mapping[str, Any], *, preempted_raises: bool) -> dict[str, Submission]:
+        """The actions of the intersections that are due, converted, then handed to their middlewares (see
+        :meth:`step_all`); ``preempted_raises``: a :class:`PreemptedError` raises as any refusal does (a run of
+        one, stepped by :meth:`step`: no time passes)."""
         self._check_running()
         unknown = sorted(set(actions) - set(self.intersections))
         if unknown:
@@ -560,7 +569,8 @@ class Testbed(_OneIntersection):
             intersection = self.intersections[name]
             if value is not None and intersection.due:
                 r = received[name] = intersection.middleware.receive(value)
-                if r.error is not None and refused is None:
+                if r.error is not None and refused is None and (
+                        preempted_raises or not isinstance(r.error, PreemptedError)):
                     refused = name
         if refused is not None:  # all or none: submitted alone, logged as received and refused, nothing sent
             received = {refused: received[refused]}
@@ -570,7 +580,7 @@ class Testbed(_OneIntersection):
             if self.intersections[refused].label is not None:
                 error.add_note(f"the action of intersection {refused}; nothing was sent to any controller")
             raise error
-        return self._to_decision(submitted)
+        return submitted
 
     def run_for(self, seconds: float) -> None:
         """Let ``seconds`` of run time pass without acting."""
@@ -669,8 +679,9 @@ class Testbed(_OneIntersection):
         for name, i in self.intersections.items():
             i.due = i.at_decision()
             done = submitted.get(name)
-            infos[name] = i.info(done.action_id if done else None, done is not None,
+            infos[name] = i.info(done.action_id if done else None, done is not None and done.error is None,
                                  done.dropped if done else False, timeouts[name].triggered) | {
+                "refused": None if done is None or done.error is None else str(done.error),
                 "ended": self.done, "due": i.due}
         return self.observe_all(), infos
 

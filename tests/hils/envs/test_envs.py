@@ -90,7 +90,7 @@ def test_observation_layout_matches_the_signal_and_the_manager() -> None:
     try:
         obs, _ = env.reset(seed=2)
         n = len(env.unwrapped.phases)
-        assert obs.shape == (3 * n + 4,)
+        assert obs.shape == (3 * n + 5,)
         for _ in range(3):
             obs, *_ = env.step(np.int64(0))  # pair (1, 5)
         raw = env.unwrapped.testbed.observe()
@@ -98,7 +98,7 @@ def test_observation_layout_matches_the_signal_and_the_manager() -> None:
         greens = {p for p, v in zip(env.unwrapped.phases, lights, strict=True) if v == 1.0}
         assert greens == set(raw.signal.greens) == {1, 5}
         assert obs[3 * n] >= 10.0, "the pair has been green since the first step"
-        assert list(obs[3 * n + 1:]) == [1.0, 0.0, 0.0]  # idle
+        assert list(obs[3 * n + 1:]) == [1.0, 0.0, 0.0, 0.0]  # idle
         queues = [raw.traffic.movements[p].upstream_queue for p in env.unwrapped.phases]
         assert list(obs[:n]) == queues
     finally:
@@ -328,7 +328,7 @@ def test_async_vector_env_with_two_workers() -> None:
     envs = AsyncVectorEnv([lambda: make("selection", episode_length=60.0)] * 2)
     try:
         obs, _ = envs.reset(seed=[9, 9])
-        assert obs.shape == (2, 28)
+        assert obs.shape == (2, 29)
         assert np.array_equal(obs[0], obs[1])
         trajectory = []
         for _ in range(6):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import re
 import time
 import warnings
@@ -20,8 +21,11 @@ import hils.envs
 from harness.bench.processes import start_emulator
 from hils.agents.builtin import Observation
 from hils.control.actions import ActionError
-from hils.envs.intersection import EnvOptionError
+from hils.control.manager import State
+from hils.envs.intersection import STATES, EnvOptionError
 from hils.envs.parallel import IntersectionsEnv
+from hils.protocol.config import load
+from hils.protocol.ntcip import PREEMPT_CONTROL_STATE
 from hils.protocol.scenario import load_scenario
 from hils.run.testbed import NotStarted
 from hils.shell.events import Kind
@@ -77,7 +81,7 @@ def test_one_agent_per_light_with_the_single_envs_spaces_until_all_are_truncated
         assert all(env.action_space(a) == space for a in CORRIDOR)
         obs, infos = env.reset(seed=4)
         assert env.agents == CORRIDOR
-        assert all(obs[a].shape == (28,) and env.observation_space(a).contains(obs[a]) for a in CORRIDOR)
+        assert all(obs[a].shape == (29,) and env.observation_space(a).contains(obs[a]) for a in CORRIDOR)
         assert {i["seed"] for i in infos.values()} == {4}
         steps, t = 0, infos["J1"]["t"]
         while env.agents:
@@ -112,7 +116,7 @@ def test_each_agents_observation_is_its_own_intersection() -> None:
             lights = obs[agent][16:24]
             assert {p for p, v in zip(phases, lights, strict=True) if v == 1.0} == set(raw[agent].signal.greens) == pair
             assert list(obs[agent][:8]) == [raw[agent].traffic.movements[p].upstream_queue for p in phases]
-            assert list(obs[agent][25:]) == [1.0, 0.0, 0.0]  # idle
+            assert list(obs[agent][25:]) == [1.0, 0.0, 0.0, 0.0]  # idle
 
 
 @pytest.mark.parametrize("action_type", ["selection", "duration"])
@@ -181,6 +185,49 @@ def test_a_timeout_shows_in_that_agents_info_and_the_others_run_on() -> None:
         assert history[-1]["J1"]["t"] == pytest.approx(60.0)
 
 
+def test_a_preempted_controller_refuses_its_agents_action_and_the_others_act(tmp_path: Path) -> None:
+    arterial = load_scenario("corridor").intersections["J2"].source
+    preempted = tmp_path / "arterial_preempted.toml"
+    preempted.write_text(Path(arterial).read_text(encoding="utf-8")
+                         + "\n[preempts]\n1 = { dwell_phases = [2, 5], exit_phases = [2, 6], dwell_green = 5 }\n",
+                         encoding="utf-8")
+    corridor = load_scenario("corridor")
+    configs = dict(corridor.intersections) | {"J2": load(preempted)}
+    scenario = dataclasses.replace(corridor, intersections=MappingProxyType(configs))
+    with opened(scenario=scenario, action_type="selection", episode_length=90.0) as env:
+        env.reset(seed=3)
+        tb = env.testbed
+
+        def call() -> Any:  # a central system calls the preempt at 25 s and releases it at 45 s
+            surface = tb.intersections["J2"].target.surface
+            yield tb.env.timeout(25.0)
+            surface.set_many([(PREEMPT_CONTROL_STATE.instance(1), 1)])
+            yield tb.env.timeout(20.0)
+            surface.set_many([(PREEMPT_CONTROL_STATE.instance(1), 0)])
+
+        tb.env.process(call())
+        steps = []
+        while env.agents:
+            obs, _, _, _, infos = env.step(dict.fromkeys(env.agents, 1))
+            steps.append((obs, infos))
+    one_hot = {s: i for i, s in enumerate(STATES)}
+    n = len(configs["J2"].phase_numbers)
+    seen = [(o, i) for o, i in steps if i["J2"]["state"] == "preempted"]
+    assert seen, "the preempt was served"
+    for o, _ in seen:
+        assert list(o["J2"][3 * n + 1:]) == [float(k == one_hot[State.PREEMPTED]) for k in range(len(STATES))]
+    # an action chosen on a preempted observation is refused, alone
+    answered = [i for (_, before), (_, i) in itertools.pairwise(steps) if before["J2"]["state"] == "preempted"]
+    assert answered
+    for i in answered:
+        assert not i["J2"]["acted"] and "serves preempt 1" in i["J2"]["refused"]
+        assert all(i[a]["acted"] and i[a]["refused"] is None for a in ("J1", "J3", "J4")), "the others act"
+    after = steps[-1][1]["J2"]
+    assert after["state"] != "preempted" and after["acted"], "J2 commands again once the preempt is over"
+    refused = [r for r in tb.records if r["kind"] == Kind.ACTION_REFUSED]
+    assert refused and {(r["intersection"], r["reason"]) for r in refused} == {("J2", "preempted")}
+
+
 def test_named_and_callable_rewards_and_the_timing_options() -> None:
     seen: list[tuple[float, float]] = []
 
@@ -207,7 +254,7 @@ def test_the_grid_has_sixteen_agents_and_runs() -> None:
         for _ in range(3):
             obs, rewards, _, truncations, infos = env.step({a: env.action_space(a).sample() for a in env.agents})
         assert len(obs) == len(rewards) == 16 and not any(truncations.values())
-        assert all(o.shape == (28,) for o in obs.values())
+        assert all(o.shape == (29,) for o in obs.values())
         assert all(i["t"] == pytest.approx(start["A1"]["t"] + 30.0) for i in infos.values())
 
 

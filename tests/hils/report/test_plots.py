@@ -76,3 +76,11 @@ def test_the_timeline_draws_no_data_where_the_state_was_not_verified_never_the_l
     svg = ElementTree.parse(plots.signal_timeline(records, CFG, tmp_path / "t.svg", start=0, end=30)).getroot()
     assert len([r for r in svg.iter(f"{SVG}rect") if r.get("fill") == "url(#no-data)"]) == len(CFG.phase_numbers)
     assert [t.text for t in svg.iter(f"{SVG}text")].count("no data") == len(CFG.phase_numbers)
+
+
+def test_a_preemption_still_on_at_the_end_is_drawn_to_the_end():
+    records = [*polls(30.0), {"kind": Kind.PREEMPT_BEGIN, "t": 12.0, "preempts": [2, 3], "command_id": None},
+               {"kind": Kind.STATE, "t": 14.0, "from": "preempted", "to": "timeout"},
+               {"kind": Kind.PREEMPT_BEGIN, "t": 20.0, "preempts": [1], "command_id": 4}]
+    assert plots.preempted_spans(records, 0.0, 30.0) == [(12.0, 14.0, (2, 3)), (20.0, 30.0, (1,))]
+    assert plots.preempted_spans(records, 15.0, 19.0) == []

@@ -46,7 +46,7 @@ def test_selection_step_runs_one_control_interval() -> None:
         obs, info = tb.step((3, 7))
         assert obs.t == pytest.approx(t0 + CFG.middleware.control_interval)
         assert info == {"t": obs.t, "action_id": 1, "acted": True, "dropped": False, "state": "idle",
-                        "timeout": False, "timeout_reason": None, "ended": False, "due": True}
+                        "timeout": False, "timeout_reason": None, "refused": None, "ended": False, "due": True}
         assert obs.signal.greens == {3, 7}
         # A numpy pair, as a policy network hands it over, is the same action.
         obs, info = tb.step(np.array([4.0, 8.0], dtype=np.float32))

@@ -7,6 +7,7 @@ from __future__ import annotations
 from collections.abc import Generator
 from pathlib import Path
 from typing import Any
+from xml.etree import ElementTree
 
 import pytest
 
@@ -21,7 +22,7 @@ from hils.protocol.ntcip import (
     preempts_in_service,
     signal_oids,
 )
-from hils.report import summary
+from hils.report import plots, summary
 from hils.shell.events import Kind
 from hils.sim.network import data_path
 from tests.hils.shell.test_fast_path import comparable
@@ -138,3 +139,20 @@ def test_a_run_without_preemption_says_none() -> None:
         s = summary.summarize({i.label: (i.tally, i.config) for i in tb.intersections.values()})
     assert s["preemptions"] == {"count": 0, "total_s": 0, "longest_s": 0.0, "episodes": []}
     assert "preemptions" not in summary.render(s)
+
+
+def test_the_signal_timeline_marks_the_preemption(tmp_path: Path) -> None:
+    records = preempted_run(CITY, True)
+    begin, end = between(records)
+    picture = plots.signal_timeline(records, load(CITY), tmp_path / "timeline.svg", start=0.0, end=60.0)
+    svg = ElementTree.parse(picture).getroot()
+    ns = "{http://www.w3.org/2000/svg}"
+    axis = next(r for r in svg.iter(f"{ns}rect") if r.get("fill") == "none")
+    left, width = float(axis.get("x")), float(axis.get("width"))
+    (bar,) = [r for r in svg.iter(f"{ns}rect") if r.get("fill") == plots.PREEMPTED]
+    assert float(bar.get("x")) == pytest.approx(left + begin / 60.0 * width, abs=0.01)
+    assert float(bar.get("width")) == pytest.approx((end - begin) / 60.0 * width, abs=0.01)
+    texts = [t.text or "" for t in svg.iter(f"{ns}text")]
+    assert "preempt 1" in texts and any(t.endswith("; purple: controller preempted") for t in texts)
+    assert plots.preempted_spans(records, 0.0, begin) == [], "a window before it shows none"
+    assert plots.preempted_spans(records, begin + 1.0, 60.0) == [(begin + 1.0, end, (1,))], "cut to the window"
