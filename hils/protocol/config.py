@@ -854,7 +854,7 @@ def _pattern(raw: Mapping[str, Any], w: str, phases: Mapping[int, Phase], rings:
     offset = _number(raw, "offset", w, source, 0, integer=True, low=0, high=cycle - 1)
     coord = _int_list(raw.get("coord_phases"), f"{w}coord_phases", source)
     ring_of = {p: ph.ring for p, ph in phases.items()}
-    if sorted(ring_of.get(p) for p in coord) != list(range(1, len(rings) + 1)) or any(p not in phases for p in coord):
+    if any(p not in phases for p in coord) or sorted(ring_of[p] for p in coord) != list(range(1, len(rings) + 1)):
         raise ConfigError(source, f"{w}coord_phases", f"is {coord}; allowed: one configured phase per ring "
                                                       f"(rings {[list(r) for r in rings]})")
     if len({next(i for i, b in enumerate(barriers) if p in b) for p in coord}) != 1:

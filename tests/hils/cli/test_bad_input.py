@@ -17,7 +17,7 @@ from typing import Any
 
 import orjson
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from emulator.agent.mib import MibView
@@ -82,6 +82,7 @@ def _with(raw: dict, path: tuple, value: Any) -> dict:
 
 @settings(max_examples=600, deadline=None)
 @given(path=st.sampled_from(PATHS), value=TOML_VALUES | st.just(_GONE))
+@example(path=("coordination", "patterns", 0, "coord_phases", 0), value=0)  # no such phase: it crashed once
 def test_any_value_in_any_field_of_a_config_is_loaded_or_refused_with_file_and_field(path: tuple,
                                                                                    value: Any) -> None:
     raw = _with(SHIPPED, path, value)
