@@ -6,12 +6,13 @@
 SUDO := $(shell [ "$$(id -u)" -eq 0 ] || echo sudo)
 VENV ?= .venv-test
 
+# Two workers: the tests that wait on real seconds run in one of them, one after another (tests/conftest.py).
 test: deps
-	$(VENV)/bin/python -m pytest -q
+	$(VENV)/bin/python -m pytest -q -n 2 --dist loadgroup
 
 # The fast loop: the environment `make test` made, without the wall-clock, browser and slow tests.
 fast:
-	$(VENV)/bin/python -m pytest -q -m "not wallclock and not browser and not slow"
+	$(VENV)/bin/python -m pytest -q -n 2 -m "not wallclock and not browser and not slow"
 
 # net-snmp's snmpget/snmpset/snmpwalk are the independent client the emulator's agent is tested
 # against; snmpd is the independent agent the middleware's SNMP client is tested against.

@@ -26,3 +26,12 @@ def paper_toml() -> str:
 def controller(paper_config: IntersectionConfig) -> Controller:
     """A freshly powered-up controller on the paper intersection."""
     return Controller(paper_config)
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """`make test` runs two pytest-xdist workers (``--dist loadgroup``): every test that waits on real seconds or
+    drives a browser goes to one of them, one after another as without xdist, so that no two share a clock's
+    slack; the rest, which only compute, spread over both (the wall-clock tests leave most of a core idle)."""
+    for item in items:
+        if item.get_closest_marker("wallclock") or item.get_closest_marker("browser"):
+            item.add_marker(pytest.mark.xdist_group("real-time"))
