@@ -255,33 +255,36 @@ def _outputs(tb: Testbed, out: Path, log_path: Path, window: tuple[float, float]
                                         asclog=asclog, since=since)
         summary.write(s, out / "summary.json")
         written.append("summary.json")
-        written += _plots(tb, s, out, window)
-        written += kept
+        per_light, network = _plots(tb, s, out, window)
+        labels = [i.label for i in tb.intersections.values() if i.label]
+        if labels:  # one entry for the intersections' folders, whatever each holds
+            charts = {Path(k).name for k in kept if Path(k).parts[0] in labels}
+            kept = [k for k in kept if Path(k).parts[0] not in labels]
+            names = sorted({*per_light, *charts}, reverse=True)
+            per_light = [f"{labels[0]}/ .. {labels[-1]}/ ({', '.join(names)})"] if names else []
+        written += per_light + network + kept
     except OSError as exc:
         return s, written, f"{exc.filename}: {exc.strerror or exc}"
     return s, written, None
 
 
-def _plots(tb: Testbed, s: dict[str, Any], out: Path, window: tuple[float, float]) -> list[str]:
+def _plots(tb: Testbed, s: dict[str, Any], out: Path, window: tuple[float, float]) -> tuple[list[str], list[str]]:
     """Each intersection's signal timeline and queue plot, in the run folder (a run of one) or in a folder of its
     own named by its label; for several, the network's queues too (one line per intersection, the queues of its
-    approaches summed). Returns what was written, as the console lists it."""
+    approaches summed). Returns the names written in each intersection's folder and those in the run folder."""
     written: list[str] = []
     for i in tb.intersections.values():
         written += [name for name in _intersection_plots(i, s, out / i.label if i.label else out, window)
                     if name not in written]
     labels = [i.label for i in tb.intersections.values() if i.label]
-    if not labels:
-        return written
-    shown = [f"{labels[0]}/ .. {labels[-1]}/ ({', '.join(sorted(written, reverse=True))})"] if written else []
     samples = [i.traffic_samples for i in tb.intersections.values()]
-    if all(samples):
-        network = [(at[0][0], {label: sum(q.values()) for label, (_, q) in zip(labels, at, strict=True)})
-                   for at in zip(*samples, strict=False)]
-        plots.queues(network, out / "queues.svg", title=f"Queues per intersection (approaches summed), "
-                                                        f"{tb.scenario.name}", legend="intersection")
-        shown.append("queues.svg")
-    return shown
+    if not labels or not all(samples):
+        return written, []
+    network = [(at[0][0], {label: sum(q.values()) for label, (_, q) in zip(labels, at, strict=True)})
+               for at in zip(*samples, strict=False)]
+    plots.queues(network, out / "queues.svg", title=f"Queues per intersection (approaches summed), "
+                                                    f"{tb.scenario.name}", legend="intersection")
+    return written, ["queues.svg"]
 
 
 def _intersection_plots(i: Intersection, s: dict[str, Any], folder: Path, window: tuple[float, float]) -> list[str]:

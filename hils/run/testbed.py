@@ -178,9 +178,10 @@ class _OneIntersection:
 
         An action that cannot be served is refused with a typed :class:`hils.control.actions.ActionError`
         (logged; nothing is sent, no time passes), :class:`hils.control.actions.PreemptedError` while the
-        controller serves a preempt. ``info`` says what happened: ``action_id``, ``acted``,
-        ``dropped`` (the manager was not IDLE), ``refused`` (why :meth:`step_all` refused it, else None), ``state`` (idle, on_hold, timeout or preempted), ``timeout`` (the
-        manager entered TIMEOUT during the step) and ``timeout_reason``, ``ended`` (the run's duration has passed)."""
+        controller serves a preempt. ``info`` says what happened: ``action_id``, ``acted``, ``dropped`` (the
+        manager was not IDLE), ``refused`` (why :meth:`step_all` refused it, else None), ``state`` (idle, on_hold,
+        timeout or preempted), ``timeout`` (the manager entered TIMEOUT during the step) and ``timeout_reason``,
+        ``ended`` (the run's duration has passed)."""
         name = self._only()
         observations, infos = self._to_decision(self._submit({name: action}, preempted_raises=True))
         return observations[name], infos[name]

@@ -8,7 +8,10 @@ emulators through ``hils run --scenario corridor --target targets.toml``.
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
+import re
 from collections import Counter
 from itertools import pairwise
 from pathlib import Path
@@ -32,9 +35,11 @@ RUN_WIDE = {Kind.RUN_STARTED, Kind.RUN_ENDED}
 @pytest.fixture(scope="module")
 def corridor_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str]:
     out = tmp_path_factory.mktemp("corridor") / "run"
-    code = main(["run", "--scenario", "corridor", "--duration", "300", "--no-progress", "--out", str(out)])
+    console = io.StringIO()
+    with contextlib.redirect_stdout(console):
+        code = main(["run", "--scenario", "corridor", "--duration", "300", "--no-progress", "--out", str(out)])
     assert code == 0
-    return out, ""
+    return out, console.getvalue()
 
 
 def test_hils_run_corridor_writes_a_summary_and_plots_per_intersection(corridor_run: tuple[Path, str]) -> None:
@@ -47,6 +52,11 @@ def test_hils_run_corridor_writes_a_summary_and_plots_per_intersection(corridor_
         assert (out / tls / "signal_timeline.svg").stat().st_size > 0
         assert (out / tls / "queues.svg").stat().st_size > 0
     assert (out / "queues.svg").stat().st_size > 0
+    # The console names what each intersection's folder holds once, not once per intersection.
+    (listed,) = [line for line in corridor_run[1].splitlines() if line.startswith("Outputs in")]
+    folders = re.search(r"J1/ \.\. J4/ \(([^)]*)\)", listed)
+    assert folders is not None and listed.count("J2") == 0, listed
+    assert set(folders[1].split(", ")) == {p.name for p in (out / "J2").iterdir()}
     traffic = summary["traffic"]
     assert traffic["arrived"] > 100 and traffic["waiting_to_enter"] == 0
     # Vehicles enter at the network's edges: the arterial's ends and every cross street, named by light.
