@@ -243,6 +243,24 @@ class Change:
     reason: Termination | None = None
 
 
+@dataclass(frozen=True, slots=True)
+class Inputs:
+    """What the inputs ask of the rings: the control objects, the detectors and the running pattern, read as
+    phase sets. A step reads them every tick but they change only with a write or a new pattern, so they are
+    derived once per change (:attr:`Controller.inputs`)."""
+
+    plan: Plan | None  # the pattern they were derived under
+    calls: frozenset[int]  # vehicle calls the controller acts on (phaseStatusGroupVehCalls)
+    holds: frozenset[int]
+    omits: frozenset[int]  # PhaseOmit and the pattern's omitted splits
+    ped_omits: frozenset[int]  # omits and PedOmit: no pedestrian call latches
+    peds: frozenset[int]  # pedestrian calls asked: PedCall, pedestrian recall, the pattern's pedestrian recall
+    pushed: frozenset[int]  # phases of the push buttons actuated now
+    recalled: frozenset[int]  # demand whatever the calls: min and max recall, the pattern's recalls (not omitted)
+    soft: frozenset[int]  # soft recall (not omitted): demand only while no other phase has any
+    extending: frozenset[int]  # phases a green extends on without a call: max recall, the pattern's max recall
+
+
 class Recorder(Protocol):
     """What watches the controller as a controller's data logger does (:mod:`emulator.model.datalogger`)."""
 
@@ -282,8 +300,11 @@ class Controller:
         # Counts changes of the status objects (what a poll reads), across power cycles too.
         # Inputs count too: they change the calls the status shows.
         self.status_version = 0
+        self._inputs: Inputs | None = None  # derived from the inputs since the last write, if read since
         self._status_seen: tuple = ()
         self._images: dict[tuple | None, tuple[frozenset[int], ...]] = {}
+        self._status: tuple[frozenset[int], ...] | None = None  # the image shown now
+        self._checked: tuple[frozenset[int], ...] | None = None  # the image the conflict monitor last passed
         self.reset()
 
     # --- lifecycle -------------------------------------------------------------------
@@ -298,6 +319,7 @@ class Controller:
         self.ped_calls: frozenset[int] = frozenset()  # latched pedestrian calls
         self.actuations: frozenset[int] = frozenset()  # vehicle detectors actuated now
         self.ped_actuations: frozenset[int] = frozenset()  # pedestrian detectors actuated now
+        self._inputs = None
         self._yellow_end: dict[int, int] = {}  # tick each phase's last yellow ended (red revert)
         self._since_set: int | None = None  # ticks since the last control SET; None = backup timer disarmed
         self.rings = [Ring(i + 1, order) for i, order in enumerate(self.config.rings)]
@@ -379,6 +401,7 @@ class Controller:
         and the status counts as changed (the calls it shows may have)."""
         self._quiet = False
         self._settled = None
+        self._inputs = None
         self.status_version += 1
 
     def set_actuations(self, detectors: Iterable[int]) -> None:
@@ -397,12 +420,34 @@ class Controller:
         self.touch()
 
     @property
+    def inputs(self) -> Inputs:
+        """The inputs as phase sets; a write (:meth:`touch`) or a new pattern derives them anew."""
+        plan = self.coordinator.plan
+        if self._inputs is None or self._inputs.plan is not plan:
+            self._inputs = self._derive_inputs(plan)
+        return self._inputs
+
+    def _derive_inputs(self, plan: Plan | None) -> Inputs:
+        co, control, phases = self.coordinator, self.control, self.config.phases
+        omits = control[ControlColumn.PHASE_OMIT] | co.omitted()
+        # Vehicle calls: SET (VehCall) or from an actuated detector, configured and not omitted.
+        detected = {self._detector_phase[d] for d in self.actuations if d in self._detector_phase}
+        calls = (control[ControlColumn.VEH_CALL] | detected).intersection(phases) - control[ControlColumn.PHASE_OMIT]
+        recall = self._recall
+        return Inputs(
+            plan=plan, calls=calls, holds=control[ControlColumn.HOLD], omits=omits,
+            ped_omits=omits | control[ControlColumn.PED_OMIT],
+            peds=control[ControlColumn.PED_CALL].intersection(phases) | recall[Recall.PED] | co.ped_recalled(),
+            pushed=frozenset(self._ped_detector_phase[d] for d in self.ped_actuations if d in self._ped_detector_phase),
+            recalled=(recall[Recall.MIN] | recall[Recall.MAX] | co.recalled()) - omits,
+            soft=recall[Recall.SOFT] - omits,
+            extending=recall[Recall.MAX] | co.max_recalled())
+
+    @property
     def calls(self) -> frozenset[int]:
         """Vehicle calls the controller acts on: SET (VehCall) or from an actuated detector, configured and
         not omitted."""
-        detected = {self._detector_phase[d] for d in self.actuations if d in self._detector_phase}
-        return (self.control[ControlColumn.VEH_CALL] | detected).intersection(self.config.phases) - self.control[
-            ControlColumn.PHASE_OMIT]
+        return self.inputs.calls
 
     # --- status -------------------------------------------------------------------------
 
@@ -431,8 +476,10 @@ class Controller:
         status = self._images.get(key)
         if status is None:
             status = self._images[key] = self._status_image()
-        (self.greens, self.yellows, self.phase_ons, self.reds, self.walks, self.ped_clears, self.dont_walks,
-         self.phase_nexts, self.overlap_greens, self.overlap_yellows, self.overlap_reds) = status
+        if status is not self._status:
+            self._status = status
+            (self.greens, self.yellows, self.phase_ons, self.reds, self.walks, self.ped_clears, self.dont_walks,
+             self.phase_nexts, self.overlap_greens, self.overlap_yellows, self.overlap_reds) = status
         # preemptState is status too: a poll reads it beside the signals, and a preempt's entry may start before
         # any indication changes.
         seen = (status, self.ped_calls, tuple(self.preemptor.states.values()))
@@ -488,8 +535,8 @@ class Controller:
             return
         if self.flashing:
             return
-        calls = self.calls
-        demand = self._demand(calls)
+        inputs = self.inputs
+        demand = self._demand(inputs)
         pe = self.preemptor
         pe.step()
         self._caps = self._preempt_caps()
@@ -507,7 +554,7 @@ class Controller:
                 if r.interval in _CLEARANCE and r.target is not None:
                     self._redirect(r, demand)
         for r in self.rings:
-            self._time(r, demand, calls)
+            self._time(r, demand, inputs)
         if pe.serving is None:
             self._decide(demand)
         else:
@@ -617,23 +664,18 @@ class Controller:
             self._since_set = None
             self.touch()  # the calls it shows are gone
 
-    def _demand(self, calls: frozenset[int]) -> frozenset[int]:
+    def _demand(self, inputs: Inputs) -> frozenset[int]:
         """Phases wanting service this tick; latches pedestrian calls of phases not showing green. While a
         pattern runs its coordinated phases and its split-mode recalls are demand too."""
-        co = self.coordinator
-        omit = self.control[ControlColumn.PHASE_OMIT] | co.omitted()
-        ped_omit = omit | self.control[ControlColumn.PED_OMIT]
         greens = {r.phase for r in self.rings if r.interval is Interval.GREEN}
-        peds = (self.control[ControlColumn.PED_CALL].intersection(self.config.phases) | self._recall[Recall.PED]
-                | co.ped_recalled())
-        pushed = {self._ped_detector_phase[d] for d in self.ped_actuations if d in self._ped_detector_phase}
-        self.ped_calls = (self.ped_calls | (peds - greens) | pushed) - ped_omit
-        recalled = self._recall[Recall.MIN] | self._recall[Recall.MAX] | co.recalled()
-        demand = (calls - omit) | self.ped_calls | (recalled - omit)
-        soft = self._recall[Recall.SOFT] - omit
+        ped_calls = (self.ped_calls | (inputs.peds - greens) | inputs.pushed) - inputs.ped_omits
+        if ped_calls != self.ped_calls:
+            self.ped_calls = ped_calls
+        demand = (inputs.calls - inputs.omits) | self.ped_calls | inputs.recalled
+        soft = inputs.soft
         if soft and not demand - soft:
             demand |= soft
-        return frozenset(demand)
+        return demand
 
     def _backing(self, r: Ring, q: int) -> bool:
         """Serving ``q`` next would back ``r`` up: ``q`` comes before the ring's phase in their barrier group."""
@@ -652,7 +694,7 @@ class Controller:
     def _conflicting(self, r: Ring, demand: frozenset[int]) -> bool:
         return any(q != r.phase and (self._ring_of[q] == r.number or self._beyond(q)) for q in demand)
 
-    def _time(self, r: Ring, demand: frozenset[int], calls: frozenset[int]) -> None:
+    def _time(self, r: Ring, demand: frozenset[int], inputs: Inputs) -> None:
         if r.interval is Interval.DWELL:
             return
         r.ticks += 1
@@ -665,7 +707,7 @@ class Controller:
                     self._enter(r, Interval.DWELL)  # a red clearance a preempt's entry cut to nothing
             return
         p = r.phase
-        extending = p in calls or p in self._recall[Recall.MAX] or p in self.coordinator.max_recalled()
+        extending = p in inputs.calls or p in inputs.extending
         r.gap = 0 if extending else r.gap + 1
         conflict = self._conflicting(r, demand)
         r.max_ticks = r.max_ticks + 1 if conflict else 0
@@ -682,7 +724,7 @@ class Controller:
 
     def _ending(self, r: Ring) -> Termination | None:
         """Why the ring's green may end now (None: it may not); a force-off before a gap-out before a max-out."""
-        if r.interval is not Interval.GREEN or r.ticks < r.minimum or r.phase in self.control[ControlColumn.HOLD]:
+        if r.interval is not Interval.GREEN or r.ticks < r.minimum or r.phase in self.inputs.holds:
             return None
         if r.phase in self.control[ControlColumn.FORCE_OFF]:
             return Termination.FORCE_OFF
@@ -751,6 +793,8 @@ class Controller:
 
     def _decide(self, demand: frozenset[int]) -> None:
         ready = {r.number: self._ready(r) for r in self.rings}
+        if not any(ready.values()):
+            return  # most ticks: every ring is timing
         wish = {r.number: self._wish(r, demand) for r in self.rings if ready[r.number]}
         across = {n: q for n, q in wish.items() if q is not None and self._beyond(q)}
         all_ready = all(ready.values())
@@ -967,6 +1011,8 @@ class Controller:
         self.overlaps.step(greens, yellows, nexts)
 
     def _monitor(self) -> None:
+        if self._status is self._checked:
+            return  # what it checks is all in the status image, and this one passed
         shown = sorted(self.greens | self.yellows)
         cfg = self.config
         conflict = next((f"phases {a} and {b}" for i, a in enumerate(shown) for b in shown[i + 1:]
@@ -975,7 +1021,9 @@ class Controller:
             conflict = next((f"overlap {cfg.overlaps[o].letter} and phase {p}"
                              for o in sorted(self.overlap_greens | self.overlap_yellows) for p in shown
                              if p in self.overlaps.conflicting[o]), None)
-        if conflict is not None:
+        if conflict is None:
+            self._checked = self._status
+        else:
             log.error("conflict monitor: %s shown together at tick %d: flash", conflict, self.tick)
             self.flash_status = UnitFlashStatus.MMU
             self._refresh_status()
