@@ -107,7 +107,10 @@ revert, backup time, start-up flash). So once a step has changed nothing
 discrete, every following step with the same inputs changes nothing either
 until a counter reaches its next threshold: :meth:`quiet_ticks` says how
 many steps that is, and :meth:`skip` advances the counters over the quiet
-ones at once. In quiet time a gap counter that runs is above zero (an
+ones at once. A step that did change something is mostly followed by one
+that does not (a green or a clearance just started); where that is short
+to prove (:meth:`_settles`), quiet time starts at once instead of after
+that step. In quiet time a gap counter that runs is above zero (an
 extending green resets it every tick) and a max-out counter that runs is
 above zero (it is zero without conflicting demand), which is all
 :meth:`skip` needs to know. Any input (a SET, a detector, a retiming)
@@ -446,7 +449,7 @@ class Controller:
     @property
     def calls(self) -> frozenset[int]:
         """Vehicle calls the controller acts on: SET (VehCall) or from an actuated detector, configured and
-        not omitted."""
+        not omitted. The step and the logger read them here, never from ``inputs``: one place says which count."""
         return self.inputs.calls
 
     # --- status -------------------------------------------------------------------------
@@ -520,7 +523,7 @@ class Controller:
         before = self._settled if self._settled is not None else self._discrete()
         self._step()
         self._settled = self._discrete()
-        self._quiet = self._settled == before
+        self._quiet = self._settled == before or self._settles()
         if self.recorder is not None:
             self.recorder.stepped()
 
@@ -542,12 +545,7 @@ class Controller:
         self._caps = self._preempt_caps()
         if pe.started:
             self._preempt_entry()
-        # Demand waiting across the barrier forbids backing; while a pattern runs only demand that can still be
-        # served in this cycle counts (a phase past its permissive period is skipped anyway).
-        plan, timer = self.coordinator.plan, self.coordinator.timer
-        clear = max(self._clearance_left(r) for r in self.rings) if plan is not None else 0
-        self._waiting_across = any(self._barrier[q] != self.group and (plan is None or plan.fits(q, timer, clear))
-                                   for q in demand)
+        self._waiting_across = self._waits_across(demand)
         if self.config.next_phase_lock is NextPhaseLock.RED_END and pe.serving is None:
             # before timing: the tick that ends a red clearance still reads the calls of that clearance
             for r in self.rings:
@@ -576,9 +574,45 @@ class Controller:
 
     # --- quiet time ----------------------------------------------------------------------
 
+    def _settles(self) -> bool:
+        """After a step that changed something: the next step changes nothing but counters, as a step that
+        changed nothing would show (see "Quiet time" above). Proven here only where it is short: free, no
+        preempt, no overlap, the next phase locked at the end of green.
+
+        Nothing is proven for a next step that :meth:`quiet_ticks` makes real anyway (a counter reaches a
+        threshold), so every comparison of a counter with a threshold is the same at the next tick as now:
+        the predicates below are the step's own, read now. What the next step does, part by part: the backup
+        timer, start-up flash and time-of-day plan act only at thresholds; the coordinator retries a pattern
+        that this step could not start and fails alike; no preempt is called or active; the pedestrian calls
+        latch as checked; a clearance only counts; a green's gap and max-out counters run as :meth:`skip` runs
+        them, as checked, so its conflicting demand is what this step saw and its gap latch is decided as this
+        step decided it; no ring is both ready and wishing, so ``_decide`` commits nothing and no green ends;
+        a ring resting in red with a phase to start stays blocked (by another ring's green or clearance, which
+        stays, or its red revert, a threshold); the status image, its walk thresholds unpassed, stays."""
+        if (self.flashing or self.coordinator.plan is not None or self.config.overlaps
+                or self.config.next_phase_lock is not NextPhaseLock.GREEN_END):
+            return False
+        pe = self.preemptor
+        if pe.control or any(s is not PreemptState.NOT_ACTIVE for s in pe.states.values()):
+            return False
+        inputs = self.inputs
+        if self._latched(inputs) != self.ped_calls:
+            return False
+        demand = self._wanted(inputs)
+        # What the next step computes before anything reads it: set now, so the predicates below read it.
+        self._waiting_across = self._waits_across(demand)
+        for r in self.rings:
+            if r.interval is Interval.GREEN and ((r.gap == 0) != self._extending(r, inputs)
+                                                 or (r.max_ticks > 0) != self._conflicting(r, demand)):
+                return False  # a counter starts or stops: skip would not move it as the step does
+            if self._ready(r) and self._wish(r, demand) is not None:
+                return False
+        return True
+
     def quiet_ticks(self) -> int | None:
         """How many steps from now the next one that may change anything is, inputs staying as they are:
-        1 unless the last step changed nothing discrete and no input came since; None when no step will."""
+        1 unless quiet time started (the last step changed nothing discrete, or :meth:`_settles` proved the
+        next one will not) and no input came since; None when no step will."""
         if not self._quiet:
             return 1
         ahead: list[int] = []
@@ -665,17 +699,32 @@ class Controller:
             self.touch()  # the calls it shows are gone
 
     def _demand(self, inputs: Inputs) -> frozenset[int]:
-        """Phases wanting service this tick; latches pedestrian calls of phases not showing green. While a
-        pattern runs its coordinated phases and its split-mode recalls are demand too."""
-        greens = {r.phase for r in self.rings if r.interval is Interval.GREEN}
-        ped_calls = (self.ped_calls | (inputs.peds - greens) | inputs.pushed) - inputs.ped_omits
-        if ped_calls != self.ped_calls:
+        """Phases wanting service this tick, once the pedestrian calls of phases not showing green latched."""
+        ped_calls = self._latched(inputs)
+        if ped_calls != self.ped_calls:  # kept while it holds the same calls: the logger compares it every step
             self.ped_calls = ped_calls
-        demand = (inputs.calls - inputs.omits) | self.ped_calls | inputs.recalled
+        return self._wanted(inputs)
+
+    def _latched(self, inputs: Inputs) -> frozenset[int]:
+        """The pedestrian calls latched this tick: those asked on phases not showing green, and push buttons."""
+        greens = {r.phase for r in self.rings if r.interval is Interval.GREEN}
+        return (self.ped_calls | (inputs.peds - greens) | inputs.pushed) - inputs.ped_omits
+
+    def _wanted(self, inputs: Inputs) -> frozenset[int]:
+        """Phases wanting service: calls, latched pedestrian calls and recalls (while a pattern runs its coordinated
+        phases and its split-mode recalls too), soft recalls when nothing else is."""
+        demand = (self.calls - inputs.omits) | self.ped_calls | inputs.recalled
         soft = inputs.soft
         if soft and not demand - soft:
             demand |= soft
         return demand
+
+    def _waits_across(self, demand: frozenset[int]) -> bool:
+        """Demand waits across the barrier (which forbids backing); while a pattern runs only demand that can still
+        be served in this cycle counts (a phase past its permissive period is skipped anyway)."""
+        plan, timer = self.coordinator.plan, self.coordinator.timer
+        clear = max(self._clearance_left(r) for r in self.rings) if plan is not None else 0
+        return any(self._barrier[q] != self.group and (plan is None or plan.fits(q, timer, clear)) for q in demand)
 
     def _backing(self, r: Ring, q: int) -> bool:
         """Serving ``q`` next would back ``r`` up: ``q`` comes before the ring's phase in their barrier group."""
@@ -706,15 +755,17 @@ class Controller:
                 if r.interval is Interval.RED_CLEAR and r.length == 0:
                     self._enter(r, Interval.DWELL)  # a red clearance a preempt's entry cut to nothing
             return
-        p = r.phase
-        extending = p in inputs.calls or p in inputs.extending
-        r.gap = 0 if extending else r.gap + 1
+        r.gap = 0 if self._extending(r, inputs) else r.gap + 1
         conflict = self._conflicting(r, demand)
         r.max_ticks = r.max_ticks + 1 if conflict else 0
         if not conflict:
             r.gapped = False
         elif r.ticks >= r.minimum and r.gap > 0 and r.gap >= r.passage:
             r.gapped = True
+
+    def _extending(self, r: Ring, inputs: Inputs) -> bool:
+        """The green's phase is called (or recalled to its maximum): its passage timer restarts."""
+        return r.phase in self.calls or r.phase in inputs.extending
 
     def _ready(self, r: Ring) -> bool:
         """A green that may end now, or a ring resting in red with nothing committed."""

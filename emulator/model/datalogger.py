@@ -274,7 +274,7 @@ class DataLogger:
         if inputs is not seen.inputs:  # these change only with the inputs: a write, a new pattern
             seen.inputs = inputs
             now = {
-                "calls": inputs.calls - self._no_call_events,
+                "calls": c.calls - self._no_call_events,
                 "holds": inputs.holds,
                 "omits": inputs.omits,
                 "ped_omits": c.control[ControlColumn.PED_OMIT],
