@@ -113,13 +113,19 @@ to prove (:meth:`_settles`), quiet time starts at once instead of after
 that step. In quiet time a gap counter that runs is above zero (an
 extending green resets it every tick) and a max-out counter that runs is
 above zero (it is zero without conflicting demand), which is all
-:meth:`skip` needs to know. Any input (a SET, a detector, a retiming)
-makes the next step a real one: :meth:`touch`.
+:meth:`skip` needs to know. A green's minimum is a threshold only while
+it has conflicting demand (or a pattern runs, or a preempt is served):
+without any, a ready green has nowhere to go. The data logger still logs
+it at its tick, so with a recorder that tick is stepped for the recorder
+alone (:meth:`step` skips it, quiet as :meth:`quiet_ticks` proved). Any
+input (a SET, a detector, a retiming) makes the next step a real one:
+:meth:`touch`.
 """
 
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from datetime import datetime
@@ -335,6 +341,8 @@ class Controller:
         self._waiting_across = False  # demand on a phase of another barrier group, this tick
         self._quiet = False  # the last step changed nothing discrete, and no input came since
         self._settled: tuple | None = None  # the discrete state the last step left, if nothing changed it since
+        # quiet_ticks' proof: steps before this tick change nothing (None: none proven; every step is real)
+        self._next_real: float | None = None
         if not self.flashing:
             self._power_up()
         self._refresh_status()
@@ -404,6 +412,7 @@ class Controller:
         and the status counts as changed (the calls it shows may have)."""
         self._quiet = False
         self._settled = None
+        self._next_real = None
         self._inputs = None
         self.status_version += 1
 
@@ -520,6 +529,13 @@ class Controller:
 
     def step(self) -> None:
         """Advance one tick (0.1 s)."""
+        if self._next_real is not None and self.tick + 1 < self._next_real:
+            # A tick quiet_ticks proved quiet, stepped for the recorder (a green's minimum to log at its tick).
+            self.skip(1)
+            if self.recorder is not None:
+                self.recorder.stepped()
+            return
+        self._next_real = None
         before = self._settled if self._settled is not None else self._discrete()
         self._step()
         self._settled = self._discrete()
@@ -613,9 +629,11 @@ class Controller:
         """How many steps from now the next one that may change anything is, inputs staying as they are:
         1 unless quiet time started (the last step changed nothing discrete, or :meth:`_settles` proved the
         next one will not) and no input came since; None when no step will."""
+        self._next_real = None
         if not self._quiet:
             return 1
         ahead: list[int] = []
+        logged: list[int] = []  # ticks the recorder needs stepped, though nothing changes there
 
         def until(counter: int, threshold: int) -> None:
             if counter < threshold:
@@ -636,9 +654,17 @@ class Controller:
         trailing = self.overlaps.quiet_ticks()
         if trailing is not None:
             ahead.append(max(1, trailing))
+        # A green's minimum matters only with conflicting demand (which, in quiet time, its max-out counter
+        # times): without any, the ready green has nowhere to go and no ring waits across the barrier for it.
+        # While a pattern runs or a preempt is served it may be what ends it. The data logger logs it.
+        minimums = self.coordinator.plan is not None or self.preemptor.serving is not None
         for r in self.rings:
             if r.interval is Interval.GREEN:
-                for threshold in (r.minimum, r.walk, r.walk + r.ped_clear, r.limit, r.cut):
+                if minimums or r.max_ticks:
+                    until(r.ticks, r.minimum)
+                elif self.recorder is not None and r.ticks < r.minimum:
+                    logged.append(r.minimum - r.ticks)
+                for threshold in (r.walk, r.walk + r.ped_clear, r.limit, r.cut):
                     until(r.ticks, threshold)
                 if r.gap:
                     until(r.gap, r.passage)
@@ -650,7 +676,8 @@ class Controller:
                     until(self.tick, revert + self.timing[r.target].red_revert)
             else:
                 until(r.ticks, r.length)
-        return min(ahead, default=None)
+        self._next_real = self.tick + min(ahead) if ahead else math.inf
+        return min(ahead + logged, default=None)
 
     def skip(self, n: int) -> None:
         """Advance ``n`` quiet ticks at once; ``n`` must be below :meth:`quiet_ticks` (or any, when None)."""

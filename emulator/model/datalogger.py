@@ -10,8 +10,8 @@ Rules of this file
   day the unit first powered up, counting on through power cycles) at the tick that made it. So the log is
   the same in virtual time and at the wall clock, and the same whether quiet ticks are stepped or skipped:
   a skipped stretch changes nothing discrete, and every threshold the log reports (minimum green, walk,
-  pedestrian clearance, the coordinator's marks) is a real step
-  (:meth:`emulator.model.controller.Controller.quiet_ticks`).
+  pedestrian clearance, the coordinator's marks) is a step, a real one or, for a minimum that changes nothing
+  else, one for the logger alone (:meth:`emulator.model.controller.Controller.quiet_ticks`).
 - The events of one tick are kept in (code, parameter) order, as field logs list them; ticks in time order.
 
 Theory of operation
