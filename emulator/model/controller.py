@@ -107,16 +107,25 @@ revert, backup time, start-up flash). So once a step has changed nothing
 discrete, every following step with the same inputs changes nothing either
 until a counter reaches its next threshold: :meth:`quiet_ticks` says how
 many steps that is, and :meth:`skip` advances the counters over the quiet
-ones at once. In quiet time a gap counter that runs is above zero (an
+ones at once. A step that did change something is mostly followed by one
+that does not (a green or a clearance just started); where that is short
+to prove (:meth:`_settles`), quiet time starts at once instead of after
+that step. In quiet time a gap counter that runs is above zero (an
 extending green resets it every tick) and a max-out counter that runs is
 above zero (it is zero without conflicting demand), which is all
-:meth:`skip` needs to know. Any input (a SET, a detector, a retiming)
-makes the next step a real one: :meth:`touch`.
+:meth:`skip` needs to know. A green's minimum is a threshold only while
+it has conflicting demand (or a pattern runs, or a preempt is served):
+without any, a ready green has nowhere to go. The data logger still logs
+it at its tick, so with a recorder that tick is stepped for the recorder
+alone (:meth:`step` skips it, quiet as :meth:`quiet_ticks` proved). Any
+input (a SET, a detector, a retiming) makes the next step a real one:
+:meth:`touch`.
 """
 
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from datetime import datetime
@@ -243,6 +252,24 @@ class Change:
     reason: Termination | None = None
 
 
+@dataclass(frozen=True, slots=True)
+class Inputs:
+    """What the inputs ask of the rings: the control objects, the detectors and the running pattern, read as
+    phase sets. A step reads them every tick but they change only with a write or a new pattern, so they are
+    derived once per change (:attr:`Controller.inputs`)."""
+
+    plan: Plan | None  # the pattern they were derived under
+    calls: frozenset[int]  # vehicle calls the controller acts on (phaseStatusGroupVehCalls)
+    holds: frozenset[int]
+    omits: frozenset[int]  # PhaseOmit and the pattern's omitted splits
+    ped_omits: frozenset[int]  # omits and PedOmit: no pedestrian call latches
+    peds: frozenset[int]  # pedestrian calls asked: PedCall, pedestrian recall, the pattern's pedestrian recall
+    pushed: frozenset[int]  # phases of the push buttons actuated now
+    recalled: frozenset[int]  # demand whatever the calls: min and max recall, the pattern's recalls (not omitted)
+    soft: frozenset[int]  # soft recall (not omitted): demand only while no other phase has any
+    extending: frozenset[int]  # phases a green extends on without a call: max recall, the pattern's max recall
+
+
 class Recorder(Protocol):
     """What watches the controller as a controller's data logger does (:mod:`emulator.model.datalogger`)."""
 
@@ -282,8 +309,11 @@ class Controller:
         # Counts changes of the status objects (what a poll reads), across power cycles too.
         # Inputs count too: they change the calls the status shows.
         self.status_version = 0
+        self._inputs: Inputs | None = None  # derived from the inputs since the last write, if read since
         self._status_seen: tuple = ()
         self._images: dict[tuple | None, tuple[frozenset[int], ...]] = {}
+        self._status: tuple[frozenset[int], ...] | None = None  # the image shown now
+        self._checked: tuple[frozenset[int], ...] | None = None  # the image the conflict monitor last passed
         self.reset()
 
     # --- lifecycle -------------------------------------------------------------------
@@ -298,6 +328,7 @@ class Controller:
         self.ped_calls: frozenset[int] = frozenset()  # latched pedestrian calls
         self.actuations: frozenset[int] = frozenset()  # vehicle detectors actuated now
         self.ped_actuations: frozenset[int] = frozenset()  # pedestrian detectors actuated now
+        self._inputs = None
         self._yellow_end: dict[int, int] = {}  # tick each phase's last yellow ended (red revert)
         self._since_set: int | None = None  # ticks since the last control SET; None = backup timer disarmed
         self.rings = [Ring(i + 1, order) for i, order in enumerate(self.config.rings)]
@@ -310,6 +341,8 @@ class Controller:
         self._waiting_across = False  # demand on a phase of another barrier group, this tick
         self._quiet = False  # the last step changed nothing discrete, and no input came since
         self._settled: tuple | None = None  # the discrete state the last step left, if nothing changed it since
+        # quiet_ticks' proof: steps before this tick change nothing (None: none proven; every step is real)
+        self._next_real: float | None = None
         if not self.flashing:
             self._power_up()
         self._refresh_status()
@@ -379,6 +412,8 @@ class Controller:
         and the status counts as changed (the calls it shows may have)."""
         self._quiet = False
         self._settled = None
+        self._next_real = None
+        self._inputs = None
         self.status_version += 1
 
     def set_actuations(self, detectors: Iterable[int]) -> None:
@@ -397,12 +432,34 @@ class Controller:
         self.touch()
 
     @property
+    def inputs(self) -> Inputs:
+        """The inputs as phase sets; a write (:meth:`touch`) or a new pattern derives them anew."""
+        plan = self.coordinator.plan
+        if self._inputs is None or self._inputs.plan is not plan:
+            self._inputs = self._derive_inputs(plan)
+        return self._inputs
+
+    def _derive_inputs(self, plan: Plan | None) -> Inputs:
+        co, control, phases = self.coordinator, self.control, self.config.phases
+        omits = control[ControlColumn.PHASE_OMIT] | co.omitted()
+        # Vehicle calls: SET (VehCall) or from an actuated detector, configured and not omitted.
+        detected = {self._detector_phase[d] for d in self.actuations if d in self._detector_phase}
+        calls = (control[ControlColumn.VEH_CALL] | detected).intersection(phases) - control[ControlColumn.PHASE_OMIT]
+        recall = self._recall
+        return Inputs(
+            plan=plan, calls=calls, holds=control[ControlColumn.HOLD], omits=omits,
+            ped_omits=omits | control[ControlColumn.PED_OMIT],
+            peds=control[ControlColumn.PED_CALL].intersection(phases) | recall[Recall.PED] | co.ped_recalled(),
+            pushed=frozenset(self._ped_detector_phase[d] for d in self.ped_actuations if d in self._ped_detector_phase),
+            recalled=(recall[Recall.MIN] | recall[Recall.MAX] | co.recalled()) - omits,
+            soft=recall[Recall.SOFT] - omits,
+            extending=recall[Recall.MAX] | co.max_recalled())
+
+    @property
     def calls(self) -> frozenset[int]:
         """Vehicle calls the controller acts on: SET (VehCall) or from an actuated detector, configured and
-        not omitted."""
-        detected = {self._detector_phase[d] for d in self.actuations if d in self._detector_phase}
-        return (self.control[ControlColumn.VEH_CALL] | detected).intersection(self.config.phases) - self.control[
-            ControlColumn.PHASE_OMIT]
+        not omitted. The step and the logger read them here, never from ``inputs``: one place says which count."""
+        return self.inputs.calls
 
     # --- status -------------------------------------------------------------------------
 
@@ -431,8 +488,10 @@ class Controller:
         status = self._images.get(key)
         if status is None:
             status = self._images[key] = self._status_image()
-        (self.greens, self.yellows, self.phase_ons, self.reds, self.walks, self.ped_clears, self.dont_walks,
-         self.phase_nexts, self.overlap_greens, self.overlap_yellows, self.overlap_reds) = status
+        if status is not self._status:
+            self._status = status
+            (self.greens, self.yellows, self.phase_ons, self.reds, self.walks, self.ped_clears, self.dont_walks,
+             self.phase_nexts, self.overlap_greens, self.overlap_yellows, self.overlap_reds) = status
         # preemptState is status too: a poll reads it beside the signals, and a preempt's entry may start before
         # any indication changes.
         seen = (status, self.ped_calls, tuple(self.preemptor.states.values()))
@@ -470,10 +529,17 @@ class Controller:
 
     def step(self) -> None:
         """Advance one tick (0.1 s)."""
+        if self._next_real is not None and self.tick + 1 < self._next_real:
+            # A tick quiet_ticks proved quiet, stepped for the recorder (a green's minimum to log at its tick).
+            self.skip(1)
+            if self.recorder is not None:
+                self.recorder.stepped()
+            return
+        self._next_real = None
         before = self._settled if self._settled is not None else self._discrete()
         self._step()
         self._settled = self._discrete()
-        self._quiet = self._settled == before
+        self._quiet = self._settled == before or self._settles()
         if self.recorder is not None:
             self.recorder.stepped()
 
@@ -488,26 +554,21 @@ class Controller:
             return
         if self.flashing:
             return
-        calls = self.calls
-        demand = self._demand(calls)
+        inputs = self.inputs
+        demand = self._demand(inputs)
         pe = self.preemptor
         pe.step()
         self._caps = self._preempt_caps()
         if pe.started:
             self._preempt_entry()
-        # Demand waiting across the barrier forbids backing; while a pattern runs only demand that can still be
-        # served in this cycle counts (a phase past its permissive period is skipped anyway).
-        plan, timer = self.coordinator.plan, self.coordinator.timer
-        clear = max(self._clearance_left(r) for r in self.rings) if plan is not None else 0
-        self._waiting_across = any(self._barrier[q] != self.group and (plan is None or plan.fits(q, timer, clear))
-                                   for q in demand)
+        self._waiting_across = self._waits_across(demand)
         if self.config.next_phase_lock is NextPhaseLock.RED_END and pe.serving is None:
             # before timing: the tick that ends a red clearance still reads the calls of that clearance
             for r in self.rings:
                 if r.interval in _CLEARANCE and r.target is not None:
                     self._redirect(r, demand)
         for r in self.rings:
-            self._time(r, demand, calls)
+            self._time(r, demand, inputs)
         if pe.serving is None:
             self._decide(demand)
         else:
@@ -529,12 +590,50 @@ class Controller:
 
     # --- quiet time ----------------------------------------------------------------------
 
+    def _settles(self) -> bool:
+        """After a step that changed something: the next step changes nothing but counters, as a step that
+        changed nothing would show (see "Quiet time" above). Proven here only where it is short: free, no
+        preempt, no overlap, the next phase locked at the end of green.
+
+        Nothing is proven for a next step that :meth:`quiet_ticks` makes real anyway (a counter reaches a
+        threshold), so every comparison of a counter with a threshold is the same at the next tick as now:
+        the predicates below are the step's own, read now. What the next step does, part by part: the backup
+        timer, start-up flash and time-of-day plan act only at thresholds; the coordinator retries a pattern
+        that this step could not start and fails alike; no preempt is called or active; the pedestrian calls
+        latch as checked; a clearance only counts; a green's gap and max-out counters run as :meth:`skip` runs
+        them, as checked, so its conflicting demand is what this step saw and its gap latch is decided as this
+        step decided it; no ring is both ready and wishing, so ``_decide`` commits nothing and no green ends;
+        a ring resting in red with a phase to start stays blocked (by another ring's green or clearance, which
+        stays, or its red revert, a threshold); the status image, its walk thresholds unpassed, stays."""
+        if (self.flashing or self.coordinator.plan is not None or self.config.overlaps
+                or self.config.next_phase_lock is not NextPhaseLock.GREEN_END):
+            return False
+        pe = self.preemptor
+        if pe.control or any(s is not PreemptState.NOT_ACTIVE for s in pe.states.values()):
+            return False
+        inputs = self.inputs
+        if self._latched(inputs) != self.ped_calls:
+            return False
+        demand = self._wanted(inputs)
+        # What the next step computes before anything reads it: set now, so the predicates below read it.
+        self._waiting_across = self._waits_across(demand)
+        for r in self.rings:
+            if r.interval is Interval.GREEN and ((r.gap == 0) != self._extending(r, inputs)
+                                                 or (r.max_ticks > 0) != self._conflicting(r, demand)):
+                return False  # a counter starts or stops: skip would not move it as the step does
+            if self._ready(r) and self._wish(r, demand) is not None:
+                return False
+        return True
+
     def quiet_ticks(self) -> int | None:
         """How many steps from now the next one that may change anything is, inputs staying as they are:
-        1 unless the last step changed nothing discrete and no input came since; None when no step will."""
+        1 unless quiet time started (the last step changed nothing discrete, or :meth:`_settles` proved the
+        next one will not) and no input came since; None when no step will."""
+        self._next_real = None
         if not self._quiet:
             return 1
         ahead: list[int] = []
+        logged: list[int] = []  # ticks the recorder needs stepped, though nothing changes there
 
         def until(counter: int, threshold: int) -> None:
             if counter < threshold:
@@ -555,9 +654,17 @@ class Controller:
         trailing = self.overlaps.quiet_ticks()
         if trailing is not None:
             ahead.append(max(1, trailing))
+        # A green's minimum matters only with conflicting demand (which, in quiet time, its max-out counter
+        # times): without any, the ready green has nowhere to go and no ring waits across the barrier for it.
+        # While a pattern runs or a preempt is served it may be what ends it. The data logger logs it.
+        minimums = self.coordinator.plan is not None or self.preemptor.serving is not None
         for r in self.rings:
             if r.interval is Interval.GREEN:
-                for threshold in (r.minimum, r.walk, r.walk + r.ped_clear, r.limit, r.cut):
+                if minimums or r.max_ticks:
+                    until(r.ticks, r.minimum)
+                elif self.recorder is not None and r.ticks < r.minimum:
+                    logged.append(r.minimum - r.ticks)
+                for threshold in (r.walk, r.walk + r.ped_clear, r.limit, r.cut):
                     until(r.ticks, threshold)
                 if r.gap:
                     until(r.gap, r.passage)
@@ -569,7 +676,8 @@ class Controller:
                     until(self.tick, revert + self.timing[r.target].red_revert)
             else:
                 until(r.ticks, r.length)
-        return min(ahead, default=None)
+        self._next_real = self.tick + min(ahead) if ahead else math.inf
+        return min(ahead + logged, default=None)
 
     def skip(self, n: int) -> None:
         """Advance ``n`` quiet ticks at once; ``n`` must be below :meth:`quiet_ticks` (or any, when None)."""
@@ -617,23 +725,33 @@ class Controller:
             self._since_set = None
             self.touch()  # the calls it shows are gone
 
-    def _demand(self, calls: frozenset[int]) -> frozenset[int]:
-        """Phases wanting service this tick; latches pedestrian calls of phases not showing green. While a
-        pattern runs its coordinated phases and its split-mode recalls are demand too."""
-        co = self.coordinator
-        omit = self.control[ControlColumn.PHASE_OMIT] | co.omitted()
-        ped_omit = omit | self.control[ControlColumn.PED_OMIT]
+    def _demand(self, inputs: Inputs) -> frozenset[int]:
+        """Phases wanting service this tick, once the pedestrian calls of phases not showing green latched."""
+        ped_calls = self._latched(inputs)
+        if ped_calls != self.ped_calls:  # kept while it holds the same calls: the logger compares it every step
+            self.ped_calls = ped_calls
+        return self._wanted(inputs)
+
+    def _latched(self, inputs: Inputs) -> frozenset[int]:
+        """The pedestrian calls latched this tick: those asked on phases not showing green, and push buttons."""
         greens = {r.phase for r in self.rings if r.interval is Interval.GREEN}
-        peds = (self.control[ControlColumn.PED_CALL].intersection(self.config.phases) | self._recall[Recall.PED]
-                | co.ped_recalled())
-        pushed = {self._ped_detector_phase[d] for d in self.ped_actuations if d in self._ped_detector_phase}
-        self.ped_calls = (self.ped_calls | (peds - greens) | pushed) - ped_omit
-        recalled = self._recall[Recall.MIN] | self._recall[Recall.MAX] | co.recalled()
-        demand = (calls - omit) | self.ped_calls | (recalled - omit)
-        soft = self._recall[Recall.SOFT] - omit
+        return (self.ped_calls | (inputs.peds - greens) | inputs.pushed) - inputs.ped_omits
+
+    def _wanted(self, inputs: Inputs) -> frozenset[int]:
+        """Phases wanting service: calls, latched pedestrian calls and recalls (while a pattern runs its coordinated
+        phases and its split-mode recalls too), soft recalls when nothing else is."""
+        demand = (self.calls - inputs.omits) | self.ped_calls | inputs.recalled
+        soft = inputs.soft
         if soft and not demand - soft:
             demand |= soft
-        return frozenset(demand)
+        return demand
+
+    def _waits_across(self, demand: frozenset[int]) -> bool:
+        """Demand waits across the barrier (which forbids backing); while a pattern runs only demand that can still
+        be served in this cycle counts (a phase past its permissive period is skipped anyway)."""
+        plan, timer = self.coordinator.plan, self.coordinator.timer
+        clear = max(self._clearance_left(r) for r in self.rings) if plan is not None else 0
+        return any(self._barrier[q] != self.group and (plan is None or plan.fits(q, timer, clear)) for q in demand)
 
     def _backing(self, r: Ring, q: int) -> bool:
         """Serving ``q`` next would back ``r`` up: ``q`` comes before the ring's phase in their barrier group."""
@@ -652,7 +770,7 @@ class Controller:
     def _conflicting(self, r: Ring, demand: frozenset[int]) -> bool:
         return any(q != r.phase and (self._ring_of[q] == r.number or self._beyond(q)) for q in demand)
 
-    def _time(self, r: Ring, demand: frozenset[int], calls: frozenset[int]) -> None:
+    def _time(self, r: Ring, demand: frozenset[int], inputs: Inputs) -> None:
         if r.interval is Interval.DWELL:
             return
         r.ticks += 1
@@ -664,15 +782,17 @@ class Controller:
                 if r.interval is Interval.RED_CLEAR and r.length == 0:
                     self._enter(r, Interval.DWELL)  # a red clearance a preempt's entry cut to nothing
             return
-        p = r.phase
-        extending = p in calls or p in self._recall[Recall.MAX] or p in self.coordinator.max_recalled()
-        r.gap = 0 if extending else r.gap + 1
+        r.gap = 0 if self._extending(r, inputs) else r.gap + 1
         conflict = self._conflicting(r, demand)
         r.max_ticks = r.max_ticks + 1 if conflict else 0
         if not conflict:
             r.gapped = False
         elif r.ticks >= r.minimum and r.gap > 0 and r.gap >= r.passage:
             r.gapped = True
+
+    def _extending(self, r: Ring, inputs: Inputs) -> bool:
+        """The green's phase is called (or recalled to its maximum): its passage timer restarts."""
+        return r.phase in self.calls or r.phase in inputs.extending
 
     def _ready(self, r: Ring) -> bool:
         """A green that may end now, or a ring resting in red with nothing committed."""
@@ -682,7 +802,7 @@ class Controller:
 
     def _ending(self, r: Ring) -> Termination | None:
         """Why the ring's green may end now (None: it may not); a force-off before a gap-out before a max-out."""
-        if r.interval is not Interval.GREEN or r.ticks < r.minimum or r.phase in self.control[ControlColumn.HOLD]:
+        if r.interval is not Interval.GREEN or r.ticks < r.minimum or r.phase in self.inputs.holds:
             return None
         if r.phase in self.control[ControlColumn.FORCE_OFF]:
             return Termination.FORCE_OFF
@@ -751,6 +871,8 @@ class Controller:
 
     def _decide(self, demand: frozenset[int]) -> None:
         ready = {r.number: self._ready(r) for r in self.rings}
+        if not any(ready.values()):
+            return  # most ticks: every ring is timing
         wish = {r.number: self._wish(r, demand) for r in self.rings if ready[r.number]}
         across = {n: q for n, q in wish.items() if q is not None and self._beyond(q)}
         all_ready = all(ready.values())
@@ -967,6 +1089,8 @@ class Controller:
         self.overlaps.step(greens, yellows, nexts)
 
     def _monitor(self) -> None:
+        if self._status is self._checked:
+            return  # what it checks is all in the status image, and this one passed
         shown = sorted(self.greens | self.yellows)
         cfg = self.config
         conflict = next((f"phases {a} and {b}" for i, a in enumerate(shown) for b in shown[i + 1:]
@@ -975,7 +1099,9 @@ class Controller:
             conflict = next((f"overlap {cfg.overlaps[o].letter} and phase {p}"
                              for o in sorted(self.overlap_greens | self.overlap_yellows) for p in shown
                              if p in self.overlaps.conflicting[o]), None)
-        if conflict is not None:
+        if conflict is None:
+            self._checked = self._status
+        else:
             log.error("conflict monitor: %s shown together at tick %d: flash", conflict, self.tick)
             self.flash_status = UnitFlashStatus.MMU
             self._refresh_status()

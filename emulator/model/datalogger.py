@@ -10,8 +10,8 @@ Rules of this file
   day the unit first powered up, counting on through power cycles) at the tick that made it. So the log is
   the same in virtual time and at the wall clock, and the same whether quiet ticks are stepped or skipped:
   a skipped stretch changes nothing discrete, and every threshold the log reports (minimum green, walk,
-  pedestrian clearance, the coordinator's marks) is a real step
-  (:meth:`emulator.model.controller.Controller.quiet_ticks`).
+  pedestrian clearance, the coordinator's marks) is a step, a real one or, for a minimum that changes nothing
+  else, one for the logger alone (:meth:`emulator.model.controller.Controller.quiet_ticks`).
 - The events of one tick are kept in (code, parameter) order, as field logs list them; ticks in time order.
 
 Theory of operation
@@ -68,7 +68,7 @@ import bisect
 from dataclasses import dataclass, field
 from datetime import datetime, timedelta
 
-from emulator.model.controller import Change, Controller, Interval, Termination
+from emulator.model.controller import Change, Controller, Inputs, Interval, Termination
 from emulator.model.coordination import Coordinator, Plan
 from emulator.model.overlaps import Show
 from hils.protocol.config import Recall
@@ -114,6 +114,7 @@ class _Green:
 class _Seen:
     """What the controller showed after the last step (mutable: the logger's memory of it)."""
 
+    inputs: Inputs | None = None  # the controller's inputs the sets were read from
     sets: dict[str, frozenset[int]] = field(default_factory=dict)
     ped_calls: frozenset[int] = frozenset()
     walks: frozenset[int] = frozenset()
@@ -224,6 +225,8 @@ class DataLogger:
         self._tick.append((int(code), parameter))
 
     def _flush(self) -> None:
+        if not self._tick:
+            return  # most steps log nothing
         clock = self._clock
         self._log.extend((clock, code, p) for code, p in sorted(set(self._tick)))
         self._tick.clear()
@@ -267,48 +270,56 @@ class DataLogger:
     def _read(self) -> None:
         """Events of what the controller shows now against what it showed after the last step."""
         c, seen = self.controller, self._seen
-        control = c.control
-        now = {
-            "calls": c.calls - self._no_call_events,
-            "holds": control[ControlColumn.HOLD],
-            "omits": control[ControlColumn.PHASE_OMIT] | c.coordinator.omitted(),
-            "ped_omits": control[ControlColumn.PED_OMIT],
-            "detectors": c.actuations,
-            "ped_detectors": c.ped_actuations,
-            "preempts": c.preemptor.control,
-        }
-        for name, numbers in now.items():
-            before = seen.sets.get(name, frozenset())
-            if numbers != before:
-                on, off = _ON_OFF[name]
-                for n in numbers - before:
-                    self._add(on, n)
-                for n in before - numbers:
-                    self._add(off, n)
-        seen.sets = now
-        for p in c.ped_calls - seen.ped_calls - self._no_ped_events:
-            self._add(E.PED_CALL_REGISTERED, p)
-        seen.ped_calls = c.ped_calls
-        for p in c.walks - seen.walks:
-            self._add(E.PED_BEGIN_WALK, p)
-        for p in c.ped_clears - seen.clears:
-            self._add(E.PED_BEGIN_CLEARANCE, p)
-        for p in (seen.walks | seen.clears) - c.walks - c.ped_clears:
-            self._add(E.PED_BEGIN_SOLID_DONT_WALK, p)
-        seen.walks, seen.clears = c.walks, c.ped_clears
-        for n, shown in c.overlaps.shown.items():
-            before = seen.overlaps.get(n, Show.RED)
-            if shown is before:
-                continue
-            if before is Show.FLASHING:
-                self._add(E.FYA_END_PERMISSIVE, n)
-            if not (shown is Show.GREEN and before is Show.TRAIL_GREEN):
-                self._add(_OVERLAP[shown], n)
-        seen.overlaps = dict(c.overlaps.shown)
-        for n, state in c.preemptor.states.items():
-            if state is not seen.preempts.get(n, PreemptState.NOT_ACTIVE) and state in _PREEMPT:
-                self._add(_PREEMPT[state], n)
-        seen.preempts = dict(c.preemptor.states)
+        inputs = c.inputs
+        if inputs is not seen.inputs:  # these change only with the inputs: a write, a new pattern
+            seen.inputs = inputs
+            now = {
+                "calls": c.calls - self._no_call_events,
+                "holds": inputs.holds,
+                "omits": inputs.omits,
+                "ped_omits": c.control[ControlColumn.PED_OMIT],
+                "detectors": c.actuations,
+                "ped_detectors": c.ped_actuations,
+                "preempts": c.preemptor.control,
+            }
+            for name, numbers in now.items():
+                before = seen.sets.get(name, frozenset())
+                if numbers != before:
+                    on, off = _ON_OFF[name]
+                    for n in numbers - before:
+                        self._add(on, n)
+                    for n in before - numbers:
+                        self._add(off, n)
+            seen.sets = now
+        # The controller keeps each of these sets (and dicts) while it holds the same numbers: most steps
+        # change none of them.
+        if c.ped_calls is not seen.ped_calls:
+            for p in c.ped_calls - seen.ped_calls - self._no_ped_events:
+                self._add(E.PED_CALL_REGISTERED, p)
+            seen.ped_calls = c.ped_calls
+        if c.walks is not seen.walks or c.ped_clears is not seen.clears:
+            for p in c.walks - seen.walks:
+                self._add(E.PED_BEGIN_WALK, p)
+            for p in c.ped_clears - seen.clears:
+                self._add(E.PED_BEGIN_CLEARANCE, p)
+            for p in (seen.walks | seen.clears) - c.walks - c.ped_clears:
+                self._add(E.PED_BEGIN_SOLID_DONT_WALK, p)
+            seen.walks, seen.clears = c.walks, c.ped_clears
+        if c.overlaps.shown != seen.overlaps:
+            for n, shown in c.overlaps.shown.items():
+                before = seen.overlaps.get(n, Show.RED)
+                if shown is before:
+                    continue
+                if before is Show.FLASHING:
+                    self._add(E.FYA_END_PERMISSIVE, n)
+                if not (shown is Show.GREEN and before is Show.TRAIL_GREEN):
+                    self._add(_OVERLAP[shown], n)
+            seen.overlaps = dict(c.overlaps.shown)
+        if c.preemptor.states != seen.preempts:
+            for n, state in c.preemptor.states.items():
+                if state is not seen.preempts.get(n, PreemptState.NOT_ACTIVE) and state in _PREEMPT:
+                    self._add(_PREEMPT[state], n)
+            seen.preempts = dict(c.preemptor.states)
         if int(c.flash_status) != seen.flash:
             seen.flash = int(c.flash_status)
             self._add(E.UNIT_FLASH_STATUS_CHANGE, seen.flash)

@@ -95,6 +95,28 @@ def test_the_log_says_every_interval_change_at_its_tick_skipped_or_stepped(
     assert times == sorted(times)  # the clock never goes back, power cycles included
 
 
+@pytest.mark.parametrize("power_failure", [False, True])
+def test_a_minimum_timed_in_quiet_time_is_logged_at_its_tick(power_failure: bool) -> None:
+    """4 and 8 called and served, nothing else: their minimum changes nothing, but the controller skipping quiet
+    ticks still steps there for its logger, which logs it at its tick, as the controller stepped every tick does
+    (and before the power failure that comes next, if one does)."""
+    logs = []
+    for ticked in (True, False):
+        c = Controller(config_mod.load())
+        log, _ = logged(c)
+        apply(c, ControlColumn.VEH_CALL, frozenset({4, 8}), ticked=ticked)
+        apply(c, "ticks", 150, ticked=ticked)  # 4 and 8 green from tick 101, their minimum timed by tick 150
+        if power_failure:
+            apply(c, "power_cycle", None, ticked=ticked)
+        apply(c, "ticks", 20, ticked=ticked)
+        logs.append(log.events())
+    assert logs[1] == logs[0]
+    minimums = [e for e in logs[0] if e.code == E.PHASE_MIN_COMPLETE and e.parameter in (4, 8)]
+    assert len(minimums) == 2 and len({e.time for e in minimums}) == 1
+    later = [e for e in logs[0] if e.time > minimums[0].time]  # nothing until the power failure, if one comes
+    assert (E.POWER_FAILURE in {e.code for e in later if e.time == later[0].time}) if power_failure else not later
+
+
 def config_text(text: str = "", timing: str = "") -> str:
     """The shipped four-leg with walks on its throughs, a passage time and some TOML added (``text`` after its last
     table, [emulator], without a plan; ``timing`` in [timing])."""
