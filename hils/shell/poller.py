@@ -59,7 +59,7 @@ class SignalCache:
         self._subscribers.append(fn if every_poll else (lambda snap, changed: changed and fn(snap, changed)))
 
     def update(self, state: SignalState, t: float, seq: int) -> bool:
-        changed = self.snapshot is None or state != self.snapshot.state
+        changed = self.snapshot is None or (state is not self.snapshot.state and state != self.snapshot.state)
         self.snapshot = Snapshot(state, t, seq)
         for fn in self._subscribers:
             fn(self.snapshot, changed)
