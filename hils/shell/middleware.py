@@ -371,7 +371,11 @@ class Middleware:
                 continue
             asleep = quiet.asleep() if quiet is not None else None
             if asleep is not None:
-                yield asleep
+                # Woken by a SET of our own, the objects are still ours: a read-back due then would sleep again, and
+                # the ReadbackDue fed before it sets nothing that the next one sent does not set anew.
+                while asleep is not None:
+                    yield asleep
+                    asleep = quiet.asleep()
                 k = grid.first_at_or_after(env.now, k)
                 continue
             controls = quiet.sent() if quiet is not None else None
