@@ -175,6 +175,10 @@ class Light:
         self._movement_lanes = tuple((p, phase_map.incoming_lanes(p), phase_map.outgoing_lanes(p))
                                      for p in config.phase_numbers)
         self._lanes = tuple(dict.fromkeys(lane for _, inc, out in self._movement_lanes for lane in (*inc, *out)))
+        # each movement's lanes by their place in _lanes: the traffic state sums a list, not a dict, per movement
+        place = {lane: i for i, lane in enumerate(self._lanes)}
+        self._movement_places = tuple((p, tuple(place[n] for n in inc), tuple(place[n] for n in out))
+                                      for p, inc, out in self._movement_lanes)
         self._lane_length = {lane: libsumo.lane.getLength(lane) for lane in self._lanes}
         self.incoming_lanes = tuple(dict.fromkeys(lane for _, inc, _ in self._movement_lanes for lane in inc))
         lanes_of = phase_map.approach_lanes
@@ -236,10 +240,11 @@ class Light:
 
     def traffic_state(self) -> TrafficState:
         now, read, departed, arrived = self._readings.read(self._lanes)
-        lanes = {n: read[n] for n in self._lanes}
-        movements = {p: MovementState(p, sum([lanes[n].halting for n in inc]), sum([lanes[n].halting for n in out]))
-                     for p, inc, out in self._movement_lanes}
-        return TrafficState(now, lanes, movements, departed, arrived)
+        states = [read[n] for n in self._lanes]
+        halting = [state.halting for state in states]
+        movements = {p: MovementState(p, sum([halting[i] for i in inc]), sum([halting[i] for i in out]))
+                     for p, inc, out in self._movement_places}
+        return TrafficState(now, dict(zip(self._lanes, states, strict=True)), movements, departed, arrived)
 
 
 class _Readings:
