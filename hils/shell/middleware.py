@@ -462,12 +462,12 @@ class Middleware:
         return effects
 
     def _carry_out(self, effect: Effect) -> None:
-        match effect:
+        match effect:  # the most frequent first: every answered poll shows its state
+            case ShowSignal(poll_id, state, after_failures):
+                self._show(state, poll_id, logged=after_failures)
             case Dispatch(command_id, action_id, command):
                 self.log.emit(Kind.COMMAND_DISPATCHED, action_id=action_id, command_id=command_id,
                               command=command.phases, green=command.green)
-            case ShowSignal(poll_id, state, after_failures):
-                self._show(state, poll_id, logged=after_failures)
             case PollFailureSeen(poll_id, error, consecutive):
                 self.log.emit(Kind.POLL_FAILED, poll_id=poll_id, error=error, consecutive=consecutive)
             case SendCall(phases, purpose, command_id):
