@@ -145,8 +145,13 @@ class EventLog:
             self._subscribers_of.setdefault(intersection, []).append(fn)
 
     def emit(self, kind: Kind, **fields: Any) -> dict[str, Any]:
+        return self.record(kind, fields, fields.get("intersection"))
+
+    def record(self, kind: Kind, fields: dict[str, Any], intersection: str | None) -> dict[str, Any]:
+        """:meth:`emit` of ``fields`` (a dict the log may keep) about ``intersection`` (None: the run's own)."""
+        # kind._value_, not kind.value: Enum's value is a property, a Python call for every record of the run.
         rec = {"seq": self._seq, "t": self._clock() if self._clock else 0.0, "wall_ns": time.monotonic_ns(),
-               "kind": kind.value, **fields}
+               "kind": kind._value_, **fields}
         self._seq += 1
         if self.keep:
             self.records.append(rec)
@@ -162,8 +167,7 @@ class EventLog:
         for fn in self._subscribers:
             fn(rec)
         if self._subscribers_of:
-            where = fields.get("intersection")
-            for fn in (self._subscribers_of.get(where, ()) if where is not None else
+            for fn in (self._subscribers_of.get(intersection, ()) if intersection is not None else
                        [fn for fns in self._subscribers_of.values() for fn in fns]):
                 fn(rec)
         return rec
@@ -310,7 +314,8 @@ class TaggedLog:
         self.log.bind(clock)
 
     def emit(self, kind: Kind, **fields: Any) -> dict[str, Any]:
-        return self.log.emit(kind, **fields, intersection=self.intersection)
+        fields["intersection"] = self.intersection  # last, as in every record that names one
+        return self.log.record(kind, fields, self.intersection)
 
     def of(self, *kinds: Kind) -> list[dict[str, Any]]:
         return [r for r in self.log.of(*kinds) if r.get("intersection") == self.intersection]

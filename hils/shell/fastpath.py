@@ -144,10 +144,10 @@ class QuietPolls:
         self._sent, self._seen = poll_id, feed.version if feed is not None else None
         return False
 
-    def asleep(self) -> simpy.Event | None:
-        """After a poll: the event to sleep on while every poll would be that one again (the feed moving), or
-        None when the next poll of the grid goes out."""
-        return self.transport.change_feed.changed() if self._unchanged() else None
+    def moved(self) -> simpy.Event:
+        """After a poll left out: the event to sleep on, the feed's next move (every poll until then would be left
+        out too)."""
+        return self.transport.change_feed.changed()
 
     def forget(self) -> None:
         """Polling halted: the first poll after it goes out."""

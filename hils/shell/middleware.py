@@ -371,7 +371,11 @@ class Middleware:
                 continue
             asleep = quiet.asleep() if quiet is not None else None
             if asleep is not None:
-                yield asleep
+                # Woken by a SET of our own, the objects are still ours: a read-back due then would sleep again, and
+                # the ReadbackDue fed before it sets nothing that the next one sent does not set anew.
+                while asleep is not None:
+                    yield asleep
+                    asleep = quiet.asleep()
                 k = grid.first_at_or_after(env.now, k)
                 continue
             controls = quiet.sent() if quiet is not None else None
@@ -428,7 +432,9 @@ class Middleware:
         """Put what a read saw into the cache, with a ``poll`` record when it changes the state, or ``logged``: the
         first answer after failed polls (the state is known again, changed or not: the plots mark the time between
         as no data)."""
-        if logged or self.cache.snapshot is None or state != self.cache.snapshot.state:
+        shown = self.cache.snapshot
+        # A state decoded before is the same object (_decode keeps them): most answers are told apart by identity.
+        if logged or shown is None or (state is not shown.state and state != shown.state):
             fields = self._log_fields.get(state)
             if fields is None:
                 fields = self._log_fields[state] = (tuple(sorted(state.greens)), tuple(sorted(state.yellows)))
@@ -443,23 +449,25 @@ class Middleware:
         for effect in effects:
             self._carry_out(effect)
         after = self.manager.mode
+        if before is after:  # most events (polls, timers, answers) leave the state as it was
+            return effects
         if before.paper is not after.paper and after.paper is not None:
             self.log.emit(Kind.STATE, **{"from": before.log_name, "to": after.log_name})
             waiting = self._entering.pop(after.paper, None)
             if waiting is not None:
                 waiting.succeed()
-        if before is Mode.RECOVERING and after is not Mode.RECOVERING and self._leaving_recovery is not None:
+        if before is Mode.RECOVERING and self._leaving_recovery is not None:
             leaving, self._leaving_recovery = self._leaving_recovery, None
             leaving.succeed()
         return effects
 
     def _carry_out(self, effect: Effect) -> None:
-        match effect:
+        match effect:  # the most frequent first: every answered poll shows its state
+            case ShowSignal(poll_id, state, after_failures):
+                self._show(state, poll_id, logged=after_failures)
             case Dispatch(command_id, action_id, command):
                 self.log.emit(Kind.COMMAND_DISPATCHED, action_id=action_id, command_id=command_id,
                               command=command.phases, green=command.green)
-            case ShowSignal(poll_id, state, after_failures):
-                self._show(state, poll_id, logged=after_failures)
             case PollFailureSeen(poll_id, error, consecutive):
                 self.log.emit(Kind.POLL_FAILED, poll_id=poll_id, error=error, consecutive=consecutive)
             case SendCall(phases, purpose, command_id):

@@ -59,7 +59,7 @@ class SignalCache:
         self._subscribers.append(fn if every_poll else (lambda snap, changed: changed and fn(snap, changed)))
 
     def update(self, state: SignalState, t: float, seq: int) -> bool:
-        changed = self.snapshot is None or state != self.snapshot.state
+        changed = self.snapshot is None or (state is not self.snapshot.state and state != self.snapshot.state)
         self.snapshot = Snapshot(state, t, seq)
         for fn in self._subscribers:
             fn(self.snapshot, changed)
@@ -80,13 +80,13 @@ class Poller:
         self.elided = 0  # polls not sent: they could not see a change
         self.halted = False
         self._resume = env.event()
-        self._halting: simpy.Event | None = None  # set during an elided sleep; wakes it when polling halts
+        self._alarm: _Alarm | None = None  # an elided sleep's: set off when the feed moves or polling halts
         self._grid, self._k = Grid(env.now, self.period), 0  # poll k is due at the grid's instant k
 
     @property
     def counts(self) -> dict[str, int]:
         """Polls on the grid so far and those not sent (``elided``: they could not see a change)."""
-        if self._halting is not None:
+        if self._alarm is not None and not self._alarm.triggered:
             self._pass_quiet_polls()
         return {"polls": self.polls, "elided": self.elided}
 
@@ -94,8 +94,8 @@ class Poller:
         self.halted = True
         if self.quiet is not None:
             self.quiet.forget()
-        if self._halting is not None and not self._halting.triggered:
-            self._halting.succeed()
+        if self._alarm is not None:
+            self._wake(self._alarm)
 
     def resume(self) -> None:
         self.halted = False
@@ -111,22 +111,25 @@ class Poller:
                 yield self._resume
                 self._grid, self._k = Grid(env.now, self.period), 0
             self.polls += 1
-            if self.quiet is not None and self.quiet.leaves_out(self.polls):
-                self.elided += 1
-            else:
-                self.send(self.polls)
             self._k += 1
-            wake = self.quiet.asleep() if self.quiet is not None else None
-            if wake is not None:
-                # Every poll until then would be this one again: sleep; the polls due meanwhile are counted as
-                # they pass (_pass_quiet_polls).
-                self._halting = env.event()
-                yield env.any_of([wake, self._halting])
-                self._pass_quiet_polls()
-                self._halting = None
-                if self.halted:
-                    continue
-            yield env.timeout(self._grid.delay(self._k, env.now))
+            if self.quiet is None or not self.quiet.leaves_out(self.polls):
+                self.send(self.polls)
+                yield env.timeout(self._grid.delay(self._k, env.now))
+                continue
+            # Left out: every poll until the feed moves would be this one again. Sleep until it does (or polling
+            # halts), on to the first instant of the grid from then; the polls due meanwhile are counted as they pass.
+            self.elided += 1
+            self._alarm = alarm = _Alarm(env)
+            self.quiet.moved().callbacks.append(lambda _ev, alarm=alarm: self._wake(alarm))
+            yield alarm
+            self._alarm = None
+
+    def _wake(self, alarm: _Alarm) -> None:
+        """End an elided sleep: the feed moved (the grid's next instant polls) or polling halted (at once)."""
+        if alarm.triggered:
+            return  # already woken: polling halted, then the feed moved (or the other way round)
+        self._pass_quiet_polls()
+        alarm.set_off(0.0 if self.halted else self._grid.delay(self._k, self.env.now))
 
     def _pass_quiet_polls(self) -> None:
         """Count, as elided, the polls of the grid due before now that an elided sleep passed over."""
@@ -134,3 +137,13 @@ class Poller:
         self.polls += due - self._k
         self.elided += due - self._k
         self._k = due
+
+
+class _Alarm(simpy.Event):
+    """A timeout whose delay is known only when it is set off: an elided sleep wakes straight at the grid's next
+    instant, one event where waking and then timing out to that instant took two (and an ``AnyOf`` besides)."""
+
+    def set_off(self, delay: float) -> None:
+        # What simpy.Timeout does as it is made: the event succeeds, scheduled ``delay`` from now.
+        self._ok, self._value = True, None
+        self.env.schedule(self, delay=delay)

@@ -123,7 +123,7 @@ class LocalTransport:
 
     def _request(self, call, latency: Latency) -> simpy.Event:
         delay = latency.draw(self._rng)
-        if (self.loss and self._rng.random() < self.loss) or delay > self.tau_udp:
+        if (self._loss and self._rng.random() < self._loss) or delay > self.tau_udp:
             done = self.env.event()
             self.env.timeout(self.tau_udp).callbacks.append(
                 lambda _: done.fail(CommunicationTimeout(f"no answer within {self.tau_udp} s")))

@@ -175,6 +175,10 @@ class Light:
         self._movement_lanes = tuple((p, phase_map.incoming_lanes(p), phase_map.outgoing_lanes(p))
                                      for p in config.phase_numbers)
         self._lanes = tuple(dict.fromkeys(lane for _, inc, out in self._movement_lanes for lane in (*inc, *out)))
+        # each movement's lanes by their place in _lanes: the traffic state sums from a list, not a dict by name
+        place = {lane: i for i, lane in enumerate(self._lanes)}
+        self._movement_places = tuple((p, tuple(place[n] for n in inc), tuple(place[n] for n in out))
+                                      for p, inc, out in self._movement_lanes)
         self._lane_length = {lane: libsumo.lane.getLength(lane) for lane in self._lanes}
         self.incoming_lanes = tuple(dict.fromkeys(lane for _, inc, _ in self._movement_lanes for lane in inc))
         lanes_of = phase_map.approach_lanes
@@ -236,10 +240,18 @@ class Light:
 
     def traffic_state(self) -> TrafficState:
         now, read, departed, arrived = self._readings.read(self._lanes)
-        lanes = {n: read[n] for n in self._lanes}
-        movements = {p: MovementState(p, sum([lanes[n].halting for n in inc]), sum([lanes[n].halting for n in out]))
-                     for p, inc, out in self._movement_lanes}
-        return TrafficState(now, lanes, movements, departed, arrived)
+        states = [read[n] for n in self._lanes]
+        halting = [state.halting for state in states].__getitem__
+        movements = {p: MovementState(p, sum(map(halting, inc)), sum(map(halting, out)))
+                     for p, inc, out in self._movement_places}
+        return TrafficState(now, dict(zip(self._lanes, states, strict=True)), movements, departed, arrived)
+
+
+#: What a lane without vehicles reads, known without asking SUMO twice more (most lanes of a network are empty at any
+#: time): libsumo's halting number and waiting time loop over the very vehicles its vehicle number counts (Lane.cpp:
+#: ``getLastStepVehicleNumber`` is the lane's ``getVehicleNumber()``, ``getLastStepHaltingNumber`` counts its
+#: ``getVehiclesSecure()``, ``getWaitingTime`` is ``MSLane::getWaitingSeconds()``, 0 without vehicles).
+_EMPTY_LANE = LaneState(0, 0.0, 0)
 
 
 class _Readings:
@@ -260,10 +272,10 @@ class _Readings:
             departed = _stat("stats.vehicles.inserted")
             self._counts = (int(departed), int(departed - _stat("stats.vehicles.running")))
         lanes = self._lanes
-        missing = [n for n in names if n not in lanes]
-        if missing:
-            lanes.update(zip(missing, map(LaneState, map(_lane_halting, missing), map(_lane_waiting, missing),
-                                          map(_lane_vehicles, missing)), strict=True))
+        for n in names:
+            if n not in lanes:
+                vehicles = _lane_vehicles(n)
+                lanes[n] = LaneState(_lane_halting(n), _lane_waiting(n), vehicles) if vehicles else _EMPTY_LANE
         return now, lanes, *self._counts
 
 

@@ -24,7 +24,7 @@ from hils.sim.network import (
     derive_phase_map,
     read_net,
 )
-from hils.sim.sumo import SumoError, SumoSimulation, time_bare_sumo
+from hils.sim.sumo import LaneState, SumoError, SumoSimulation, time_bare_sumo
 from hils.sim.webster import webster_plan
 
 STEP = 0.25
@@ -224,6 +224,32 @@ def test_queues_build_on_red_and_discharge_on_green(config) -> None:
     # the north and south approaches saw red for three minutes: their delay so far is at least a minute
     assert summary.approaches["north"].mean_delay > 60 and summary.approaches["south"].mean_delay > 60
     assert summary.mean_delay > summary.mean_time_loss  # it counts those still waiting at the red
+
+
+def test_the_traffic_state_is_what_libsumo_reads_lane_by_lane(config) -> None:
+    """Every lane's state is SUMO's own three figures, an empty lane's too (whose halting number and waiting time
+    are not asked for: SUMO's loop over its vehicles has none), and a movement's queues sum its lanes' halting."""
+    every = frozenset(config.phases)
+    lane = libsumo.lane
+    with SumoSimulation(config, seed=5) as sim:
+        light = sim.lights[TLS_ID]
+        light.apply(SignalState(every - {2, 6}, frozenset(), frozenset({2, 6})))
+        empty = busy = 0
+        for _ in range(30):
+            sim.advance(40)  # 10 s
+            state = light.traffic_state()
+            for name, read in state.lanes.items():
+                assert read == LaneState(lane.getLastStepHaltingNumber(name), lane.getWaitingTime(name),
+                                         lane.getLastStepVehicleNumber(name))
+                assert type(read.waiting_time) is float and type(read.halting) is type(read.vehicles) is int
+                empty += read.vehicles == 0
+                busy += read.halting > 0 and read.waiting_time > 0
+            for phase, movement in state.movements.items():
+                pm = light.phase_map
+                assert movement.upstream_queue == sum(map(lane.getLastStepHaltingNumber, pm.incoming_lanes(phase)))
+                assert movement.downstream_queue == sum(map(lane.getLastStepHaltingNumber,
+                                                            pm.outgoing_lanes(phase)))
+    assert empty > 30 and busy > 30  # both kinds were read, many times
 
 
 def test_same_seed_same_run_and_restart_in_one_process(config) -> None:
