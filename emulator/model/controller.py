@@ -372,7 +372,15 @@ class Controller:
 
     def set_control(self, column: ControlColumn, phases: Iterable[int]) -> None:
         """A SET of one control object: replaces its phases and restarts the backup timer."""
-        self.control[column] = frozenset(phases)
+        phases = frozenset(phases)
+        if phases == self.control[column] and self.control_status is UnitControlStatus.SYSTEM_CONTROL:
+            # The same phases again (a middleware repeats its calls): no input a step reads changed, so quiet time
+            # goes on; the backup timer restarts (its threshold only moves later) and the status counts the write.
+            self._since_set = 0
+            self._settled = None
+            self.status_version += 1
+            return
+        self.control[column] = phases
         self._system_set()
 
     def set_timing(self, phase: int, name: str, ticks: int) -> None:

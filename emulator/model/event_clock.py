@@ -77,7 +77,7 @@ class EventClock:
         self.unit = unit
         self._version = _Moves(env)
         self._controls = _Moves(env)
-        self.steps = 0  # real steps run (the rest were skipped)
+        self.steps = 0  # steps run (real ones, and ticks stepped for the data logger alone); the rest were skipped
         self._grid = Grid(env.now + phase, TICK)
         self._due: int | None = None  # tick count after the next scheduled real step
         self._generation = 0  # an alarm from an older schedule is stale

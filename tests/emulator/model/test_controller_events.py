@@ -156,6 +156,30 @@ def test_a_preempt_called_in_the_start_up_flash_is_read_after_it() -> None:
                 delayed=False)
 
 
+@pytest.mark.parametrize("delayed", [False, True])
+def test_a_repeated_set_restarts_the_backup_timer_and_nothing_else(delayed: bool) -> None:
+    """The same calls SET again while resting in their green, and again while a backup time runs out: the twins
+    agree (the backup timer restarts at the write's tick, the status counts the write)."""
+    config = dataclasses.replace(config_mod.load(), middleware=dataclasses.replace(config_mod.load().middleware,
+                                                                                   backup_time=30))
+    calls = (ControlColumn.VEH_CALL, frozenset({4, 8}))
+    check_equal(config, [calls, ("ticks", 200), calls, ("ticks", 250), calls, ("ticks", 100), ("ticks", 300), calls,
+                         ("ticks", 5), calls, ("ticks", 400)], delayed=delayed)
+
+
+def test_a_repeated_set_is_no_step() -> None:
+    """Resting in the called green, the same calls again (within the backup time): quiet time goes on, and the status
+    counts the write."""
+    c = CountingController(config_mod.load())
+    c.set_control(ControlColumn.VEH_CALL, {4, 8})
+    c.advance(200)
+    c.steps, version = 0, c.status_version
+    c.set_control(ControlColumn.VEH_CALL, {4, 8})
+    assert c.status_version > version  # a poller waiting for a change reads the unit again, as after any write
+    c.advance(100)
+    assert c.greens == {4, 8} and c.steps == 0
+
+
 class CountingController(Controller):
     """Counts the steps it really runs."""
 
