@@ -294,7 +294,7 @@ def _intersection_plots(i: Intersection, s: dict[str, Any], folder: Path, window
     name = f"{i.label} ({i.config.name})" if i.label else i.config.name
     if i.tally.records:
         plots.signal_timeline(i.tally.records, i.config, folder / "signal_timeline.svg",
-                              start=window[0], end=window[1], label=name)
+                              start=window[0], end=window[1], label=name, preemptions=i.tally.preemptions)
         written.append("signal_timeline.svg")
     if i.traffic_samples:
         approaches = s["traffic"]["approaches"] if s.get("traffic") else None

@@ -66,21 +66,12 @@ def signal_intervals(records: Sequence[dict[str, Any]], phases: Sequence[int], s
     return spans
 
 
-def preempted_spans(records: Sequence[dict[str, Any]], start: float, end: float
+def preempted_spans(episodes: Sequence[Mapping[str, Any]], start: float, end: float
                     ) -> list[tuple[float, float, tuple[int, ...]]]:
-    """(from, to, preempts) of every stretch the manager was PREEMPTED that overlaps [start, end], cut to it:
-    from its ``preempt_begin`` to the state record leaving PREEMPTED (the controller reporting it over, or a
-    TIMEOUT), or to ``end`` when it never left."""
-    spans: list[tuple[float, float, tuple[int, ...]]] = []
-    began: tuple[float, tuple[int, ...]] | None = None
-    for r in records:
-        if r["kind"] == Kind.PREEMPT_BEGIN:
-            began = (r["t"], tuple(r["preempts"]))
-        elif r["kind"] == Kind.STATE and r["from"] == "preempted" and began is not None:
-            spans.append((began[0], r["t"], began[1]))
-            began = None
-    if began is not None:
-        spans.append((began[0], end, began[1]))
+    """(from, to, preempts) of every PREEMPTED episode (:attr:`hils.report.summary.Tally.preemptions`) that overlaps
+    [start, end], cut to it; one still on (no duration yet) lasts to ``end``."""
+    spans = [(e["t"], end if e["duration_s"] is None else e["t"] + e["duration_s"], tuple(e["preempts"]))
+             for e in episodes]
     return [(max(t0, start), min(t1, end), n) for t0, t1, n in spans if t1 > start and t0 < end]
 
 
@@ -116,15 +107,17 @@ def movement_label(config: IntersectionConfig, phase: int) -> str:
 
 
 def signal_timeline(records: Sequence[dict[str, Any]], config: IntersectionConfig, path: Path, *,
-                    start: float = 0.0, end: float = 120.0, label: str | None = None) -> Path:
+                    start: float = 0.0, end: float = 120.0, label: str | None = None,
+                    preemptions: Sequence[Mapping[str, Any]] = ()) -> Path:
     """Green, yellow and red of every phase over [start, end] cut to the run, one row per phase
     grouped by ring (solid separators) and barrier (dotted), labelled with its movement (SVG). ``label`` names
-    the intersection in the title (default: its config's name)."""
+    the intersection in the title (default: its config's name); ``preemptions`` (the run's
+    :attr:`hils.report.summary.Tally.preemptions`) are marked above the rows."""
     start, end = timeline_window(records, start, end)
     rows = phase_rows(config)
     phases = [p for p, _, _ in rows]
     spans = signal_intervals(records, phases, start, end)
-    preempted = preempted_spans(records, start, end)
+    preempted = preempted_spans(preemptions, start, end)
     row_h, left, top, width = 40.0, 150.0, 58.0 if preempted else 40.0, 780.0
     chart = Chart(left, top, width, row_h * len(rows), (start, end))
     svg = Svg(left + width + 90.0, top + chart.height + 60.0)
@@ -164,7 +157,10 @@ def signal_timeline(records: Sequence[dict[str, Any]], config: IntersectionConfi
         y = top + (sum(members) / len(members) + 0.5) * row_h
         svg.text(left + width + 8, y - 3, f"ring {ring}", size=11)
         svg.text(left + width + 8, y + 11, f"barrier {barrier}", size=11)
-    unverified = any(ind == NO_DATA and t1 > t0 for row in spans.values() for t0, t1, ind in row)
+    # the caption names what the picture shows: a stretch without data narrower than a pixel (the few ms between
+    # the close's clear and the run's end) is not there to see
+    unverified = any(ind == NO_DATA and chart.x(t1) - chart.x(t0) >= 1.0 for row in spans.values()
+                     for t0, t1, ind in row)
     chart.axes(svg, "simulation time (s); dashed: command dispatched; colours as polled"
                + ("; hatched: no data (polls failing or halted in TIMEOUT)" if unverified else "")
                + ("; purple: controller preempted" if preempted else ""))

@@ -8,6 +8,7 @@ import pytest
 
 from hils.protocol import config as config_mod
 from hils.report import plots
+from hils.report.summary import Tally
 from hils.shell.events import Kind
 
 CFG = config_mod.load()
@@ -82,5 +83,8 @@ def test_a_preemption_still_on_at_the_end_is_drawn_to_the_end():
     records = [*polls(30.0), {"kind": Kind.PREEMPT_BEGIN, "t": 12.0, "preempts": [2, 3], "command_id": None},
                {"kind": Kind.STATE, "t": 14.0, "from": "preempted", "to": "timeout"},
                {"kind": Kind.PREEMPT_BEGIN, "t": 20.0, "preempts": [1], "command_id": 4}]
-    assert plots.preempted_spans(records, 0.0, 30.0) == [(12.0, 14.0, (2, 3)), (20.0, 30.0, (1,))]
-    assert plots.preempted_spans(records, 15.0, 19.0) == []
+    tally = Tally()
+    for r in records:
+        tally(r)
+    assert plots.preempted_spans(tally.preemptions, 0.0, 30.0) == [(12.0, 14.0, (2, 3)), (20.0, 30.0, (1,))]
+    assert plots.preempted_spans(tally.preemptions, 15.0, 19.0) == []

@@ -144,7 +144,12 @@ def test_a_run_without_preemption_says_none() -> None:
 def test_the_signal_timeline_marks_the_preemption(tmp_path: Path) -> None:
     records = preempted_run(CITY, True)
     begin, end = between(records)
-    picture = plots.signal_timeline(records, load(CITY), tmp_path / "timeline.svg", start=0.0, end=60.0)
+    tally = summary.Tally()  # what `hils run` draws from: the records it keeps, the episodes it saw
+    for r in records:
+        tally(r)
+    episodes = tally.preemptions
+    picture = plots.signal_timeline(tally.records, load(CITY), tmp_path / "timeline.svg", start=0.0, end=60.0,
+                                    preemptions=episodes)
     svg = ElementTree.parse(picture).getroot()
     ns = "{http://www.w3.org/2000/svg}"
     axis = next(r for r in svg.iter(f"{ns}rect") if r.get("fill") == "none")
@@ -154,5 +159,5 @@ def test_the_signal_timeline_marks_the_preemption(tmp_path: Path) -> None:
     assert float(bar.get("width")) == pytest.approx((end - begin) / 60.0 * width, abs=0.01)
     texts = [t.text or "" for t in svg.iter(f"{ns}text")]
     assert "preempt 1" in texts and any(t.endswith("; purple: controller preempted") for t in texts)
-    assert plots.preempted_spans(records, 0.0, begin) == [], "a window before it shows none"
-    assert plots.preempted_spans(records, begin + 1.0, 60.0) == [(begin + 1.0, end, (1,))], "cut to the window"
+    assert plots.preempted_spans(episodes, 0.0, begin) == [], "a window before it shows none"
+    assert plots.preempted_spans(episodes, begin + 1.0, 60.0) == [(begin + 1.0, end, (1,))], "cut to the window"
