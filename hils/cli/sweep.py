@@ -112,14 +112,14 @@ def sweep_command(args: argparse.Namespace) -> int:
 def compare_command(args: argparse.Namespace) -> int:
     scenarios = _scenarios(args)
     results, out = _run(args, scenarios, "compare")
-    tables = compare.aggregate(results)
+    tables, runs = compare.aggregate(results), compare.runs(results)
     markdown, plots = [], []
     for scenario, table in tables.items():
-        failed = sum(not r.ok for r in results if r.cell.scenario == scenario)
-        text = compare.render(table, failed)
+        text = compare.render(table, runs[scenario])
         print(f"{scenario}, {args.duration:g} simulated s per run\n{text}\n")
         plot = "compare.png" if len(tables) == 1 else f"compare-{re.sub(r'[^A-Za-z0-9_.-]+', '_', scenario)}.png"
-        compare.plot(table, out / plot, f"{scenario}: mean over seeds with 95 % CI ({args.duration:g} s)")
+        compare.plot(table, out / plot, f"{scenario}: mean over seeds with 95 % CI ({args.duration:g} s)",
+                     runs[scenario])
         markdown.append(f"## {scenario}, {args.duration:g} s\n\n```\n{text}\n```\n\n![{scenario}]({plot})\n")
         plots.append(plot)
     for r in results:

@@ -88,15 +88,42 @@ def aggregate(results: Sequence[CellResult]) -> dict[str, Table]:
     return out
 
 
-def render(table: Table, failed: int = 0) -> str:
+@dataclass(frozen=True, slots=True)
+class Runs:
+    """An agent's runs in one scenario: how many there were and how many failed."""
+
+    total: int
+    failed: int
+
+    @property
+    def ok(self) -> int:
+        return self.total - self.failed
+
+
+def runs(results: Sequence[CellResult]) -> dict[str, dict[str, Runs]]:
+    """Per scenario, per agent: its runs, to tell an agent whose runs failed from a figure nobody measured."""
+    out: dict[str, dict[str, Runs]] = {}
+    for r in results:
+        by_agent = out.setdefault(r.cell.scenario, {})
+        before = by_agent.get(r.cell.agent, Runs(0, 0))
+        by_agent[r.cell.agent] = Runs(before.total + 1, before.failed + (0 if r.ok else 1))
+    return out
+
+
+def render(table: Table, runs: dict[str, Runs]) -> str:
+    """The table as text: a row per agent (``failed`` in every column of an agent none of whose runs finished), and
+    what the intervals are over, naming each agent that has fewer runs than seeds behind its figures."""
     names = list(next(iter(table.values())))
     width = max(14, *(len(a) for a in table))
     head = f"{'agent':<{width}}  " + "  ".join(f"{_label(n):>18}" for n in names)
     lines = [head, "-" * len(head)]
-    lines += [f"{agent:<{width}}  " + "  ".join(f"{row[n].text():>18}" for n in names) for agent, row in table.items()]
-    n = {row[names[0]].n for row in table.values()}
-    lines.append(f"mean ± half width of the 95 % confidence interval over {'/'.join(map(str, sorted(n)))} seeds "
-                 "(Student's t)" + (f"; {failed} run(s) failed, see the sweep table" if failed else ""))
+    for agent, row in table.items():
+        cells = ("failed" if not runs[agent].ok else row[n].text() for n in names)
+        lines.append(f"{agent:<{width}}  " + "  ".join(f"{c:>18}" for c in cells))
+    seeds = max(r.total for r in runs.values())
+    short = [f"{agent}: {r.failed} of {r.total} runs failed" for agent, r in runs.items() if r.failed]
+    lines.append(f"mean ± half width of the 95 % confidence interval over {seeds} seeds (Student's t)"
+                 + (f"; {', '.join(short)}, see the sweep table" if short else ""))
     return "\n".join(lines)
 
 
@@ -104,9 +131,9 @@ def _label(name: str) -> str:
     return name.replace("max_queue_", "queue ") if name.startswith("max_queue_") else _LABELS[name]
 
 
-def plot(table: Table, path: Path, title: str) -> None:
+def plot(table: Table, path: Path, title: str, runs: dict[str, Runs]) -> None:
     """One panel per figure (RESCO's four on top, hils' in the middle, ATSPM's below): a bar per agent with its 95 %
-    confidence interval."""
+    confidence interval; an agent whose runs all failed is marked so, a figure no run gave "not measured"."""
     plt = pyplot()
     agents = list(table)
     columns = len(FIGURES) // 3
@@ -114,17 +141,22 @@ def plot(table: Table, path: Path, title: str) -> None:
     for ax, (name, label) in zip(axes.flat, FIGURES.items(), strict=True):
         means = [table[a][name].mean or 0.0 for a in agents]
         errors = [table[a][name].half_width or 0.0 for a in agents]
+        measured = [a for a in agents if table[a][name].n]
         ax.bar(range(len(agents)), means, yerr=errors, capsize=4, color="#4c78a8")
         for i, agent in enumerate(agents):
-            if table[agent][name].n == 0:  # no run gave the figure (an ATSPM detector measure without detectors)
+            if not runs[agent].ok:
+                ax.text(i, 0, "runs\nfailed", ha="center", va="bottom", fontsize=7, color="#b22222")
+            elif measured and not table[agent][name].n:  # an ATSPM detector measure where no detector was read
                 ax.text(i, 0, "not\nmeasured", ha="center", va="bottom", fontsize=7, color="#555")
         ax.set_xticks(range(len(agents)), agents, rotation=30, ha="right", fontsize=8)
         ax.set_title(label, fontsize=9)
-        if not any(means):
-            ax.set_ylim(0, 1)  # not matplotlib's tiny range around zero
-            ax.text(0.5, 0.5, "0 for every agent", transform=ax.transAxes, ha="center", fontsize=9, color="#555")
-        else:
+        if any(means):
             ax.set_ylim(bottom=0)
+        else:
+            ax.set_ylim(0, 1)  # not matplotlib's tiny range around zero
+            said = ("not measured" if not measured else
+                    "0 for every agent" if len(measured) == len(agents) else "0 where measured")
+            ax.text(0.5, 0.5, said, transform=ax.transAxes, ha="center", fontsize=9, color="#555")
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=120)

@@ -8,10 +8,11 @@ import subprocess
 import sys
 from pathlib import Path
 
+import matplotlib.axes
 import pytest
 
-from hils.sweep.compare import Estimate, aggregate
-from hils.sweep.grid import Cell, SweepError, grid, parse_seeds, run_grid, scenario_arguments
+from hils.sweep.compare import Estimate, Runs, aggregate, plot, render, runs
+from hils.sweep.grid import Cell, CellResult, SweepError, grid, parse_seeds, run_grid, scenario_arguments
 
 SHORT = 120.0
 
@@ -40,6 +41,40 @@ def test_the_confidence_interval_is_students_t_over_the_seeds() -> None:
     e = Estimate.of([1.0, 2.0, 3.0])
     assert e.mean == 2.0 and e.n == 3 and math.isclose(e.half_width, 4.303 * 1.0 / math.sqrt(3))
     assert Estimate.of([5.0]).half_width is None and Estimate.of([]).mean is None
+
+
+def test_an_agent_whose_runs_failed_is_told_from_a_figure_nobody_measured(tmp_path: Path) -> None:
+    """Seen as a user: coordinated on a scenario where a light has no plan failed every run, and the table said
+    "-", its footer "over 0/2 seeds", the plot "not measured" under coordinated and "0 for every agent" over a
+    panel no agent had measured."""
+    def cell(agent: str, seed: int, ok: bool, delay: float) -> CellResult:
+        figures = {"mean_delay_s": delay, "atspm_max_outs": 0} if ok else {}
+        return CellResult(Cell(agent, seed), f"f{agent}{seed}", ok, None if ok else "no plan", figures)
+
+    results = [cell("max-pressure", 0, True, 30.0), cell("max-pressure", 1, True, 32.0),
+               cell("coordinated", 0, False, 0), cell("coordinated", 1, False, 0),
+               cell("actuated", 0, True, 40.0), cell("actuated", 1, False, 0)]
+    table, count = aggregate(results)["four_leg"], runs(results)["four_leg"]
+    assert count == {"max-pressure": Runs(2, 0), "coordinated": Runs(2, 2), "actuated": Runs(2, 1)}
+    text = render(table, count)
+    row = next(line for line in text.splitlines() if line.startswith("coordinated"))
+    assert row.split()[1:] == ["failed"] * len(table["coordinated"])
+    assert text.splitlines()[-1] == ("mean ± half width of the 95 % confidence interval over 2 seeds (Student's t); "
+                                     "coordinated: 2 of 2 runs failed, actuated: 1 of 2 runs failed, "
+                                     "see the sweep table")
+    said: list[str] = []
+    original = matplotlib.axes.Axes.text
+
+    def text_of(ax: matplotlib.axes.Axes, x: float, y: float, s: str, *args, **kwargs):
+        said.append(s)
+        return original(ax, x, y, s, *args, **kwargs)
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(matplotlib.axes.Axes, "text", text_of)
+        plot(table, tmp_path / "compare.png", "t", count)
+    assert (tmp_path / "compare.png").stat().st_size > 10_000
+    assert said.count("runs\nfailed") == 12  # in each of the twelve panels
+    assert "not measured" in said and "0 where measured" in said and "0 for every agent" not in said
 
 
 @pytest.fixture(scope="module")
