@@ -252,21 +252,22 @@ def _render_network(summary: Mapping[str, Any]) -> str:
              _simulated(s)]
     if s.get("traffic"):
         lines += _traffic_lines(s["traffic"])
+    w = max(7, *map(len, s["intersections"]))  # RESCO's cluster names run to 45 characters
     plans = {tls: _plan_text(c.get("controller_plan", {})) for tls, c in s["intersections"].items()}
     if any(text != "free" for text in plans.values()):
-        lines += ["Controller plans"] + [f"  {tls:<7} {text}" for tls, text in plans.items()]
+        lines += ["Controller plans"] + [f"  {tls:<{w}} {text}" for tls, text in plans.items()]
     lines += ["Signal control per intersection",
-              "  light   transitions  hold mean   timeouts               polls (failed, not sent)   drifted"]
+              f"  {'light':<{w}} transitions  hold mean   timeouts               polls (failed, not sent)   drifted"]
     for tls, c in s["intersections"].items():
         h, polls, timeouts = c["hold_s"], _polls_shown(c), _timeouts(c)
-        lines.append(f"  {tls:<7} {c['transitions_verified']:>5} of {c['commands_dispatched']:<4} "
+        lines.append(f"  {tls:<{w}} {c['transitions_verified']:>5} of {c['commands_dispatched']:<4} "
                      f"{_fmt(h['mean'] if h['n'] else None):>9}   {timeouts:<22} "
                      f"{polls['polls']:>6} ({polls['failed']}, {polls['elided']})"
                      f"{'':>10}{c['drifted_steps']:>3}")
     preempted = {tls: c["preemptions"] for tls, c in s["intersections"].items()
                  if c.get("preemptions", {}).get("count")}
     if preempted:
-        lines += ["Preemptions"] + [f"  {tls:<7} {_preemptions_text(p)}" for tls, p in preempted.items()]
+        lines += ["Preemptions"] + [f"  {tls:<{w}} {_preemptions_text(p)}" for tls, p in preempted.items()]
     return "\n".join(lines)
 
 
@@ -307,12 +308,12 @@ def _traffic_lines(t: Mapping[str, Any]) -> list[str]:
         lines.append(f"  RESCO's figures      delay {_fmt(r['delay_s'])}, trip time {_fmt(r['trip_time_s'])}, "
                      f"waiting time {_fmt(r['waiting_time_s'])}, queue {queue} (SUMO tripinfo of {r['vehicles']} "
                      f"vehicles, {r['never_entered']} never entered; queue over {r['queue_steps']} decision steps)")
-    lines += [
-        "  per approach         arrived  running  waiting  mean delay  max queue  minutes with a lane full",
-    ]
+    w = max(18, *map(len, t["approaches"]))
+    lines.append(f"  {'per approach':<{w + 2}} arrived  running  waiting  mean delay  max queue  "
+                 "minutes with a lane full")
     for name, a in t["approaches"].items():
         spill = len(a["spillback_minutes"])
-        lines.append(f"    {name:<18} {a['arrived']:>7}  {a['running']:>7}  {a['waiting_to_enter']:>7}  "
+        lines.append(f"    {name:<{w}} {a['arrived']:>7}  {a['running']:>7}  {a['waiting_to_enter']:>7}  "
                      f"{_fmt(a['mean_delay']):>10}  {a['max_queue']:>9}  "
                      + (f"{spill} (spillback; a lane holds {a['lane_storage']})" if spill else "0"))
     return lines

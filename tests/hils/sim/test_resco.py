@@ -19,6 +19,7 @@ from hils.protocol import resco
 from hils.protocol.config import FREE, parse
 from hils.protocol.ntcip import SignalState
 from hils.protocol.scenario import SignalLink, load_scenario
+from hils.report import summary
 from hils.run.testbed import Testbed
 from hils.sim.network import NetworkError, PhaseMap, check_scenario, derive_phase_map, sumocfg_net_file
 from hils.sim.resco_metrics import TripinfoError, read_tripinfo
@@ -249,6 +250,31 @@ def write_tripinfo(path: Path, rows: list[dict[str, float]]) -> None:
                    'duration="{duration}" waitingTime="{waitingTime}" timeLoss="{timeLoss}"/>\n'.format(i, **r)
                    for i, r in enumerate(rows))
     path.write_text(f'<?xml version="1.0"?>\n<tripinfos>\n{body}</tripinfos>\n', encoding="utf-8")
+
+
+def test_the_console_summary_keeps_its_columns_under_a_light_named_by_a_45_character_cluster() -> None:
+    """cologne3's third light is ``GS_cluster_2415878664_254486231_359566_359576``: its rows had pushed every column
+    of the plans, signal-control and per-approach tables out of line."""
+    with Testbed(scenario="resco:cologne3", sumo=True, agent="fixed-time", duration=30.0, seed=0) as tb:
+        tb.reset_all()
+        tb.run()
+        text = summary.render(summary.summarize({i.label: (i.tally, i.config) for i in tb.intersections.values()},
+                                                traffic=tb.traffic))
+    lines = text.splitlines()
+    long = max(tb.intersections, key=len)
+    assert len(long) == 45
+
+    def table(title: str, rows: int) -> list[str]:
+        at = next(i for i, line in enumerate(lines) if line.lstrip().startswith(title))
+        return lines[at:at + 1 + rows]
+
+    header, *rows = table("light ", 3)
+    assert {row.index(" of ") - 5 for row in rows} == {header.index("transitions")}  # "{verified:>5} of {dispatched}"
+    assert len({line.index("pattern 1") for line in table("Controller plans", 3)[1:]}) == 1
+    header, *rows = table("per approach", len(tb.traffic.approaches))
+    arrived = header.index("arrived") + len("arrived")  # the column's right edge: numbers are right-aligned
+    assert any(row.lstrip().startswith(long) for row in rows)
+    assert all(row[arrived - 7:arrived].strip().isdigit() and row[arrived] == " " for row in rows), rows
 
 
 def test_resco_figures_from_a_tripinfo_computed_by_hand(tmp_path: Path) -> None:
