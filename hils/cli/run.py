@@ -291,7 +291,7 @@ def _intersection_plots(i: Intersection, s: dict[str, Any], folder: Path, window
     """One intersection's signal timeline and queue plot in ``folder``; returns the names of the files written."""
     folder.mkdir(exist_ok=True)
     written = []
-    name = f"{i.label} ({i.config.name})" if i.label else i.config.name
+    name = plots.named(i.label, i.config)
     if i.tally.records:
         plots.signal_timeline(i.tally.records, i.config, folder / "signal_timeline.svg",
                               start=window[0], end=window[1], label=name, preemptions=i.tally.preemptions)

@@ -60,12 +60,13 @@ import sys
 import xml.etree.ElementTree as ET
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
+from datetime import timedelta
 from functools import cache
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
-from hils.protocol.config import IntersectionConfig, from_dict
+from hils.protocol.config import DEFAULT_START, IntersectionConfig, from_dict
 from hils.protocol.errors import UserError
 from hils.protocol.scenario import RESCO_PREFIX, Scenario, SignalLink
 
@@ -540,6 +541,9 @@ def _table(light: _Light, phases: list[_Phase], resco: RescoMap, structure: str)
         # barrier: tau_trans covers that with a poll's margin.
         "middleware": {"control_interval": resco.decision_interval,
                        "tau_trans": float(math.ceil(longest_min + clearance + 5.0))},
+        # The controller's clock shows SUMO's time of day (cologne starts at 07:00): its hi-res log, its ATSPM bins
+        # and its cycle timer count from midnight as SUMO's program does.
+        "emulator": {"start": DEFAULT_START + timedelta(seconds=resco.start)},
     }
 
 
@@ -655,7 +659,8 @@ def to_toml(config: IntersectionConfig) -> str:
     lines += ["", "[structure]", f"rings = {[list(r) for r in config.rings]}",
               f"barriers = {[sorted(b) for b in config.barriers]}", f"sequence = [{sequence}]", f"pairs = [{pairs}]",
               "", "[middleware]", f"control_interval = {config.middleware.control_interval:g}",
-              f"tau_trans = {config.middleware.tau_trans:g}"]
+              f"tau_trans = {config.middleware.tau_trans:g}", "", "[emulator]",
+              f"start = {config.emulator.start.isoformat()}"]
     c = config.coordination
     if c.patterns:
         lines += ["", "[coordination]", 'pattern = "free"']

@@ -51,7 +51,7 @@ def _draw(path: Path, title: str, legend: Sequence[tuple[str, str]], x_label: st
     columns = 1 if len(panels) == 1 else 2
     rows = (len(panels) + columns - 1) // columns
     svg = Svg(_LEFT + columns * (_PANEL_W + _LEFT), _TOP + rows * (_PANEL_H + _GAP))
-    svg.text(svg.width / 2, 24, title, size=15, anchor="middle")
+    svg.title(title, 24)
     x = _LEFT
     for label, color in legend:
         svg.dots([(x, 46)], color, radius=4)

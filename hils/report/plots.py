@@ -81,6 +81,14 @@ def run_end(records: Sequence[dict[str, Any]]) -> float:
     return ended[-1] if ended else (records[-1]["t"] if records else 0.0)
 
 
+def named(label: str | None, config: IntersectionConfig) -> str:
+    """How a picture's title names an intersection: its label in a run of several and its config's name, once where
+    the name already begins with the label (a RESCO light's derived config: "A0, dual-ring from its SUMO program")."""
+    if not label or config.name.startswith(label):
+        return config.name
+    return f"{label} ({config.name})"
+
+
 def timeline_window(records: Sequence[dict[str, Any]], start: float, end: float) -> tuple[float, float]:
     """The asked window cut to the run: never past its end; a window that starts after the end
     shows the run's last stretch of the same length instead."""
@@ -121,8 +129,8 @@ def signal_timeline(records: Sequence[dict[str, Any]], config: IntersectionConfi
     row_h, left, top, width = 40.0, 150.0, 58.0 if preempted else 40.0, 780.0
     chart = Chart(left, top, width, row_h * len(rows), (start, end))
     svg = Svg(left + width + 90.0, top + chart.height + 60.0)
-    svg.text(svg.width / 2, 22, f"Signal timeline, {label or config.name}: {start:.0f} to {end:.0f} s of a "
-                                f"{run_end(records):.0f} s run", size=15, anchor="middle")
+    svg.title(f"Signal timeline, {label or config.name}: {start:.0f} to {end:.0f} s of a {run_end(records):.0f} s run",
+              22)
     for row, p in enumerate(phases):
         y = top + row * row_h
         for t0, t1, ind in spans[p]:
@@ -204,7 +212,7 @@ def queues(samples: Sequence[tuple[float, Mapping[str, int]]], path: Path, *, ti
     chart = Chart(left, top, width, height, (minutes[0], minutes[-1]) if minutes else (0.0, 1.0),
                   (0.0, max(1.0, highest) * (1.3 if spilled else 1.08)))  # room for the stacked spillback marks
     svg = Svg(left + width + 120.0, top + height + (80.0 if spillback else 55.0))
-    svg.text(svg.width / 2, 22, title, size=15, anchor="middle")
+    svg.title(title, 22)
     svg.text(left + width + 14, top + 8, legend, size=12)
     for index, (name, values) in enumerate(tops.items()):
         color = PALETTE[index % len(PALETTE)]
@@ -230,6 +238,10 @@ def queues(samples: Sequence[tuple[float, Mapping[str, int]]], path: Path, *, ti
 #: grid's sixteen intersections each get their own).
 PALETTE = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f", "#bcbd22",
            "#17becf", "#aec7e8", "#ffbb78", "#98df8a", "#ff9896", "#c5b0d5", "#c49c94")
+
+
+#: The mean advance of a title's characters in DejaVu Sans, in em (its digits 0.64, lower case ~0.6, space 0.32).
+_EM_WIDTH = 0.6
 
 
 class Svg:
@@ -270,6 +282,12 @@ class Svg:
         turn = f' transform="rotate(-90 {x:.2f} {y:.2f})"' if rotate else ""
         self.parts.append(f'<text x="{x:.2f}" y="{y:.2f}" font-size="{size}" text-anchor="{anchor}"{turn}>'
                           f"{escape(text)}</text>")
+
+    def title(self, text: str, y: float, *, size: float = 15) -> None:
+        """The picture's title, centred, its font made smaller where it would run past the edges (RESCO names a light
+        by a cluster id of up to 45 characters)."""
+        fits = (self.width - 20) / (_EM_WIDTH * max(len(text), 1))
+        self.text(self.width / 2, y, text, size=round(min(size, fits), 1), anchor="middle")
 
     def write(self, path: Path) -> Path:
         """Write the picture whole (a file that cannot take all of it is removed: no half picture is left)."""

@@ -20,7 +20,7 @@ from typing import Any
 from hils.protocol import hires
 from hils.protocol.config import IntersectionConfig
 from hils.protocol.hires import Event
-from hils.report import atspm, atspm_charts
+from hils.report import atspm, atspm_charts, plots
 
 #: Where a run at the wall clock finds its controller's log when it does not collect it (summary and event log).
 KEPT_BY_CONTROLLER = ("the controller keeps its own hi-res log: collect it from the controller for the run's window "
@@ -68,7 +68,7 @@ def keep(logs: Mapping[str, list[Event]], configs: Mapping[str, IntersectionConf
     for f in folders.values():
         f.mkdir(exist_ok=True)
     charts = atspm_charts.draw(logs, configs, folders,
-                               {tls: f"{tls} ({configs[tls].name})" if several else configs[tls].name for tls in logs})
+                               {tls: plots.named(tls if several else None, configs[tls]) for tls in logs})
     written += [str(p.relative_to(folder)) for p in charts]
     return section, written
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+from datetime import date, datetime, timedelta
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -76,6 +77,9 @@ pairs = [[2, 6], [1, 5], [2, 5], [1, 6], [4, 8], [3, 7], [3, 8], [4, 7]]
 control_interval = 10
 tau_trans = 14
 
+[emulator]
+start = 2024-01-01T00:00:00
+
 [coordination]
 pattern = "free"
 
@@ -109,6 +113,9 @@ pairs = [[2, 6], [1, 5], [4, 8], [3, 7]]
 control_interval = 10
 tau_trans = 16
 
+[emulator]
+start = 2024-01-01T07:00:00
+
 [coordination]
 pattern = "free"
 
@@ -134,6 +141,7 @@ splits = { 1 = 11, 2 = 34, 3 = 11, 4 = 34, 5 = 11, 6 = 34, 7 = 11, 8 = 34 }"""
     # of their approach) are its protected phase, yielding beside their through (~). minDur 5/maxDur 50 and the
     # 5 s yellow are the program's. Plan: 29+5, 6+5, 29+5, 6+5 s, a cycle of 90 s: 2 and 6 34 s, 1 and 5 11 s, the
     # cross street alike; the longest stages (29 s) are the first and third, the first (2+6) coordinated, offset 0.
+    # The controller's clock starts at the scenario's begin, 25200 s: 07:00.
     ("cologne1", "GS_cluster_357187_359543", COLOGNE1,
      "4 4 4 7~4 7~4 2 2 2 5~2 5~2 8 8 8 3~8 3~8 6 6 6 1~6 1~6"),
 ])
@@ -275,6 +283,17 @@ def test_the_console_summary_keeps_its_columns_under_a_light_named_by_a_45_chara
     arrived = header.index("arrived") + len("arrived")  # the column's right edge: numbers are right-aligned
     assert any(row.lstrip().startswith(long) for row in rows)
     assert all(row[arrived - 7:arrived].strip().isdigit() and row[arrived] == " " for row in rows), rows
+
+
+def test_a_controllers_clock_and_hi_res_log_show_sumos_time_of_day() -> None:
+    """cologne begins at 25200 s of SUMO's day: its controllers' logs start at 07:00, not at midnight."""
+    with Testbed(scenario="resco:cologne1", sumo=True, agent="coordinated", duration=20.0, seed=0) as tb:
+        tb.reset_all()
+        tb.run()
+        (events,) = tb.hires().values()
+    assert events and all(e.time.date() == date(2024, 1, 1) for e in events)
+    assert timedelta(hours=7) <= events[0].time - datetime(2024, 1, 1) < timedelta(hours=7, seconds=1)
+    assert events[-1].time - events[0].time <= timedelta(seconds=20)
 
 
 def test_resco_figures_from_a_tripinfo_computed_by_hand(tmp_path: Path) -> None:
