@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from xml.etree import ElementTree
 
 import pytest
@@ -88,3 +89,22 @@ def test_a_preemption_still_on_at_the_end_is_drawn_to_the_end():
         tally(r)
     assert plots.preempted_spans(tally.preemptions, 0.0, 30.0) == [(12.0, 14.0, (2, 3)), (20.0, 30.0, (1,))]
     assert plots.preempted_spans(tally.preemptions, 15.0, 19.0) == []
+
+
+def test_a_title_too_long_for_the_picture_is_set_smaller_to_fit_and_names_a_resco_light_once(tmp_path):
+    """Measured with matplotlib's own DejaVu Sans metrics, the font the pictures name first."""
+    from matplotlib.font_manager import FontProperties
+    from matplotlib.textpath import TextPath
+
+    records = [*polls(50.0), {"kind": Kind.RUN_ENDED, "t": 50.0}]
+    cluster = "GS_cluster_2415878664_254486231_359566_359576"  # cologne3's third light
+    derived = replace(CFG, name=f"{cluster}, dual-ring from its SUMO program")
+    assert plots.named(cluster, derived) == derived.name and plots.named("J2", CFG) == f"J2 ({CFG.name})"
+    for label, longest in ((None, False), (plots.named(cluster, derived), True)):
+        svg = ElementTree.parse(plots.signal_timeline(records, CFG, tmp_path / "t.svg", end=50,
+                                                      label=label)).getroot()
+        title = next(t for t in svg.iter(f"{SVG}text") if t.text.startswith("Signal timeline"))
+        size = float(title.get("font-size"))
+        wide = TextPath((0, 0), title.text, size=size, prop=FontProperties(family="DejaVu Sans")).get_extents().width
+        assert wide <= float(svg.get("width")) - 20, title.text
+        assert (size < 15) is longest
