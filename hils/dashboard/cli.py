@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING
 from hils.dashboard import DashboardError
 from hils.protocol import config as config_mod
 from hils.protocol.config import IntersectionConfig
-from hils.protocol.scenario import Scenario, load_scenario
+from hils.protocol.scenario import RESCO_PREFIX, Scenario, load_scenario
 
 if TYPE_CHECKING:  # the dashboard's modules load when a page is served, not for `hils --help`
     from hils.dashboard.board import Panels, Replay
@@ -100,7 +100,8 @@ def load_replay(run: Path, *, config: str | None = None, scenario: str | None = 
 
 
 def _config(started: dict, given: str | None, log_path: Path) -> IntersectionConfig:
-    """The config the run used: the one given, or the file its run_started names, or the shipped one."""
+    """The config the run used: the one given, the file its run_started names, the shipped one, or a RESCO light's
+    derived anew from the installed sumo-rl (its source names the scenario and the light)."""
     if given is not None:
         return config_mod.load(given)
     source = started.get("source")
@@ -109,17 +110,25 @@ def _config(started: dict, given: str | None, log_path: Path) -> IntersectionCon
         return default
     if isinstance(source, str) and Path(source).is_file():
         return config_mod.load(source)
+    if isinstance(source, str) and source.startswith(RESCO_PREFIX):  # "resco:cologne1 GS_cluster_357187_359543"
+        scenario, _, tls = source.partition(" ")
+        derived = load_scenario(scenario).intersections
+        if tls in derived:
+            return derived[tls]
     raise DashboardError(f"{log_path}: run_started.source: {source} is not a file here; allowed: give the run's "
                          "config with --config FILE")
 
 
 def _scenario(started: dict, given: str | None, log_path: Path) -> Scenario:
-    """The scenario the run used: the one given, or the file its run_started names."""
+    """The scenario the run used: the one given, the file its run_started names, or RESCO's of its name (read from
+    the installed sumo-rl, as the run did)."""
     if given is not None:
         return load_scenario(given)
-    source = started.get("source")
+    source, name = started.get("source"), started.get("scenario")
     if isinstance(source, str) and Path(source).is_file():
         return load_scenario(source)
+    if isinstance(name, str) and name.startswith(RESCO_PREFIX):
+        return load_scenario(name)
     raise DashboardError(f"{log_path}: run_started.source: {source} is not a file here; allowed: give the run's "
                          "scenario with --scenario NAME|FILE")
 

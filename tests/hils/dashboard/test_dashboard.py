@@ -443,3 +443,20 @@ def test_the_strip_shows_no_data_while_the_signal_state_is_not_verified(paper_co
     segments = board.snapshot()["strip"]["segments"]
     green = {"2": "G", "6": "G"}
     assert segments == [[0.0, green], [2.0, None], [2.5, green], [4.0, None], [9.0, green], [12.0, None]]
+
+
+def test_hils_view_finds_a_resco_runs_lights_by_their_names(tmp_path: Path) -> None:
+    """A RESCO run's source lies inside sumo-rl's wheel ("resco:cologne3 (.../cologne3.sumocfg)", for one light
+    "resco:cologne1 GS_cluster_357187_359543"): the view derives the lights again by name, as the run did, instead of
+    asking for a file."""
+    from hils.cli.main import main
+    from hils.dashboard.cli import load_replay
+
+    for name, lights in (("cologne1", 1), ("cologne3", 3)):
+        out = tmp_path / name
+        assert main(["run", "--scenario", f"resco:{name}", "--duration", "20", "--no-progress", "--out", str(out)]) == 0
+        replay, _, skipped = load_replay(out)
+        snap = replay.at(replay.end).snapshot()
+        boards = snap["panels"] if lights > 1 else [snap]
+        assert not skipped and len(boards) == lights
+        assert all(b["comms"]["polls_ok"] == 200 for b in boards)  # ten a second for 20 s, each its own
