@@ -65,8 +65,8 @@ def _register_serve(commands: argparse._SubParsersAction) -> None:
     which = serve.add_mutually_exclusive_group()
     which.add_argument("--config", metavar="FILE", help="intersection config (TOML); default: the shipped four-leg")
     which.add_argument("--scenario", metavar="NAME|FILE",
-                       help=f"serve every intersection of a scenario ({', '.join(SCENARIOS)} or a .scenario.toml), "
-                            "each with its own config, on consecutive ports in the scenario's order")
+                       help=f"serve every intersection of a scenario ({', '.join(SCENARIOS)}, resco:NAME or a "
+                            ".scenario.toml), each with its own config, on consecutive ports in the scenario's order")
     serve.add_argument("--count", type=int, metavar="N",
                        help="serve N controllers on ports PORT..PORT+N-1 (1, or the scenario's number of "
                             "intersections)")
