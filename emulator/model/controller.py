@@ -50,7 +50,10 @@ called. A ring may not back from a phase with ``backup_prevent`` either. A
 backing refused counts as a wish beyond the barrier (the phase waits for the
 group's next visit, or, with nothing across, both rings clear and restart the
 group for it); when both rings are ready and one wishes beyond, the other does
-not back either (crossing goes first). A wish beyond the barrier is served
+not back either (crossing goes first). While a pattern runs, no ring backs
+while ``backup_prevent`` makes another restart the group, even before that
+one is ready: backed into its coordinated phase, it would rest there to its
+yield point and hold the restart for a cycle (``_beyond`` says why). A wish beyond the barrier is served
 only when every ring is ready (or idle in red) and wishes beyond or nowhere:
 then all rings clear together into the new group, a ring without demand there
 taking its ``dual_entry`` phase if it has one and resting in red otherwise.
@@ -339,6 +342,7 @@ class Controller:
         self._placed: Plan | None = None  # the plan the rings' coordination latches were placed under
         self.group = 0
         self._waiting_across = False  # demand on a phase of another barrier group, this tick
+        self._restarting = False  # a pattern runs and a ring must restart its group through the barrier, this tick
         self._quiet = False  # the last step changed nothing discrete, and no input came since
         self._settled: tuple | None = None  # the discrete state the last step left, if nothing changed it since
         # quiet_ticks' proof: steps before this tick change nothing (None: none proven; every step is real)
@@ -570,6 +574,7 @@ class Controller:
         if pe.started:
             self._preempt_entry()
         self._waiting_across = self._waits_across(demand)
+        self._restarting = self.coordinator.plan is not None and any(self._restarts(r, demand) for r in self.rings)
         if self.config.next_phase_lock is NextPhaseLock.RED_END and pe.serving is None:
             # before timing: the tick that ends a red clearance still reads the calls of that clearance
             for r in self.rings:
@@ -756,10 +761,21 @@ class Controller:
 
     def _waits_across(self, demand: frozenset[int]) -> bool:
         """Demand waits across the barrier (which forbids backing); while a pattern runs only demand that can still
-        be served in this cycle counts (a phase past its permissive period is skipped anyway)."""
-        plan, timer = self.coordinator.plan, self.coordinator.timer
-        clear = max(self._clearance_left(r) for r in self.rings) if plan is not None else 0
-        return any(self._barrier[q] != self.group and (plan is None or plan.fits(q, timer, clear)) for q in demand)
+        be served in this cycle counts (a phase past its permissive period is skipped anyway), measured as its own
+        ring measures it (:meth:`_serviceable`)."""
+        plan = self.coordinator.plan
+        return any(self._barrier[q] != self.group
+                   and (plan is None or self._serviceable(self.rings[self._ring_of[q] - 1], q, demand))
+                   for q in demand)
+
+    def _restarts(self, r: Ring, demand: frozenset[int]) -> bool:
+        """``r``'s next service is a backing that ``backup_prevent`` on its phase forbids: the ring will restart its
+        barrier group through the barrier (see :meth:`_beyond`)."""
+        if r.phase is None or not self.config.phases[r.phase].backup_prevent or not (
+                r.interval is Interval.GREEN or (r.interval is Interval.DWELL and r.target is None)):
+            return False
+        q = self._wish(r, demand)
+        return q is not None and self._backing(r, q)
 
     def _backing(self, r: Ring, q: int) -> bool:
         """Serving ``q`` next would back ``r`` up: ``q`` comes before the ring's phase in their barrier group."""
@@ -768,12 +784,23 @@ class Controller:
 
     def _beyond(self, q: int) -> bool:
         """True when a phase with demand cannot be served in this visit of the barrier group: it lies across
-        the barrier, or its ring would have to back into it while demand waits across the barrier or from a
-        phase with ``backup_prevent``."""
+        the barrier, or its ring would have to back into it while demand waits across the barrier, from a
+        phase with ``backup_prevent``, or (a pattern running) while another ring restarts the group.
+
+        The last case keeps the coordinated phases served. A ring that ``backup_prevent`` keeps from backing
+        restarts its group through the barrier, which takes every ring: Naztec TecNote 3013 gives the option's
+        purpose, to "insure that the controller never 'backs into' a protected left-turn phase", so it holds under
+        coordination too. Had the other ring backed meanwhile into its coordinated phase, that phase would rest
+        to its yield point a cycle later and hold the restarting ring at the barrier until then, its own
+        coordinated phase unserved for that cycle. No source found (NTCIP 1202 defines no backup prevent; SUMO's
+        NEMA controller has none) says what a controller does here; this choice keeps coordination's promise,
+        every coordinated phase served every cycle, and in free mode (where a backed phase ends by its maximum)
+        nothing changes."""
         if self._barrier[q] != self.group:
             return True
         r = self.rings[self._ring_of[q] - 1]
-        return self._backing(r, q) and (self._waiting_across or self.config.phases[r.phase].backup_prevent)
+        return self._backing(r, q) and (self._waiting_across or self.config.phases[r.phase].backup_prevent
+                                        or self._restarting)
 
     def _conflicting(self, r: Ring, demand: frozenset[int]) -> bool:
         return any(q != r.phase and (self._ring_of[q] == r.number or self._beyond(q)) for q in demand)
@@ -846,13 +873,18 @@ class Controller:
 
     def _serviceable(self, r: Ring, q: int, demand: frozenset[int]) -> bool:
         """``q`` has demand and, while a pattern runs, still fits before its force-off point once ``r`` has
-        cleared (a phase that does not fit is skipped: its time goes to the phases after it)."""
+        cleared, and with it every ring showing a phase of another barrier group than ``q``'s (rings cross a
+        barrier together: :meth:`_enter_target`). A phase that does not fit is skipped: its time goes to the
+        phases after it."""
         if q not in demand:
             return False
         plan = self.coordinator.plan
         if plan is None:
             return True
-        return plan.fits(q, self.coordinator.timer, self._clearance_left(r))
+        side = self._barrier[q]
+        clear = max(self._clearance_left(o) for o in self.rings
+                    if o is r or (o.interval is not Interval.DWELL and self._barrier[o.phase] != side))
+        return plan.fits(q, self.coordinator.timer, clear)
 
     def _clearance_left(self, r: Ring) -> int:
         tm = None if r.phase is None else self.timing[r.phase]

@@ -25,6 +25,7 @@ from hils.protocol.config import (
     ForceOff,
     IntersectionConfig,
     ScheduleEntry,
+    from_dict,
     load,
 )
 from hils.protocol.ntcip import (
@@ -234,11 +235,10 @@ def _running(config: IntersectionConfig, **changes: object) -> IntersectionConfi
     return dataclasses.replace(config, coordination=dataclasses.replace(co, pattern=first, schedule=(), **changes))
 
 
-# derandomize: about one random seed in ten finds a config where a ring waits at the barrier for a whole cycle
-# (backup_prevent on a phase after the coordinated phase in its barrier group, the cross street's phase fitting by
-# its own ring's clearance but not by the other's: the other ring backs into its coordinated phase). That gap is
-# known and open (issue 24's closing note); until it is fixed the suite explores the same 40 examples every run
-# instead of going red at random.
+# derandomize: about one random seed in twenty (seed 21 of 1-8 and 21 tried) finds a green serving a walk whose walk and
+# pedestrian clearance outlast its force-off point (the unit powers up mid-cycle and starts a phase on pedestrian
+# recall late in its split: whether it fits is measured by its minimum green alone). That gap is open; the
+# backup_prevent gap this comment named before is fixed (the test above).
 @settings(max_examples=40, deadline=None, derandomize=True)
 @given(config=configs(coordinated=True), calls=st.frozensets(st.sampled_from(range(1, 9))),
        changes=st.lists(st.tuples(st.integers(0, 3000), st.frozensets(st.sampled_from(range(1, 9)))), max_size=4))
@@ -287,6 +287,44 @@ def test_coordinated_phases_are_served_every_cycle_and_fixed_force_offs_hold(
             if plan.force_off[p] in co.passed:
                 overdue.setdefault(r.number, c.tick + 1)
     assert cycles >= 5
+
+
+def _backup_prevented_after_the_coordinated_phase() -> IntersectionConfig:
+    """The case the property below once shrank to: coordinated phases 1 and 5 (cycle 30 s, local zero at 1's
+    green), 3 and 4 called, ``backup_prevent`` on 3, and phase 7 (on pedestrian recall) clearing in 4.2 s against
+    the others' 3.5 s. 4's split no longer fits once both rings have cleared, so ring 1 leaves 3 for 1, which
+    backup prevent allows only through the barrier."""
+    short = {"min_green": 1, "max_green": 1, "yellow": 3.0, "red_clear": 0.5}
+    phases = {str(p): dict(short) for p in range(1, 9)}
+    phases["3"]["backup_prevent"] = True
+    phases["7"] = {"min_green": 1, "max_green": 2, "yellow": 3.0, "red_clear": 1.2, "walk": 1, "ped_clear": 1,
+                   "recall": "ped"}
+    return from_dict({
+        "name": "backup prevent", "phases": phases,
+        "structure": {"rings": [[1, 2, 3, 4], [5, 6, 7, 8]], "barriers": [[1, 2, 3, 5, 6, 7], [4, 8]],
+                      "sequence": [[1, 5], [4, 8]],
+                      "pairs": [[a, b] for a in (1, 2, 3) for b in (5, 6, 7)] + [[4, 8]]},
+        "coordination": {"pattern": 1, "force_off": "fixed", "patterns": [{
+            "number": 1, "cycle": 30, "offset": 0, "coord_phases": [1, 5],
+            "splits": {"1": 12, "2": 5, "3": 8, "4": 5, "5": 12, "6": 5, "7": 8, "8": 5}}]},
+    }, "backup_prevent.toml")
+
+
+def test_a_ring_that_may_not_back_restarts_its_group_and_the_coordinated_phases_are_served_every_cycle() -> None:
+    """Before: ring 2 backed from 7 into its coordinated phase 5 while ring 1's 3, forced off, could neither back
+    into 1 (backup prevent) nor cross alone; 3 then held until 5's yield point a cycle later and 1 was skipped every
+    other cycle. Now ring 2 does not back while ring 1 must go through the barrier: both rings leave 3 and 7 at 3's
+    force-off point (21.5 s) and restart the group, and every cycle shows 1 and 5."""
+    c = Controller(_backup_prevented_after_the_coordinated_phase())
+    c.backup_time = 0
+    c.set_control(CALL, {3, 4})
+    seen = run(c, 6 * 300)
+    cycles = range(6)
+    assert onsets(seen, 3, "Y") == onsets(seen, 7, "Y") == [215 + 300 * k for k in cycles]
+    assert onsets(seen, 1, "G") == [250 + 300 * k for k in cycles]  # after 3's clearance
+    assert onsets(seen, 5, "G") == [257 + 300 * k for k in cycles]  # after 7's longer one
+    # 4 is skipped: once both rings have cleared (at 25.7 s) its minimum no longer ends by its force-off (26.5 s)
+    assert onsets(seen, 4, "G") == []
 
 
 @settings(max_examples=40, deadline=None)
