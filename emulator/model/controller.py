@@ -53,11 +53,12 @@ group for it); when both rings are ready and one wishes beyond, the other does
 not back either (crossing goes first). While a pattern runs, no ring backs
 while ``backup_prevent`` makes another restart the group, even before that
 one is ready: backed into its coordinated phase, it would rest there to its
-yield point and hold the restart for a cycle (``_beyond`` says why). A wish beyond the barrier is served
-only when every ring is ready (or idle in red) and wishes beyond or nowhere:
-then all rings clear together into the new group, a ring without demand there
-taking its ``dual_entry`` phase if it has one and resting in red otherwise.
-Until then the ring wishing across keeps its green (it waits at the barrier).
+yield point and hold the restart for a cycle (``_beyond`` says why). A wish
+beyond the barrier is served only when every ring is ready (or idle in red)
+and wishes beyond or nowhere: then all rings clear together into the new
+group, a ring without demand there taking its ``dual_entry`` phase if it has
+one and resting in red otherwise. Until then the ring wishing across keeps its
+green (it waits at the barrier).
 
 The next phase is *committed at the start of yellow* (shown in
 phaseStatusGroupPhaseNexts from then). With ``next_phase_lock = "green_end"``
