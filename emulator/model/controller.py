@@ -885,7 +885,17 @@ class Controller:
         side = self._barrier[q]
         clear = max(self._clearance_left(o) for o in self.rings
                     if o is r or (o.interval is not Interval.DWELL and self._barrier[o.phase] != side))
-        return plan.fits(q, self.coordinator.timer, clear)
+        inputs = self.inputs
+        vehicle = (q in self.calls and q not in inputs.omits) or q in inputs.recalled or q in inputs.soft
+        return plan.fits(q, self.coordinator.timer, clear, walk=not vehicle and self.timing[q].walk > 0)
+
+    def _walk_fits(self, phase: int) -> bool:
+        """A green of ``phase`` starting now may serve its walk: no pattern runs, or its walk and pedestrian
+        clearance end by its force-off point. Otherwise the pedestrian call waits for a cycle where they do: a
+        controller without stop-in-walk keeps to its splits, and stop-in-walk "will allow an occasional pedestrian
+        call to push the controller out of coordination" (Naztec, Coordination Modes+, MM->2->1)."""
+        plan = self.coordinator.plan
+        return plan is None or plan.fits(phase, self.coordinator.timer, 0, walk=True)
 
     def _clearance_left(self, r: Ring) -> int:
         tm = None if r.phase is None else self.timing[r.phase]
@@ -979,8 +989,10 @@ class Controller:
         if interval is Interval.GREEN:
             self._place(r)
             r.cut = 0
-            served = r.phase in self.ped_calls and tm.walk > 0
-            self.ped_calls -= {r.phase}
+            called = r.phase in self.ped_calls and tm.walk > 0
+            served = called and self._walk_fits(r.phase)
+            if served or not called:
+                self.ped_calls -= {r.phase}
             r.walk, r.ped_clear = (tm.walk, tm.ped_clear) if served else (0, 0)
             r.minimum = max(tm.min_green, r.walk + r.ped_clear)
             r.maximum = tm.max2 if r.number in self.max2_rings else tm.max1

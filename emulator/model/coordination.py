@@ -99,6 +99,7 @@ class Plan:
     start: Mapping[int, int]  # cycle position of each phase's split start
     force_off: Mapping[int, int]  # cycle position where each phase's green must end
     min_green: Mapping[int, int]
+    walk_service: Mapping[int, int]  # the least a green serving a walk lasts: minimum green, or walk + ped clear
     clearance: Mapping[int, int]
     ring_of: Mapping[int, int]
     modes: Mapping[int, SplitMode]
@@ -115,12 +116,14 @@ class Plan:
         """Ticks from its ring's yield point to ``phase``'s force-off point (the cycle for the coordinated phase)."""
         return (self.force_off[phase] - self.force_off[self.coord[self.ring_of[phase]]]) % self.cycle or self.cycle
 
-    def fits(self, phase: int, local: int, clearance: int) -> bool:
-        """``phase`` can still start after ``clearance`` ticks, serve its minimum and reach its force-off point in
-        this cycle (the coordinated phase always fits: it is where the ring returns)."""
+    def fits(self, phase: int, local: int, clearance: int, *, walk: bool = False) -> bool:
+        """``phase`` can still start after ``clearance`` ticks, serve its minimum (with ``walk``, its walk and
+        pedestrian clearance too) and reach its force-off point in this cycle (the coordinated phase always fits:
+        it is where the ring returns)."""
         if phase in self.coord.values():
             return True
-        return self.position(phase, local) + clearance + self.min_green[phase] <= self.reach(phase)
+        least = self.walk_service[phase] if walk else self.min_green[phase]
+        return self.position(phase, local) + clearance + least <= self.reach(phase)
 
     def permitted(self, prior: int, local: int) -> bool:
         """The permissive period of the phase after ``prior`` (leaving its ring's coordinated phase) is open:
@@ -167,7 +170,8 @@ class Plan:
         for p in self.split:
             if p not in self.coord.values():
                 y = self.force_off[self.coord[self.ring_of[p]]]
-                out |= {(y + self.reach(p) - self.min_green[p] - c + 1) % self.cycle for c in clearances}
+                out |= {(y + self.reach(p) - least - c + 1) % self.cycle for c in clearances
+                        for least in (self.min_green[p], self.walk_service[p])}
         return frozenset(out)
 
 
@@ -206,9 +210,12 @@ def lay_out(number: int, row: PatternRow, splits: Mapping[int, SplitRow], config
     start = {p: (raw_start[p] - zero) % cycle for p in phases}
     force = {p: (raw_force[p] - zero) % cycle for p in phases}
     min_green = {p: round(ph.min_green * tick) for p, ph in phases.items()}
+    walk_service = {p: max(min_green[p], round((ph.walk + ph.ped_clear) * tick) if ph.walk else 0)
+                    for p, ph in phases.items()}
     greens = [(force[c] - start[c]) % cycle for c in coord.values()]
     return Plan(number, cycle, row.offset * tick, coord, {p: splits[p].time * tick for p in phases}, start, force,
-                min_green, clearance, {p: ph.ring for p, ph in phases.items()}, {p: splits[p].mode for p in phases},
+                min_green, walk_service, clearance, {p: ph.ring for p, ph in phases.items()},
+                {p: splits[p].mode for p in phases},
                 hold=(min(force[c] for c in coord.values()) - 1) % cycle,
                 jump=min(start[c] for c in coord.values()), add_cap=cycle // CORRECTION_SHARE,
                 subtract_cap=max(0, min(min(greens) - max(min_green[c] for c in coord.values()),
