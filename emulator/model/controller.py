@@ -81,7 +81,10 @@ together) and its red revert since its own last yellow has passed.
 
 A walk is served when the phase's green starts with a pedestrian call (latched
 from phaseControlGroupPedCall or ped recall, not on a PedOmit phase); a call
-arriving later in the green waits for the next service (no recycling). A push
+arriving later in the green waits for the next service (no recycling). While a
+pattern runs, the walk is served only if it and the pedestrian clearance end by
+the phase's force-off point; otherwise the call stays latched for the next
+cycle, and a phase wanted by its pedestrian call alone is skipped. A push
 button (a pedestrian detector, pedestrianDetectorControlGroupActuation) latches
 its phase's call at once, during that phase's green too: the walk comes at the
 phase's next green. PedOmit stops new walks only; a walk being timed completes.
