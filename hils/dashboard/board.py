@@ -440,7 +440,9 @@ class Panels:
             col, row = self.cells[tls]
             snap = board.snapshot()
             del snap["t"], snap["run"]  # the run's, given once
-            panels.append({"id": tls, "name": board.config.name, "col": col, "row": row, **snap})
+            # The panel's heading names the light; a RESCO light's derived config repeats it ("A0, dual-ring ...").
+            name = board.config.name.removeprefix(f"{tls}, ")
+            panels.append({"id": tls, "name": name, "col": col, "row": row, **snap})
         return {"t": round(self.t, 3), "run": self.run, "ended": self.ended, "panels": panels,
                 "cols": 1 + max(c for c, _ in self.cells.values()), "rows": 1 + max(r for _, r in self.cells.values())}
 

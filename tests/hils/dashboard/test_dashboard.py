@@ -460,3 +460,5 @@ def test_hils_view_finds_a_resco_runs_lights_by_their_names(tmp_path: Path) -> N
         boards = snap["panels"] if lights > 1 else [snap]
         assert not skipped and len(boards) == lights
         assert all(b["comms"]["polls_ok"] == 200 for b in boards)  # ten a second for 20 s, each its own
+        if lights > 1:  # each panel's heading names its light; the derived config's name does not repeat it
+            assert {b["name"] for b in boards} == {"dual-ring from its SUMO program"}
