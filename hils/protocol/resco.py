@@ -630,7 +630,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"hils.protocol.resco: {exc}", file=sys.stderr)
         return 1
     for tls, config in scenario.intersections.items():
-        print(f"# {tls}: {config.name}")
+        print(f"# {tls}")
         print(to_toml(config))
         print("# signal links: index = phase (+ overlaps, ~ yields with)")
         for index, link in enumerate(scenario.links[tls]):
