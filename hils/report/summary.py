@@ -252,22 +252,22 @@ def _render_network(summary: Mapping[str, Any]) -> str:
              _simulated(s)]
     if s.get("traffic"):
         lines += _traffic_lines(s["traffic"])
-    w = max(7, *map(len, s["intersections"]))  # RESCO's cluster names run to 45 characters
+    w = _width(s["intersections"], 7)
     plans = {tls: _plan_text(c.get("controller_plan", {})) for tls, c in s["intersections"].items()}
     if any(text != "free" for text in plans.values()):
-        lines += ["Controller plans"] + [f"  {tls:<{w}} {text}" for tls, text in plans.items()]
+        lines += ["Controller plans"] + [f"  {_fit(tls, w)} {text}" for tls, text in plans.items()]
     lines += ["Signal control per intersection",
               f"  {'light':<{w}} transitions  hold mean   timeouts               polls (failed, not sent)   drifted"]
     for tls, c in s["intersections"].items():
         h, polls, timeouts = c["hold_s"], _polls_shown(c), _timeouts(c)
-        lines.append(f"  {tls:<{w}} {c['transitions_verified']:>5} of {c['commands_dispatched']:<4} "
+        lines.append(f"  {_fit(tls, w)} {c['transitions_verified']:>5} of {c['commands_dispatched']:<4} "
                      f"{_fmt(h['mean'] if h['n'] else None):>9}   {timeouts:<22} "
                      f"{polls['polls']:>6} ({polls['failed']}, {polls['elided']})"
                      f"{'':>10}{c['drifted_steps']:>3}")
     preempted = {tls: c["preemptions"] for tls, c in s["intersections"].items()
                  if c.get("preemptions", {}).get("count")}
     if preempted:
-        lines += ["Preemptions"] + [f"  {tls:<{w}} {_preemptions_text(p)}" for tls, p in preempted.items()]
+        lines += ["Preemptions"] + [f"  {_fit(tls, w)} {_preemptions_text(p)}" for tls, p in preempted.items()]
     return "\n".join(lines)
 
 
@@ -308,15 +308,33 @@ def _traffic_lines(t: Mapping[str, Any]) -> list[str]:
         lines.append(f"  RESCO's figures      delay {_fmt(r['delay_s'])}, trip time {_fmt(r['trip_time_s'])}, "
                      f"waiting time {_fmt(r['waiting_time_s'])}, queue {queue} (SUMO tripinfo of {r['vehicles']} "
                      f"vehicles, {r['never_entered']} never entered; queue over {r['queue_steps']} decision steps)")
-    w = max(18, *map(len, t["approaches"]))
+    w = _width(t["approaches"], 18)
     lines.append(f"  {'per approach':<{w + 2}} arrived  running  waiting  mean delay  max queue  "
                  "minutes with a lane full")
     for name, a in t["approaches"].items():
         spill = len(a["spillback_minutes"])
-        lines.append(f"    {name:<{w}} {a['arrived']:>7}  {a['running']:>7}  {a['waiting_to_enter']:>7}  "
+        lines.append(f"    {_fit(name, w)} {a['arrived']:>7}  {a['running']:>7}  {a['waiting_to_enter']:>7}  "
                      f"{_fmt(a['mean_delay']):>10}  {a['max_queue']:>9}  "
                      + (f"{spill} (spillback; a lane holds {a['lane_storage']})" if spill else "0"))
     return lines
+
+
+#: The widest a name column grows. RESCO names lights by their SUMO cluster ids: cologne3's runs to 45 characters,
+#: one of ingolstadt's to 166. Longer names are shortened in the middle; summary.json keeps them whole.
+_NAME_COLUMN = 48
+
+
+def _width(names: Iterable[str], least: int) -> int:
+    return min(_NAME_COLUMN, max(least, *map(len, names)))
+
+
+def _fit(name: str, width: int) -> str:
+    """``name`` in a column ``width`` wide: padded, or shortened in the middle (its start and end tell lights and
+    approaches apart: ``cluster_3064…_306484190 north``)."""
+    if len(name) <= width:
+        return f"{name:<{width}}"
+    tail = (width - 1) // 2
+    return name[:width - 1 - tail] + "…" + name[-tail:]
 
 
 def _refused(refusal: Mapping[str, Any]) -> str:

@@ -91,7 +91,7 @@ class ApproachSummary:
     mean_delay: float | None
     max_queue: int
     lane_storage: int  # vehicles its shortest lane holds end to end (lane length / (vehicle length + gap))
-    spillback_minutes: tuple[int, ...]  # minutes of the run in which one of its lanes was full (spillback)
+    spillback_minutes: tuple[int, ...]  # minutes in which a lane of it was full of halted vehicles (spillback)
 
 
 @dataclass(frozen=True)
@@ -398,8 +398,10 @@ class SumoSimulation:
                                tuple(int(libsumo.lane.getLength(lane) // spacing) for lane in lanes))
                               for approach, lanes in approach_lanes)
         ends = accumulate(len(its) for _, its, _ in self._storage)
+        # A lane shorter than one vehicle (RESCO's networks have such) cannot show a queue reaching back: it is never
+        # full.
         self._sampled = (tuple(lane for _, its, _ in self._storage for lane in its),
-                         tuple(c for _, _, capacities in self._storage for c in capacities),
+                         tuple(c or sys.maxsize for _, _, capacities in self._storage for c in capacities),
                          tuple((a, slice(end - len(its), end))
                                for (a, its, _), end in zip(self._storage, ends, strict=True)))
         self._spill_minutes = {approach: set() for approach, _ in approach_lanes}
@@ -492,8 +494,9 @@ class SumoSimulation:
             queue = sum(halting[its])
             if queue > top[approach]:
                 top[approach] = queue
-        # a lane holding as many vehicles as fit on it: the queue reaches back beyond the network
-        full = list(map(operator.ge, map(_lane_vehicles, lanes), capacities))
+        # a lane holding as many halted vehicles as fit on it: the queue reaches back beyond the network (vehicles
+        # merely on it do not: a short lane holds one moving vehicle as often as not)
+        full = list(map(operator.ge, halting, capacities))
         if any(full):
             minute = int((self.time - self.begin) // 60.0)
             for approach, its in approaches:
@@ -543,7 +546,7 @@ class SumoSimulation:
             approach = self._approach(vid)
             delays.setdefault(approach, []).append(libsumo.vehicle.getDepartDelay(vid))
             counts.setdefault(approach, Counter())["waiting"] += 1
-        storage = {a: min(capacities, default=0) for a, _, capacities in self._storage}
+        storage = {a: min(filter(None, capacities), default=0) for a, _, capacities in self._storage}
         approaches = {a: ApproachSummary(
             departed=counts[a]["arrived"] + counts[a]["running"], arrived=counts[a]["arrived"],
             running=counts[a]["running"], waiting_to_enter=counts[a]["waiting"],
