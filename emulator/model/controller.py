@@ -889,7 +889,10 @@ class Controller:
         clear = max(self._clearance_left(o) for o in self.rings
                     if o is r or (o.interval is not Interval.DWELL and self._barrier[o.phase] != side))
         inputs = self.inputs
-        vehicle = (q in self.calls and q not in inputs.omits) or q in inputs.recalled or q in inputs.soft
+        # wanted for a vehicle, not only for its pedestrian call (soft recall counts as _wanted counts it: when
+        # nothing else wants service)
+        vehicle = (q in self.calls and q not in inputs.omits) or q in inputs.recalled or (
+            q in inputs.soft and demand <= inputs.soft)
         return plan.fits(q, self.coordinator.timer, clear, walk=not vehicle and self.timing[q].walk > 0)
 
     def _walk_fits(self, phase: int) -> bool:

@@ -46,6 +46,7 @@ from typing import Any
 from hils.dashboard.cabinet import COLUMNS as CABINET_COLUMNS
 from hils.dashboard.cabinet import OVERLAP_COLUMNS
 from hils.protocol.config import IntersectionConfig, OverlapKind
+from hils.protocol.scenario import described
 from hils.shell.events import signal_known
 
 #: Seconds of signal history in the strip.
@@ -440,9 +441,7 @@ class Panels:
             col, row = self.cells[tls]
             snap = board.snapshot()
             del snap["t"], snap["run"]  # the run's, given once
-            # The panel's heading names the light; a RESCO light's derived config repeats it ("A0, dual-ring ...").
-            name = board.config.name.removeprefix(f"{tls}, ")
-            panels.append({"id": tls, "name": name, "col": col, "row": row, **snap})
+            panels.append({"id": tls, "name": described(tls, board.config), "col": col, "row": row, **snap})
         return {"t": round(self.t, 3), "run": self.run, "ended": self.ended, "panels": panels,
                 "cols": 1 + max(c for c, _ in self.cells.values()), "rows": 1 + max(r for _, r in self.cells.values())}
 

@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING
 from hils.dashboard import DashboardError
 from hils.protocol import config as config_mod
 from hils.protocol.config import IntersectionConfig
+from hils.protocol.resco import light_of
 from hils.protocol.scenario import RESCO_PREFIX, Scenario, load_scenario
 
 if TYPE_CHECKING:  # the dashboard's modules load when a page is served, not for `hils --help`
@@ -110,11 +111,11 @@ def _config(started: dict, given: str | None, log_path: Path) -> IntersectionCon
         return default
     if isinstance(source, str) and Path(source).is_file():
         return config_mod.load(source)
-    if isinstance(source, str) and source.startswith(RESCO_PREFIX):  # "resco:cologne1 GS_cluster_357187_359543"
-        scenario, _, tls = source.partition(" ")
-        derived = load_scenario(scenario).intersections
-        if tls in derived:
-            return derived[tls]
+    light = light_of(source) if isinstance(source, str) else None
+    if light is not None:
+        derived = load_scenario(light[0]).intersections
+        if light[1] in derived:
+            return derived[light[1]]
     raise DashboardError(f"{log_path}: run_started.source: {source} is not a file here; allowed: give the run's "
                          "config with --config FILE")
 

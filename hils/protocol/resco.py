@@ -227,7 +227,7 @@ def derive(tls: Any, resco: RescoMap, scenario: str) -> DerivedLight:
     if isinstance(plan, dict):  # free at power-up, as the phase-commanding agents need
         table["coordination"] = {"pattern": "free", "patterns": [plan]}
     try:
-        config = from_dict(table, source=f"{scenario} {light.id}")
+        config = from_dict(table, source=source_of(scenario, light.id))
     except UserError as exc:  # a derivation that breaks a config rule is this module's bug, said so
         raise RescoError(f"{light.where}: the derived config is not valid ({exc})") from None
     if isinstance(plan, str):
@@ -236,6 +236,18 @@ def derive(tls: Any, resco: RescoMap, scenario: str) -> DerivedLight:
                   SignalLink(phases[link[0]].number, link[1], _numbers(phases, link[2]), _numbers(phases, link[3]))
                   for link in links)
     return DerivedLight(config, bound, structure, MappingProxyType(table))
+
+
+def source_of(scenario: str, tls: str) -> str:
+    """A derived config's source, as a run's log names it: the scenario and the light (``resco:cologne1 GS_...``)."""
+    return f"{scenario} {tls}"
+
+
+def light_of(source: str) -> tuple[str, str] | None:
+    """The scenario and light a derived config's :func:`source_of` names; None for any other source (a file, or a
+    RESCO scenario's own: ``resco:cologne3 (.../cologne3.sumocfg)``)."""
+    scenario, _, tls = source.partition(" ")
+    return (scenario, tls) if scenario.startswith(RESCO_PREFIX) and tls and not tls.startswith("(") else None
 
 
 class _NoFit(Exception):

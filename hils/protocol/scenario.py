@@ -88,6 +88,12 @@ def labels(names: Sequence[str]) -> dict[str, str | None]:
     return {name: name if len(names) > 1 else None for name in names}
 
 
+def described(label: str | None, config: IntersectionConfig) -> str:
+    """An intersection's config name less the label it repeats: a RESCO light's derived config is named after the
+    light ("A0, dual-ring from its SUMO program"), where a label already names it."""
+    return config.name.removeprefix(f"{label}, ") if label else config.name
+
+
 def scenario_path(name_or_path: str | Path) -> Path:
     """The file of a shipped scenario's name, or the path given."""
     if str(name_or_path) in SCENARIOS:

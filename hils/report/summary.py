@@ -325,7 +325,7 @@ _NAME_COLUMN = 48
 
 
 def _width(names: Iterable[str], least: int) -> int:
-    return min(_NAME_COLUMN, max(least, *map(len, names)))
+    return min(_NAME_COLUMN, max([least, *map(len, names)]))
 
 
 def _fit(name: str, width: int) -> str:
