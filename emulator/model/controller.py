@@ -99,10 +99,12 @@ under the configured matrix, and that no overlap showing green or yellow
 stands beside a phase it conflicts with (:mod:`emulator.model.overlaps`); if they
 are, the controller goes to flash (all red) and stops timing.
 
-Overlaps follow the phases at the end of each tick; a trailing overlap (its
-own green, yellow and red after its parents ended) holds back a committed
-phase that conflicts with it until it has cleared, as controllers do when
-their overlap clearance locks the next phase.
+Overlaps follow the phases at the end of each tick; an overlap that will
+still show green or yellow after this tick (its own trailing green, yellow
+and red after its parents ended, or a green whose included next was taken
+away) holds back a committed phase that conflicts with it until it has
+cleared, as controllers do when their overlap clearance locks the next
+phase; a minus-green-yellow overlap's modifier waits for it likewise.
 
 Quiet time. Most ticks change nothing but counters: a green resting on its
 call, a yellow timing its length. A tick's discrete effects (intervals,
@@ -142,7 +144,7 @@ from typing import Protocol
 import simpy
 
 from emulator.model.coordination import Coordinator, Plan
-from emulator.model.overlaps import Overlaps
+from emulator.model.overlaps import Overlaps, Phases
 from emulator.model.preemption import Event, Preemptor
 from hils.protocol.config import IntersectionConfig, NextPhaseLock, Phase, Recall
 from hils.protocol.ntcip import (
@@ -981,8 +983,8 @@ class Controller:
         revert = self._yellow_end.get(t)
         if others_elsewhere or (revert is not None and self.tick - revert < self.timing[t].red_revert):
             return
-        if self.overlaps.blocks(t):
-            return  # a trailing overlap it conflicts with still shows
+        if self.config.overlaps and self.overlaps.blocks(t, self._phases()):
+            return  # an overlap it waits for still shows (or clears) after this tick
         r.phase, r.target = t, None
         self._enter(r, Interval.GREEN)
 
@@ -1140,12 +1142,18 @@ class Controller:
 
     def _step_overlaps(self) -> None:
         """The overlaps follow what the phases show after this tick's timing."""
-        if not self.config.overlaps:
-            return
-        greens = frozenset(r.phase for r in self.rings if r.interval is Interval.GREEN)
-        yellows = frozenset(r.phase for r in self.rings if r.interval is Interval.YELLOW)
-        nexts = {r.phase: r.target for r in self.rings if r.interval is not Interval.GREEN and r.phase is not None}
-        self.overlaps.step(greens, yellows, nexts)
+        if self.config.overlaps:
+            self.overlaps.step(self._phases())
+
+    def _phases(self) -> Phases:
+        """What the rings show now, as the overlaps read it."""
+        rings = self.rings
+        return Phases(
+            greens=frozenset(r.phase for r in rings if r.interval is Interval.GREEN),
+            yellows=frozenset(r.phase for r in rings if r.interval is Interval.YELLOW),
+            starting=frozenset(r.phase for r in rings if r.interval is Interval.YELLOW and r.ticks == 0),
+            nexts={r.phase: r.target for r in rings if r.interval is not Interval.GREEN and r.phase is not None},
+            committed=frozenset(r.target for r in rings if r.target is not None))
 
     def _monitor(self) -> None:
         if self._status is self._checked:

@@ -28,6 +28,19 @@ included phases" (overlapIncludedPhases); it never starts a green before an incl
 overlap that was held red by its modifier does not turn yellow when its included phase clears: a yellow
 follows a green.
 
+Never green to red. The standard's rules read alone allow two displays no signal may show, and a signal
+monitor faults a channel that skips its yellow (NEMA TS 2's MMU: "Minimum Yellow Change Interval"
+monitoring). Where they would, the overlap times a yellow of its own (overlapTrailYellow, 3.0 s at least)
+and its trailing red, and the phase that ends its green waits for that clearance, as a conflicting phase
+waits for a trailing overlap (:meth:`Overlaps.blocks`):
+
+- A minus-green-yellow overlap whose modifier is to start beside a green included phase: read literally, it
+  goes from green to red the tick the modifier turns green. Here it clears once the modifier is committed
+  next (phaseStatusGroupPhaseNexts), and the modifier waits for it; it stays red while the modifier is green.
+- A green overlap whose included phase's clearance loses its included next (a ``red_end`` redirect or a
+  preempt commits another phase): it times its own yellow. It follows its parent's yellow only from that
+  yellow's first tick, so that yellow is never a remnant of the parent's.
+
 overlapTrailGreen: "When this value is greater than zero and the overlap green would normally terminate, the
 overlap green shall be extended by this additional time", followed by the overlap's own overlapTrailYellow and
 overlapTrailRed. A trailing overlap shows beyond its parents, so a phase that conflicts with it (see
@@ -70,10 +83,11 @@ class Show(StrEnum):
 class Cond(Enum):
     """What decides an overlap's next display (see ``_NEXT``)."""
 
-    HELD = "its included phases hold it green (and no modifier of a minus-green-yellow overlap is green)"
+    HELD = "its included phases hold it green (and no modifier of a minus-green-yellow overlap is green or next)"
     FLASH = "a flashing yellow arrow's permissive (modifier) phase is green"
-    MODIFIED = "a minus-green-yellow overlap's modifier phase is green"
+    MODIFIED = "a minus-green-yellow overlap's modifier phase is green or committed next"
     TRAILS = "it has a trailing green"
+    CLEARS = "the yellow of a phase it follows starts now (and no modifier of a minus-green-yellow overlap is yellow)"
     CLEARING = "a phase it follows is yellow (and no modifier of a minus-green-yellow overlap is)"
     TIMED = "its trailing interval has run its length"
     ALWAYS = "otherwise"
@@ -81,12 +95,13 @@ class Cond(Enum):
 
 _NEXT: dict[Show, tuple[tuple[Cond, Show], ...]] = {
     Show.RED: ((Cond.HELD, Show.GREEN), (Cond.FLASH, Show.FLASHING), (Cond.ALWAYS, Show.RED)),
-    Show.GREEN: ((Cond.HELD, Show.GREEN), (Cond.MODIFIED, Show.RED), (Cond.TRAILS, Show.TRAIL_GREEN),
-                 (Cond.CLEARING, Show.YELLOW), (Cond.ALWAYS, Show.TRAIL_YELLOW)),
+    Show.GREEN: ((Cond.HELD, Show.GREEN), (Cond.MODIFIED, Show.TRAIL_YELLOW), (Cond.TRAILS, Show.TRAIL_GREEN),
+                 (Cond.CLEARS, Show.YELLOW), (Cond.ALWAYS, Show.TRAIL_YELLOW)),
     Show.FLASHING: ((Cond.HELD, Show.GREEN), (Cond.FLASH, Show.FLASHING), (Cond.CLEARING, Show.YELLOW),
                     (Cond.ALWAYS, Show.RED)),
     Show.YELLOW: ((Cond.CLEARING, Show.YELLOW), (Cond.ALWAYS, Show.RED)),
-    Show.TRAIL_GREEN: ((Cond.HELD, Show.GREEN), (Cond.TIMED, Show.TRAIL_YELLOW), (Cond.ALWAYS, Show.TRAIL_GREEN)),
+    Show.TRAIL_GREEN: ((Cond.HELD, Show.GREEN), (Cond.MODIFIED, Show.TRAIL_YELLOW), (Cond.TIMED, Show.TRAIL_YELLOW),
+                       (Cond.ALWAYS, Show.TRAIL_GREEN)),
     Show.TRAIL_YELLOW: ((Cond.TIMED, Show.TRAIL_RED), (Cond.ALWAYS, Show.TRAIL_YELLOW)),
     Show.TRAIL_RED: ((Cond.TIMED, Show.RED), (Cond.ALWAYS, Show.TRAIL_RED)),
 }
@@ -95,6 +110,17 @@ _GREEN = frozenset({Show.GREEN, Show.TRAIL_GREEN})
 _YELLOW = frozenset({Show.YELLOW, Show.TRAIL_YELLOW, Show.FLASHING})
 #: Displays that outlast the overlap's parents: a phase conflicting with the overlap waits for them to end.
 TRAILING = frozenset({Show.TRAIL_GREEN, Show.TRAIL_YELLOW, Show.TRAIL_RED})
+
+
+@dataclass(frozen=True, slots=True)
+class Phases:
+    """What the phases show as the overlaps step: each ring's phase once it has timed this tick."""
+
+    greens: frozenset[int]
+    yellows: frozenset[int]
+    starting: frozenset[int]  # phases whose yellow starts this tick
+    nexts: Mapping[int, int | None]  # each phase clearing or resting in red: its ring's committed next phase
+    committed: frozenset[int]  # every ring's committed next phase (phaseStatusGroupPhaseNexts)
 
 
 @dataclass(slots=True)
@@ -119,6 +145,10 @@ class Overlaps:
         #: Per overlap, the phases that may not show green or yellow beside it.
         self.conflicting = {n: frozenset(p for p in config.phases if not config.overlap_allows(n, p))
                             for n in config.overlaps}
+        #: Per overlap, the phases that may not start while it shows: those conflicting with it, and a
+        #: minus-green-yellow overlap's modifiers (it clears before they start: see "Never green to red").
+        self.waiting = {n: self.conflicting[n] | frozenset(o.modifiers if o.kind is OverlapKind.MINUS_GREEN_YELLOW
+                                                           else ()) for n, o in config.overlaps.items()}
         self.reset()
 
     def reset(self) -> None:
@@ -145,57 +175,54 @@ class Overlaps:
     def discrete(self) -> tuple[Show, ...]:
         return tuple(self.shown.values())
 
-    def blocks(self, phase: int) -> bool:
-        """A trailing overlap that ``phase`` conflicts with still shows (or clears) after this tick: the phase
-        waits. Asked before the overlaps step, like a ring's next phase that starts the tick its red ends."""
-        return any(s in TRAILING and phase in self.conflicting[n] and not self._clears_now(n, s)
-                   for n, s in self.shown.items())
+    def blocks(self, phase: int, phases: Phases) -> bool:
+        """``phase`` may not start this tick: an overlap it waits for will not show red after this tick's step.
+        Asked before the overlaps step, with what the phases show then: starting ``phase`` cannot hold such an
+        overlap green (it is none of its parents), so the answer stands once the phase has started."""
+        return any(phase in self.waiting[n] and self._after(n, phases)[0] is not Show.RED for n in self.shown)
 
-    def _clears_now(self, n: int, s: Show) -> bool:
-        last = s is Show.TRAIL_RED or (s is Show.TRAIL_YELLOW and self.timing[n].trail_red == 0)
-        return last and self.ticks[n] + 1 >= self._length(n, s)
+    def step(self, phases: Phases) -> None:
+        """One tick, after the rings have timed: each overlap follows what the phases show now."""
+        for n, s in self.shown.items():
+            to, ticks = self._after(n, phases)
+            self.shown[n], self.ticks[n] = to, ticks if to is s else 0
 
-    def step(self, greens: frozenset[int], yellows: frozenset[int], nexts: Mapping[int, int | None]) -> None:
-        """One tick: what the phases show now (``nexts``: each phase clearing or resting in red, its ring's
-        committed next phase)."""
-        for n, o in self.config.overlaps.items():
-            s = self.shown[n]
-            if s in TRAILING:
-                self.ticks[n] += 1
-            to = next(to for cond, to in _NEXT[s] if self._holds(cond, n, o, greens, yellows, nexts))
-            if to is not s:
-                self._enter(n, to)
+    def _after(self, n: int, phases: Phases) -> tuple[Show, int]:
+        """What overlap ``n`` shows once this tick's step has run, and the ticks its trailing interval then has
+        timed (one more than now)."""
+        s = self.shown[n]
+        ticks = self.ticks[n] + (s in TRAILING)
+        to = next(to for cond, to in _NEXT[s] if self._holds(cond, n, phases, ticks))
+        # A trailing red of no length is no interval at all: the overlap is red at once.
+        return (Show.RED if to is Show.TRAIL_RED and self.timing[n].trail_red == 0 else to), ticks
 
-    def _holds(self, cond: Cond, n: int, o: Overlap, greens: frozenset[int], yellows: frozenset[int],
-               nexts: Mapping[int, int | None]) -> bool:
+    def _holds(self, cond: Cond, n: int, phases: Phases, ticks: int) -> bool:
+        o = self.config.overlaps[n]
         minus = o.kind is OverlapKind.MINUS_GREEN_YELLOW
+        greens, yellows = phases.greens, phases.yellows
         if cond is Cond.HELD:
             # Cycling between included phases keeps a green; it does not start one (a ring resting in red that
             # commits its own included phase again shows nothing green yet).
+            nexts = phases.nexts
             cycling = self.shown[n] in _GREEN and any(p in o.included and nexts.get(p) in o.included for p in nexts)
-            return (cycling or not greens.isdisjoint(o.included)) and not (minus and not greens.isdisjoint(o.modifiers))
+            return (cycling or not greens.isdisjoint(o.included)) and not self._holds(Cond.MODIFIED, n, phases, ticks)
         if cond is Cond.FLASH:
             return o.kind is OverlapKind.FYA and not greens.isdisjoint(o.modifiers)
         if cond is Cond.MODIFIED:
-            return minus and not greens.isdisjoint(o.modifiers)
+            return minus and not (greens | phases.committed).isdisjoint(o.modifiers)
         if cond is Cond.TRAILS:
             return self.timing[n].trail_green > 0
-        if cond is Cond.CLEARING:
+        if cond in (Cond.CLEARS, Cond.CLEARING):
             followed = o.included + o.modifiers if o.kind is OverlapKind.FYA else o.included
-            return not yellows.isdisjoint(followed) and not (minus and not yellows.isdisjoint(o.modifiers))
+            clearing = phases.starting if cond is Cond.CLEARS else yellows
+            return not clearing.isdisjoint(followed) and not (minus and not yellows.isdisjoint(o.modifiers))
         if cond is Cond.TIMED:
-            return self.ticks[n] >= self._length(n, self.shown[n])
+            return ticks >= self._length(n, self.shown[n])
         return True
 
     def _length(self, n: int, s: Show) -> int:
         tm = self.timing[n]
         return {Show.TRAIL_GREEN: tm.trail_green, Show.TRAIL_YELLOW: tm.trail_yellow, Show.TRAIL_RED: tm.trail_red}[s]
-
-    def _enter(self, n: int, s: Show) -> None:
-        # A trailing red of no length is no interval at all: the overlap is red at once.
-        if s is Show.TRAIL_RED and self.timing[n].trail_red == 0:
-            s = Show.RED
-        self.shown[n], self.ticks[n] = s, 0
 
     # --- quiet time (see emulator/model/controller.py) -------------------------------------------------
 

@@ -8,6 +8,9 @@ arrows E (protected 1, permissive 2), F (5, 6), G (3, 4), H (7, 8). Times are co
 
 from __future__ import annotations
 
+import copy
+import itertools
+
 import pytest
 
 from emulator.agent.mib import MibView
@@ -111,14 +114,33 @@ def test_a_phase_that_runs_beside_the_trailing_overlap_does_not_wait() -> None:
     assert seen["5"][1] == (80, "G") and seen["1"][1] == (100, "G")
 
 
-def test_minus_green_yellow_is_held_red_by_its_modifier() -> None:
+def test_minus_green_yellow_clears_before_its_modifier_starts_and_is_red_while_it_shows() -> None:
     c = Controller(city('A = { type = "minus_green_yellow", included = [2], modifiers = [5] }\n'))
     # 2+6; 5 called with 2: ring 2 backs from 6 into 5 (nothing across the barrier) while 2 rests.
     seen = watch(c, 300, {0: {2, 5}})
     assert seen["2"] == [(1, "G")] and seen["5"][1] == (80, "G")
-    # Green with 2 while 5 is not green, red ("whenever the overlap green and yellow are not ON") while it is.
-    assert seen["A"][:2] == [(1, "green"), (80, "red")]
-    assert all(v == "red" for _, v in seen["A"][1:])
+    # Green with 2 while 5 is not green; 5 committed at 6's yellow (tick 30): A times its own yellow (3 s) and
+    # is red before 5 starts, never green to red; red ("whenever the overlap green and yellow are not ON") while
+    # 5 shows.
+    assert seen["A"][:3] == [(1, "green"), (30, "trail_yellow"), (60, "red")]
+    assert all(v == "red" for _, v in seen["A"][2:])
+
+
+def test_a_modifier_that_would_start_at_once_waits_for_the_minus_green_yellow_overlap_to_clear() -> None:
+    c = Controller(city('A = { type = "minus_green_yellow", included = [2], modifiers = [5], trail_yellow = 4.0,'
+                        ' trail_red = 1.0 }\n'))
+    # 5 called with 2 and omitted during 6's clearance: ring 2 rests in red with nothing committed, and A is
+    # green with 2 again. When the omit goes, ring 2 commits 5 at once: it would start the next tick beside A.
+    c.set_control(CALL, {2, 5})
+    watch(c, 40)
+    c.set_control(ControlColumn.PHASE_OMIT, {5})
+    seen = watch(c, 60)
+    assert seen["6"][-1] == (60, "r") and seen["5"] == [(41, "r")] and seen["A"][-1][1] == "green"
+    c.set_control(ControlColumn.PHASE_OMIT, ())
+    seen = watch(c, 100)
+    # A times its own 4 s yellow and 1 s red; 5 starts the tick A is red.
+    assert seen["A"] == [(101, "trail_yellow"), (141, "trail_red"), (151, "red")]
+    assert seen["5"] == [(101, "r"), (151, "G")]
 
 
 def test_a_flashing_yellow_arrow_follows_its_protected_and_its_opposing_through() -> None:
@@ -135,6 +157,51 @@ def test_a_flashing_yellow_arrow_follows_its_protected_and_its_opposing_through(
     c2 = Controller(c.config)
     c2.step()
     assert E in c2.overlap_yellows and E in c2.overlaps.flashing and E not in c2.overlap_greens
+
+
+def clearing_4_into_1(config: IntersectionConfig) -> Controller:
+    """4+8 served, then 1+5 called: returned on the tick 4's yellow starts (B, parents 4 and 1, stays green
+    through the clearance: its ring has committed 1)."""
+    c = Controller(config)
+    c.set_control(CALL, {4, 8})
+    while not {4, 8} <= c.greens:
+        c.step()
+    c.set_control(CALL, {1, 5})
+    while 4 not in c.yellows:
+        c.step()
+    return c
+
+
+def shown_at(changes: list[tuple[int, str]], tick: int) -> str:
+    """The display a ``watch`` timeline holds at ``tick``."""
+    return [v for t, v in changes if t <= tick][-1]
+
+
+@pytest.mark.parametrize("change", ["preempt", "red_end redirect"])
+def test_a_next_phase_changed_on_any_tick_of_the_clearance_waits_for_the_overlap_to_clear(change: str) -> None:
+    # The shipped city four-leg: B stays green while ring 1 clears 4 with 1 committed. A preempt (dwell 2+5) or,
+    # with the red_end lock, calls moved to 2+6 take 1's place. On the tick the red clearance ended, 2 used to
+    # start beside B, which turned yellow on that same tick: the monitor flashed the unit.
+    text = data_path("four_leg_city.toml").read_text()
+    if change == "red_end redirect":
+        text = text.replace("[timing]", '[timing]\nnext_phase_lock = "red_end"')
+    start = clearing_4_into_1(parse(text, "city.toml"))
+    for offset in range(52):  # every tick of 4's 3 s yellow and 2 s red clearance, and past it
+        c = copy.deepcopy(start)
+        for _ in range(offset):
+            c.step()
+        if change == "preempt":
+            c.set_preempt_control({1})
+        else:
+            c.set_control(CALL, {2, 6})
+        seen = watch(c, 150)  # asserts that the unit never flashes
+        b, two = seen["B"], seen["2"]
+        assert shown_at(two, two[-1][0] - 1) == "r" and two[-1][1] == "G", (offset, two)
+        assert shown_at(b, two[-1][0]) == "red", f"2 green beside B at offset {offset}: {b}"
+        for (_, before), (_, after) in itertools.pairwise(b):
+            assert not (before == "green" and after == "red"), f"B green to red at offset {offset}: {b}"
+        yellows = [(t, b[i + 1][0]) for i, (t, v) in enumerate(b[:-1]) if i > 0 and v.endswith("yellow")]
+        assert all(end - begin >= 30 for begin, end in yellows), f"B's yellow under 3 s at offset {offset}: {b}"
 
 
 def test_the_monitor_flashes_on_an_overlap_shown_beside_a_phase_it_conflicts_with() -> None:
