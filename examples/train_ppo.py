@@ -3,7 +3,7 @@ policy against the served emulator.
 
 Needs the ``rl`` extra (Stable-Baselines3 on the CPU build of PyTorch)::
 
-    pip install torch==2.13.0          # the CPU build; a plain "torch" pulls a CUDA build of several GB
+    pip install torch==2.13.0 --index-url https://download.pytorch.org/whl/cpu   # the CPU build (docs/rl.md)
     pip install -e '.[rl]'
     python examples/train_ppo.py --timesteps 20000
 

@@ -3,7 +3,7 @@ average delay against max-pressure, and save it.
 
 Needs the ``rl`` and ``resco`` extras (RLlib, the CPU build of PyTorch, sumo-rl's networks)::
 
-    pip install torch==2.13.0          # the CPU build; a plain "torch" pulls a CUDA build of several GB
+    pip install torch==2.13.0 --index-url https://download.pytorch.org/whl/cpu   # the CPU build (docs/rl.md)
     pip install -e '.[rl,resco]'
     python examples/train_rllib_resco.py --scenario resco:grid4x4 --iterations 20
     python examples/train_rllib_resco.py --address auto ...     # on a running Ray cluster (ray start --head ...)

@@ -32,7 +32,7 @@ from hils.shell.events import Kind
 
 SHORT = 120.0  # simulated seconds per test episode
 CORRIDOR = ["J1", "J2", "J3", "J4"]
-README = Path(__file__).resolve().parents[3] / "README.md"
+RL_DOCS = Path(__file__).resolve().parents[3] / "docs" / "rl.md"
 
 
 def opened(**options: Any) -> closing[IntersectionsEnv]:
@@ -281,10 +281,10 @@ def test_the_same_env_runs_at_wall_clock_against_the_served_corridor(tmp_path: P
         served.stop()
 
 
-def test_the_readme_snippet_runs() -> None:
-    section = README.read_text(encoding="utf-8").split("### Multi-agent (PettingZoo)", 1)[1]
+def test_the_documented_snippet_runs() -> None:
+    section = RL_DOCS.read_text(encoding="utf-8").split("## Multi-agent (PettingZoo)", 1)[1]
     code = re.search(r"```python\n(.*?)```", section, re.S).group(1)
     namespace: dict[str, Any] = {}
-    exec(compile(code, str(README), "exec"), namespace)
+    exec(compile(code, str(RL_DOCS), "exec"), namespace)
     env = namespace["env"]
     assert env.agents == [] and env.testbed.ended, "the snippet ran its episode to the end"
