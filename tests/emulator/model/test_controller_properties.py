@@ -309,8 +309,8 @@ class Monitor:
             for p in self.yellow_since:
                 self.yellow_cap[p] = min(self.yellow_cap.get(p, caps[3]), caps[3])
                 self.red_cap[p] = min(self.red_cap.get(p, caps[4]), caps[4])
-            for p, red_from in self.yellow_end.items():
-                if now[p] == "r" and p in self.clear_at and self.clear_at[p] > t:
+            for p, red_from in self.yellow_end.items():  # in red as the tick began: it may end the red now
+                if self.shown[p] == "r" and p in self.clear_at and self.clear_at[p] > t:
                     self.clear_at[p] = min(self.clear_at[p], red_from + min(tenths(phases[p].red_clear), caps[4]))
         for p in sorted(ALL_PHASES, key=lambda p: now[p] == "G"):  # endings before starts
             before, after = self.shown[p], now[p]
