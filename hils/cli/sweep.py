@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import re
+import shutil
 from pathlib import Path
 from typing import Any
 
@@ -107,11 +108,14 @@ def sweep_command(args: argparse.Namespace) -> int:
 def compare_command(args: argparse.Namespace) -> int:
     scenarios = _scenarios(args)
     results, out = _run(args, scenarios, "compare")
-    tables, runs = compare.aggregate(results), compare.runs(results)
+    tables, runs, unmeasured = compare.aggregate(results), compare.runs(results), compare.unmeasured(results)
     markdown, plots = [], []
+    terminal = shutil.get_terminal_size((compare.WIDTH, 24)).columns  # the table wraps its columns to fit
     for scenario, table in tables.items():
-        text = compare.render(table, runs[scenario])
-        print(f"{scenario}, {args.duration:g} simulated s per run\n{text}\n")
+        why = unmeasured.get(scenario)
+        print(f"{scenario}, {args.duration:g} simulated s per run\n"
+              f"{compare.render(table, runs[scenario], unmeasured=why, width=terminal)}\n")
+        text = compare.render(table, runs[scenario], unmeasured=why)
         plot = "compare.png" if len(tables) == 1 else f"compare-{re.sub(r'[^A-Za-z0-9_.-]+', '_', scenario)}.png"
         compare.plot(table, out / plot, f"{scenario}: mean over seeds with 95 % CI ({args.duration:g} s)",
                      runs[scenario])

@@ -88,9 +88,7 @@ def describe(section: Mapping[str, Any]) -> list[str]:
         return lines
     aog = measured["percent_on_green"]
     if measured["split_failures"] is None:
-        detectors = ("no detector actuations in the log: the controller ran on the middleware's calls or a pretimed "
-                     "plan alone, so split failures and arrivals on green are not measured (--agent actuated or "
-                     "coordinated runs the controller on its detectors)")
+        detectors = atspm.NO_DETECTORS
     else:
         detectors = (f"{measured['split_failures']} split failures, {'-' if aog is None else f'{aog:.1f} %'} of "
                      "arrivals on green (stop-bar detectors)")
