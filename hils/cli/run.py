@@ -21,7 +21,7 @@ from datetime import datetime, timedelta
 from pathlib import Path
 from typing import Any
 
-from hils.agents.builtin import PLAN_AGENTS, check_plans, controller_config, describe_plan
+from hils.agents.builtin import PLAN_AGENTS, check_plans, controlled_by, controller_config, describe_plan
 from hils.cli.status import Notices, StatusLine
 from hils.control.actions import ActionType
 from hils.protocol import config as config_mod
@@ -231,7 +231,7 @@ def run_command(args: argparse.Namespace) -> int:
         return _ending(tb, error, None, None)  # it never started: nothing to summarise
     s, written, unwritten = _outputs(tb, out, log_path, window,
                                      asclog=args.asclog, since=started - timedelta(seconds=1))
-    print(summary.render(s))
+    print(summary.render(s, by=controlled_by(s["agent"], s["action_type"])))
     if "record" in s:
         print("\n".join(record.describe(s["record"])))
     for warning in summary.warnings(s):
