@@ -70,6 +70,8 @@ def keep(logs: Mapping[str, list[Event]], configs: Mapping[str, IntersectionConf
     charts = atspm_charts.draw(logs, configs, folders,
                                {tls: plots.named(tls if several else None, configs[tls]) for tls in logs})
     written += [str(p.relative_to(folder)) for p in charts]
+    if not any(atspm_charts.chose_its_splits(events) for events in logs.values()):
+        section["charts"] = atspm_charts.NOTHING_TO_DRAW
     return section, written
 
 
@@ -82,6 +84,8 @@ def describe(section: Mapping[str, Any]) -> list[str]:
              + ", ".join(f"{n} = {tls}" for n, tls in section["devices"].items()) + ")"]
     if "format_note" in section:
         lines.append(f"  {section['format_note']}")
+    if "charts" in section:
+        lines.append(f"  {section['charts']}")
     measured = section.get("atspm", {})
     if "missing" in measured:
         lines.append(f"ATSPM measures: not computed, {measured['missing']}")
