@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from hils.protocol.config import IntersectionConfig
+from hils.protocol.resco import light_of, titled
 from hils.protocol.scenario import described
 from hils.report.outfiles import write_whole
 from hils.shell.events import Kind, signal_known
@@ -84,7 +85,11 @@ def run_end(records: Sequence[dict[str, Any]]) -> float:
 
 def named(label: str | None, config: IntersectionConfig) -> str:
     """How a picture's title names an intersection: its label in a run of several and its config's name, once where
-    the name already begins with the label (a RESCO light's derived config: "A0, dual-ring from its SUMO program")."""
+    the name already begins with the label (a RESCO light's derived config: "A0, dual-ring from its SUMO program");
+    in a run of a scenario's one light, the scenario and the light (as the console's summary does)."""
+    light = light_of(config.source) if not label else None
+    if light is not None:
+        return titled(*light)
     if not label or described(label, config) != config.name:
         return config.name
     return f"{label} ({config.name})"

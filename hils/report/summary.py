@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from hils.protocol.config import IntersectionConfig
-from hils.protocol.resco import light_of
+from hils.protocol.resco import light_of, titled
 from hils.report import jsonout
 from hils.report.latency import Stats, internal_latencies_ms, transition_holds
 from hils.report.outfiles import write_whole
@@ -216,7 +216,7 @@ def render(summary: Mapping[str, Any], *, by: str | None = None) -> str:
 
 def _render_one(summary: Mapping[str, Any], by: str) -> str:
     s = summary
-    named = f"{s['scenario']}, light {s['light']}" if s.get("light") else s["config"]
+    named = titled(s["scenario"], s["light"]) if s.get("light") else s["config"]
     lines = [f"Run summary: {named} ({s['mode']}, {by}, seed {s['seed']})",
              _simulated(s)]
     t = s.get("traffic")
