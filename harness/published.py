@@ -19,24 +19,25 @@ from hils.report.outfiles import fresh_folder, given_folder
 REPORTS = Path(__file__).resolve().parent.parent / "reports"
 
 
-def options(parser: argparse.ArgumentParser, published: str) -> None:
-    """``--out DIR`` and ``--publish`` (one or the other) for a command whose published report is ``published``
-    (a folder under reports/, "." for reports/ itself)."""
+def options(parser: argparse.ArgumentParser, command: str, published: str) -> None:
+    """``--out DIR`` and ``--publish`` (one or the other) for ``command`` (how its new folders are named), whose
+    published report is ``published`` (a folder under reports/, "." for reports/ itself)."""
     shown = "reports/" if published == "." else f"reports/{published}/"
     where = parser.add_mutually_exclusive_group()
     where.add_argument("--out", type=Path, metavar="DIR",
-                       help="folder of the outputs (default: a new reports/runs/<time>-<command>/ under the current "
+                       help=f"folder of the outputs (default: a new reports/runs/<time>-{command}/ under the current "
                             "folder)")
     where.add_argument("--publish", action="store_true",
                        help=f"rebuild the published report instead: {shown} of the clone hils runs from (tracked by "
                             "git, linked from the README)")
+    parser.set_defaults(folder_command=command, folder_published=published)
 
 
-def folder(args: argparse.Namespace, command: str, published: str) -> Path:
+def folder(args: argparse.Namespace) -> Path:
     """The folder the command writes to, made: ``--out``, the published report's with ``--publish``, or a new one."""
     if args.publish:
         if not REPORTS.is_dir():
             raise UserError(f"--publish rebuilds the published reports of a clone of hils; there is none at {REPORTS} "
                             "(hils is installed as a package): give --out DIR")
-        return given_folder(REPORTS / published)
-    return given_folder(args.out) if args.out is not None else fresh_folder(command)
+        return given_folder(REPORTS / args.folder_published)
+    return given_folder(args.out) if args.out is not None else fresh_folder(args.folder_command)

@@ -1,7 +1,8 @@
 """`hils bench ...`: benchmarks that print figures and write them as NAME.json.
 
 Each writes to ``--out DIR`` or a new ``reports/runs/<time>-bench-NAME/``; ``--publish`` rebuilds the published
-``reports/bench/NAME.json`` (:mod:`harness.published`).
+``reports/bench/NAME.json`` (:mod:`harness.published`). The folder is made before measuring: one that cannot be made
+is said at once, not after an hour.
 
 Figures are wall-clock measurements on a shared machine: each report states
 the machine, and comparisons are made side by side within one run. Modules that
@@ -55,7 +56,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                                           "through to a file as in a real run.")
     lat.add_argument("--samples", type=int, default=1000, metavar="N", help="commands per action type (1000)")
     lat.add_argument("--seed", type=int, default=0)
-    published.options(lat, "bench")
+    published.options(lat, "bench-latency", "bench")
     lat.set_defaults(func=_latency_command)
     over = commands.add_parser("overhead", help="wall time of the full loop over bare SUMO with the same traffic",
                                description="The cost of the HILS over bare SUMO: the wall time of the full loop "
@@ -72,7 +73,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     over.add_argument("--instructions", action="store_true",
                       help="also count the instructions of each side under valgrind's callgrind (minutes; "
                            "exact and repeatable on a busy machine, where seconds are not)")
-    published.options(over, "bench")
+    published.options(over, "bench-overhead", "bench")
     over.set_defaults(func=_overhead_command)
     wire = commands.add_parser("wire", help="verification lag and GET round trip over UDP (wall-clock time)",
                                description="Against `hils emulator serve` in another process, over loopback UDP: "
@@ -93,7 +94,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                       help="seconds of the controller's tick measured without a flood and under each flood: 20 "
                            "datagrams of 60 KB a second with a wrong community, 3000 SNMPv3 GETs a second without "
                            "a user name (20)")
-    published.options(wire, "bench")
+    published.options(wire, "bench-wire", "bench")
     wire.set_defaults(func=_wire_command)
     env = commands.add_parser("env", help="the gymnasium environment's speed beside sumo-rl's (same network, demand)",
                               description="Environment steps per second and wall time per simulated hour of "
@@ -110,7 +111,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                                           "sumo-rl: pip install 'hils[bench]'.")
     env.add_argument("--duration", type=float, default=3600.0, metavar="S", help="simulated seconds per episode (3600)")
     bench_seeds.seeds_option(env, "0-7")
-    published.options(env, "bench")
+    published.options(env, "bench-env", "bench")
     env.set_defaults(func=_env_command)
     res = commands.add_parser("resco", help="hils' PettingZoo environment beside sumo-rl's on RESCO's networks",
                               description=(
@@ -130,7 +131,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                      help="RESCO scenarios (grid4x4,cologne8; all: the eight)")
     res.add_argument("--duration", type=float, default=3600.0, metavar="S", help="simulated seconds per episode (3600)")
     bench_seeds.seeds_option(res)
-    published.options(res, "bench")
+    published.options(res, "bench-resco", "bench")
     res.set_defaults(func=_resco_command)
     corridor = commands.add_parser("corridor", help="controllers one process drives at wall clock; virtual time and "
                                                     "memory per controller",
@@ -157,7 +158,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     corridor.add_argument("--climbs", type=_positive, default=3, metavar="N",
                           help="times the wall-clock counts are climbed, each until one fails (3)")
     bench_seeds.seeds_option(corridor)
-    published.options(corridor, "bench")
+    published.options(corridor, "bench-corridor", "bench")
     corridor.set_defaults(func=_corridor_command)
 
 
@@ -180,7 +181,7 @@ def measure_latency(samples: int, seed: int = 0) -> dict[str, Stats]:
 
 
 def _latency_command(args: argparse.Namespace) -> int:
-    folder = _folder(args, "latency")
+    folder = published.folder(args)
     info = machine.describe()
     stats = measure_latency(args.samples, args.seed)
     print(machine.header(info))
@@ -199,12 +200,6 @@ def _latency_command(args: argparse.Namespace) -> int:
     return 0
 
 
-def _folder(args: argparse.Namespace, bench: str) -> Path:
-    """Where a benchmark's figures go (:mod:`harness.published`), made before it runs: a folder that cannot be made
-    is said at once, not after an hour of measuring."""
-    return published.folder(args, f"bench-{bench}", "bench")
-
-
 def _write_figures(path: Path, figures: dict[str, Any]) -> None:
     """A benchmark's figures as JSON in ``path``, written whole, and the console told where."""
     write_whole(path, jsonout.dumps(figures) + "\n")
@@ -214,7 +209,7 @@ def _write_figures(path: Path, figures: dict[str, Any]) -> None:
 def _overhead_command(args: argparse.Namespace) -> int:
     from harness.bench.overhead import measure_instructions, measure_overhead
 
-    folder = _folder(args, "overhead")
+    folder = published.folder(args)
     info = machine.describe()
     f = measure_overhead(args.duration, args.seeds)
     print(machine.header(info))
@@ -411,7 +406,7 @@ def measure_verification_lag(rate_hz: float, duration: float, workdir: Path) -> 
 
 
 def _wire_command(args: argparse.Namespace) -> int:
-    folder = _folder(args, "wire")
+    folder = published.folder(args)
     info = machine.describe()
     rates = [float(r) for r in args.rates.split(",")]
     out: dict[str, Any] = {"machine": info}
@@ -465,7 +460,7 @@ def _env_command(args: argparse.Namespace) -> int:
     except ImportError as exc:
         if "SUMO_HOME" not in str(exc):
             raise SystemExit("hils bench env compares with sumo-rl: pip install 'hils[bench]'") from None
-    folder = _folder(args, "env")
+    folder = published.folder(args)
     info = machine.describe()
     f = measure_env(args.seeds, args.duration)
     print(machine.header(info))
@@ -491,7 +486,7 @@ def _env_command(args: argparse.Namespace) -> int:
 def _resco_command(args: argparse.Namespace) -> int:
     from harness.bench.resco import measure_resco
 
-    folder = _folder(args, "resco")
+    folder = published.folder(args)
     info = machine.describe()
     f = measure_resco(args.scenarios, args.seeds, args.duration)
     print(machine.header(info))
@@ -521,7 +516,7 @@ def _resco_names(text: str) -> list[str]:
 
 
 def _corridor_command(args: argparse.Namespace) -> int:
-    folder = _folder(args, "corridor")
+    folder = published.folder(args)
     info = machine.describe()
     print(machine.header(info))
     f = bench_corridor.measure_corridor(args.counts, args.duration, args.virtual_duration, args.seeds, args.climbs)

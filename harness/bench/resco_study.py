@@ -430,7 +430,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help="simulated seconds from each scenario's begin (3600, as RESCO evaluates)")
     parser.add_argument("--workers", type=int, default=multiprocessing.cpu_count(), metavar="N",
                         help="runs at once, each in its own process (the CPUs)")
-    published.options(parser, "resco")
+    published.options(parser, "resco-study", "resco")
     parser.add_argument("--force", action="store_true", help="run every cell again, even those already run")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     args = parser.parse_args(argv)
@@ -446,7 +446,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not args.duration > 0 or args.workers < 1:
         parser.error("--duration: allowed: positive seconds; --workers: 1 or more")
     try:
-        out = published.folder(args, "resco-study", "resco")
+        out = published.folder(args)
     except UserError as exc:
         parser.error(str(exc))
     todo = cells(names, AGENTS, seeds, args.duration)

@@ -72,7 +72,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                      help="run every scenario at each of these seeds, e.g. 1,1001,2002 or 0-4 (default: the "
                           "scenario's own)")
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
-    published.options(run, ".")
+    published.options(run, "faults", ".")
     run.set_defaults(func=_run)
 
     listing = commands.add_parser("list", help="list scenarios, one line each",
@@ -117,7 +117,7 @@ def _run(args: argparse.Namespace) -> int:
                         "for a report of these scenarios)")
     seeds = args.seeds or (list(PUBLISHED_SEEDS) if args.publish else None)
     scenarios = _scenarios(args.paths)
-    out = published.folder(args, "faults", ".")
+    out = published.folder(args)
     if seeds:
         scenarios = [dataclasses.replace(s, seed=seed) for s in scenarios for seed in seeds]
     t0 = time.perf_counter()

@@ -37,7 +37,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     commands = parser.add_subparsers(dest="report_command", metavar="REPORT", required=True)
     paper = commands.add_parser("paper", help="the paper's latency table, transition trajectory and holds",
                                 description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    published.options(paper, "paper")
+    published.options(paper, "paper", "paper")
     paper.add_argument("--latency-duration", type=float, default=1200.0, metavar="S",
                        help="simulated seconds of SUMO traffic per action type for the latency table (1200)")
     paper.add_argument("--seed", type=int, default=0)
@@ -269,7 +269,7 @@ def holds_figure(holds: dict[float, Stats], clearance: float, path: Path) -> Non
 
 def _paper_command(args: argparse.Namespace) -> int:
     cfg = config_mod.load()
-    out = published.folder(args, "paper", "paper")
+    out = published.folder(args)
     info = machine.describe()
     print("latency runs (SUMO + emulator, virtual time) ...")
     latency = latency_table(cfg, args.latency_duration, args.seed)
