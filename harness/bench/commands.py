@@ -1,4 +1,8 @@
-"""`hils bench ...`: benchmarks that print figures and write them under reports/bench/.
+"""`hils bench ...`: benchmarks that print figures and write them as NAME.json.
+
+Each writes to ``--out DIR`` or a new ``reports/runs/<time>-bench-NAME/``; ``--publish`` rebuilds the published
+``reports/bench/NAME.json`` (:mod:`harness.published`). The folder is made before measuring: one that cannot be made
+is said at once, not after an hour.
 
 Figures are wall-clock measurements on a shared machine: each report states
 the machine, and comparisons are made side by side within one run. Modules that
@@ -22,6 +26,7 @@ from typing import Any
 
 import simpy
 
+from harness import published
 from harness.bench import corridor as bench_corridor
 from harness.bench import floods, machine
 from harness.bench import seeds as bench_seeds
@@ -37,13 +42,12 @@ from hils.report.outfiles import write_whole
 from hils.run.testbed import RunSpec, run_spec
 from hils.shell.events import Kind
 
-REPORT_DIR = Path("reports/bench")
-
 
 def register(sub: argparse._SubParsersAction) -> None:
-    parser = sub.add_parser("bench", help="benchmarks (figures under reports/bench/)",
+    parser = sub.add_parser("bench", help="benchmarks (figures printed and written as JSON)",
                             description="Benchmarks: each prints its figures beside the machine it ran on and "
-                                        "writes them to reports/bench/NAME.json.")
+                                        "writes them to NAME.json in a new reports/runs/<time>-bench-NAME/ (or --out "
+                                        "DIR); --publish rebuilds the published reports/bench/NAME.json.")
     commands = parser.add_subparsers(dest="bench_command", metavar="BENCH", required=True)
     lat = commands.add_parser("latency", help="middleware internal latency per action type (paper's Table)",
                               description="Middleware internal latency, as the paper defines it: from the agent's "
@@ -52,7 +56,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                                           "through to a file as in a real run.")
     lat.add_argument("--samples", type=int, default=1000, metavar="N", help="commands per action type (1000)")
     lat.add_argument("--seed", type=int, default=0)
-    lat.add_argument("--out", type=Path, default=REPORT_DIR / "latency.json", metavar="FILE")
+    published.options(lat, "bench-latency", "bench")
     lat.set_defaults(func=_latency_command)
     over = commands.add_parser("overhead", help="wall time of the full loop over bare SUMO with the same traffic",
                                description="The cost of the HILS over bare SUMO: the wall time of the full loop "
@@ -69,7 +73,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     over.add_argument("--instructions", action="store_true",
                       help="also count the instructions of each side under valgrind's callgrind (minutes; "
                            "exact and repeatable on a busy machine, where seconds are not)")
-    over.add_argument("--out", type=Path, default=REPORT_DIR / "overhead.json", metavar="FILE")
+    published.options(over, "bench-overhead", "bench")
     over.set_defaults(func=_overhead_command)
     wire = commands.add_parser("wire", help="verification lag and GET round trip over UDP (wall-clock time)",
                                description="Against `hils emulator serve` in another process, over loopback UDP: "
@@ -90,7 +94,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                       help="seconds of the controller's tick measured without a flood and under each flood: 20 "
                            "datagrams of 60 KB a second with a wrong community, 3000 SNMPv3 GETs a second without "
                            "a user name (20)")
-    wire.add_argument("--out", type=Path, default=REPORT_DIR / "wire.json", metavar="FILE")
+    published.options(wire, "bench-wire", "bench")
     wire.set_defaults(func=_wire_command)
     env = commands.add_parser("env", help="the gymnasium environment's speed beside sumo-rl's (same network, demand)",
                               description="Environment steps per second and wall time per simulated hour of "
@@ -107,7 +111,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                                           "sumo-rl: pip install 'hils[bench]'.")
     env.add_argument("--duration", type=float, default=3600.0, metavar="S", help="simulated seconds per episode (3600)")
     bench_seeds.seeds_option(env, "0-7")
-    env.add_argument("--out", type=Path, default=REPORT_DIR / "env.json", metavar="FILE")
+    published.options(env, "bench-env", "bench")
     env.set_defaults(func=_env_command)
     res = commands.add_parser("resco", help="hils' PettingZoo environment beside sumo-rl's on RESCO's networks",
                               description=(
@@ -127,7 +131,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                      help="RESCO scenarios (grid4x4,cologne8; all: the eight)")
     res.add_argument("--duration", type=float, default=3600.0, metavar="S", help="simulated seconds per episode (3600)")
     bench_seeds.seeds_option(res)
-    res.add_argument("--out", type=Path, default=REPORT_DIR / "resco.json", metavar="FILE")
+    published.options(res, "bench-resco", "bench")
     res.set_defaults(func=_resco_command)
     corridor = commands.add_parser("corridor", help="controllers one process drives at wall clock; virtual time and "
                                                     "memory per controller",
@@ -154,8 +158,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     corridor.add_argument("--climbs", type=_positive, default=3, metavar="N",
                           help="times the wall-clock counts are climbed, each until one fails (3)")
     bench_seeds.seeds_option(corridor)
-    corridor.add_argument("--out", type=Path, default=REPORT_DIR / "corridor.json", metavar="FILE",
-                          help="where the figures go (reports/bench/corridor.json)")
+    published.options(corridor, "bench-corridor", "bench")
     corridor.set_defaults(func=_corridor_command)
 
 
@@ -178,6 +181,7 @@ def measure_latency(samples: int, seed: int = 0) -> dict[str, Stats]:
 
 
 def _latency_command(args: argparse.Namespace) -> int:
+    folder = published.folder(args)
     info = machine.describe()
     stats = measure_latency(args.samples, args.seed)
     print(machine.header(info))
@@ -192,20 +196,20 @@ def _latency_command(args: argparse.Namespace) -> int:
         rows[name] = {"ours_ms": st.as_dict(), "paper_ms": {"n": pn, "mean": pmean, "std": pstd},
                       "paper_over_ours": ratio}
     print("target: mean < 50 us, p99 < 200 us")
-    _write_figures(args.out, {"machine": info, "latency": rows})
+    _write_figures(folder / "latency.json", {"machine": info, "latency": rows})
     return 0
 
 
-
 def _write_figures(path: Path, figures: dict[str, Any]) -> None:
-    """A benchmark's figures as JSON in ``path`` (its folder made), written whole, and the console told where."""
-    path.parent.mkdir(parents=True, exist_ok=True)
+    """A benchmark's figures as JSON in ``path``, written whole, and the console told where."""
     write_whole(path, jsonout.dumps(figures) + "\n")
     print(f"written: {path}")
+
 
 def _overhead_command(args: argparse.Namespace) -> int:
     from harness.bench.overhead import measure_instructions, measure_overhead
 
+    folder = published.folder(args)
     info = machine.describe()
     f = measure_overhead(args.duration, args.seeds)
     print(machine.header(info))
@@ -227,7 +231,7 @@ def _overhead_command(args: argparse.Namespace) -> int:
         print(f"  instructions (callgrind, seed 0, start-up counted out): full loop "
               f"{ins['hils_instructions'] / 1e9:.2f} G, same-traffic floor {ins['floor_instructions'] / 1e9:.2f} G, "
               f"ratio {ins['ratio']:.2f}")
-    _write_figures(args.out, {"machine": info, "overhead": f})
+    _write_figures(folder / "overhead.json", {"machine": info, "overhead": f})
     return 0
 
 
@@ -402,6 +406,7 @@ def measure_verification_lag(rate_hz: float, duration: float, workdir: Path) -> 
 
 
 def _wire_command(args: argparse.Namespace) -> int:
+    folder = published.folder(args)
     info = machine.describe()
     rates = [float(r) for r in args.rates.split(",")]
     out: dict[str, Any] = {"machine": info}
@@ -440,7 +445,7 @@ def _wire_command(args: argparse.Namespace) -> int:
               + (f"  dropped {st['dropped']:6d}  RSS {st['rss_growth_mb']:+6.1f} MB: {st['per_second']}/s "
                  f"{st['what']}" if name != "quiet" else ""))
     print("  target: p99 < 5 ms with the wrong community, < 20 ms with the SNMPv3 flood, no memory kept")
-    _write_figures(args.out, out)
+    _write_figures(folder / "wire.json", out)
     return 0
 
 
@@ -455,6 +460,7 @@ def _env_command(args: argparse.Namespace) -> int:
     except ImportError as exc:
         if "SUMO_HOME" not in str(exc):
             raise SystemExit("hils bench env compares with sumo-rl: pip install 'hils[bench]'") from None
+    folder = published.folder(args)
     info = machine.describe()
     f = measure_env(args.seeds, args.duration)
     print(machine.header(info))
@@ -473,13 +479,14 @@ def _env_command(args: argparse.Namespace) -> int:
             "other signals, other traffic, which SUMO steps at its own cost)")
     print(bench_seeds.ratio_line("hils / sumo-rl unconverted", f["hils_to_sumo_rl_unconverted"])
           + " (shorter clearances, lighter traffic)")
-    _write_figures(args.out, {"machine": info, "env": f})
+    _write_figures(folder / "env.json", {"machine": info, "env": f})
     return 0
 
 
 def _resco_command(args: argparse.Namespace) -> int:
     from harness.bench.resco import measure_resco
 
+    folder = published.folder(args)
     info = machine.describe()
     f = measure_resco(args.scenarios, args.seeds, args.duration)
     print(machine.header(info))
@@ -493,7 +500,7 @@ def _resco_command(args: argparse.Namespace) -> int:
                                               per_controller=True):
             print(line)
         print(bench_seeds.ratio_line("hils / sumo-rl", sc["hils_to_sumo_rl"]) + " (goal: wall <= 1)")
-    _write_figures(args.out, {"machine": info, "resco": f})
+    _write_figures(folder / "resco.json", {"machine": info, "resco": f})
     return 0
 
 
@@ -509,6 +516,7 @@ def _resco_names(text: str) -> list[str]:
 
 
 def _corridor_command(args: argparse.Namespace) -> int:
+    folder = published.folder(args)
     info = machine.describe()
     print(machine.header(info))
     f = bench_corridor.measure_corridor(args.counts, args.duration, args.virtual_duration, args.seeds, args.climbs)
@@ -553,7 +561,7 @@ def _corridor_command(args: argparse.Namespace) -> int:
         per = m[side]["mb_per_controller"]
         print(f"memory, {side}: " + ("-" if per is None else f"{per:.2f} MB per added controller") +
               f" (goal <= {m['goal_mb_per_controller']:g})")
-    _write_figures(args.out, {"machine": info, "corridor": f})
+    _write_figures(folder / "corridor.json", {"machine": info, "corridor": f})
     return 0
 
 

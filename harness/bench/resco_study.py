@@ -2,7 +2,8 @@
 
 ``python -m harness.bench.resco_study --seeds 0-4`` runs, on every RESCO scenario, max-pressure and fixed-time under
 sumo-rl's direct switching and under hils' emulated NEMA controllers (same network, same demand, same seeds),
-and writes ``reports/resco/``: ``results.json`` (every run's RESCO figures and the aggregates) and ``README.md``
+and writes (to the published ``reports/resco/`` with ``--publish``; else to ``--out`` or a new folder:
+:mod:`harness.published`) ``results.json`` (every run's RESCO figures and the aggregates) and ``README.md``
 (method, what differs between the sides and why, the tables with 95 % confidence intervals, the gains).
 
 Rules of this module
@@ -42,8 +43,10 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
+from harness import published
 from harness.bench import machine
 from harness.bench.seeds import seeds_text
+from hils.protocol.errors import UserError
 from hils.report import jsonout
 from hils.sweep.compare import Estimate
 
@@ -57,7 +60,6 @@ SIDE_LABELS = {"sumo_rl": "sumo-rl", "hils": "hils"}
 AGENT_LABELS = {"max-pressure": "max-pressure", "fixed-cycle": "fixed-time"}
 #: RESCO's figures, from SUMO's tripinfo (hils.sim.resco_metrics), and how the tables name them.
 FIGURES = {"delay_s": "delay s", "trip_time_s": "trip time s", "waiting_time_s": "waiting s", "queue": "queue"}
-OUT = Path("reports/resco")
 
 
 @dataclass(frozen=True, slots=True)
@@ -296,7 +298,7 @@ controller is not, on purpose: that is the question.
 
 ```sh
 pip install -e '.[resco]'
-python -m harness.bench.resco_study --seeds {seeds} --duration {duration_arg}   # resumes: cells run are read back
+python -m harness.bench.resco_study --seeds {seeds} --duration {duration_arg} --publish  # resumes: reads back its cells
 ```
 
 Each run (cell) is one fresh process; its figures go to `cells/SCENARIO/SIDE-AGENT-seedN.json` as it finishes, so
@@ -417,9 +419,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         description="Max-pressure and fixed-time on RESCO's scenarios under sumo-rl's direct switching and under "
                     "hils' NEMA controllers (same network, demand and seeds): RESCO's figures with 95 %% confidence "
                     "intervals, max-pressure's gain on each side and how much of it survives, written to "
-                    "OUT/results.json and OUT/README.md. Every run is a fresh process whose figures are kept in "
-                    "OUT/cells/: a second call resumes (cells already run are read back). Needs sumo-rl: "
-                    "pip install 'hils[resco]'.")
+                    "OUT/results.json and OUT/README.md (OUT: --out DIR, the published reports/resco/ with "
+                    "--publish, else a new reports/runs/<time>-resco-study/). Every run is a fresh process whose "
+                    "figures are kept in OUT/cells/: a second call with the same OUT resumes (cells already run are "
+                    "read back). Needs sumo-rl: pip install 'hils[resco]'.")
     parser.add_argument("--scenarios", default="all", metavar="NAME,...|all",
                         help=f"RESCO scenarios (all: {','.join(resco.NAMES)})")
     parser.add_argument("--seeds", default="0-4", metavar="LIST", help="seeds, e.g. 0-4 or 0,3,7 (0-4)")
@@ -427,7 +430,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help="simulated seconds from each scenario's begin (3600, as RESCO evaluates)")
     parser.add_argument("--workers", type=int, default=multiprocessing.cpu_count(), metavar="N",
                         help="runs at once, each in its own process (the CPUs)")
-    parser.add_argument("--out", type=Path, default=OUT, metavar="DIR", help=f"where the study goes ({OUT})")
+    published.options(parser, "resco-study", "resco")
     parser.add_argument("--force", action="store_true", help="run every cell again, even those already run")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     args = parser.parse_args(argv)
@@ -442,18 +445,21 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error(str(exc))
     if not args.duration > 0 or args.workers < 1:
         parser.error("--duration: allowed: positive seconds; --workers: 1 or more")
+    try:
+        out = published.folder(args)
+    except UserError as exc:
+        parser.error(str(exc))
     todo = cells(names, AGENTS, seeds, args.duration)
-    results, failed = run(todo, args.out, workers=args.workers, force=args.force, progress=not args.no_progress)
+    results, failed = run(todo, out, workers=args.workers, force=args.force, progress=not args.no_progress)
     table = aggregate(results)
     meta = _meta(results, seeds, args.duration, names)
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "results.json").write_text(jsonout.dumps({
+    (out / "results.json").write_text(jsonout.dumps({
         "seeds": seeds, "duration_s": args.duration, "scenarios": names, "agents": list(AGENTS),
         "sides": list(SIDES), "aggregates": table, "runs": results,
         "failed": [{"cell": asdict(c), "error": e} for c, e in failed.items()]}) + "\n", encoding="utf-8")
-    (args.out / "README.md").write_text(render_readme(table, meta), encoding="utf-8")
+    (out / "README.md").write_text(render_readme(table, meta), encoding="utf-8")
     print(render_console(table))
-    print(f"written: {args.out / 'results.json'}, {args.out / 'README.md'} ({len(results)} runs, "
+    print(f"written: {out / 'results.json'}, {out / 'README.md'} ({len(results)} runs, "
           f"{len(todo) - len(results)} missing)")
     for cell, error in failed.items():
         print(f"failed: {cell.scenario} {cell.agent} {SIDE_LABELS[cell.side]} seed {cell.seed}: {error}",

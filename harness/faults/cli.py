@@ -2,7 +2,9 @@
 
 ``hils faults run [PATH ...]`` runs every scenario (default: the shipped suite
 in ``fault_scenarios/``), prints a results table, writes ``faults.md`` and
-``faults.json`` to the report directory and exits 1 if any expectation failed.
+``faults.json`` to its output folder (:mod:`harness.published`: ``--publish`` rebuilds
+the published ``reports/faults.md``, the shipped suite at :data:`PUBLISHED_SEEDS`) and
+exits 1 if any expectation failed.
 ``hils faults list [PATH ...]`` prints one line per scenario. ``hils faults
 proxy`` relays UDP to an SNMP agent with faults on a schedule (:mod:`harness.faults.proxy`).
 """
@@ -19,10 +21,13 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from harness import published
+from harness.bench.seeds import seeds_text
 from harness.faults.judge import FaultScenarioResult
 from harness.faults.proxy import register_proxy
 from harness.faults.reader import FaultScenario, default_suite, discover, load_fault_scenario
 from harness.faults.runner import run_fault_scenario
+from hils.protocol.errors import UserError
 from hils.report import jsonout
 from hils.sweep.grid import SweepError, parse_seeds
 
@@ -40,9 +45,16 @@ With --seeds every scenario runs once per seed (its own seed replaced: the
 emulator's draws, the faults' and the agent's), and is reported per seed: an
 expectation must hold at every seed.
 
+Outputs: faults.md and faults.json in a new reports/runs/<time>-faults/ (or --out);
+--publish rebuilds the published reports/faults.md and faults.json instead, from the
+shipped suite at seeds 1,1001,2002 unless --seeds says otherwise.
+
 Exit status: 0 if every expectation held, 1 if any failed, 2 if a scenario file
 is invalid.
 """
+
+#: The seeds of the published report (reports/faults.md): every scenario must hold at each of them.
+PUBLISHED_SEEDS = (1, 1001, 2002)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -54,14 +66,13 @@ def register(sub: argparse._SubParsersAction) -> None:
                               formatter_class=argparse.RawDescriptionHelpFormatter)
     run.add_argument("paths", nargs="*", metavar="PATH",
                      help="scenario files or directories of them (default: the shipped suite)")
-    run.add_argument("--report-dir", type=Path, default=Path("reports"), metavar="DIR",
-                     help="where faults.md and faults.json go (default: reports)")
     run.add_argument("--log-dir", type=Path, metavar="DIR",
                      help="also write each scenario's JSON Lines event log to DIR/<scenario>.jsonl")
     run.add_argument("--seeds", type=_seeds, metavar="SEEDS",
                      help="run every scenario at each of these seeds, e.g. 1,1001,2002 or 0-4 (default: the "
                           "scenario's own)")
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
+    published.options(run, "faults", ".")
     run.set_defaults(func=_run)
 
     listing = commands.add_parser("list", help="list scenarios, one line each",
@@ -101,9 +112,14 @@ def _seeds(text: str) -> list[int]:
 
 
 def _run(args: argparse.Namespace) -> int:
+    if args.publish and args.paths:
+        raise UserError("--publish rebuilds the published report of the shipped suite; give no PATH (or --out DIR "
+                        "for a report of these scenarios)")
+    seeds = args.seeds or (list(PUBLISHED_SEEDS) if args.publish else None)
     scenarios = _scenarios(args.paths)
-    if args.seeds:
-        scenarios = [dataclasses.replace(s, seed=seed) for s in scenarios for seed in args.seeds]
+    out = published.folder(args)
+    if seeds:
+        scenarios = [dataclasses.replace(s, seed=seed) for s in scenarios for seed in seeds]
     t0 = time.perf_counter()
     results: list[FaultScenarioResult] = []
     # Faults make the controller model warn (backup mode after a suppressed keepalive, say): that is
@@ -112,7 +128,7 @@ def _run(args: argparse.Namespace) -> int:
     with tqdm(scenarios, unit="scenario", disable=args.no_progress or args.quiet, file=sys.stderr) as bar:
         for scenario in bar:
             bar.set_postfix_str(f"{scenario.name} seed {scenario.seed}")
-            name = f"{scenario.name}-seed{scenario.seed}" if args.seeds else scenario.name
+            name = f"{scenario.name}-seed{scenario.seed}" if seeds else scenario.name
             log_path = None if args.log_dir is None else args.log_dir / f"{name}.jsonl"
             results.append(run_fault_scenario(scenario, log_path=log_path))
     wall = time.perf_counter() - t0
@@ -122,7 +138,9 @@ def _run(args: argparse.Namespace) -> int:
             print(f"FAIL {r.scenario.name} (seed {r.scenario.seed}): {c.label}: expected {c.message}")
     failed = sum(not r.passed for r in results)
     print(f"{len(results) - failed} of {len(results)} scenario runs passed in {wall:.1f} s")
-    md, js = write_reports(results, args.report_dir, wall)
+    command = " ".join(["hils faults run", *args.paths, *([f"--seeds {seeds_text(seeds)}"] if seeds else []),
+                        *(["--publish"] if args.publish else [])])
+    md, js = write_reports(results, out, wall, command)
     print(f"reports: {md} {js}")
     return 1 if failed else 0
 
@@ -147,13 +165,14 @@ def render_table(results: Sequence[FaultScenarioResult]) -> str:
     return "\n".join(lines)
 
 
-def render_markdown(results: Sequence[FaultScenarioResult], wall_s: float) -> str:
+def render_markdown(results: Sequence[FaultScenarioResult], wall_s: float, command: str) -> str:
+    """The report of a suite's runs, ``command`` the command line that made it."""
     failed = sum(not r.passed for r in results)
     out = [
         "# Fault scenarios",
         "",
         f"{len(results) - failed} of {len(results)} scenario runs passed; the suite took {wall_s:.1f} s of wall time "
-        f"for {sum(r.scenario.duration for r in results):g} s of virtual time. Generated by `hils faults run`.",
+        f"for {sum(r.scenario.duration for r in results):g} s of virtual time. Generated by `{command}`.",
         "",
         "Detection: seconds from the fault's first firing (or, where stated, from the dispatch of the command "
         "that timed out) to TIMEOUT. Recovery: the slowest TIMEOUT's seconds from the `recover()` call that "
@@ -209,11 +228,12 @@ def _display(source: str) -> str:
     return str(path.relative_to(Path.cwd())) if path.is_relative_to(Path.cwd()) else source
 
 
-def write_reports(results: Sequence[FaultScenarioResult], report_dir: Path, wall_s: float) -> tuple[Path, Path]:
-    report_dir.mkdir(parents=True, exist_ok=True)
+def write_reports(results: Sequence[FaultScenarioResult], report_dir: Path, wall_s: float, command: str
+                  ) -> tuple[Path, Path]:
+    """faults.md and faults.json in ``report_dir`` (made before the runs)."""
     md = report_dir / "faults.md"
     js = report_dir / "faults.json"
-    md.write_text(render_markdown(results, wall_s), encoding="utf-8")
+    md.write_text(render_markdown(results, wall_s, command), encoding="utf-8")
     doc = {
         "passed": sum(r.passed for r in results),
         "failed": sum(not r.passed for r in results),

@@ -1,4 +1,4 @@
-"""`hils report paper`: the paper's results, regenerated under reports/paper/.
+"""`hils report paper`: the paper's results, regenerated (``--publish``: the published reports/paper/).
 
 - the middleware internal latency by action type (N, mean, std, p50, p99) beside the paper's Table;
 - the phase-transition trajectory of three consecutive phase-switch commands from [3,7]
@@ -16,6 +16,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+from harness import published
 from harness.bench import machine
 from hils.agents.builtin import Observation
 from hils.control.actions import ActionType
@@ -27,7 +28,6 @@ from hils.report.plots import COLORS, pyplot, signal_intervals
 from hils.run.testbed import RunSpec, run_spec
 from hils.shell.events import Kind
 
-OUT = Path("reports/paper")
 PAPER_HOLD = (5.18, 5.20)  # seconds, the paper's range of holds per transition at 10 Hz polling
 
 
@@ -37,7 +37,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     commands = parser.add_subparsers(dest="report_command", metavar="REPORT", required=True)
     paper = commands.add_parser("paper", help="the paper's latency table, transition trajectory and holds",
                                 description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    paper.add_argument("--out", type=Path, default=OUT, metavar="DIR", help="output folder (reports/paper)")
+    published.options(paper, "paper", "paper")
     paper.add_argument("--latency-duration", type=float, default=1200.0, metavar="S",
                        help="simulated seconds of SUMO traffic per action type for the latency table (1200)")
     paper.add_argument("--seed", type=int, default=0)
@@ -269,8 +269,7 @@ def holds_figure(holds: dict[float, Stats], clearance: float, path: Path) -> Non
 
 def _paper_command(args: argparse.Namespace) -> int:
     cfg = config_mod.load()
-    out: Path = args.out
-    out.mkdir(parents=True, exist_ok=True)
+    out = published.folder(args)
     info = machine.describe()
     print("latency runs (SUMO + emulator, virtual time) ...")
     latency = latency_table(cfg, args.latency_duration, args.seed)
@@ -285,7 +284,7 @@ def _paper_command(args: argparse.Namespace) -> int:
     delays = cfg.emulator
     text = f"""# The paper's results, reproduced
 
-Regenerate with `hils report paper`. {machine.header(info)}. All runs in virtual time against the
+Regenerate with `hils report paper --publish`. {machine.header(info)}. All runs in virtual time against the
 emulator; the latency runs drive SUMO traffic ({args.latency_duration:g} simulated s per action type, default
 agents). Latency is wall-clock time measured inside the run, so it depends on the machine; the
 paper's figures were taken on a MacBook Pro M1 against an Econolite Cobalt.

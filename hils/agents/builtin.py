@@ -215,9 +215,19 @@ BUILTIN: dict[str, type] = {"random": RandomAgent, "fixed-cycle": FixedCycleAgen
 #: default) for actuated and every other agent.
 _PLANS = {"coordinated": IntersectionConfig.planned, "fixed-time": IntersectionConfig.pretimed}
 PLAN_AGENTS = frozenset(_PLANS)
-CONTROLLER_AGENTS = frozenset({"actuated", *_PLANS})
+#: What the controller runs under each of those, as the console says it (no agent acts: its action type is moot).
+OWN_OPERATION = {"actuated": "actuated on its detectors", "coordinated": "its coordination plan on its detectors",
+                 "fixed-time": "its coordination plan pretimed, no detectors"}
 #: Of those, the ones whose controller runs on its detectors (fixed-time's pretimed plan needs none).
 DETECTOR_AGENTS = frozenset({"actuated", "coordinated"})
+
+
+def controlled_by(agent: str | None, action_type: str | None) -> str:
+    """Who drove the signals, in a few words: ``selection by max-pressure``, or for an agent that leaves the
+    controller to its own operation, what the controller ran (``coordinated: the controller's own operation, its
+    coordination plan on its detectors``)."""
+    own = OWN_OPERATION.get(agent or "")
+    return f"{action_type} by {agent}" if own is None else f"{agent}: the controller's own operation, {own}"
 
 
 def controller_config(agent: object, config: IntersectionConfig) -> IntersectionConfig:

@@ -16,20 +16,19 @@ import os
 import signal
 import sys
 import tempfile
-import time
 from collections.abc import Iterator
 from datetime import datetime, timedelta
 from pathlib import Path
 from typing import Any
 
-from hils.agents.builtin import PLAN_AGENTS, check_plans, controller_config, describe_plan
+from hils.agents.builtin import PLAN_AGENTS, check_plans, controlled_by, controller_config, describe_plan
 from hils.cli.status import Notices, StatusLine
 from hils.control.actions import ActionType
 from hils.protocol import config as config_mod
 from hils.protocol.config import ConfigError, IntersectionConfig
 from hils.protocol.errors import AgentFailed, RunInterrupted, UserError
 from hils.protocol.scenario import SCENARIOS, Scenario, load_scenario, load_targets
-from hils.report import plots, record, summary
+from hils.report import outfiles, plots, record, summary
 from hils.run.intersection import Intersection
 from hils.run.testbed import BLIND_AGENTS, DEFAULT_AGENTS, RunSpec, Testbed, reason_of
 from hils.shell.events import Kind
@@ -232,7 +231,7 @@ def run_command(args: argparse.Namespace) -> int:
         return _ending(tb, error, None, None)  # it never started: nothing to summarise
     s, written, unwritten = _outputs(tb, out, log_path, window,
                                      asclog=args.asclog, since=started - timedelta(seconds=1))
-    print(summary.render(s))
+    print(summary.render(s, by=controlled_by(s["agent"], s["action_type"])))
     if "record" in s:
         print("\n".join(record.describe(s["record"])))
     for warning in summary.warnings(s):
@@ -432,23 +431,7 @@ def _check_room(out: Path, log_path: Path) -> None:
 
 def _run_folder(given: Path | None, action_type: str) -> Path:
     """The run's folder: the one given, or a new one under reports/runs/ that no other run uses."""
-    if given is not None:
-        try:
-            given.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            raise UsageError(f"cannot create the output folder {given}: {exc.strerror}") from None
-        return given
-    base = Path("reports/runs") / f"{time.strftime('%Y%m%d-%H%M%S')}-{action_type}"
-    for n in range(1, 1000):
-        candidate = base if n == 1 else base.with_name(f"{base.name}-{n}")
-        try:
-            candidate.mkdir(parents=True, exist_ok=False)
-        except FileExistsError:
-            continue  # another run started in the same second: take the next name
-        except OSError as exc:
-            raise UsageError(f"cannot create the output folder {candidate}: {exc.strerror}") from None
-        return candidate
-    raise UsageError(f"no free run folder name beside {base}")
+    return outfiles.given_folder(given) if given is not None else outfiles.fresh_folder(action_type)
 
 
 @contextlib.contextmanager

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import argparse
 import re
-import time
+import shutil
 from pathlib import Path
 from typing import Any
 
 from hils.control.actions import ActionType
-from hils.report import jsonout
+from hils.report import jsonout, outfiles
 from hils.sweep import compare
 from hils.sweep import grid as sweep
 
@@ -62,7 +62,7 @@ def _grid_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--workers", type=int, metavar="N", help="local processes (default: the CPUs)")
     p.add_argument("--ray", metavar="local|auto|ADDRESS", help="run the cells on Ray instead of local processes")
     p.add_argument("--out", type=Path, metavar="DIR", help="folder of the table and the run folders "
-                                                           "(default: reports/sweeps/<time>)")
+                                                           "(default: a new reports/runs/<time>-<command>/)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
@@ -74,11 +74,7 @@ def _run(args: argparse.Namespace, scenarios: list[str], kind: str) -> tuple[lis
     agents = [a.strip() for a in args.agents.split(",") if a.strip()]
     cells = sweep.grid(agents, sweep.parse_seeds(args.seeds), scenarios, action_type=args.action_type,
                        duration=args.duration)
-    out = args.out or Path("reports/sweeps") / f"{time.strftime('%Y%m%d-%H%M%S')}-{kind}"
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise sweep.SweepError(f"cannot create the output folder {out}: {exc.strerror}") from None
+    out = outfiles.given_folder(args.out) if args.out is not None else outfiles.fresh_folder(kind)
     where = f"Ray ({args.ray})" if args.ray else f"local processes ({args.workers or 'one per CPU'})"
     print(f"{len(cells)} runs of {args.duration:g} simulated s on {where}; run folders in {out}/")
     bar = _bar(len(cells)) if not args.no_progress else None
@@ -112,11 +108,14 @@ def sweep_command(args: argparse.Namespace) -> int:
 def compare_command(args: argparse.Namespace) -> int:
     scenarios = _scenarios(args)
     results, out = _run(args, scenarios, "compare")
-    tables, runs = compare.aggregate(results), compare.runs(results)
+    tables, runs, unmeasured = compare.aggregate(results), compare.runs(results), compare.unmeasured(results)
     markdown, plots = [], []
+    terminal = shutil.get_terminal_size((compare.WIDTH, 24)).columns  # the table wraps its columns to fit
     for scenario, table in tables.items():
-        text = compare.render(table, runs[scenario])
-        print(f"{scenario}, {args.duration:g} simulated s per run\n{text}\n")
+        why = unmeasured.get(scenario)
+        print(f"{scenario}, {args.duration:g} simulated s per run\n"
+              f"{compare.render(table, runs[scenario], unmeasured=why, width=terminal)}\n")
+        text = compare.render(table, runs[scenario], unmeasured=why)
         plot = "compare.png" if len(tables) == 1 else f"compare-{re.sub(r'[^A-Za-z0-9_.-]+', '_', scenario)}.png"
         compare.plot(table, out / plot, f"{scenario}: mean over seeds with 95 % CI ({args.duration:g} s)",
                      runs[scenario])

@@ -6,7 +6,9 @@ data (``hils/data/four_leg.toml``) and is the default everywhere.
 
 Times are given in seconds. Minimum and maximum green are whole seconds and
 clearance times are tenths of a second, as NTCIP 1202 stores them; the
-controller counts integer tenths internally.
+controller counts integer tenths internally. Every time the controller serves
+from its MIB must fit the range of the NTCIP 1202 object that carries it (a
+yellow change of 3.0-25.5 s, say): what a GET answers, a SET takes back.
 """
 
 from __future__ import annotations
@@ -22,9 +24,28 @@ from pathlib import Path
 from typing import Any
 
 from hils.protocol.errors import UserError
-from hils.protocol.ntcip import PhaseStartup, SplitMode, group_count
+from hils.protocol.ntcip import (
+    OVERLAP_TABLE,
+    PHASE_TABLE,
+    PREEMPT_TABLE,
+    UNIT_BACKUP_TIME,
+    UNIT_STARTUP_FLASH,
+    ObjectDef,
+    OverlapColumn,
+    PhaseColumn,
+    PhaseStartup,
+    PreemptColumn,
+    SplitMode,
+    group_count,
+)
 
 Pair = tuple[int, int]
+
+#: The NTCIP 1202 object a config time is carried in, and its units per second (1: seconds, 10: tenths). A time the
+#: object cannot hold would be answered by a GET as a value that a SET of the same object refuses: the config refuses
+#: it first, naming the object's range (its SYNTAX in the MIB, or NEMA TS 2's narrower range where the MIB's
+#: description gives one, as phaseYellowChange's "NEMA TS 2 range: 3-25.5 sec").
+Carrier = tuple[ObjectDef, int]
 
 DEFAULT_CONFIG_NAME = "four_leg.toml"
 
@@ -60,6 +81,18 @@ class NextPhaseLock(StrEnum):
     RED_END = "red_end"      # a call during the clearance may still redirect it on the same side of the barrier
 
 
+#: Each phase time of the config, and the phase-table object that carries it (NTCIP 1202 phaseTable).
+_PHASE_OBJECTS: dict[str, Carrier] = {
+    "min_green": (PHASE_TABLE[PhaseColumn.MINIMUM_GREEN], 1),
+    "max_green": (PHASE_TABLE[PhaseColumn.MAXIMUM1], 1),
+    "max2": (PHASE_TABLE[PhaseColumn.MAXIMUM2], 1),
+    "passage": (PHASE_TABLE[PhaseColumn.PASSAGE], 10),
+    "walk": (PHASE_TABLE[PhaseColumn.WALK], 1),
+    "ped_clear": (PHASE_TABLE[PhaseColumn.PEDESTRIAN_CLEAR], 1),
+    "yellow": (PHASE_TABLE[PhaseColumn.YELLOW_CHANGE], 10),
+    "red_clear": (PHASE_TABLE[PhaseColumn.RED_CLEAR], 10),
+    "red_revert": (PHASE_TABLE[PhaseColumn.RED_REVERT], 10),
+}
 # Per-phase timings and options a phase may set itself or inherit from [timing].
 _PHASE_OPTIONS = ("min_green", "max_green", "max2", "passage", "walk", "ped_clear", "yellow", "red_clear",
                   "red_revert", "recall", "dual_entry", "backup_prevent")
@@ -415,7 +448,7 @@ def _unknown(raw: Mapping[str, Any], allowed: tuple[str, ...], where: str, sourc
 
 def _number(raw: Mapping[str, Any], key: str, where: str, source: str, default: Any = None, *,
             integer: bool = False, low: float | None = None, low_open: bool = False,
-            high: float | None = None, step: float | None = None) -> Any:
+            high: float | None = None, step: float | None = None, ntcip: Carrier | None = None) -> Any:
     name = f"{where}{key}"
     value = raw.get(key, default)
     if value is None:
@@ -424,11 +457,20 @@ def _number(raw: Mapping[str, Any], key: str, where: str, source: str, default: 
     bad_type = isinstance(value, bool) or not isinstance(value, kinds)
     if bad_type or (isinstance(value, float) and not math.isfinite(value)):
         raise ConfigError(source, name, f"must be {'an integer' if integer else 'a finite number'}, got {value!r}")
+    carried = ""
+    if ntcip is not None:
+        obj, per_second = ntcip
+        lowest, highest = (obj.low, obj.high) if per_second == 1 else (obj.low / per_second, obj.high / per_second)
+        if low is None or lowest > low:
+            low, low_open = lowest, False
+        high = highest if high is None else min(high, highest)
+        carried = (f" s (NTCIP 1202 {obj.name}: {obj.low}-{obj.high} "
+                   f"{'seconds' if per_second == 1 else 'tenths of a second'})")
     too_low = low is not None and (value <= low if low_open else value < low)
     if too_low or (high is not None and value > high):
         lo = "" if low is None else f"{'>' if low_open else '>='} {low}"
         hi = "" if high is None else f"<= {high}"
-        raise ConfigError(source, name, f"is {value}; allowed: {' and '.join(x for x in (lo, hi) if x)}")
+        raise ConfigError(source, name, f"is {value}; allowed: {' and '.join(x for x in (lo, hi) if x)}{carried}")
     if step is not None and abs(round(value / step) * step - value) > 1e-9:
         raise ConfigError(source, name, f"is {value}; allowed: multiples of {step} s")
     return value
@@ -453,7 +495,7 @@ def _middleware(raw: Mapping[str, Any], source: str) -> MiddlewareParams:
         n_drift=_number(raw, "n_drift", w, source, d.n_drift, integer=True, low=1, high=1000),
         control_interval=float(_number(raw, "control_interval", w, source, d.control_interval,
                                        low=0, low_open=True, high=3600)),
-        backup_time=_number(raw, "backup_time", w, source, d.backup_time, integer=True, low=0, high=65535),
+        backup_time=_number(raw, "backup_time", w, source, d.backup_time, integer=True, ntcip=(UNIT_BACKUP_TIME, 1)),
     )
 
 
@@ -499,25 +541,27 @@ def _phase(number: int, raw: Any, defaults: Mapping[str, Any], ring: int, source
         # A bad value inherited from [timing] is reported where the user wrote it.
         return w if key in raw or key not in defaults else "timing."
 
-    min_green = _number(merged, "min_green", where("min_green"), source, integer=True, low=1, high=255)
-    max_green = _number(merged, "max_green", where("max_green"), source, integer=True, low=1, high=255)
+    def timing(key: str, default: Any = None, **limits: Any) -> Any:
+        return _number(merged, key, where(key), source, default, ntcip=_PHASE_OBJECTS[key], **limits)
+
+    min_green = timing("min_green", integer=True, low=1)
+    max_green = timing("max_green", integer=True, low=1)
     if max_green < min_green:
         blame = w if "min_green" in raw else where("max_green")
         raise ConfigError(source, f"{blame}max_green",
                           f"is {max_green} s, below min_green {min_green} s; allowed: max_green >= min_green")
-    yellow = _number(merged, "yellow", where("yellow"), source, low=0, low_open=True, high=25.5, step=0.1)
-    red_clear = _number(merged, "red_clear", where("red_clear"), source, low=0, low_open=True, high=25.5, step=0.1)
+    yellow = timing("yellow", step=0.1)
+    red_clear = timing("red_clear", low=0, low_open=True, step=0.1)
     startup = merged.get("startup", "off")
     if not isinstance(startup, str) or startup not in _STARTUP_NAMES:
         raise ConfigError(source, f"{w}startup", f"is {startup!r}; allowed: {', '.join(_STARTUP_NAMES)}")
-    tenth = {"low": 0, "high": 25.5, "step": 0.1}
-    passage = _number(merged, "passage", where("passage"), source, 0, **tenth)
-    walk = _number(merged, "walk", where("walk"), source, 0, integer=True, low=0, high=255)
-    ped_clear = _number(merged, "ped_clear", where("ped_clear"), source, 0, integer=True, low=0, high=255)
-    red_revert = _number(merged, "red_revert", where("red_revert"), source, 0, **tenth)
+    passage = timing("passage", 0, step=0.1)
+    walk = timing("walk", 0, integer=True)
+    ped_clear = timing("ped_clear", 0, integer=True)
+    red_revert = timing("red_revert", 0, step=0.1)
     max2 = merged.get("max2")
     if max2 is not None:
-        max2 = _number(merged, "max2", where("max2"), source, integer=True, low=min_green, high=255)
+        max2 = timing("max2", integer=True, low=min_green)
     if passage > max_green:
         raise ConfigError(source, f"{where('passage')}passage",
                           f"is {passage} s, beyond max_green {max_green} s; allowed: passage <= max_green")
@@ -646,7 +690,7 @@ def from_dict(raw: Mapping[str, Any], source: str = "<memory>") -> IntersectionC
     if not isinstance(timing, dict):
         raise ConfigError(source, "timing", "must be a table of default phase timings")
     _unknown(timing, (*_PHASE_OPTIONS, *_UNIT_OPTIONS), "timing.", source)
-    startup_flash = _number(timing, "startup_flash", "timing.", source, 0, integer=True, low=0, high=255)
+    startup_flash = _number(timing, "startup_flash", "timing.", source, 0, integer=True, ntcip=(UNIT_STARTUP_FLASH, 1))
     lock = timing.get("next_phase_lock", NextPhaseLock.GREEN_END.value)
     if lock not in tuple(NextPhaseLock):
         raise ConfigError(source, "timing.next_phase_lock",
@@ -964,13 +1008,14 @@ def _overlap(number: int, raw: Any, w: str, phases: Mapping[int, Phase], compati
             m, p = bad[0]
             raise ConfigError(source, f"{w}modifiers", f"phase {m} runs beside protected phase {p}; allowed: "
                                                        "permissive phases that conflict with every included phase")
-    trail_green = _number(raw, "trail_green", w, source, 0, integer=True, low=0, high=255)
+    trail_green = _number(raw, "trail_green", w, source, 0, integer=True,
+                          ntcip=(OVERLAP_TABLE[OverlapColumn.TRAIL_GREEN], 1))
     if trail_green and kind is OverlapKind.FYA:
         raise ConfigError(source, f"{w}trail_green", "is given for an fya overlap; allowed: 0 (a flashing yellow "
                                                      "arrow clears with its phases)")
-    # NTCIP 1202 overlapTrailYellow: "NEMA range: 3.0-25.5 sec"; overlapTrailRed 0-25.5 s.
-    trail_yellow = _number(raw, "trail_yellow", w, source, 3.0, low=3.0, high=25.5, step=0.1)
-    trail_red = _number(raw, "trail_red", w, source, 0.0, low=0.0, high=25.5, step=0.1)
+    trail_yellow = _number(raw, "trail_yellow", w, source, 3.0, step=0.1,
+                           ntcip=(OVERLAP_TABLE[OverlapColumn.TRAIL_YELLOW], 10))
+    trail_red = _number(raw, "trail_red", w, source, 0.0, step=0.1, ntcip=(OVERLAP_TABLE[OverlapColumn.TRAIL_RED], 10))
     approach, turn = raw.get("approach"), raw.get("turn")
     if (approach is None) != (turn is None):
         missing, given = ("turn", "approach") if turn is None else ("approach", "turn")
@@ -988,11 +1033,20 @@ def _overlap(number: int, raw: Any, w: str, phases: Mapping[int, Phase], compati
 
 # --- [preempts] -----------------------------------------------------------------------------------
 
-_PREEMPT_TIMES = {  # field: (integer, low, high); NTCIP 1202's ranges (the yellows from NEMA's 3.0 s)
-    "delay": (True, 0, 600), "min_duration": (True, 0, 65535), "min_green": (True, 0, 255),
-    "min_walk": (True, 0, 255), "enter_ped_clear": (True, 0, 255), "enter_yellow": (False, 3.0, 25.5),
-    "enter_red": (False, 0.0, 25.5), "track_green": (True, 0, 255), "track_yellow": (False, 3.0, 25.5),
-    "track_red": (False, 0.0, 25.5), "dwell_green": (True, 1, 255), "max_presence": (True, 0, 65535),
+#: Each preempt time of the config, and the preempt-table object that carries it (NTCIP 1202 preemptTable).
+_PREEMPT_TIMES: dict[str, Carrier] = {
+    "delay": (PREEMPT_TABLE[PreemptColumn.DELAY], 1),
+    "min_duration": (PREEMPT_TABLE[PreemptColumn.MINIMUM_DURATION], 1),
+    "min_green": (PREEMPT_TABLE[PreemptColumn.MINIMUM_GREEN], 1),
+    "min_walk": (PREEMPT_TABLE[PreemptColumn.MINIMUM_WALK], 1),
+    "enter_ped_clear": (PREEMPT_TABLE[PreemptColumn.ENTER_PED_CLEAR], 1),
+    "enter_yellow": (PREEMPT_TABLE[PreemptColumn.ENTER_YELLOW_CHANGE], 10),
+    "enter_red": (PREEMPT_TABLE[PreemptColumn.ENTER_RED_CLEAR], 10),
+    "track_green": (PREEMPT_TABLE[PreemptColumn.TRACK_GREEN], 1),
+    "track_yellow": (PREEMPT_TABLE[PreemptColumn.TRACK_YELLOW_CHANGE], 10),
+    "track_red": (PREEMPT_TABLE[PreemptColumn.TRACK_RED_CLEAR], 10),
+    "dwell_green": (PREEMPT_TABLE[PreemptColumn.DWELL_GREEN], 1),
+    "max_presence": (PREEMPT_TABLE[PreemptColumn.MAXIMUM_PRESENCE], 1),
 }
 
 
@@ -1029,10 +1083,11 @@ def _preempt(number: int, raw: Any, w: str, phases: Mapping[int, Phase], compati
             raise ConfigError(source, f"{w}{key}", f"phases {clash[0]} and {clash[1]} conflict; allowed: phases that "
                                                    "run together")
         got[key] = tuple(value)
-    for key, (integer, low, high) in _PREEMPT_TIMES.items():
+    for key, (obj, per_second) in _PREEMPT_TIMES.items():
         default = Preempt.__dataclass_fields__[key].default
-        value = _number(raw, key, w, source, default, integer=integer, low=low, high=high,
-                        step=None if integer else 0.1)
+        integer = per_second == 1
+        value = _number(raw, key, w, source, default, integer=integer, step=None if integer else 0.1,
+                        ntcip=(obj, per_second))
         got[key] = value if integer else float(value)
     if got["track_green"] and not got["track_phases"]:
         raise ConfigError(source, f"{w}track_phases", "is required with track_green: the phases that clear the track")

@@ -250,6 +250,11 @@ def light_of(source: str) -> tuple[str, str] | None:
     return (scenario, tls) if scenario.startswith(RESCO_PREFIX) and tls and not tls.startswith("(") else None
 
 
+def titled(scenario: str, tls: str) -> str:
+    """How a run of a scenario's one light is titled (console, pictures): the scenario, then the light."""
+    return f"{scenario}, light {tls}"
+
+
 class _NoFit(Exception):
     """No dual-ring structure serves the program's stages (the split-phase one is used instead)."""
 

@@ -37,6 +37,10 @@ SPLIT_FAILURE = {"red_time": 5, "red_occupancy_threshold": 0.80, "green_occupanc
                  "by_approach": True}
 #: The extra that installs the package.
 INSTALL = "pip install 'hils[atspm]'"
+#: Why split failures and arrivals on green are not measured in a run whose controllers read no detector.
+NO_DETECTORS = ("no detector actuations in the log: the controller ran on the middleware's calls or a pretimed plan "
+                "alone, so split failures and arrivals on green are not measured (--agent actuated or coordinated "
+                "runs the controller on its detectors)")
 #: The columns of a run's ``atspm.csv``, one row per controller, phase and bin.
 FIELDS = ("TimeStamp", "DeviceId", "Phase", "split_failures", "green_occupancy", "red_occupancy", "arrivals",
           "arrivals_on_green", "percent_on_green", "actuations", "gap_outs", "max_outs", "force_offs")

@@ -14,7 +14,14 @@ in milliseconds, opened by any browser):
   force-off, or none: a coordinated phase yielding or a green with nowhere to go), with the programmed
   split of the pattern running (events 134-149) as a dashed line.
 
-A coordinated phase (one with yield point events, 151) says so in its panel's title.
+A coordinated phase (one with yield point events, 151) says so in its panel's title. The time of day reads as a
+clock does.
+
+Each is drawn where it says something the run's other pictures do not: the coordination diagram for the phases whose
+detectors the controller read (its arrivals are its point), the split monitor where the controller chose its splits
+itself, running a plan or timing its greens on its detectors. A controller that only served the middleware's calls
+has neither (every split is the agent's, in the signal timeline): :data:`NOTHING_TO_DRAW`. A legend names only what
+its chart shows.
 """
 
 from __future__ import annotations
@@ -24,17 +31,22 @@ from collections.abc import Callable, Mapping, Sequence
 from datetime import datetime
 from pathlib import Path
 
-from hils.protocol.config import IntersectionConfig
+from hils.protocol.config import FREE, IntersectionConfig
 from hils.protocol.hires import Event, EventCode, split_code
-from hils.report.plots import Chart, Svg
+from hils.report.plots import Chart, Svg, clock_ticks
 
 E = EventCode
 TERMINATIONS = {E.PHASE_GAP_OUT: ("gap-out", "#2ca02c"), E.PHASE_MAX_OUT: ("max-out", "#d62728"),
                 E.PHASE_FORCE_OFF: ("force-off", "#1f77b4"), None: ("none (yield, rest)", "#7f7f7f")}
 GREEN, YELLOW = "#2ca02c", "#e6a800"
+DASHED = "dashed"  # a legend entry drawn as the programmed split's dashed line
 _PANEL_W, _PANEL_H, _LEFT, _TOP, _GAP = 520.0, 190.0, 70.0, 70.0, 95.0
 
 Panel = Callable[[Svg, Chart], None]
+
+#: Why a controller's log gives no chart (the run's summary says it).
+NOTHING_TO_DRAW = ("no coordination diagram or split monitor: the controller ran no plan and read no detector, it "
+                   "served the middleware's calls alone (the agent's splits are in signal_timeline.svg)")
 
 
 def _hours(t: datetime, day0: datetime) -> float:
@@ -45,16 +57,20 @@ def _coordinated(events: Sequence[Event]) -> set[int]:
     return {e.parameter for e in events if e.code == E.COORD_YIELD_POINT}
 
 
-def _draw(path: Path, title: str, legend: Sequence[tuple[str, str]], x_label: str, y_label: str,
+def _draw(path: Path, title: str, legend: Sequence[tuple[str, str]], day0: datetime, y_label: str,
           panels: Sequence[tuple[str, tuple[float, float], tuple[float, float], Panel]]) -> Path:
-    """Panels two by two, each with its axes; a legend of (label, colour) under the title."""
+    """Panels two by two, each with its axes over the time of day (hours after ``day0``'s midnight, read as a clock);
+    a legend of (label, colour) under the title (a dashed line where the colour is ``dashed``)."""
     columns = 1 if len(panels) == 1 else 2
     rows = (len(panels) + columns - 1) // columns
     svg = Svg(_LEFT + columns * (_PANEL_W + _LEFT), _TOP + rows * (_PANEL_H + _GAP))
     svg.title(title, 24)
     x = _LEFT
     for label, color in legend:
-        svg.dots([(x, 46)], color, radius=4)
+        if color == DASHED:
+            svg.line(x - 6, 46, x + 4, 46, color="#555555", dash="5 3")
+        else:
+            svg.dots([(x, 46)], color, radius=4)
         svg.text(x + 8, 50, label, size=12)
         x += 24 + 7 * len(label)
     for k, (name, xs, ys, draw) in enumerate(panels):
@@ -63,16 +79,18 @@ def _draw(path: Path, title: str, legend: Sequence[tuple[str, str]], x_label: st
         chart = Chart(left, top, _PANEL_W, _PANEL_H, xs, ys)
         svg.text(left + _PANEL_W / 2, top - 6, name, size=13, anchor="middle")
         draw(svg, chart)
-        chart.axes(svg, x_label, y_label=y_label)
+        chart.axes(svg, f"time of day, {day0:%Y-%m-%d}", y_label=y_label, x_ticks=clock_ticks(*xs))
     return svg.write(path)
 
 
 def coordination_diagram(events: Sequence[Event], config: IntersectionConfig, path: Path, title: str) -> bool:
-    """Draw the Purdue coordination diagram of every phase with detectors to ``path`` (SVG); False when no phase
-    has a whole cycle to show."""
+    """Draw the Purdue coordination diagram of every phase whose detectors the log shows actuated to ``path`` (SVG);
+    False when no such phase has a whole cycle to show."""
+    actuated = {e.parameter for e in events if e.code == E.DETECTOR_ON}
     detectors: dict[int, set[int]] = {}
     for d, phase in config.detectors.items():
-        detectors.setdefault(phase, set()).add(d)
+        if d in actuated:
+            detectors.setdefault(phase, set()).add(d)
     day0 = datetime.combine(events[0].time.date(), datetime.min.time()) if events else datetime.min
     coordinated = _coordinated(events)
     panels = []
@@ -109,7 +127,7 @@ def coordination_diagram(events: Sequence[Event], config: IntersectionConfig, pa
         return False
     _draw(path, f"Purdue coordination diagram, {title}", [("begin green", GREEN), ("begin yellow", YELLOW),
                                                          ("detector on (arrival)", "black")],
-          f"time of day (h), {day0:%Y-%m-%d}", "time in cycle (s)", panels)
+          day0, "time in cycle (s)", panels)
     return True
 
 
@@ -140,19 +158,29 @@ def _programmed(events: Sequence[Event], phase: int) -> list[tuple[datetime, flo
     return out
 
 
+def chose_its_splits(events: Sequence[Event]) -> bool:
+    """The controller chose its splits itself: it ran a plan (a pattern other than free) or read its detectors."""
+    return any(e.code == E.DETECTOR_ON or (e.code == E.COORD_PATTERN_CHANGE and e.parameter != FREE) for e in events)
+
+
 def split_monitor(events: Sequence[Event], config: IntersectionConfig, path: Path, title: str) -> bool:
-    """Draw the split monitor of every phase served to ``path`` (SVG); False when no phase was served."""
-    if not events:
+    """Draw the split monitor of every phase served to ``path`` (SVG); False when no phase was served, or when the
+    controller did not choose its splits itself (a controller on the middleware's calls alone)."""
+    if not events or not chose_its_splits(events):
         return False
     day0 = datetime.combine(events[0].time.date(), datetime.min.time())
     span = (_hours(events[0].time, day0), _hours(events[-1].time, day0))
     coordinated = _coordinated(events)
     panels = []
+    ended: set[int | None] = set()  # how greens ended, and whether a split was programmed: what the legend names
+    planned = False
     for phase in config.phase_numbers:
         services = _services(events, phase)
         if not services:
             continue
         plan = _programmed(events, phase)
+        ended |= {r for _, _, r in services}
+        planned |= any(s is not None for _, s in plan)
         top = max([s for _, s, _ in services] + [s for _, s in plan if s is not None])
 
         def draw(svg: Svg, chart: Chart, services: list = services, plan: list = plan) -> None:
@@ -169,9 +197,9 @@ def split_monitor(events: Sequence[Event], config: IntersectionConfig, path: Pat
                        (0.0, top * 1.15), draw))
     if not panels:
         return False
-    _draw(path, f"Split monitor, {title}: each service's split by how its green ended; dashed: programmed split",
-          [(label, color) for label, color in TERMINATIONS.values()], f"time of day (h), {day0:%Y-%m-%d}",
-          "split (s)", panels)
+    legend = [(label, color) for reason, (label, color) in TERMINATIONS.items() if reason in ended]
+    _draw(path, f"Split monitor, {title}: each service's split by how its green ended",
+          legend + [("programmed split", DASHED)] * planned, day0, "split (s)", panels)
     return True
 
 

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from hils.protocol.config import IntersectionConfig
+from hils.protocol.resco import light_of, titled
 from hils.protocol.scenario import described
 from hils.report.outfiles import write_whole
 from hils.shell.events import Kind, signal_known
@@ -84,7 +85,11 @@ def run_end(records: Sequence[dict[str, Any]]) -> float:
 
 def named(label: str | None, config: IntersectionConfig) -> str:
     """How a picture's title names an intersection: its label in a run of several and its config's name, once where
-    the name already begins with the label (a RESCO light's derived config: "A0, dual-ring from its SUMO program")."""
+    the name already begins with the label (a RESCO light's derived config: "A0, dual-ring from its SUMO program");
+    in a run of a scenario's one light, the scenario and the light (as the console's summary does)."""
+    light = light_of(config.source) if not label else None
+    if light is not None:
+        return titled(*light)
     if not label or described(label, config) != config.name:
         return config.name
     return f"{label} ({config.name})"
@@ -319,13 +324,15 @@ class Chart:
         lo, hi = self.ys or (0.0, 1.0)
         return self.top + self.height - (value - lo) / ((hi - lo) or 1.0) * self.height
 
-    def axes(self, svg: Svg, x_label: str, *, y_label: str | None = None) -> None:
+    def axes(self, svg: Svg, x_label: str, *, y_label: str | None = None,
+             x_ticks: Sequence[tuple[float, str]] | None = None) -> None:
+        """The frame, round ticks on both axes (``x_ticks``: the x axis's own, as (value, label)) and the labels."""
         bottom = self.top + self.height
         svg.parts.append(f'<rect x="{self.left:.2f}" y="{self.top:.2f}" width="{self.width:.2f}" '
                          f'height="{self.height:.2f}" fill="none" stroke="black"/>')
-        for value in ticks(*self.xs):
+        for value, label in x_ticks if x_ticks is not None else [(v, f"{v:g}") for v in ticks(*self.xs)]:
             svg.line(self.x(value), bottom, self.x(value), bottom + 5)
-            svg.text(self.x(value), bottom + 19, f"{value:g}", anchor="middle")
+            svg.text(self.x(value), bottom + 19, label, anchor="middle")
         svg.text(self.left + self.width / 2, bottom + 38, x_label, anchor="middle")
         if self.ys is not None:
             for value in ticks(*self.ys):
@@ -344,3 +351,22 @@ def ticks(lo: float, hi: float, most: int = 10) -> list[float]:
                 if span / (m * 10.0 ** e) <= most)
     first = math.ceil(lo / step - 1e-9)
     return [round(k * step, 10) for k in range(first, math.floor(hi / step + 1e-9) + 1)]
+
+
+#: Steps between the ticks of a time of day, in seconds: round on a clock's face.
+_CLOCK_STEPS = (1, 2, 5, 10, 15, 30, 60, 120, 300, 600, 900, 1800, 3600, 7200, 10800, 21600, 43200)
+
+
+def clock_ticks(lo: float, hi: float, most: int = 8) -> list[tuple[float, str]]:
+    """Ticks at round times of day over [lo, hi] hours after midnight, at most ``most``, labelled as a clock reads
+    (``07:15``; ``07:15:30`` where they are under a minute apart)."""
+    span = (hi - lo) * 3600
+    step = next((s for s in _CLOCK_STEPS if span / s <= most), _CLOCK_STEPS[-1])
+    first, last = math.ceil(lo * 3600 / step - 1e-9), math.floor(hi * 3600 / step + 1e-9)
+    out = []
+    for k in range(first, last + 1):
+        seconds = k * step
+        hours, rest = divmod(seconds, 3600)
+        clock = f"{hours % 24:02d}:{rest // 60:02d}" + (f":{rest % 60:02d}" if step < 60 else "")
+        out.append((seconds / 3600, clock))
+    return out

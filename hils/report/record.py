@@ -70,6 +70,8 @@ def keep(logs: Mapping[str, list[Event]], configs: Mapping[str, IntersectionConf
     charts = atspm_charts.draw(logs, configs, folders,
                                {tls: plots.named(tls if several else None, configs[tls]) for tls in logs})
     written += [str(p.relative_to(folder)) for p in charts]
+    if not any(atspm_charts.chose_its_splits(events) for events in logs.values()):
+        section["charts"] = atspm_charts.NOTHING_TO_DRAW
     return section, written
 
 
@@ -82,15 +84,15 @@ def describe(section: Mapping[str, Any]) -> list[str]:
              + ", ".join(f"{n} = {tls}" for n, tls in section["devices"].items()) + ")"]
     if "format_note" in section:
         lines.append(f"  {section['format_note']}")
+    if "charts" in section:
+        lines.append(f"  {section['charts']}")
     measured = section.get("atspm", {})
     if "missing" in measured:
         lines.append(f"ATSPM measures: not computed, {measured['missing']}")
         return lines
     aog = measured["percent_on_green"]
     if measured["split_failures"] is None:
-        detectors = ("no detector actuations in the log: the controller ran on the middleware's calls or a pretimed "
-                     "plan alone, so split failures and arrivals on green are not measured (--agent actuated or "
-                     "coordinated runs the controller on its detectors)")
+        detectors = atspm.NO_DETECTORS
     else:
         detectors = (f"{measured['split_failures']} split failures, {'-' if aog is None else f'{aog:.1f} %'} of "
                      "arrivals on green (stop-bar detectors)")

@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from hils.protocol.config import IntersectionConfig
+from hils.protocol.resco import light_of, titled
 from hils.report import jsonout
 from hils.report.latency import Stats, internal_latencies_ms, transition_holds
 from hils.report.outfiles import write_whole
@@ -78,11 +79,14 @@ def summarize(intersections: Mapping[str | None, tuple[Tally, IntersectionConfig
     label) and the traffic. A run of one intersection (labelled None) is summed up as the single controller's
     run always was; a run of several names each intersection, and the network's approaches (``J2 north``)."""
     run = next(iter(intersections.values()))[0]  # every tally holds the run's own records
+    started = next((r for r in run.records if r["kind"] == Kind.RUN_STARTED), {})
     if None in intersections:
         tally, config = intersections[None]
-        out = {"config": config.name, **_run(tally, wall_s), **_control(tally, config)}
+        # a scenario's one light (RESCO's cologne1): the scenario names the run, not the light's derived config
+        light = light_of(started.get("source") or "")
+        out = {"config": config.name, **({"scenario": light[0], "light": light[1]} if light else {}),
+               **_run(tally, wall_s), **_control(tally, config)}
     else:
-        started = next((r for r in run.records if r["kind"] == Kind.RUN_STARTED), {})
         out = {"scenario": started.get("scenario"), **_run(run, wall_s),
                "intersections": {label: {"config": cfg.name, **_control(t, cfg)}
                                  for label, (t, cfg) in intersections.items()}}
@@ -202,15 +206,18 @@ def _polls(ended: Mapping[str, Any], intersection: str | None) -> dict[str, int]
     return dict(polls)
 
 
-def render(summary: Mapping[str, Any]) -> str:
+def render(summary: Mapping[str, Any], *, by: str | None = None) -> str:
     """The console summary of a run: the run, its traffic and its signal control (per intersection when the
-    summary names them)."""
-    return _render_network(summary) if "intersections" in summary else _render_one(summary)
+    summary names them). ``by`` says who drove the signals (default: the action type and the agent; an agent that
+    leaves the controller to its own operation has none: :func:`hils.agents.builtin.controlled_by`)."""
+    by = by or f"{summary['action_type']} by {summary['agent']}"
+    return _render_network(summary, by) if "intersections" in summary else _render_one(summary, by)
 
 
-def _render_one(summary: Mapping[str, Any]) -> str:
+def _render_one(summary: Mapping[str, Any], by: str) -> str:
     s = summary
-    lines = [f"Run summary: {s['config']} ({s['mode']}, {s['action_type']} by {s['agent']}, seed {s['seed']})",
+    named = titled(s["scenario"], s["light"]) if s.get("light") else s["config"]
+    lines = [f"Run summary: {named} ({s['mode']}, {by}, seed {s['seed']})",
              _simulated(s)]
     t = s.get("traffic")
     if t:
@@ -244,11 +251,11 @@ def _render_one(summary: Mapping[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def _render_network(summary: Mapping[str, Any]) -> str:
+def _render_network(summary: Mapping[str, Any], by: str) -> str:
     """The network's traffic, then a line per intersection."""
     s = summary
     lines = [f"Run summary: {s['scenario']} ({len(s['intersections'])} controllers, {s['mode']}, "
-             f"{s['action_type']} by {s['agent']}, seed {s['seed']})",
+             f"{by}, seed {s['seed']})",
              _simulated(s)]
     if s.get("traffic"):
         lines += _traffic_lines(s["traffic"])
@@ -311,11 +318,18 @@ def _traffic_lines(t: Mapping[str, Any]) -> list[str]:
     w = _width(t["approaches"], 18)
     lines.append(f"  {'per approach':<{w + 2}} arrived  running  waiting  mean delay  max queue  "
                  "minutes with a lane full")
+    fed = False  # an approach no vehicle entered the network on: fed by a neighbouring intersection
     for name, a in t["approaches"].items():
         spill = len(a["spillback_minutes"])
-        lines.append(f"    {_fit(name, w)} {a['arrived']:>7}  {a['running']:>7}  {a['waiting_to_enter']:>7}  "
-                     f"{_fmt(a['mean_delay']):>10}  {a['max_queue']:>9}  "
-                     + (f"{spill} (spillback; a lane holds {a['lane_storage']})" if spill else "0"))
+        entered = (a["arrived"], a["running"], a["waiting_to_enter"], _fmt(a["mean_delay"]))
+        if not a["departed"] and not a["waiting_to_enter"]:
+            entered, fed = ("-",) * 4, True
+        lines.append(f"    {_fit(name, w)} {entered[0]:>7}  {entered[1]:>7}  {entered[2]:>7}  {entered[3]:>10}  "
+                     f"{a['max_queue']:>9}  " + (f"{spill} (spillback; a lane holds {a['lane_storage']})"
+                                                 if spill else "0"))
+    if fed:
+        lines += ["    -: no vehicle entered the network there (arrived, running, waiting and mean delay count",
+                  "       vehicles by the approach they entered on): its traffic comes from a neighbouring light"]
     return lines
 
 

@@ -9,12 +9,17 @@ the same demand; with one seed there is no interval and the table says so).
 from __future__ import annotations
 
 import math
+import textwrap
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from hils.report import atspm
 from hils.report.plots import pyplot
-from hils.sweep.grid import CellResult
+from hils.sweep.grid import ATSPM_FIGURES, CellResult
+
+#: The widest a table is drawn (a terminal's usual width): its columns wrap into blocks beyond.
+WIDTH = 120
 
 #: Two-sided 95 % quantiles of Student's t by degrees of freedom (1..30); beyond, the normal's 1.96.
 _T95 = (12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228, 2.201, 2.179, 2.160, 2.145, 2.131,
@@ -110,16 +115,48 @@ def runs(results: Sequence[CellResult]) -> dict[str, dict[str, Runs]]:
     return out
 
 
-def render(table: Table, runs: dict[str, Runs]) -> str:
-    """The table as text: a row per agent (``failed`` in every column of an agent none of whose runs finished), and
-    what the intervals are over, naming each agent that has fewer runs than seeds behind its figures."""
+def unmeasured(results: Sequence[CellResult]) -> dict[str, dict[str, str]]:
+    """Per scenario, why a figure no run gave was not measured (by figure): the ATSPM measures without the atspm
+    package, split failures and arrivals on green where no controller read its detectors."""
+    out: dict[str, dict[str, str]] = {}
+    for r in results:
+        missing = ((r.summary.get("record") or {}).get("atspm") or {}).get("missing")
+        if r.ok:
+            out[r.cell.scenario] = ({f"atspm_{name}": missing for name in ATSPM_FIGURES} if missing else
+                                    {"atspm_split_failures": atspm.NO_DETECTORS,
+                                     "atspm_percent_on_green": atspm.NO_DETECTORS})
+    return out
+
+
+def render(table: Table, runs: dict[str, Runs], *, unmeasured: dict[str, str] | None = None,
+           width: int = WIDTH) -> str:
+    """The table as text: a row per agent (``failed`` in every column of an agent none of whose runs finished), its
+    columns wrapped into blocks of at most ``width`` characters, each repeating the agent; a figure no run gave is
+    left out and said once, with why (``unmeasured``, by figure); then what the intervals are over, naming each
+    agent that has fewer runs than seeds behind its figures."""
     names = list(next(iter(table.values())))
-    width = max(14, *(len(a) for a in table))
-    head = f"{'agent':<{width}}  " + "  ".join(f"{_label(n):>18}" for n in names)
-    lines = [head, "-" * len(head)]
-    for agent, row in table.items():
-        cells = ("failed" if not runs[agent].ok else row[n].text() for n in names)
-        lines.append(f"{agent:<{width}}  " + "  ".join(f"{c:>18}" for c in cells))
+    shown = [n for n in names if any(row[n].n for row in table.values())] or names[:1]
+    cells = {agent: {n: row[n].text() if runs[agent].ok else "failed" for n in shown} for agent, row in table.items()}
+    agent_width = max(len("agent"), *(len(a) for a in table))
+    widths = {n: max(len(_label(n)), *(len(row[n]) for row in cells.values())) for n in shown}
+    blocks: list[list[str]] = [[]]
+    for n in shown:
+        if blocks[-1] and agent_width + sum(2 + widths[m] for m in (*blocks[-1], n)) > width:
+            blocks.append([])
+        blocks[-1].append(n)
+    lines: list[str] = []
+    for k, block in enumerate(blocks):
+        head = f"{'agent':<{agent_width}}" + "".join(f"  {_label(n):>{widths[n]}}" for n in block)
+        lines += [""] * (k > 0) + [head, "-" * len(head)]
+        lines += [f"{agent:<{agent_width}}" + "".join(f"  {row[n]:>{widths[n]}}" for n in block)
+                  for agent, row in cells.items()]
+    why = unmeasured or {}
+    left_out: dict[str, list[str]] = {}
+    for n in names:
+        if n not in shown:
+            left_out.setdefault(why.get(n, "no run gave it"), []).append(_label(n))
+    lines += [textwrap.fill(f"not measured, left out: {', '.join(labels)}: {reason}", width, subsequent_indent="  ")
+              for reason, labels in left_out.items()]
     seeds = max(r.total for r in runs.values())
     short = [f"{agent}: {r.failed} of {r.total} runs failed" for agent, r in runs.items() if r.failed]
     lines.append(f"mean ± half width of the 95 % confidence interval over {seeds} seeds (Student's t)"

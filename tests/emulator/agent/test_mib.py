@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+from importlib import resources
+
 import pytest
+from hypothesis import example, given, settings
+from hypothesis import strategies as st
 
 from emulator.agent.mib import MibView
 from emulator.model.controller import Controller
-from hils.protocol.config import IntersectionConfig, from_dict, parse
+from hils.protocol.config import ConfigError, IntersectionConfig, from_dict, parse
 from hils.protocol.ntcip import (
     CHANNEL_TABLE,
     COORD_PATTERN_STATUS,
@@ -398,3 +402,38 @@ def test_unit_start_up_flash_over_the_mib_and_at_power_up(mib: MibView, controll
     assert controller.flash_status is UnitFlashStatus.STARTUP
     controller.step()
     assert controller.flash_status is UnitFlashStatus.NOT_FLASH and controller.greens == {2, 6}
+
+
+# Each writable phase-table column, the config's field it carries and its units per second.
+_PHASE_FIELDS = {PhaseColumn.WALK: ("walk", 1), PhaseColumn.PEDESTRIAN_CLEAR: ("ped_clear", 1),
+                 PhaseColumn.MINIMUM_GREEN: ("min_green", 1), PhaseColumn.PASSAGE: ("passage", 10),
+                 PhaseColumn.MAXIMUM1: ("max_green", 1), PhaseColumn.MAXIMUM2: ("max2", 1),
+                 PhaseColumn.YELLOW_CHANGE: ("yellow", 10), PhaseColumn.RED_CLEAR: ("red_clear", 10),
+                 PhaseColumn.RED_REVERT: ("red_revert", 10)}
+
+
+@settings(max_examples=300, deadline=None)
+@given(column=st.sampled_from(sorted(_PHASE_FIELDS)), value=st.integers(0, 300))
+@example(column=PhaseColumn.YELLOW_CHANGE, value=1)  # the issue's yellow = 0.1
+def test_a_phase_time_a_config_gives_is_one_a_set_takes_back(column: PhaseColumn, value: int) -> None:
+    """What the config sets, a GET answers and a SET of the same value takes back; what the NTCIP object cannot
+    carry the config refuses, naming the object's range (the issue's ``yellow = 0.1``: GET 1, SET refused)."""
+    name, per_second = _PHASE_FIELDS[column]
+    text = (resources.files("hils.data") / "four_leg.toml").read_text(encoding="utf-8")
+    # phase 1 with a walk for the pedestrian times, a max_green of 255 s for the others to fit under
+    setting = f"{name} = {value / per_second:g}" if name != "max_green" else f"max_green = {value}"
+    extra = "" if name in ("walk", "ped_clear", "max_green") else ", max_green = 255"
+    extra += {"walk": ", ped_clear = 5", "ped_clear": ", walk = 5"}.get(name, "")
+    text = text.replace('1 = { approach = "west", turn = "left" }',
+                        f'1 = {{ approach = "west", turn = "left", {setting}{extra} }}')
+    try:
+        config = parse(text, "variant.toml")
+    except ConfigError as exc:
+        obj = object_for(phase_oid(column, 1))
+        if not obj.low <= value <= obj.high:
+            assert f"NTCIP 1202 {obj.name}: {obj.low}-{obj.high}" in exc.message
+        return
+    mib = MibView(Controller(config))
+    answered = mib.get(phase_oid(column, 1))
+    mib.set_many([(phase_oid(column, 1), answered)])
+    assert mib.get(phase_oid(column, 1)) == answered == value

@@ -99,11 +99,11 @@ def test_bad_seeds_are_refused_in_one_line() -> None:
 
 
 def test_the_overhead_bench_runs_the_loop_and_its_floor_seed_by_seed_in_fresh_processes(tmp_path: Path) -> None:
-    out = tmp_path / "overhead.json"
+    out = tmp_path / "figures"
     done = subprocess.run([sys.executable, "-m", "hils", "bench", "overhead", "--seeds", "0,1", "--duration",
                            "60", "--out", str(out)], capture_output=True, text=True, timeout=300, cwd=tmp_path)
     assert done.returncode == 0, done.stderr
-    doc = json.loads(out.read_text())
+    doc = json.loads((out / "overhead.json").read_text())
     f = doc["overhead"]
     assert doc["machine"]["cores"] and f["seeds"] == [0, 1]
     # the same traffic on both sides of every seed, and the ratio taken seed by seed

@@ -47,7 +47,7 @@ SEEDS = (1, 1001, 2002)
 def test_the_shipped_suite_passes_at_every_seed_through_the_cli(tmp_path, capsys):
     """Every scenario's expectations hold at three seeds (its faults', emulator's and agent's draws replaced),
     burst-loss's too: each burst of lost polls is a TIMEOUT however the polls' answers and failures interleave."""
-    code = main(["faults", "run", "--seeds", ",".join(map(str, SEEDS)), "--report-dir", str(tmp_path),
+    code = main(["faults", "run", "--seeds", ",".join(map(str, SEEDS)), "--out", str(tmp_path),
                  "--no-progress"])
     out = capsys.readouterr().out
     assert code == 0, out
@@ -103,7 +103,7 @@ def test_a_wrong_expectation_fails_saying_which_and_what_happened(tmp_path):
 def test_a_scenario_expecting_no_timeout_fails_when_one_happens(tmp_path, capsys):
     path = tmp_path / "ride.toml"
     path.write_text(LINK_DOWN.split("[expect]")[0] + '[expect]\ntimeout = "none"\n')
-    code = main(["faults", "run", str(path), "--report-dir", str(tmp_path / "rep"), "--no-progress"])
+    code = main(["faults", "run", str(path), "--out", str(tmp_path / "rep"), "--no-progress"])
     out = capsys.readouterr().out
     assert code == 1
     assert re.search(r"FAIL ride \(seed \d+\): timeout: expected no TIMEOUT; got TIMEOUT: communication at "
@@ -188,7 +188,7 @@ def test_a_bad_scenario_file_is_refused_naming_the_file_and_the_key(tmp_path, ed
 def test_the_cli_refuses_a_bad_file_with_its_name_and_key(tmp_path, capsys):
     path = tmp_path / "typo.toml"
     path.write_text(LINK_DOWN.replace("seed = 1", "sede = 1"))
-    assert main(["faults", "run", str(path), "--report-dir", str(tmp_path), "--no-progress"]) == 2
+    assert main(["faults", "run", str(path), "--out", str(tmp_path), "--no-progress"]) == 2
     err = capsys.readouterr().err
     assert str(path) in err and "sede" in err and "unknown key" in err
 
@@ -270,7 +270,7 @@ def test_while_one_corridor_link_is_down_the_others_go_on_verifying_the_same_tra
 def test_a_corridor_fault_on_the_wrong_controller_fails_at_both_intersections(tmp_path, capsys):
     path = tmp_path / "moved.toml"
     path.write_text(CORRIDOR_LINK_DOWN.replace('intersection = "J2"', 'intersection = "J3"'))
-    assert main(["faults", "run", str(path), "--report-dir", str(tmp_path / "rep"), "--no-progress"]) == 1
+    assert main(["faults", "run", str(path), "--out", str(tmp_path / "rep"), "--no-progress"]) == 1
     out = capsys.readouterr().out
     assert re.search(r"FAIL moved \(seed 1\): \[J3\] timeout: expected no TIMEOUT; got TIMEOUT: communication "
                      r"at 21\.4\d\d s", out)

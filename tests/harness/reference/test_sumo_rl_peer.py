@@ -125,12 +125,12 @@ def test_a_peer_episode_gives_rescos_figures_from_its_tripinfo(tmp_path: Path) -
 
 
 def test_the_resco_bench_compares_both_sides_seed_by_seed(tmp_path: Path) -> None:
-    out = tmp_path / "resco.json"
+    out = tmp_path / "figures"
     done = subprocess.run([sys.executable, "-m", "hils", "bench", "resco", "--scenarios", "cologne1", "--seeds",
                            "0,1", "--duration", "120", "--out", str(out)], capture_output=True, text=True,
                           timeout=300, cwd=tmp_path)
     assert done.returncode == 0, done.stderr
-    doc = json.loads(out.read_text())
+    doc = json.loads((out / "resco.json").read_text())
     f = doc["resco"]
     assert f["seeds"] == [0, 1] and doc["machine"]["cpu"] and "single_agent=False" in f["peer"]
     sc = f["scenarios"]["cologne1"]

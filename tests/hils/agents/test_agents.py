@@ -121,10 +121,10 @@ def test_an_agent_of_another_action_type_is_refused(user_module):
 
 
 def test_the_coordinated_agent_runs_the_plan_and_needs_one(paper_config, paper_toml) -> None:
-    from hils.agents.builtin import CONTROLLER_AGENTS, controller_config
+    from hils.agents.builtin import OWN_OPERATION, controller_config
 
     agent = load_agent("coordinated", paper_config, "selection")
-    assert agent.act(None) is None and "coordinated" in CONTROLLER_AGENTS
+    assert agent.act(None) is None and "coordinated" in OWN_OPERATION
     assert controller_config("coordinated", paper_config).coordination.pattern == 1
     assert controller_config("max-pressure", paper_config).coordination.pattern == 254
     bare = config_mod.parse(paper_toml[:paper_toml.index("[coordination]")], "bare.toml")
@@ -133,11 +133,11 @@ def test_the_coordinated_agent_runs_the_plan_and_needs_one(paper_config, paper_t
 
 
 def test_the_fixed_time_agent_runs_the_plan_pretimed_and_needs_one(paper_config, paper_toml) -> None:
-    from hils.agents.builtin import CONTROLLER_AGENTS, DETECTOR_AGENTS, controller_config, describe_plan
+    from hils.agents.builtin import DETECTOR_AGENTS, OWN_OPERATION, controller_config, describe_plan
     from hils.protocol.ntcip import SplitMode
 
     agent = load_agent("fixed-time", paper_config, "selection")
-    assert agent.act(None) is None and "fixed-time" in CONTROLLER_AGENTS and "fixed-time" not in DETECTOR_AGENTS
+    assert agent.act(None) is None and "fixed-time" in OWN_OPERATION and "fixed-time" not in DETECTOR_AGENTS
     c = controller_config("fixed-time", paper_config).coordination
     assert c.pattern == 1 and c.patterns[1].modes == dict.fromkeys(paper_config.phases, SplitMode.MAX_RECALL)
     assert controller_config("coordinated", paper_config).coordination.patterns[1].modes == {}
@@ -147,3 +147,13 @@ def test_the_fixed_time_agent_runs_the_plan_pretimed_and_needs_one(paper_config,
     with pytest.raises(AgentError, match=re.escape("the fixed-time agent runs the controller's timing plan, and "
                                                    "bare.toml has none: add [[coordination.patterns]]")):
         load_agent("fixed-time", bare, "selection")
+
+
+def test_an_agent_that_leaves_the_controller_to_itself_is_said_so_not_given_an_action_type() -> None:
+    """Seen as a user: `hils run --agent coordinated` was summed up as "selection by coordinated"."""
+    from hils.agents.builtin import BUILTIN, OWN_OPERATION, ActuatedAgent, controlled_by
+
+    assert set(OWN_OPERATION) == {name for name, cls in BUILTIN.items() if issubclass(cls, ActuatedAgent)}
+    assert controlled_by("coordinated", "selection") == ("coordinated: the controller's own operation, its "
+                                                         "coordination plan on its detectors")
+    assert controlled_by("max-pressure", "selection") == "selection by max-pressure"

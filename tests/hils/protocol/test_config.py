@@ -303,31 +303,28 @@ def test_a_shared_max_green_below_min_green_names_the_timing_table() -> None:
     assert "allowed: max_green >= min_green" in err.message
 
 
-@pytest.mark.parametrize("key", ["yellow", "red_clear"])
 @pytest.mark.parametrize("value", ["0", "0.0", "-1.0"])
-def test_non_positive_clearance_is_rejected(key: str, value: str) -> None:
-    err = rejected(toml(phases={5: f"{{ {key} = {value} }}"}))
-    assert err.field == f"phases.5.{key}"
+def test_non_positive_red_clearance_is_rejected(value: str) -> None:
+    err = rejected(toml(phases={5: f"{{ red_clear = {value} }}"}))
+    assert err.field == "phases.5.red_clear"
+    assert "allowed: > 0" in err.message
+
+
+def test_non_positive_shared_red_clearance_names_the_timing_table() -> None:
+    err = rejected(toml(timing="min_green = 3\nmax_green = 20\nyellow = 3.0\nred_clear = -2.0"))
+    assert err.field == "timing.red_clear"
     assert "allowed: > 0" in err.message
 
 
 @pytest.mark.parametrize("key", ["yellow", "red_clear"])
-def test_non_positive_shared_clearance_names_the_timing_table(key: str) -> None:
-    timing = "min_green = 3\nmax_green = 20\nyellow = 3.0\nred_clear = 2.0".replace(f"{key} = ", f"{key} = -")
-    err = rejected(toml(timing=timing))
-    assert err.field == f"timing.{key}"
-    assert "allowed: > 0" in err.message
-
-
-@pytest.mark.parametrize("key", ["yellow", "red_clear"])
-@pytest.mark.parametrize("value", ["3.05", "0.01", "2.25"])
+@pytest.mark.parametrize("value", ["3.05", "4.01", "3.25"])
 def test_clearance_not_in_tenths_is_rejected(key: str, value: str) -> None:
     err = rejected(toml(phases={1: f"{{ {key} = {value} }}"}))
     assert err.field == f"phases.1.{key}"
     assert "allowed: multiples of 0.1 s" in err.message
 
 
-@pytest.mark.parametrize("value", ["0.3", "4.7", "25.5"])
+@pytest.mark.parametrize("value", ["3.0", "4.7", "25.5"])
 def test_clearance_in_tenths_is_accepted(value: str) -> None:
     assert parse(toml(phases={1: f"{{ yellow = {value} }}"}), SOURCE).phases[1].yellow == float(value)
 
@@ -335,6 +332,34 @@ def test_clearance_in_tenths_is_accepted(value: str) -> None:
 def test_clearance_above_the_ntcip_range_is_rejected() -> None:
     err = rejected(toml(phases={1: "{ red_clear = 25.6 }"}))
     assert "<= 25.5" in err.message
+
+
+# NTCIP 1202 v03 phaseTable (1202v0328.MIB): phaseYellowChange "in tenth seconds (NEMA TS 2 range: 3-25.5 sec)";
+# the other times fit their objects' SYNTAX INTEGER (0..255) in seconds or tenths.
+@pytest.mark.parametrize(("key", "value", "field", "allowed"), [
+    ("yellow", "0.1", "phases.1.yellow", "allowed: >= 3.0 and <= 25.5 s (NTCIP 1202 phaseYellowChange: 30-255 tenths "
+                                         "of a second)"),
+    ("yellow", "2.9", "phases.1.yellow", "allowed: >= 3.0 and <= 25.5 s (NTCIP 1202 phaseYellowChange"),
+    ("yellow", "25.6", "phases.1.yellow", "allowed: >= 3.0 and <= 25.5 s (NTCIP 1202 phaseYellowChange"),
+    ("red_revert", "25.6", "phases.1.red_revert", "allowed: >= 0.0 and <= 25.5 s (NTCIP 1202 phaseRedRevert: 0-255 "
+                                                  "tenths of a second)"),
+    ("passage", "25.6", "phases.1.passage", "<= 25.5 s (NTCIP 1202 phasePassage: 0-255 tenths of a second)"),
+    ("walk", "256", "phases.1.walk", "<= 255 s (NTCIP 1202 phaseWalk: 0-255 seconds)"),
+    ("max_green", "256", "phases.1.max_green", "allowed: >= 1 and <= 255 s (NTCIP 1202 phaseMaximum1: 0-255 "
+                                               "seconds)"),
+])
+def test_a_time_its_ntcip_object_cannot_carry_is_refused_naming_the_range(key: str, value: str, field: str,
+                                                                          allowed: str) -> None:
+    err = rejected(toml(phases={1: f"{{ {key} = {value} }}"}))
+    assert err.field == field
+    assert allowed in err.message
+    assert str(err).startswith(f"{SOURCE}: {field}: is {value}; ")
+
+
+def test_a_shared_yellow_the_standard_cannot_carry_names_the_timing_table() -> None:
+    err = rejected(toml(timing="min_green = 3\nmax_green = 20\nyellow = 0.1\nred_clear = 2.0"))
+    assert err.field == "timing.yellow"
+    assert "allowed: >= 3.0 and <= 25.5 s (NTCIP 1202 phaseYellowChange" in err.message
 
 
 @pytest.mark.parametrize("value", ["0", "-3"])

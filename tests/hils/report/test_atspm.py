@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 from collections import Counter
@@ -114,3 +115,52 @@ def test_a_run_of_several_controllers_names_one_device_each(tmp_path: Path) -> N
 
     assert sorted(pd.read_parquet(out / "hires.parquet").DeviceId.unique()) == [1, 2, 3, 4]
     assert all((out / tls / "split_monitor.svg").exists() for tls in ("J1", "J2", "J3", "J4"))
+
+
+def _record_of(agent: str, action_type: str, duration: float) -> tuple[dict[str, list[hires.Event]], dict]:
+    """A virtual-time run of the four-leg without SUMO (no traffic, so no detector is actuated): its controller's log
+    and its config."""
+    from hils.protocol.config import load
+    from hils.run.testbed import Testbed
+
+    with Testbed(load(), sumo=False, agent=agent, action_type=action_type, duration=duration, seed=0) as tb:
+        tb.reset()
+        tb.run()
+        return tb.hires(), tb.configs
+
+
+def test_a_controller_on_the_middlewares_calls_alone_gets_no_chart_and_the_run_says_why(tmp_path: Path) -> None:
+    """Seen as a user: the default run drew a coordination diagram (an empty "detector" legend, no arrival) and a
+    split monitor ("dashed: programmed split", none drawn) of a controller that ran no plan and read no detector."""
+    from hils.report import atspm_charts, record
+
+    logs, configs = _record_of("fixed-cycle", "switch", 600.0)
+    section, written = record.keep(logs, configs, tmp_path, several=False)
+    assert not {"coordination_diagram.svg", "split_monitor.svg"} & set(written)
+    assert not list(tmp_path.glob("*.svg"))
+    assert section["charts"] == atspm_charts.NOTHING_TO_DRAW
+    assert f"  {atspm_charts.NOTHING_TO_DRAW}" in record.describe(section)
+
+
+def test_the_charts_read_the_time_of_day_as_a_clock_and_name_only_what_they_show(tmp_path: Path) -> None:
+    """The coordination diagram of the phases whose detectors were read, the split monitor of a controller on its
+    detectors or its plan; ticks at 00:05, 00:10 (not 0.1 h); a legend of what is drawn."""
+    from hils.report.atspm_charts import coordination_diagram, split_monitor
+
+    events, _ = fixed_time_log({2, 3, 6})  # detector 4 (phase 4) actuated; every green maxed out; no plan
+    config = config_with(timing='recall = "max"')
+    assert coordination_diagram(events, config, tmp_path / "pcd.svg", "t")
+    pcd = (tmp_path / "pcd.svg").read_text()
+    assert ">phase 4<" in pcd and ">phase 2<" not in pcd  # only the phase whose detector was read
+    assert ">detector on (arrival)<" in pcd and "(h)" not in pcd
+    assert re.findall(r">(\d\d:\d\d)<", pcd)[:3] == ["00:02", "00:04", "00:06"]  # 800 s of log from midnight
+    assert split_monitor(events, config, tmp_path / "split.svg", "t")
+    split = (tmp_path / "split.svg").read_text()
+    assert ">max-out<" in split and ">gap-out<" not in split and "programmed split" not in split
+    assert "stroke-dasharray" not in split
+    logs, configs = _record_of("fixed-time", "selection", 600.0)  # its plan pretimed: no detector read
+    (log,), (config,) = logs.values(), configs.values()
+    assert split_monitor(log, config, tmp_path / "planned.svg", "t")
+    planned = (tmp_path / "planned.svg").read_text()
+    assert ">programmed split<" in planned and "stroke-dasharray" in planned
+    assert not coordination_diagram(log, config, tmp_path / "none.svg", "t")  # no detector read: no arrival to show

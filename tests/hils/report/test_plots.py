@@ -108,3 +108,12 @@ def test_a_title_too_long_for_the_picture_is_set_smaller_to_fit_and_names_a_resc
         wide = TextPath((0, 0), title.text, size=size, prop=FontProperties(family="DejaVu Sans")).get_extents().width
         assert wide <= float(svg.get("width")) - 20, title.text
         assert (size < 15) is longest
+
+
+def test_a_run_of_a_scenarios_one_light_titles_its_pictures_by_the_scenario() -> None:
+    """As its console summary does: `hils run --scenario resco:cologne1` drew "Signal timeline,
+    GS_cluster_357187_359543, dual-ring from its SUMO program" (its light's SUMO cluster id)."""
+    derived = replace(CFG, name="GS_cluster_357187_359543, dual-ring from its SUMO program",
+                      source="resco:cologne1 GS_cluster_357187_359543")
+    assert plots.named(None, derived) == "resco:cologne1, light GS_cluster_357187_359543"
+    assert plots.named(None, CFG) == CFG.name  # a config of its own keeps its name

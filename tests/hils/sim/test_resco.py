@@ -289,10 +289,25 @@ def test_the_console_summary_keeps_its_columns_under_a_light_named_by_a_long_clu
     header, *rows = table("per approach", len(traffic.approaches))
     arrived = header.index("arrived") + len("arrived")  # the column's right edge: numbers are right-aligned
     assert any(row.lstrip().startswith(long[:20]) and "…" in row for row in rows)  # "GS_cluster_2415878664_25…"
-    assert all(row[arrived - 7:arrived].strip().isdigit() and row[arrived] == " " for row in rows), rows
+    assert all(row[arrived - 7:arrived].strip().isdigit() or row[arrived - 7:arrived].strip() == "-"
+               for row in rows), rows  # "-": no vehicle entered the network on it
+    assert all(row[arrived] == " " for row in rows), rows
     # A lane shorter than one vehicle cannot show a queue reaching back: ingolstadt21's made their approaches
     # report spillback in every minute, vehicles merely crossing them.
     assert all(a.lane_storage >= 1 for a in traffic.approaches.values() if a.spillback_minutes)
+
+
+def test_a_run_of_a_scenarios_one_light_is_titled_by_the_scenario() -> None:
+    """Seen as a user: `hils run --scenario resco:cologne1` was summed up as "GS_cluster_357187_359543, dual-ring
+    from its SUMO program", the SUMO cluster id of its light."""
+    with Testbed(scenario="resco:cologne1", sumo=True, duration=20.0, seed=0) as tb:
+        tb.reset_all()
+        tb.run()
+        s = summary.summarize({i.label: (i.tally, i.config) for i in tb.intersections.values()}, traffic=tb.traffic)
+    assert (s["scenario"], s["light"]) == ("resco:cologne1", "GS_cluster_357187_359543")
+    assert s["config"] == "GS_cluster_357187_359543, dual-ring from its SUMO program"
+    assert summary.render(s).splitlines()[0] == ("Run summary: resco:cologne1, light GS_cluster_357187_359543 "
+                                                 "(virtual, selection by max-pressure, seed 0)")
 
 
 def test_a_controllers_clock_and_hi_res_log_show_sumos_time_of_day() -> None:

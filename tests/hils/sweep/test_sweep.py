@@ -11,8 +11,8 @@ from pathlib import Path
 import matplotlib.axes
 import pytest
 
-from hils.sweep.compare import Estimate, Runs, aggregate, plot, render, runs
-from hils.sweep.grid import Cell, CellResult, SweepError, grid, parse_seeds, run_grid, scenario_arguments
+from hils.sweep.compare import Estimate, Runs, aggregate, plot, render, runs, unmeasured
+from hils.sweep.grid import Cell, CellResult, SweepError, figures, grid, parse_seeds, run_grid, scenario_arguments
 
 SHORT = 120.0
 
@@ -58,7 +58,7 @@ def test_an_agent_whose_runs_failed_is_told_from_a_figure_nobody_measured(tmp_pa
     assert count == {"max-pressure": Runs(2, 0), "coordinated": Runs(2, 2), "actuated": Runs(2, 1)}
     text = render(table, count)
     row = next(line for line in text.splitlines() if line.startswith("coordinated"))
-    assert row.split()[1:] == ["failed"] * len(table["coordinated"])
+    assert row.split()[1:] == ["failed"] * 2  # the two figures some agent measured: mean delay, max-outs
     assert text.splitlines()[-1] == ("mean ± half width of the 95 % confidence interval over 2 seeds (Student's t); "
                                      "coordinated: 2 of 2 runs failed, actuated: 1 of 2 runs failed, "
                                      "see the sweep table")
@@ -75,6 +75,48 @@ def test_an_agent_whose_runs_failed_is_told_from_a_figure_nobody_measured(tmp_pa
     assert (tmp_path / "compare.png").stat().st_size > 10_000
     assert said.count("runs\nfailed") == 12  # in each of the twelve panels
     assert "not measured" in said and "0 where measured" in said and "0 for every agent" not in said
+
+
+def _four_leg_results(*, record: dict) -> list[CellResult]:
+    """Two agents' runs of the four-leg over two seeds, every figure of `hils compare` given but what the
+    controllers' record (``record``: the summary's) could not measure."""
+    results = []
+    for agent, seed in [("max-pressure", 0), ("max-pressure", 1), ("fixed-cycle", 0), ("fixed-cycle", 1)]:
+        summary = {"record": {"atspm": record}, "traffic": {
+            "resco": {"delay_s": 17.5 + seed, "trip_time_s": 48.8, "waiting_time_s": 10.6 + seed, "queue": 7.2},
+            "mean_delay": 17.5 + seed, "arrived": 1670 + 89 * seed, "departed": 1700, "waiting_to_enter": 0,
+            "max_queue": {"east": 6 + seed, "north": 5, "south": 7, "west": 8 + seed}}}
+        results.append(CellResult(Cell(agent, seed), f"f{agent}{seed}", True, None, figures(summary), summary))
+    return results
+
+
+@pytest.mark.parametrize(("record", "said", "left_out"), [
+    ({"missing": "the atspm package is not installed (pip install 'hils[atspm]')"},
+     "the atspm package is not installed (pip install 'hils[atspm]')",
+     ["split failures", "% on green", "max-outs", "force-offs"]),
+    ({"split_failures": None, "percent_on_green": None, "max_outs": 0, "force_offs": 0},
+     "no detector actuations in the log", ["split failures", "% on green"]),
+])
+def test_the_compare_table_fits_a_terminal_and_says_why_a_figure_is_missing(record, said, left_out) -> None:
+    """Seen as a user: the table was 346 characters wide, and its four ATSPM columns read "-" without a word on
+    the atspm package missing from the environment."""
+    results = _four_leg_results(record=record)
+    table = aggregate(results)["four_leg"]
+    text = render(table, runs(results)["four_leg"], unmeasured=unmeasured(results)["four_leg"])
+    lines = text.splitlines()
+    assert max(map(len, lines)) <= 120
+    shown = " ".join(lines)
+    for label in ("RESCO delay s", "trip time s", "waiting s", "RESCO queue", "arrived", "max queue", "queue east",
+                  "queue west"):
+        assert label in shown
+    start = next(i for i, line in enumerate(lines) if line.startswith("not measured"))
+    note = " ".join(line.strip() for line in lines[start:-1])  # one note, wrapped, before the footer
+    assert note.startswith(f"not measured, left out: {', '.join(left_out)}: ") and said in note
+    assert not any(cell == "-" for line in lines for cell in line.split("  "))
+    assert lines[-1].startswith("mean ± half width of the 95 % confidence interval over 2 seeds")
+    # every row in every block of columns, each block under its own header
+    assert sum(line.startswith("agent ") for line in lines) >= 2
+    assert sum(line.startswith("max-pressure ") for line in lines) == sum(line.startswith("agent ") for line in lines)
 
 
 @pytest.fixture(scope="module")
