@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import csv
 import io
+import re
 import urllib.parse
 import xml.etree.ElementTree as ET
 from collections.abc import Iterable, Mapping, Sequence
@@ -156,13 +157,21 @@ def format_time(t: datetime) -> str:
     return f"{t.strftime(_TIME_FORMAT)}.{t.microsecond // 100_000}"
 
 
+#: ``MM-DD-YYYY HH:MM:SS[.f]`` as ``strptime("%m-%d-%Y %H:%M:%S.%f")`` reads it (a log's every event has one: read
+#: without strptime, about three times faster).
+_TIME = re.compile(r"(\d{1,2})-(\d{1,2})-(\d{4}) (\d{1,2}):(\d{1,2}):(\d{1,2})(?:\.(\d{1,6}))?")
+
+
 def parse_time(text: str) -> datetime:
     """A MaxTime timestamp (``MM-DD-YYYY HH:MM:SS`` with or without a fraction)."""
-    for form in (_TIME_FORMAT + ".%f", _TIME_FORMAT):
+    match = _TIME.fullmatch(text.strip())
+    if match is not None:
+        month, day, year, hour, minute, second, fraction = match.groups()
         try:
-            return datetime.strptime(text.strip(), form)
+            return datetime(int(year), int(month), int(day), int(hour), int(minute), int(second),
+                            int((fraction or "0").ljust(6, "0")))
         except ValueError:
-            continue
+            pass
     raise AsclogError(f"timestamp {text!r}: allowed: MM-DD-YYYY HH:MM:SS.f, e.g. 04-15-2024 12:00:00.0")
 
 

@@ -170,9 +170,13 @@ def split_monitor(events: Sequence[Event], config: IntersectionConfig, path: Pat
                        (0.0, top * 1.15), draw))
     if not panels:
         return False
-    programmed = ("dashed: programmed split" if any(e.code == E.COORD_PATTERN_CHANGE for e in events) else
-                  "no pattern event in the log: programmed split unknown")
-    _draw(path, f"Split monitor, {title}: each service's split by how its green ended; {programmed}",
+    if any(split_code(1) <= e.code <= split_code(16) for e in events):
+        programmed = "; dashed: programmed split"
+    elif not any(e.code == E.COORD_PATTERN_CHANGE for e in events):
+        programmed = "; no pattern event in the log: programmed split unknown"
+    else:
+        programmed = ""  # free throughout: no split programmed
+    _draw(path, f"Split monitor, {title}: each service's split by how its green ended{programmed}",
           [(label, color) for label, color in TERMINATIONS.values()], f"time of day (h), {day0:%Y-%m-%d}",
           "split (s)", panels)
     return True

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import urllib.parse
 from collections.abc import Mapping
 from dataclasses import dataclass
 from datetime import datetime
@@ -101,7 +102,7 @@ def gather(held: Mapping[str, list[Event]], configs: Mapping[str, IntersectionCo
     logs = dict(held)
     if not logs and asclog is not None:
         (tls,) = configs
-        url = hires.asclog_url(asclog, since)
+        url = urllib.parse.unquote_plus(hires.asclog_url(asclog, since))  # as a reader reads it
         try:
             logs = {tls: asclog_mod.collect(asclog, since, bounds or asclog_mod.Bounds())}
             section["collected_from"] = url
