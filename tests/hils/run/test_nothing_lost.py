@@ -85,15 +85,18 @@ def _full_disk(monkeypatch: pytest.MonkeyPatch, *, from_name: str, everything_af
     return refused
 
 
+def _run(out: Path, capsys: pytest.CaptureFixture[str]) -> tuple[int, str, dict]:
+    """`hils run` of five simulated minutes in ``out``: its exit status, its last line and its summary.json."""
+    code = main(["run", "--no-sumo", "--no-progress", "--duration", "300", "--out", str(out)])
+    return code, capsys.readouterr().err.splitlines()[-1], json.loads((out / "summary.json").read_text())
+
+
 def test_a_full_disk_costs_the_hi_res_file_alone_and_summary_json_names_it(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
     refused = _full_disk(monkeypatch, from_name="hires.parquet", everything_after=False)
     out = tmp_path / "run"
-    code = main(["run", "--no-sumo", "--no-progress", "--duration", "300", "--out", str(out)])
-    err = capsys.readouterr().err
-    assert refused and code == 1
-    assert "not written: hires.parquet: No space left on device" in err.splitlines()[-1]
-    s = json.loads((out / "summary.json").read_text())
+    code, last, s = _run(out, capsys)
+    assert refused and code == 1 and "not written: hires.parquet: No space left on device" in last
     assert s["outputs"]["failed"] == {"hires.parquet": "No space left on device"} and s["outputs"]["finished"]
     for name in ("events.jsonl", "signal_timeline.svg", "atspm.csv", "split_monitor.svg"):
         assert name in s["outputs"]["written"] and (out / name).stat().st_size > 0, name
@@ -109,11 +112,9 @@ def test_a_disk_that_fills_with_the_hi_res_file_still_leaves_summary_json(
     """The largest file comes last: summary.json and the pictures are in before the disk fills."""
     refused = _full_disk(monkeypatch, from_name="hires.parquet", everything_after=True)
     out = tmp_path / "run"
-    code = main(["run", "--no-sumo", "--no-progress", "--duration", "300", "--out", str(out)])
-    err = capsys.readouterr().err
+    code, last, s = _run(out, capsys)  # summary.json written first, and whole
     assert code == 1 and refused == [".hires.parquet.part", ".summary.json.part"]
-    assert "hires.parquet: No space left on device" in err.splitlines()[-1]
-    s = json.loads((out / "summary.json").read_text())  # written first, and whole
+    assert "hires.parquet: No space left on device" in last
     assert s["outputs"] == {"written": ["events.jsonl", "hires.journal.csv", "summary.json"], "failed": {},
                             "finished": False}
     assert s["config"] and s["transitions_verified"] > 0
