@@ -29,8 +29,6 @@ HTTP form of the log.
 
 from __future__ import annotations
 
-import csv
-import io
 import re
 import urllib.parse
 import xml.etree.ElementTree as ET
@@ -263,11 +261,14 @@ def rows(logs: Mapping[int, Sequence[Event]]) -> list[tuple[datetime, int, int, 
 
 
 def csv_rows(rows: Iterable[tuple[datetime, int, int, int]]) -> str:
-    """Rows in the CSV form of the ATSPM layout (without the header :data:`CSV_HEADER`)."""
-    out = io.StringIO()
-    csv.writer(out, lineterminator="\n").writerows((t.isoformat(sep=" ", timespec="milliseconds"), d, c, p)
-                                                   for t, d, c, p in rows)
-    return out.getvalue()
+    """Rows in the CSV form of the ATSPM layout (without the header :data:`CSV_HEADER`): integers and a timestamp,
+    nothing to quote."""
+    out, last, stamp = [], None, ""
+    for t, device, code, parameter in rows:
+        if t != last:  # a tick's events share their time: written once
+            last, stamp = t, t.isoformat(sep=" ", timespec="milliseconds")
+        out.append(f"{stamp},{device},{code},{parameter}\n")  # an IntEnum code formats as its number
+    return "".join(out)
 
 
 #: The first line of the CSV form of the ATSPM layout.
