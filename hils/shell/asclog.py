@@ -32,7 +32,7 @@ class Bounds:
     """How long a collection may take and how much it may read."""
 
     seconds: float = 120.0  # the whole collection, from connecting to the body's last byte
-    max_bytes: int = 100 * 2**20  # of the body: a day of a busy intersection's events is about 25 MB
+    max_bytes: int = 100 * 2**20  # of the body: a day of the shipped four-leg's actuated controller is 19 MB
     read_timeout: float = 15.0  # each receive
 
     def __post_init__(self) -> None:
