@@ -23,8 +23,11 @@ from pathlib import Path
 import pytest
 
 from hils.cli.main import main
+from hils.protocol.hires import Event
 from hils.run.testbed import Testbed
 from hils.shell.events import read
+from hils.shell.hiresjournal import HiresJournal
+from tests.hils.run.test_exits import _Filling
 
 
 def journal_rows(path: Path) -> list[tuple[datetime, int, int, int]]:
@@ -121,3 +124,16 @@ def test_a_disk_that_fills_with_the_hi_res_file_still_leaves_summary_json(
     for name in ("signal_timeline.svg", "atspm.csv", "coordination_diagram.svg", "split_monitor.svg"):
         assert (out / name).stat().st_size > 0, name
     assert (out / "hires.journal.csv").stat().st_size > 0, "the hi-res log stays in the journal"
+
+
+def test_a_journal_the_disk_cannot_take_keeps_whole_rows_and_says_why(tmp_path: Path) -> None:
+    journal = HiresJournal(tmp_path / "hires.journal.csv")
+    one = journal.device(1)
+    tick = [Event(datetime(2024, 1, 1, 0, 0, 0, 100_000), 1, 2), Event(datetime(2024, 1, 1, 0, 0, 0, 100_000), 1, 6)]
+    one(tick)
+    journal._file._file = _Filling(journal._file._file, 40)  # room for less than the next tick
+    one(tick)
+    one(tick)  # the journal has stopped: nothing more is written, nothing raised
+    journal.close()
+    assert journal_rows(journal.path) == [(e.time, 1, e.code, e.parameter) for e in tick]
+    assert journal.failure == "No space left on device (it keeps its first 2 events, whole)"
