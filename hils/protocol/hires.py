@@ -13,11 +13,11 @@ HTTP form of the log.
   plain integers.
 - **The ATSPM layout** (the ``atspm`` package's ``sample_raw_data.parquet``, UDOT's tables): one row per
   event, columns ``TimeStamp, DeviceId, EventId, Parameter``, one ``DeviceId`` per controller.
-  :func:`encode` puts a run's logs in ``hires.parquet`` with pyarrow, or ``hires.csv`` without it; :func:`csv_rows`
-  gives the CSV form's lines, which a run also appends as its controllers log them (its journal,
-  :mod:`hils.shell.hiresjournal`). The ``atspm`` package reads ``EventId`` and ``Parameter`` as 16-bit integers
-  (``atspm/data_loader.py``: ``_CAST_TYPES = {'EventId': 'INT16', 'Parameter': 'INT16'}``): a log read here keeps
-  both within :data:`VALUE_RANGE`.
+  :func:`encode` puts a run's logs in ``hires.parquet`` with pyarrow, or ``hires.csv`` without it
+  (:func:`file_name`); :func:`csv_rows` gives the CSV form's lines, which a run also appends as its controllers
+  log them (its journal, :mod:`hils.shell.hiresjournal`). The ``atspm`` package reads ``EventId`` and
+  ``Parameter`` as 16-bit integers (``atspm/data_loader.py``: ``_CAST_TYPES = {'EventId': 'INT16', 'Parameter':
+  'INT16'}``): a log read here keeps both within :data:`VALUE_RANGE`.
 - **MaxTime's event log over HTTP**: ``GET /v1/asclog/xml/full`` answers
   ``<EventResponses><Event ID=".." TimeStamp="MM-DD-YYYY HH:MM:SS.f" EventTypeID=".." Parameter=".."/>
   ...</EventResponses>``, and ``?since=MM-DD-YYYY HH:MM:SS.f`` limits it to the events from that time on.
@@ -275,18 +275,27 @@ def csv_rows(rows: Iterable[tuple[datetime, int, int, int]]) -> str:
 CSV_HEADER = ",".join(COLUMNS) + "\n"
 
 
-def encode(logs: Mapping[int, Sequence[Event]]) -> tuple[str, bytes]:
-    """The file of ``logs`` in the ATSPM layout, by device: its name and its bytes (``hires.parquet`` when pyarrow is
-    installed, ``hires.csv`` when not). Made in memory, so that writing it is one write the caller can name."""
-    table = rows(logs)
+def file_name() -> str:
+    """The name of a run's hi-res file: ``hires.parquet`` when pyarrow is installed, ``hires.csv`` when not."""
     try:
-        import pyarrow as pa
-        import pyarrow.parquet as pq
+        import pyarrow.parquet  # noqa: F401
     except ImportError:
-        return "hires.csv", (CSV_HEADER + csv_rows(table)).encode()
+        return "hires.csv"
+    return "hires.parquet"
+
+
+def encode(logs: Mapping[int, Sequence[Event]]) -> bytes:
+    """The bytes of :func:`file_name`: ``logs``, by device, in the ATSPM layout. Made in memory, so that writing them is
+    one write the caller can name."""
+    table = rows(logs)
+    if file_name() == "hires.csv":
+        return (CSV_HEADER + csv_rows(table)).encode()
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
     columns = list(zip(*table, strict=True)) if table else [[], [], [], []]
     types = (pa.timestamp("ms"), pa.int32(), pa.int16(), pa.int32())
     sink = pa.BufferOutputStream()
     pq.write_table(pa.table({name: pa.array(col, type=kind) for name, col, kind in zip(COLUMNS, columns, types,
                                                                                          strict=True)}), sink)
-    return "hires.parquet", sink.getvalue().to_pybytes()
+    return sink.getvalue().to_pybytes()

@@ -70,8 +70,9 @@ class Record:
         written (removed with :meth:`drop_journal` once the summary names the file that replaces it)."""
         if not self.logs:
             return
-        name, data = hires.encode({self.devices[tls]: events for tls, events in self.logs.items()})
-        if files.write(name, lambda: write_whole(files.folder / name, data)):
+        name = hires.file_name()
+        by_device = {self.devices[tls]: events for tls, events in self.logs.items()}
+        if files.write(name, lambda: write_whole(files.folder / name, hires.encode(by_device))):
             self.section["file"] = name
             if name.endswith(".csv"):
                 self.section["format_note"] = ("CSV: pyarrow is not installed (pip install 'hils[atspm]' for "
