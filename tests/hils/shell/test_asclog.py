@@ -8,6 +8,7 @@ ATSPM reader takes, and a good log that, collected long after the controller pow
 
 from __future__ import annotations
 
+import contextlib
 import json
 import socket
 import threading
@@ -110,6 +111,8 @@ class Hostile:
                 pass  # the collector hung up: what a bounded collector does
 
     def close(self) -> None:
+        with contextlib.suppress(OSError):
+            self.server.shutdown(socket.SHUT_RDWR)  # wakes the thread waiting in accept()
         self.server.close()
 
 
@@ -147,7 +150,7 @@ def test_a_hostile_endpoint_is_one_line_within_the_bounds(hostile, case: str) ->
         collect(server.url, datetime(2024, 4, 15, 12), BOUNDS)
     took = time.monotonic() - t0
     assert why in str(caught.value) and "\n" not in str(caught.value)
-    assert took < BOUNDS.seconds + 0.5, f"took {took:.1f} s"
+    assert took < BOUNDS.seconds + 1.5, f"took {took:.1f} s"  # the deadline, and a loaded machine's slack
 
 
 def test_a_silent_endpoint_times_out_on_its_read_timeout(hostile) -> None:
@@ -155,14 +158,14 @@ def test_a_silent_endpoint_times_out_on_its_read_timeout(hostile) -> None:
     t0 = time.monotonic()
     with pytest.raises(CollectError, match="no answer within 1 s"):
         collect(server.url, None, BOUNDS)
-    assert time.monotonic() - t0 < 1.5
+    assert time.monotonic() - t0 < BOUNDS.read_timeout + 1.5
 
 
-def test_an_endpoint_nobody_listens_on_says_so(hostile) -> None:
-    server = hostile(_garbage)
-    server.close()
-    with pytest.raises(CollectError, match="Connection refused"):
-        collect(server.url, None, BOUNDS)
+def test_an_endpoint_nobody_listens_on_says_so() -> None:
+    with socket.socket() as unused:
+        unused.bind(("127.0.0.1", 0))  # a port of ours, not listening
+        with pytest.raises(CollectError, match="Connection refused"):
+            collect(f"http://127.0.0.1:{unused.getsockname()[1]}", None, BOUNDS)
 
 
 def test_a_good_log_reads_back_in_time_order(hostile) -> None:
