@@ -104,8 +104,11 @@ def gather(held: Mapping[str, list[Event]], configs: Mapping[str, IntersectionCo
     if not logs and asclog is not None:
         (tls,) = configs
         url = urllib.parse.unquote_plus(hires.asclog_url(asclog, since))  # as a reader reads it
+        bounds = bounds or asclog_mod.Bounds()
+        log.info("collecting the controller's hi-res log from %s (at most %g s and %g MB)", url, bounds.seconds,
+                 bounds.max_bytes / 2**20)
         try:
-            logs = {tls: asclog_mod.collect(asclog, since, bounds or asclog_mod.Bounds())}
+            logs = {tls: asclog_mod.collect(asclog, since, bounds)}
             section["collected_from"] = url
         except asclog_mod.CollectError as exc:
             section["missing"] = f"could not collect the controller's log from {url}: {exc}"
