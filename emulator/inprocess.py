@@ -11,6 +11,7 @@ the transport, so this package needs nothing of the middleware.
 from __future__ import annotations
 
 import random
+from collections.abc import Callable, Sequence
 
 import simpy
 
@@ -33,8 +34,8 @@ class VirtualTarget:
     """Controller model + its delays + MIB view on one environment; the MIB view is the transport's surface.
 
     ``controller`` is the model itself (its lamps, for monitors); ``unit`` is what the agent talks to;
-    ``log`` its data logger, whose hi-res event log :meth:`hires` hands the run (the optional method of a
-    target through which a Testbed collects the controller's own record).
+    ``log`` its data logger, whose hi-res event log :meth:`hires` hands the run, and :meth:`hires_to` hands a sink
+    as it is logged (the optional methods of a target through which a Testbed keeps the controller's own record).
     On virtual time's fast path (``fast_path``, the run's flag: :mod:`hils.shell.fastpath`) the unit's ticks run
     event by event (:mod:`emulator.model.event_clock`), and the clock is the change feed that lets the poller skip
     polls that cannot see a change. Without it is the reference the fast path is tested against: every tick
@@ -65,6 +66,11 @@ class VirtualTarget:
     def hires(self) -> list[Event]:
         """The controller's hi-res event log so far (complete: only real steps log, and they run when due)."""
         return self.log.events()
+
+    def hires_to(self, sink: Callable[[Sequence[Event]], None]) -> None:
+        """Hand ``sink`` the hi-res log so far, then each tick's events as they are logged (the other optional
+        method of a target: a Testbed writes them through, :mod:`hils.shell.hiresjournal`)."""
+        self.log.write_to(sink)
 
     @property
     def change_feed(self) -> EventClock | None:

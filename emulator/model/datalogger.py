@@ -59,12 +59,15 @@ At power-up the log records the state the unit starts in (the phases starting in
 clearance, the pattern) as events of that tick, so a log read from its start tells the whole story.
 Without a ``capacity`` the log keeps every event of the unit's life (a run hands it over at its end); with
 one it keeps the last ``capacity`` events, as a real controller keeps a ring buffer of its last events
-(MaxTime's holds about 10,000): a served controller's memory stays bounded however long it runs.
+(MaxTime's holds about 10,000): a served controller's memory stays bounded however long it runs. Given a sink
+(:meth:`DataLogger.write_to`), the logger also hands it each tick's events as the tick logs them, so that a run
+can write them through (:mod:`hils.shell.hiresjournal`) and keep them if it dies before its end.
 """
 
 from __future__ import annotations
 
 import bisect
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime, timedelta
 
@@ -141,6 +144,7 @@ class DataLogger:
         self._red_served: dict[int, bool] = {}  # ring number -> its red clearance has a length
         self._group: int | None = None  # barrier group of the last green started
         self._seen = _Seen()
+        self._sink: Callable[[Sequence[Event]], None] | None = None
         cfg = controller.config
         self._no_call_events = frozenset(p for p, ph in cfg.phases.items() if ph.recall in (Recall.MIN, Recall.MAX))
         self._no_ped_events = frozenset(p for p, ph in cfg.phases.items() if ph.recall is Recall.PED)
@@ -163,6 +167,11 @@ class DataLogger:
             clock = -(-(since - self.day0) // timedelta(microseconds=100_000))  # the first tick at or after since
             start = bisect.bisect_left(self._log, clock, key=lambda e: e[0])
         return [Event(self.time(c), code, p) for c, code, p in self._log[start:]]
+
+    def write_to(self, sink: Callable[[Sequence[Event]], None]) -> None:
+        """Hand ``sink`` the log so far, then each tick's events as the tick logs them."""
+        sink(self.events())
+        self._sink = sink
 
     # --- what the controller tells -------------------------------------------------------------------------
 
@@ -228,8 +237,12 @@ class DataLogger:
         if not self._tick:
             return  # most steps log nothing
         clock = self._clock
-        self._log.extend((clock, code, p) for code, p in sorted(set(self._tick)))
+        logged = sorted(set(self._tick))
+        self._log.extend((clock, code, p) for code, p in logged)
         self._tick.clear()
+        if self._sink is not None:
+            at = self.time(clock)
+            self._sink([Event(at, code, p) for code, p in logged])
         if self.capacity is not None and len(self._log) > self.capacity + self.capacity // 4:
             del self._log[:len(self._log) - self.capacity]  # the oldest go, a quarter at a time
 

@@ -34,7 +34,8 @@ from pathlib import Path
 
 from harness.reference.field_log import Row
 from hils.protocol import config as config_mod
-from hils.protocol.hires import Event, EventCode, collect
+from hils.protocol.hires import Event, EventCode
+from hils.shell.asclog import collect
 
 log = logging.getLogger(__name__)
 

@@ -16,6 +16,7 @@ import os
 import signal
 import sys
 import tempfile
+import urllib.parse
 from collections.abc import Iterator
 from datetime import datetime, timedelta
 from pathlib import Path
@@ -29,8 +30,11 @@ from hils.protocol.config import ConfigError, IntersectionConfig
 from hils.protocol.errors import AgentFailed, RunInterrupted, UserError
 from hils.protocol.scenario import SCENARIOS, Scenario, load_scenario, load_targets
 from hils.report import outfiles, plots, record, summary
+from hils.report.outfiles import Outputs
 from hils.run.intersection import Intersection
 from hils.run.testbed import BLIND_AGENTS, DEFAULT_AGENTS, RunSpec, Testbed, reason_of
+from hils.shell import hiresjournal
+from hils.shell.asclog import Bounds
 from hils.shell.events import Kind
 from hils.shell.targets import VIRTUAL
 from hils.sim.network import scenario_config
@@ -45,7 +49,12 @@ Default (no arguments): the shipped four-leg intersection, the max-pressure agen
 choosing phase pairs every 10 s, one simulated hour of SUMO traffic, and the
 built-in NTCIP 1202 emulator in virtual time. Outputs go to a run folder under
 reports/runs/: the JSON Lines event log, summary.json, a signal timeline and a
-queue plot.
+queue plot, and the controller's hi-res log (hires.parquet) with its ATSPM
+measures and charts. The event log and the hi-res log (hires.journal.csv until
+the run ends) are written as the run goes: a run killed with SIGKILL keeps them.
+At the end the small files come first (summary.json before the pictures, the
+pictures before hires.parquet); a file that cannot be written is named with why
+in summary.json, and the others are still written.
 
 One flag to real hardware: --target snmp://HOST:PORT?community=NAME&version=1|2c
 runs the same agent and middleware at wall-clock time against that controller
@@ -123,6 +132,13 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="wall-clock runs of one controller: after the run, collect the controller's own hi-res log "
                         "from its MaxTime event-log endpoint (`hils emulator serve --http`, an Intelight MaxTime) "
                         "into the run folder, with its ATSPM measures; virtual-time runs keep the emulator's anyway")
+    bounds = Bounds()
+    p.add_argument("--asclog-timeout", type=float, default=bounds.seconds, metavar="S",
+                   help="--asclog: the most the collection may take, from connecting to the last byte "
+                        f"({bounds.seconds:g}); each receive waits at most {bounds.read_timeout:g} s")
+    p.add_argument("--asclog-max-mb", type=float, default=bounds.max_bytes / 2**20, metavar="MB",
+                   help=f"--asclog: the largest log collected ({bounds.max_bytes / 2**20:g} MB; a day of the "
+                        "shipped four-leg's actuated controller, 9,900 events an hour, is 19 MB)")
     p.set_defaults(func=run_command)
 
 
@@ -152,6 +168,18 @@ def _check_values(args: argparse.Namespace) -> None:
         raise UsageError("--recover-after is nan; allowed: seconds >= 0, or negative for never")
     if not 0 <= args.seed <= MAX_SEED:
         raise UsageError(f"--seed is {args.seed}; allowed: 0 to {MAX_SEED}")
+    for flag, value in (("--asclog-timeout", args.asclog_timeout), ("--asclog-max-mb", args.asclog_max_mb)):
+        if not (math.isfinite(value) and value > 0):
+            raise UsageError(f"{flag} is {value:g}; allowed: a number > 0")
+    if args.asclog is not None:
+        url = urllib.parse.urlsplit(args.asclog)
+        try:
+            port = url.port
+        except ValueError:
+            port = -1
+        if url.scheme != "http" or not url.hostname or port == -1 or url.path.strip("/") or url.query:
+            raise UsageError(f"--asclog is {args.asclog!r}; allowed: http://HOST:PORT (the controller's event-log "
+                             "endpoint, without a path)")
 
 
 def _config(args: argparse.Namespace) -> IntersectionConfig:
@@ -196,7 +224,8 @@ def run_command(args: argparse.Namespace) -> int:
     status = StatusLine() if args.target and not args.no_progress else None
     tb = Testbed(None if scenario else cfg, scenario=scenario, action_type=spec.action_type,
                  target=_targets(args.target, scenario), sumo=spec.sumo, seed=spec.seed, agent=spec.agent,
-                 duration=spec.duration, log_path=log_path, recover_after=spec.recover_after,
+                 duration=spec.duration, log_path=log_path, hires_path=out / hiresjournal.NAME,
+                 recover_after=spec.recover_after,
                  on_reset=_hooks(status.start if status else None, dashboard.attach if dashboard else None),
                  sumo_config=sumo_config, take_over=args.take_over)
     error: BaseException | None = None
@@ -229,82 +258,99 @@ def run_command(args: argparse.Namespace) -> int:
             tb.finish(reason_of(error))  # a run that failed as it started is finished too (nothing stays called)
     if not any(i.tally.kinds[Kind.RUN_STARTED] for i in tb.intersections.values()):
         return _ending(tb, error, None, None)  # it never started: nothing to summarise
-    s, written, unwritten = _outputs(tb, out, log_path, window,
-                                     asclog=args.asclog, since=started - timedelta(seconds=1))
+    bounds = Bounds(seconds=args.asclog_timeout, max_bytes=round(args.asclog_max_mb * 2**20))
+    s, files = _outputs(tb, out, log_path, window, asclog=args.asclog, since=started - timedelta(seconds=1),
+                        bounds=bounds, verbose=args.verbose)
     print(summary.render(s, by=controlled_by(s["agent"], s["action_type"])))
     if "record" in s:
         print("\n".join(record.describe(s["record"])))
     for warning in summary.warnings(s):
         print(warning)
-    print(f"Outputs in {out}/: {', '.join(written) or 'none'}")
-    return _ending(tb, error, s, unwritten)
+    print(f"Outputs in {out}/: {', '.join(_shown(files.written, tb)) or 'none'}")
+    for line in files.lines():
+        print(f"NOT WRITTEN: {line}")
+    return _ending(tb, error, s, "; ".join(files.lines()) or None)
 
 
 def _outputs(tb: Testbed, out: Path, log_path: Path, window: tuple[float, float], *, asclog: str | None,
-             since: datetime) -> tuple[dict[str, Any], list[str], str | None]:
-    """The run's summary, and the files written (the log, summary.json, plots, the controllers' hi-res record and
-    its measures); the last is why the others could not be written (a full disk: the console still gets the
-    summary), or None."""
-    log_name = log_path.name if log_path.parent == out else str(log_path)
-    written = [] if tb.events.failure else [log_name]
+             since: datetime, bounds: Bounds, verbose: bool) -> tuple[dict[str, Any], Outputs]:
+    """The run's summary, and its files: the event log (written as the run went), then the small files before the
+    large ones: summary.json, the plots, the controllers' record (collected first when it is at the controller),
+    its measures and charts, and last the hi-res log. summary.json is written again at the end, naming what could
+    not be written and why (it is written first so that a full disk or a kill while the rest is written leaves
+    it, saying which files it was still writing)."""
+    files = Outputs(out, raise_errors=verbose)
+    if not tb.events.failure:
+        files.written.append(log_path.name if log_path.parent == out else str(log_path))
+    journal = tb.journal if tb.journal is not None and tb.journal.failure is None else None
     s = summary.summarize({i.label: (i.tally, i.config) for i in tb.intersections.values()}, traffic=tb.traffic,
                           wall_s=tb.wall_s)
-    try:
-        s["record"], kept = record.keep(tb.hires(), tb.configs, out, several=len(tb.intersections) > 1,
-                                        asclog=asclog, since=since)
-        summary.write(s, out / "summary.json")
-        written.append("summary.json")
-        per_light, network = _plots(tb, s, out, window)
-        labels = [i.label for i in tb.intersections.values() if i.label]
-        if labels:  # one entry for the intersections' folders, whatever each holds
-            charts = {Path(k).name for k in kept if Path(k).parts[0] in labels}
-            kept = [k for k in kept if Path(k).parts[0] not in labels]
-            names = sorted({*per_light, *charts}, reverse=True)
-            per_light = [f"{labels[0]}/ .. {labels[-1]}/ ({', '.join(names)})"] if names else []
-        written += per_light + network + kept
-    except OSError as exc:
-        return s, written, f"{exc.filename}: {exc.strerror or exc}"
-    return s, written, None
+
+    def write_summary() -> None:
+        # Until the record is written, its journal is what holds it.
+        held = [journal.path.name] if journal is not None and "record" not in s else []
+        written = list(dict.fromkeys([*files.written, *held, "summary.json"]))
+        summary.write({**s, "outputs": {"written": written, "failed": files.failed, "finished": "record" in s}},
+                      out / "summary.json")
+
+    files.write("summary.json", write_summary)
+    _plots(tb, s, files, window)
+    kept = record.gather(tb.hires(), tb.configs, tb.devices, asclog=asclog, since=since, bounds=bounds,
+                         journal=journal)
+    kept.write_small(files, several=len(tb.intersections) > 1)
+    kept.write_log(files)
+    if journal is not None and kept.section.get("file") == journal.path.name:
+        files.written.append(journal.path.name)  # the record's file could not be written: the journal stays
+    s["record"] = kept.section
+    files.write("summary.json", write_summary)
+    kept.drop_journal()
+    return s, files
 
 
-def _plots(tb: Testbed, s: dict[str, Any], out: Path, window: tuple[float, float]) -> tuple[list[str], list[str]]:
+def _shown(written: list[str], tb: Testbed) -> list[str]:
+    """The files written as the console lists them: the intersections' folders of a run of several as one entry."""
+    labels = [i.label for i in tb.intersections.values() if i.label]
+    if not labels:
+        return written
+    inside = sorted({Path(name).name for name in written if Path(name).parts[0] in labels}, reverse=True)
+    rest = [name for name in written if Path(name).parts[0] not in labels]
+    return rest + ([f"{labels[0]}/ .. {labels[-1]}/ ({', '.join(inside)})"] if inside else [])
+
+
+def _plots(tb: Testbed, s: dict[str, Any], files: Outputs, window: tuple[float, float]) -> None:
     """Each intersection's signal timeline and queue plot, in the run folder (a run of one) or in a folder of its
     own named by its label; for several, the network's queues too (one line per intersection, the queues of its
-    approaches summed). Returns the names written in each intersection's folder and those in the run folder."""
-    written: list[str] = []
+    approaches summed)."""
     for i in tb.intersections.values():
-        written += [name for name in _intersection_plots(i, s, out / i.label if i.label else out, window)
-                    if name not in written]
+        _intersection_plots(i, s, files, window)
     labels = [i.label for i in tb.intersections.values() if i.label]
     samples = [i.traffic_samples for i in tb.intersections.values()]
     if not labels or not all(samples):
-        return written, []
+        return
     network = [(at[0][0], {label: sum(q.values()) for label, (_, q) in zip(labels, at, strict=True)})
                for at in zip(*samples, strict=False)]
-    plots.queues(network, out / "queues.svg", title=f"Queues per intersection (approaches summed), "
-                                                    f"{tb.scenario.name}", legend="intersection")
-    return written, ["queues.svg"]
+    files.write("queues.svg", lambda: plots.queues(network, files.folder / "queues.svg",
+                                                   title=f"Queues per intersection (approaches summed), "
+                                                         f"{tb.scenario.name}", legend="intersection"))
 
 
-def _intersection_plots(i: Intersection, s: dict[str, Any], folder: Path, window: tuple[float, float]) -> list[str]:
-    """One intersection's signal timeline and queue plot in ``folder``; returns the names of the files written."""
-    folder.mkdir(exist_ok=True)
-    written = []
+def _intersection_plots(i: Intersection, s: dict[str, Any], files: Outputs, window: tuple[float, float]) -> None:
+    """One intersection's signal timeline and queue plot, in its folder."""
+    folder = files.folder / i.label if i.label else files.folder
+    prefix = f"{i.label}/" if i.label else ""
     name = plots.named(i.label, i.config)
     if i.tally.records:
-        plots.signal_timeline(i.tally.records, i.config, folder / "signal_timeline.svg",
-                              start=window[0], end=window[1], label=name, preemptions=i.tally.preemptions)
-        written.append("signal_timeline.svg")
+        files.write(f"{prefix}signal_timeline.svg", lambda: plots.signal_timeline(
+            i.tally.records, i.config, folder / "signal_timeline.svg", start=window[0], end=window[1], label=name,
+            preemptions=i.tally.preemptions))
     if i.traffic_samples:
         approaches = s["traffic"]["approaches"] if s.get("traffic") else None
-        prefix = i.signals.prefix if i.signals is not None else ""  # how the summary names its approaches
+        signals = i.signals.prefix if i.signals is not None else ""  # how the summary names its approaches
         spillback = None if approaches is None else {
-            a: [60.0 * m for m in approaches[prefix + a]["spillback_minutes"]]
-            for a in i.traffic_samples[0][1] if prefix + a in approaches}
-        plots.queues(i.traffic_samples, folder / "queues.svg", title=f"Queues per approach, {name}",
-                     spillback=spillback)
-        written.append("queues.svg")
-    return written
+            a: [60.0 * m for m in approaches[signals + a]["spillback_minutes"]]
+            for a in i.traffic_samples[0][1] if signals + a in approaches}
+        files.write(f"{prefix}queues.svg", lambda: plots.queues(
+            i.traffic_samples, folder / "queues.svg", title=f"Queues per approach, {name}", spillback=spillback))
 
 
 def _scenario(args: argparse.Namespace) -> Scenario | None:
@@ -402,7 +448,7 @@ def _ending(tb: Testbed, error: BaseException | None, s: dict[str, Any] | None, 
         calls = summary.cleared(s)
         if calls is not False:  # not cleared: a line of `lost` says so
             parts.append("calls cleared" if calls else "no call was placed")
-        parts.append(f"summary and plots not written: {unwritten}" if unwritten else "outputs written")
+        parts.append(f"not written: {unwritten}" if unwritten else "outputs written")
     if reason in ("agent_error", "error"):
         parts.append("use -v for a traceback")
     print(f"hils run: {'; '.join(parts)}", file=sys.stderr)

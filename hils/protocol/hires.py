@@ -13,26 +13,29 @@ HTTP form of the log.
   plain integers.
 - **The ATSPM layout** (the ``atspm`` package's ``sample_raw_data.parquet``, UDOT's tables): one row per
   event, columns ``TimeStamp, DeviceId, EventId, Parameter``, one ``DeviceId`` per controller.
-  :func:`write` puts a run's logs in ``hires.parquet`` with pyarrow, or ``hires.csv`` without it.
+  :func:`encode` puts a run's logs in ``hires.parquet`` with pyarrow, or ``hires.csv`` without it
+  (:func:`file_name`); :func:`csv_rows` gives the CSV form's lines, which a run also appends as its controllers
+  log them (its journal, :mod:`hils.shell.hiresjournal`). The ``atspm`` package reads ``EventId`` and
+  ``Parameter`` as 16-bit integers (``atspm/data_loader.py``: ``_CAST_TYPES = {'EventId': 'INT16', 'Parameter':
+  'INT16'}``): a log read here keeps both within :data:`VALUE_RANGE`.
 - **MaxTime's event log over HTTP**: ``GET /v1/asclog/xml/full`` answers
   ``<EventResponses><Event ID=".." TimeStamp="MM-DD-YYYY HH:MM:SS.f" EventTypeID=".." Parameter=".."/>
   ...</EventResponses>``, and ``?since=MM-DD-YYYY HH:MM:SS.f`` limits it to the events from that time on.
   That is what Signal-Replay's collector (``signal_replay.collector.fetch_output_data``) requests and
   parses (it drops ``ID`` and parses ``TimeStamp`` with ``%m-%d-%Y %H:%M:%S.%f``); UDOT ATSPM's MaxTime
   device configuration asks the same path with ``?since=[LogStartTime:MM-dd-yyyy HH:mm:ss.f]``.
+  :class:`AsclogReader` reads such a body as it arrives (the middleware's collector: :mod:`hils.shell.asclog`).
 """
 
 from __future__ import annotations
 
-import csv
+import re
 import urllib.parse
-import urllib.request
 import xml.etree.ElementTree as ET
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from datetime import datetime
 from enum import IntEnum
-from pathlib import Path
 
 #: The ATSPM layout's columns, in order.
 COLUMNS = ("TimeStamp", "DeviceId", "EventId", "Parameter")
@@ -117,6 +120,10 @@ class CycleState(IntEnum):
     BEGIN_PICKUP = 6
 
 
+#: The event codes and parameters a log read here may hold: what the ATSPM layout's readers take (16-bit integers);
+#: the Indiana enumerations use 0-255, vendors' own codes (MaxTime's 300s) go beyond.
+VALUE_RANGE = range(0, 2**15)
+
 #: The largest value a one-byte parameter holds: "Cycle lengths in excess of 255 shall record this event
 #: with a 255 parameter".
 MAX_PARAMETER = 255
@@ -148,13 +155,21 @@ def format_time(t: datetime) -> str:
     return f"{t.strftime(_TIME_FORMAT)}.{t.microsecond // 100_000}"
 
 
+#: ``MM-DD-YYYY HH:MM:SS[.f]`` as ``strptime("%m-%d-%Y %H:%M:%S.%f")`` reads it (a log's every event has one: read
+#: without strptime, about three times faster).
+_TIME = re.compile(r"(\d{1,2})-(\d{1,2})-(\d{4}) (\d{1,2}):(\d{1,2}):(\d{1,2})(?:\.(\d{1,6}))?")
+
+
 def parse_time(text: str) -> datetime:
     """A MaxTime timestamp (``MM-DD-YYYY HH:MM:SS`` with or without a fraction)."""
-    for form in (_TIME_FORMAT + ".%f", _TIME_FORMAT):
+    match = _TIME.fullmatch(text.strip())
+    if match is not None:
+        month, day, year, hour, minute, second, fraction = match.groups()
         try:
-            return datetime.strptime(text.strip(), form)
+            return datetime(int(year), int(month), int(day), int(hour), int(minute), int(second),
+                            int((fraction or "0").ljust(6, "0")))
         except ValueError:
-            continue
+            pass
     raise AsclogError(f"timestamp {text!r}: allowed: MM-DD-YYYY HH:MM:SS.f, e.g. 04-15-2024 12:00:00.0")
 
 
@@ -166,33 +181,73 @@ def asclog_xml(events: Iterable[Event]) -> bytes:
             + ("\n" if rows else "") + "</EventResponses>\n").encode()
 
 
+class AsclogReader:
+    """A MaxTime event log body read as it arrives (:meth:`feed` each chunk, then :meth:`close`): the events of a
+    long log are kept, not the document's tree."""
+
+    def __init__(self) -> None:
+        self._parser = ET.XMLPullParser(events=("start", "end"))
+        self._root: ET.Element | None = None
+        self.events: list[Event] = []
+
+    def feed(self, chunk: bytes) -> None:
+        """Read ``chunk``; raises :class:`AsclogError` at the first event (or byte) that is not a log's."""
+        try:
+            self._parser.feed(chunk)
+        except ET.ParseError as exc:
+            raise _not_a_log(exc) from None
+        self._read()
+
+    def close(self) -> list[Event]:
+        """The events, once the body is whole (a body cut short raises :class:`AsclogError`)."""
+        try:
+            self._parser.close()
+        except ET.ParseError as exc:
+            raise _not_a_log(exc) from None
+        self._read()
+        if self._root is None or self._root.tag != "EventResponses":
+            raise _not_a_log(f"the document is <{getattr(self._root, 'tag', '')}>")
+        return self.events
+
+    def _read(self) -> None:
+        for kind, element in self._parser.read_events():
+            if self._root is None:
+                self._root = element
+            if kind == "end" and element.tag == "Event":
+                self.events.append(_event(element.attrib, len(self.events) + 1))
+                element.clear()
+        if self._root is not None:
+            self._root.clear()  # the events read are kept as Events, not as the document's elements
+
+
+def _not_a_log(why: object) -> AsclogError:
+    return AsclogError(f"not an event log: {why}; expected <EventResponses><Event .../></EventResponses>")
+
+
+def _event(attrib: Mapping[str, str], number: int) -> Event:
+    try:
+        event = Event(parse_time(attrib["TimeStamp"]), int(attrib["EventTypeID"]), int(attrib["Parameter"]))
+    except (KeyError, ValueError) as exc:
+        raise AsclogError(f"event {number} {dict(attrib)!r}: {exc}; expected TimeStamp, EventTypeID and Parameter "
+                          "attributes") from None
+    for name, value in (("EventTypeID", event.code), ("Parameter", event.parameter)):
+        if value not in VALUE_RANGE:
+            raise AsclogError(f"event {number} at {attrib['TimeStamp']}: {name} {value}; allowed: "
+                              f"{VALUE_RANGE.start} to {VALUE_RANGE.stop - 1}")
+    return event
+
+
 def parse_asclog(body: bytes) -> list[Event]:
     """The events of a MaxTime event log body (what :func:`asclog_xml` writes, or a controller's)."""
-    try:
-        root = ET.fromstring(body)
-    except ET.ParseError as exc:
-        raise AsclogError(f"not an event log: {exc}; expected <EventResponses><Event .../></EventResponses>") from None
-    out = []
-    for element in root.iter("Event"):
-        try:
-            out.append(Event(parse_time(element.attrib["TimeStamp"]), int(element.attrib["EventTypeID"]),
-                             int(element.attrib["Parameter"])))
-        except (KeyError, ValueError) as exc:
-            raise AsclogError(f"event {element.attrib!r}: {exc}; expected TimeStamp, EventTypeID and Parameter "
-                              "attributes") from None
-    return out
+    reader = AsclogReader()
+    reader.feed(body)
+    return reader.close()
 
 
 def asclog_url(base: str, since: datetime | None = None) -> str:
     """The URL of a controller's event log at ``base`` (``http://HOST:PORT``), from ``since`` on."""
     url = base.rstrip("/") + ASCLOG_PATH
     return url if since is None else f"{url}?{urllib.parse.urlencode({'since': format_time(since)})}"
-
-
-def collect(base: str, since: datetime | None = None, timeout: float = 30.0) -> list[Event]:
-    """A controller's event log over HTTP, as a field collector reads a MaxTime controller's."""
-    with urllib.request.urlopen(asclog_url(base, since), timeout=timeout) as answer:
-        return parse_asclog(answer.read())
 
 
 # --- the ATSPM layout ----------------------------------------------------------------------------------------
@@ -205,22 +260,42 @@ def rows(logs: Mapping[int, Sequence[Event]]) -> list[tuple[datetime, int, int, 
     return out
 
 
-def write(logs: Mapping[int, Sequence[Event]], folder: Path) -> Path:
-    """``folder/hires.parquet`` (pyarrow installed) or ``folder/hires.csv`` (not), in the ATSPM layout; returns it."""
-    table = rows(logs)
+def csv_rows(rows: Iterable[tuple[datetime, int, int, int]]) -> str:
+    """Rows in the CSV form of the ATSPM layout (without the header :data:`CSV_HEADER`): integers and a timestamp,
+    nothing to quote."""
+    out, last, stamp = [], None, ""
+    for t, device, code, parameter in rows:
+        if t != last:  # a tick's events share their time: written once
+            last, stamp = t, t.isoformat(sep=" ", timespec="milliseconds")
+        out.append(f"{stamp},{device},{code},{parameter}\n")  # an IntEnum code formats as its number
+    return "".join(out)
+
+
+#: The first line of the CSV form of the ATSPM layout.
+CSV_HEADER = ",".join(COLUMNS) + "\n"
+
+
+def file_name() -> str:
+    """The name of a run's hi-res file: ``hires.parquet`` when pyarrow is installed, ``hires.csv`` when not."""
     try:
-        import pyarrow as pa
-        import pyarrow.parquet as pq
+        import pyarrow.parquet  # noqa: F401
     except ImportError:
-        path = folder / "hires.csv"
-        with path.open("w", newline="", encoding="utf-8") as f:
-            out = csv.writer(f)
-            out.writerow(COLUMNS)
-            out.writerows((t.isoformat(sep=" ", timespec="milliseconds"), d, c, p) for t, d, c, p in table)
-        return path
-    path = folder / "hires.parquet"
+        return "hires.csv"
+    return "hires.parquet"
+
+
+def encode(logs: Mapping[int, Sequence[Event]]) -> bytes:
+    """The bytes of :func:`file_name`: ``logs``, by device, in the ATSPM layout. Made in memory, so that writing them is
+    one write the caller can name."""
+    table = rows(logs)
+    if file_name() == "hires.csv":
+        return (CSV_HEADER + csv_rows(table)).encode()
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
     columns = list(zip(*table, strict=True)) if table else [[], [], [], []]
     types = (pa.timestamp("ms"), pa.int32(), pa.int16(), pa.int32())
+    sink = pa.BufferOutputStream()
     pq.write_table(pa.table({name: pa.array(col, type=kind) for name, col, kind in zip(COLUMNS, columns, types,
-                                                                                         strict=True)}), path)
-    return path
+                                                                                         strict=True)}), sink)
+    return sink.getvalue().to_pybytes()

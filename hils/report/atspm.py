@@ -24,6 +24,7 @@ Every detector of the config is both a presence and an arrival detector of its p
 from __future__ import annotations
 
 import csv
+import io
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from datetime import datetime
@@ -31,6 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from hils.protocol.config import IntersectionConfig
+from hils.report.outfiles import write_whole
 
 BIN_MINUTES = 15
 SPLIT_FAILURE = {"red_time": 5, "red_occupancy_threshold": 0.80, "green_occupancy_threshold": 0.80,
@@ -86,10 +88,12 @@ class Measures:
         return out | {name: sum(t[name] for t in totals) for name in ("gap_outs", "max_outs", "force_offs")}
 
     def write(self, path: Path) -> None:
-        with path.open("w", newline="", encoding="utf-8") as f:
-            out = csv.DictWriter(f, FIELDS)
-            out.writeheader()
-            out.writerows({**row, "TimeStamp": row["TimeStamp"].isoformat(sep=" ")} for row in self.rows)
+        """``atspm.csv``, whole or not at all."""
+        text = io.StringIO()
+        out = csv.DictWriter(text, FIELDS, lineterminator="\n")
+        out.writeheader()
+        out.writerows({**row, "TimeStamp": row["TimeStamp"].isoformat(sep=" ")} for row in self.rows)
+        write_whole(path, text.getvalue())
 
 
 def detector_config(configs: Mapping[int, IntersectionConfig]) -> list[tuple[int, int, int, str]]:

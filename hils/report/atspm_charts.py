@@ -27,7 +27,7 @@ its chart shows.
 from __future__ import annotations
 
 import itertools
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from datetime import datetime
 from pathlib import Path
 
@@ -184,11 +184,12 @@ def split_monitor(events: Sequence[Event], config: IntersectionConfig, path: Pat
         top = max([s for _, s, _ in services] + [s for _, s in plan if s is not None])
 
         def draw(svg: Svg, chart: Chart, services: list = services, plan: list = plan) -> None:
-            for (t0, split), after in zip(plan, [*plan[1:], None], strict=True):
+            # Each split holds until the next change, the last one to the end of the log (a log collected after
+            # the controller powered up may hold no pattern event: no split known, no line).
+            for (t0, split), (t1, _) in itertools.pairwise([*plan, (events[-1].time, None)]):
                 if split is not None:
-                    t1 = span[1] if after is None else _hours(after[0], day0)
-                    svg.line(chart.x(_hours(t0, day0)), chart.y(split), chart.x(t1), chart.y(split), color="#555555",
-                             dash="5 3")
+                    svg.line(chart.x(_hours(t0, day0)), chart.y(split), chart.x(_hours(t1, day0)), chart.y(split),
+                             color="#555555", dash="5 3")
             for reason, (_, color) in TERMINATIONS.items():
                 svg.dots([(chart.x(_hours(t, day0)), chart.y(s)) for t, s, r in services if r == reason], color,
                          radius=2.4)
@@ -198,18 +199,17 @@ def split_monitor(events: Sequence[Event], config: IntersectionConfig, path: Pat
     if not panels:
         return False
     legend = [(label, color) for reason, (label, color) in TERMINATIONS.items() if reason in ended]
-    _draw(path, f"Split monitor, {title}: each service's split by how its green ended",
+    # a log collected after the controller powered up may hold no pattern event: what was programmed is unknown
+    unknown = "" if any(e.code == E.COORD_PATTERN_CHANGE for e in events) else (
+        "; no pattern event in the log: programmed split unknown")
+    _draw(path, f"Split monitor, {title}: each service's split by how its green ended{unknown}",
           legend + [("programmed split", DASHED)] * planned, day0, "split (s)", panels)
     return True
 
 
-def draw(logs: Mapping[str, Sequence[Event]], configs: Mapping[str, IntersectionConfig],
-         folders: Mapping[str, Path], names: Mapping[str, str]) -> list[Path]:
-    """Both charts of each controller's log in its folder; the files written."""
-    written = []
-    for tls, events in logs.items():
-        for name, chart in (("coordination_diagram.svg", coordination_diagram), ("split_monitor.svg", split_monitor)):
-            path = folders[tls] / name
-            if chart(events, configs[tls], path, names[tls]):
-                written.append(path)
-    return written
+#: A chart of a controller's log: ``(events, config, path, title)``, drawn to ``path``; False when it has nothing
+#: to show (then no file is written).
+Draw = Callable[[Sequence[Event], IntersectionConfig, Path, str], bool]
+
+#: The charts of each controller's log, by the name of their file.
+CHARTS: dict[str, Draw] = {"coordination_diagram.svg": coordination_diagram, "split_monitor.svg": split_monitor}

@@ -65,6 +65,7 @@ from hils.shell.clock import Answer, Clock, VirtualClock, WallClockDriver
 from hils.shell.events import EventLog, Kind, LogWriteError, TaggedLog
 from hils.shell.events import read as read_events
 from hils.shell.fastpath import StepCost, modeled_cost
+from hils.shell.hiresjournal import HiresJournal
 from hils.shell.middleware import Middleware, Received, Submission
 from hils.shell.preflight import ControllerCheckFailed
 from hils.shell.targets import VIRTUAL, TargetFactory, check_target, connect, target_specs
@@ -213,16 +214,17 @@ class Testbed(_OneIntersection):
     starts with (default: the scenario's, or the shipped four-leg). ``seed``: every virtual-time run is
     reproducible from it. ``agent``: what :meth:`run` uses when given none (a built-in name,
     ``package.module:Class`` or an instance; with several intersections each gets its own of a named agent).
-    ``duration``: simulated seconds after which the run is done (None: no end). ``log_path``: the JSON Lines
-    event log (None: kept in memory only). ``recover_after``: seconds in TIMEOUT before the manager recovers by
-    itself (None: never). ``on_reset(testbed)`` runs after assembly, before anything starts: the fault harness
-    wraps parts of the run there. ``detectors``: SUMO's stop-bar loops actuate the controllers' detectors
-    (default: for the actuated agent). ``measure``: False skips what only the end-of-run summary and the queue
-    plot need (per-vehicle delays, queue and spillback samples, ``queues`` records), as environments do for
-    speed. ``fast_path``: leave out in virtual time what cannot change a result (:mod:`hils.shell.fastpath`); False runs
-    the reference (every controller tick, every poll, every SUMO step). ``take_over``: drive a controller on which
-    someone else's calls are found without first watching them for another manager (a run that finds them
-    changing refuses to start); their calls are cleared.
+    ``duration``: simulated seconds after which the run is done (None: no end). ``log_path``: the JSON Lines event
+    log (None: kept in memory only). ``hires_path``: the hi-res journal, where the controllers held in process write
+    their hi-res events through as they log them (:mod:`hils.shell.hiresjournal`; None: none). ``recover_after``:
+    seconds in TIMEOUT before the manager recovers by itself (None: never). ``on_reset(testbed)`` runs after
+    assembly, before anything starts: the fault harness wraps parts of the run there. ``detectors``: SUMO's stop-bar
+    loops actuate the controllers' detectors (default: for the actuated agent). ``measure``: False skips what only
+    the end-of-run summary and the queue plot need (per-vehicle delays, queue and spillback samples, ``queues``
+    records), as environments do for speed. ``fast_path``: leave out in virtual time what cannot change a result
+    (:mod:`hils.shell.fastpath`); False runs the reference (every controller tick, every poll, every SUMO step).
+    ``take_over``: drive a controller on which someone else's calls are found without first watching them for
+    another manager (a run that finds them changing refuses to start); their calls are cleared.
 
     The general API takes and gives one value per intersection, by name: :meth:`reset_all`, :meth:`step_all`,
     :meth:`observe_all`, :attr:`intersections`. A run of one intersection also has the single view of it:
@@ -237,7 +239,7 @@ class Testbed(_OneIntersection):
                  target: str | TargetFactory | Mapping[str, str | TargetFactory] = VIRTUAL,
                  sumo: bool | Simulation = False, seed: int = 0, agent: str | Agent | None = None,
                  duration: float | None = None, log_path: str | Path | None = None,
-                 recover_after: float | None = 5.0,
+                 hires_path: str | Path | None = None, recover_after: float | None = 5.0,
                  on_reset: Callable[[Testbed], None] | None = None,
                  sumo_config: str | Path | None = None, detectors: bool | None = None,
                  scenario: str | Path | Scenario | None = None, measure: bool = True, fast_path: bool = True,
@@ -276,6 +278,8 @@ class Testbed(_OneIntersection):
         self.detectors = agent in DETECTOR_AGENTS if detectors is None else detectors
         self.duration = duration
         self.log_path = Path(log_path) if log_path is not None else None
+        self.hires_path = Path(hires_path) if hires_path is not None else None
+        self.journal: HiresJournal | None = None
         self.recover_after = recover_after
         self.on_reset = on_reset
         self.measure = measure
@@ -323,8 +327,7 @@ class Testbed(_OneIntersection):
     def hires(self) -> dict[str, list[Event]]:
         """Each controller's own hi-res event log, where the run can read it: the in-process emulator's (a target
         with a ``hires()`` method, see :mod:`hils.protocol.hires`). A controller reached at the wall clock keeps its
-        own,
-        which a field tool collects from it (:func:`hils.protocol.hires.collect` for a MaxTime endpoint)."""
+        own, which a field tool collects from it (:func:`hils.shell.asclog.collect` for a MaxTime endpoint)."""
         return {name: i.target.hires() for name, i in self.intersections.items()
                 if callable(getattr(i.target, "hires", None))}
 
@@ -360,6 +363,7 @@ class Testbed(_OneIntersection):
         self.intersections = {name: self._assemble_intersection(env, name, index)
                               for index, name in enumerate(self.configs)}
         self._assemble_simulation()
+        self._assemble_journal()
         for i in self.intersections.values():
             i.agent = self._load_agent(i.config)
         if self.on_reset is not None:
@@ -402,6 +406,28 @@ class Testbed(_OneIntersection):
         middleware = Middleware(env, transport, cfg, self.action_type, events, where=where, community=community,
                                 recover_after=self.recover_after, fast_path=self.fast_path, take_over=self.take_over)
         return Intersection(name, label, cfg, target, transport, middleware, events, tally)
+    @property
+    def devices(self) -> dict[str, int]:
+        """The ``DeviceId`` of each controller in its hi-res record: 1, 2, ... in the run's order."""
+        return {name: n for n, name in enumerate(self.configs, start=1)}
+
+    def _assemble_journal(self) -> None:
+        """Each controller held in process writes its hi-res events through to the journal (a target with a
+        ``hires_to()`` method); no journal when none is, or none is asked for."""
+        self.journal = None
+        held = {name: i.target.hires_to for name, i in self.intersections.items()
+                if callable(getattr(i.target, "hires_to", None))}
+        if self.hires_path is None or not held:
+            return
+        try:
+            self.journal = HiresJournal(self.hires_path)
+        except OSError as exc:
+            log.warning("no hi-res journal %s: %s; the run's record is kept in memory until its end", self.hires_path,
+                        exc.strerror or exc)
+            return
+        for name, hires_to in held.items():
+            hires_to(self.journal.device(self.devices[name]))
+
     def _assemble_simulation(self) -> None:
         sumo = self._sumo_spec
         self._owns_sumo = False
@@ -501,6 +527,8 @@ class Testbed(_OneIntersection):
             if not done.triggered:
                 self.events.emit(Kind.RUN_ENDED, reason=reason, polls=self._poll_counts())
                 self.events.close()
+            if self.journal is not None:
+                self.journal.close()
             self.wall_s = time.perf_counter() - self._wall_t0
             self._collect_traffic()
 

@@ -24,17 +24,17 @@ from __future__ import annotations
 
 import logging
 import math
-import os
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from enum import StrEnum
 from pathlib import Path
-from typing import IO, Any
+from typing import Any
 
 import orjson
 
 from hils.protocol.errors import STOPS
+from hils.shell.appendfile import AppendFile
 
 log = logging.getLogger(__name__)
 
@@ -109,16 +109,14 @@ class EventLog:
 
     def __init__(self, path: str | Path | None = None, *, keep: bool = True, clock=None) -> None:
         self.path = Path(path) if path is not None else None
-        self._file: IO[bytes] | None = None
+        self._file: AppendFile | None = None
         if self.path is not None:
             try:
                 self.path.parent.mkdir(parents=True, exist_ok=True)
-                # Unbuffered: each record is one write(2), on disk (in the OS) before emit returns.
-                self._file = self.path.open("wb", buffering=0)
+                # Each record on disk (in the OS) before emit returns.
+                self._file = AppendFile(self.path)
             except OSError as exc:
                 raise LogWriteError(f"cannot write the event log {self.path}: {exc.strerror or exc}") from None
-        self._written = 0  # bytes of whole records in the file
-        self._lines = 0  # whole records in the file
         #: Why the file stopped taking records (None while it takes them).
         self.failure: LogWriteError | None = None
         #: Called once with :attr:`failure` when the file stops taking records; without it the failure is raised.
@@ -173,30 +171,12 @@ class EventLog:
         return rec
 
     def _write(self, line: bytes) -> None:
-        """One record, whole: a short write is finished, and a record the file cannot take is cut back out."""
-        view = memoryview(line)
-        try:
-            while view:
-                n = self._file.write(view)
-                if not n:
-                    raise OSError(0, "the file took no bytes")
-                view = view[n:]
-        except OSError as exc:
-            self._stop_writing(exc)
+        """One record, whole (:class:`hils.shell.appendfile.AppendFile`); a file that stops taking them is a failure."""
+        if self._file.append(line):
             return
-        self._written += len(line)
-        self._lines += 1
-
-    def _stop_writing(self, exc: OSError) -> None:
         file, self._file = self._file, None
-        try:
-            os.ftruncate(file.fileno(), self._written)  # never half a record: the file ends with the last whole one
-        except OSError:
-            log.warning("could not cut %s back to its last whole record", self.path)
-        finally:
-            file.close()
-        self.failure = LogWriteError(f"cannot write the event log {self.path}: {exc.strerror or exc} (it keeps its "
-                                     f"first {self._lines} records, whole)")
+        self.failure = LogWriteError(f"cannot write the event log {self.path}: {file.failure.strerror or file.failure} "
+                                     f"(it keeps its first {file.records} records, whole)")
         if self.on_failure is None:
             raise self.failure
         self.on_failure(self.failure)
@@ -207,10 +187,8 @@ class EventLog:
 
     def close(self) -> None:
         if self._file is not None:
-            try:
-                self._file.close()
-            finally:
-                self._file = None
+            file, self._file = self._file, None
+            file.close()
 
 
 def _jsonable(value: Any) -> Any:

@@ -13,7 +13,6 @@ from pathlib import Path
 import pytest
 from signal_replay import collector
 
-from hils.protocol import hires
 from hils.protocol.hires import EventCode
 from hils.protocol.ntcip import (
     DETECTOR_ACTUATION,
@@ -23,6 +22,7 @@ from hils.protocol.ntcip import (
     StatusColumn,
     oid_str,
 )
+from hils.shell import asclog
 from tests.emulator.agent.test_agent_netsnmp import run
 
 pytestmark = pytest.mark.wallclock
@@ -69,7 +69,7 @@ def test_detector_and_push_button_sets_reach_the_log(served: object) -> None:
     assert done.returncode == 0, done.stderr  # vehicle detector 8
 
     def seen() -> set[tuple[int, int]]:
-        return {(e.code, e.parameter) for e in hires.collect(url, since)}
+        return {(e.code, e.parameter) for e in asclog.collect(url, since)}
 
     wait_for(lambda: {(E.PED_DETECTOR_ON, 4), (E.PED_CALL_REGISTERED, 4), (E.DETECTOR_ON, 8),
                       (E.PHASE_CALL_REGISTERED, 8)} <= seen())
@@ -151,11 +151,11 @@ def test_a_preempt_input_set_by_snmpset_reaches_the_log(tmp_path: Path) -> None:
         done = run("snmpset", "1", "private", served.port, oid_str(PREEMPT_CONTROL_STATE.instance(1)), "i", "1")
         assert done.returncode == 0, done.stderr
         wait_for(lambda: {(E.PREEMPT_CALL_INPUT_ON, 1), (E.PREEMPT_ENTRY_STARTED, 1)}
-                 <= {(e.code, e.parameter) for e in hires.collect(url, since)}, seconds=15)
+                 <= {(e.code, e.parameter) for e in asclog.collect(url, since)}, seconds=15)
         missing = run("snmpset", "1", "private", served.port, oid_str(PREEMPT_CONTROL_STATE.instance(2)), "i", "0")
         assert missing.returncode != 0 and "noSuchName" in missing.stderr + missing.stdout
         assert run("snmpset", "1", "private", served.port, oid_str(PREEMPT_CONTROL_STATE.instance(1)), "i",
                    "0").returncode == 0
-        wait_for(lambda: (E.PREEMPT_CALL_INPUT_OFF, 1) in {(e.code, e.parameter) for e in hires.collect(url, since)})
+        wait_for(lambda: (E.PREEMPT_CALL_INPUT_OFF, 1) in {(e.code, e.parameter) for e in asclog.collect(url, since)})
     finally:
         served.stop()

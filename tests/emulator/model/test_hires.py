@@ -276,19 +276,19 @@ def test_the_maxtime_xml_reads_back_and_since_takes_maxtimes_form() -> None:
 
 def test_the_atspm_layout_in_parquet(tmp_path: Path) -> None:
     import pandas as pd
-    path = hires.write({1: EVENTS[:2], 2: EVENTS[2:]}, tmp_path)
-    assert path.name == "hires.parquet"
+    assert hires.file_name() == "hires.parquet"
+    path = tmp_path / "hires.parquet"
+    path.write_bytes(hires.encode({1: EVENTS[:2], 2: EVENTS[2:]}))
     frame = pd.read_parquet(path)
     assert list(frame.columns) == list(hires.COLUMNS)
     assert frame.values.tolist() == [[pd.Timestamp(e.time), d, e.code, e.parameter]
                                      for e, d in zip(EVENTS, (1, 1, 2), strict=True)]
 
 
-def test_without_pyarrow_the_layout_is_csv(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_without_pyarrow_the_layout_is_csv(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setitem(sys.modules, "pyarrow", None)  # as if not installed
-    path = hires.write({1: EVENTS}, tmp_path)
-    assert path.name == "hires.csv"
-    assert path.read_text().splitlines() == ["TimeStamp,DeviceId,EventId,Parameter",
+    assert hires.file_name() == "hires.csv"
+    assert hires.encode({1: EVENTS}).decode().splitlines() == ["TimeStamp,DeviceId,EventId,Parameter",
                                              "2024-04-15 12:00:00.100,1,1,2", "2024-04-15 12:00:03.500,1,82,17",
                                              "2024-04-15 12:00:03.500,1,316,75"]
 

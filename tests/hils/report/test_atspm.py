@@ -7,6 +7,7 @@ import re
 import subprocess
 import sys
 from collections import Counter
+from datetime import timedelta
 from pathlib import Path
 
 import pytest
@@ -15,7 +16,7 @@ from emulator.model.controller import Controller
 from emulator.model.datalogger import DataLogger
 from hils.protocol import hires
 from hils.protocol.hires import EventCode
-from hils.report import atspm
+from hils.report import atspm, atspm_charts
 from hils.sweep import grid as sweep
 from tests.emulator.model.test_hires import config_with
 
@@ -68,6 +69,24 @@ def test_split_failures_arrivals_and_terminations_of_a_fixed_time_plan() -> None
     assert m.run_figures()["split_failures"] == 3
     rows = {(r["TimeStamp"], r["Phase"]) for r in m.rows}
     assert len({t for t, _ in rows}) == 1 + (events[-1].time - events[0].time).seconds // 900  # 15-minute bins
+
+
+def test_the_charts_of_a_log_collected_after_power_up_hold_no_pattern_event(tmp_path: Path) -> None:
+    """A log collected from a controller that powered up long before (``hils run --asclog``) has no pattern event:
+    the split monitor draws its services and says the programmed split is unknown; the coordination diagram draws
+    its phases' cycles."""
+    events, _ = fixed_time_log(set(), cycles=4)
+    later = [e for e in events if e.time >= events[0].time + timedelta(seconds=60)]
+    assert not any(e.code == E.COORD_PATTERN_CHANGE for e in later)
+    config = config_with()
+    for name, chart in atspm_charts.CHARTS.items():
+        assert chart(later, config, tmp_path / name, "no pattern"), name
+        assert (tmp_path / name).read_text().endswith("</svg>\n")
+    monitor = (tmp_path / "split_monitor.svg").read_text()
+    assert "programmed split unknown" in monitor and "stroke-dasharray" not in monitor
+    # The whole log (from power-up) says the controller ran free: no split to draw, nothing unknown.
+    assert atspm_charts.split_monitor(events, config, tmp_path / "whole.svg", "whole")
+    assert "programmed split" not in (tmp_path / "whole.svg").read_text()
 
 
 def test_without_the_package_the_measures_say_so(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -133,10 +152,14 @@ def test_a_controller_on_the_middlewares_calls_alone_gets_no_chart_and_the_run_s
     """Seen as a user: the default run drew a coordination diagram (an empty "detector" legend, no arrival) and a
     split monitor ("dashed: programmed split", none drawn) of a controller that ran no plan and read no detector."""
     from hils.report import atspm_charts, record
+    from hils.report.outfiles import Outputs
 
     logs, configs = _record_of("fixed-cycle", "switch", 600.0)
-    section, written = record.keep(logs, configs, tmp_path, several=False)
-    assert not {"coordination_diagram.svg", "split_monitor.svg"} & set(written)
+    kept = record.gather(logs, configs, {tls: n for n, tls in enumerate(configs, start=1)})
+    files = Outputs(tmp_path)
+    kept.write_small(files, several=False)
+    section = kept.section
+    assert files.written == ["atspm.csv"] and not files.failed
     assert not list(tmp_path.glob("*.svg"))
     assert section["charts"] == atspm_charts.NOTHING_TO_DRAW
     assert f"  {atspm_charts.NOTHING_TO_DRAW}" in record.describe(section)

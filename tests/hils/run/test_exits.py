@@ -128,7 +128,7 @@ def test_a_record_the_file_cannot_take_whole_is_cut_back_out(tmp_path: Path) -> 
     path = tmp_path / "events.jsonl"
     log = EventLog(path, clock=lambda: 1.0)
     log.emit(Kind.NOTE, message="first")
-    log._file = _Filling(log._file, 70)
+    log._file._file = _Filling(log._file._file, 70)
     failures: list[LogWriteError] = []
     log.on_failure = failures.append
     log.emit(Kind.NOTE, message="second, a little longer than the room left for it")
@@ -138,7 +138,7 @@ def test_a_record_the_file_cannot_take_whole_is_cut_back_out(tmp_path: Path) -> 
         failures[0])
     assert log.records[-1] is kept and kept["seq"] == 2
     bare = EventLog(tmp_path / "bare.jsonl")
-    bare._file = _Filling(bare._file, 10)
+    bare._file._file = _Filling(bare._file._file, 10)
     with pytest.raises(LogWriteError, match="No space left on device"):  # nobody to tell: raised
         bare.emit(Kind.NOTE, message="x")
 
