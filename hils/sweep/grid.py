@@ -6,8 +6,8 @@ Rules of this module
   Ray task. It runs `hils run` with the cell's arguments into the cell's own run folder (the layout
   `hils run --out` gives: events.jsonl, summary.json, plots, and the console in console.txt) and
   returns what that summary says.
-- Every cell runs in a fresh process of its own, never after another cell in one: libsumo's results
-  depend on what the process did before (below, :func:`run_grid`), and a cell must give what `hils run`
+- Every cell runs in a fresh process of its own, never after another cell in one: a libsumo run
+  depends on what its process did before (:mod:`hils.sim.sumo`), and a cell must give what `hils run`
   gives it.
 - A cell that fails is a row with its error; the sweep goes on and its table keeps every cell.
 - Results come back in grid order, whatever order the workers finish in, so a sweep's table is
@@ -196,12 +196,9 @@ def run_grid(cells: Sequence[Cell], root: str | Path, *, workers: int | None = N
     else:
         n = min(len(cells), workers or os.cpu_count() or 1)
         # Spawned workers (a fork of a process that loaded libsumo is not a clean SUMO), each for one cell only
-        # (max_tasks_per_child=1): libsumo's run depends on where the objects of the network it loads lie in the
-        # process's memory (on cologne1, whether a vehicle waiting inside the junction yields or goes on). A fresh
-        # process places them in the order they are made; a heap left full of holes by an earlier run (or anything
-        # else the process did) scatters them, and no libsumo call undoes that (close and start, load). Cells run
-        # one after another in one process drifted from `hils run` (cologne1, coordinated, seed 0, 600 s: RESCO
-        # delay 25.009 s against 24.983 s), and a table changed with the order the workers took the cells in.
+        # (max_tasks_per_child=1): a libsumo run depends on what its process did before (hils.sim.sumo says how).
+        # Cells run one after another in one worker drifted from `hils run` (cologne1, coordinated, seed 0, 600 s:
+        # RESCO delay 25.009 s against 24.983 s), and a table changed with the order the workers took the cells in.
         with ProcessPoolExecutor(n, mp_context=multiprocessing.get_context("spawn"), max_tasks_per_child=1) as pool:
             futures = {pool.submit(run_cell, cell, root): i for i, cell in enumerate(cells)}
             for future in as_completed(futures):

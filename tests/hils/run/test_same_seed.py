@@ -1,10 +1,10 @@
-"""The same seed, the same run, however many runs the process made before (issue 33, item 7): each family of runs
-twice in this one process, with identical event logs, hi-res records and summaries.
+"""The same seed, the same run: nothing of hils survives a run (issue 33, item 7). Each family of runs twice in this
+one process, with identical event logs, hi-res logs and summaries.
 
-Only SUMO's side can tell a process's history: libsumo's run depends on where the objects of the network it loads
-lie in memory (:func:`hils.sweep.grid.run_grid` says how), so `hils sweep` and `hils compare` run every cell in a
-process of its own (tests/hils/sweep/test_sweep.py). On cologne1 that shows after 520 simulated seconds at the
-earliest; the RESCO run here stops before, and checks that nothing of hils survives a run."""
+Only SUMO's side can tell a process's history: a libsumo run depends on where the objects it loads lie in memory
+(:mod:`hils.sim.sumo`), so `hils sweep` and `hils compare` run every cell in a process of its own
+(tests/hils/sweep/test_sweep.py). On cologne1 that shows after 520 simulated seconds at the earliest; the RESCO run
+here stops before it."""
 
 from __future__ import annotations
 

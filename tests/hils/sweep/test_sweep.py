@@ -135,7 +135,7 @@ def test_compare_writes_its_table_and_plot_from_another_folder(tmp_path: Path) -
 def test_a_cell_gives_what_hils_run_gives_it_alone_whatever_the_process_ran_before(tmp_path: Path) -> None:
     # Issue 33, item 7: a run of one seed that followed others in one process could drift from `hils run` (cologne1,
     # coordinated, seed 0, 600 s: RESCO delay 25.009 s against 24.983 s): libsumo's run depends on what the process
-    # did before (hils.sweep.grid.run_grid says how), so every cell runs in a process of its own.
+    # did before (hils.sim.sumo says how), so every cell runs in a process of its own.
     cell = Cell("coordinated", 0, "resco:cologne1", duration=600.0)
     alone = tmp_path / "alone"
     done = subprocess.run([sys.executable, "-m", "hils", "--quiet", "run", "--no-progress", "--out", str(alone),
