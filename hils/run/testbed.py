@@ -212,7 +212,8 @@ class Testbed(_OneIntersection):
     needs a URL for every intersection). ``sumo``: True to run the SUMO scenario (started at each reset), or a
     simulation object the caller started (with a ``lights`` mapping); ``sumo_config``: the ``.sumocfg`` SUMO
     starts with (default: the scenario's, or the shipped four-leg). ``seed``: every virtual-time run is
-    reproducible from it. ``agent``: what :meth:`run` uses when given none (a built-in name,
+    reproducible from it, in a process of its own (a SUMO run may also depend on the runs before it in one
+    process: :mod:`hils.sim.sumo`). ``agent``: what :meth:`run` uses when given none (a built-in name,
     ``package.module:Class`` or an instance; with several intersections each gets its own of a named agent).
     ``duration``: simulated seconds after which the run is done (None: no end). ``log_path``: the JSON Lines event
     log (None: kept in memory only). ``hires_path``: the hi-res journal, where the controllers held in process write

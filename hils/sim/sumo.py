@@ -10,6 +10,15 @@ libsumo runs the simulation inside this process: one simulation per process at a
 hot path of a co-simulation (four steps per simulated second), so :meth:`apply` and
 :meth:`step` do almost nothing beyond the libsumo call; queues are read only when asked
 for and, for the end-of-run maximum, sampled once per ``queue_sample_period``.
+
+A libsumo run also depends on what the process did before it. SUMO decides some things by where
+the objects it loads lie in memory (on RESCO's cologne1, whether a vehicle waiting inside the
+junction yields or goes on): a fresh process places them in the order they are made, one whose
+heap an earlier run (or anything else) left full of holes scatters them, and no libsumo call undoes
+that (close and start, load). So runs whose figures must agree run in processes of their own, as
+`hils run` and every cell of :mod:`hils.sweep.grid` do; several runs in one process agree as far as
+the network allows (cologne1, coordinated, seed 0, 600 s: a RESCO delay of 24.983 s in a fresh
+process, 25.009 s in some runs after others; the shipped networks have shown no such difference).
 """
 
 from __future__ import annotations

@@ -2,10 +2,13 @@
 
 Rules of this module
 --------------------
-- One code path: every cell runs through :func:`run_cell`, the same function in a pool worker, in a
-  Ray task or in this process. It runs `hils run` with the cell's arguments into the cell's own run
-  folder (the layout `hils run --out` gives: events.jsonl, summary.json, plots, and the console in
-  console.txt) and returns what that summary says.
+- One code path: every cell runs through :func:`run_cell`, the same function in a pool worker or in a
+  Ray task. It runs `hils run` with the cell's arguments into the cell's own run folder (the layout
+  `hils run --out` gives: events.jsonl, summary.json, plots, and the console in console.txt) and
+  returns what that summary says.
+- Every cell runs in a fresh process of its own, never after another cell in one: a libsumo run
+  depends on what its process did before (:mod:`hils.sim.sumo`), and a cell must give what `hils run`
+  gives it.
 - A cell that fails is a row with its error; the sweep goes on and its table keeps every cell.
 - Results come back in grid order, whatever order the workers finish in, so a sweep's table is
   reproducible from its seeds (virtual time), whichever backend ran it.
@@ -190,13 +193,13 @@ def run_grid(cells: Sequence[Cell], root: str | Path, *, workers: int | None = N
 
     if ray is not None:
         _on_ray(cells, root, ray, finished)
-    elif (workers or 0) == 1 or len(cells) == 1:
-        for i, cell in enumerate(cells):
-            finished(i, run_cell(cell, root))
     else:
         n = min(len(cells), workers or os.cpu_count() or 1)
-        # Spawned workers: a fork of a process that loaded libsumo is not a clean SUMO.
-        with ProcessPoolExecutor(n, mp_context=multiprocessing.get_context("spawn")) as pool:
+        # Spawned workers (a fork of a process that loaded libsumo is not a clean SUMO), each for one cell only
+        # (max_tasks_per_child=1): a libsumo run depends on what its process did before (hils.sim.sumo says how).
+        # Cells run one after another in one worker drifted from `hils run` (cologne1, coordinated, seed 0, 600 s:
+        # RESCO delay 25.009 s against 24.983 s), and a table changed with the order the workers took the cells in.
+        with ProcessPoolExecutor(n, mp_context=multiprocessing.get_context("spawn"), max_tasks_per_child=1) as pool:
             futures = {pool.submit(run_cell, cell, root): i for i, cell in enumerate(cells)}
             for future in as_completed(futures):
                 finished(futures[future], future.result())
@@ -214,7 +217,7 @@ def _on_ray(cells: Sequence[Cell], root: str, address: str, finished: Callable[[
         ray.init(address=None if address == "local" else address, include_dashboard=False,
                  log_to_driver=False, configure_logging=False)
     try:
-        remote = ray.remote(run_cell)
+        remote = ray.remote(max_calls=1)(run_cell)  # a worker process for each cell, as on the local pool
         pending = {remote.remote(cell, root): i for i, cell in enumerate(cells)}
         while pending:
             ready, _ = ray.wait(list(pending), num_returns=1)

@@ -11,8 +11,10 @@ from pathlib import Path
 import matplotlib.axes
 import pytest
 
+from hils.run.testbed import Testbed
 from hils.sweep.compare import Estimate, Runs, aggregate, plot, render, runs, unmeasured
 from hils.sweep.grid import Cell, CellResult, SweepError, figures, grid, parse_seeds, run_grid, scenario_arguments
+from tests.hils.run import same_seed
 
 SHORT = 120.0
 
@@ -169,3 +171,28 @@ def test_compare_writes_its_table_and_plot_from_another_folder(tmp_path: Path) -
     assert table["webster"]["mean_delay_s"]["n"] == 2 and table["webster"]["mean_delay_s"]["ci95_half_width"] > 0
     assert (out / "compare.png").stat().st_size > 10_000 and (out / "sweep.csv").exists()
     assert len(list(out.glob("four_leg-*-seed*"))) == 4
+
+
+@pytest.mark.slow  # five runs of 600 s of cologne1 (the drift shows after 520 s), each in a process of its own
+def test_a_cell_gives_what_hils_run_gives_it_alone_whatever_the_process_ran_before(tmp_path: Path) -> None:
+    # Issue 33, item 7: a run of one seed that followed others in one process could drift from `hils run` (cologne1,
+    # coordinated, seed 0, 600 s: RESCO delay 25.009 s against 24.983 s): libsumo's run depends on what the process
+    # did before (hils.sim.sumo says how), so every cell runs in a process of its own.
+    cell = Cell("coordinated", 0, "resco:cologne1", duration=600.0)
+    alone = tmp_path / "alone"
+    done = subprocess.run([sys.executable, "-m", "hils", "--quiet", "run", "--no-progress", "--out", str(alone),
+                           "--agent", cell.agent, "--seed", "0", "--duration", f"{cell.duration:g}",
+                           *scenario_arguments(cell.scenario)], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    expected = (same_seed.logged(alone / "events.jsonl"),
+                same_seed.summary(json.loads((alone / "summary.json").read_text(encoding="utf-8"))))
+    swept = []
+    for before in (10.0, 20.0, 30.0, 40.0):
+        with Testbed(sumo=True, duration=before) as other:  # what this process runs before the sweep
+            other.run()
+        result, = run_grid([cell], tmp_path / "sweep", workers=1)
+        assert result.ok, result.error
+        swept.append((same_seed.logged(Path(result.folder) / "events.jsonl"), same_seed.summary(result.summary)))
+    delays = [s["traffic"]["resco"]["delay_s"] for _, s in swept]
+    assert delays == [expected[1]["traffic"]["resco"]["delay_s"]] * len(swept)
+    assert all(run == expected for run in swept)
