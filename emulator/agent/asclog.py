@@ -246,7 +246,7 @@ class AsclogServer:
         body = f"busy: {self.connections.open} event-log connections open; retry in a second\n".encode()
         writer.write(_status_line(HTTPStatus.SERVICE_UNAVAILABLE) + "Content-Type: text/plain\r\nRetry-After: 1\r\n"
                      f"Content-Length: {len(body)}\r\nConnection: close\r\n\r\n".encode() + body)
-        with contextlib.suppress(ConnectionError, TimeoutError):
+        with contextlib.suppress(OSError):  # the client gone already (reset, not connected), or the linger over
             writer.write_eof()
             async with asyncio.timeout(LINGER):
                 while await reader.read(MAX_REQUEST):

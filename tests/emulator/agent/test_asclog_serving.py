@@ -10,7 +10,6 @@ import socket
 import statistics
 import time
 import urllib.request
-from collections.abc import Iterator
 
 import pytest
 from pyasn1.codec.ber import encoder
@@ -156,17 +155,6 @@ def test_the_streamed_log_is_the_whole_log_for_http_1_1_and_1_0(paper_config) ->
     assert body == whole
 
 
-@pytest.fixture(scope="module")
-def served(tmp_path_factory: pytest.TempPathFactory) -> Iterator[object]:
-    from harness.bench.processes import start_emulator
-
-    server = start_emulator(tmp_path_factory.mktemp("serve") / "serve.log", http=True)
-    try:
-        yield server
-    finally:
-        server.stop()
-
-
 def test_connections_beyond_the_limit_get_503_at_once(served: object) -> None:
     """Before: every connection was served, each holding its whole answer."""
     address = ("127.0.0.1", served.http_ports[0])
@@ -226,3 +214,16 @@ def test_the_closing_line_counts_the_event_log_requests(tmp_path) -> None:
     code, out = server.stop()
     assert code == 0
     assert "event log: answered 2 requests (200 1, 404 1); dropped 0 connections" in out
+
+
+def test_the_wire_bench_measures_the_tick_under_the_event_log_flood() -> None:
+    """`hils bench wire`'s figures for the event-log flood: requests answered, refused beyond the connection limit,
+    and the tick's lateness beside it."""
+    from harness.bench.commands import LOG_EVENTS, LogFlood, measure_tick_lateness_under_flood
+
+    figures = measure_tick_lateness_under_flood(2.0, [LogFlood("event_log", whole=2, never_read=MAX_CONNECTIONS)])
+    flood = figures["floods"]["event_log"]
+    assert figures["log_events"] == LOG_EVENTS and flood["whole"] == 2
+    assert flood["answered"] >= 1 and flood["refused_busy"] >= 1, flood
+    assert flood["n"] >= 15 and figures["quiet"]["n"] >= 15
+    assert flood["p50"] < 20.0, flood
