@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from emulator.agent.asclog import MAX_CONNECTIONS, WRITE_TIMEOUT
 from hils.protocol import config as config_mod
 from hils.protocol.config import IntersectionConfig
 from hils.protocol.hires import ASCLOG_PATH
@@ -93,7 +94,10 @@ def _register_serve(commands: argparse._SubParsersAction) -> None:
                             f"(GET http://HOST:PORT{ASCLOG_PATH}[?since=MM-DD-YYYY HH:MM:SS.0], the Indiana "
                             "enumerations), on TCP ports PORT.. (0: free ones); without PORT on the same numbers as "
                             "the UDP ports, where Signal-Replay looks for a controller on this host. The controllers' "
-                            "clocks are the host's local time")
+                            "clocks are the host's local time. The log is streamed a few events at a time between "
+                            f"ticks, so that no request delays one; at most {MAX_CONNECTIONS} connections at once "
+                            f"(more are answered 503), and a client that takes nothing of its answer for "
+                            f"{WRITE_TIMEOUT:g} s is dropped")
     serve.add_argument("--log-events", type=int, default=100_000, metavar="N",
                        help="hi-res events each controller keeps, its last ones, as a controller's ring buffer "
                             "(100000; an Intelight MaxTime keeps about 10000)")

@@ -22,7 +22,8 @@ real controller's clock is set to local time. Their hi-res logs
 a field tool that aligns a replay with the time of day (Signal-Replay's cycle
 alignment) finds the coordinated cycle where the time of day puts it. With
 ``http`` each controller also serves its log as an Intelight MaxTime does
-(:mod:`emulator.agent.asclog`), on consecutive TCP ports.
+(:mod:`emulator.agent.asclog`), on consecutive TCP ports, on the same loop: a
+few events per turn of it, so that serving a log never holds a tick up.
 """
 
 from __future__ import annotations
@@ -43,7 +44,7 @@ from enum import Enum
 from pathlib import Path
 from typing import TextIO
 
-from emulator.agent.asclog import AsclogServer
+from emulator.agent.asclog import AsclogServer, Connections, HttpStats
 from emulator.agent.mib import MibView
 from emulator.agent.snmp import AgentStats, DropReason, ReportBudget, RequestKind, SnmpAgent, V3User
 from emulator.model.controller import TICK, Change, Controller
@@ -147,6 +148,7 @@ class ServeSummary:
     traffic: AgentStats  # the agents' counters at the end, summed over the controllers
     ticks: TickStats
     controllers: int = 1
+    http: HttpStats | None = None  # the event-log endpoints' counters, summed; None: not served
 
     def describe(self) -> str:
         def parts(counts: Counter, kinds: type[Enum]) -> str:
@@ -157,8 +159,9 @@ class ServeSummary:
                    + ", ".join(f"{failure.value} {n}" for failure, n in t.reports.most_common()) + ")"
                    if t.reports else "")
         by = f" by {self.controllers} controllers" if self.controllers > 1 else ""
+        http = f"; {self.http.describe()}" if self.http is not None else ""
         return (f"served {t.answered} requests{by} ({parts(t.requests, RequestKind)}), {t.errors} answered with an "
-                f"error{reports}; dropped {t.total_dropped} datagrams ({parts(t.dropped, DropReason)}); "
+                f"error{reports}; dropped {t.total_dropped} datagrams ({parts(t.dropped, DropReason)}){http}; "
                 f"{k.ticks} ticks, {k.late} late (max {k.max_lateness * 1e3:.1f} ms)")
 
 
@@ -166,12 +169,13 @@ class ServedController:
     """One controller model behind its delays, its MIB view and the SNMP agent over it."""
 
     def __init__(self, config: IntersectionConfig, options: ServeOptions, trace: TextIO | None = None,
-                 reports: ReportBudget | None = None, start: datetime | None = None) -> None:
+                 reports: ReportBudget | None = None, start: datetime | None = None,
+                 connections: Connections | None = None) -> None:
         self.config = config
         self._trace = trace
         self.controller = Controller(config, on_change=self._on_change, start=start)
         self.log = DataLogger(self.controller, capacity=options.log_events)
-        self.asclog = AsclogServer(self.log.events)
+        self.asclog = AsclogServer(self.log.snapshot, connections)
         self.unit = DelayedController(self.controller, config.emulator)
         self.view = MibView(self.unit)
         self.agent = SnmpAgent(self.view, ro_community=options.ro_community, rw_community=options.rw_community,
@@ -208,24 +212,26 @@ class EmulatorServer:
             raise ServeError(f"--trace records one controller, not {len(configs)}; allowed: --trace with --count 1")
         self._trace = self.options.trace.open("w", buffering=1) if self.options.trace else None
         self.http_ports = None if self.options.http is None else serve_ports(self.options.http, len(configs))
+        self.addresses: list[tuple[str, int]] = []  # of the agents, once started
         self.http_addresses: list[tuple[str, int]] = []
         # The controllers' clocks are the host's, as a real controller's is set: tick 0 at the next tenth of a
         # second of the host's time, so their logs' timestamps are the host's local time too.
         tenths = math.ceil(time.time() * 10)
         start = datetime.fromtimestamp(tenths // 10) + timedelta(microseconds=tenths % 10 * 100_000)
-        # The agents share the process's loop, so they share one budget of SNMPv3 Reports too.
+        # The agents share the process's loop, so they share one budget of SNMPv3 Reports too, and the event-log
+        # endpoints one of connections and render turns.
         reports = ReportBudget()
-        self.controllers = tuple(ServedController(config, self.options, self._trace, reports, start)
+        connections = Connections()
+        self.controllers = tuple(ServedController(config, self.options, self._trace, reports, start, connections)
                                  for config in configs)
         self.ticker = WallClockTicker(*(served.unit for served in self.controllers), origin=tenths / 10)
         self._ticking: asyncio.Task[None] | None = None
 
     async def start(self) -> list[tuple[str, int]]:
         """Bind every agent and start ticking; returns the bound addresses, in order."""
-        addresses = []
         for served, port in zip(self.controllers, self.ports, strict=True):
             try:
-                addresses.append(await served.agent.start(self.options.host, port))
+                self.addresses.append(await served.agent.start(self.options.host, port))
             except OSError as exc:
                 self._close()
                 raise BindError(self.options.host, port, exc) from exc
@@ -236,7 +242,7 @@ class EmulatorServer:
                 self._close()
                 raise BindError(self.options.host, port, exc, "tcp") from exc
         self._ticking = asyncio.create_task(self.ticker.run(), name="controller-tick")
-        return addresses
+        return list(self.addresses)
 
     @property
     def ticking(self) -> asyncio.Task[None]:
@@ -254,6 +260,7 @@ class EmulatorServer:
     async def stop(self) -> ServeSummary:
         """Stop answering and ticking; raises what ended the ticker if it failed."""
         self._close()
+        await asyncio.gather(*(served.asclog.wait_closed() for served in self.controllers))
         if self._ticking is not None:
             self._ticking.cancel()
             with contextlib.suppress(asyncio.CancelledError):
@@ -261,8 +268,13 @@ class EmulatorServer:
         return self.summary()
 
     def summary(self) -> ServeSummary:
+        http = None
+        if self.http_ports is not None:
+            http = HttpStats()
+            for served in self.controllers:
+                http.add(served.asclog.stats)
         return ServeSummary(_total(served.agent.stats for served in self.controllers), copy.copy(self.ticker.stats),
-                            len(self.controllers))
+                            len(self.controllers), http)
 
 
 def _total(stats: Iterable[AgentStats]) -> AgentStats:

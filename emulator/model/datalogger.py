@@ -13,6 +13,9 @@ Rules of this file
   pedestrian clearance, the coordinator's marks) is a step, a real one or, for a minimum that changes nothing
   else, one for the logger alone (:meth:`emulator.model.controller.Controller.quiet_ticks`).
 - The events of one tick are kept in (code, parameter) order, as field logs list them; ticks in time order.
+- The list of events is never changed in place but by appending: dropping the oldest makes a new list. So a
+  :class:`Snapshot` (the list and its length then) is taken in O(log n) and stays the log as it stood while
+  the controller logs on: the served event log (:mod:`emulator.agent.asclog`) streams from one between ticks.
 
 Theory of operation
 -------------------
@@ -103,6 +106,25 @@ _ON_OFF = {
 }
 
 
+@dataclass(frozen=True, slots=True)
+class Snapshot:
+    """Events ``start`` to ``stop`` of a log's list of records, which only grows past ``stop``: a fixed view."""
+
+    records: list[tuple[int, int, int]]  # (clock tick, code, parameter), the logger's list when it was taken
+    start: int
+    stop: int
+    day0: datetime
+
+    def __len__(self) -> int:
+        return self.stop - self.start
+
+    def events(self, first: int = 0, count: int | None = None) -> list[Event]:
+        """``count`` events (all: None) from the ``first`` of the view on."""
+        lo = self.start + first
+        hi = self.stop if count is None else min(self.stop, lo + count)
+        return [Event(_local_time(self.day0, c), code, p) for c, code, p in self.records[lo:hi]]
+
+
 @dataclass(slots=True)
 class _Green:
     """What the logger remembers of the green a ring is timing (mutable: updated as it runs)."""
@@ -158,15 +180,19 @@ class DataLogger:
 
     def time(self, clock: int) -> datetime:
         """The local time of a clock tick."""
-        return self.day0 + timedelta(microseconds=clock * 100_000)
+        return _local_time(self.day0, clock)
 
     def events(self, since: datetime | None = None) -> list[Event]:
         """The log in time order; from ``since`` on (inclusive) when given."""
+        return self.snapshot(since).events()
+
+    def snapshot(self, since: datetime | None = None) -> Snapshot:
+        """The log as it stands, from ``since`` on (inclusive) when given; O(log n), nothing copied."""
         start = 0
         if since is not None:
             clock = -(-(since - self.day0) // timedelta(microseconds=100_000))  # the first tick at or after since
             start = bisect.bisect_left(self._log, clock, key=lambda e: e[0])
-        return [Event(self.time(c), code, p) for c, code, p in self._log[start:]]
+        return Snapshot(self._log, start, len(self._log), self.day0)
 
     def write_to(self, sink: Callable[[Sequence[Event]], None]) -> None:
         """Hand ``sink`` the log so far, then each tick's events as the tick logs them."""
@@ -244,7 +270,7 @@ class DataLogger:
             at = self.time(clock)
             self._sink([Event(at, code, p) for code, p in logged])
         if self.capacity is not None and len(self._log) > self.capacity + self.capacity // 4:
-            del self._log[:len(self._log) - self.capacity]  # the oldest go, a quarter at a time
+            self._log = self._log[len(self._log) - self.capacity:]  # the oldest go, a quarter at a time
 
     def _power_up(self, *, first: bool) -> None:
         if not first:
@@ -363,6 +389,11 @@ class DataLogger:
         for phase in plan.coord.values():
             if plan.force_off[phase] in co.passed:
                 self._add(E.COORD_YIELD_POINT, phase)
+
+
+def _local_time(day0: datetime, clock: int) -> datetime:
+    """The local time of a clock tick counted from midnight of ``day0``."""
+    return day0 + timedelta(microseconds=clock * 100_000)
 
 
 def _cycle_state(co: Coordinator) -> CycleState:

@@ -20,9 +20,10 @@ import tempfile
 import time
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
+from http import HTTPStatus
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import simpy
 
@@ -41,6 +42,9 @@ from hils.report.latency import PAPER_LATENCY_MS, Stats, internal_latencies_ms
 from hils.report.outfiles import write_whole
 from hils.run.testbed import RunSpec, run_spec
 from hils.shell.events import Kind
+
+if TYPE_CHECKING:
+    from emulator.agent.serve import EmulatorServer, ServeSummary
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -83,9 +87,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                                            "trip (reds, yellows, greens) and the request rate, beside net-snmp's "
                                            "snmpd answering a comparable GET, with the client's and the agent's CPU "
                                            "per GET; (3) the emulator's tick lateness and memory under floods "
-                                           "from another process: large datagrams with a wrong community, and "
+                                           "from another process: large datagrams with a wrong community, "
                                            "SNMPv3 requests without a user name (noAuthNoPriv, the agent's "
-                                           "discovered engine ID).")
+                                           "discovered engine ID), and requests for the controller's event log "
+                                           "over HTTP (its last 100,000 events) from clients that read every "
+                                           "answer whole, again and again, and from clients that never read one.")
     wire.add_argument("--duration", type=float, default=90.0, metavar="S",
                       help="wall-clock seconds of phase switching per polling rate (90)")
     wire.add_argument("--rates", default="10,50,100", metavar="HZ,...", help="polling rates (10,50,100)")
@@ -93,7 +99,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     wire.add_argument("--flood", type=float, default=20.0, metavar="S",
                       help="seconds of the controller's tick measured without a flood and under each flood: 20 "
                            "datagrams of 60 KB a second with a wrong community, 3000 SNMPv3 GETs a second without "
-                           "a user name (20)")
+                           "a user name, the event log asked by 6 clients reading it whole and 100 never reading "
+                           "(20)")
     published.options(wire, "bench-wire", "bench")
     wire.set_defaults(func=_wire_command)
     env = commands.add_parser("env", help="the gymnasium environment's speed beside sumo-rl's (same network, demand)",
@@ -305,60 +312,113 @@ def measure_agent_cost(count: int) -> float:
 
 @dataclass(frozen=True)
 class Flood:
-    """A stream of hostile datagrams against the served emulator."""
+    """A stream of hostile datagrams against the served emulator's agent."""
 
     name: str
     make: floods.Datagram  # the datagram, made by the sending process from the agent's address
     per_second: int
     what: str  # for the console
 
+    def settings(self) -> dict[str, Any]:
+        return {"per_second": self.per_second, "what": self.what}
+
+    def sending(self, server: EmulatorServer) -> contextlib.AbstractContextManager[None]:
+        return floods.flooding(server.addresses[0], self.make, self.per_second)
+
+    def counts(self, summary: ServeSummary) -> dict[str, int]:
+        """What the server counted of this flood so far."""
+        return {"dropped": summary.traffic.total_dropped}
+
+    def describe(self, figures: dict[str, Any]) -> str:
+        return f"dropped {figures['dropped']:6d}: {self.per_second}/s {self.what}"
+
+
+@dataclass(frozen=True)
+class LogFlood:
+    """Requests for a served controller's event log over HTTP: clients that read each answer whole, again and
+    again, and clients that never read one."""
+
+    name: str
+    whole: int
+    never_read: int
+
+    def settings(self) -> dict[str, Any]:
+        return {"whole": self.whole, "never_read": self.never_read}
+
+    def sending(self, server: EmulatorServer) -> contextlib.AbstractContextManager[None]:
+        return floods.fetching_logs(server.http_addresses[0], self.whole, self.never_read)
+
+    def counts(self, summary: ServeSummary) -> dict[str, int]:
+        """What the server counted of this flood so far."""
+        from emulator.agent.asclog import Dropped
+
+        if summary.http is None:
+            raise ValueError("the event-log flood needs the event log served (ServeOptions.http)")
+        answered, dropped = summary.http.answered, summary.http.dropped
+        return {"answered": answered[HTTPStatus.OK], "refused_busy": answered[HTTPStatus.SERVICE_UNAVAILABLE],
+                "dropped_not_reading": dropped[Dropped.NOT_READING]}
+
+    def describe(self, figures: dict[str, Any]) -> str:
+        return (f"answered {figures['answered']}, refused {figures['refused_busy']} (busy), dropped "
+                f"{figures['dropped_not_reading']} (not reading): {self.whole} clients reading the whole log again "
+                f"and again, {self.never_read} never reading")
+
 
 #: The floods the wire benchmark measures the controller's tick under, one after the other.
 FLOODS = (Flood("wrong_community", floods.large_wrong_community, 20, "datagrams of 60 KB with a wrong community"),
           Flood("v3_no_user", floods.v3_without_user, 3000,
-                "SNMPv3 GETs, noAuthNoPriv, no user name, the agent's engine ID"))
+                "SNMPv3 GETs, noAuthNoPriv, no user name, the agent's engine ID"),
+          LogFlood("event_log", whole=6, never_read=100))
+#: The events in the served controller's log while the tick is measured: as many as it keeps (the default).
+LOG_EVENTS = 100_000
 
 
-def measure_tick_lateness_under_flood(seconds: float, of: Sequence[Flood] = FLOODS) -> dict[str, Any]:
+def measure_tick_lateness_under_flood(seconds: float, of: Sequence[Flood | LogFlood] = FLOODS) -> dict[str, Any]:
     """The served controller's tick lateness (ms) during ``seconds`` of each flood, beside the same time without one:
-    the emulator (with an SNMPv3 user) in this process on its own loop, each flood from another process. With each
-    flood, the datagrams the agent dropped and how much this process's resident memory grew (MB)."""
+    the emulator (with an SNMPv3 user, its event log served over HTTP and holding :data:`LOG_EVENTS` events) in
+    this process on its own loop, each flood from another process. With each flood, what the server counted of it
+    and how much this process's resident memory grew (MB)."""
     import asyncio
     import os
 
     from emulator.agent.serve import EmulatorServer, ServeOptions
     from emulator.agent.snmp import V3User
+    from emulator.model.controller import TICK
 
-    options = ServeOptions(port=0, v3_user=V3User("hils", "auth-pass-phrase", "priv-pass-phrase"))
+    options = ServeOptions(port=0, http=0, log_events=LOG_EVENTS,
+                           v3_user=V3User("hils", "auth-pass-phrase", "priv-pass-phrase"))
 
-    def serve(flood: Flood | None) -> dict[str, Any]:
+    def serve(flood: Flood | LogFlood | None) -> dict[str, Any]:
         lateness: list[float] = []
 
-        async def session() -> tuple[int, float]:
+        async def session() -> dict[str, Any]:
             server = EmulatorServer([config_mod.load()], options)
-            [address] = await server.start()
+            floods.fill_log(server.controllers[0], LOG_EVENTS)
+            await server.start()
+            # The ticks stepped to fill the log are caught up with first: they are not measured.
+            await asyncio.sleep(2 * TICK)
             server.ticker.observe = lambda late: lateness.append(late * 1e3)
             if flood is None:
                 await asyncio.sleep(seconds)
                 await server.stop()
-                return 0, 0.0
+                return {}
             # The agent warns of what it drops (once per 10 s): here the figures say it.
-            with floods.flooding(address, flood.make, flood.per_second), _quiet("emulator.agent.snmp"):
-                # From the flood's first datagram on (the sender takes a moment to start).
-                while not server.summary().traffic.total_dropped:
+            with flood.sending(server), _quiet("emulator.agent.snmp"):
+                # From the flood's first datagram or request on (the sender takes a moment to start).
+                while not any(flood.counts(server.summary()).values()):
                     await asyncio.sleep(0.01)
                 lateness.clear()
-                dropped, rss = server.summary().traffic.total_dropped, resident_mb(os.getpid())
+                before, rss = flood.counts(server.summary()), resident_mb(os.getpid())
                 await asyncio.sleep(seconds)
-                dropped, rss = server.summary().traffic.total_dropped - dropped, resident_mb(os.getpid()) - rss
+                after, rss = flood.counts(server.summary()), resident_mb(os.getpid()) - rss
             await server.stop()
-            return dropped, rss
+            return {**{key: after[key] - before[key] for key in after}, "rss_growth_mb": rss}
 
-        dropped, rss_growth = asyncio.run(session())
-        return {**Stats.of(lateness).as_dict(), "dropped": dropped, "rss_growth_mb": rss_growth}
+        counted = asyncio.run(session())
+        return {**Stats.of(lateness).as_dict(), **counted}
 
-    return {"quiet": serve(None),
-            "floods": {f.name: {"per_second": f.per_second, "what": f.what, **serve(f)} for f in of}}
+    return {"log_events": LOG_EVENTS, "quiet": serve(None),
+            "floods": {f.name: {**f.settings(), **serve(f)} for f in of}}
 
 
 @contextlib.contextmanager
@@ -439,14 +499,20 @@ def _wire_command(args: argparse.Namespace) -> int:
               f"rate {st['rate_per_s']:.0f}/s  client CPU {st['client_cpu_ms_per_get']:.3f} ms/GET")
     print(f"  ratio (ours / snmpd, mean): {out['get_rtt_ms']['ratio_mean']:.2f} (target <= 1.2)")
     print(f"  emulator agent CPU per GET: {out['agent_cpu_ms_per_get']:.3f} ms (target <= 0.2; client target <= 0.2)")
-    print(f"emulator tick lateness, ms, {args.flood:g} s of each flood (from another process) and without one:")
-    for name, st in (("quiet", flood["quiet"]), *flood["floods"].items()):
-        print(f"  {name:16} N {st['n']:4d}  p50 {st['p50']:6.2f}  p99 {st['p99']:6.2f}  max {st['max']:6.2f}"
-              + (f"  dropped {st['dropped']:6d}  RSS {st['rss_growth_mb']:+6.1f} MB: {st['per_second']}/s "
-                 f"{st['what']}" if name != "quiet" else ""))
-    print("  target: p99 < 5 ms with the wrong community, < 20 ms with the SNMPv3 flood, no memory kept")
+    print(f"emulator tick lateness, ms, {args.flood:g} s of each flood (from another process) and without one; the "
+          f"controller's event log served over HTTP and holding {flood['log_events']} events:")
+    print(f"  {'quiet':16} {_lateness(flood['quiet'])}")
+    for f in FLOODS:
+        st = flood["floods"][f.name]
+        print(f"  {f.name:16} {_lateness(st)}  RSS {st['rss_growth_mb']:+6.1f} MB  {f.describe(st)}")
+    print("  target: p99 < 5 ms with the wrong community, < 20 ms with the SNMPv3 flood and the event-log requests, "
+          "no memory kept")
     _write_figures(folder / "wire.json", out)
     return 0
+
+
+def _lateness(st: dict[str, Any]) -> str:
+    return f"N {st['n']:4d}  p50 {st['p50']:6.2f}  p99 {st['p99']:6.2f}  max {st['max']:6.2f}"
 
 
 # --- env -------------------------------------------------------------------------------------------

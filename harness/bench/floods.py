@@ -1,4 +1,4 @@
-"""Hostile datagrams for the wire benchmark and the tests, and a process that floods an agent with them.
+"""Hostile traffic for the wire benchmark and the tests: datagrams, event-log requests, and a process sending them.
 
 - :func:`wrong_community`: a large SNMPv2c GET with a community no agent here accepts.
 - :func:`v3_get`: an SNMPv3 GET in plaintext, its security header as given: with this agent's engine ID (learnt
@@ -7,6 +7,11 @@
 - :func:`flooding`: another process makes one datagram (:func:`large_wrong_community`,
   :func:`v3_without_user`: it discovers the engine ID itself, as an attacker would) and sends it at a steady
   rate until the block ends, so that the sender's work does not share the measured process's interpreter.
+- :func:`fetching_logs`: another process asks a served controller's event log again and again, from clients that
+  read each answer whole and from clients that never read one (each opened anew once the server drops or
+  refuses it), until the block ends.
+- :func:`fill_log`: a served controller's log made as large as a busy controller's after hours, before it is
+  served, by its detectors chattering every tick.
 """
 
 from __future__ import annotations
@@ -14,15 +19,21 @@ from __future__ import annotations
 import contextlib
 import multiprocessing
 import socket
+import threading
 import time
 from collections.abc import Callable, Iterator
+from typing import TYPE_CHECKING
 
 from pyasn1.codec.ber import decoder, encoder
 from pysnmp.proto import api
 from pysnmp.proto.mpmod.rfc3412 import SNMPv3Message
 from pysnmp.proto.secmod.rfc3414.service import UsmSecurityParameters
 
+from hils.protocol.hires import ASCLOG_PATH
 from hils.protocol.ntcip import MAX_PHASES, signal_oids
+
+if TYPE_CHECKING:
+    from emulator.agent.serve import ServedController
 
 #: msgFlags (RFC 3412 6.4): reportable, with authentication, with privacy.
 REPORTABLE, AUTH, PRIV = 0x04, 0x01, 0x02
@@ -110,15 +121,77 @@ def _send(address: tuple[str, int], make: Datagram, per_second: int) -> None:
             time.sleep(max(0.0, start + sent / per_second - time.monotonic()))
 
 
-@contextlib.contextmanager
-def flooding(address: tuple[str, int], make: Datagram, per_second: int) -> Iterator[None]:
+def flooding(address: tuple[str, int], make: Datagram, per_second: int) -> contextlib.AbstractContextManager[None]:
     """``make(address)`` sent to ``address`` ``per_second`` times a second by another process while the block runs
     (``make``: a function of this module, or any other the process can import)."""
-    sender = multiprocessing.get_context("spawn").Process(target=_send, args=(address, make, per_second),
-                                                          daemon=True)
+    return _in_another_process(_send, address, make, per_second)
+
+
+#: What a field collector sends for a controller's whole log.
+LOG_REQUEST = f"GET {ASCLOG_PATH} HTTP/1.1\r\nHost: controller\r\n\r\n".encode()
+_TCP_ESTABLISHED = 1  # tcpi_state, the first byte of Linux's struct tcp_info
+
+
+def _fetch_whole_logs(address: tuple[str, int]) -> None:
+    """Ask for the log and read the answer whole, again and again (a refused or failed request is asked again)."""
+    while True:
+        try:
+            with socket.create_connection(address, timeout=30) as sock:
+                sock.sendall(LOG_REQUEST)
+                while sock.recv(1 << 16):
+                    pass
+        except OSError:
+            time.sleep(0.05)
+
+
+def _never_read_logs(address: tuple[str, int]) -> None:
+    """Ask for the log and read nothing of the answer; once the server has closed the connection (dropped or
+    refused it), ask again."""
+    while True:
+        with contextlib.suppress(OSError), socket.socket() as sock:
+            # Before connecting, so that the window this client offers stays small.
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+            sock.settimeout(5)
+            sock.connect(address)
+            sock.sendall(LOG_REQUEST)
+            while sock.getsockopt(socket.IPPROTO_TCP, socket.TCP_INFO, 1)[0] == _TCP_ESTABLISHED:
+                time.sleep(0.2)
+        time.sleep(0.05)
+
+
+def _fetch_logs(address: tuple[str, int], whole: int, never_read: int) -> None:
+    clients = [threading.Thread(target=_fetch_whole_logs, args=(address,), daemon=True) for _ in range(whole)]
+    clients += [threading.Thread(target=_never_read_logs, args=(address,), daemon=True) for _ in range(never_read)]
+    for client in clients:
+        client.start()
+    threading.Event().wait()
+
+
+def fetching_logs(address: tuple[str, int], whole: int, never_read: int) -> contextlib.AbstractContextManager[None]:
+    """``whole`` clients asking for the event log at ``address`` (TCP) and reading each answer whole, again and
+    again, and ``never_read`` clients asking for it and reading nothing, from another process while the block
+    runs."""
+    return _in_another_process(_fetch_logs, address, whole, never_read)
+
+
+@contextlib.contextmanager
+def _in_another_process(target: Callable[..., None], *args: object) -> Iterator[None]:
+    """``target(*args)`` run by another process (spawned: nothing of this one's state) while the block runs."""
+    sender = multiprocessing.get_context("spawn").Process(target=target, args=args, daemon=True)
     sender.start()
     try:
         yield
     finally:
         sender.terminate()
         sender.join(5)
+
+
+def fill_log(served: ServedController, events: int) -> None:
+    """Step ``served``'s controller with its vehicle detectors all on one tick and all off the next until its log
+    holds ``events`` (or its capacity), before it is served: a log as large as a busy controller's after hours,
+    in a second. Its clock runs ahead of the host's by the ticks stepped."""
+    detectors = list(served.config.detectors)
+    target = min(events, served.log.capacity or events)
+    while len(served.log) < target:
+        served.controller.set_actuations(() if served.controller.actuations else detectors)
+        served.unit.step()

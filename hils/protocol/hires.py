@@ -173,12 +173,20 @@ def parse_time(text: str) -> datetime:
     raise AsclogError(f"timestamp {text!r}: allowed: MM-DD-YYYY HH:MM:SS.f, e.g. 04-15-2024 12:00:00.0")
 
 
+#: What MaxTime's event log body starts and ends with; :func:`asclog_rows` go between.
+ASCLOG_HEAD = b'<?xml version="1.0" encoding="UTF-8"?>\n<EventResponses>\n'
+ASCLOG_TAIL = b"</EventResponses>\n"
+
+
+def asclog_rows(events: Iterable[Event], first: int = 1) -> bytes:
+    """The ``<Event .../>`` lines of ``events`` in order, their IDs counted from ``first`` (a body's first is 1)."""
+    return "".join(f'<Event ID="{i}" TimeStamp="{format_time(e.time)}" EventTypeID="{int(e.code)}" '
+                   f'Parameter="{e.parameter}"/>\n' for i, e in enumerate(events, start=first)).encode()
+
+
 def asclog_xml(events: Iterable[Event]) -> bytes:
     """The body MaxTime answers ``GET /v1/asclog/xml/full`` with, for ``events`` in order."""
-    rows = [f'<Event ID="{i}" TimeStamp="{format_time(e.time)}" EventTypeID="{int(e.code)}" '
-            f'Parameter="{e.parameter}"/>' for i, e in enumerate(events, start=1)]
-    return ('<?xml version="1.0" encoding="UTF-8"?>\n<EventResponses>\n' + "\n".join(rows)
-            + ("\n" if rows else "") + "</EventResponses>\n").encode()
+    return ASCLOG_HEAD + asclog_rows(events) + ASCLOG_TAIL
 
 
 class AsclogReader:

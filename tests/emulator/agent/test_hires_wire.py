@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import socket
 import time
-from collections.abc import Iterator
 from datetime import datetime, timedelta
 from pathlib import Path
 
@@ -28,17 +27,6 @@ from tests.emulator.agent.test_agent_netsnmp import run
 pytestmark = pytest.mark.wallclock
 
 E = EventCode
-
-
-@pytest.fixture(scope="module")
-def served(tmp_path_factory: pytest.TempPathFactory) -> Iterator[object]:
-    from harness.bench.processes import start_emulator
-
-    server = start_emulator(tmp_path_factory.mktemp("serve") / "serve.log", http=True)
-    try:
-        yield server
-    finally:
-        server.stop()
 
 
 def wait_for(condition: object, seconds: float = 5.0) -> None:

@@ -336,6 +336,22 @@ def test_a_bounded_log_keeps_the_last_events_as_a_ring_buffer() -> None:
     assert ring.events() == whole.events()[-len(ring):]
 
 
+def test_a_snapshot_stays_the_log_it_was_while_the_controller_logs_on_and_drops_its_oldest() -> None:
+    """What the served log streams from, between ticks that go on logging (emulator.agent.asclog)."""
+    c = Controller(config_with())
+    ring = DataLogger(c, capacity=100)
+    c.set_actuations({1, 2, 3, 4, 5, 6, 7, 8})
+    run(c, 1000)
+    snapshot, then = ring.snapshot(), ring.events()
+    since = then[40].time
+    later = ring.snapshot(since)
+    run(c, 3000)  # the oldest dropped several times over
+    assert ring.events() != then
+    assert snapshot.events() == then and len(snapshot) == len(then)
+    assert later.events() == [e for e in then if e.time >= since]
+    assert snapshot.events(10, 5) == then[10:15] and snapshot.events(len(then) - 2, 5) == then[-2:]
+
+
 def test_a_preempt_is_logged_from_its_input_to_its_exit() -> None:
     """The four-leg as a city runs it: preempt 1 (no delay, 2 s entry minimum green, dwell on 2+5 at least 5 s,
     exit to 2+6) called while 4 and 8 are green."""
