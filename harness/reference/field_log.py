@@ -43,8 +43,9 @@ the log's own events (Indiana enumerations) and says which values it had to gues
 - **coordination**: the cycle is the spacing of the local zeros (event 150, parameter 5; two at one time are one),
   the offset their time of day modulo the cycle with the local zero at the start of the coordinated greens
   (NEMA TS 2's lead-green reference); the coordinated phases are the ones with the most yield point events (151)
-  in the group that has them, else the phases green at the local zero; each phase's split ends where its
-  force-offs (6) fall in the cycle plus its clearance (when at least a fifth of its greens end so), a ring's
+  in the group that has them, else the phases green at the local zero; each phase's split is what the controller
+  logged (split change, events 134-149, phases 1-16: the value in effect at most local zeros), else it ends where
+  its force-offs (6) fall in the cycle plus its clearance (when at least a fifth of its greens end so), a ring's
   last phase before a barrier where the other ring's ends, the last phase with the cycle; then each split is made
   at least its phase's minimum green and clearance, the rings reach each barrier together and each ring fills the
   cycle, as NTCIP 1202's splitTime and the barrier require (what had to move is said).
@@ -103,7 +104,7 @@ class Inferred:
         return config_mod.parse(self.toml, "inferred.toml")
 
 
-def event(r: Row) -> str:
+def _event(r: Row) -> str:
     """An event as a refusal names it: its code and name, its parameter and its time."""
     try:
         name = f" ({E(r.code).name.lower().replace('_', ' ')})"
@@ -152,12 +153,13 @@ def _greens(rows: Sequence[Row]) -> dict[int, list[tuple[datetime, datetime]]]:
 
 def _spans(rows: Sequence[Row], greens: Mapping[int, list[tuple[datetime, datetime]]]
            ) -> dict[int, list[tuple[datetime, datetime]]]:
-    """Each phase's time on: each green to the last end of yellow (9) or red clearance (11) of that phase before it
-    begins green again (the green's own end when neither is logged)."""
+    """Each phase's time on: each green to the end of the yellow (9) and red clearance (11) that follow it, before
+    the phase's next begin green or yellow (a service whose begin green the log lost does not lend its clearance);
+    the green's own end when neither is logged."""
     begins: dict[int, list[datetime]] = defaultdict(list)
     ends: dict[int, list[datetime]] = defaultdict(list)
     for r in rows:
-        if r.code == E.PHASE_BEGIN_GREEN:
+        if r.code in (E.PHASE_BEGIN_GREEN, E.PHASE_BEGIN_YELLOW):
             begins[r.parameter].append(r.time)
         elif r.code in (E.PHASE_END_YELLOW, E.PHASE_END_RED_CLEARANCE):
             ends[r.parameter].append(r.time)
@@ -166,7 +168,7 @@ def _spans(rows: Sequence[Row], greens: Mapping[int, list[tuple[datetime, dateti
         again, times = begins[p], ends.get(p, [])
         spans = []
         for begin, end in mine:
-            k = bisect.bisect_right(again, begin)
+            k = bisect.bisect_right(again, end)
             last = bisect.bisect_left(times, again[k]) if k < len(again) else len(times)
             spans.append((begin, max(end, times[last - 1]) if last else end))
         out[p] = spans
@@ -252,7 +254,7 @@ def _check_numbers(rows: Iterable[Row]) -> None:
         top = PHASES if kind == "a phase" else None
         if r.parameter < 1 or (top is not None and r.parameter > top):
             allowed = f"1-{top}" if top else "1 and up"
-            raise FieldLogError(f"{event(r)}: {r.parameter} is not {kind} number; allowed: {allowed}")
+            raise FieldLogError(f"{_event(r)}: {r.parameter} is not {kind} number; allowed: {allowed}")
 
 
 def _structure(phases: Sequence[int], greens: Mapping[int, list[tuple[datetime, datetime]]],
@@ -365,15 +367,17 @@ def _timing(rows: Sequence[Row], p: int, greens: Sequence[tuple[datetime, dateti
         if found[key] is None:
             out.guessed.append(f"phase {p}: {key} {default} (its events are not in the log)")
         t[key] = found[key] if found[key] is not None else default
-    # NTCIP 1202's phase table: yellow and red clearance in tenths to 25.5 s, greens in seconds to 255 s
-    t["yellow"] = _within(p, "yellow", t["yellow"], 0.1, 25.5, out)
+    # NTCIP 1202's phase table: phaseYellowChange "NEMA range: 3.0-25.5 sec", red clearance in tenths to 25.5 s (the
+    # config asks for some), greens, walk and pedestrian clearance in seconds to 255 s (walk and clearance within
+    # the maximum)
+    t["yellow"] = _within(p, "yellow", t["yellow"], 3.0, 25.5, out)
     t["red_clear"] = _within(p, "red_clear", t["red_clear"], 0.1, 25.5, out)
     t["min_green"] = _within(p, "min_green", math.ceil(t["min_green"] - 1e-9), 1, 255, out)
     walk = _mode(_durations(rows, p, E.PED_BEGIN_WALK, E.PED_BEGIN_CLEARANCE))
     ped_clear = _mode(_durations(rows, p, E.PED_BEGIN_CLEARANCE, E.PED_BEGIN_SOLID_DONT_WALK))
     if walk and ped_clear:
-        t["walk"] = _within(p, "walk", math.ceil(walk), 1, 127, out)
-        t["ped_clear"] = _within(p, "ped_clear", math.ceil(ped_clear), 1, 128, out)
+        t["walk"] = _within(p, "walk", math.ceil(walk), 1, 254, out)
+        t["ped_clear"] = _within(p, "ped_clear", math.ceil(ped_clear), 1, 255 - t["walk"], out)
     longest = max(((b - a).total_seconds() for a, b in greens), default=0.0)
     t["max_green"] = _within(p, "max_green", max(t["min_green"], t.get("walk", 0) + t.get("ped_clear", 0),
                                                  math.ceil(longest)), 1, 255, out)
@@ -385,8 +389,8 @@ def _within(p: int, key: str, value: Any, low: float, high: float, out: Inferred
     if low <= value <= high:
         return value
     inside = min(max(value, low), high)
-    out.guessed.append(f"phase {p}: {key} {inside:g} s (the log's {value:g} s is outside what NTCIP's phase table "
-                       f"holds, {low:g}-{high:g} s)")
+    out.guessed.append(f"phase {p}: {key} {inside:g} s (the log's {value:g} s is outside what the config holds, "
+                       f"{low:g}-{high:g} s)")
     return inside
 
 
@@ -480,13 +484,31 @@ def _coordination(rows: Sequence[Row], structure: Structure, timing: Mapping[int
     for p in timing:
         force_offs = [round((_seconds_of_day(row.time) - zero) % cycle, 1) for row in rows
                       if row.code == E.PHASE_FORCE_OFF and row.parameter == p]
-        if force_offs and len(force_offs) >= FORCE_OFF_SHARE * len(greens.get(p, ())):  # not a stray one
+        if p in greens and force_offs and len(force_offs) >= FORCE_OFF_SHARE * len(greens[p]):  # not a stray one
             ends[p] = _mode(force_offs) + timing[p]["yellow"] + timing[p]["red_clear"]
-    splits = _splits(structure, coord, ends, cycle, timing, out)
+    logged = {p: s for p, s in _logged_splits(rows, zeros).items() if p in greens}
+    splits = _splits(structure, coord, ends, logged, cycle, timing, out)
     out.read.append(f"coordination: cycle {cycle} s, local zero at {zero:g} s of the time of day modulo the cycle, "
-                    f"coordinated {coord[1]}+{coord[2]}, splits " + ", ".join(f"{p}: {s}" for p, s in splits.items()))
+                    f"coordinated {coord[1]}+{coord[2]}, splits " + ", ".join(f"{p}: {s}" for p, s in splits.items())
+                    + (f" (as logged, events 134-149, for {', '.join(map(str, logged))})" if logged else ""))
     out.guessed.append("offset reference: the local zero (event 150, 5) starts the coordinated greens (lead green)")
     return {"cycle": cycle, "offset": round(zero) % cycle, "coord": [coord[1], coord[2]], "splits": splits}
+
+
+def _logged_splits(rows: Sequence[Row], zeros: Sequence[datetime]) -> dict[int, int]:
+    """Each phase's split as the controller logged it (split change, events 134-149 for phases 1-16), the value in
+    effect at most local zeros; a split of 0 is none."""
+    changes: dict[int, list[tuple[datetime, int]]] = defaultdict(list)
+    for r in rows:
+        if E.SPLIT_1_CHANGE <= r.code < E.SPLIT_1_CHANGE + 16:
+            changes[r.code - E.SPLIT_1_CHANGE + 1].append((r.time, r.parameter))
+    out = {}
+    for p, mine in changes.items():
+        times = [t for t, _ in mine]
+        value = _mode(mine[k - 1][1] for z in zeros if (k := bisect.bisect_right(times, z)))
+        if value:
+            out[p] = int(value)
+    return out
 
 
 def _covering(zeros: Sequence[datetime], greens: Mapping[int, Sequence[tuple[datetime, datetime]]]) -> Counter[int]:
@@ -501,11 +523,11 @@ def _covering(zeros: Sequence[datetime], greens: Mapping[int, Sequence[tuple[dat
     return out
 
 
-def _splits(structure: Structure, coord: Mapping[int, int], ends: Mapping[int, float], cycle: int,
-            timing: Mapping[int, dict[str, Any]], out: Inferred) -> dict[int, int]:
-    """Each phase's split from where it ends in the cycle (from the local zero, which starts the coordinated splits):
-    force-offs where the log has them, the other ring's end of the barrier group, the cycle's end; then fitted
-    (:func:`_fit`)."""
+def _splits(structure: Structure, coord: Mapping[int, int], ends: Mapping[int, float], logged: Mapping[int, int],
+            cycle: int, timing: Mapping[int, dict[str, Any]], out: Inferred) -> dict[int, int]:
+    """Each phase's split as logged, or from where it ends in the cycle (from the local zero, which starts the
+    coordinated splits): force-offs where the log has them, the other ring's end of the barrier group, the cycle's
+    end; then fitted (:func:`_fit`)."""
     cyclic = {}
     for r in (1, 2):
         mine = structure.ring(r)
@@ -518,13 +540,13 @@ def _splits(structure: Structure, coord: Mapping[int, int], ends: Mapping[int, f
     barrier_end: dict[int, float] = {}
     for r in (1, 2):
         for k, p in enumerate(cyclic[r]):
-            if p in ends and last_of_group(cyclic[r], k):
+            if p in ends and p not in logged and last_of_group(cyclic[r], k):
                 barrier_end.setdefault(structure.group_of(p), ends[p])
     splits: dict[int, int] = {}
     for r in (1, 2):
         at, order = 0.0, cyclic[r]
         for k, p in enumerate(order):
-            end = ends.get(p)
+            end = at + logged[p] if p in logged else ends.get(p)
             if end is None and k == len(order) - 1:
                 end = float(cycle)
             if end is None and last_of_group(order, k):
@@ -621,10 +643,12 @@ def _overlaps(rows: Sequence[Row], phases: Sequence[int], out: Inferred) -> dict
 
 
 def _startup(greens: Mapping[int, list[tuple[datetime, datetime]]], structure: Structure) -> list[int]:
-    """The phases to power up in: the first phase served in each ring of the group served first."""
+    """The phases to power up in: in each ring, the phase of the group served first that the log shows green first
+    (the group's first in the ring's order when none of its phases is)."""
     first = min((t0, p) for p, spans in greens.items() for t0, _ in spans)[1]
     g = structure.group_of(first)
-    return [structure.order[r][g][0] for r in (1, 2)]
+    return [min(structure.order[r][g], key=lambda p: greens[p][0][0] if p in greens else datetime.max)
+            for r in (1, 2)]
 
 
 def _toml(name: str, structure: Structure, timing: Mapping[int, dict[str, Any]], detectors: Mapping[int, int],
