@@ -637,7 +637,7 @@ def _overlaps(rows: Sequence[Row], phases: Sequence[int], out: Inferred) -> dict
     seen = {r.parameter for r in rows if E.OVERLAP_BEGIN_GREEN <= r.code <= E.OVERLAP_DARK}
     for o in sorted(seen - set(overlaps) - set(beyond)):
         letter = f"{chr(64 + o)} ({o})" if o <= OVERLAPS else str(o)
-        out.guessed.append(f"overlap {letter}: not modelled (it never begins green with a phase in the log; its "
+        out.guessed.append(f"overlap {letter}: not modelled (it never begins green in the log; its "
                            "other events fit none of the types: normal, minus green-yellow, flashing yellow arrow)")
     return overlaps
 

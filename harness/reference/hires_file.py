@@ -76,15 +76,16 @@ def load(path: str | Path, device: Any | None = None, start: datetime | None = N
         ids = frame.DeviceId.astype(str).str.strip()
         refuse("DeviceId", frame.DeviceId.isna() | ids.isin(("", "nan", "<NA>", "None")), "a controller's id")
         devices = sorted(ids.unique())
+        shown = {d: d if d.isprintable() else repr(d) for d in devices[:10]}  # one line, whatever a cell holds
         if device is None and len(devices) > 1:
             counts = ids.value_counts()
-            each = ", ".join(f"{d} ({counts[d]:,} rows)" if counts[d] > 1
-                             else f"{d} (1 row, {where(ids.eq(d).idxmax())})" for d in devices[:10])
+            each = ", ".join(f"{shown[d]} ({counts[d]:,} rows)" if counts[d] > 1
+                             else f"{shown[d]} (1 row, {where(ids.eq(d).idxmax())})" for d in shown)
             raise FieldLogError(f"{path} holds {len(devices)} controllers: {each}; pick one: --device "
-                                + ", ".join(devices[:10]))
+                                + ", ".join(shown.values()))
         if device is not None:
             if str(device) not in devices:
-                raise FieldLogError(f"{path}: no DeviceId {device}; allowed: {', '.join(devices[:10])}")
+                raise FieldLogError(f"{path}: no DeviceId {device!r}; allowed: {', '.join(shown.values())}")
             frame = frame[ids == str(device)]
     times = _times(frame.TimeStamp)
     refuse("TimeStamp", times.isna(), _TIMES)

@@ -215,8 +215,6 @@ def _command(args: argparse.Namespace) -> int:
     from harness.reference import field_log, hires_file
     from harness.reference.hires_file import FieldLogError
 
-    out = args.out or Path(tempfile.mkdtemp(prefix="hils-replay-"))
-    out.mkdir(parents=True, exist_ok=True)
     every = hires_file.load(args.log, args.device)
     config = args.config
     if config is None:
@@ -224,6 +222,9 @@ def _command(args: argparse.Namespace) -> int:
             inferred = field_log.infer(every, name=f"{Path(args.log).stem} {args.device or ''}".strip())
         except FieldLogError as exc:
             raise FieldLogError(f"{args.log}: {exc}") from None
+    out = args.out or Path(tempfile.mkdtemp(prefix="hils-replay-"))
+    out.mkdir(parents=True, exist_ok=True)
+    if config is None:
         config = out / "inferred.toml"
         config.write_text(inferred.toml)
         print(f"Config written to {config}\nRead from the log:\n  " + "\n  ".join(inferred.read)

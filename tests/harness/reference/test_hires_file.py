@@ -14,7 +14,7 @@ from pathlib import Path
 import atspm
 import pandas as pd
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from emulator.model.controller import Controller
@@ -164,6 +164,7 @@ def one_field_changed(draw: st.DrawFn) -> tuple[str, int, str, str]:
 
 @settings(max_examples=40, deadline=timedelta(seconds=20), suppress_health_check=[HealthCheck.too_slow])
 @given(one_field_changed())
+@example(("field", 0, "DeviceId", "0\n0"))  # found by it: a DeviceId with a line break broke the refusal's line
 def test_a_log_with_one_field_changed_gives_a_config_or_a_one_line_refusal(change: tuple[str, int, str, str]) -> None:
     """Whatever one cell of a real log says, the validator takes the config inferred from it, or the reader or the
     inference refuses the log in one line naming the line or the event (a hang shows as the deadline)."""
