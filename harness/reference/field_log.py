@@ -4,27 +4,56 @@ Signal-Replay replays a field log's detector, pedestrian and preempt inputs into
 the bench's phase events with the field's; the bench must run the field's timing. :func:`infer` reads it from
 the log's own events (Indiana enumerations) and says which values it had to guess:
 
-- **phases and structure**: the phases that began green (event 1); two phases whose greens overlap are
-  concurrent, so in different rings and one barrier group; barrier groups are the connected sets of concurrent
-  phases, rings split each group by concurrency (NEMA's numbering, 1-4 and 9-12 in ring 1, when it agrees), and
-  each ring serves its phases in the order the log shows them following each other. A ring without a phase in a
-  group gets an unused phase number there that nothing calls (the controller skips it; NTCIP's split table needs
-  a split for it);
+- **phases and structure**: the phases that began green (event 1). Two phases on at the same time are concurrent,
+  so in different rings and one barrier group: a phase is on from its green to the end of its red clearance (11;
+  of its yellow, 9, when no red clearance is served), as NTCIP 1202's phaseStatusGroupPhaseOns has it ("The phase
+  is ON during the Green, Yellow, & Red Clearance intervals of that phase"), and phaseConcurrency says which
+  phases "may run concurrently" ("Phases that are contained in the same ring may NOT run concurrently"). Greens
+  alone are not enough: in a pretimed plan a phase may begin green as soon as the phase beside it ends its green,
+  and two phases across a barrier never overlap at all. Barrier groups are the connected sets of concurrent
+  phases; rings split each group by concurrency (NEMA's numbering, 1-4 and 9-12 in ring 1, when it agrees). A
+  ring without a phase in a group gets an unused phase number there that nothing calls (the controller skips it;
+  NTCIP's split table needs a split for it);
+- **service order** (:func:`_service_order`), in time polynomial in the phases (O(n^3) for the n phases of a ring
+  in a group): NTCIP 1202 sequenceData, "The order of phase numbers determines the phase sequence for the ring",
+  and a ring goes on to the next phase of that order that is called, within its barrier group until both rings
+  cross the barrier. So each time a phase of a ring begins green right after another of its group, no phase of
+  another group having begun green in between (:func:`_successions`), it comes later in the sequence: the
+  successions the log shows point forward. The order is built one phase at a time: next is a phase no remaining
+  phase was seen to precede (the one seen most often right after the phase before it; then the lower number),
+  and when every remaining phase was seen to follow another (a cycle: a ring that backed into an earlier phase of
+  its group while the other ring timed, TecNote 3013, or came round again with nothing called across the
+  barrier), the phase with the largest surplus of successions out over successions in (the greedy of Eades, Lin
+  and Smyth for a minimum feedback arc set). Guarantee: when the successions have no cycle, every one of them
+  points forward in the order, and when each phase of the sequence was seen at least once right after the one
+  before it, the order is the controller's sequence (the only one with every succession forward). The exhaustive
+  search it replaces (the order whose adjacent pairs were seen most) took 11 phases 56 s and grew as n!; it also
+  preferred a skip it saw often to the sequence (1 3 2 for a log that mostly skips 2);
 - **timings**: yellow (8 to 9) and red clearance (10 to 11), the minimum (1 to 3, the most frequent), walk (21 to 22)
   and pedestrian clearance (22 to 23), passage (a gap-out, 4, after the last of the phase's calling detectors
   went off, 81: the most frequent gap, counted from the last tick with the call; the intersection's when a
-  phase shows too few), the maximum (the longest green; coordination does not time it);
+  phase shows too few), the maximum (the longest green; coordination does not time it), each within what NTCIP's
+  phase table holds (said when a value had to be brought inside);
 - **detectors**: a detector calls the phase whose call registrations (43) its actuations (82) bring most often, at
   the same tick or the next, when they do for at least a tenth of them; the others are logged but call nothing
-  (phase 0, as a count station). Push buttons likewise with pedestrian calls (90 with 45);
+  (phase 0, as a count station). Push buttons likewise with pedestrian calls (90 with 45). Numbers past the
+  emulator's 64 are said and left out;
 - **overlaps**: an overlap that begins green (61) with phases (1, the same tick, nine times in ten) includes them
-  (a normal overlap);
-- **coordination**: the cycle is the spacing of the local zeros (event 150, parameter 5), the offset their time of
-  day modulo the cycle with the local zero at the start of the coordinated greens (NEMA TS 2's lead-green
-  reference); the coordinated phases have yield point events (151), the other ring's is the phase of the same
-  group green at the local zero; each phase's split ends where its force-offs (6) fall in the cycle plus its
-  clearance (when at least a fifth of its greens end so), the rings reach each barrier together, and what is still
-  open goes to the last phase of its ring.
+  (a normal overlap); overlaps past P (16) are said and left out;
+- **coordination**: the cycle is the spacing of the local zeros (event 150, parameter 5; two at one time are one),
+  the offset their time of day modulo the cycle with the local zero at the start of the coordinated greens
+  (NEMA TS 2's lead-green reference); the coordinated phases are the ones with the most yield point events (151)
+  in the group that has them, else the phases green at the local zero; each phase's split is what the controller
+  logged (split change, events 134-149, phases 1-16: the value in effect at most local zeros), else it ends where
+  its force-offs (6) fall in the cycle plus its clearance (when at least a fifth of its greens end so), a ring's
+  last phase before a barrier where the other ring's ends, the last phase with the cycle; then each split is made
+  at least its phase's minimum green and clearance, the rings reach each barrier together and each ring fills the
+  cycle, as NTCIP 1202's splitTime and the barrier require (what had to move is said).
+
+A log whose events cannot make a config is refused with one line naming the event (its time, code and parameter)
+and why: a begin green or yellow of phase 0 or past 255 (NTCIP's largest phase number), an overlap, detector or
+push button 0, local zeros whose spacing is no cycle NTCIP allows (30-255 s) or shorter than the phases' minimum
+service, no phase number left for a ring's group. Reading the file is :mod:`harness.reference.hires_file`'s job.
 
 What the log does not show is guessed and said: a value a phase never showed (its event never logged), the
 offset reference, detector extension, max 2, recalls, red revert, dual entry, overlaps and dynamic omits.
@@ -32,18 +61,19 @@ offset reference, detector extension, max 2, recalls, red revert, dual entry, ov
 
 from __future__ import annotations
 
+import bisect
 import itertools
+import json
 import math
 from collections import Counter, defaultdict
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime, timedelta
-from pathlib import Path
 from typing import Any
 
+from harness.reference.hires_file import FieldLogError, Row
 from hils.protocol import config as config_mod
 from hils.protocol.config import IntersectionConfig
-from hils.protocol.errors import UserError
 from hils.protocol.hires import EventCode
 
 E = EventCode
@@ -52,17 +82,14 @@ CALL_SHARE = 0.10  # a detector calls a phase when at least this share of its ac
 LOCAL_ZERO = 5  # event 150's parameter at the local zero
 PASSAGE_SEEN = 3  # a phase's own most frequent gap counts as its passage when seen this often
 FORCE_OFF_SHARE = 0.2  # a phase's force-offs mark where its split ends when they end at least this share of its greens
-
-
-class FieldLogError(UserError, ValueError):
-    """A log that cannot be read into a config; says what it lacks."""
-
-
-@dataclass(frozen=True, slots=True)
-class Row:
-    time: datetime
-    code: int
-    parameter: int
+#: What the emulator's config holds: phases 1-255 (NTCIP 1202 maxPhases), detectors and push buttons 1-64,
+#: overlaps A-P; cycles 30-255 s (NTCIP 1202 patternCycleTime, "NEMA TS 2 range: 30-255").
+PHASES, DETECTORS, OVERLAPS, CYCLES = 255, 64, 16, (30, 255)
+#: The events whose parameter names what the config is written from, and what they name.
+NAMED = {E.PHASE_BEGIN_GREEN: "a phase", E.PHASE_BEGIN_YELLOW: "a phase",
+         **{code: "an overlap" for code in range(E.OVERLAP_BEGIN_GREEN, E.OVERLAP_DARK + 1)},
+         E.DETECTOR_ON: "a detector", E.DETECTOR_OFF: "a detector", E.PED_DETECTOR_ON: "a push button",
+         E.PED_DETECTOR_OFF: "a push button"}
 
 
 @dataclass
@@ -77,41 +104,20 @@ class Inferred:
         return config_mod.parse(self.toml, "inferred.toml")
 
 
-# --- reading a log ----------------------------------------------------------------------------------------------
-
-
-def load(path: str | Path, device: Any | None = None, start: datetime | None = None,
-         end: datetime | None = None) -> list[Row]:
-    """One controller's events of an ATSPM-layout log (parquet or CSV: TimeStamp, DeviceId, EventId, Parameter),
-    in time order, between ``start`` and ``end`` when given. ``device`` picks a controller of a log of several."""
-    import pandas as pd
-
-    path = Path(path)
+def _event(r: Row) -> str:
+    """An event as a refusal names it: its code and name, its parameter and its time."""
     try:
-        frame = pd.read_parquet(path) if path.suffix == ".parquet" else pd.read_csv(path, parse_dates=["TimeStamp"])
-    except (OSError, ValueError) as exc:
-        raise FieldLogError(f"{path}: cannot be read as an ATSPM log ({exc}); allowed: a .parquet or .csv file with "
-                            "TimeStamp, DeviceId, EventId, Parameter") from None
-    missing = {"TimeStamp", "EventId", "Parameter"} - set(frame.columns)
-    if missing:
-        raise FieldLogError(f"{path}: no column {', '.join(sorted(missing))}; allowed: the ATSPM layout "
-                            "(TimeStamp, DeviceId, EventId, Parameter)")
-    if "DeviceId" in frame.columns:
-        devices = sorted(frame.DeviceId.astype(str).unique())
-        if device is None and len(devices) > 1:
-            raise FieldLogError(f"{path} holds {len(devices)} controllers; pick one: --device "
-                                + ", ".join(devices[:10]))
-        if device is not None:
-            if str(device) not in devices:
-                raise FieldLogError(f"{path}: no DeviceId {device}; allowed: {', '.join(devices[:10])}")
-            frame = frame[frame.DeviceId.astype(str) == str(device)]
-    if start is not None:
-        frame = frame[frame.TimeStamp >= start]
-    if end is not None:
-        frame = frame[frame.TimeStamp < end]
-    frame = frame.sort_values(["TimeStamp", "EventId", "Parameter"], kind="stable")
-    return [Row(t.to_pydatetime(), int(c), int(p)) for t, c, p in zip(frame.TimeStamp, frame.EventId,
-                                                                         frame.Parameter, strict=True)]
+        name = f" ({E(r.code).name.lower().replace('_', ' ')})"
+    except ValueError:
+        name = ""
+    return f"event {r.code}{name}, parameter {r.parameter}, at {_when(r.time)}"
+
+
+def _when(t: datetime) -> str:
+    return f"{t:%Y-%m-%d %H:%M:%S}.{t.microsecond // 100_000}"
+
+
+# --- the log's events -------------------------------------------------------------------------------------------
 
 
 def _mode(values: Iterable[float]) -> float | None:
@@ -145,6 +151,30 @@ def _greens(rows: Sequence[Row]) -> dict[int, list[tuple[datetime, datetime]]]:
     return out
 
 
+def _spans(rows: Sequence[Row], greens: Mapping[int, list[tuple[datetime, datetime]]]
+           ) -> dict[int, list[tuple[datetime, datetime]]]:
+    """Each phase's time on: each green to the end of the yellow (9) and red clearance (11) that follow it, before
+    the phase's next begin green or yellow (a service whose begin green the log lost does not lend its clearance);
+    the green's own end when neither is logged."""
+    begins: dict[int, list[datetime]] = defaultdict(list)
+    ends: dict[int, list[datetime]] = defaultdict(list)
+    for r in rows:
+        if r.code in (E.PHASE_BEGIN_GREEN, E.PHASE_BEGIN_YELLOW):
+            begins[r.parameter].append(r.time)
+        elif r.code in (E.PHASE_END_YELLOW, E.PHASE_END_RED_CLEARANCE):
+            ends[r.parameter].append(r.time)
+    out = {}
+    for p, mine in greens.items():
+        again, times = begins[p], ends.get(p, [])
+        spans = []
+        for begin, end in mine:
+            k = bisect.bisect_right(again, end)
+            last = bisect.bisect_left(times, again[k]) if k < len(again) else len(times)
+            spans.append((begin, max(end, times[last - 1]) if last else end))
+        out[p] = spans
+    return out
+
+
 def _seconds_of_day(t: datetime) -> float:
     return t.hour * 3600 + t.minute * 60 + t.second + t.microsecond / 1e6
 
@@ -173,6 +203,7 @@ class Structure:
 
 def infer(rows: Sequence[Row], name: str = "field controller") -> Inferred:
     """The config of the controller whose log ``rows`` are (see the module's header for how)."""
+    _check_numbers(rows)
     out = Inferred("")
     greens = _greens(rows)
     phases = sorted(greens)
@@ -180,10 +211,10 @@ def infer(rows: Sequence[Row], name: str = "field controller") -> Inferred:
         raise FieldLogError(f"the log shows {len(phases)} phase(s) served (begin green, event 1, then begin yellow, "
                             "event 8); a config needs at least two")
     out.read.append(f"phases served: {', '.join(map(str, phases))}")
-    structure = _structure(phases, greens, out)
+    structure = _structure(phases, greens, _spans(rows, greens), out)
     timing = {p: _timing(rows, p, greens[p], out) for p in phases}
-    detectors = _detector_phases(rows, E.DETECTOR_ON, E.PHASE_CALL_REGISTERED, phases)
-    pushes = _detector_phases(rows, E.PED_DETECTOR_ON, E.PED_CALL_REGISTERED, phases)
+    detectors = _in_config(_detector_phases(rows, E.DETECTOR_ON, E.PHASE_CALL_REGISTERED, phases), "detector", out)
+    pushes = _in_config(_detector_phases(rows, E.PED_DETECTOR_ON, E.PED_CALL_REGISTERED, phases), "push button", out)
     gaps = {p: _gaps(rows, p, [d for d, q in detectors.items() if q == p]) for p in phases}
     shared = _mode(g for values in gaps.values() for g in values)
     for p in phases:
@@ -194,6 +225,7 @@ def infer(rows: Sequence[Row], name: str = "field controller") -> Inferred:
             timing[p]["passage"] = shared if shared is not None else 2.0
             out.guessed.append(f"phase {p}: passage {timing[p]['passage']:g} s (the intersection's most frequent: "
                                f"no gap of its own seen {PASSAGE_SEEN} times)")
+        timing[p]["passage"] = _within(p, "passage", timing[p]["passage"], 0, min(25.5, timing[p]["max_green"]), out)
     for p, twin in structure.phantom.items():
         timing[p] = {k: v for k, v in timing[twin].items() if k not in ("walk", "ped_clear")}
     logged = sorted(d for d, q in detectors.items() if q == 0)
@@ -213,10 +245,21 @@ def infer(rows: Sequence[Row], name: str = "field controller") -> Inferred:
     return out
 
 
+def _check_numbers(rows: Iterable[Row]) -> None:
+    """Refuse an event whose parameter cannot be what it names (phase 0, overlap 0...), naming the first."""
+    for r in rows:
+        kind = NAMED.get(r.code)
+        if kind is None:
+            continue
+        top = PHASES if kind == "a phase" else None
+        if r.parameter < 1 or (top is not None and r.parameter > top):
+            allowed = f"1-{top}" if top else "1 and up"
+            raise FieldLogError(f"{_event(r)}: {r.parameter} is not {kind} number; allowed: {allowed}")
+
+
 def _structure(phases: Sequence[int], greens: Mapping[int, list[tuple[datetime, datetime]]],
-               out: Inferred) -> Structure:
-    concurrent = {frozenset((p, q)) for p, q in itertools.combinations(phases, 2)
-                  if any(a0 < b1 and b0 < a1 for a0, a1 in greens[p] for b0, b1 in greens[q])}
+               spans: Mapping[int, list[tuple[datetime, datetime]]], out: Inferred) -> Structure:
+    concurrent = _concurrent(spans)
     groups: list[set[int]] = []
     for p in phases:
         touching = [g for g in groups if any(frozenset((p, q)) in concurrent for q in g)]
@@ -229,7 +272,9 @@ def _structure(phases: Sequence[int], greens: Mapping[int, list[tuple[datetime, 
             ring = _two_colour(group, concurrent)
             out.guessed.append(f"rings of phases {group}: split by which are concurrent, not NEMA's numbering")
         ring_of |= ring
-    order = {r: [_service_order([p for p in group if ring_of[p] == r], [p for p in phases if ring_of[p] == r], greens)
+    group_of = {p: g for g, group in enumerate(ordered) for p in group}
+    starts = sorted((t0, p) for p in phases for t0, _ in greens[p])
+    order = {r: [_service_order([p for p in group if ring_of[p] == r], _successions(starts, r, ring_of, group_of))
                  for group in ordered] for r in (1, 2)}
     structure = Structure(ordered, order)
     used = set(phases)
@@ -240,7 +285,12 @@ def _structure(phases: Sequence[int], greens: Mapping[int, list[tuple[datetime, 
             twin = order[3 - r][g][0]
             base = 0 if r == 1 else 4
             # NEMA's numbering first: in ring 1 the second barrier group's through is 4, its left 3, and so on
-            free = next(n for n in (base + 2 * g + 2, base + 2 * g + 1, *range(1, 65)) if n not in used)
+            free = next((n for n in (base + 2 * g + 2, base + 2 * g + 1, *range(1, PHASES + 1))
+                         if n not in used and n <= PHASES), None)
+            if free is None:
+                raise FieldLogError(f"the log's phases use every phase number 1-{PHASES}: none is left for ring {r} "
+                                    f"beside phase {twin}, where NTCIP's split table needs one; allowed: a log of "
+                                    "fewer phases")
             used.add(free)
             mine.append(free)
             structure.phantom[free] = twin
@@ -248,6 +298,17 @@ def _structure(phases: Sequence[int], greens: Mapping[int, list[tuple[datetime, 
                                "needs a phase of each ring in each barrier group; nothing calls it, so it is skipped)")
     out.read.append(f"rings: {structure.ring(1)} and {structure.ring(2)}; barrier groups: {structure.barriers}")
     return structure
+
+
+def _concurrent(spans: Mapping[int, Sequence[tuple[datetime, datetime]]]) -> set[frozenset[int]]:
+    """The pairs of phases that were on at the same time (a sweep over the spans in time order)."""
+    out: set[frozenset[int]] = set()
+    on: list[tuple[datetime, int]] = []
+    for begin, end, p in sorted((a, b, p) for p, mine in spans.items() for a, b in mine):
+        on = [(until, q) for until, q in on if until > begin]
+        out.update(frozenset((p, q)) for _, q in on if q != p)
+        on.append((end, p))
+    return out
 
 
 def _nema_ring(p: int) -> int:
@@ -263,16 +324,38 @@ def _two_colour(group: Sequence[int], concurrent: set[frozenset[int]]) -> dict[i
     return colour
 
 
-def _service_order(mine: Sequence[int], ring: Sequence[int], greens: Mapping[int, list[tuple[datetime, datetime]]]
-                   ) -> list[int]:
-    """The order the log serves a ring's phases of one group (``mine``, of the ring's phases ``ring``): the one in
-    which they most often follow each other directly."""
-    if len(mine) < 2:
-        return list(mine)
-    starts = [p for _, p in sorted((t0, p) for p in ring for t0, _ in greens[p])]
-    follows = Counter((a, b) for a, b in itertools.pairwise(starts) if a != b and a in mine and b in mine)
-    return list(max(itertools.permutations(mine),
-                    key=lambda order: sum(follows[(a, b)] for a, b in itertools.pairwise(order))))
+def _successions(starts: Sequence[tuple[datetime, int]], ring: int, ring_of: Mapping[int, int],
+                 group_of: Mapping[int, int]) -> Counter[tuple[int, int]]:
+    """How often each phase of ``ring`` began green right after another of its barrier group, with no phase of
+    another group begun in between (in either ring: a ring with nothing to serve across a barrier crosses it without
+    a green of its own)."""
+    out: Counter[tuple[int, int]] = Counter()
+    last: int | None = None
+    for _, p in starts:
+        if ring_of[p] == ring:
+            if last is not None and last != p and group_of[last] == group_of[p]:
+                out[(last, p)] += 1
+            last = p
+        elif last is not None and group_of[p] != group_of[last]:
+            last = None
+    return out
+
+
+def _service_order(mine: Sequence[int], follows: Mapping[tuple[int, int], int]) -> list[int]:
+    """The order a ring serves its phases ``mine`` of one barrier group, from how often each followed another
+    (``follows``; see the module's header for the rule and what it guarantees)."""
+    order: list[int] = []
+    left = sorted(mine)
+    while left:
+        inward = {p: sum(follows.get((q, p), 0) for q in left) for p in left}
+        first = [p for p in left if not inward[p]]
+        if not first:  # a cycle: the phase that most often leads rather than follows
+            surplus = {p: sum(follows.get((p, q), 0) for q in left) - inward[p] for p in left}
+            first = [p for p in left if surplus[p] == max(surplus.values())]
+        before = order[-1] if order else None
+        order.append(max(first, key=lambda p: (follows.get((before, p), 0), -p)))
+        left.remove(order[-1])
+    return order
 
 
 def _timing(rows: Sequence[Row], p: int, greens: Sequence[tuple[datetime, datetime]], out: Inferred) -> dict[str, Any]:
@@ -284,14 +367,31 @@ def _timing(rows: Sequence[Row], p: int, greens: Sequence[tuple[datetime, dateti
         if found[key] is None:
             out.guessed.append(f"phase {p}: {key} {default} (its events are not in the log)")
         t[key] = found[key] if found[key] is not None else default
-    t["min_green"] = max(1, math.ceil(t["min_green"] - 1e-9))
+    # NTCIP 1202's phase table: phaseYellowChange "NEMA range: 3.0-25.5 sec", red clearance in tenths to 25.5 s (the
+    # config asks for some), greens, walk and pedestrian clearance in seconds to 255 s (walk and clearance within
+    # the maximum)
+    t["yellow"] = _within(p, "yellow", t["yellow"], 3.0, 25.5, out)
+    t["red_clear"] = _within(p, "red_clear", t["red_clear"], 0.1, 25.5, out)
+    t["min_green"] = _within(p, "min_green", math.ceil(t["min_green"] - 1e-9), 1, 255, out)
     walk = _mode(_durations(rows, p, E.PED_BEGIN_WALK, E.PED_BEGIN_CLEARANCE))
     ped_clear = _mode(_durations(rows, p, E.PED_BEGIN_CLEARANCE, E.PED_BEGIN_SOLID_DONT_WALK))
     if walk and ped_clear:
-        t["walk"], t["ped_clear"] = math.ceil(walk), math.ceil(ped_clear)
+        t["walk"] = _within(p, "walk", math.ceil(walk), 1, 254, out)
+        t["ped_clear"] = _within(p, "ped_clear", math.ceil(ped_clear), 1, 255 - t["walk"], out)
     longest = max(((b - a).total_seconds() for a, b in greens), default=0.0)
-    t["max_green"] = max(t["min_green"], t.get("walk", 0) + t.get("ped_clear", 0), math.ceil(longest))
+    t["max_green"] = _within(p, "max_green", max(t["min_green"], t.get("walk", 0) + t.get("ped_clear", 0),
+                                                 math.ceil(longest)), 1, 255, out)
     return t
+
+
+def _within(p: int, key: str, value: Any, low: float, high: float, out: Inferred) -> Any:
+    """``value`` brought inside ``low``..``high`` (saying so when it was not)."""
+    if low <= value <= high:
+        return value
+    inside = min(max(value, low), high)
+    out.guessed.append(f"phase {p}: {key} {inside:g} s (the log's {value:g} s is outside what the config holds, "
+                       f"{low:g}-{high:g} s)")
+    return inside
 
 
 def _minimums(rows: Sequence[Row], p: int) -> list[float]:
@@ -327,6 +427,15 @@ def _detector_phases(rows: Sequence[Row], on: int, call: int, phases: Sequence[i
     return out
 
 
+def _in_config(detectors: Mapping[int, int], kind: str, out: Inferred) -> dict[int, int]:
+    """The detectors (or push buttons) the emulator's config holds; the others are said."""
+    beyond = sorted(d for d in detectors if d > DETECTORS)
+    if beyond:
+        out.guessed.append(f"{kind}s {', '.join(map(str, beyond))}: left out (the emulator's are numbered "
+                           f"1-{DETECTORS}); their inputs are not replayed")
+    return {d: q for d, q in detectors.items() if d <= DETECTORS}
+
+
 def _gaps(rows: Sequence[Row], p: int, detectors: Sequence[int]) -> list[float]:
     """Each time from the last of the phase's detectors going off to its gap-out (a gap-out logged when the green
     ends may come later than the gap: at a barrier, the green waits for the other ring)."""
@@ -347,39 +456,78 @@ def _gaps(rows: Sequence[Row], p: int, detectors: Sequence[int]) -> list[float]:
 
 def _coordination(rows: Sequence[Row], structure: Structure, timing: Mapping[int, dict[str, Any]],
                   greens: Mapping[int, list[tuple[datetime, datetime]]], out: Inferred) -> dict[str, Any] | None:
-    zeros = [r.time for r in rows if r.code == E.COORD_CYCLE_STATE_CHANGE and r.parameter == LOCAL_ZERO]
+    zeros = sorted({r.time for r in rows if r.code == E.COORD_CYCLE_STATE_CHANGE and r.parameter == LOCAL_ZERO})
     if len(zeros) < 2:
         out.read.append("coordination: no local zero in the log (event 150 with 5): free")
         return None
-    cycle = round(_mode(round((b - a).total_seconds(), 1) for a, b in itertools.pairwise(zeros)))
+    apart = [(round((b - a).total_seconds(), 1), a, b) for a, b in itertools.pairwise(zeros)]
+    cycle = round(_mode(s for s, _, _ in apart))
+    if not CYCLES[0] <= cycle <= CYCLES[1]:
+        s, a, b = next(x for x in apart if round(x[0]) == cycle)
+        raise FieldLogError(f"local zeros (event 150, parameter 5) at {_when(a)} and {_when(b)}: {s:g} s apart, as "
+                            f"most are, a cycle of {cycle} s; allowed: {CYCLES[0]}-{CYCLES[1]} s (NTCIP 1202 "
+                            "patternCycleTime)")
     zero = _mode(round(_seconds_of_day(t) % cycle, 1) for t in zeros)
-    yielding = {r.parameter for r in rows if r.code == E.COORD_YIELD_POINT}
+    ringed = set(structure.ring(1) + structure.ring(2))
+    yields = Counter(r.parameter for r in rows if r.code == E.COORD_YIELD_POINT and r.parameter in ringed)
+    covering = _covering(zeros, greens)
+    votes = yields or covering or Counter({structure.ring(1)[0]: 1})
+    group = structure.group_of(max(votes, key=lambda p: (votes[p], -p)))
     coord = {}
     for r in (1, 2):
-        mine = structure.ring(r)
-        coord[r] = next((p for p in mine if p in yielding), None)
-        if coord[r] is None:  # the phase of this ring whose green most often covers the local zero
-            covering = Counter(q for q in mine for z in zeros for a, b in greens.get(q, ()) if a <= z < b)
-            coord[r] = covering.most_common(1)[0][0] if covering else mine[0]
+        mine = structure.order[r][group]
+        coord[r] = max(mine, key=lambda p: (yields[p], covering[p], -mine.index(p)))
+        if not yields[coord[r]]:
             out.guessed.append(f"coordinated phase of ring {r}: {coord[r]} (no yield point event, 151: the phase of "
                                "that ring green at the local zero)")
     ends: dict[int, float] = {}
     for p in timing:
         force_offs = [round((_seconds_of_day(row.time) - zero) % cycle, 1) for row in rows
                       if row.code == E.PHASE_FORCE_OFF and row.parameter == p]
-        if force_offs and len(force_offs) >= FORCE_OFF_SHARE * len(greens.get(p, ())):  # not a stray one
+        if p in greens and force_offs and len(force_offs) >= FORCE_OFF_SHARE * len(greens[p]):  # not a stray one
             ends[p] = _mode(force_offs) + timing[p]["yellow"] + timing[p]["red_clear"]
-    splits = _splits(structure, coord, ends, cycle, timing, out)
+    logged = {p: s for p, s in _logged_splits(rows, zeros).items() if p in greens}
+    splits = _splits(structure, coord, ends, logged, cycle, timing, out)
     out.read.append(f"coordination: cycle {cycle} s, local zero at {zero:g} s of the time of day modulo the cycle, "
-                    f"coordinated {coord[1]}+{coord[2]}, splits " + ", ".join(f"{p}: {s}" for p, s in splits.items()))
+                    f"coordinated {coord[1]}+{coord[2]}, splits " + ", ".join(f"{p}: {s}" for p, s in splits.items())
+                    + (f" (as logged, events 134-149, for {', '.join(map(str, logged))})" if logged else ""))
     out.guessed.append("offset reference: the local zero (event 150, 5) starts the coordinated greens (lead green)")
     return {"cycle": cycle, "offset": round(zero) % cycle, "coord": [coord[1], coord[2]], "splits": splits}
 
 
-def _splits(structure: Structure, coord: Mapping[int, int], ends: Mapping[int, float], cycle: int,
-            timing: Mapping[int, dict[str, Any]], out: Inferred) -> dict[int, int]:
-    """Each phase's split from where it ends in the cycle (from the local zero, which starts the coordinated splits):
-    force-offs where the log has them, the other ring's end of the barrier group, the cycle's end."""
+def _logged_splits(rows: Sequence[Row], zeros: Sequence[datetime]) -> dict[int, int]:
+    """Each phase's split as the controller logged it (split change, events 134-149 for phases 1-16), the value in
+    effect at most local zeros; a split of 0 is none."""
+    changes: dict[int, list[tuple[datetime, int]]] = defaultdict(list)
+    for r in rows:
+        if E.SPLIT_1_CHANGE <= r.code < E.SPLIT_1_CHANGE + 16:
+            changes[r.code - E.SPLIT_1_CHANGE + 1].append((r.time, r.parameter))
+    out = {}
+    for p, mine in changes.items():
+        times = [t for t, _ in mine]
+        value = _mode(mine[k - 1][1] for z in zeros if (k := bisect.bisect_right(times, z)))
+        if value:
+            out[p] = int(value)
+    return out
+
+
+def _covering(zeros: Sequence[datetime], greens: Mapping[int, Sequence[tuple[datetime, datetime]]]) -> Counter[int]:
+    """How many local zeros fall in each phase's greens."""
+    out: Counter[int] = Counter()
+    for p, mine in greens.items():
+        begins = [a for a, _ in mine]
+        for z in zeros:
+            k = bisect.bisect_right(begins, z) - 1
+            if k >= 0 and z < mine[k][1]:
+                out[p] += 1
+    return out
+
+
+def _splits(structure: Structure, coord: Mapping[int, int], ends: Mapping[int, float], logged: Mapping[int, int],
+            cycle: int, timing: Mapping[int, dict[str, Any]], out: Inferred) -> dict[int, int]:
+    """Each phase's split as logged, or from where it ends in the cycle (from the local zero, which starts the
+    coordinated splits): force-offs where the log has them, the other ring's end of the barrier group, the cycle's
+    end; then fitted (:func:`_fit`)."""
     cyclic = {}
     for r in (1, 2):
         mine = structure.ring(r)
@@ -392,13 +540,13 @@ def _splits(structure: Structure, coord: Mapping[int, int], ends: Mapping[int, f
     barrier_end: dict[int, float] = {}
     for r in (1, 2):
         for k, p in enumerate(cyclic[r]):
-            if p in ends and last_of_group(cyclic[r], k):
+            if p in ends and p not in logged and last_of_group(cyclic[r], k):
                 barrier_end.setdefault(structure.group_of(p), ends[p])
     splits: dict[int, int] = {}
     for r in (1, 2):
         at, order = 0.0, cyclic[r]
         for k, p in enumerate(order):
-            end = ends.get(p)
+            end = at + logged[p] if p in logged else ends.get(p)
             if end is None and k == len(order) - 1:
                 end = float(cycle)
             if end is None and last_of_group(order, k):
@@ -410,11 +558,56 @@ def _splits(structure: Structure, coord: Mapping[int, int], ends: Mapping[int, f
                     out.guessed.append(f"phase {p}: split {round(end - at)} s (never forced off: its longest service)")
             splits[p] = max(1, round(end - at))
             at = end
-        short = cycle - sum(splits[p] for p in order)
-        if short:
-            splits[order[-1]] += short
-            out.guessed.append(f"phase {order[-1]}: split changed by {short} s so that ring {r} fills the cycle")
-    return dict(sorted(splits.items()))
+    return dict(sorted(_fit(splits, structure, cyclic, cycle, timing, out).items()))
+
+
+def _fit(splits: dict[int, int], structure: Structure, cyclic: Mapping[int, Sequence[int]], cycle: int,
+         timing: Mapping[int, dict[str, Any]], out: Inferred) -> dict[int, int]:
+    """The splits made what NTCIP 1202's splitTime asks ("longer than the sum of the phase minimum service
+    requirements") and the barrier: each ring's splits in a barrier group add up to the same, and to the cycle over
+    the groups. A ring short of the other at a barrier gets the difference on its last phase before it; the cycle's
+    rest goes to both rings' last phases, and an excess is taken back from the latest phases that have more than
+    their minimum."""
+    need = {p: math.ceil(t["min_green"] + t["yellow"] + t["red_clear"] - 1e-9) for p, t in timing.items()}
+    for p in splits:
+        if splits[p] < need[p]:
+            out.guessed.append(f"phase {p}: split {need[p]} s, its minimum green and clearance (the log's ends "
+                               f"give {splits[p]} s)")
+            splits[p] = need[p]
+
+    def in_group(r: int, g: int) -> list[int]:
+        return [p for p in cyclic[r] if structure.group_of(p) == g]
+
+    before = dict(splits)
+    for g in range(len(structure.groups)):
+        sums = {r: sum(splits[p] for p in in_group(r, g)) for r in (1, 2)}
+        for r in (1, 2):
+            splits[in_group(r, g)[-1]] += max(0, sums[3 - r] - sums[r])
+    short = cycle - sum(splits[p] for p in cyclic[1])
+    if short > 0:
+        g = structure.group_of(cyclic[1][-1])
+        for r in (1, 2):
+            splits[in_group(r, g)[-1]] += short
+    for g in dict.fromkeys(structure.group_of(p) for p in reversed(cyclic[1])):
+        if short >= 0:
+            break
+        cut = min(-short, *(sum(splits[p] - need[p] for p in in_group(r, g)) for r in (1, 2)))
+        for r in (1, 2):
+            left = cut
+            for p in reversed(in_group(r, g)):
+                by = min(left, splits[p] - need[p])
+                splits[p] -= by
+                left -= by
+        short += cut
+    if short < 0:
+        raise FieldLogError(f"local zeros (event 150, parameter 5) every {cycle} s: a cycle shorter than the "
+                            f"{cycle - short} s the phases' minimum greens and clearances need in each ring; allowed: "
+                            "a cycle that serves every phase's minimum (NTCIP 1202 splitTime)")
+    for p in splits:
+        if splits[p] != before[p]:
+            out.guessed.append(f"phase {p}: split changed by {splits[p] - before[p]} s so that the rings reach each "
+                               f"barrier together and fill the {cycle} s cycle")
+    return splits
 
 
 def _overlaps(rows: Sequence[Row], phases: Sequence[int], out: Inferred) -> dict[int, list[int]]:
@@ -435,20 +628,27 @@ def _overlaps(rows: Sequence[Row], phases: Sequence[int], out: Inferred) -> dict
                         with_phase[(r.parameter, q.parameter)] += 1
     overlaps = {o: [p for p in phases if with_phase[(o, p)] >= 0.9 * n] for o, n in starts.items()}
     overlaps = {o: included for o, included in overlaps.items() if included}
+    beyond = sorted(o for o in overlaps if o > OVERLAPS)
+    for o in beyond:
+        out.guessed.append(f"overlap {o}: left out (it begins green with phase(s) {overlaps.pop(o)}, but the "
+                           f"emulator's overlaps are A-P, 1-{OVERLAPS})")
     for o, included in overlaps.items():
         out.read.append(f"overlap {chr(64 + o)} ({o}): begins green with phase(s) {included}: a normal overlap of them")
     seen = {r.parameter for r in rows if E.OVERLAP_BEGIN_GREEN <= r.code <= E.OVERLAP_DARK}
-    for o in sorted(seen - set(overlaps)):
-        out.guessed.append(f"overlap {chr(64 + o)} ({o}): not modelled (it never begins green in the log; its other "
-                           "events fit none of the types: normal, minus green-yellow, flashing yellow arrow)")
+    for o in sorted(seen - set(overlaps) - set(beyond)):
+        letter = f"{chr(64 + o)} ({o})" if o <= OVERLAPS else str(o)
+        out.guessed.append(f"overlap {letter}: not modelled (it never begins green in the log; its "
+                           "other events fit none of the types: normal, minus green-yellow, flashing yellow arrow)")
     return overlaps
 
 
 def _startup(greens: Mapping[int, list[tuple[datetime, datetime]]], structure: Structure) -> list[int]:
-    """The phases to power up in: the first phase served in each ring of the group served first."""
+    """The phases to power up in: in each ring, the phase of the group served first that the log shows green first
+    (the group's first in the ring's order when none of its phases is)."""
     first = min((t0, p) for p, spans in greens.items() for t0, _ in spans)[1]
     g = structure.group_of(first)
-    return [structure.order[r][g][0] for r in (1, 2)]
+    return [min(structure.order[r][g], key=lambda p: greens[p][0][0] if p in greens else datetime.max)
+            for r in (1, 2)]
 
 
 def _toml(name: str, structure: Structure, timing: Mapping[int, dict[str, Any]], detectors: Mapping[int, int],
@@ -458,7 +658,7 @@ def _toml(name: str, structure: Structure, timing: Mapping[int, dict[str, Any]],
         return f"{v:g}" if isinstance(v, float) else str(v)
 
     lines = ["# Written by harness.reference.field_log from a controller's hi-res log: what it read and guessed is "
-             "printed with it.", f'name = "{name}"', "", "[phases]"]
+             "printed with it.", f"name = {json.dumps(name)}", "", "[phases]"]
     for p in sorted(timing):
         fields = {k: timing[p][k] for k in ("min_green", "max_green", "yellow", "red_clear", "passage", "walk",
                                             "ped_clear") if k in timing[p]}

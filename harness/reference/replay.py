@@ -32,7 +32,7 @@ from dataclasses import dataclass
 from datetime import datetime, timedelta
 from pathlib import Path
 
-from harness.reference.field_log import Row
+from harness.reference.hires_file import Row
 from hils.protocol import config as config_mod
 from hils.protocol.hires import Event, EventCode
 from hils.shell.asclog import collect
@@ -213,14 +213,19 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _command(args: argparse.Namespace) -> int:
-    from harness.reference import field_log
+    from harness.reference import field_log, hires_file
+    from harness.reference.hires_file import FieldLogError
 
-    out = args.out or Path(tempfile.mkdtemp(prefix="hils-replay-"))
-    out.mkdir(parents=True, exist_ok=True)
-    every = field_log.load(args.log, args.device)
+    every = hires_file.load(args.log, args.device)
     config = args.config
     if config is None:
-        inferred = field_log.infer(every, name=f"{Path(args.log).stem} {args.device or ''}".strip())
+        try:
+            inferred = field_log.infer(every, name=f"{Path(args.log).stem} {args.device or ''}".strip())
+        except FieldLogError as exc:
+            raise FieldLogError(f"{args.log}: {exc}") from None
+    out = args.out or Path(tempfile.mkdtemp(prefix="hils-replay-"))
+    out.mkdir(parents=True, exist_ok=True)
+    if config is None:
         config = out / "inferred.toml"
         config.write_text(inferred.toml)
         print(f"Config written to {config}\nRead from the log:\n  " + "\n  ".join(inferred.read)

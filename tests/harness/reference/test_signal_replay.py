@@ -20,8 +20,8 @@ import pytest
 
 from emulator.model.controller import Controller
 from emulator.model.datalogger import DataLogger
-from harness.reference import field_log
-from harness.reference.field_log import Row
+from harness.reference import field_log, hires_file
+from harness.reference.hires_file import Row
 from harness.reference.replay import match_table, replay
 from hils.protocol.hires import EventCode
 from tests.emulator.model.test_hires import config_text, config_with
@@ -85,7 +85,7 @@ def test_the_emulators_own_log_replays_at_100_percent(tmp_path: Path) -> None:
 
 def test_a_window_of_a_real_field_log_replays_into_the_config_written_from_it(tmp_path: Path) -> None:
     sample = Path(atspm.__file__).parent / "data" / "sample_raw_data.parquet"
-    every = field_log.load(sample)
+    every = hires_file.load(sample)
     inferred = field_log.infer(every, "atspm sample 1136")
     config = tmp_path / "field.toml"
     config.write_text(inferred.toml)
