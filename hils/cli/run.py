@@ -282,12 +282,12 @@ def _outputs(tb: Testbed, out: Path, log_path: Path, window: tuple[float, float]
     files = Outputs(out, raise_errors=verbose)
     if not tb.events.failure:
         files.written.append(log_path.name if log_path.parent == out else str(log_path))
-    journal = tb.journal if tb.journal is not None and tb.journal.failure is None else None
+    journal = tb.journal
     s = summary.summarize({i.label: (i.tally, i.config) for i in tb.intersections.values()}, traffic=tb.traffic,
                           wall_s=tb.wall_s)
 
     def write_summary() -> None:
-        # Until the record is written, its journal is what holds it.
+        # Until the record is written, its journal is what holds it (its first events, if it stopped).
         held = [journal.path.name] if journal is not None and "record" not in s else []
         written = list(dict.fromkeys([*files.written, *held, "summary.json"]))
         summary.write({**s, "outputs": {"written": written, "failed": files.failed, "finished": "record" in s}},
@@ -299,8 +299,8 @@ def _outputs(tb: Testbed, out: Path, log_path: Path, window: tuple[float, float]
                          journal=journal)
     kept.write_small(files, several=len(tb.intersections) > 1)
     kept.write_log(files)
-    if journal is not None and kept.section.get("file") == journal.path.name:
-        files.written.append(journal.path.name)  # the record's file could not be written: the journal stays
+    if kept.journal_kept is not None:
+        files.written.append(kept.journal_kept)  # the record's file could not be written: the journal stays
     s["record"] = kept.section
     files.write("summary.json", write_summary)
     kept.drop_journal()

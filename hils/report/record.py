@@ -84,11 +84,21 @@ class Record:
             self.section["format_note"] = (f"{name} could not be written: the log stays in the run's journal, "
                                            f"{journal.path.name} (CSV, ATSPM layout, rows in the order logged)")
         elif journal is not None:
-            self.section["format_note"] = f"{name} could not be written, and the journal stopped: {journal.failure}"
+            self.section["format_note"] = (f"{name} could not be written, and the journal stopped: {journal.failure}; "
+                                           f"{journal.path.name} keeps those")
+
+    @property
+    def journal_kept(self) -> str | None:
+        """The journal's name when it stays in the run folder: the record's file could not be written, and it
+        holds the log, whole or its first events."""
+        journal = self.journal
+        if journal is None or self.section.get("file") not in (None, journal.path.name):
+            return None
+        return journal.path.name
 
     def drop_journal(self) -> None:
-        """Remove the journal once the record's file replaces it."""
-        if self.journal is not None and self.section.get("file") != self.journal.path.name:
+        """Remove the journal once the record's file replaces it (a journal that stopped early included)."""
+        if self.journal is not None and self.journal_kept is None:
             with contextlib.suppress(OSError):
                 self.journal.path.unlink(missing_ok=True)
 

@@ -452,6 +452,23 @@ def test_a_flash_during_clearance_announces_no_next_phase(paper_toml: str) -> No
     assert c.phase_nexts == frozenset()
 
 
+@pytest.mark.parametrize("yellow", [0, 26, 27])
+def test_the_monitor_flashes_on_a_yellow_shorter_than_an_mmu_takes(controller: Controller, yellow: int) -> None:
+    # A phase table retimed past what NTCIP allows (its SET refuses under 3.0 s; the model takes any): 2 leaves
+    # its green with 0 or 2.6 s of yellow, which an MMU faults ("a Yellow must follow it and it must stay on for
+    # at least 2.7 seconds"); 2.7 s passes.
+    c = controller
+    c.backup_time = 0
+    c.set_timing(2, "yellow", yellow)
+    serve(c, {2, 6})
+    c.set_control(CALL, {1, 6})
+    record(c, 100)
+    if yellow < 27:
+        assert c.flash_status is UnitFlashStatus.MMU and c.reds == ALL_PHASES
+    else:
+        assert not c.flashing and 1 in c.greens
+
+
 def test_status_sets_are_frozen(controller: Controller) -> None:
     controller.set_control(CALL, {3, 4})
     controller.step()

@@ -138,3 +138,42 @@ def test_a_journal_the_disk_cannot_take_keeps_whole_rows_and_says_why(tmp_path: 
     journal.close()
     assert journal_rows(journal.path) == [(e.time, 1, e.code, e.parameter) for e in tick]
     assert journal.failure == "No space left on device (it keeps its first 2 events, whole)"
+
+
+def _journal_fills(monkeypatch: pytest.MonkeyPatch, *, room: int, and_the_record: bool) -> None:
+    """The hi-res journal's disk fills after ``room`` bytes (as a full disk does: a short write, then ENOSPC); with
+    ``and_the_record``, ``hires.parquet`` cannot be written either."""
+    opened = HiresJournal.__init__
+
+    def filling(journal: HiresJournal, path: Path) -> None:
+        opened(journal, path)
+        journal._file._file = _Filling(journal._file._file, room)
+
+    monkeypatch.setattr(HiresJournal, "__init__", filling)
+    if and_the_record:
+        _full_disk(monkeypatch, from_name="hires.parquet", everything_after=False)
+
+
+def test_a_journal_that_stopped_is_removed_once_the_record_is_written(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    _journal_fills(monkeypatch, room=4000, and_the_record=False)
+    out = tmp_path / "run"
+    assert main(["run", "--no-sumo", "--agent", "fixed-time", "--no-progress", "--duration", "300", "--out",
+                 str(out)]) == 0
+    s = json.loads((out / "summary.json").read_text())
+    assert s["record"]["file"] == "hires.parquet" and s["outputs"]["failed"] == {}
+    assert not (out / "hires.journal.csv").exists() and "hires.journal.csv" not in s["outputs"]["written"]
+
+
+def test_a_journal_that_stopped_stays_and_is_named_when_the_record_cannot_be_written(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    _journal_fills(monkeypatch, room=4000, and_the_record=True)
+    out = tmp_path / "run"
+    code, last, s = _run(out, capsys)
+    assert code == 1 and "hires.parquet: No space left on device" in last
+    record = s["record"]
+    assert "file" not in record and "the journal stopped: No space left on device" in record["format_note"]
+    assert "hires.journal.csv keeps those" in record["format_note"]
+    assert "hires.journal.csv" in s["outputs"]["written"]
+    kept = journal_rows(out / "hires.journal.csv")
+    assert 0 < len(kept) < record["events"]["1"], "its first events, whole"
