@@ -82,9 +82,10 @@ CALL_SHARE = 0.10  # a detector calls a phase when at least this share of its ac
 LOCAL_ZERO = 5  # event 150's parameter at the local zero
 PASSAGE_SEEN = 3  # a phase's own most frequent gap counts as its passage when seen this often
 FORCE_OFF_SHARE = 0.2  # a phase's force-offs mark where its split ends when they end at least this share of its greens
-#: What the emulator's config holds: phases 1-255 (NTCIP 1202 maxPhases), detectors and push buttons 1-64,
-#: overlaps A-P; cycles 30-255 s (NTCIP 1202 patternCycleTime, "NEMA TS 2 range: 30-255").
-PHASES, DETECTORS, OVERLAPS, CYCLES = 255, 64, 16, (30, 255)
+#: What the emulator's config holds (:mod:`hils.protocol.config`): phases 1-255, detectors and push buttons 1-64,
+#: overlaps A-P (1-16), cycles 30-255 s.
+PHASES, DETECTORS = config_mod.PHASE_NUMBERS[-1], config_mod.DETECTOR_NUMBERS[-1]
+OVERLAPS, CYCLES = config_mod.OVERLAP_NUMBERS[-1], (config_mod.CYCLE_SECONDS[0], config_mod.CYCLE_SECONDS[-1])
 #: The events whose parameter names what the config is written from, and what they name.
 NAMED = {E.PHASE_BEGIN_GREEN: "a phase", E.PHASE_BEGIN_YELLOW: "a phase",
          **{code: "an overlap" for code in range(E.OVERLAP_BEGIN_GREEN, E.OVERLAP_DARK + 1)},
@@ -225,7 +226,8 @@ def infer(rows: Sequence[Row], name: str = "field controller") -> Inferred:
             timing[p]["passage"] = shared if shared is not None else 2.0
             out.guessed.append(f"phase {p}: passage {timing[p]['passage']:g} s (the intersection's most frequent: "
                                f"no gap of its own seen {PASSAGE_SEEN} times)")
-        timing[p]["passage"] = _within(p, "passage", timing[p]["passage"], 0, min(25.5, timing[p]["max_green"]), out)
+        low, high = config_mod.phase_time_range("passage")
+        timing[p]["passage"] = _within(p, "passage", timing[p]["passage"], low, min(high, timing[p]["max_green"]), out)
     for p, twin in structure.phantom.items():
         timing[p] = {k: v for k, v in timing[twin].items() if k not in ("walk", "ped_clear")}
     logged = sorted(d for d, q in detectors.items() if q == 0)
@@ -367,20 +369,22 @@ def _timing(rows: Sequence[Row], p: int, greens: Sequence[tuple[datetime, dateti
         if found[key] is None:
             out.guessed.append(f"phase {p}: {key} {default} (its events are not in the log)")
         t[key] = found[key] if found[key] is not None else default
-    # NTCIP 1202's phase table: phaseYellowChange "NEMA range: 3.0-25.5 sec", red clearance in tenths to 25.5 s (the
-    # config asks for some), greens, walk and pedestrian clearance in seconds to 255 s (walk and clearance within
-    # the maximum)
-    t["yellow"] = _within(p, "yellow", t["yellow"], 3.0, 25.5, out)
-    t["red_clear"] = _within(p, "red_clear", t["red_clear"], 0.1, 25.5, out)
-    t["min_green"] = _within(p, "min_green", math.ceil(t["min_green"] - 1e-9), 1, 255, out)
+    # What NTCIP 1202's phase table carries (phaseYellowChange "NEMA range: 3.0-25.5 sec", ...), and what the config
+    # asks beyond it: a red clearance of a tenth at least, greens of a second, walk and clearance within the maximum.
+    carried = config_mod.phase_time_range
+    t["yellow"] = _within(p, "yellow", t["yellow"], *carried("yellow"), out)
+    t["red_clear"] = _within(p, "red_clear", t["red_clear"], max(0.1, carried("red_clear")[0]), carried("red_clear")[1],
+                             out)
+    t["min_green"] = _within(p, "min_green", math.ceil(t["min_green"] - 1e-9), 1, carried("min_green")[1], out)
     walk = _mode(_durations(rows, p, E.PED_BEGIN_WALK, E.PED_BEGIN_CLEARANCE))
     ped_clear = _mode(_durations(rows, p, E.PED_BEGIN_CLEARANCE, E.PED_BEGIN_SOLID_DONT_WALK))
+    top = carried("max_green")[1]
     if walk and ped_clear:
-        t["walk"] = _within(p, "walk", math.ceil(walk), 1, 254, out)
-        t["ped_clear"] = _within(p, "ped_clear", math.ceil(ped_clear), 1, 255 - t["walk"], out)
+        t["walk"] = _within(p, "walk", math.ceil(walk), 1, top - 1, out)
+        t["ped_clear"] = _within(p, "ped_clear", math.ceil(ped_clear), 1, top - t["walk"], out)
     longest = max(((b - a).total_seconds() for a, b in greens), default=0.0)
     t["max_green"] = _within(p, "max_green", max(t["min_green"], t.get("walk", 0) + t.get("ped_clear", 0),
-                                                 math.ceil(longest)), 1, 255, out)
+                                                 math.ceil(longest)), 1, top, out)
     return t
 
 

@@ -81,6 +81,13 @@ class NextPhaseLock(StrEnum):
     RED_END = "red_end"      # a call during the clearance may still redirect it on the same side of the barrier
 
 
+#: What a config numbers: phases (NTCIP 1202 maxPhases, 1-255), the emulator's vehicle detectors and push buttons
+#: (1-64), overlaps (A-P, NTCIP's 1-16), and a pattern's cycle (patternCycleTime: "NEMA TS 2 range: 30-255").
+PHASE_NUMBERS = range(1, 256)
+DETECTOR_NUMBERS = range(1, 65)
+OVERLAP_NUMBERS = range(1, 17)
+CYCLE_SECONDS = range(30, 256)
+
 #: Each phase time of the config, and the phase-table object that carries it (NTCIP 1202 phaseTable).
 _PHASE_OBJECTS: dict[str, Carrier] = {
     "min_green": (PHASE_TABLE[PhaseColumn.MINIMUM_GREEN], 1),
@@ -446,6 +453,17 @@ def _unknown(raw: Mapping[str, Any], allowed: tuple[str, ...], where: str, sourc
             raise ConfigError(source, f"{where}{key}", f"unknown field; allowed: {', '.join(allowed)}")
 
 
+def phase_time_range(key: str) -> tuple[float, float]:
+    """The least and the most a phase time (``yellow``, ``min_green``, ...) may be, in the config's unit (seconds),
+    as the NTCIP 1202 object that carries it can hold it."""
+    return _carried(_PHASE_OBJECTS[key])
+
+
+def _carried(carrier: Carrier) -> tuple[float, float]:
+    obj, per_second = carrier
+    return (obj.low, obj.high) if per_second == 1 else (obj.low / per_second, obj.high / per_second)
+
+
 def _number(raw: Mapping[str, Any], key: str, where: str, source: str, default: Any = None, *,
             integer: bool = False, low: float | None = None, low_open: bool = False,
             high: float | None = None, step: float | None = None, ntcip: Carrier | None = None) -> Any:
@@ -460,7 +478,7 @@ def _number(raw: Mapping[str, Any], key: str, where: str, source: str, default: 
     carried = ""
     if ntcip is not None:
         obj, per_second = ntcip
-        lowest, highest = (obj.low, obj.high) if per_second == 1 else (obj.low / per_second, obj.high / per_second)
+        lowest, highest = _carried(ntcip)
         if low is None or lowest > low:
             low, low_open = lowest, False
         high = highest if high is None else min(high, highest)
@@ -662,7 +680,7 @@ def from_dict(raw: Mapping[str, Any], source: str = "<memory>") -> IntersectionC
     numbers = []
     for key in raw_phases:
         # "01" would name phase 1 a second way and miss every later lookup by str(number).
-        if not key.isdigit() or key != str(int(key)) or not 1 <= int(key) <= 255:
+        if not key.isdigit() or key != str(int(key)) or int(key) not in PHASE_NUMBERS:
             raise ConfigError(source, f"phases.{key}", "is not a phase number; allowed: 1..255")
         numbers.append(int(key))
     numbers.sort()
@@ -780,7 +798,7 @@ def _ped_detectors(raw: Any, phases: Mapping[int, Phase], source: str) -> dict[i
     out: dict[int, int] = {}
     for key, phase in raw.items():
         where = f"pedestrian_detectors.{key}"
-        if not (key.isdigit() and 1 <= int(key) <= 64):
+        if not (key.isdigit() and int(key) in DETECTOR_NUMBERS):
             raise ConfigError(source, where, "unknown pedestrian detector; allowed: numbers 1-64")
         if isinstance(phase, bool) or phase not in phases:
             raise ConfigError(source, where, f"calls phase {phase!r}; allowed: the configured phases "
@@ -800,7 +818,7 @@ def _detectors(raw: Any, phases: Mapping[int, Phase], source: str) -> dict[str, 
     lanes: dict[int, str] = {}
     for key, value in raw.items():
         where = f"detectors.{key}"
-        if not (key.isdigit() and 1 <= int(key) <= 64):
+        if not (key.isdigit() and int(key) in DETECTOR_NUMBERS):
             raise ConfigError(source, where, "unknown detector; allowed: detector numbers 1-64")
         if isinstance(value, dict):
             _unknown(value, ("phase", "lane"), f"{where}.", source)
@@ -894,7 +912,7 @@ def _pattern(raw: Mapping[str, Any], w: str, phases: Mapping[int, Phase], rings:
     _unknown(raw, ("number", "cycle", "offset", "coord_phases", "splits"), w, source)
     number = _number(raw, "number", w, source, integer=True, low=1, high=253)
     # NTCIP 1202 patternCycleTime: "NEMA TS 2 range: 30-255"; an offset at or past the cycle "shall result in Free".
-    cycle = _number(raw, "cycle", w, source, integer=True, low=30, high=255)
+    cycle = _number(raw, "cycle", w, source, integer=True, low=CYCLE_SECONDS[0], high=CYCLE_SECONDS[-1])
     offset = _number(raw, "offset", w, source, 0, integer=True, low=0, high=cycle - 1)
     coord = _int_list(raw.get("coord_phases"), f"{w}coord_phases", source)
     ring_of = {p: ph.ring for p, ph in phases.items()}
@@ -950,7 +968,7 @@ def _overlaps(raw: Any, phases: Mapping[int, Phase], compatibility: frozenset[fr
         raise ConfigError(source, "overlaps", "must be a table of overlaps by letter, e.g. A = { included = [8, 5] }")
     out = {}
     for key, item in raw.items():
-        if not (len(key) == 1 and "A" <= key <= "P"):
+        if not (len(key) == 1 and ord(key) - ord("A") + 1 in OVERLAP_NUMBERS):
             raise ConfigError(source, f"overlaps.{key}", "is not an overlap letter; allowed: A to P")
         out[ord(key) - ord("A") + 1] = _overlap(ord(key) - ord("A") + 1, item, f"overlaps.{key}.", phases,
                                                  compatibility, source)
