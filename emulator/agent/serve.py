@@ -260,11 +260,13 @@ class EmulatorServer:
     async def stop(self) -> ServeSummary:
         """Stop answering and ticking; raises what ended the ticker if it failed."""
         self._close()
-        await asyncio.gather(*(served.asclog.wait_closed() for served in self.controllers))
-        if self._ticking is not None:
-            self._ticking.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._ticking
+        try:
+            await asyncio.gather(*(served.asclog.wait_closed() for served in self.controllers))
+        finally:  # whatever a client's connection ended in, the controllers stop ticking
+            if self._ticking is not None:
+                self._ticking.cancel()
+                with contextlib.suppress(asyncio.CancelledError):
+                    await self._ticking
         return self.summary()
 
     def summary(self) -> ServeSummary:

@@ -29,6 +29,7 @@ from harness.faults.reader import FaultScenario, default_suite, discover, load_f
 from harness.faults.runner import run_fault_scenario
 from hils.protocol.errors import UserError
 from hils.report import jsonout
+from hils.report.outfiles import write_whole
 from hils.sweep.grid import SweepError, parse_seeds
 
 RUN_HELP = """\
@@ -233,12 +234,12 @@ def write_reports(results: Sequence[FaultScenarioResult], report_dir: Path, wall
     """faults.md and faults.json in ``report_dir`` (made before the runs)."""
     md = report_dir / "faults.md"
     js = report_dir / "faults.json"
-    md.write_text(render_markdown(results, wall_s, command), encoding="utf-8")
+    write_whole(md, render_markdown(results, wall_s, command))  # a full disk leaves the report as it was
     doc = {
         "passed": sum(r.passed for r in results),
         "failed": sum(not r.passed for r in results),
         "wall_s": round(wall_s, 3),
         "scenarios": [r.to_json() for r in results],
     }
-    js.write_text(jsonout.dumps(doc) + "\n", encoding="utf-8")
+    write_whole(js, jsonout.dumps(doc) + "\n")
     return md, js

@@ -168,9 +168,10 @@ def _check_values(args: argparse.Namespace) -> None:
         raise UsageError("--recover-after is nan; allowed: seconds >= 0, or negative for never")
     if not 0 <= args.seed <= MAX_SEED:
         raise UsageError(f"--seed is {args.seed}; allowed: 0 to {MAX_SEED}")
-    for flag, value in (("--asclog-timeout", args.asclog_timeout), ("--asclog-max-mb", args.asclog_max_mb)):
-        if not (math.isfinite(value) and value > 0):
-            raise UsageError(f"{flag} is {value:g}; allowed: a number > 0")
+    for flag, value, least in (("--asclog-timeout", args.asclog_timeout, 0.001),
+                               ("--asclog-max-mb", args.asclog_max_mb, 0.001)):
+        if not (math.isfinite(value) and value >= least):
+            raise UsageError(f"{flag} is {value:g}; allowed: a number >= {least:g}")
     if args.asclog is not None:
         url = urllib.parse.urlsplit(args.asclog)
         try:

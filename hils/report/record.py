@@ -119,7 +119,7 @@ def gather(held: Mapping[str, list[Event]], configs: Mapping[str, IntersectionCo
                  bounds.max_bytes / 2**20)
         try:
             logs = {tls: asclog_mod.collect(asclog, since, bounds)}
-            section["collected_from"] = url
+            section["collected_from"] = hires.asclog_url(asclog, since)  # as a client asks for it again
         except asclog_mod.CollectError as exc:
             section["missing"] = f"could not collect the controller's log from {url}: {exc}"
     record = Record(section, logs, dict(devices), configs, journal=journal)

@@ -50,11 +50,31 @@ def collect(base: str, since: datetime | None = None, bounds: Bounds = Bounds())
     if url.scheme != "http" or not url.hostname:
         raise CollectError(f"{base!r} is not an http://HOST:PORT address")
     deadline = time.monotonic() + bounds.seconds
-    connection = _Connection(url.hostname, url.port or 80, deadline, bounds.read_timeout)
+    while True:
+        connection = _Connection(url.hostname, url.port or 80, deadline, bounds.read_timeout)
+        try:
+            return _read(connection, f"{url.path}?{url.query}" if url.query else url.path, deadline, bounds)
+        except _Busy as busy:  # a controller serving its log to others asks to come back (503, Retry-After)
+            if time.monotonic() + busy.seconds >= deadline:
+                raise CollectError(f"the endpoint stayed busy (HTTP 503) for {bounds.seconds:g} s") from None
+            time.sleep(busy.seconds)
+        finally:
+            connection.close()
+
+
+class _Busy(Exception):
+    def __init__(self, seconds: float) -> None:
+        self.seconds = seconds
+
+
+def _read(connection: _Connection, path: str, deadline: float, bounds: Bounds) -> list[Event]:
     received = 0
     try:
-        connection.request("GET", f"{url.path}?{url.query}" if url.query else url.path)
+        connection.request("GET", path)
         answer = connection.getresponse()
+        if answer.status == http.client.SERVICE_UNAVAILABLE:
+            retry = answer.getheader("Retry-After", "1")
+            raise _Busy(min(float(retry), bounds.seconds) if retry.isdigit() else 1.0)
         if answer.status != http.client.OK:
             raise CollectError(f"the endpoint answered HTTP {answer.status} {answer.reason}".rstrip())
         reader = AsclogReader()
@@ -77,14 +97,14 @@ def collect(base: str, since: datetime | None = None, bounds: Bounds = Bounds())
         more = "" if exc.expected is None else f", {exc.expected} more announced"
         raise CollectError(f"the answer ended early ({received + len(exc.partial)} bytes of the body read{more})"
                            ) from None
+    except http.client.RemoteDisconnected:
+        raise CollectError("the endpoint closed the connection without an answer") from None
     except http.client.HTTPException as exc:
         raise CollectError(f"not an HTTP answer ({type(exc).__name__}: {str(exc)[:80]!r})") from None
     except OSError as exc:
         raise CollectError(exc.strerror or str(exc)) from None
     except AsclogError as exc:
         raise CollectError(str(exc)) from None
-    finally:
-        connection.close()
     events.sort(key=lambda e: e.time)  # a log out of order would mislead every measure made from it
     return events
 
@@ -101,6 +121,8 @@ class _Connection(http.client.HTTPConnection):
         plain = socket.create_connection((self.host, self.port), timeout=_wait(self.deadline, self.read_timeout))
         self.sock = _DeadlineSocket(plain.family, plain.type, plain.proto, fileno=plain.detach())
         self.sock.deadline, self.sock.read_timeout = self.deadline, self.read_timeout
+        self.sock.settimeout(_wait(self.deadline, self.read_timeout))  # the sends too: a socket made from a bare fd
+
 
 
 class _DeadlineSocket(socket.socket):

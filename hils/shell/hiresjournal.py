@@ -2,7 +2,7 @@
 
 A controller the run holds in process (the emulator in virtual time) logs its hi-res events in memory, and the
 run keeps them in ``hires.parquet`` when it ends (:mod:`hils.report.record`). A run that never ends that way
-(SIGKILL, the OOM killer, a power cut) would lose them all: so each tick's events are also appended to the
+(SIGKILL, the OOM killer) would lose them all: so each tick's events are also appended to the
 journal, ``hires.journal.csv`` in the run folder, written through as the event log is
 (:class:`hils.shell.appendfile.AppendFile`: one ``write(2)`` per tick with events, whole or not at all). It is
 the CSV form of the ATSPM layout (:func:`hils.protocol.hires.csv_rows`: ``TimeStamp, DeviceId, EventId,
