@@ -1,4 +1,4 @@
-"""SUMO at the wall clock: a minute and a half of the shipped scenario against `hils emulator serve`, SUMO paced
+"""SUMO at the wall clock: a minute of the shipped scenario against `hils emulator serve`, SUMO paced
 to the clock, its step cost feeding drift detection, and no drift TIMEOUT on this machine."""
 
 from __future__ import annotations
@@ -15,12 +15,12 @@ from hils.shell.events import Kind
 pytestmark = pytest.mark.wallclock
 
 
-def test_ninety_seconds_of_sumo_at_the_wall_clock_do_not_drift(tmp_path: Path) -> None:
+def test_a_minute_of_sumo_at_the_wall_clock_does_not_drift(tmp_path: Path) -> None:
     served = start_emulator(tmp_path / "serve.log")
     cfg = load()
     try:
         with Testbed(cfg, target=f"snmp://127.0.0.1:{served.port}?community=private", sumo=True, seed=1,
-                     duration=90.0, agent="max-pressure") as tb:
+                     duration=60.0, agent="max-pressure") as tb:
             tb.reset()
             assert tb.run() == "duration"
             records = tb.records
@@ -32,5 +32,5 @@ def test_ninety_seconds_of_sumo_at_the_wall_clock_do_not_drift(tmp_path: Path) -
     drifts = [r for r in records if r["kind"] == Kind.DRIFT]
     assert max((r["consecutive"] for r in drifts), default=0) < cfg.middleware.n_drift
     verified = [r for r in records if r["kind"] == Kind.TRANSITION_VERIFIED]
-    assert len(verified) >= 5, "the agent commanded and the controller served over the run"
+    assert len(verified) >= 4, "the agent commanded and the controller served over the run"
     assert lateness.p99 < cfg.middleware.sumo_step
