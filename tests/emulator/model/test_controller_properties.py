@@ -525,7 +525,8 @@ inputs_at_once = st.lists(
     min_size=1, max_size=2)
 
 
-@settings(max_examples=25, deadline=None)
+# 40 examples: against the model before its overlap fix, the first failing example came at the 18th and 36th.
+@settings(max_examples=40, deadline=None)
 @given(config=configs(overlapped=True, preempted=True, least=1),
        calls=st.lists(st.just(ALL_PHASES) | phase_sets.filter(bool), min_size=1, max_size=3),
        lead=st.integers(0, 200), at_once=inputs_at_once)
