@@ -35,10 +35,12 @@ phase. A green is *ready to end* when it has timed its minimum (and Walk plus
 pedestrian clearance if it served a walk), is not held, and has gapped out
 (no vehicle call for its passage time), maxed out (Maximum1, or Maximum2 when
 ringControlGroupMax2 selects it for the ring, timed while *conflicting demand*
-waits: demand in its own ring or across the barrier) or been forced off. Once a
-ready, gapped-out green sees conflicting demand it stays gapped out until it
+waits: demand in its own ring or across the barrier; on max recall timed from
+the start of the green, as NTCIP 1202 phaseMaximum1's timer is "held reset
+unless Max Vehicle Recall is enabled for this phase") or been forced off. Once
+a ready, gapped-out green sees conflicting demand it stays gapped out until it
 ends (NEMA "simultaneous gap disable": a call coming back does not re-extend
-it). A green without anywhere to go rests in green.
+it). A green without anywhere to go rests in green, maxed out or not.
 
 A ready ring *wishes* for the nearest phase with demand in its ring order after
 its own (1, 2, 3, 4, 1, ...). Within the barrier group it goes there at once:
@@ -122,11 +124,14 @@ ones at once. A step that did change something is mostly followed by one
 that does not (a green or a clearance just started); where that is short
 to prove (:meth:`_settles`), quiet time starts at once instead of after
 that step. In quiet time a gap counter that runs is above zero (an
-extending green resets it every tick) and a max-out counter that runs is
-above zero (it is zero without conflicting demand), which is all
-:meth:`skip` needs to know. A green's minimum is a threshold only while
-it has conflicting demand (or a pattern runs, or a preempt is served):
-without any, a ready green has nowhere to go. The data logger still logs
+extending green resets it every tick), a max-out counter that runs is
+above zero (it is held at zero without conflicting demand unless the
+phase is on max recall, and its first tick of a green is a real step) and
+the conflicting demand a green registered (``Ring.conflict``) stays as it
+is, which is all :meth:`skip` needs to know. A green's minimum is a
+threshold only while it has conflicting demand (or a pattern runs, or a
+preempt is served): without any, a ready green has nowhere to go, even
+one that max recall has maxed out. The data logger still logs
 it at its tick, so with a recorder that tick is stepped for the recorder
 alone (:meth:`step` skips it, quiet as :meth:`quiet_ticks` proved). Any
 input (a SET, a detector, a retiming) makes the next step a real one:
@@ -229,7 +234,8 @@ class Ring:
     passage: int = 0  # passage ticks of the current green
     walk: int = 0  # walk ticks served in the current green (0: no walk)
     ped_clear: int = 0
-    max_ticks: int = 0  # ticks of conflicting demand during this green
+    max_ticks: int = 0  # the maximum timer: ticks of conflicting demand (or of max recall) during this green
+    conflict: bool = False  # conflicting demand registered at the green's last tick (the max timer may run without)
     gap: int = 0  # ticks since the green's own vehicle call was last present
     gapped: bool = False  # gapped out with conflicting demand: latched until the green ends
     target: int | None = None  # the committed next phase (PhaseNext), from the start of yellow
@@ -621,15 +627,16 @@ class Controller:
         preempt, no overlap, the next phase locked at the end of green.
 
         Nothing is proven for a next step that :meth:`quiet_ticks` makes real anyway (a counter reaches a
-        threshold), so every comparison of a counter with a threshold is the same at the next tick as now:
-        the predicates below are the step's own, read now. What the next step does, part by part: the backup
-        timer, start-up flash and time-of-day plan act only at thresholds; the coordinator retries a pattern
-        that this step could not start and fails alike; no preempt is called or active; the pedestrian calls
-        latch as checked; a clearance only counts; a green's gap and max-out counters run as :meth:`skip` runs
-        them, as checked, so its conflicting demand is what this step saw and its gap latch is decided as this
-        step decided it; no ring is both ready and wishing, so ``_decide`` commits nothing and no green ends;
-        a ring resting in red with a phase to start stays blocked (by another ring's green or clearance, which
-        stays, or its red revert, a threshold); the status image, its walk thresholds unpassed, stays."""
+        threshold), so every comparison of a counter with a threshold is the same at the next tick as now: the
+        predicates below are the step's own, read now. What the next step does, part by part: the backup timer,
+        start-up flash and time-of-day plan act only at thresholds; the coordinator retries a pattern that this
+        step could not start and fails alike; no preempt is called or active; the pedestrian calls latch as
+        checked; a clearance only counts; a green's conflicting demand is what this step registered and its gap
+        and max-out counters run as :meth:`skip` runs them (max recall runs the latter without conflicting
+        demand), as checked, so its gap latch is decided as this step decided it; no ring is both ready and
+        wishing, so ``_decide`` commits nothing and no green ends; a ring resting in red with a phase to start
+        stays blocked (by another ring's green or clearance, which stays, or its red revert, a threshold); the
+        status image, its walk thresholds unpassed, stays."""
         if (self.flashing or self.coordinator.plan is not None or self.config.overlaps
                 or self.config.next_phase_lock is not NextPhaseLock.GREEN_END):
             return False
@@ -643,9 +650,11 @@ class Controller:
         # What the next step computes before anything reads it: set now, so the predicates below read it.
         self._waiting_across = self._waits_across(demand)
         for r in self.rings:
-            if r.interval is Interval.GREEN and ((r.gap == 0) != self._extending(r, inputs)
-                                                 or (r.max_ticks > 0) != self._conflicting(r, demand)):
-                return False  # a counter starts or stops: skip would not move it as the step does
+            if r.interval is Interval.GREEN:
+                conflict = self._conflicting(r, demand)
+                if ((r.gap == 0) != self._extending(r, inputs) or r.conflict != conflict
+                        or (r.max_ticks > 0) != self._maximum_runs(r, conflict, inputs)):
+                    return False  # a counter starts or stops, or the conflicting demand changes: not skip's work
             if self._ready(r) and self._wish(r, demand) is not None:
                 return False
         return True
@@ -679,13 +688,13 @@ class Controller:
         trailing = self.overlaps.quiet_ticks()
         if trailing is not None:
             ahead.append(max(1, trailing))
-        # A green's minimum matters only with conflicting demand (which, in quiet time, its max-out counter
-        # times): without any, the ready green has nowhere to go and no ring waits across the barrier for it.
+        # A green's minimum matters only with conflicting demand (registered by the last step, and constant in
+        # quiet time): without any, the ready green has nowhere to go and no ring waits across the barrier for it.
         # While a pattern runs or a preempt is served it may be what ends it. The data logger logs it.
         minimums = self.coordinator.plan is not None or self.preemptor.serving is not None
         for r in self.rings:
             if r.interval is Interval.GREEN:
-                if minimums or r.max_ticks:
+                if minimums or r.conflict:
                     until(r.ticks, r.minimum)
                 elif self.recorder is not None and r.ticks < r.minimum:
                     logged.append(r.minimum - r.ticks)
@@ -830,12 +839,22 @@ class Controller:
                     self._enter(r, Interval.DWELL)  # a red clearance a preempt's entry cut to nothing
             return
         r.gap = 0 if self._extending(r, inputs) else r.gap + 1
-        conflict = self._conflicting(r, demand)
-        r.max_ticks = r.max_ticks + 1 if conflict else 0
-        if not conflict:
+        r.conflict = self._conflicting(r, demand)
+        r.max_ticks = r.max_ticks + 1 if self._maximum_runs(r, r.conflict, inputs) else 0
+        if not r.conflict:
             r.gapped = False
         elif r.ticks >= r.minimum and r.gap > 0 and r.gap >= r.passage:
             r.gapped = True
+
+    @staticmethod
+    def _maximum_runs(r: Ring, conflict: bool, inputs: Inputs) -> bool:
+        """The green's maximum timer (Maximum 1 or 2) times this tick: with conflicting demand, or always under max
+        recall. NTCIP 1202 phaseMaximum1 (phaseMaximum2 alike): "This time setting shall determine the maximum
+        length of time this phase may be held in Green in the presence of a serviceable conflicting call. In the
+        absence of a serviceable conflicting call the Maximum Green timer shall be held reset unless Max Vehicle
+        Recall is enabled for this phase." So a max-recalled green times out its maximum and rests there: a
+        conflicting call then ends it at once. While a pattern runs the maximum is inhibited (:meth:`_ending`)."""
+        return conflict or r.phase in inputs.extending
 
     def _extending(self, r: Ring, inputs: Inputs) -> bool:
         """The green's phase is called (or recalled to its maximum): its passage timer restarts."""
@@ -995,7 +1014,7 @@ class Controller:
         self._enter(r, Interval.GREEN)
 
     def _enter(self, r: Ring, interval: Interval, *, notify: bool = True, reason: Termination | None = None) -> None:
-        r.interval, r.ticks, r.max_ticks, r.gap, r.gapped = interval, 0, 0, 0, False
+        r.interval, r.ticks, r.max_ticks, r.conflict, r.gap, r.gapped = interval, 0, 0, False, 0, False
         tm = self.timing[r.phase]
         plan = self.coordinator.plan
         if plan is not None and r.phase == plan.coord[r.number] and interval is Interval.YELLOW:

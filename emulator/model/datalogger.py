@@ -32,8 +32,10 @@ events                                     from
 9, 10 end yellow, begin red clearance      the change into red clearance (10 only when it has a length: "Set
                                            only if phase red clearance is served")
 11, 12 end red clearance, phase inactive   the change to rest in red (the ring no longer times the phase)
-2 phase check                              the green's max timer starting: conflicting demand registered (at
-                                           the latest on the tick the green ends, as field logs show it)
+2 phase check                              conflicting demand registered against the green ("Set when a
+                                           conflicting call is registered against the active phase"; at the
+                                           latest on the tick the green ends, as field logs show it); under max
+                                           recall the max timer runs from the green's start without it
 3 min complete                             the green's minimum (with walk and pedestrian clearance) timed
 31 barrier termination                     a green starting in another barrier group than the last one;
                                            parameter: the group that ended (1 = the first), as field logs show
@@ -132,7 +134,7 @@ class _Green:
     start: int  # clock tick it began
     minimum: int  # ticks of its minimum
     min_logged: bool = False
-    checking: bool = False  # its max timer is running (conflicting demand registered)
+    checking: bool = False  # conflicting demand registered (the max timer runs, unless max recall ran it before)
 
 
 @dataclass(slots=True)
@@ -238,7 +240,7 @@ class DataLogger:
         for number, green in self._greens.items():
             ring = c.rings[number - 1]
             self._min_complete(green, ring.phase)
-            checking = ring.max_ticks > 0
+            checking = ring.conflict
             if checking and not green.checking:
                 self._add(E.PHASE_CHECK, ring.phase)
             green.checking = checking

@@ -679,9 +679,31 @@ def test_min_and_max_recall(paper_toml: str) -> None:
     c = with_options(paper_toml, {4: 'recall = "min"', 8: 'recall = "max"'})
     seen = onsets(c, 300, {100: {2}})
     # Served by recall without any call; once 2 is called, 4 (min recall) is ready at once and waits
-    # at the barrier while 8 (max recall) extends to its maximum, timed from the call on 2.
+    # at the barrier while 8 (max recall) extends to its maximum, timed from the start of its green: max
+    # recall runs the maximum timer without a conflicting call (NTCIP 1202 phaseMaximum1).
     assert seen[(4, "G")] == seen[(8, "G")] == MIN + YELLOW + RED
-    assert seen[(4, "Y")] == seen[(8, "Y")] == 100 + MAX
+    assert seen[(4, "Y")] == seen[(8, "Y")] == MIN + YELLOW + RED + MAX
+
+
+def test_max_recall_times_the_maximum_without_a_conflicting_call(paper_toml: str) -> None:
+    """NTCIP 1202 phaseMaximum1: "In the absence of a serviceable conflicting call the Maximum Green timer shall be
+    held reset unless Max Vehicle Recall is enabled for this phase." 2+6 on max recall (20 s) from start-up have
+    timed their maximum by 20 s and rest there: a call on 4 at 40 s ends them at the next tick."""
+    c = with_options(paper_toml, {2: 'recall = "max"', 6: 'recall = "max"'})
+    seen = onsets(c, 500, {400: {4}})
+    assert seen[(2, "Y")] == seen[(6, "Y")] == 401
+    assert seen[(4, "G")] == 401 + YELLOW + RED
+
+
+def test_max_recall_under_maximum_2_times_it_from_the_start_of_green(paper_toml: str) -> None:
+    """phaseMaximum2 is "held reset" the same way: a ring on Maximum 2 (30 s here) times it from its green's start
+    under max recall."""
+    c = with_options(paper_toml, {4: 'max2 = 30, recall = "max"', 8: 'max2 = 30, recall = "max"'})
+    c.set_max2({1, 2})
+    seen = onsets(c, 900, {100: {2}})
+    start = MIN + YELLOW + RED
+    assert seen[(4, "G")] == seen[(8, "G")] == start
+    assert seen[(4, "Y")] == seen[(8, "Y")] == start + 300
 
 
 def test_soft_recall_yields_to_any_other_demand(paper_toml: str) -> None:

@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 from emulator.model.controller import Change, Controller
 from emulator.model.delays import STATUS_ATTRIBUTES, DelayedController
 from hils.protocol import config as config_mod
-from hils.protocol.config import EmulatorParams, IntersectionConfig
+from hils.protocol.config import EmulatorParams, IntersectionConfig, Recall
 from hils.protocol.ntcip import ControlColumn
 from hils.sim.network import data_path
 from tests.emulator.model.test_controller_properties import ALL_PHASES, configs, phase_sets
@@ -154,6 +154,19 @@ def test_a_preempt_called_in_the_start_up_flash_is_read_after_it() -> None:
     assert config.preempts
     check_equal(config, [("preempt", frozenset({1})), (ControlColumn.VEH_CALL, frozenset({2, 6})), ("ticks", 60)],
                 delayed=False)
+
+
+@pytest.mark.parametrize("delayed", [False, True])
+def test_a_max_recalled_green_times_its_maximum_in_quiet_time(delayed: bool) -> None:
+    """4+8 on max recall start green with nothing else called: their maximum timers run from the green's first tick
+    on, through quiet time that starts right after the green does (:meth:`Controller._settles`); they rest maxed
+    out until a call on 2 ends them. The twins agree throughout (a proof that took the timer to run only with
+    conflicting demand left the skipping twin's timer at zero)."""
+    config = config_mod.load().with_middleware(backup_time=0)
+    config = dataclasses.replace(config, phases={p: dataclasses.replace(ph, recall=Recall.MAX) if p in (4, 8) else ph
+                                                 for p, ph in config.phases.items()})
+    check_equal(config, [("ticks", 150), ("ticks", 300), (ControlColumn.VEH_CALL, frozenset({2})), ("ticks", 20)],
+                delayed=delayed)
 
 
 @pytest.mark.parametrize("delayed", [False, True])
