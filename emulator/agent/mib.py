@@ -119,10 +119,14 @@ _RECALL_BITS = {
 
 
 def phase_options(ph: Phase) -> PhaseOption:
-    """phaseOptions of a configured phase. Simultaneous gap disable is always on: a gapped-out green
-    does not re-extend while it waits at the barrier (see emulator/model/controller.py)."""
-    bits = PhaseOption.ENABLED | PhaseOption.SIMULTANEOUS_GAP_DISABLE | _RECALL_BITS[ph.recall]
-    return bits | PhaseOption.DUAL_ENTRY if ph.dual_entry else bits
+    """phaseOptions of a configured phase: enabled, its recall, dual entry and simultaneous gap disable (a
+    gapped-out green does not re-extend while it waits at the barrier: see emulator/model/controller.py)."""
+    bits = PhaseOption.ENABLED | _RECALL_BITS[ph.recall]
+    if ph.dual_entry:
+        bits |= PhaseOption.DUAL_ENTRY
+    if ph.simultaneous_gap_disable:
+        bits |= PhaseOption.SIMULTANEOUS_GAP_DISABLE
+    return bits
 
 
 @dataclass(frozen=True, slots=True)

@@ -39,8 +39,11 @@ waits: demand in its own ring or across the barrier; on max recall timed from
 the start of the green, as NTCIP 1202 phaseMaximum1's timer is "held reset
 unless Max Vehicle Recall is enabled for this phase") or been forced off. Once
 a ready, gapped-out green sees conflicting demand it stays gapped out until it
-ends (NEMA "simultaneous gap disable": a call coming back does not re-extend
-it). A green without anywhere to go rests in green, maxed out or not.
+ends, when its phase has ``simultaneous_gap_disable`` (the default; NTCIP 1202
+phaseOptions bit 11: it "disables a gapped out phase from reverting to the
+extensible portion"): a call coming back does not re-extend it. Without it, a
+call coming back while it waits (at the barrier for the other ring) extends it
+again. A green without anywhere to go rests in green, maxed out or not.
 
 A ready ring *wishes* for the nearest phase with demand in its ring order after
 its own (1, 2, 3, 4, 1, ...). Within the barrier group it goes there at once:
@@ -237,7 +240,7 @@ class Ring:
     max_ticks: int = 0  # the maximum timer: ticks of conflicting demand (or of max recall) during this green
     conflict: bool = False  # conflicting demand registered at the green's last tick (the max timer may run without)
     gap: int = 0  # ticks since the green's own vehicle call was last present
-    gapped: bool = False  # gapped out with conflicting demand: latched until the green ends
+    gapped: bool = False  # gapped out with conflicting demand: latched until the green ends (simultaneous gap disable)
     target: int | None = None  # the committed next phase (PhaseNext), from the start of yellow
     # Coordination (a pattern running): this green passed its force-off point or started past it; the green
     # ticks a floating force-off allows (0: none); the ring's yield point passed since its coordinated phase
@@ -843,7 +846,8 @@ class Controller:
         r.max_ticks = r.max_ticks + 1 if self._maximum_runs(r, r.conflict, inputs) else 0
         if not r.conflict:
             r.gapped = False
-        elif r.ticks >= r.minimum and r.gap > 0 and r.gap >= r.passage:
+        elif (r.ticks >= r.minimum and r.gap > 0 and r.gap >= r.passage
+              and self.config.phases[r.phase].simultaneous_gap_disable):
             r.gapped = True
 
     @staticmethod

@@ -102,7 +102,7 @@ _PHASE_OBJECTS: dict[str, Carrier] = {
 }
 # Per-phase timings and options a phase may set itself or inherit from [timing].
 _PHASE_OPTIONS = ("min_green", "max_green", "max2", "passage", "walk", "ped_clear", "yellow", "red_clear",
-                  "red_revert", "recall", "dual_entry", "backup_prevent")
+                  "red_revert", "recall", "dual_entry", "backup_prevent", "simultaneous_gap_disable")
 TURNS = ("left", "through")
 FREE = 254  # NTCIP's pattern number of free operation (systemPatternControl, coordPatternStatus)
 
@@ -279,6 +279,8 @@ class Phase:
     recall: Recall = Recall.NONE
     dual_entry: bool = False      # served with the other ring's entry into its barrier group
     backup_prevent: bool = False  # its ring may not back from it into an earlier phase of its group
+    # gapped out and waiting (at the barrier, for the other ring), a call coming back does not extend it again
+    simultaneous_gap_disable: bool = True
     # Turns of the same approach that run permissive (yielding) while this phase is green,
     # e.g. the lefts of a four-phase plan without protected lefts.
     permissive: tuple[str, ...] = ()
@@ -598,8 +600,8 @@ def _phase(number: int, raw: Any, defaults: Mapping[str, Any], ring: int, source
         raise ConfigError(source, f"{where('recall')}recall", "is 'ped' on a phase without walk; allowed: a walk > 0 "
                           "for ped recall")
     flags = {}
-    for key in ("dual_entry", "backup_prevent"):
-        flags[key] = merged.get(key, False)
+    for key, default in (("dual_entry", False), ("backup_prevent", False), ("simultaneous_gap_disable", True)):
+        flags[key] = merged.get(key, default)
         if not isinstance(flags[key], bool):
             raise ConfigError(source, f"{where(key)}{key}", f"is {flags[key]!r}; allowed: true, false")
     approach, turn = raw.get("approach"), raw.get("turn")
@@ -614,7 +616,7 @@ def _phase(number: int, raw: Any, defaults: Mapping[str, Any], ring: int, source
     return Phase(number, ring, float(min_green), float(max_green), float(yellow), float(red_clear),
                  _STARTUP_NAMES[startup], approach, turn, float(passage), None if max2 is None else float(max2),
                  float(walk), float(ped_clear), float(red_revert), Recall(recall), flags["dual_entry"],
-                 flags["backup_prevent"], tuple(permissive))
+                 flags["backup_prevent"], flags["simultaneous_gap_disable"], tuple(permissive))
 
 
 def _pairs(raw: Any, name: str, phases: Mapping[int, Phase], compatible: frozenset[frozenset[int]],

@@ -316,16 +316,19 @@ def test_a_set_of_one_group_keeps_the_calls_of_the_other() -> None:
 # --- the phase table as a lab retimes it -----------------------------------------------------
 
 
-def test_phase_options_carry_the_configured_recall_and_dual_entry(paper_toml: str) -> None:
+def test_phase_options_carry_the_configured_recall_dual_entry_and_gap_disable(paper_toml: str) -> None:
     text = paper_toml.replace('2 = { approach = "east", turn = "through", startup = "green" }',
                               '2 = { approach = "east", turn = "through", startup = "green", recall = "max", '
-                              'dual_entry = true, walk = 5, ped_clear = 7, passage = 2.5, max2 = 30 }')
+                              'dual_entry = true, walk = 5, ped_clear = 7, passage = 2.5, max2 = 30 }').replace(
+        '4 = { approach = "north", turn = "through" }',
+        '4 = { approach = "north", turn = "through", simultaneous_gap_disable = false }')
     c = Controller(parse(text, "variant.toml"))
     mib = MibView(c)
     options = mib.get(phase_oid(PhaseColumn.OPTIONS, 2))
     assert options == PhaseOption.ENABLED | PhaseOption.MAX_VEHICLE_RECALL | PhaseOption.DUAL_ENTRY | (
         PhaseOption.SIMULTANEOUS_GAP_DISABLE)
     assert mib.get(phase_oid(PhaseColumn.OPTIONS, 1)) == PhaseOption.ENABLED | PhaseOption.SIMULTANEOUS_GAP_DISABLE
+    assert mib.get(phase_oid(PhaseColumn.OPTIONS, 4)) == PhaseOption.ENABLED  # bit 11 clear
     values = {col: mib.get(phase_oid(col, 2)) for col in (PhaseColumn.WALK, PhaseColumn.PEDESTRIAN_CLEAR,
                                                            PhaseColumn.PASSAGE, PhaseColumn.MAXIMUM2,
                                                            PhaseColumn.RED_REVERT)}

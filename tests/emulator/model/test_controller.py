@@ -260,6 +260,19 @@ def test_maximum_timing_restarts_when_the_conflicting_call_goes_away(controller:
     assert runs(trace, 2) == [("G", MAX - 1), ("Y", 1)]
 
 
+@pytest.mark.parametrize(("disable", "ends"), [(True, 151), (False, MAX)])
+def test_simultaneous_gap_disable_keeps_a_gapped_out_green_from_extending_again(paper_toml: str, disable: bool,
+                                                                                 ends: int) -> None:
+    """NTCIP 1202 phaseOptions bit 11, Simultaneous Gap Disable: "when set to 1 disables a gapped out phase from
+    reverting to the extensible portion". 2 gaps out at its minimum and waits at the barrier for 6 (4 is called);
+    its call comes back at 10 s, and 6's call goes at 15 s. With the bit, 2 stays gapped out and both cross as 6
+    gaps out; without it, 2 extends again on its call, to its maximum (timed from the call on 4)."""
+    option = f"simultaneous_gap_disable = {str(disable).lower()}"
+    c = with_options(paper_toml, {2: option, 6: option})
+    seen = onsets(c, 400, {0: {4, 6}, 100: {2, 4, 6}, 150: {2, 4}})
+    assert seen[(2, "Y")] == seen[(6, "Y")] == ends
+
+
 def test_a_gapped_out_green_waits_at_the_barrier_for_the_other_ring(controller: Controller) -> None:
     controller.set_control(CALL, {6, 4})
     trace = record(controller, MAX + 1)

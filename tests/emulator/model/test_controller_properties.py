@@ -1,11 +1,12 @@
 """Safety and liveness of the controller model over random configs and random control SETs.
 
 Configs draw every phase option (passage, recalls, Max2, pedestrians, red
-revert, dual entry, backup prevent), both next-phase locks, overlaps of every
-type and preempts; SETs draw calls, pedestrian calls, omits, holds, force-offs,
-Max2 selection and preempt calls, landing on every tick offset of an interval
-(waits aligned on display changes and on the last ticks of a clearance, and
-one input tried on each tick of a whole clearance). Every tick of every run is
+revert, dual entry, backup prevent, simultaneous gap disable), both
+next-phase locks, overlaps of every type and preempts; SETs draw calls,
+pedestrian calls, omits, holds, force-offs, Max2 selection and preempt
+calls, landing on every tick offset of an interval (waits aligned on
+display changes and on the last ticks of a clearance, and one input tried
+on each tick of a whole clearance). Every tick of every run is
 checked against what a conflict monitor and a timing engineer would demand: no
 two conflicting phases shown together (overlaps included), no channel, phase
 or overlap, from green to red without a yellow of at least its length, every
@@ -52,6 +53,7 @@ def timings(draw: st.DrawFn) -> dict[str, object]:
         "red_revert": draw(st.integers(0, 60)) / 10,
         "dual_entry": draw(st.booleans()),
         "backup_prevent": draw(st.booleans()),
+        "simultaneous_gap_disable": draw(st.booleans()),
     }
     if draw(st.booleans()):
         out["max2"] = draw(st.integers(min_green, 40))

@@ -467,12 +467,14 @@ def test_phase_options_are_read_per_phase_and_from_timing() -> None:
     cfg = parse(toml(timing="min_green = 3\nmax_green = 20\nyellow = 3.0\nred_clear = 2.0\npassage = 1.5\n"
                             "startup_flash = 6",
                      phases={4: '{ walk = 5, ped_clear = 8, recall = "ped", dual_entry = true, max2 = 35 }',
-                             8: '{ recall = "soft", backup_prevent = true, red_revert = 4.5, passage = 0 }'}),
+                             8: '{ recall = "soft", backup_prevent = true, red_revert = 4.5, passage = 0, '
+                                'simultaneous_gap_disable = false }'}),
                 SOURCE)
     four, eight, one = cfg.phases[4], cfg.phases[8], cfg.phases[1]
     assert (four.walk, four.ped_clear, four.recall, four.dual_entry, four.maximum2) == (5, 8, Recall.PED, True, 35)
     assert (eight.recall, eight.backup_prevent, eight.red_revert, eight.passage) == (Recall.SOFT, True, 4.5, 0)
     assert (one.passage, one.maximum2, one.recall, one.dual_entry, one.walk) == (1.5, 20, Recall.NONE, False, 0)
+    assert not eight.simultaneous_gap_disable and four.simultaneous_gap_disable and one.simultaneous_gap_disable
     assert cfg.startup_flash == 6
 
 
@@ -480,8 +482,8 @@ def test_the_paper_config_keeps_the_paper_behaviour(paper_config) -> None:
     from hils.protocol.config import Recall
 
     for ph in paper_config.phases.values():
-        assert (ph.passage, ph.recall, ph.walk, ph.ped_clear, ph.dual_entry, ph.backup_prevent, ph.red_revert) == (
-            0, Recall.NONE, 0, 0, False, False, 0)
+        assert (ph.passage, ph.recall, ph.walk, ph.ped_clear, ph.dual_entry, ph.backup_prevent, ph.red_revert,
+                ph.simultaneous_gap_disable) == (0, Recall.NONE, 0, 0, False, False, 0, True)
     assert paper_config.startup_flash == 0
     assert paper_config.next_phase_lock == "green_end"
 
@@ -496,6 +498,7 @@ def test_the_paper_config_keeps_the_paper_behaviour(paper_config) -> None:
     ({4: "{ max2 = 2 }"}, "", "phases.4.max2", ">= 3"),
     ({4: '{ dual_entry = "yes" }'}, "", "phases.4.dual_entry", "true, false"),
     ({}, "\nbackup_prevent = 1", "timing.backup_prevent", "true, false"),
+    ({4: '{ simultaneous_gap_disable = "off" }'}, "", "phases.4.simultaneous_gap_disable", "true, false"),
     ({}, "\nstartup_flash = 300", "timing.startup_flash", "<= 255"),
     ({}, '\nnext_phase_lock = "yellow_end"', "timing.next_phase_lock", "green_end, red_end"),
     ({}, "\nwalk = 30\nped_clear = 5", "timing.walk", "walk + ped_clear <= max_green"),
