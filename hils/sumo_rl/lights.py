@@ -104,6 +104,9 @@ def derive(net_file: str | Path, sumocfg: Path, timings: Timings) -> tuple[Scena
     params = resco.RescoMap(timings.delta_time, timings.yellow_time, timings.begin_time,
                             timings.begin_time + timings.num_seconds)
     scenario, derived = resco.derive_network(f"{PREFIX}{net_file.name}", sumocfg, net_file, params, given)
+    if not derived:
+        raise EnvOptionError(f"net_file {net_file}: has no traffic light; allowed: a network with at least one (each "
+                             "light is an agent)")
     configs = {tls: light.config.with_middleware(sumo_step=timings.step_length, control_interval=timings.delta_time)
                for tls, light in derived.items()}
     net = sumolib.net.readNet(str(net_file), withPrograms=True)

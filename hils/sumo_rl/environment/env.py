@@ -182,7 +182,7 @@ class SumoEnvironment(gym.Env):
         SumoEnvironment.CONNECTION_LABEL += 1
         self.sumo: Any = None  # libsumo while an episode runs, as sumo-rl's connection
 
-        sumo_args, step_length = _sumo_options(additional_sumo_cmd)
+        sumo_args, step_length = _sumo_options(additional_sumo_cmd, quiet=not sumo_warnings)
         self._scenario_dir = tempfile.TemporaryDirectory(prefix="hils-sumo-rl-")
         sumocfg = scenario_config(net=net_file, routes=str(route_file).split(","), directory=self._scenario_dir.name,
                                   begin=float(begin_time))
@@ -396,7 +396,7 @@ class SumoEnvironment(gym.Env):
         self.sumo = None
 
     def __del__(self) -> None:
-        if hasattr(self, "_simulation"):
+        if "testbed" in self.__dict__:  # not when the constructor refused its arguments
             self.close()
 
     def render(self) -> None:
@@ -427,15 +427,31 @@ class SumoEnvironment(gym.Env):
         return min(int(density * 10), 9)
 
 
-def _sumo_options(additional: str | None) -> tuple[list[str], float]:
+#: SUMO options the environment gives SUMO itself, and the argument that sets each (None: the network is the run's).
+_GIVEN = {"--seed": "sumo_seed", "--end": "num_seconds", "-e": "num_seconds", "--begin": "begin_time",
+          "-b": "begin_time", "--time-to-teleport": "time_to_teleport", "--max-depart-delay": "max_depart_delay",
+          "--waiting-time-memory": "waiting_time_memory", "--net-file": "net_file", "-n": "net_file",
+          "--route-files": "route_file", "-r": "route_file", "--configuration-file": None, "-c": None}
+#: SUMO flags the run always sets (no step log; no warnings when quiet): left out where a command repeats them.
+_SET_ANYWAY = ("--no-step-log", "--no-warnings")
+
+
+def _sumo_options(additional: str | None, quiet: bool) -> tuple[list[str], float]:
     """``additional_sumo_cmd`` as SUMO options, less its ``--step-length`` (the run's SUMO step, which the run gives
-    SUMO itself), and that step (:data:`STEP_LENGTH` without one)."""
+    SUMO itself) and the flags the run sets anyway, with that step (:data:`STEP_LENGTH` without one). An option the
+    environment sets from one of its arguments is refused (SUMO refuses an option given twice)."""
     words = additional.split() if additional else []
     step = STEP_LENGTH
     out: list[str] = []
     rest = iter(words)
     for word in rest:
         name, equals, value = word.partition("=")
+        if name in _GIVEN:
+            argument = _GIVEN[name]
+            raise EnvOptionError(f"additional_sumo_cmd: {name}: the environment gives SUMO this option itself"
+                                 + (f"; allowed: its {argument} argument" if argument else "; allowed: leave it out"))
+        if name in _SET_ANYWAY and (name == "--no-step-log" or quiet):
+            continue
         if name != "--step-length":
             out.append(word)
             continue

@@ -122,6 +122,15 @@ class TrafficSignal:
         self._green_at: dict[int, float] = {}  # each phase shown green: since when
         self._change_at = 0.0
 
+    @property
+    def last_measure(self) -> float:
+        """sumo-rl 1.4.5's name of :attr:`last_ts_waiting_time` (a reward function written for it reads this)."""
+        return self.last_ts_waiting_time
+
+    @last_measure.setter
+    def last_measure(self, value: float) -> None:
+        self.last_ts_waiting_time = value
+
     def _get_reward_fn_from_string(self, reward_fn: str | RewardFn) -> RewardFn:
         if isinstance(reward_fn, str):
             if reward_fn not in TrafficSignal.reward_fns:
