@@ -7,6 +7,30 @@ The names are sumo-rl's (1.4.5 and its repository since: ``enforce_max_green``, 
 :class:`ObservationFunction`, RESCO's eight networks (:func:`grid4x4`...), and the modules under
 ``hils.sumo_rl.environment`` as sumo-rl names its own (``hils.sumo_rl.environment.observations``...). Importing it
 registers ``sumo-rl-v0`` with gymnasium. What differs from sumo-rl, and why, is in ``docs/sumo-rl.md``.
+
+The modules under ``hils.sumo_rl.environment`` follow sumo-rl's of the same names, which carry this notice:
+
+    MIT License
+
+    Copyright (c) 2018 Lucas Alegre
+
+    Permission is hereby granted, free of charge, to any person obtaining a copy
+    of this software and associated documentation files (the "Software"), to deal
+    in the Software without restriction, including without limitation the rights
+    to use, copy, modify, merge, publish, distribute, sublicense, and/or sell
+    copies of the Software, and to permit persons to whom the Software is
+    furnished to do so, subject to the following conditions:
+
+    The above copyright notice and this permission notice shall be included in all
+    copies or substantial portions of the Software.
+
+    THE SOFTWARE IS PROVIDED "AS IS", WITHOUT WARRANTY OF ANY KIND, EXPRESS OR
+    IMPLIED, INCLUDING BUT NOT LIMITED TO THE WARRANTIES OF MERCHANTABILITY,
+    FITNESS FOR A PARTICULAR PURPOSE AND NONINFRINGEMENT. IN NO EVENT SHALL THE
+    AUTHORS OR COPYRIGHT HOLDERS BE LIABLE FOR ANY CLAIM, DAMAGES OR OTHER
+    LIABILITY, WHETHER IN AN ACTION OF CONTRACT, TORT OR OTHERWISE, ARISING FROM,
+    OUT OF OR IN CONNECTION WITH THE SOFTWARE OR THE USE OR OTHER DEALINGS IN THE
+    SOFTWARE.
 """
 
 from hils.sumo_rl.environment.env import ObservationFunction, SumoEnvironment, TrafficSignal, env, parallel_env

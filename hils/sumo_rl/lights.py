@@ -124,24 +124,25 @@ def derive(net_file: str | Path, sumocfg: Path, timings: Timings) -> tuple[Scena
 
 def _check(t: Timings) -> None:
     """Refuse a timing the derived controllers cannot take (the module header's list)."""
+    for name in ("delta_time", "num_seconds", "step_length", "yellow_time", "min_green", "max_green"):
+        value = getattr(t, name)
+        if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value) or value <= 0:
+            raise EnvOptionError(f"{name} {value!r}: allowed: a positive number of seconds")
+    if t.delta_time < t.step_length:
+        raise EnvOptionError(f"delta_time {t.delta_time:g} s is shorter than SUMO's step of {t.step_length:g} s; "
+                             "allowed: delta_time >= the step length")
     low, high = phase_time_range("yellow")
     if not low <= t.yellow_time <= high or abs(round(t.yellow_time * 10) - t.yellow_time * 10) > 1e-9:
         raise EnvOptionError(f"yellow_time {t.yellow_time!r}: a NEMA controller's yellow change is NTCIP 1202's "
                              f"phaseYellowChange; allowed: {low:g}-{high:g} s in tenths (sumo-rl's default of 2 s is "
                              "below it, and a signal monitor faults a yellow under 2.7 s)")
-    for name, value in (("min_green", t.min_green), ("max_green", t.max_green)):
-        high = phase_time_range(name)[1]
+    for name in ("min_green", "max_green"):
+        value, high = getattr(t, name), phase_time_range(name)[1]
         if not 1 <= value <= high or value != int(value):
             raise EnvOptionError(f"{name} {value!r}: allowed: whole seconds, 1-{high:g} (NTCIP 1202)")
     if t.max_green <= t.min_green:
         raise EnvOptionError(f"max_green {t.max_green} s is not above min_green {t.min_green} s; allowed: "
                              "max_green > min_green (as sumo-rl asserts)")
-    for name, value in (("delta_time", t.delta_time), ("num_seconds", t.num_seconds), ("step_length", t.step_length)):
-        if not isinstance(value, int | float) or not math.isfinite(value) or value <= 0:
-            raise EnvOptionError(f"{name} {value!r}: allowed: a positive number of seconds")
-    if t.delta_time < t.step_length:
-        raise EnvOptionError(f"delta_time {t.delta_time:g} s is shorter than SUMO's step of {t.step_length:g} s; "
-                             "allowed: delta_time >= the step length")
 
 
 def _light(net: Any, tls: Any, config: IntersectionConfig, stages: Sequence[int]) -> Light:

@@ -30,29 +30,8 @@ Rules of this module
 - ``out_csv_name``: the info of every step of an episode, written as sumo-rl writes it, to
   ``{out_csv_name}_conn{label}_ep{episode}.csv`` at the next reset or by :meth:`SumoEnvironment.save_csv`.
 
-This follows sumo-rl's ``sumo_rl/environment/env.py``, which carries this notice:
-
-    MIT License
-
-    Copyright (c) 2018 Lucas Alegre
-
-    Permission is hereby granted, free of charge, to any person obtaining a copy
-    of this software and associated documentation files (the "Software"), to deal
-    in the Software without restriction, including without limitation the rights
-    to use, copy, modify, merge, publish, distribute, sublicense, and/or sell
-    copies of the Software, and to permit persons to whom the Software is
-    furnished to do so, subject to the following conditions:
-
-    The above copyright notice and this permission notice shall be included in all
-    copies or substantial portions of the Software.
-
-    THE SOFTWARE IS PROVIDED "AS IS", WITHOUT WARRANTY OF ANY KIND, EXPRESS OR
-    IMPLIED, INCLUDING BUT NOT LIMITED TO THE WARRANTIES OF MERCHANTABILITY,
-    FITNESS FOR A PARTICULAR PURPOSE AND NONINFRINGEMENT. IN NO EVENT SHALL THE
-    AUTHORS OR COPYRIGHT HOLDERS BE LIABLE FOR ANY CLAIM, DAMAGES OR OTHER
-    LIABILITY, WHETHER IN AN ACTION OF CONTRACT, TORT OR OTHERWISE, ARISING FROM,
-    OUT OF OR IN CONNECTION WITH THE SOFTWARE OR THE USE OR OTHER DEALINGS IN THE
-    SOFTWARE.
+This follows sumo-rl's ``sumo_rl/environment/env.py``
+(MIT License, Copyright (c) 2018 Lucas Alegre: its notice is in :mod:`hils.sumo_rl`).
 """
 
 from __future__ import annotations
@@ -159,7 +138,6 @@ class SumoEnvironment(gym.Env):
         self._net, self._route = str(net_file), str(route_file)
         self.use_gui = use_gui
         self.begin_time = begin_time
-        self.sim_max_time = begin_time + num_seconds
         self.delta_time = delta_time
         self.max_depart_delay = max_depart_delay
         self.waiting_time_memory = waiting_time_memory
@@ -189,6 +167,7 @@ class SumoEnvironment(gym.Env):
         self.scenario, self.lights = derive(net_file, sumocfg, Timings(
             delta_time, yellow_time, min_green, max_green, begin_time, num_seconds, step_length))
         self.ts_ids = list(self.lights)
+        self.sim_max_time = begin_time + num_seconds
         self._simulation = SumoSimulation(
             sumo_config=sumocfg, lights=self.scenario.intersections, links=self.scenario.links, end=num_seconds,
             step_length=step_length, time_to_teleport=float(time_to_teleport), quiet=not sumo_warnings, measure=False,

@@ -4,8 +4,8 @@ the installed sumo-rl package carries, with RESCO's begin and one simulated hour
 (a decision every 5 s; these are sumo-rl's environments on RESCO's networks, not hils' ``resco:`` scenarios, which
 take RESCO's own decision interval and the programs' timings).
 
-This follows sumo-rl's ``sumo_rl/environment/resco_envs.py`` (MIT License, Copyright (c) 2018 Lucas Alegre; the full
-notice is in :mod:`hils.sumo_rl.environment.env`).
+This follows sumo-rl's ``sumo_rl/environment/resco_envs.py`` (MIT License, Copyright (c) 2018 Lucas Alegre: its
+notice is in :mod:`hils.sumo_rl`).
 """
 
 from __future__ import annotations

@@ -25,30 +25,8 @@ Rules of this module
   ``diff-waiting-time`` (the default: the fall of the accumulated waiting time, in hundreds of seconds),
   ``average-speed``, ``queue`` (minus the halting vehicles) and ``pressure``.
 
-The names, the reward functions and the lane measures follow sumo-rl's ``sumo_rl/environment/traffic_signal.py``,
-which carries this notice:
-
-    MIT License
-
-    Copyright (c) 2018 Lucas Alegre
-
-    Permission is hereby granted, free of charge, to any person obtaining a copy
-    of this software and associated documentation files (the "Software"), to deal
-    in the Software without restriction, including without limitation the rights
-    to use, copy, modify, merge, publish, distribute, sublicense, and/or sell
-    copies of the Software, and to permit persons to whom the Software is
-    furnished to do so, subject to the following conditions:
-
-    The above copyright notice and this permission notice shall be included in all
-    copies or substantial portions of the Software.
-
-    THE SOFTWARE IS PROVIDED "AS IS", WITHOUT WARRANTY OF ANY KIND, EXPRESS OR
-    IMPLIED, INCLUDING BUT NOT LIMITED TO THE WARRANTIES OF MERCHANTABILITY,
-    FITNESS FOR A PARTICULAR PURPOSE AND NONINFRINGEMENT. IN NO EVENT SHALL THE
-    AUTHORS OR COPYRIGHT HOLDERS BE LIABLE FOR ANY CLAIM, DAMAGES OR OTHER
-    LIABILITY, WHETHER IN AN ACTION OF CONTRACT, TORT OR OTHERWISE, ARISING FROM,
-    OUT OF OR IN CONNECTION WITH THE SOFTWARE OR THE USE OR OTHER DEALINGS IN THE
-    SOFTWARE.
+The names, the reward functions and the lane measures follow sumo-rl's ``sumo_rl/environment/traffic_signal.py``
+(MIT License, Copyright (c) 2018 Lucas Alegre: its notice is in :mod:`hils.sumo_rl`).
 """
 
 from __future__ import annotations

@@ -124,7 +124,9 @@ REFUSED = [
     ({"yellow_time": 2}, "yellow_time 2: a NEMA controller's yellow change is NTCIP 1202's phaseYellowChange; allowed: "
                          "3-25.5 s"),
     ({"yellow_time": 3.25}, "yellow_time 3.25"),
-    ({"min_green": 0}, "min_green 0: allowed: whole seconds, 1-255"),
+    ({"min_green": 0}, "min_green 0: allowed: a positive number of seconds"),
+    ({"min_green": 300}, "min_green 300: allowed: whole seconds, 1-255 (NTCIP 1202)"),
+    ({"delta_time": "5"}, "delta_time '5': allowed: a positive number of seconds"),
     ({"min_green": 4.5}, "min_green 4.5: allowed: whole seconds"),
     ({"max_green": 5}, "max_green 5 s is not above min_green 5 s; allowed: max_green > min_green"),
     ({"delta_time": 3}, "delta_time 3 s: traffic light t clears for 3.1 s (yellow 3 s + the red clearance of its "
