@@ -33,6 +33,8 @@ ALLOWED: dict[str, set[str]] = {
     "report": {"protocol", "shell"},
     "run": {"protocol", "control", "shell", "sim", "agents", "report"},
     "envs": {"protocol", "control", "shell", "sim", "agents", "run"},
+    # sumo-rl's API: its environments on the Testbed, beside hils' own
+    "sumo_rl": {"protocol", "control", "shell", "sim", "agents", "run", "envs"},
     "dashboard": {"protocol", "shell", "sim", "run"},
     # a sweep's cell is one `hils run` (imported where a cell runs, so a Ray worker loads this module first)
     "sweep": {"protocol", "control", "agents", "report", "cli"},

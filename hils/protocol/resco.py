@@ -49,6 +49,10 @@ Rules of this module
   its phase's minimum service (minimum green + yellow + red clearance).
 - The scenario's begin is its ``.sumocfg``'s (cologne 25200 s, ingolstadt 57600 s, as RESCO's map_config
   ``start_time``); a run lasts one simulated hour by default, as RESCO evaluates.
+- Any other network derives the same way (:func:`derive_network`), with the decision interval and default yellow
+  its caller gives (:class:`RescoMap`) and, where given, one yellow, minimum and maximum green for every phase in
+  place of the program's (:class:`Timing`: sumo-rl's ``yellow_time``, ``min_green`` and ``max_green``,
+  :mod:`hils.sumo_rl`); the red clearance stays the program's.
 """
 
 from __future__ import annotations
@@ -73,7 +77,8 @@ from hils.protocol.scenario import RESCO_PREFIX, Scenario, SignalLink
 
 @dataclass(frozen=True, slots=True)
 class RescoMap:
-    """What RESCO's ``map_config.py`` says of a scenario (its ``step_length`` is the decision interval)."""
+    """What RESCO's ``map_config.py`` says of a scenario (its ``step_length`` is the decision interval); for another
+    network, the same facts as its caller gives them."""
 
     decision_interval: float
     yellow: float
@@ -103,6 +108,15 @@ NO_ALL_RED = 0.1
 
 _LEFT, _THROUGH = "left", "through"
 _CORE = {_LEFT: frozenset("lL"), _THROUGH: frozenset("s")}
+
+
+@dataclass(frozen=True, slots=True)
+class Timing:
+    """Timings every phase of a derived light gets in place of its program's (None: the program's)."""
+
+    yellow: float | None = None
+    min_green: int | None = None
+    max_green: int | None = None
 
 
 class RescoError(UserError, ValueError):
@@ -142,16 +156,23 @@ def load(name: str) -> Scenario:
 
 @cache
 def _load(name: str) -> Scenario:
+    cfg = sumo_config(name)
+    return derive_network(f"{RESCO_PREFIX}{name}", cfg, _net_file(cfg), MAPS[name])[0]
+
+
+def derive_network(name: str, sumocfg: Path, net_file: Path, resco: RescoMap, timing: Timing = Timing()
+                   ) -> tuple[Scenario, dict[str, DerivedLight]]:
+    """The scenario ``name`` of the network ``net_file`` run by ``sumocfg``: every traffic light (by id) a controller
+    derived from its program; with each light's derivation (its stages among the program's phases)."""
     import sumolib  # here: `hils` names RESCO's scenarios at every start, and reads a network only to load one
 
-    cfg = sumo_config(name)
-    net = sumolib.net.readNet(str(_net_file(cfg)), withPrograms=True)
-    configs, links = {}, {}
-    for tls in sorted(net.getTrafficLights(), key=lambda t: t.getID()):
-        light = derive(tls, MAPS[name], f"{RESCO_PREFIX}{name}")
-        configs[tls.getID()], links[tls.getID()] = light.config, light.links
-    return Scenario(f"{RESCO_PREFIX}{name}", f"{RESCO_PREFIX}{name} ({cfg})", cfg, MappingProxyType(configs),
-                    MappingProxyType(links))
+    net = sumolib.net.readNet(str(net_file), withPrograms=True)
+    lights = {tls.getID(): derive(tls, resco, name, timing)
+              for tls in sorted(net.getTrafficLights(), key=lambda t: t.getID())}
+    scenario = Scenario(name, f"{name} ({sumocfg})", sumocfg,
+                        MappingProxyType({tls: light.config for tls, light in lights.items()}),
+                        MappingProxyType({tls: light.links for tls, light in lights.items()}))
+    return scenario, lights
 
 
 def _net_file(sumocfg: Path) -> Path:
@@ -167,12 +188,14 @@ def _net_file(sumocfg: Path) -> Path:
 @dataclass(frozen=True)
 class DerivedLight:
     """One light's derived controller: its config (as a TOML-shaped table and validated), how each of its signal
-    links follows the phases, and which structure fitted."""
+    links follows the phases, which structure fitted, and the program phase each stage (each pair of the config's
+    sequence, in its order) comes from."""
 
     config: IntersectionConfig
     links: tuple[SignalLink, ...]
     structure: str  # "dual-ring" or "split phase"
     table: Mapping[str, Any] = field(repr=False)
+    stages: tuple[int, ...] = ()
 
 
 @dataclass
@@ -211,8 +234,9 @@ class _Light:
         return frozenset(k for k, s in enumerate(self.stages) if s[i] == "g")
 
 
-def derive(tls: Any, resco: RescoMap, scenario: str) -> DerivedLight:
-    """The NEMA controller of the sumolib traffic light ``tls`` (read with programs), as the module header says."""
+def derive(tls: Any, resco: RescoMap, scenario: str, timing: Timing = Timing()) -> DerivedLight:
+    """The NEMA controller of the sumolib traffic light ``tls`` (read with programs), as the module header says;
+    ``timing`` replaces the program's yellow, minimum and maximum green of every phase where it gives them."""
     light = _read(tls, f"{scenario}: traffic light {tls.getID()}")
     movements = _movements(light)
     try:
@@ -222,7 +246,7 @@ def derive(tls: Any, resco: RescoMap, scenario: str) -> DerivedLight:
         phases, links = _split_phase(light)
         structure = "split phase"
     _number(phases)
-    table = _table(light, phases, resco, structure)
+    table = _table(light, phases, resco, structure, timing)
     plan = _plan(light, table)
     if isinstance(plan, dict):  # free at power-up, as the phase-commanding agents need
         table["coordination"] = {"pattern": "free", "patterns": [plan]}
@@ -235,7 +259,7 @@ def derive(tls: Any, resco: RescoMap, scenario: str) -> DerivedLight:
     bound = tuple(SignalLink(None) if link is None else
                   SignalLink(phases[link[0]].number, link[1], _numbers(phases, link[2]), _numbers(phases, link[3]))
                   for link in links)
-    return DerivedLight(config, bound, structure, MappingProxyType(table))
+    return DerivedLight(config, bound, structure, MappingProxyType(table), light.stage_at)
 
 
 def source_of(scenario: str, tls: str) -> str:
@@ -526,8 +550,9 @@ def _numbers(phases: Sequence[_Phase], indices: Iterable[int]) -> tuple[int, ...
     return tuple(sorted(phases[n].number for n in indices))
 
 
-def _table(light: _Light, phases: list[_Phase], resco: RescoMap, structure: str) -> dict[str, Any]:
-    """The config as TOML would hold it: phases with their program timings, the structure, the middleware."""
+def _table(light: _Light, phases: list[_Phase], resco: RescoMap, structure: str, timing: Timing) -> dict[str, Any]:
+    """The config as TOML would hold it: phases with their program timings (or ``timing``'s), the structure, the
+    middleware."""
     stage_pairs = []
     for k in range(len(light.stages)):
         here = sorted((p for p in phases if k in p.stages), key=lambda p: p.ring)
@@ -536,7 +561,9 @@ def _table(light: _Light, phases: list[_Phase], resco: RescoMap, structure: str)
     for p in sorted(phases, key=lambda p: p.number):
         yellow, red_clear = _clearance(light, p, resco)
         low, high = _green_limits(light, p)
-        entry: dict[str, Any] = {"min_green": low, "max_green": high, "yellow": yellow, "red_clear": red_clear}
+        given = {"min_green": timing.min_green, "max_green": timing.max_green, "yellow": timing.yellow}
+        entry: dict[str, Any] = {"min_green": low, "max_green": high, "yellow": yellow, "red_clear": red_clear} | {
+            key: value for key, value in given.items() if value is not None}
         if p.number in stage_pairs[0]:
             entry["startup"] = "green"
         table_phases[str(p.number)] = entry

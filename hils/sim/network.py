@@ -346,9 +346,9 @@ def _approach_labels(net: Any, edges: Iterable[str]) -> dict[str, str]:
 
 def scenario_config(*, sumocfg: str | Path | None = None, net: str | Path | None = None,
                     routes: str | Path | Sequence[str | Path] | None = None,
-                    directory: str | Path | None = None) -> Path | None:
+                    directory: str | Path | None = None, begin: float = 0.0) -> Path | None:
     """The ``.sumocfg`` of a scenario: ``sumocfg`` as given, or one written into ``directory`` for
-    ``net`` and ``routes`` (both needed); None for the shipped four-leg scenario."""
+    ``net`` and ``routes`` (both needed), starting at ``begin`` (s); None for the shipped four-leg scenario."""
     if sumocfg is not None:
         if net is not None or routes is not None:
             raise NetworkError("give either a .sumocfg or a network and routes, not both")
@@ -370,7 +370,8 @@ def scenario_config(*, sumocfg: str | Path | None = None, net: str | Path | None
         '<?xml version="1.0" encoding="UTF-8"?>\n<sumoConfiguration>\n    <input>\n'
         f'        <net-file value="{Path(net).resolve()}"/>\n'
         f'        <route-files value="{",".join(str(r.resolve()) for r in route_files)}"/>\n'
-        '    </input>\n</sumoConfiguration>\n', encoding="utf-8")
+        f'    </input>\n    <time>\n        <begin value="{begin!r}"/>\n    </time>\n</sumoConfiguration>\n',
+        encoding="utf-8")
     return out
 
 

@@ -278,8 +278,8 @@ class _Readings:
         now = libsumo.simulation.getTime()
         if now != self._time:
             self._time, self._lanes = now, {}
-            departed = _stat("stats.vehicles.inserted")
-            self._counts = (int(departed), int(departed - _stat("stats.vehicles.running")))
+            departed = statistic("stats.vehicles.inserted")
+            self._counts = (int(departed), int(departed - statistic("stats.vehicles.running")))
         lanes = self._lanes
         for n in names:
             if n not in lanes:
@@ -534,13 +534,13 @@ class SumoSimulation:
     def summary(self) -> RunSummary:
         """Every vehicle counted: arrived, running, waiting to enter, with delays so far (see
         :class:`RunSummary` for what each figure counts); without ``measure``, the counts only."""
-        departed = int(_stat("stats.vehicles.inserted"))
-        running = int(_stat("stats.vehicles.running"))
+        departed = int(statistic("stats.vehicles.inserted"))
+        running = int(statistic("stats.vehicles.running"))
         arrived = departed - running
         if not self.measure:
             return RunSummary(self.time - self.begin, departed, arrived, running,
                               len(libsumo.simulation.getPendingVehicles()), None, None, None, {}, {},
-                              int(_stat("stats.safety.collisions")), int(_stat("stats.teleports.total")),
+                              int(statistic("stats.safety.collisions")), int(statistic("stats.teleports.total")),
                               (NOT_MEASURED_NOTE,), self.begin)
         self._sample_vehicles()
         delays = {a: list(done) for a, done in self._finished.items()}
@@ -573,12 +573,12 @@ class SumoSimulation:
             running=running,
             waiting_to_enter=len(pending),
             mean_delay=sum(every) / len(every) if every else None,
-            mean_time_loss=_stat("device.tripinfo.vehicleTripStatistics.timeLoss") if arrived else None,
-            mean_waiting_time=_stat("device.tripinfo.vehicleTripStatistics.waitingTime") if arrived else None,
+            mean_time_loss=statistic("device.tripinfo.vehicleTripStatistics.timeLoss") if arrived else None,
+            mean_waiting_time=statistic("device.tripinfo.vehicleTripStatistics.waitingTime") if arrived else None,
             max_queue=dict(self._max_queue),
             approaches=approaches,
-            collisions=int(_stat("stats.safety.collisions")),
-            teleports=int(_stat("stats.teleports.total")),
+            collisions=int(statistic("stats.safety.collisions")),
+            teleports=int(statistic("stats.teleports.total")),
             notes=tuple(notes),
             begin=self.begin,
         )
@@ -636,7 +636,7 @@ def _vehicle_spacing() -> float:
     return sum(vtype.getLength(t) + vtype.getMinGap(t) for t in types) / len(types)
 
 
-def _stat(key: str) -> float:
+def statistic(key: str) -> float:
     """One of SUMO's running statistics (vehicle counts, trip means of the arrived)."""
     return float(libsumo.simulation.getParameter("", key))
 
