@@ -109,6 +109,32 @@ _TIMING_COLUMNS: dict[PhaseColumn, tuple[str, int]] = {
     PhaseColumn.RED_REVERT: ("red_revert", 1),
 }
 
+_FROM_CONFIG = "taken from the intersection config, which is validated whole before the controller starts"
+_STRUCTURE = f"the ring-and-barrier structure: {_FROM_CONFIG} (rings, barriers, concurrency and sequence agree)"
+#: Objects the standard makes writable that the emulator serves read-only (a SET is refused notWritable), and why:
+#: the model takes them from the intersection config and does not rebuild itself while it runs.
+NOT_WRITABLE_HERE: dict[str, str] = {
+    "phaseStartup": f"a phase's start-up interval: {_FROM_CONFIG}",
+    "phaseOptions": f"a phase's recalls, dual entry and options: {_FROM_CONFIG}",
+    "phaseRing": _STRUCTURE,
+    "phaseConcurrency": _STRUCTURE,
+    "sequenceData": _STRUCTURE,
+    "vehicleDetectorOptions": f"the detectors' wiring to phases: {_FROM_CONFIG}",
+    "vehicleDetectorCallPhase": f"the detectors' wiring to phases: {_FROM_CONFIG}",
+    "pedestrianDetectorCallPhase": f"the push buttons' wiring to phases: {_FROM_CONFIG}",
+    "overlapType": f"an overlap's kind and phases (the monitor's conflict check is built from them): {_FROM_CONFIG}",
+    "overlapIncludedPhases": f"an overlap's kind and phases (the monitor's conflict check is built from them): "
+                             f"{_FROM_CONFIG}",
+    "overlapModifierPhases": f"an overlap's kind and phases (the monitor's conflict check is built from them): "
+                             f"{_FROM_CONFIG}",
+    "preemptControl": f"a preempt's options and phases: {_FROM_CONFIG}",
+    "preemptLink": f"a preempt's options and phases: {_FROM_CONFIG}",
+    "preemptTrackPhase": f"a preempt's options and phases: {_FROM_CONFIG}",
+    "preemptDwellPhase": f"a preempt's options and phases: {_FROM_CONFIG}",
+    "preemptDwellPed": f"a preempt's options and phases: {_FROM_CONFIG}",
+    "preemptExitPhase": f"a preempt's options and phases: {_FROM_CONFIG}",
+}
+
 _RECALL_BITS = {
     Recall.NONE: PhaseOption(0),
     Recall.MIN: PhaseOption.MIN_VEHICLE_RECALL,

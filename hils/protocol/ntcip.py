@@ -1,5 +1,10 @@
-"""NTCIP 1202 v02 object model, SNMP value types and the latency model: what the middleware and
+"""NTCIP 1202 object model, SNMP value types and the latency model: what the middleware and
 the emulator share (the emulator imports nothing else of hils but the intersection config).
+
+Each object is defined as an edition of the standard defines it (:class:`Version`): v02, what an Econolite
+Cobalt speaks, unless the object is one v03 added. Where v03 changed an object hils knows, :data:`V03_CHANGES`
+says how. The definitions are checked against the compiled NTCIP 1202 v03 MIB by
+:mod:`harness.reference.mib_conformance`.
 
 This is the only module that spells an OID. Everything else names objects by
 the definitions below and builds instance OIDs with the helpers here, so an
@@ -15,7 +20,7 @@ from __future__ import annotations
 import random
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from enum import Enum, IntEnum, IntFlag
+from enum import Enum, IntEnum, IntFlag, StrEnum
 
 Oid = tuple[int, ...]
 Value = int | bytes  # what an NTCIP object holds: INTEGER or OCTET STRING
@@ -33,6 +38,27 @@ class Syntax(Enum):
 class Access(Enum):
     READ_ONLY = "read-only"
     READ_WRITE = "read-write"
+
+
+class Version(StrEnum):
+    """An edition of NTCIP 1202 (of its ASC MIB)."""
+
+    V02 = "v02"
+    V03 = "v03"
+
+
+#: The edition the emulator serves and the middleware assumes: v02, what an Econolite Cobalt speaks (DESIGN.md);
+#: an object v03 added is served as v03 defines it.
+DEFAULT_VERSION = Version.V02
+
+#: Where NTCIP 1202 v03 (1202v0328) defines an object otherwise than v02, among the objects hils knows: how, and
+#: where v02's definition is read. The v02 text is not at hand here: v02's side comes from the ASC MIB before v03
+#: (1202ASC.mib as pysmi compiled it into ASC_MIB1, in the repository Metrolla-Inc/ntcipy), which issue 36 confirms
+#: for v02.
+V03_CHANGES: dict[str, str] = {
+    "patternSplitNumber": 'read-write before v03 (ASC_MIB1: patternSplitNumber.setMaxAccess("read-write")); '
+                          "read-only in v03 (1202v0328 5.5.7.4)",
+}
 
 
 #: Environment variables holding SNMPv3 keys (pass phrases) when a target URL or
@@ -241,14 +267,15 @@ class ObjectDef:
     access: Access
     low: int = 0
     high: int = 255
+    version: Version = DEFAULT_VERSION  # the edition whose definition this is
 
     def instance(self, *index: int) -> Oid:
         return self.prefix + (index or (0,))
 
 
 def _o(name: str, suffix: Oid, syntax: Syntax = Syntax.INTEGER, access: Access = Access.READ_ONLY,
-       low: int = 0, high: int = 255) -> ObjectDef:
-    return ObjectDef(name, ASC + suffix, syntax, access, low, high)
+       low: int = 0, high: int = 255, version: Version = DEFAULT_VERSION) -> ObjectDef:
+    return ObjectDef(name, ASC + suffix, syntax, access, low, high, version)
 
 
 MAX_PHASES = _o("maxPhases", (1, 1))
@@ -506,7 +533,8 @@ MAX_VEHICLE_DETECTORS = _o("maxVehicleDetectors", (2, 1))
 VEHICLE_DETECTOR_OPTIONS = _o("vehicleDetectorOptions", (2, 2, 1, 2))
 VEHICLE_DETECTOR_CALL_PHASE = _o("vehicleDetectorCallPhase", (2, 2, 1, 4))
 DETECTOR_STATUS_ACTIVE = _o("vehicleDetectorStatusGroupActive", (2, 4, 1, 2))
-DETECTOR_ACTUATION = _o("vehicleDetectorControlGroupActuation", (2, 12, 1, 2), access=Access.READ_WRITE)
+DETECTOR_ACTUATION = _o("vehicleDetectorControlGroupActuation", (2, 12, 1, 2), access=Access.READ_WRITE,
+                        version=Version.V03)
 # Pedestrian detectors (push buttons) likewise: the table's call phase, the active ones by group of 8, and v03's
 # remote actuation (pedestrianDetectorControlGroupActuation, what Signal-Replay SETs to replay a field log's
 # pedestrian detector events).
@@ -514,7 +542,8 @@ MAX_PED_DETECTORS = _o("maxPedestrianDetectors", (2, 6))
 PED_DETECTOR_CALL_PHASE = _o("pedestrianDetectorCallPhase", (2, 7, 1, 2))
 MAX_PED_DETECTOR_GROUPS = _o("maxPedestrianDetectorGroups", (2, 8))
 PED_DETECTOR_STATUS_ACTIVE = _o("pedestrianDetectorStatusGroupActive", (2, 9, 1, 2))
-PED_DETECTOR_ACTUATION = _o("pedestrianDetectorControlGroupActuation", (2, 13, 1, 2), access=Access.READ_WRITE)
+PED_DETECTOR_ACTUATION = _o("pedestrianDetectorControlGroupActuation", (2, 13, 1, 2), access=Access.READ_WRITE,
+                            version=Version.V03)
 
 ALL_OBJECTS: tuple[ObjectDef, ...] = (
     MAX_PHASES, MAX_PHASE_GROUPS, UNIT_STARTUP_FLASH, UNIT_BACKUP_TIME, UNIT_CONTROL_STATUS, UNIT_FLASH_STATUS,
