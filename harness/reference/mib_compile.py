@@ -280,7 +280,9 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="python -m harness.reference.mib_compile",
         description=f"Compile the NTCIP 1202 v03 MIB texts of {FOLDER} with pysmi into {OUTPUT.name}, the reference "
-                    "the emulator's objects are checked against (needs pysmi: pip install -e '.[mib]').")
+                    "the emulator's objects are checked against. Needs pysmi 2.0 and nothing else of hils: best in an "
+                    "environment of its own (pip install 'pysmi>=2.0,<2.1'; PYTHONPATH=REPOSITORY), as pysnmp, where "
+                    "pysmi is importable, builds pysmi's parser at an engine's first request.")
     parser.add_argument("--check", action="store_true",
                         help=f"write nothing; exit 1 when {OUTPUT.name} is not what the texts compile to")
     args = parser.parse_args(argv)

@@ -238,8 +238,8 @@ def walk_findings(mib: Mib, walked: Sequence[Walked]) -> list[Finding]:
         out += [Finding(Verdict.FINDING, obj.name, "index", problem, shown) for problem in _index(mib, obj, w.oid)]
         if obj.table is not None and len(w.oid) > len(obj.oid):
             rows[obj.table].add(w.oid[len(obj.oid)])
-    values = {mib.object_for(w.oid).name: w.value for w in walked
-              if mib.object_for(w.oid) is not None and w.oid[-1] == 0}
+    scalars = ((mib.object_for(w.oid), w) for w in walked)
+    values = {obj.name: w.value for obj, w in scalars if obj is not None and obj.table is None}
     for table, numbers in rows.items():
         count = mib.tables[table].rows
         if count is None:
