@@ -44,6 +44,7 @@ from pathlib import Path
 from emulator.agent.mib import NOT_WRITABLE_HERE
 from harness.bench.processes import start_emulator, tool
 from harness.reference.mib import Mib, MibObject, load
+from hils.protocol import config as config_mod
 from hils.protocol.ntcip import (
     ALL_OBJECTS,
     ASC,
@@ -421,6 +422,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.target:
             report = check(_target(args.target), sets=args.set)
         else:
+            config_mod.load(args.config)  # a config that cannot serve is said in one line, before anything starts
             with served_emulator(args.config) as agent:
                 report = check(agent, sets=True)
     except (ValueError, RuntimeError) as exc:

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from harness.reference import mib_compile
+from harness.reference import mib_compile, mib_conformance
 from harness.reference.mib import REFERENCE, load
 from harness.reference.mib_conformance import Verdict, Walked, definition_findings, parse_walk, walk_findings
 from hils.protocol.ntcip import (
@@ -153,3 +153,11 @@ def test_the_reference_is_json_with_its_source_and_mends() -> None:
     assert doc["source"]["repository"] == "ibrahimkesim/ntcip-2025"
     assert len(doc["mends"]) == len(mib_compile.MENDS) and doc["compiled_by"].startswith("pysmi 2.0")
     assert doc["source"] == mib_compile.UPSTREAM and doc["stand_ins"] == sorted(mib_compile.STAND_INS)
+
+
+def test_a_config_that_cannot_be_read_is_said_in_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    missing = tmp_path / "nope.toml"
+    with pytest.raises(SystemExit) as info:
+        mib_conformance.main(["--config", str(missing)])
+    err = capsys.readouterr().err
+    assert info.value.code == 2 and str(missing) in err and "cannot be read" in err and err.count("\n") == 1
