@@ -10,22 +10,35 @@ whole before anything is applied, so a refused SET changes nothing.
 The phase table's timing columns are writable with NTCIP 1202's ranges, as on
 a real controller, so a lab can retime the emulator live; a SET acts from the
 next interval of that phase on (a green or clearance being timed keeps the
-lengths it started with). Start-up, options, ring and concurrency are read-only
-here: they come from the intersection config. ringControlGroupMax2 selects
-Maximum 2 per ring (bit 0 = ring 1) from the ring's next green.
+lengths it started with). The objects the model takes from the intersection
+config (a phase's start-up, options, ring and concurrency, the detectors' wiring,
+an overlap's or a preempt's phases) are writable in the standard but read-only
+here: :data:`NOT_WRITABLE_HERE` lists them with why. ringControlGroupMax2
+selects Maximum 2 per ring (bit 0 = ring 1) from the ring's next green.
+
+Every static table has rows 1..its max object, as the MIB says ("The number of
+rows in this table is equal to the maxPhases object"; every max object is
+1..255): a number the config leaves out, or the only row of a table the config
+leaves empty (no overlap, no preempt, no pattern), is an unprogrammed row, as
+the MIB defines one: a phase with phaseRing 0 and phaseOptions bit 0 clear, a
+detector calling phase 0, an overlap with no included phase, a preempt with no
+phases whose input (preemptControlState) calls nothing. Its times can be SET
+and read back; they act on nothing.
 """
 
 from __future__ import annotations
 
 import bisect
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import Any
 
-from emulator.model.controller import Controller
+from emulator.model.controller import Controller, Timing
 from emulator.model.delays import DelayedController
-from hils.protocol.config import OverlapKind, Phase, Recall
+from emulator.model.overlaps import OverlapTiming
+from emulator.model.preemption import PreemptTiming
+from hils.protocol.config import IntersectionConfig, Overlap, OverlapKind, Phase, Preempt, Recall
 from hils.protocol.ntcip import (
     CHANNEL_TABLE,
     CONTROL_TABLE,
@@ -37,6 +50,7 @@ from hils.protocol.ntcip import (
     DETECTOR_ACTUATION,
     DETECTOR_STATUS_ACTIVE,
     LOCAL_FREE_STATUS,
+    MAX_CHANNEL_STATUS_GROUPS,
     MAX_OVERLAP_STATUS_GROUPS,
     MAX_OVERLAPS,
     MAX_PATTERNS,
@@ -45,7 +59,10 @@ from hils.protocol.ntcip import (
     MAX_PHASE_GROUPS,
     MAX_PHASES,
     MAX_PREEMPTS,
+    MAX_RING_CONTROL_GROUPS,
     MAX_SPLITS,
+    MAX_VEHICLE_DETECTOR_CONTROL_GROUPS,
+    MAX_VEHICLE_DETECTOR_STATUS_GROUPS,
     MAX_VEHICLE_DETECTORS,
     OVERLAP_STATUS_TABLE,
     OVERLAP_TABLE,
@@ -75,6 +92,7 @@ from hils.protocol.ntcip import (
     ControlColumn,
     CoordCorrectionMode,
     CoordForceMode,
+    DetectorOption,
     ErrorStatus,
     ObjectDef,
     Oid,
@@ -84,13 +102,16 @@ from hils.protocol.ntcip import (
     PatternColumn,
     PhaseColumn,
     PhaseOption,
+    PhaseStartup,
     PreemptColumn,
+    PreemptState,
     SnmpError,
     SplitColumn,
     SplitMode,
     StatusColumn,
     Syntax,
     Value,
+    group_count,
     groups_to_phases,
     phases_to_groups,
     sequence_oid,
@@ -107,6 +128,32 @@ _TIMING_COLUMNS: dict[PhaseColumn, tuple[str, int]] = {
     PhaseColumn.YELLOW_CHANGE: ("yellow", 1),
     PhaseColumn.RED_CLEAR: ("red_clear", 1),
     PhaseColumn.RED_REVERT: ("red_revert", 1),
+}
+
+_FROM_CONFIG = "taken from the intersection config, which is validated whole before the controller starts"
+_STRUCTURE = f"the ring-and-barrier structure: {_FROM_CONFIG} (rings, barriers, concurrency and sequence agree)"
+#: Objects the standard makes writable that the emulator serves read-only (a SET is refused notWritable), and why:
+#: the model takes them from the intersection config and does not rebuild itself while it runs.
+NOT_WRITABLE_HERE: dict[str, str] = {
+    "phaseStartup": f"a phase's start-up interval: {_FROM_CONFIG}",
+    "phaseOptions": f"a phase's recalls, dual entry and options: {_FROM_CONFIG}",
+    "phaseRing": _STRUCTURE,
+    "phaseConcurrency": _STRUCTURE,
+    "sequenceData": _STRUCTURE,
+    "vehicleDetectorOptions": f"the detectors' wiring to phases: {_FROM_CONFIG}",
+    "vehicleDetectorCallPhase": f"the detectors' wiring to phases: {_FROM_CONFIG}",
+    "pedestrianDetectorCallPhase": f"the push buttons' wiring to phases: {_FROM_CONFIG}",
+    "overlapType": f"an overlap's kind and phases (the monitor's conflict check is built from them): {_FROM_CONFIG}",
+    "overlapIncludedPhases": f"an overlap's kind and phases (the monitor's conflict check is built from them): "
+                             f"{_FROM_CONFIG}",
+    "overlapModifierPhases": f"an overlap's kind and phases (the monitor's conflict check is built from them): "
+                             f"{_FROM_CONFIG}",
+    "preemptControl": f"a preempt's options and phases: {_FROM_CONFIG}",
+    "preemptLink": f"a preempt's options and phases: {_FROM_CONFIG}",
+    "preemptTrackPhase": f"a preempt's options and phases: {_FROM_CONFIG}",
+    "preemptDwellPhase": f"a preempt's options and phases: {_FROM_CONFIG}",
+    "preemptDwellPed": f"a preempt's options and phases: {_FROM_CONFIG}",
+    "preemptExitPhase": f"a preempt's options and phases: {_FROM_CONFIG}",
 }
 
 _RECALL_BITS = {
@@ -127,6 +174,20 @@ def phase_options(ph: Phase) -> PhaseOption:
     if ph.simultaneous_gap_disable:
         bits |= PhaseOption.SIMULTANEOUS_GAP_DISABLE
     return bits
+
+
+#: What a configured vehicle detector does (vehicleDetectorOptions): it calls its phase ("Bit 7: Call") and, on its
+#: green, restarts the phase's passage timer ("Bit 4: Passage").
+DETECTOR_OPTIONS = DetectorOption.CALL | DetectorOption.PASSAGE
+#: The timings of an unprogrammed phase: none, but the yellow at NEMA's 3.0 s (the lowest phaseYellowChange).
+_UNPROGRAMMED_TIMING = {"min_green": 0, "max1": 0, "max2": 0, "passage": 0, "walk": 0, "ped_clear": 0, "yellow": 30,
+                        "red_clear": 0, "red_revert": 0}
+
+
+def _rows(numbers: Iterable[int]) -> range:
+    """The rows of a static table: 1..the highest configured number, at least one (the max object that counts
+    them is 1..255)."""
+    return range(1, max(numbers, default=1) + 1)
 
 
 @dataclass(frozen=True, slots=True)
@@ -202,6 +263,9 @@ class MibView:
         groups = cfg.groups
         out = [
             Instance(MAX_PHASES.instance(), MAX_PHASES, lambda: max(cfg.phases)),
+            Instance(MAX_CHANNEL_STATUS_GROUPS.instance(), MAX_CHANNEL_STATUS_GROUPS, lambda: groups),
+            Instance(MAX_RING_CONTROL_GROUPS.instance(), MAX_RING_CONTROL_GROUPS,
+                     lambda: group_count(len(cfg.rings))),
             Instance(MAX_PHASE_GROUPS.instance(), MAX_PHASE_GROUPS, lambda: groups),
             Instance(UNIT_STARTUP_FLASH.instance(), UNIT_STARTUP_FLASH, lambda: c.startup_flash,
                      lambda v: setattr(c, "startup_flash", v)),
@@ -214,17 +278,14 @@ class MibView:
                      c.set_pattern_control),
             *_coordination(c),
         ]
-        for p, ph in cfg.phases.items():
-            concurrent = bytes(sorted(q for q in cfg.phases if cfg.compatible(p, q)))
-            fixed: dict[PhaseColumn, Value] = {
-                PhaseColumn.STARTUP: int(ph.startup),
-                PhaseColumn.OPTIONS: int(phase_options(ph)),
-                PhaseColumn.RING: ph.ring,
-                PhaseColumn.CONCURRENCY: concurrent,
-            }
-            out += [Instance(PHASE_TABLE[col].instance(p), PHASE_TABLE[col], lambda v=v: v)
-                    for col, v in fixed.items()]
-            out += [Instance(PHASE_TABLE[col].instance(p), PHASE_TABLE[col], *_timing_access(c, p, name, unit))
+        for p in _rows(cfg.phases):
+            ph = cfg.phases.get(p)
+            unprogrammed = None if ph else Timing(**_UNPROGRAMMED_TIMING)
+            out += [Instance(PHASE_TABLE[col].instance(p), PHASE_TABLE[col], _constant(v))
+                    for col, v in _phase_row(cfg, p, ph).items()]
+            out += [Instance(PHASE_TABLE[col].instance(p), PHASE_TABLE[col],
+                             *(_field_access(c, unprogrammed, name, unit) if unprogrammed
+                               else _timing_access(c, p, name, unit)))
                     for col, (name, unit) in _TIMING_COLUMNS.items()]
         out.append(Instance(RING_CONTROL_MAX2.instance(1), RING_CONTROL_MAX2,
                             lambda: sum(1 << (r - 1) for r in c.max2_rings),
@@ -259,26 +320,42 @@ class MibView:
         out += _preempts(c)
         for r, order in enumerate(cfg.rings, start=1):
             out.append(Instance(sequence_oid(1, r), SEQUENCE_DATA, lambda o=order: bytes(o)))
-        out += _detectors(cfg.detectors, MAX_VEHICLE_DETECTORS, VEHICLE_DETECTOR_CALL_PHASE, None,
+        out += _detectors(cfg.detectors, MAX_VEHICLE_DETECTORS, VEHICLE_DETECTOR_CALL_PHASE,
+                          (MAX_VEHICLE_DETECTOR_STATUS_GROUPS, MAX_VEHICLE_DETECTOR_CONTROL_GROUPS),
                           DETECTOR_STATUS_ACTIVE, DETECTOR_ACTUATION, lambda: c.actuations, c.set_actuations)
-        out.extend(Instance(VEHICLE_DETECTOR_OPTIONS.instance(d), VEHICLE_DETECTOR_OPTIONS, lambda: 0)
-                   for d in cfg.detectors)
-        out += _detectors(cfg.ped_detectors, MAX_PED_DETECTORS, PED_DETECTOR_CALL_PHASE, MAX_PED_DETECTOR_GROUPS,
+        out.extend(Instance(VEHICLE_DETECTOR_OPTIONS.instance(d), VEHICLE_DETECTOR_OPTIONS,
+                            _constant(int(DETECTOR_OPTIONS if d in cfg.detectors else 0)))
+                   for d in _rows(cfg.detectors))
+        out += _detectors(cfg.ped_detectors, MAX_PED_DETECTORS, PED_DETECTOR_CALL_PHASE, (MAX_PED_DETECTOR_GROUPS,),
                           PED_DETECTOR_STATUS_ACTIVE, PED_DETECTOR_ACTUATION, lambda: c.ped_actuations,
                           c.set_ped_actuations)
         return out
 
 
-def _detectors(call_phases: dict[int, int], maximum: ObjectDef, call_phase: ObjectDef, max_groups: ObjectDef | None,
-               active: ObjectDef, actuation: ObjectDef, read: Callable[[], frozenset[int]],
-               write: Callable[[frozenset[int]], None]) -> list[Instance]:
-    """One kind of detector: how many, the phase each calls, and by group of 8 the active ones and their remote
-    actuation (a SET of a group past the last is noSuchName in SNMPv1: that group does not exist)."""
-    groups = (max(call_phases) + 7) // 8
-    out = [Instance(maximum.instance(), maximum, lambda: max(call_phases))]
-    if max_groups is not None:
-        out.append(Instance(max_groups.instance(), max_groups, lambda: groups))
-    out += [Instance(call_phase.instance(d), call_phase, lambda phase=phase: phase) for d, phase in call_phases.items()]
+def _phase_row(cfg: IntersectionConfig, p: int, ph: Phase | None) -> dict[PhaseColumn, Value]:
+    """The columns of a phase's row that the config sets; an unprogrammed phase is disabled as the MIB says: start-up
+    other ("this phase is not enabled (phaseOptions bit 0=0 or phaseRing=0)"), no option, ring 0 ("If the ring
+    number is zero, the phase is disabled"), no concurrent phase."""
+    if ph is None:
+        return {PhaseColumn.STARTUP: int(PhaseStartup.OTHER), PhaseColumn.OPTIONS: 0, PhaseColumn.RING: 0,
+                PhaseColumn.CONCURRENCY: b""}
+    return {PhaseColumn.STARTUP: int(ph.startup), PhaseColumn.OPTIONS: int(phase_options(ph)),
+            PhaseColumn.RING: ph.ring,
+            PhaseColumn.CONCURRENCY: bytes(sorted(q for q in cfg.phases if cfg.compatible(p, q)))}
+
+
+def _detectors(call_phases: dict[int, int], maximum: ObjectDef, call_phase: ObjectDef,
+               group_counts: tuple[ObjectDef, ...], active: ObjectDef, actuation: ObjectDef,
+               read: Callable[[], frozenset[int]], write: Callable[[frozenset[int]], None]) -> list[Instance]:
+    """One kind of detector: how many, the phase each calls (0 for an unprogrammed one: "The associated detector
+    call capability is enabled when this object is set to a non-zero value"), how many groups of 8, and by group
+    the active ones and their remote actuation (a SET of a group past the last is noSuchName in SNMPv1: that group
+    does not exist)."""
+    numbers = _rows(call_phases)
+    groups = group_count(numbers[-1])
+    out = [Instance(maximum.instance(), maximum, lambda: numbers[-1])]
+    out += [Instance(count.instance(), count, lambda: groups) for count in group_counts]
+    out += [Instance(call_phase.instance(d), call_phase, _constant(call_phases.get(d, 0))) for d in numbers]
     for g in range(1, groups + 1):
         reader = _group_reader(read, g, groups)
         out.append(Instance(active.instance(g), active, reader))
@@ -350,16 +427,18 @@ def _overlaps(c: Controller | DelayedController, st: Controller | DelayedControl
     """The overlap node: the overlap table (type and phases from the config, the trailing times writable, acting
     from the next trailing interval on) and the overlap status by group of 8."""
     cfg = c.config
-    groups = cfg.overlap_groups
-    out = [Instance(MAX_OVERLAPS.instance(), MAX_OVERLAPS, lambda: max(cfg.overlaps, default=0)),
+    numbers = _rows(cfg.overlaps)
+    groups = group_count(numbers[-1])
+    out = [Instance(MAX_OVERLAPS.instance(), MAX_OVERLAPS, lambda: numbers[-1]),
            Instance(MAX_OVERLAP_STATUS_GROUPS.instance(), MAX_OVERLAP_STATUS_GROUPS, lambda: groups)]
-    for n, o in cfg.overlaps.items():
+    for n in numbers:
+        o = cfg.overlaps.get(n) or Overlap(n, OverlapKind.NORMAL, ())  # unprogrammed: no included phase
         fixed: dict[OverlapColumn, Value] = {
             OverlapColumn.NUMBER: n, OverlapColumn.TYPE: int(_OVERLAP_TYPES[o.kind]),
             OverlapColumn.INCLUDED_PHASES: bytes(o.included), OverlapColumn.MODIFIER_PHASES: bytes(o.modifiers)}
         out += [Instance(OVERLAP_TABLE[col].instance(n), OVERLAP_TABLE[col], lambda v=v: v) for col, v in fixed.items()]
-        out += [Instance(OVERLAP_TABLE[col].instance(n), OVERLAP_TABLE[col],
-                         *_field_access(c, c.overlaps.timing[n], name, unit))
+        timing = c.overlaps.timing.get(n) or OverlapTiming.of(o)
+        out += [Instance(OVERLAP_TABLE[col].instance(n), OVERLAP_TABLE[col], *_field_access(c, timing, name, unit))
                 for col, (name, unit) in _OVERLAP_TIMING.items()]
     status: dict[OverlapStatusColumn, Callable[[], frozenset[int]]] = {
         OverlapStatusColumn.REDS: lambda: st.overlap_reds,
@@ -395,17 +474,20 @@ def _preempts(c: Controller | DelayedController) -> list[Instance]:
     """The preempt node: the preempt table (phases and control bits from the config, times writable, acting from
     the next use), each preempt's state, and preemptControlState (a SET calls or releases the preempt)."""
     pe = c.preemptor
-    out = [Instance(MAX_PREEMPTS.instance(), MAX_PREEMPTS, lambda: max(c.config.preempts, default=0))]
-    for n, p in c.config.preempts.items():
+    numbers = _rows(c.config.preempts)
+    out = [Instance(MAX_PREEMPTS.instance(), MAX_PREEMPTS, lambda: numbers[-1])]
+    for n in numbers:
+        p = c.config.preempts.get(n) or Preempt(n)  # unprogrammed: no phases, its input calls nothing
         fixed: dict[PreemptColumn, Value] = {
             PreemptColumn.NUMBER: n, PreemptColumn.CONTROL: int(p.non_locking), PreemptColumn.LINK: 0,
             PreemptColumn.TRACK_PHASE: bytes(p.track_phases), PreemptColumn.DWELL_PHASE: bytes(p.dwell_phases),
             PreemptColumn.DWELL_PED: b"", PreemptColumn.EXIT_PHASE: bytes(p.exit_phases)}
         out += [Instance(PREEMPT_TABLE[col].instance(n), PREEMPT_TABLE[col], lambda v=v: v) for col, v in fixed.items()]
-        out += [Instance(PREEMPT_TABLE[col].instance(n), PREEMPT_TABLE[col],
-                         *_field_access(c, pe.timing[n], name, unit)) for col, (name, unit) in _PREEMPT_TIMING.items()]
+        timing = pe.timing.get(n) or PreemptTiming.of(p)
+        out += [Instance(PREEMPT_TABLE[col].instance(n), PREEMPT_TABLE[col], *_field_access(c, timing, name, unit))
+                for col, (name, unit) in _PREEMPT_TIMING.items()]
         out.append(Instance(PREEMPT_TABLE[PreemptColumn.STATE].instance(n), PREEMPT_TABLE[PreemptColumn.STATE],
-                            lambda n=n: int(pe.states[n])))
+                            lambda n=n: int(pe.states.get(n, PreemptState.NOT_ACTIVE))))
         out.append(Instance(PREEMPT_CONTROL_NUMBER.instance(n), PREEMPT_CONTROL_NUMBER, lambda n=n: n))
         out.append(Instance(PREEMPT_CONTROL_STATE.instance(n), PREEMPT_CONTROL_STATE,
                             lambda n=n: int(n in pe.control),
@@ -433,6 +515,10 @@ def _field_access(c: Controller | DelayedController, row: Any, name: str, unit: 
         c.touch()
 
     return lambda: getattr(row, name) // unit, write
+
+
+def _constant(value: Value) -> Callable[[], Value]:
+    return lambda: value
 
 
 def _group_reader(read: Callable[[], frozenset[int]], group: int, groups: int) -> Callable[[], int]:

@@ -239,9 +239,10 @@ class Coordinator:
         self.reference = c.offset_reference
         self.force_mode = _FORCES[c.force_off]
         self.correction = _CORRECTIONS[c.correction]
-        # The tables hold a row for every pattern number up to the highest configured; one not configured has a
-        # cycle of 0 (no pattern: calling it runs Free) until a SET defines it.
-        for n in range(1, max(c.patterns, default=0) + 1):
+        # The tables hold a row for every pattern number up to the highest configured, and at least one
+        # (maxPatterns is 1..253 and counts the patternTable's rows); one not configured has a cycle of 0 (no
+        # pattern: calling it runs Free) until a SET defines it.
+        for n in range(1, max(c.patterns, default=1) + 1):
             pattern = c.patterns.get(n)
             self.patterns[n] = PatternRow(pattern.cycle, pattern.offset, n) if pattern else PatternRow(0, 0, n)
             self.splits[n] = (_split_rows(pattern) if pattern

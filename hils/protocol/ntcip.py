@@ -1,5 +1,10 @@
-"""NTCIP 1202 v02 object model, SNMP value types and the latency model: what the middleware and
+"""NTCIP 1202 object model, SNMP value types and the latency model: what the middleware and
 the emulator share (the emulator imports nothing else of hils but the intersection config).
+
+Each object is defined as an edition of the standard defines it (:class:`Version`): v02, what an Econolite
+Cobalt speaks, unless the object is one v03 added. Where v03 changed an object hils knows, :data:`V03_CHANGES`
+says how. The definitions are checked against the compiled NTCIP 1202 v03 MIB by
+:mod:`harness.reference.mib_conformance`.
 
 This is the only module that spells an OID. Everything else names objects by
 the definitions below and builds instance OIDs with the helpers here, so an
@@ -15,7 +20,7 @@ from __future__ import annotations
 import random
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from enum import Enum, IntEnum, IntFlag
+from enum import Enum, IntEnum, IntFlag, StrEnum
 
 Oid = tuple[int, ...]
 Value = int | bytes  # what an NTCIP object holds: INTEGER or OCTET STRING
@@ -33,6 +38,27 @@ class Syntax(Enum):
 class Access(Enum):
     READ_ONLY = "read-only"
     READ_WRITE = "read-write"
+
+
+class Version(StrEnum):
+    """An edition of NTCIP 1202 (of its ASC MIB)."""
+
+    V02 = "v02"
+    V03 = "v03"
+
+
+#: The edition the emulator serves and the middleware assumes: v02, what an Econolite Cobalt speaks (DESIGN.md);
+#: an object v03 added is served as v03 defines it.
+DEFAULT_VERSION = Version.V02
+
+#: Where NTCIP 1202 v03 (1202v0328) defines an object otherwise than v02, among the objects hils knows: how, and
+#: where v02's definition is read. The v02 text is not at hand here: v02's side comes from the ASC MIB before v03
+#: (1202ASC.mib as pysmi compiled it into ASC_MIB1, in the repository Metrolla-Inc/ntcipy), which issue 36 confirms
+#: for v02.
+V03_CHANGES: dict[str, str] = {
+    "patternSplitNumber": 'read-write before v03 (ASC_MIB1: patternSplitNumber.setMaxAccess("read-write")); '
+                          "read-only in v03 (1202v0328 5.5.7.4)",
+}
 
 
 #: Environment variables holding SNMPv3 keys (pass phrases) when a target URL or
@@ -241,18 +267,19 @@ class ObjectDef:
     access: Access
     low: int = 0
     high: int = 255
+    version: Version = DEFAULT_VERSION  # the edition whose definition this is
 
     def instance(self, *index: int) -> Oid:
         return self.prefix + (index or (0,))
 
 
 def _o(name: str, suffix: Oid, syntax: Syntax = Syntax.INTEGER, access: Access = Access.READ_ONLY,
-       low: int = 0, high: int = 255) -> ObjectDef:
-    return ObjectDef(name, ASC + suffix, syntax, access, low, high)
+       low: int = 0, high: int = 255, version: Version = DEFAULT_VERSION) -> ObjectDef:
+    return ObjectDef(name, ASC + suffix, syntax, access, low, high, version)
 
 
-MAX_PHASES = _o("maxPhases", (1, 1))
-MAX_PHASE_GROUPS = _o("maxPhaseGroups", (1, 3))
+MAX_PHASES = _o("maxPhases", (1, 1), low=2)
+MAX_PHASE_GROUPS = _o("maxPhaseGroups", (1, 3), low=1)
 UNIT_STARTUP_FLASH = _o("unitStartUpFlash", (3, 1), access=Access.READ_WRITE)
 UNIT_BACKUP_TIME = _o("unitBackupTime", (3, 3), access=Access.READ_WRITE, high=65535)
 UNIT_CONTROL_STATUS = _o("unitControlStatus", (3, 5), low=1, high=8)
@@ -264,13 +291,13 @@ SYSTEM_PATTERN_CONTROL = _o("systemPatternControl", (4, 14), access=Access.READ_
 # number, the split table by split number and phase.
 COORD_CORRECTION_MODE = _o("coordCorrectionMode", (4, 2), access=Access.READ_WRITE, low=1, high=4)
 COORD_FORCE_MODE = _o("coordForceMode", (4, 4), access=Access.READ_WRITE, low=1, high=3)
-MAX_PATTERNS = _o("maxPatterns", (4, 5), high=253)
+MAX_PATTERNS = _o("maxPatterns", (4, 5), low=1, high=253)
 PATTERN_TABLE_TYPE = _o("patternTableType", (4, 6), low=1, high=4)
-MAX_SPLITS = _o("maxSplits", (4, 8))
+MAX_SPLITS = _o("maxSplits", (4, 8), low=1)
 COORD_PATTERN_STATUS = _o("coordPatternStatus", (4, 10))
 LOCAL_FREE_STATUS = _o("localFreeStatus", (4, 11), low=1, high=11)
-COORD_CYCLE_STATUS = _o("coordCycleStatus", (4, 12), high=65535)
-COORD_SYNC_STATUS = _o("coordSyncStatus", (4, 13), high=65535)
+COORD_CYCLE_STATUS = _o("coordCycleStatus", (4, 12), high=510)
+COORD_SYNC_STATUS = _o("coordSyncStatus", (4, 13), high=510)
 
 
 class PatternColumn(IntEnum):
@@ -297,8 +324,9 @@ PATTERN_TABLE: dict[PatternColumn, ObjectDef] = {
     PatternColumn.NUMBER: _o("patternNumber", (4, 7, 1, 1), low=1, high=253),
     PatternColumn.CYCLE_TIME: _o("patternCycleTime", (4, 7, 1, 2), access=Access.READ_WRITE),
     PatternColumn.OFFSET_TIME: _o("patternOffsetTime", (4, 7, 1, 3), access=Access.READ_WRITE),
-    PatternColumn.SPLIT_NUMBER: _o("patternSplitNumber", (4, 7, 1, 4), access=Access.READ_WRITE),
-    PatternColumn.SEQUENCE_NUMBER: _o("patternSequenceNumber", (4, 7, 1, 5), access=Access.READ_WRITE),
+    # v02's access (see V03_CHANGES); the range both editions admit.
+    PatternColumn.SPLIT_NUMBER: _o("patternSplitNumber", (4, 7, 1, 4), access=Access.READ_WRITE, low=1),
+    PatternColumn.SEQUENCE_NUMBER: _o("patternSequenceNumber", (4, 7, 1, 5), access=Access.READ_WRITE, low=1),
 }
 SPLIT_TABLE: dict[SplitColumn, ObjectDef] = {
     SplitColumn.NUMBER: _o("splitNumber", (4, 9, 1, 1), low=1),
@@ -320,10 +348,10 @@ _PHASE_NAMES: dict[PhaseColumn, tuple[str, Syntax, Access, int, int]] = {
     PhaseColumn.YELLOW_CHANGE: ("phaseYellowChange", Syntax.INTEGER, _RW, 30, 255),
     PhaseColumn.RED_CLEAR: ("phaseRedClear", Syntax.INTEGER, _RW, 0, 255),
     PhaseColumn.RED_REVERT: ("phaseRedRevert", Syntax.INTEGER, _RW, 0, 255),
-    PhaseColumn.STARTUP: ("phaseStartup", Syntax.INTEGER, Access.READ_ONLY, 1, 6),
-    PhaseColumn.OPTIONS: ("phaseOptions", Syntax.INTEGER, Access.READ_ONLY, 0, 65535),
-    PhaseColumn.RING: ("phaseRing", Syntax.INTEGER, Access.READ_ONLY, 0, 255),
-    PhaseColumn.CONCURRENCY: ("phaseConcurrency", Syntax.OCTET_STRING, Access.READ_ONLY, 0, 255),
+    PhaseColumn.STARTUP: ("phaseStartup", Syntax.INTEGER, _RW, 1, 6),
+    PhaseColumn.OPTIONS: ("phaseOptions", Syntax.INTEGER, _RW, 0, 65535),
+    PhaseColumn.RING: ("phaseRing", Syntax.INTEGER, _RW, 0, 255),
+    PhaseColumn.CONCURRENCY: ("phaseConcurrency", Syntax.OCTET_STRING, _RW, 0, 255),
 }
 PHASE_TABLE: dict[PhaseColumn, ObjectDef] = {
     col: _o(name, (1, 2, 1, int(col)), syntax, access, low, high)
@@ -339,17 +367,19 @@ CONTROL_TABLE: dict[ControlColumn, ObjectDef] = {
 #: The control objects a middleware never sets, read back to see whether someone else did (VehCall is the
 #: middleware's, re-SET by every command and keepalive, and its read races with its own SETs in flight).
 FOREIGN_COLUMNS = tuple(c for c in ControlColumn if c is not ControlColumn.VEH_CALL)
+MAX_CHANNEL_STATUS_GROUPS = _o("maxChannelStatusGroups", (8, 3), low=1)
 CHANNEL_TABLE: dict[ChannelColumn, ObjectDef] = {
     col: _o("channelStatusGroup" + col.name.title().replace("_", ""), (8, 4, 1, int(col))) for col in ChannelColumn
 }
-SEQUENCE_DATA = _o("sequenceData", (7, 3, 1, 3), Syntax.OCTET_STRING)
+SEQUENCE_DATA = _o("sequenceData", (7, 3, 1, 3), Syntax.OCTET_STRING, access=Access.READ_WRITE)
+MAX_RING_CONTROL_GROUPS = _o("maxRingControlGroups", (7, 4), low=1)
 # ringControlGroupMax2 (A.1.7.5.1.4.g): bit k-1 of group 1 selects Maximum 2 for ring k.
 RING_CONTROL_MAX2 = _o("ringControlGroupMax2", (7, 5, 1, 4), access=Access.READ_WRITE)
 
 # Overlaps (NTCIP 1202 v02 node overlap, A.9; OIDs, ranges and the overlapType enumeration from the same ASC
 # MIB): the overlap table by overlap number (1 = Overlap A) and the overlap status by group of 8 overlaps.
-MAX_OVERLAPS = _o("maxOverlaps", (9, 1))
-MAX_OVERLAP_STATUS_GROUPS = _o("maxOverlapStatusGroups", (9, 3))
+MAX_OVERLAPS = _o("maxOverlaps", (9, 1), low=1)
+MAX_OVERLAP_STATUS_GROUPS = _o("maxOverlapStatusGroups", (9, 3), low=1)
 
 
 class OverlapType(IntEnum):
@@ -382,27 +412,30 @@ class OverlapStatusColumn(IntEnum):
     GREENS = 4
 
 
-# Type and phases come from the intersection config (read-only here, like a phase's ring and concurrency);
-# the trailing times are writable with the MIB's ranges (green in seconds, yellow and red in tenths; the yellow
-# from 3.0 s, "NEMA range: 3.0-25.5 sec", as the phase table's yellow change).
+# The trailing times in the MIB's units (green in seconds, yellow and red in tenths; the yellow from 3.0 s, "NEMA
+# range: 3.0-25.5 sec", as the phase table's yellow change).
 OVERLAP_TABLE: dict[OverlapColumn, ObjectDef] = {
     OverlapColumn.NUMBER: _o("overlapNumber", (9, 2, 1, 1), low=1),
-    OverlapColumn.TYPE: _o("overlapType", (9, 2, 1, 2), low=1, high=3),
-    OverlapColumn.INCLUDED_PHASES: _o("overlapIncludedPhases", (9, 2, 1, 3), Syntax.OCTET_STRING),
-    OverlapColumn.MODIFIER_PHASES: _o("overlapModifierPhases", (9, 2, 1, 4), Syntax.OCTET_STRING),
+    OverlapColumn.TYPE: _o("overlapType", (9, 2, 1, 2), access=Access.READ_WRITE, low=1, high=3),
+    OverlapColumn.INCLUDED_PHASES: _o("overlapIncludedPhases", (9, 2, 1, 3), Syntax.OCTET_STRING,
+                                      access=Access.READ_WRITE),
+    OverlapColumn.MODIFIER_PHASES: _o("overlapModifierPhases", (9, 2, 1, 4), Syntax.OCTET_STRING,
+                                      access=Access.READ_WRITE),
     OverlapColumn.TRAIL_GREEN: _o("overlapTrailGreen", (9, 2, 1, 5), access=Access.READ_WRITE),
     OverlapColumn.TRAIL_YELLOW: _o("overlapTrailYellow", (9, 2, 1, 6), access=Access.READ_WRITE, low=30),
     OverlapColumn.TRAIL_RED: _o("overlapTrailRed", (9, 2, 1, 7), access=Access.READ_WRITE),
 }
 OVERLAP_STATUS_TABLE: dict[OverlapStatusColumn, ObjectDef] = {
-    col: _o("overlapStatusGroup" + col.name.title(), (9, 4, 1, int(col))) for col in OverlapStatusColumn
+    OverlapStatusColumn.NUMBER: _o("overlapStatusGroupNumber", (9, 4, 1, 1), low=1),
+    **{col: _o("overlapStatusGroup" + col.name.title(), (9, 4, 1, int(col)))
+       for col in (OverlapStatusColumn.REDS, OverlapStatusColumn.YELLOWS, OverlapStatusColumn.GREENS)},
 }
 
 # Preemption (NTCIP 1202 v02 node preempt, A.6; OIDs, ranges and the preemptState enumeration from the ASC MIB,
 # the v02 columns past .16 numbered as the standard lists them: preemptEnterYellowChange .22 and
 # preemptEnterRedClear .23 as controller firmware spells them, preemptTrackYellowChange .24 and
 # preemptTrackRedClear .25 after them). The table is indexed by preempt number: lower numbers override higher.
-MAX_PREEMPTS = _o("maxPreempts", (6, 1))
+MAX_PREEMPTS = _o("maxPreempts", (6, 1), low=1)
 # shortAlarmStatus (A.3.9): "Bit 1: T&F Flash - When either the Local Flash or MMU Flash input becomes active.
 # Bit 0: Preempt - When any of the CU Preempt inputs become active."
 SHORT_ALARM_STATUS = _o("shortAlarmStatus", (3, 9))
@@ -465,12 +498,12 @@ class PreemptColumn(IntEnum):
     TRACK_RED_CLEAR = 25
 
 
-# Phases and control bits come from the intersection config (read-only here); the times are writable with the
-# standard's ranges (seconds; tenths for the clearances, the yellows from NEMA's 3.0 s as the phase table's).
+# The times in the standard's units (seconds; tenths for the clearances, the yellows from NEMA's 3.0 s as the phase
+# table's).
 _PREEMPT_NAMES: dict[PreemptColumn, tuple[str, Syntax, Access, int, int]] = {
     PreemptColumn.NUMBER: ("preemptNumber", Syntax.INTEGER, Access.READ_ONLY, 1, 255),
-    PreemptColumn.CONTROL: ("preemptControl", Syntax.INTEGER, Access.READ_ONLY, 0, 255),
-    PreemptColumn.LINK: ("preemptLink", Syntax.INTEGER, Access.READ_ONLY, 0, 255),
+    PreemptColumn.CONTROL: ("preemptControl", Syntax.INTEGER, _RW, 0, 255),
+    PreemptColumn.LINK: ("preemptLink", Syntax.INTEGER, _RW, 0, 255),
     PreemptColumn.DELAY: ("preemptDelay", Syntax.INTEGER, _RW, 0, 600),
     PreemptColumn.MINIMUM_DURATION: ("preemptMinimumDuration", Syntax.INTEGER, _RW, 0, 65535),
     PreemptColumn.MINIMUM_GREEN: ("preemptMinimumGreen", Syntax.INTEGER, _RW, 0, 255),
@@ -479,10 +512,10 @@ _PREEMPT_NAMES: dict[PreemptColumn, tuple[str, Syntax, Access, int, int]] = {
     PreemptColumn.TRACK_GREEN: ("preemptTrackGreen", Syntax.INTEGER, _RW, 0, 255),
     PreemptColumn.DWELL_GREEN: ("preemptDwellGreen", Syntax.INTEGER, _RW, 1, 255),
     PreemptColumn.MAXIMUM_PRESENCE: ("preemptMaximumPresence", Syntax.INTEGER, _RW, 0, 65535),
-    PreemptColumn.TRACK_PHASE: ("preemptTrackPhase", Syntax.OCTET_STRING, Access.READ_ONLY, 0, 255),
-    PreemptColumn.DWELL_PHASE: ("preemptDwellPhase", Syntax.OCTET_STRING, Access.READ_ONLY, 0, 255),
-    PreemptColumn.DWELL_PED: ("preemptDwellPed", Syntax.OCTET_STRING, Access.READ_ONLY, 0, 255),
-    PreemptColumn.EXIT_PHASE: ("preemptExitPhase", Syntax.OCTET_STRING, Access.READ_ONLY, 0, 255),
+    PreemptColumn.TRACK_PHASE: ("preemptTrackPhase", Syntax.OCTET_STRING, _RW, 0, 255),
+    PreemptColumn.DWELL_PHASE: ("preemptDwellPhase", Syntax.OCTET_STRING, _RW, 0, 255),
+    PreemptColumn.DWELL_PED: ("preemptDwellPed", Syntax.OCTET_STRING, _RW, 0, 255),
+    PreemptColumn.EXIT_PHASE: ("preemptExitPhase", Syntax.OCTET_STRING, _RW, 0, 255),
     PreemptColumn.STATE: ("preemptState", Syntax.INTEGER, Access.READ_ONLY, 1, 9),
     PreemptColumn.ENTER_YELLOW_CHANGE: ("preemptEnterYellowChange", Syntax.INTEGER, _RW, 30, 255),
     PreemptColumn.ENTER_RED_CLEAR: ("preemptEnterRedClear", Syntax.INTEGER, _RW, 0, 255),
@@ -499,31 +532,51 @@ PREEMPT_TABLE: dict[PreemptColumn, ObjectDef] = {
 PREEMPT_CONTROL_NUMBER = _o("preemptControlNumber", (6, 3, 1, 1), low=1)
 PREEMPT_CONTROL_STATE = _o("preemptControlState", (6, 3, 1, 2), access=Access.READ_WRITE, high=1)
 
+
+class DetectorOption(IntFlag):
+    """Bits of vehicleDetectorOptions (A.2.2.1.2), "0=Disabled, 1=Enabled"."""
+
+    VOLUME = 1 << 0
+    OCCUPANCY = 1 << 1
+    YELLOW_LOCK_CALL = 1 << 2
+    RED_LOCK_CALL = 1 << 3
+    PASSAGE = 1 << 4
+    ADDED_INITIAL = 1 << 5
+    QUEUE = 1 << 6
+    CALL = 1 << 7
+
+
 # Vehicle detectors (A.1.2): the detector table (call phase, options), the active detectors by group of 8
 # (vehicleDetectorStatusGroupActive) and NTCIP 1202 v03's remote actuation by group of 8
 # (vehicleDetectorControlGroupActuation: a set bit forces that detector's actuation, as a cabinet input would).
-MAX_VEHICLE_DETECTORS = _o("maxVehicleDetectors", (2, 1))
-VEHICLE_DETECTOR_OPTIONS = _o("vehicleDetectorOptions", (2, 2, 1, 2))
-VEHICLE_DETECTOR_CALL_PHASE = _o("vehicleDetectorCallPhase", (2, 2, 1, 4))
+MAX_VEHICLE_DETECTORS = _o("maxVehicleDetectors", (2, 1), low=1)
+VEHICLE_DETECTOR_OPTIONS = _o("vehicleDetectorOptions", (2, 2, 1, 2), access=Access.READ_WRITE)
+VEHICLE_DETECTOR_CALL_PHASE = _o("vehicleDetectorCallPhase", (2, 2, 1, 4), access=Access.READ_WRITE)
+MAX_VEHICLE_DETECTOR_STATUS_GROUPS = _o("maxVehicleDetectorStatusGroups", (2, 3), low=1)
 DETECTOR_STATUS_ACTIVE = _o("vehicleDetectorStatusGroupActive", (2, 4, 1, 2))
-DETECTOR_ACTUATION = _o("vehicleDetectorControlGroupActuation", (2, 12, 1, 2), access=Access.READ_WRITE)
+MAX_VEHICLE_DETECTOR_CONTROL_GROUPS = _o("maxVehicleDetectorControlGroups", (2, 11), low=1, version=Version.V03)
+DETECTOR_ACTUATION = _o("vehicleDetectorControlGroupActuation", (2, 12, 1, 2), access=Access.READ_WRITE,
+                        version=Version.V03)
 # Pedestrian detectors (push buttons) likewise: the table's call phase, the active ones by group of 8, and v03's
 # remote actuation (pedestrianDetectorControlGroupActuation, what Signal-Replay SETs to replay a field log's
 # pedestrian detector events).
-MAX_PED_DETECTORS = _o("maxPedestrianDetectors", (2, 6))
-PED_DETECTOR_CALL_PHASE = _o("pedestrianDetectorCallPhase", (2, 7, 1, 2))
-MAX_PED_DETECTOR_GROUPS = _o("maxPedestrianDetectorGroups", (2, 8))
+MAX_PED_DETECTORS = _o("maxPedestrianDetectors", (2, 6), low=1)
+PED_DETECTOR_CALL_PHASE = _o("pedestrianDetectorCallPhase", (2, 7, 1, 2), access=Access.READ_WRITE)
+MAX_PED_DETECTOR_GROUPS = _o("maxPedestrianDetectorGroups", (2, 8), low=1)
 PED_DETECTOR_STATUS_ACTIVE = _o("pedestrianDetectorStatusGroupActive", (2, 9, 1, 2))
-PED_DETECTOR_ACTUATION = _o("pedestrianDetectorControlGroupActuation", (2, 13, 1, 2), access=Access.READ_WRITE)
+PED_DETECTOR_ACTUATION = _o("pedestrianDetectorControlGroupActuation", (2, 13, 1, 2), access=Access.READ_WRITE,
+                            version=Version.V03)
 
 ALL_OBJECTS: tuple[ObjectDef, ...] = (
     MAX_PHASES, MAX_PHASE_GROUPS, UNIT_STARTUP_FLASH, UNIT_BACKUP_TIME, UNIT_CONTROL_STATUS, UNIT_FLASH_STATUS,
     SYSTEM_PATTERN_CONTROL, COORD_CORRECTION_MODE, COORD_FORCE_MODE, MAX_PATTERNS, PATTERN_TABLE_TYPE, MAX_SPLITS,
     COORD_PATTERN_STATUS, LOCAL_FREE_STATUS, COORD_CYCLE_STATUS, COORD_SYNC_STATUS, *PATTERN_TABLE.values(),
-    *SPLIT_TABLE.values(), SEQUENCE_DATA, RING_CONTROL_MAX2, MAX_VEHICLE_DETECTORS, VEHICLE_DETECTOR_OPTIONS,
-    VEHICLE_DETECTOR_CALL_PHASE, DETECTOR_STATUS_ACTIVE, DETECTOR_ACTUATION, MAX_PED_DETECTORS,
+    *SPLIT_TABLE.values(), SEQUENCE_DATA, MAX_RING_CONTROL_GROUPS, RING_CONTROL_MAX2, MAX_VEHICLE_DETECTORS,
+    VEHICLE_DETECTOR_OPTIONS, VEHICLE_DETECTOR_CALL_PHASE, MAX_VEHICLE_DETECTOR_STATUS_GROUPS, DETECTOR_STATUS_ACTIVE,
+    MAX_VEHICLE_DETECTOR_CONTROL_GROUPS, DETECTOR_ACTUATION, MAX_PED_DETECTORS,
     PED_DETECTOR_CALL_PHASE, MAX_PED_DETECTOR_GROUPS, PED_DETECTOR_STATUS_ACTIVE, PED_DETECTOR_ACTUATION,
-    *PHASE_TABLE.values(), *STATUS_TABLE.values(), *CONTROL_TABLE.values(), *CHANNEL_TABLE.values(),
+    *PHASE_TABLE.values(), *STATUS_TABLE.values(), *CONTROL_TABLE.values(), MAX_CHANNEL_STATUS_GROUPS,
+    *CHANNEL_TABLE.values(),
     MAX_OVERLAPS, MAX_OVERLAP_STATUS_GROUPS, *OVERLAP_TABLE.values(), *OVERLAP_STATUS_TABLE.values(),
     MAX_PREEMPTS, SHORT_ALARM_STATUS, *PREEMPT_TABLE.values(), PREEMPT_CONTROL_NUMBER, PREEMPT_CONTROL_STATE,
 )

@@ -8,26 +8,50 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from emulator.agent.mib import MibView
+from emulator.agent.mib import NOT_WRITABLE_HERE, MibView
 from emulator.model.controller import Controller
 from hils.protocol.config import ConfigError, IntersectionConfig, from_dict, parse
 from hils.protocol.ntcip import (
     CHANNEL_TABLE,
     COORD_PATTERN_STATUS,
+    MAX_CHANNEL_STATUS_GROUPS,
+    MAX_OVERLAP_STATUS_GROUPS,
+    MAX_OVERLAPS,
+    MAX_PATTERNS,
+    MAX_PED_DETECTOR_GROUPS,
+    MAX_PED_DETECTORS,
     MAX_PHASE_GROUPS,
     MAX_PHASES,
+    MAX_PREEMPTS,
+    MAX_RING_CONTROL_GROUPS,
+    MAX_SPLITS,
+    MAX_VEHICLE_DETECTOR_CONTROL_GROUPS,
+    MAX_VEHICLE_DETECTOR_STATUS_GROUPS,
+    MAX_VEHICLE_DETECTORS,
+    OVERLAP_SIGNAL_COLUMNS,
+    OVERLAP_STATUS_TABLE,
+    OVERLAP_TABLE,
+    PREEMPT_CONTROL_STATE,
+    PREEMPT_TABLE,
     RING_CONTROL_MAX2,
     SYSTEM_PATTERN_CONTROL,
     UNIT_BACKUP_TIME,
     UNIT_CONTROL_STATUS,
     UNIT_FLASH_STATUS,
     UNIT_STARTUP_FLASH,
+    VEHICLE_DETECTOR_CALL_PHASE,
+    VEHICLE_DETECTOR_OPTIONS,
+    Access,
     ChannelColumn,
     ControlColumn,
+    DetectorOption,
     ErrorStatus,
+    OverlapColumn,
     PhaseColumn,
     PhaseOption,
     PhaseStartup,
+    PreemptColumn,
+    PreemptState,
     SnmpError,
     StatusColumn,
     Syntax,
@@ -267,12 +291,15 @@ def test_next_oid_walks_every_instance_in_increasing_order(mib: MibView) -> None
     assert len(set(walked)) == len(walked)
     assert all(object_for(o) is not None for o in walked)
     # 8 unit scalars (shortAlarmStatus too) and 9 of coordination, one pattern row of 5 columns and its split
-    # table (5 columns x 8 phases), 13 phase columns x 8 phases, 10 status + 3 channel + 6 control columns x 1
-    # group, 2 rings, ringControlGroupMax2 of group 1; maxOverlaps and maxOverlapStatusGroups (no overlaps),
-    # maxPreempts (no preempts); maxVehicleDetectors, 2 detector columns x 8 detectors, detector status and
+    # table (5 columns x 8 phases), 13 phase columns x 8 phases, maxChannelStatusGroups, 10 status + 3 channel + 6
+    # control columns x 1 group, 2 rings, maxRingControlGroups, ringControlGroupMax2 of group 1; maxOverlaps,
+    # maxOverlapStatusGroups, the unprogrammed overlap 1 (7 columns) and its status group (4 columns);
+    # maxPreempts, the unprogrammed preempt 1 (20 columns) and its preemptControl row (2 columns); maxVehicleDetectors,
+    # maxVehicleDetectorStatusGroups and ControlGroups, 2 detector columns x 8 detectors, detector status and
     # actuation of group 1; maxPedestrianDetectors, maxPedestrianDetectorGroups, the call phase of 8 push buttons,
     # their status and actuation of group 1.
-    assert len(walked) == 8 + 9 + 5 + 5 * 8 + 13 * 8 + 19 + 2 + 1 + 2 + 1 + 1 + 2 * 8 + 2 + 2 + 8 + 2
+    assert len(walked) == (8 + 9 + 5 + 5 * 8 + 13 * 8 + 1 + 19 + 2 + 1 + 1 + 2 + 7 + 4 + 1 + 20 + 2 + 3 + 2 * 8 + 2
+                           + 2 + 8 + 2)
 
 
 def test_next_oid_from_an_object_prefix_gives_its_first_instance(mib: MibView) -> None:
@@ -440,3 +467,70 @@ def test_a_phase_time_a_config_gives_is_one_a_set_takes_back(column: PhaseColumn
     answered = mib.get(phase_oid(column, 1))
     mib.set_many([(phase_oid(column, 1), answered)])
     assert mib.get(phase_oid(column, 1)) == answered == value
+
+
+# --- the rows the standard counts (NTCIP 1202 v03: every max object is 1..255, "The number of rows in this table is
+# equal to the maxX object") ----------------------------------------------------------------------------------------
+
+
+def _config(name: str) -> IntersectionConfig:
+    return parse((resources.files("hils.data") / name).read_text(encoding="utf-8"), name)
+
+
+def test_a_controller_with_no_overlap_or_preempt_answers_one_unprogrammed_row(mib: MibView) -> None:
+    assert mib.controller.config.overlaps == {} and mib.controller.config.preempts == {}
+    assert mib.get(MAX_OVERLAPS.instance()) == mib.get(MAX_OVERLAP_STATUS_GROUPS.instance()) == 1
+    assert mib.get(MAX_PREEMPTS.instance()) == 1
+    # Overlap 1 has no included phase (it never lights): its status bits stay clear.
+    assert mib.get(OVERLAP_TABLE[OverlapColumn.INCLUDED_PHASES].instance(1)) == b""
+    assert [mib.get(OVERLAP_STATUS_TABLE[col].instance(1)) for col in OVERLAP_SIGNAL_COLUMNS] == [0, 0, 0]
+    # Preempt 1 has no phases and is not active.
+    assert mib.get(PREEMPT_TABLE[PreemptColumn.TRACK_PHASE].instance(1)) == b""
+    assert mib.get(PREEMPT_TABLE[PreemptColumn.STATE].instance(1)) == PreemptState.NOT_ACTIVE
+
+
+def test_every_count_of_rows_or_groups_is_served_and_at_least_one(mib: MibView) -> None:
+    counts = (MAX_PHASES, MAX_PHASE_GROUPS, MAX_PATTERNS, MAX_SPLITS, MAX_VEHICLE_DETECTORS,
+              MAX_VEHICLE_DETECTOR_STATUS_GROUPS, MAX_VEHICLE_DETECTOR_CONTROL_GROUPS, MAX_PED_DETECTORS,
+              MAX_PED_DETECTOR_GROUPS, MAX_CHANNEL_STATUS_GROUPS, MAX_RING_CONTROL_GROUPS, MAX_OVERLAPS,
+              MAX_OVERLAP_STATUS_GROUPS, MAX_PREEMPTS)
+    assert [obj.name for obj in counts if mib.get(obj.instance()) < obj.low or obj.low < 1] == []
+
+
+def test_a_phase_the_config_leaves_out_is_a_disabled_row() -> None:
+    cfg = _config("four_phase.toml")
+    assert sorted(cfg.phases) == [2, 4, 6, 8]
+    mib = MibView(Controller(cfg))
+    assert mib.get(MAX_PHASES.instance()) == 8
+    assert {p for p in range(1, 9) if phase_oid(PhaseColumn.RING, p) in mib} == set(range(1, 9))
+    # "If the ring number is zero, the phase is disabled (phaseOptions Bit 0 = 0 has the same effect)"
+    assert [mib.get(phase_oid(col, 1)) for col in (PhaseColumn.RING, PhaseColumn.OPTIONS, PhaseColumn.STARTUP,
+                                                   PhaseColumn.CONCURRENCY)] == [0, 0, PhaseStartup.OTHER, b""]
+    assert mib.get(phase_oid(PhaseColumn.OPTIONS, 2)) & PhaseOption.ENABLED
+    # Its times take a SET and give it back; the controller never serves it.
+    mib.set_many([(phase_oid(PhaseColumn.MINIMUM_GREEN, 1), 7)])
+    assert mib.get(phase_oid(PhaseColumn.MINIMUM_GREEN, 1)) == 7
+    assert 1 not in mib.controller.timing
+    # A detector of the left-out numbers calls no phase ("enabled when this object is set to a non-zero value").
+    assert [mib.get(VEHICLE_DETECTOR_CALL_PHASE.instance(d)) for d in (1, 2)] == [0, 2]
+    assert [mib.get(VEHICLE_DETECTOR_OPTIONS.instance(d)) for d in (1, 2)] == [0, DetectorOption.CALL
+                                                                                | DetectorOption.PASSAGE]
+
+
+def test_the_input_of_an_unprogrammed_preempt_calls_nothing(mib: MibView, controller: Controller) -> None:
+    mib.set_many([(PREEMPT_CONTROL_STATE.instance(1), 1)])
+    for _ in range(50):
+        controller.step()
+    assert mib.get(PREEMPT_CONTROL_STATE.instance(1)) == 1
+    assert mib.get(PREEMPT_TABLE[PreemptColumn.STATE].instance(1)) == PreemptState.NOT_ACTIVE
+    assert controller.preemptor.serving is None
+
+
+def test_the_objects_read_only_here_are_the_listed_ones() -> None:
+    """Every writable object of the standard is writable here, but those NOT_WRITABLE_HERE lists with why."""
+    mib = MibView(Controller(_config("four_leg_city.toml")))
+    read_only_here = {inst.obj.name for inst in mib._by_oid.values()
+                      if inst.obj.access is Access.READ_WRITE and inst.write is None}
+    assert read_only_here == set(NOT_WRITABLE_HERE)
+    oid = OVERLAP_TABLE[OverlapColumn.INCLUDED_PHASES].instance(1)
+    refused(mib, [(oid, 1)], ErrorStatus.NOT_WRITABLE, 1)

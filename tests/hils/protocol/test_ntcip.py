@@ -103,10 +103,11 @@ def test_phase_option_bits_follow_ntcip_1202() -> None:
     (PhaseColumn.YELLOW_CHANGE, 8, "phaseYellowChange", Access.READ_WRITE),
     (PhaseColumn.RED_CLEAR, 9, "phaseRedClear", Access.READ_WRITE),
     (PhaseColumn.RED_REVERT, 10, "phaseRedRevert", Access.READ_WRITE),
-    (PhaseColumn.STARTUP, 20, "phaseStartup", Access.READ_ONLY),
-    (PhaseColumn.OPTIONS, 21, "phaseOptions", Access.READ_ONLY),
-    (PhaseColumn.RING, 22, "phaseRing", Access.READ_ONLY),
-    (PhaseColumn.CONCURRENCY, 23, "phaseConcurrency", Access.READ_ONLY),
+    # Writable in the standard; the emulator serves them read-only (emulator.agent.mib.NOT_WRITABLE_HERE).
+    (PhaseColumn.STARTUP, 20, "phaseStartup", Access.READ_WRITE),
+    (PhaseColumn.OPTIONS, 21, "phaseOptions", Access.READ_WRITE),
+    (PhaseColumn.RING, 22, "phaseRing", Access.READ_WRITE),
+    (PhaseColumn.CONCURRENCY, 23, "phaseConcurrency", Access.READ_WRITE),
 ])
 def test_phase_table_oids(column: PhaseColumn, number: int, name: str, access: Access) -> None:
     assert oid_str(phase_oid(column, 7)) == f"{A}.1.2.1.{number}.7"
