@@ -22,9 +22,10 @@ Rules of this module
   ``advance`` is the one place time moves) and the transport differ. ``target="virtual"`` (the default) is
   the in-process emulator, found through the ``hils.shell.targets`` entry point so that ``hils`` never imports it;
   ``target="snmp://..."`` is a real controller, or ``hils emulator serve``, at wall-clock time; a callable
-  target is a factory ``(env, config, *, seed, fast_path) -> target`` whose target has a ``transport``, or a
-  ``surface`` (with ``get_latency`` and ``set_latency``) that an in-process transport reaches (the fault
-  harness puts its faults there).
+  target is a factory ``(env, config, *, seed, fast_path, hires) -> target`` whose target has a ``transport``, or
+  a ``surface`` (with ``get_latency`` and ``set_latency``) that an in-process transport reaches (the fault
+  harness puts its faults there); ``hires`` says whether the run keeps the controller's hi-res record
+  (:attr:`Testbed.keeps_hires`).
 - Virtual time's fast path is switched by the run's ``fast_path`` flag alone (:mod:`hils.shell.fastpath`).
 - A decision point is the end of the control interval for selection and switch actions, the end of
   the served green for duration actions, and, earlier, the manager entering TIMEOUT or the end of
