@@ -36,6 +36,9 @@ class VirtualTarget:
     ``controller`` is the model itself (its lamps, for monitors); ``unit`` is what the agent talks to;
     ``log`` its data logger, whose hi-res event log :meth:`hires` hands the run, and :meth:`hires_to` hands a sink
     as it is logged (the optional methods of a target through which a Testbed keeps the controller's own record).
+    With ``hires=False`` (a run that keeps no hi-res record) the controller has no data logger (``log`` is None):
+    the logger's work on every step and the ticks stepped for it alone (a green's minimum, logged at its tick) are
+    left out, and nothing else changes, since the logger never acts.
     On virtual time's fast path (``fast_path``, the run's flag: :mod:`hils.shell.fastpath`) the unit's ticks run
     event by event (:mod:`emulator.model.event_clock`), and the clock is the change feed that lets the poller skip
     polls that cannot see a change. Without it is the reference the fast path is tested against: every tick
@@ -43,10 +46,10 @@ class VirtualTarget:
     """
 
     def __init__(self, env: simpy.Environment, config: IntersectionConfig, *, seed: int = 0,
-                 fast_path: bool = True) -> None:
+                 fast_path: bool = True, hires: bool = True) -> None:
         self.env = env
         self.controller = Controller(config)
-        self.log = DataLogger(self.controller)
+        self.log = DataLogger(self.controller) if hires else None
         self.unit = DelayedController(self.controller, config.emulator)
         self.mib = MibView(self.unit)
         self.get_latency = GET_LATENCY
@@ -65,12 +68,18 @@ class VirtualTarget:
 
     def hires(self) -> list[Event]:
         """The controller's hi-res event log so far (complete: only real steps log, and they run when due)."""
-        return self.log.events()
+        return self._logger().events()
 
     def hires_to(self, sink: Callable[[Sequence[Event]], None]) -> None:
         """Hand ``sink`` the hi-res log so far, then each tick's events as they are logged (the other optional
         method of a target: a Testbed writes them through, :mod:`hils.shell.hiresjournal`)."""
-        self.log.write_to(sink)
+        self._logger().write_to(sink)
+
+    def _logger(self) -> DataLogger:
+        if self.log is None:
+            raise RuntimeError("this controller keeps no hi-res log: it was built with hires=False (a Testbed does so "
+                               "with measure=False and no hires_path)")
+        return self.log
 
     @property
     def change_feed(self) -> EventClock | None:

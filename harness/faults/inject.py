@@ -827,10 +827,10 @@ class FaultTarget:
     """
 
     def __init__(self, env: simpy.Environment, config: IntersectionConfig, *, seed: int = 0,
-                 faults: Sequence[Fault] = (), fast_path: bool = True) -> None:
+                 faults: Sequence[Fault] = (), fast_path: bool = True, hires: bool = True) -> None:
         self.env = env
         self.config = config
-        self.base = VirtualTarget(env, config, seed=seed, fast_path=fast_path)
+        self.base = VirtualTarget(env, config, seed=seed, fast_path=fast_path, hires=hires)
         self.controller: Controller = self.base.controller
         self.mib: MibView = self.base.mib
         surface: ObjectSurface = self.base.surface  # writes go through the controller's clock

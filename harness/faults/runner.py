@@ -31,8 +31,8 @@ def run_fault_scenario(scenario: FaultScenario, *, log_path: Path | None = None)
         # Each controller's target carries only the faults placed on it: the others' links stay whole.
         here = [fault for spec, fault in placed if spec.acts_at(tls)]
 
-        def make(env: Any, config: IntersectionConfig, *, seed: int, fast_path: bool) -> FaultTarget:
-            target = FaultTarget(env, config, seed=seed, faults=here, fast_path=fast_path)
+        def make(env: Any, config: IntersectionConfig, *, seed: int, fast_path: bool, hires: bool) -> FaultTarget:
+            target = FaultTarget(env, config, seed=seed, faults=here, fast_path=fast_path, hires=hires)
             monitors[tls] = IndicationMonitor(env, target.controller, config)
             return target
         return make

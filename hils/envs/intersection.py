@@ -195,8 +195,9 @@ class IntersectionEnv(gymnasium.Env):
     ``control_interval``: override the config's. ``episode_length``: simulated seconds.
     ``reward``: a name of :data:`REWARDS` or a callable. ``recover_after``: seconds in TIMEOUT
     before the Testbed recovers. ``log_path``: the event log of each episode (overwritten). ``measure``:
-    True to have ``testbed.traffic`` carry the run summary's delays and queues at an episode's end (they
-    cost per-vehicle samples every second, which training does not need: off by default).
+    True to have ``testbed.traffic`` carry the run summary's delays and queues at an episode's end, and
+    ``testbed.hires()`` the controllers' hi-res logs (they cost per-vehicle samples every second and a data
+    logger in every controller, which training does not need: off by default; the episode is the same).
     """
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": []}

@@ -22,9 +22,10 @@ Rules of this module
   ``advance`` is the one place time moves) and the transport differ. ``target="virtual"`` (the default) is
   the in-process emulator, found through the ``hils.shell.targets`` entry point so that ``hils`` never imports it;
   ``target="snmp://..."`` is a real controller, or ``hils emulator serve``, at wall-clock time; a callable
-  target is a factory ``(env, config, *, seed, fast_path) -> target`` whose target has a ``transport``, or a
-  ``surface`` (with ``get_latency`` and ``set_latency``) that an in-process transport reaches (the fault
-  harness puts its faults there).
+  target is a factory ``(env, config, *, seed, fast_path, hires) -> target`` whose target has a ``transport``, or
+  a ``surface`` (with ``get_latency`` and ``set_latency``) that an in-process transport reaches (the fault
+  harness puts its faults there); ``hires`` says whether the run keeps the controller's hi-res record
+  (:attr:`Testbed.keeps_hires`).
 - Virtual time's fast path is switched by the run's ``fast_path`` flag alone (:mod:`hils.shell.fastpath`).
 - A decision point is the end of the control interval for selection and switch actions, the end of
   the served green for duration actions, and, earlier, the manager entering TIMEOUT or the end of
@@ -221,8 +222,10 @@ class Testbed(_OneIntersection):
     seconds in TIMEOUT before the manager recovers by itself (None: never). ``on_reset(testbed)`` runs after
     assembly, before anything starts: the fault harness wraps parts of the run there. ``detectors``: SUMO's stop-bar
     loops actuate the controllers' detectors (default: for the actuated agent). ``measure``: False skips what only
-    the end-of-run summary and the queue plot need (per-vehicle delays, queue and spillback samples, ``queues``
-    records), as environments do for speed. ``fast_path``: leave out in virtual time what cannot change a result
+    the end-of-run summary, the queue plot and the controllers' hi-res record need (per-vehicle delays, queue and
+    spillback samples, ``queues`` records; the data logger of each controller held in process, unless a
+    ``hires_path`` journal is asked for: :attr:`keeps_hires`), as environments do for speed; every other record
+    of the run stays the same. ``fast_path``: leave out in virtual time what cannot change a result
     (:mod:`hils.shell.fastpath`); False runs the reference (every controller tick, every poll, every SUMO step).
     ``take_over``: drive a controller on which someone else's calls are found without first watching them for
     another manager (a run that finds them changing refuses to start); their calls are cleared.
@@ -318,6 +321,13 @@ class Testbed(_OneIntersection):
         return self.ended or (self.duration is not None and self._env.now >= self.duration - 1e-9)
 
     @property
+    def keeps_hires(self) -> bool:
+        """The run keeps its controllers' hi-res record: it measures, or writes the hi-res journal. Without, the
+        controllers held in process run no data logger (their targets are made with ``hires=False``): none of its
+        work on every step, none of the steps it alone needs, and :meth:`hires` has nothing to give."""
+        return self.measure or self.hires_path is not None
+
+    @property
     def records(self) -> list[dict[str, Any]]:
         """The event log's records (read back from the file when the log is not kept in memory)."""
         log_ = self.events
@@ -328,7 +338,10 @@ class Testbed(_OneIntersection):
     def hires(self) -> dict[str, list[Event]]:
         """Each controller's own hi-res event log, where the run can read it: the in-process emulator's (a target
         with a ``hires()`` method, see :mod:`hils.protocol.hires`). A controller reached at the wall clock keeps its
-        own, which a field tool collects from it (:func:`hils.shell.asclog.collect` for a MaxTime endpoint)."""
+        own, which a field tool collects from it (:func:`hils.shell.asclog.collect` for a MaxTime endpoint). Empty
+        in a run that keeps no hi-res record (:attr:`keeps_hires`)."""
+        if not self.keeps_hires:
+            return {}
         return {name: i.target.hires() for name, i in self.intersections.items()
                 if callable(getattr(i.target, "hires", None))}
 
@@ -398,7 +411,7 @@ class Testbed(_OneIntersection):
         # one draws from the run's seed itself.
         seed = self.seed if label is None else self.seed * 1009 + index
         target, transport, where, community = connect(env, cfg, spec, self._wall_targets.get(name), self._driver,
-                                                      seed=seed, fast_path=self.fast_path)
+                                                      seed=seed, fast_path=self.fast_path, hires=self.keeps_hires)
         events = TaggedLog(self.events, label) if label is not None else self.events
         # The summary's figures, kept as the run goes (its end re-reads nothing): each intersection's tally is handed
         # its own records and the run's (a lone one's, every record).

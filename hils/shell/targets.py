@@ -24,8 +24,10 @@ __all__ = ["VIRTUAL", "TargetError", "TargetFactory", "check_target", "connect",
 
 VIRTUAL = "virtual"
 
-#: ``(env, config, *, seed, fast_path) -> target``: a target with a ``transport``, or a ``surface`` (with
-#: ``get_latency`` and ``set_latency``) that an in-process transport reaches.
+#: ``(env, config, *, seed, fast_path, hires) -> target``: a target with a ``transport``, or a ``surface`` (with
+#: ``get_latency`` and ``set_latency``) that an in-process transport reaches. ``hires``: the run keeps the
+#: controller's hi-res record (a target that keeps one offers ``hires()`` and ``hires_to()``); when it does not,
+#: a controller held in process runs no data logger.
 TargetFactory = Callable[..., Any]
 
 
@@ -87,14 +89,15 @@ def check_target(url: str, label: str | None) -> tuple[Any, tuple[str, int]]:
 
 
 def connect(env: simpy.Environment, config: IntersectionConfig, spec: str | TargetFactory,
-            wall: tuple[Any, tuple[str, int]] | None, driver: Any, *, seed: int, fast_path: bool
+            wall: tuple[Any, tuple[str, int]] | None, driver: Any, *, seed: int, fast_path: bool, hires: bool
             ) -> tuple[Any, Transport, str, str | None]:
     """Reach one intersection's controller: its target, the transport to it, how messages name it (where) and
     the community it is written with (None in process). ``wall``: the parsed URL and address of a wall-clock
-    target (:func:`check_target`), reached through ``driver``."""
+    target (:func:`check_target`), reached through ``driver``. ``seed``, ``fast_path``, ``hires``: the run's, for a
+    target made in process (:data:`TargetFactory`)."""
     if wall is None:
         factory = virtual_target_factory() if spec == VIRTUAL else spec
-        target = factory(env, config, seed=seed, fast_path=fast_path)
+        target = factory(env, config, seed=seed, fast_path=fast_path, hires=hires)
         # A target brings its transport, or an object surface that an in-process transport reaches.
         transport = getattr(target, "transport", None) or LocalTransport(
             env, target.surface, tau_udp=config.middleware.tau_udp, get_latency=target.get_latency,

@@ -128,8 +128,8 @@ def test_the_implicit_checks_catch_a_conflicting_command_and_a_lost_record():
     # Judge doctored records of a fresh run: one SET of conflicting phases, one record missing.
     monitors = []
 
-    def factory(env, config, *, seed, fast_path):
-        target = FaultTarget(env, config, seed=seed, faults=faults, fast_path=fast_path)
+    def factory(env, config, *, seed, fast_path, hires):
+        target = FaultTarget(env, config, seed=seed, faults=faults, fast_path=fast_path, hires=hires)
         monitors.append(IndicationMonitor(env, target.controller, config))
         return target
 
@@ -405,8 +405,8 @@ def test_a_preempt_during_a_commanded_transition_is_judged_preempted_and_its_bre
     faults = scenario.build_faults()
     monitors = []
 
-    def factory(env, config, *, seed, fast_path):
-        target = FaultTarget(env, config, seed=seed, faults=faults, fast_path=fast_path)
+    def factory(env, config, *, seed, fast_path, hires):
+        target = FaultTarget(env, config, seed=seed, faults=faults, fast_path=fast_path, hires=hires)
         monitors.append(IndicationMonitor(env, target.controller, config))
         return target
 

@@ -247,8 +247,8 @@ def test_a_rebooting_controller_is_silent_then_back_in_its_startup_phases_with_c
 
 def run_with(config: IntersectionConfig, faults, *, action_type=ActionType.SELECTION, agent=None, duration=60.0,
              monitors: list | None = None):
-    def factory(env, cfg, *, seed, fast_path):
-        target = FaultTarget(env, cfg, seed=seed, faults=faults, fast_path=fast_path)
+    def factory(env, cfg, *, seed, fast_path, hires):
+        target = FaultTarget(env, cfg, seed=seed, faults=faults, fast_path=fast_path, hires=hires)
         if monitors is not None:
             monitors.append(IndicationMonitor(env, target.controller, cfg))
         return target

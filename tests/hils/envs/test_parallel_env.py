@@ -258,6 +258,28 @@ def test_the_grid_has_sixteen_agents_and_runs() -> None:
         assert all(i["t"] == pytest.approx(start["A1"]["t"] + 30.0) for i in infos.values())
 
 
+def test_an_episode_that_keeps_no_hi_res_record_is_the_same_episode_without_its_data_loggers() -> None:
+    """measure=False (the default) runs no controller's data logger, nor the steps a logger alone takes: on RESCO's
+    grid4x4, sixteen controllers beside SUMO, the episode is the measured one step for step (observations, rewards,
+    infos) and record for record, but for the queue samples only a measured run writes."""
+    episodes = {}
+    for measure in (True, False):
+        with opened(scenario="resco:grid4x4", action_type="selection", episode_length=SHORT, measure=measure) as env:
+            trajectory = rollout(env, 5, sampled_actions(env, 5, 13))
+            targets = [i.target for i in env.testbed.intersections.values()]
+            records = [{k: v for k, v in r.items() if k not in ("wall_ns", "seq")} for r in env.testbed.records
+                       if r["kind"] != Kind.QUEUES]
+            unlogged, steps = [t.log is None for t in targets], sum(t.clock.steps for t in targets)
+            episodes[measure] = trajectory, records, unlogged, steps
+    (trajectory, records, unlogged, steps), (bare_trajectory, bare_records, bare_unlogged, bare_steps) = (
+        episodes[True], episodes[False])
+    assert not any(unlogged) and all(bare_unlogged)
+    assert bare_steps < steps, "the loggers' own steps are gone"
+    assert records[-1]["kind"] == Kind.RUN_ENDED and len(trajectory) == 13
+    assert bare_trajectory == trajectory
+    assert bare_records == records
+
+
 @pytest.mark.wallclock
 def test_the_same_env_runs_at_wall_clock_against_the_served_corridor(tmp_path: Path) -> None:
     served = start_emulator(tmp_path / "serve.log", "--scenario", "corridor", count=4)

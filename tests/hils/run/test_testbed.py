@@ -89,9 +89,9 @@ def test_a_refused_action_raises_sends_nothing_and_takes_no_time() -> None:
 
 
 def test_a_step_ends_early_when_the_manager_enters_timeout() -> None:
-    def target(env: Any, config: IntersectionConfig, *, seed: int, fast_path: bool) -> FaultTarget:
+    def target(env: Any, config: IntersectionConfig, *, seed: int, fast_path: bool, hires: bool) -> FaultTarget:
         return FaultTarget(env, config, seed=seed, faults=[DatagramLoss("down", window=Window(2.0))],
-                           fast_path=fast_path)
+                           fast_path=fast_path, hires=hires)
 
     with Testbed(CFG, action_type="selection", target=target, recover_after=None) as tb:
         tb.reset()
@@ -313,6 +313,39 @@ def test_a_run_that_does_not_measure_is_the_same_run_without_the_summary_samples
     assert (counts.departed, counts.arrived, counts.running) == (traffic.departed, traffic.arrived, traffic.running)
     assert traffic.mean_delay is not None and counts.mean_delay is None and counts.approaches == {}
     assert "not measured" in counts.notes[0]
+
+
+def test_a_run_that_keeps_no_hi_res_record_runs_no_data_logger_and_takes_no_step_for_one(tmp_path: Path) -> None:
+    """measure=False without a hi-res journal keeps no hi-res record: its controller runs no data logger, and so
+    takes none of the steps a logger alone needs (a green's minimum logged at its tick), the controller's own steps
+    all the same. A run that writes the journal keeps the logger whatever it measures, and the very same record."""
+    runs = {}
+    for measure, journal in ((True, tmp_path / "measured.csv"), (False, tmp_path / "unmeasured.csv"), (False, None)):
+        own = [0]  # the controller's own steps: those the logger did not ask for alone
+
+        def count(tb: Testbed, own: list[int] = own) -> None:
+            controller = tb.target.controller
+            step = controller._step
+
+            def counted() -> None:
+                own[0] += 1
+                step()
+            controller._step = counted
+
+        with Testbed(seed=1, duration=300.0, agent="random", measure=measure, hires_path=journal,
+                     on_reset=count) as tb:
+            tb.reset()
+            tb.run()
+            runs[measure, journal is not None] = (tb.target, tb.target.clock.steps, own[0], tb.hires())
+    (logged, steps, own, hires), (kept, kept_steps, kept_own, kept_hires) = runs[True, True], runs[False, True]
+    bare, bare_steps, bare_own, nothing = runs[False, False]
+    assert logged.log is not None and kept.log is not None and kept_hires == hires and len(hires["C"]) > 100
+    assert (tmp_path / "unmeasured.csv").read_bytes() == (tmp_path / "measured.csv").read_bytes()
+    assert (kept_steps, kept_own) == (steps, own)
+    assert bare.log is None and bare.controller.recorder is None and nothing == {}
+    assert bare_own == own and bare_steps < steps, "only the steps taken for the logger alone are left out"
+    with pytest.raises(RuntimeError, match="keeps no hi-res log"):
+        bare.hires()
 
 
 @settings(max_examples=300, deadline=None)

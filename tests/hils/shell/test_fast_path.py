@@ -69,8 +69,9 @@ def test_a_transport_wrapped_in_a_fault_keeps_the_path_the_flag_says() -> None:
     for fast_path in (True, False):
         loss = DatagramLoss("loss", probability=0.3, window=Window(40.0, 55.0), seed=4)
 
-        def target(env: Any, config: Any, *, seed: int, fast_path: bool, loss: DatagramLoss = loss) -> FaultTarget:
-            return FaultTarget(env, config, seed=seed, faults=[loss], fast_path=fast_path)
+        def target(env: Any, config: Any, *, seed: int, fast_path: bool, hires: bool,
+                   loss: DatagramLoss = loss) -> FaultTarget:
+            return FaultTarget(env, config, seed=seed, faults=[loss], fast_path=fast_path, hires=hires)
 
         with Testbed(target=target, seed=4, duration=100.0, agent="random", fast_path=fast_path) as tb:
             tb.reset()

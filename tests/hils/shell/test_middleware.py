@@ -406,8 +406,9 @@ class _FirstSetLost:
 def test_a_command_set_without_answer_is_sent_again_and_the_transition_completes(paper_config) -> None:
     tau_udp = paper_config.middleware.tau_udp
 
-    def target(env: simpy.Environment, config: IntersectionConfig, *, seed: int, fast_path: bool) -> VirtualTarget:
-        base = VirtualTarget(env, config, seed=seed, fast_path=fast_path)
+    def target(env: simpy.Environment, config: IntersectionConfig, *, seed: int, fast_path: bool,
+               hires: bool) -> VirtualTarget:
+        base = VirtualTarget(env, config, seed=seed, fast_path=fast_path, hires=hires)
         base.transport = _FirstSetLost(LocalTransport(env, base.surface, tau_udp=tau_udp,
                                                       get_latency=base.get_latency, set_latency=base.set_latency),
                                        tau_udp)

@@ -66,8 +66,8 @@ def test_faults_draw_on_every_poll_in_their_window() -> None:
     """A fault in the request path sees every poll while it may act: polls are left out only outside its window,
     and the run is the reference's record for record."""
     def target_with(loss: DatagramLoss) -> Any:
-        def target(env: Any, config: Any, *, seed: int, fast_path: bool) -> FaultTarget:
-            return FaultTarget(env, config, seed=seed, faults=[loss], fast_path=fast_path)
+        def target(env: Any, config: Any, *, seed: int, fast_path: bool, hires: bool) -> FaultTarget:
+            return FaultTarget(env, config, seed=seed, faults=[loss], fast_path=fast_path, hires=hires)
         return target
 
     runs = {}
@@ -110,8 +110,8 @@ def test_read_backs_that_cannot_see_a_change_are_not_sent(fast_path: bool) -> No
     hold = control_oid(ControlColumn.HOLD, 1)
     surfaces: list[CountingSurface] = []
 
-    def target(env: Any, config: Any, *, seed: int, fast_path: bool) -> VirtualTarget:
-        t = VirtualTarget(env, config, seed=seed, fast_path=fast_path)
+    def target(env: Any, config: Any, *, seed: int, fast_path: bool, hires: bool) -> VirtualTarget:
+        t = VirtualTarget(env, config, seed=seed, fast_path=fast_path, hires=hires)
         surfaces.append(CountingSurface(t.surface, hold))
         t.surface = surfaces[-1]
         return t
