@@ -3,6 +3,8 @@ runs beside, in a fixed order."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 from hils.protocol.config import IntersectionConfig
 from hils.protocol.conflict import Conflict, conflicts, first_conflict
 
@@ -44,9 +46,14 @@ def test_every_conflict_comes_phases_first_then_overlaps_each_in_number_order(ci
     assert first_conflict(city_config.permissives, {7, 6, 2}, {E, A, D}) == found[0]
 
 
-def test_the_permissives_are_the_configs_worked_out_once(city_config: IntersectionConfig,
-                                                         paper_config: IntersectionConfig) -> None:
-    assert city_config.permissives is city_config.permissives
+def test_the_permissives_are_the_configs_and_follow_a_copy(city_config: IntersectionConfig,
+                                                           paper_config: IntersectionConfig) -> None:
     assert city_config.permissives.phases == city_config.compatibility
     assert set(city_config.permissives.overlaps) == set(city_config.overlaps)
     assert paper_config.permissives.overlaps == {}
+    # A copy with another matrix is judged by it: nothing runs beside anything, so every overlap conflicts with
+    # every phase but its own parents.
+    strict = replace(city_config, compatibility=frozenset())
+    assert first_conflict(strict.permissives, {2, 6}) == Conflict(2, 6)
+    assert strict.permissives.overlaps[A] == set(city_config.phases) - {8, 5}
+    assert replace(city_config) == city_config
