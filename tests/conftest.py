@@ -1,4 +1,4 @@
-"""Shared fixtures: the shipped paper intersection and a fresh controller on it."""
+"""Shared fixtures: the shipped paper intersection, the city's, and a fresh controller on the paper's."""
 
 from __future__ import annotations
 
@@ -7,13 +7,20 @@ from importlib import resources
 import pytest
 
 from emulator.model.controller import Controller
-from hils.protocol.config import DEFAULT_CONFIG_NAME, IntersectionConfig, load
+from hils.protocol.config import DEFAULT_CONFIG_NAME, IntersectionConfig, load, parse
 
 
 @pytest.fixture(scope="session")
 def paper_config() -> IntersectionConfig:
     """The shipped four-leg intersection of the paper (immutable, so shared by the session)."""
     return load()
+
+
+@pytest.fixture(scope="session")
+def city_config() -> IntersectionConfig:
+    """The shipped four-leg intersection as a city runs it: the paper's, with overlaps, a plan and a preempt."""
+    return parse((resources.files("hils.data") / "four_leg_city.toml").read_text(encoding="utf-8"),
+                 "hils/data/four_leg_city.toml")
 
 
 @pytest.fixture(scope="session")

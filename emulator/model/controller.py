@@ -98,13 +98,11 @@ Omitted phases never start. ForceOff bits clear themselves when that phase's
 green ends. unitBackupTime is armed by the first SET of a control object; when
 it passes without another, the controller reports backupMode and clears every
 control object. After power-up the controller flashes for unitStartUpFlash
-seconds, then starts its start-up intervals. A conflict monitor, like an MMU,
-checks every tick that no two phases showing green or yellow are incompatible
-under the configured matrix, that no overlap showing green or yellow stands
-beside a phase it conflicts with (:mod:`emulator.model.overlaps`), and that
-no channel, phase or overlap, goes from green to red without a yellow of at
-least 2.7 s (an MMU's short-yellow fault); if any does, the controller goes
-to flash (all red) and stops timing.
+seconds, then starts its start-up intervals. The monitor (the cabinet's MMU,
+:mod:`emulator.model.monitor`) sees the lamps after every tick that changed
+them: two conflicting signals lit together (phases, or an overlap and a phase)
+or a channel leaving its green without a yellow of at least 2.7 s is a fault,
+and the controller goes to flash (all red) and stops timing.
 
 Overlaps follow the phases at the end of each tick; an overlap that will
 still show green or yellow after this tick (its own trailing green, yellow
@@ -154,6 +152,7 @@ from typing import Protocol
 import simpy
 
 from emulator.model.coordination import Coordinator, Plan
+from emulator.model.monitor import Lamps, Monitor
 from emulator.model.overlaps import Overlaps, Phases
 from emulator.model.preemption import Event, Preemptor
 from hils.protocol.config import IntersectionConfig, NextPhaseLock, Phase, Recall
@@ -171,7 +170,6 @@ from hils.protocol.timegrid import Grid
 log = logging.getLogger(__name__)
 
 TICK = 0.1  # seconds per controller tick
-SHORT_YELLOW = 27  # ticks: the least yellow a signal monitor takes after a green (see Controller._short_yellow)
 
 
 class Interval(StrEnum):
@@ -327,6 +325,7 @@ class Controller:
         self.coordinator = Coordinator(config, clock=tenths((start - self.day0).total_seconds()))
         self.overlaps = Overlaps(config)
         self.preemptor = Preemptor(config)
+        self.monitor = Monitor(config)
         # Counts changes of the status objects (what a poll reads), across power cycles too.
         # Inputs count too: they change the calls the status shows.
         self.status_version = 0
@@ -349,10 +348,9 @@ class Controller:
         self.actuations: frozenset[int] = frozenset()  # vehicle detectors actuated now
         self.ped_actuations: frozenset[int] = frozenset()  # pedestrian detectors actuated now
         self._inputs = None
-        # The image the conflict monitor last passed, and the tick each channel's yellow began: a power cycle puts
-        # every lamp out, so the monitor starts afresh.
+        # The image the monitor last passed: a power cycle puts every lamp out, so the monitor starts afresh.
         self._checked: tuple[frozenset[int], ...] | None = None
-        self._yellow_began: dict[tuple[str, int], int] = {}
+        self.monitor.reset()
         self._yellow_end: dict[int, int] = {}  # tick each phase's last yellow ended (red revert)
         self._since_set: int | None = None  # ticks since the last control SET; None = backup timer disarmed
         self.rings = [Ring(i + 1, order) for i, order in enumerate(self.config.rings)]
@@ -1186,41 +1184,12 @@ class Controller:
 
     def _monitor(self) -> None:
         if self._status is self._checked:
-            return  # what it checks is all in the status image, and this one passed
-        fault = self._conflict() or self._short_yellow()
+            return  # what it sees is all in the status image, and this one passed
+        lamps = Lamps(self.greens, self.yellows, self.overlap_greens, self.overlap_yellows)
+        fault = self.monitor.check(lamps, self.tick)
         if fault is None:
             self._checked = self._status
         else:
             log.error("conflict monitor: %s at tick %d: flash", fault, self.tick)
             self.flash_status = UnitFlashStatus.MMU
             self._refresh_status()
-
-    def _conflict(self) -> str | None:
-        shown = sorted(self.greens | self.yellows)
-        cfg = self.config
-        conflict = next((f"phases {a} and {b}" for i, a in enumerate(shown) for b in shown[i + 1:]
-                         if not cfg.compatible(a, b)), None)
-        if conflict is None and cfg.overlaps:
-            conflict = next((f"overlap {cfg.overlaps[o].letter} and phase {p}"
-                             for o in sorted(self.overlap_greens | self.overlap_yellows) for p in shown
-                             if p in self.overlaps.conflicting[o]), None)
-        return None if conflict is None else f"{conflict} shown together"
-
-    def _short_yellow(self) -> str | None:
-        """A channel, phase or overlap, whose green went off without a yellow of at least 2.7 s before its red: an
-        MMU's short-yellow fault ("When a channel has a Green ... that turns off, a Yellow must follow it and it
-        must stay on for at least 2.7 seconds", Reno A&E MMU-1600G, Short Yellow Monitoring)."""
-        before = self._checked
-        began = self._yellow_began
-        for kind, g, y in (("phase", 0, 1), ("overlap", 8, 9)):
-            greens, yellows = self._status[g], self._status[y]
-            was_green, was_yellow = (frozenset(), frozenset()) if before is None else (before[g], before[y])
-            for n in was_green - greens - yellows:
-                return f"{kind} {n} from green to red without a yellow"
-            for n in yellows - was_yellow:
-                began[kind, n] = self.tick
-            for n in was_yellow - yellows:
-                since = began.pop((kind, n), None)
-                if n not in greens and since is not None and self.tick - since < SHORT_YELLOW:
-                    return f"{kind} {n} yellow for {(self.tick - since) / 10:g} s"
-        return None

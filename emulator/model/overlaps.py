@@ -142,13 +142,12 @@ class Overlaps:
     def __init__(self, config: IntersectionConfig) -> None:
         self.config = config
         self.timing = {n: OverlapTiming.of(o) for n, o in config.overlaps.items()}
-        #: Per overlap, the phases that may not show green or yellow beside it.
-        self.conflicting = {n: frozenset(p for p in config.phases if not config.overlap_allows(n, p))
-                            for n in config.overlaps}
-        #: Per overlap, the phases that may not start while it shows: those conflicting with it, and a
-        #: minus-green-yellow overlap's modifiers (it clears before they start: see "Never green to red").
-        self.waiting = {n: self.conflicting[n] | frozenset(o.modifiers if o.kind is OverlapKind.MINUS_GREEN_YELLOW
-                                                           else ()) for n, o in config.overlaps.items()}
+        #: Per overlap, the phases that may not start while it shows: those that may not be lit beside it (what
+        #: the monitor checks), and a minus-green-yellow overlap's modifiers (it clears before they start: see
+        #: "Never green to red").
+        conflicting = config.permissives.overlaps
+        self.waiting = {n: conflicting[n] | frozenset(o.modifiers if o.kind is OverlapKind.MINUS_GREEN_YELLOW
+                                                      else ()) for n, o in config.overlaps.items()}
         self.reset()
 
     def reset(self) -> None:

@@ -51,6 +51,7 @@ from hils.agents.builtin import Agent, Observation
 from hils.control.actions import ActionType
 from hils.control.manager import State
 from hils.protocol.config import IntersectionConfig
+from hils.protocol.conflict import Conflict, conflicts, first_conflict
 from hils.protocol.ntcip import (
     CONTROL_TABLE,
     PREEMPT_CONTROL_STATE,
@@ -613,12 +614,13 @@ def bad_value(kind: BadActionKind, action_type: ActionType, config: Intersection
     ring2 = [p for p in config.phase_numbers if config.ring_of(p) == 2]
     match kind:
         case BadActionKind.CONFLICT:
-            return next([a, b] for a in ring1 for b in ring2 if not config.compatible(a, b))
+            return next([a, b] for a in ring1 for b in ring2 if first_conflict(config.permissives, (a, b)))
         case BadActionKind.UNKNOWN_PHASE:
             return [ring1[0], max(config.phases) + 1]
         case BadActionKind.NOT_IN_SET:
             pairs = set(config.pairs)
-            return next([a, b] for a in ring1 for b in ring2 if config.compatible(a, b) and (a, b) not in pairs)
+            return next([a, b] for a in ring1 for b in ring2
+                        if first_conflict(config.permissives, (a, b)) is None and (a, b) not in pairs)
         case BadActionKind.NAN:
             return [math.nan, math.nan] if action_type is ActionType.SELECTION else math.nan
         case BadActionKind.OUT_OF_RANGE:
@@ -851,11 +853,12 @@ class FaultTarget:
 @dataclass(frozen=True, slots=True)
 class ShownConflict:
     t: float
-    phases: tuple[int, int]
+    conflict: Conflict  # two phases, or an overlap and a phase
 
 
 class IndicationMonitor:
-    """Samples the controller every tick: conflicting indications, MMU flash, control status."""
+    """Samples the controller every tick: conflicting indications (phases and overlaps, by the one conflict check
+    of :mod:`hils.protocol.conflict`, every conflict of a sample), MMU flash, control status."""
 
     def __init__(self, env: simpy.Environment, controller: Controller, config: IntersectionConfig) -> None:
         self.env = env
@@ -882,8 +885,5 @@ class IndicationMonitor:
         self.status_first_seen.setdefault(c.control_status, self.env.now)
         if c.flash_status is UnitFlashStatus.MMU and self.mmu_flash_at is None:
             self.mmu_flash_at = self.env.now
-        shown = sorted(c.greens | c.yellows)
-        for i, a in enumerate(shown):
-            for b in shown[i + 1:]:
-                if not self.config.compatible(a, b):
-                    self.conflicts.append(ShownConflict(self.env.now, (a, b)))
+        lit = conflicts(self.config.permissives, c.greens | c.yellows, c.overlap_greens | c.overlap_yellows)
+        self.conflicts.extend(ShownConflict(self.env.now, conflict) for conflict in lit)

@@ -6,11 +6,12 @@ of :class:`~harness.faults.reader.Expectations`, into a :class:`FaultScenarioRes
 Implicit expectations, always checked: every fault fired at least once (a
 scenario cannot pass because its fault never happened); no SET holds two
 conflicting phases or an unknown one; the controller never showed two
-conflicting phases (sampled every tick) nor went to MMU flash; no command or
-keepalive was sent while in TIMEOUT; the log is whole (seq gapless from 0, the
-run started and ended, every dispatched command ended exactly once, every SET
-was answered or failed). Each can be switched off in ``[expect]``
-(``no_conflicting_command``, ``no_conflicting_indication``,
+conflicting signals, two phases or an overlap and a phase (sampled every tick;
+conflicts as :mod:`hils.protocol.conflict`, the one check, finds them), nor went
+to MMU flash; no command or keepalive was sent while in TIMEOUT; the log is
+whole (seq gapless from 0, the run started and ended, every dispatched command
+ended exactly once, every SET was answered or failed). Each can be switched off
+in ``[expect]`` (``no_conflicting_command``, ``no_conflicting_indication``,
 ``no_commands_in_timeout``, ``log_complete`` = false) for a scenario that studies
 that very failure. A scenario with no ``timeout`` key expects no TIMEOUT.
 
@@ -29,6 +30,7 @@ from typing import Any
 from harness.faults.inject import Fault, IndicationMonitor
 from harness.faults.reader import ANY_TIMEOUT, NO_TIMEOUT, Expectations, FaultScenario, status_name
 from hils.protocol.config import IntersectionConfig
+from hils.protocol.conflict import first_conflict
 from hils.shell.events import Kind
 
 __all__ = ["Check", "Episode", "FaultReport", "FaultScenarioResult", "Outcome", "evaluate"]
@@ -368,8 +370,7 @@ def _check_commands(cfg: IntersectionConfig, sets: list[dict[str, Any]],
     for r in sets:
         phases = sorted(r["phases"])
         unknown = [p for p in phases if p not in cfg.phases]
-        clash = [(a, b) for i, a in enumerate(phases) for b in phases[i + 1:] if not cfg.compatible(a, b)]
-        if unknown or clash:
+        if unknown or first_conflict(cfg.permissives, phases) is not None:
             bad.append(f"set_sent seq {r['seq']} at {r['t']:.3f} s phases {phases}")
     check("no_conflicting_command", not bad,
           f"no SET of conflicting or unknown phases ({len(sets)} SETs checked)" + (
@@ -426,7 +427,7 @@ def _check_controller(ex: Expectations, monitor: IndicationMonitor | None,
         check("controller", False, "controller samples needed, but the target has no controller to sample")
         return
     if ex.no_conflicting_indication:
-        bad = [f"{list(c.phases)} at {c.t:.3f} s" for c in monitor.conflicts[:5]]
+        bad = [f"{c.conflict} at {c.t:.3f} s" for c in monitor.conflicts[:5]]
         if monitor.mmu_flash_at is not None:
             bad.append(f"MMU flash at {monitor.mmu_flash_at:.3f} s")
         check("no_conflicting_indication", not bad,

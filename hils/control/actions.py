@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from enum import StrEnum
 
 from hils.protocol.config import IntersectionConfig, Pair
+from hils.protocol.conflict import first_conflict
 
 __all__ = [
     "ActionConverter", "ActionError", "ActionType", "ActionTypeError", "Command", "ConflictError", "ConflictMatrix",
@@ -78,14 +79,15 @@ def _short(value: object) -> str:
 
 class ConflictMatrix:
     """Which phases may show green together: the config's matrix, derived from
-    the ring-and-barrier structure unless the config overrides it."""
+    the ring-and-barrier structure unless the config overrides it, read through
+    the one conflict check (:func:`hils.protocol.conflict.first_conflict`)."""
 
     def __init__(self, config: IntersectionConfig) -> None:
         self.phases = config.phase_numbers
-        self._compatible = config.compatibility
+        self._permissives = config.permissives
 
     def conflict(self, a: int, b: int) -> bool:
-        return frozenset((a, b)) not in self._compatible
+        return first_conflict(self._permissives, (a, b)) is not None
 
     def as_rows(self) -> list[list[int]]:
         """The conflict matrix (1 = conflict) over the phases in number order, diagonal 0."""

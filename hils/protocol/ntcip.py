@@ -382,6 +382,11 @@ MAX_OVERLAPS = _o("maxOverlaps", (9, 1), low=1)
 MAX_OVERLAP_STATUS_GROUPS = _o("maxOverlapStatusGroups", (9, 3), low=1)
 
 
+def overlap_letter(number: int) -> str:
+    """An overlap's name by its number: 1 = Overlap A."""
+    return chr(ord("A") + number - 1)
+
+
 class OverlapType(IntEnum):
     """overlapType (A.9.2.1.2). NTCIP 1202 v02 knows normal and minusGreenYellow; a flashing yellow arrow is a
     vendor's type there, other(1)."""

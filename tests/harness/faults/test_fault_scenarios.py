@@ -6,8 +6,10 @@ import itertools
 import json
 import re
 from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
+import simpy
 
 from harness.faults.inject import FaultTarget, IndicationMonitor
 from harness.faults.judge import evaluate
@@ -15,6 +17,7 @@ from harness.faults.reader import default_suite, load_fault_scenario, parse_faul
 from harness.faults.runner import run_fault_scenario
 from harness.faults.table import FaultScenarioError
 from hils.cli.main import main
+from hils.protocol.ntcip import UnitControlStatus, UnitFlashStatus
 from hils.run.testbed import run_spec
 from hils.shell.events import Kind
 from hils.shell.events import read as read_events
@@ -142,6 +145,28 @@ def test_the_implicit_checks_catch_a_conflicting_command_and_a_lost_record():
     assert set(failed) == {"no_conflicting_command", "log_complete"}
     assert "phases [1, 7]" in failed["no_conflicting_command"]
     assert "seq not gapless" in failed["log_complete"]
+
+
+def test_the_judge_names_an_overlap_shown_beside_a_phase_it_conflicts_with(city_config):
+    scenario = parse_fault_scenario(LINK_DOWN, "link.toml")
+    faults = scenario.build_faults()
+
+    def factory(env, config, *, seed, fast_path):
+        return FaultTarget(env, config, seed=seed, faults=faults, fast_path=fast_path)
+
+    records = run_spec(scenario.spec(), target=factory).records
+    # A controller showing the city's right-turn overlap A (with 8 and 5) beside 6, which runs beside neither.
+    env = simpy.Environment()
+    shown = SimpleNamespace(greens=frozenset({2, 6}), yellows=frozenset(), overlap_greens=frozenset({1}),
+                            overlap_yellows=frozenset(), flash_status=UnitFlashStatus.NOT_FLASH,
+                            control_status=UnitControlStatus.SYSTEM_CONTROL)
+    monitor = IndicationMonitor(env, shown, city_config)
+    env.run(until=0.2)
+    result = evaluate(scenario, records, faults, {TLS_ID: monitor})
+    failed = {c.expectation: c.message for c in result.failures}
+    assert set(failed) == {"no_conflicting_indication"}
+    assert "got: overlap A and phase 6 at 0.050 s; overlap A and phase 6 at 0.150 s" in failed[
+        "no_conflicting_indication"]
 
 
 def test_a_scenario_is_reproducible_from_its_seed():

@@ -33,6 +33,7 @@ from harness.faults.inject import (
 )
 from hils.control.actions import ActionConverter, ActionError, ActionType
 from hils.protocol.config import IntersectionConfig
+from hils.protocol.conflict import Conflict
 from hils.protocol.ntcip import (
     ControlColumn,
     ErrorStatus,
@@ -349,15 +350,32 @@ def test_keepalive_suppressed_lets_the_backup_time_run_out(paper_config):
     assert short.fired == 1
 
 
+def lit(greens=(), yellows=(), overlap_greens=(), overlap_yellows=()) -> SimpleNamespace:
+    """What a controller shows, as the monitor samples it."""
+    return SimpleNamespace(greens=frozenset(greens), yellows=frozenset(yellows),
+                           overlap_greens=frozenset(overlap_greens), overlap_yellows=frozenset(overlap_yellows),
+                           flash_status=UnitFlashStatus.NOT_FLASH, control_status=UnitControlStatus.SYSTEM_CONTROL)
+
+
 def test_the_monitor_sees_conflicting_indications_and_mmu_flash(paper_config):
     env = simpy.Environment()
-    shown = SimpleNamespace(greens=frozenset({2, 6}), yellows=frozenset(), flash_status=UnitFlashStatus.NOT_FLASH,
-                            control_status=UnitControlStatus.SYSTEM_CONTROL)
+    shown = lit({2, 6})
     monitor = IndicationMonitor(env, shown, paper_config)
     env.run(until=1.0)
     assert monitor.samples == 10 and not monitor.conflicts and monitor.mmu_flash_at is None
     shown.yellows = frozenset({7})
     shown.flash_status = UnitFlashStatus.MMU
     env.run(until=1.2)
-    assert [c.phases for c in monitor.conflicts] == [(2, 7), (6, 7)] * 2
+    assert [c.conflict for c in monitor.conflicts] == [Conflict(2, 7), Conflict(6, 7)] * 2
     assert monitor.mmu_flash_at == pytest.approx(1.05)
+
+
+def test_the_monitor_sees_an_overlap_lit_beside_a_phase_it_conflicts_with(city_config):
+    # The city's right-turn overlap A shows with 8 and 5; 6 runs beside neither.
+    env = simpy.Environment()
+    shown = lit({2, 6}, overlap_greens={1}, overlap_yellows={5})  # A green, E (flashing beside 2) yellow
+    monitor = IndicationMonitor(env, shown, city_config)
+    env.run(until=0.2)
+    assert [(c.t, c.conflict) for c in monitor.conflicts] == [
+        (pytest.approx(0.05), Conflict(1, 6, overlap=True)), (pytest.approx(0.15), Conflict(1, 6, overlap=True))]
+    assert str(monitor.conflicts[0].conflict) == "overlap A and phase 6"

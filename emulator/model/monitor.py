@@ -1,0 +1,91 @@
+"""The monitor: the cabinet's malfunction management unit (MMU), watching the lamps apart from the controller.
+
+Rules of this file
+------------------
+- The monitor reads the lamps (the phases' and the overlaps' greens and yellows) and nothing of the
+  controller's timing. The controller shows it each set of lamps that differs from the last one it passed;
+  :meth:`Monitor.check` answers with a fault or None, and on a fault the controller goes to flash (all red) and
+  stops timing, as a cabinet's MMU puts the intersection in flash.
+- Two checks, nothing else: conflict and short yellow. The conflict check is
+  :func:`hils.protocol.conflict.first_conflict`, the one conflict check of hils (the config validator, the
+  action converter and the fault harness call it too); this module adds no rule to it.
+- Time is the controller's integer tick (0.1 s). A power cycle puts every lamp out, so :meth:`Monitor.reset`
+  starts the monitor afresh.
+
+Theory of operation
+-------------------
+Conflict monitoring: "While a channel has a Green, Walk, or Yellow display active, the channel is tested to
+see if a non-permissive channel has a Green, Walk, or Yellow display active at the same time" (Reno A&E
+MMU-1600G operation manual, 2.5.1 Conflict Monitoring). Our channels are the phases and the overlaps; what is
+permissive is the config's (:class:`hils.protocol.conflict.Permissives`): two phases its compatibility matrix
+allows, an overlap and the phases beside one of its parents. The MMU's conflict timer (a fault once a
+conflict has lasted 300 ms) has no counterpart here: the monitor faults the first tick a conflict shows.
+
+Short yellow: "When a channel has a Green or Walk that turns off, a Yellow must follow it and it must stay on
+for at least 2.7 seconds" (Reno A&E MMU-1600G, 2.5.5 Short Yellow Monitoring). A channel, phase or overlap,
+whose green goes straight to red, or whose yellow lasts under :data:`SHORT_YELLOW`, faults. A yellow that
+ends in green (a flashing yellow arrow's yellow lamp going to its green arrow) is no clearance and is not
+timed.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from hils.protocol.config import IntersectionConfig
+from hils.protocol.conflict import first_conflict
+
+SHORT_YELLOW = 27  # ticks: the least yellow a channel may show after its green (2.7 s)
+
+
+@dataclass(frozen=True, slots=True)
+class Lamps:
+    """What the monitor sees at one tick: the phases and the overlaps (1 = A) lit green or yellow."""
+
+    greens: frozenset[int]
+    yellows: frozenset[int]
+    overlap_greens: frozenset[int]
+    overlap_yellows: frozenset[int]
+
+
+_NONE = Lamps(frozenset(), frozenset(), frozenset(), frozenset())
+
+
+class Monitor:
+    """One controller's MMU: the lamps it last passed, and when each channel's yellow began."""
+
+    def __init__(self, config: IntersectionConfig) -> None:
+        self.permissives = config.permissives
+        self.reset()
+
+    def reset(self) -> None:
+        """Power-up: every lamp out."""
+        self._passed = _NONE  # the lamps of the last check that found no fault
+        self._yellow_began: dict[tuple[str, int], int] = {}  # (channel kind, number) -> the tick its yellow began
+
+    def check(self, lamps: Lamps, tick: int) -> str | None:
+        """The fault these lamps show at ``tick`` (after the ones last passed), or None."""
+        fault = self._conflict(lamps) or self._short_yellow(lamps, tick)
+        if fault is None:
+            self._passed = lamps
+        return fault
+
+    def _conflict(self, lamps: Lamps) -> str | None:
+        conflict = first_conflict(self.permissives, lamps.greens | lamps.yellows,
+                                  lamps.overlap_greens | lamps.overlap_yellows)
+        return None if conflict is None else f"{conflict} shown together"
+
+    def _short_yellow(self, lamps: Lamps, tick: int) -> str | None:
+        was, began = self._passed, self._yellow_began
+        for kind, greens, yellows, was_green, was_yellow in (
+                ("phase", lamps.greens, lamps.yellows, was.greens, was.yellows),
+                ("overlap", lamps.overlap_greens, lamps.overlap_yellows, was.overlap_greens, was.overlap_yellows)):
+            for n in was_green - greens - yellows:
+                return f"{kind} {n} from green to red without a yellow"
+            for n in yellows - was_yellow:
+                began[kind, n] = tick
+            for n in was_yellow - yellows:
+                since = began.pop((kind, n), None)
+                if n not in greens and since is not None and tick - since < SHORT_YELLOW:
+                    return f"{kind} {n} yellow for {(tick - since) / 10:g} s"
+        return None
