@@ -151,8 +151,8 @@ def test_the_judge_names_an_overlap_shown_beside_a_phase_it_conflicts_with(city_
     scenario = parse_fault_scenario(LINK_DOWN, "link.toml")
     faults = scenario.build_faults()
 
-    def factory(env, config, *, seed, fast_path):
-        return FaultTarget(env, config, seed=seed, faults=faults, fast_path=fast_path)
+    def factory(env, config, *, seed, fast_path, hires):
+        return FaultTarget(env, config, seed=seed, faults=faults, fast_path=fast_path, hires=hires)
 
     records = run_spec(scenario.spec(), target=factory).records
     # A controller showing the city's right-turn overlap A (with 8 and 5) beside 6, which runs beside neither.
