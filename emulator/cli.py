@@ -13,7 +13,7 @@ from emulator.agent.asclog import MAX_CONNECTIONS, WRITE_TIMEOUT
 from hils.protocol import config as config_mod
 from hils.protocol.config import IntersectionConfig
 from hils.protocol.hires import ASCLOG_PATH
-from hils.protocol.ntcip import AUTH_KEY_ENV, PRIV_KEY_ENV
+from hils.protocol.ntcip import AUTH_KEY_ENV, PRIV_KEY_ENV, Version
 from hils.protocol.scenario import SCENARIOS, load_scenario
 from hils.protocol.usm import services_missing
 
@@ -98,6 +98,11 @@ def _register_serve(commands: argparse._SubParsersAction) -> None:
                             f"ticks, so that no request delays one; at most {MAX_CONNECTIONS} connections at once "
                             f"(more are answered 503), and a client that takes nothing of its answer for "
                             f"{WRITE_TIMEOUT:g} s is dropped")
+    serve.add_argument("--ntcip", choices=[v.value for v in Version],
+                       help="the edition of NTCIP 1202 the objects follow: v02 (what an Econolite Cobalt speaks, as "
+                            "in the paper's lab) answers noSuchObject for the objects v03 added, but the detector "
+                            "inputs; v03 serves them with v03's access (patternSplitNumber read-only). Default: the "
+                            "config's [emulator] ntcip, v02 unless it says otherwise")
     serve.add_argument("--log-events", type=int, default=100_000, metavar="N",
                        help="hi-res events each controller keeps, its last ones, as a controller's ring buffer "
                             "(100000; an Intelight MaxTime keeps about 10000)")
@@ -163,7 +168,8 @@ def _serve(args: argparse.Namespace) -> int:
     http = args.port if args.http == SAME_PORTS else args.http
     options = ServeOptions(host=args.host, port=args.port, ro_community=args.ro_community,
                            rw_community=args.rw_community, latency=Latency(args.latency_ms / 1e3, args.jitter_ms / 1e3),
-                           trace=args.trace, v3_user=v3_user, http=http, log_events=args.log_events)
+                           trace=args.trace, v3_user=v3_user, http=http, log_events=args.log_events,
+                           ntcip=Version(args.ntcip) if args.ntcip else None)
 
     def ready(server: EmulatorServer, addresses: list[tuple[str, int]]) -> None:
         # Scripts and tests wait for these lines: they are printed only once requests are answered.
@@ -171,7 +177,8 @@ def _serve(args: argparse.Namespace) -> int:
         for (tls, cfg), (host, port) in zip(controllers, addresses, strict=True):
             label = f" [{tls}]" if tls is not None else ""
             print(f"serving {cfg.name}{label} on udp:{host}:{port} "
-                  f"(ro={options.ro_community} rw={options.rw_community}{v3})")
+                  f"(ro={options.ro_community} rw={options.rw_community}{v3} "
+                  f"ntcip={(options.ntcip or cfg.emulator.ntcip).value})")
         if len(addresses) > 1:
             print(f"serving {len(addresses)} controllers on udp:{addresses[0][0]}:"
                   f"{_port_range([port for _, port in addresses])}")

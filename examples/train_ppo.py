@@ -42,7 +42,7 @@ def serve_emulator() -> tuple[subprocess.Popen[str], str]:
     """Start ``hils emulator serve`` on a free port; returns it and its snmp:// URL."""
     proc = subprocess.Popen([sys.executable, "-m", "hils", "emulator", "serve", "--port", "0"],
                             stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
-    line = proc.stdout.readline()  # "serving NAME on udp:127.0.0.1:PORT (ro=... rw=...)"
+    line = proc.stdout.readline()  # "serving NAME on udp:127.0.0.1:PORT (ro=... rw=... ntcip=...)"
     port = line.split("udp:127.0.0.1:")[1].split()[0]
     return proc, f"snmp://127.0.0.1:{port}?community=private&version=2c"
 

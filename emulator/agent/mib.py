@@ -16,6 +16,11 @@ an overlap's or a preempt's phases) are writable in the standard but read-only
 here: :data:`NOT_WRITABLE_HERE` lists them with why. ringControlGroupMax2
 selects Maximum 2 per ring (bit 0 = ring 1) from the ring's next green.
 
+The edition of NTCIP 1202 served is chosen per controller (``[emulator] ntcip`` of the config, or ``hils emulator
+serve --ntcip``): under v02 the objects v03 added answer noSuchObject (but the detector inputs,
+:data:`hils.protocol.ntcip.SERVED_IN_V02`), under v03 each object has v03's access
+(:meth:`hils.protocol.ntcip.ObjectDef.in_edition`).
+
 Every static table has rows 1..its max object, as the MIB says ("The number of
 rows in this table is equal to the maxPhases object"; every max object is
 1..255): a number the config leaves out, or the only row of a table the config
@@ -30,16 +35,21 @@ from __future__ import annotations
 
 import bisect
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 from typing import Any
 
 from emulator.model.controller import Controller, Timing
+from emulator.model.coordination import DAY
 from emulator.model.delays import DelayedController
 from emulator.model.overlaps import OverlapTiming
 from emulator.model.preemption import PreemptTiming
-from hils.protocol.config import IntersectionConfig, Overlap, OverlapKind, Phase, Preempt, Recall
+from hils.protocol.config import IntersectionConfig, Overlap, OverlapKind, Phase, Preempt, Recall, ScheduleEntry
 from hils.protocol.ntcip import (
+    CHANNEL_CONTROL_SOURCE,
+    CHANNEL_CONTROL_TYPE,
+    CHANNEL_NUMBER,
+    CHANNEL_STATUS_GROUP_NUMBER,
     CHANNEL_TABLE,
     CONTROL_TABLE,
     COORD_CORRECTION_MODE,
@@ -51,6 +61,7 @@ from hils.protocol.ntcip import (
     DETECTOR_STATUS_ACTIVE,
     LOCAL_FREE_STATUS,
     MAX_CHANNEL_STATUS_GROUPS,
+    MAX_CHANNELS,
     MAX_OVERLAP_STATUS_GROUPS,
     MAX_OVERLAPS,
     MAX_PATTERNS,
@@ -58,9 +69,13 @@ from hils.protocol.ntcip import (
     MAX_PED_DETECTORS,
     MAX_PHASE_GROUPS,
     MAX_PHASES,
+    MAX_PREEMPT_GROUPS,
     MAX_PREEMPTS,
     MAX_RING_CONTROL_GROUPS,
+    MAX_RINGS,
+    MAX_SEQUENCES,
     MAX_SPLITS,
+    MAX_TIMEBASE_ACTIONS,
     MAX_VEHICLE_DETECTOR_CONTROL_GROUPS,
     MAX_VEHICLE_DETECTOR_STATUS_GROUPS,
     MAX_VEHICLE_DETECTORS,
@@ -70,25 +85,44 @@ from hils.protocol.ntcip import (
     PATTERN_TABLE_TYPE,
     PED_DETECTOR_ACTUATION,
     PED_DETECTOR_CALL_PHASE,
+    PED_DETECTOR_CONTROL_GROUP_NUMBER,
+    PED_DETECTOR_NUMBER,
     PED_DETECTOR_STATUS_ACTIVE,
+    PED_DETECTOR_STATUS_GROUP_NUMBER,
+    PHASE_CONTROL_GROUP_NUMBER,
+    PHASE_NUMBER,
+    PHASE_STATUS_GROUP_NUMBER,
     PHASE_TABLE,
     PREEMPT_CONTROL_NUMBER,
     PREEMPT_CONTROL_STATE,
+    PREEMPT_STATUS,
+    PREEMPT_STATUS_GROUP,
+    PREEMPT_STATUS_GROUP_NUMBER,
     PREEMPT_TABLE,
+    RING_CONTROL_GROUP_NUMBER,
     RING_CONTROL_MAX2,
     SEQUENCE_DATA,
+    SEQUENCE_NUMBER,
+    SEQUENCE_RING_NUMBER,
     SHORT_ALARM_STATUS,
     SPLIT_TABLE,
     STATUS_TABLE,
     SYSTEM_PATTERN_CONTROL,
+    TIMEBASE_ACTION_NUMBER,
+    TIMEBASE_ACTION_STATUS,
+    TIMEBASE_PATTERN,
     UNIT_BACKUP_TIME,
     UNIT_CONTROL_STATUS,
     UNIT_FLASH_STATUS,
     UNIT_STARTUP_FLASH,
     VEHICLE_DETECTOR_CALL_PHASE,
+    VEHICLE_DETECTOR_CONTROL_GROUP_NUMBER,
+    VEHICLE_DETECTOR_NUMBER,
     VEHICLE_DETECTOR_OPTIONS,
+    VEHICLE_DETECTOR_STATUS_GROUP_NUMBER,
     Access,
     ChannelColumn,
+    ChannelControlType,
     ControlColumn,
     CoordCorrectionMode,
     CoordForceMode,
@@ -111,8 +145,10 @@ from hils.protocol.ntcip import (
     StatusColumn,
     Syntax,
     Value,
+    Version,
     group_count,
     groups_to_phases,
+    object_for,
     phases_to_groups,
     sequence_oid,
 )
@@ -154,6 +190,11 @@ NOT_WRITABLE_HERE: dict[str, str] = {
     "preemptDwellPhase": f"a preempt's options and phases: {_FROM_CONFIG}",
     "preemptDwellPed": f"a preempt's options and phases: {_FROM_CONFIG}",
     "preemptExitPhase": f"a preempt's options and phases: {_FROM_CONFIG}",
+    "channelControlSource": "the channel map: the emulator's load switches follow its phases one to one (channel i is "
+                            "phase i), as the status of its channels does",
+    "channelControlType": "the channel map: the emulator's load switches follow its phases one to one (channel i is "
+                          "phase i), as the status of its channels does",
+    "timebaseAscPattern": f"the time of day schedule ([[coordination.schedule]]): {_FROM_CONFIG}",
 }
 
 _RECALL_BITS = {
@@ -199,12 +240,14 @@ class Instance:
 
 
 class MibView:
-    """get/set/next by OID over one controller (bare, or behind its delays)."""
+    """get/set/next by OID over one controller (bare, or behind its delays), as one edition of NTCIP 1202 defines
+    the objects (by default the intersection config's ``[emulator] ntcip``)."""
 
-    def __init__(self, controller: Controller | DelayedController) -> None:
+    def __init__(self, controller: Controller | DelayedController, edition: Version | None = None) -> None:
         self.controller = controller
+        self.edition = edition or controller.config.emulator.ntcip
         self.set_count = 0
-        instances = self._build()
+        instances = [replace(i, obj=obj) for i in self._build() if (obj := i.obj.in_edition(self.edition))]
         self._by_oid = {i.oid: i for i in instances}
         self._sorted = sorted(self._by_oid)
 
@@ -251,6 +294,10 @@ class MibView:
     def __contains__(self, oid: Oid) -> bool:
         return tuple(oid) in self._by_oid
 
+    def definition(self, oid: Oid) -> ObjectDef | None:
+        """The object an instance OID belongs to, as the served edition defines it (None: no such object)."""
+        return object_for(tuple(oid), self.edition)
+
     @property
     def oids(self) -> list[Oid]:
         return list(self._sorted)
@@ -277,10 +324,13 @@ class MibView:
             Instance(SYSTEM_PATTERN_CONTROL.instance(), SYSTEM_PATTERN_CONTROL, lambda: c.coordinator.command,
                      c.set_pattern_control),
             *_coordination(c),
+            *_timebase(c),
+            *_channels(cfg),
         ]
         for p in _rows(cfg.phases):
             ph = cfg.phases.get(p)
             unprogrammed = None if ph else Timing(**_UNPROGRAMMED_TIMING)
+            out.append(Instance(PHASE_NUMBER.instance(p), PHASE_NUMBER, _constant(p)))
             out += [Instance(PHASE_TABLE[col].instance(p), PHASE_TABLE[col], _constant(v))
                     for col, v in _phase_row(cfg, p, ph).items()]
             out += [Instance(PHASE_TABLE[col].instance(p), PHASE_TABLE[col],
@@ -290,6 +340,7 @@ class MibView:
         out.append(Instance(RING_CONTROL_MAX2.instance(1), RING_CONTROL_MAX2,
                             lambda: sum(1 << (r - 1) for r in c.max2_rings),
                             lambda v: c.set_max2(k + 1 for k in range(8) if v >> k & 1)))
+        out.append(Instance(RING_CONTROL_GROUP_NUMBER.instance(1), RING_CONTROL_GROUP_NUMBER, _constant(1)))
         st = c.status if isinstance(c, DelayedController) else c
         status: dict[StatusColumn, Callable[[], frozenset[int]]] = {
             StatusColumn.REDS: lambda: st.reds,
@@ -306,6 +357,8 @@ class MibView:
         channels = {ChannelColumn.REDS: status[StatusColumn.REDS], ChannelColumn.YELLOWS: status[StatusColumn.YELLOWS],
                     ChannelColumn.GREENS: status[StatusColumn.GREENS]}
         for g in range(1, groups + 1):
+            out += [Instance(number.instance(g), number, _constant(g))
+                    for number in (PHASE_STATUS_GROUP_NUMBER, PHASE_CONTROL_GROUP_NUMBER, CHANNEL_STATUS_GROUP_NUMBER)]
             out += [Instance(STATUS_TABLE[col].instance(g), STATUS_TABLE[col], _group_reader(read, g, groups))
                     for col, read in status.items()]
             # Channel i is driven by phase i: the emulator's load switches follow its phases one to one.
@@ -318,17 +371,25 @@ class MibView:
                     for col in ControlColumn]
         out += _overlaps(c, st)
         out += _preempts(c)
+        # One sequence (sequenceData 1.r): the rings' order the config gives.
+        out += [Instance(MAX_RINGS.instance(), MAX_RINGS, _constant(len(cfg.rings))),
+                Instance(MAX_SEQUENCES.instance(), MAX_SEQUENCES, _constant(1))]
         for r, order in enumerate(cfg.rings, start=1):
-            out.append(Instance(sequence_oid(1, r), SEQUENCE_DATA, lambda o=order: bytes(o)))
-        out += _detectors(cfg.detectors, MAX_VEHICLE_DETECTORS, VEHICLE_DETECTOR_CALL_PHASE,
+            out += [Instance(SEQUENCE_NUMBER.instance(1, r), SEQUENCE_NUMBER, _constant(1)),
+                    Instance(SEQUENCE_RING_NUMBER.instance(1, r), SEQUENCE_RING_NUMBER, _constant(r)),
+                    Instance(sequence_oid(1, r), SEQUENCE_DATA, _constant(bytes(order)))]
+        out += _detectors(cfg.detectors, (MAX_VEHICLE_DETECTORS, VEHICLE_DETECTOR_NUMBER, VEHICLE_DETECTOR_CALL_PHASE),
                           (MAX_VEHICLE_DETECTOR_STATUS_GROUPS, MAX_VEHICLE_DETECTOR_CONTROL_GROUPS),
-                          DETECTOR_STATUS_ACTIVE, DETECTOR_ACTUATION, lambda: c.actuations, c.set_actuations)
+                          (VEHICLE_DETECTOR_STATUS_GROUP_NUMBER, DETECTOR_STATUS_ACTIVE),
+                          (VEHICLE_DETECTOR_CONTROL_GROUP_NUMBER, DETECTOR_ACTUATION),
+                          lambda: c.actuations, c.set_actuations)
         out.extend(Instance(VEHICLE_DETECTOR_OPTIONS.instance(d), VEHICLE_DETECTOR_OPTIONS,
                             _constant(int(DETECTOR_OPTIONS if d in cfg.detectors else 0)))
                    for d in _rows(cfg.detectors))
-        out += _detectors(cfg.ped_detectors, MAX_PED_DETECTORS, PED_DETECTOR_CALL_PHASE, (MAX_PED_DETECTOR_GROUPS,),
-                          PED_DETECTOR_STATUS_ACTIVE, PED_DETECTOR_ACTUATION, lambda: c.ped_actuations,
-                          c.set_ped_actuations)
+        out += _detectors(cfg.ped_detectors, (MAX_PED_DETECTORS, PED_DETECTOR_NUMBER, PED_DETECTOR_CALL_PHASE),
+                          (MAX_PED_DETECTOR_GROUPS,), (PED_DETECTOR_STATUS_GROUP_NUMBER, PED_DETECTOR_STATUS_ACTIVE),
+                          (PED_DETECTOR_CONTROL_GROUP_NUMBER, PED_DETECTOR_ACTUATION),
+                          lambda: c.ped_actuations, c.set_ped_actuations)
         return out
 
 
@@ -344,23 +405,71 @@ def _phase_row(cfg: IntersectionConfig, p: int, ph: Phase | None) -> dict[PhaseC
             PhaseColumn.CONCURRENCY: bytes(sorted(q for q in cfg.phases if cfg.compatible(p, q)))}
 
 
-def _detectors(call_phases: dict[int, int], maximum: ObjectDef, call_phase: ObjectDef,
-               group_counts: tuple[ObjectDef, ...], active: ObjectDef, actuation: ObjectDef,
-               read: Callable[[], frozenset[int]], write: Callable[[frozenset[int]], None]) -> list[Instance]:
-    """One kind of detector: how many, the phase each calls (0 for an unprogrammed one: "The associated detector
-    call capability is enabled when this object is set to a non-zero value"), how many groups of 8, and by group
-    the active ones and their remote actuation (a SET of a group past the last is noSuchName in SNMPv1: that group
-    does not exist)."""
+def _detectors(call_phases: dict[int, int], table: tuple[ObjectDef, ObjectDef, ObjectDef],
+               group_counts: tuple[ObjectDef, ...], status: tuple[ObjectDef, ObjectDef],
+               control: tuple[ObjectDef, ObjectDef], read: Callable[[], frozenset[int]],
+               write: Callable[[frozenset[int]], None]) -> list[Instance]:
+    """One kind of detector: how many, each one's number and the phase it calls (0 for an unprogrammed one: "The
+    associated detector call capability is enabled when this object is set to a non-zero value"), how many groups
+    of 8, and by group (its number) the active ones and their remote actuation (a SET of a group past the last is
+    noSuchName in SNMPv1: that group does not exist)."""
+    maximum, number, call_phase = table
     numbers = _rows(call_phases)
     groups = group_count(numbers[-1])
-    out = [Instance(maximum.instance(), maximum, lambda: numbers[-1])]
-    out += [Instance(count.instance(), count, lambda: groups) for count in group_counts]
-    out += [Instance(call_phase.instance(d), call_phase, _constant(call_phases.get(d, 0))) for d in numbers]
+    out = [Instance(maximum.instance(), maximum, _constant(numbers[-1]))]
+    out += [Instance(count.instance(), count, _constant(groups)) for count in group_counts]
+    for d in numbers:
+        out += [Instance(number.instance(d), number, _constant(d)),
+                Instance(call_phase.instance(d), call_phase, _constant(call_phases.get(d, 0)))]
     for g in range(1, groups + 1):
         reader = _group_reader(read, g, groups)
-        out.append(Instance(active.instance(g), active, reader))
-        out.append(Instance(actuation.instance(g), actuation, reader, _group_writer(read, write, g)))
+        out += [Instance(obj.instance(g), obj, _constant(g)) for obj in (status[0], control[0])]
+        out.append(Instance(status[1].instance(g), status[1], reader))
+        out.append(Instance(control[1].instance(g), control[1], reader, _group_writer(read, write, g)))
     return out
+
+
+def _channels(cfg: IntersectionConfig) -> list[Instance]:
+    """The channel table: channel i is driven by phase i (the emulator's load switches follow its phases one to
+    one, as channelStatusGroup says); a channel whose phase the config leaves out has no control source ("Value 00
+    = No Control (Not In Use)")."""
+    numbers = _rows(cfg.phases)
+    out = [Instance(MAX_CHANNELS.instance(), MAX_CHANNELS, _constant(numbers[-1]))]
+    for ch in numbers:
+        out += [Instance(CHANNEL_NUMBER.instance(ch), CHANNEL_NUMBER, _constant(ch)),
+                Instance(CHANNEL_CONTROL_SOURCE.instance(ch), CHANNEL_CONTROL_SOURCE,
+                         _constant(ch if ch in cfg.phases else 0)),
+                Instance(CHANNEL_CONTROL_TYPE.instance(ch), CHANNEL_CONTROL_TYPE,
+                         _constant(int(ChannelControlType.PHASE_VEHICLE)))]
+    return out
+
+
+def _timebase(c: Controller | DelayedController) -> list[Instance]:
+    """The time base action table: the config's [[coordination.schedule]] entries are its actions, numbered in the
+    order of the day (the config orders them by their start), each running its pattern; with no schedule one
+    unprogrammed action, pattern 0 ("A pattern of zero indicates that no pattern is being selected").
+    timebaseAscActionStatus is the action of the time of day on the controller's clock ("the current time base
+    Action Table row that will be used when the CU is in Time Base operation"; 0 with no schedule: "no time base
+    Action is selected")."""
+    schedule = c.config.coordination.schedule
+    numbers = _rows(range(1, len(schedule) + 1))
+    out = [Instance(MAX_TIMEBASE_ACTIONS.instance(), MAX_TIMEBASE_ACTIONS, _constant(numbers[-1])),
+           Instance(TIMEBASE_ACTION_STATUS.instance(), TIMEBASE_ACTION_STATUS,
+                    lambda: _action_now(schedule, c.coordinator.clock % DAY))]
+    for n in numbers:
+        out += [Instance(TIMEBASE_ACTION_NUMBER.instance(n), TIMEBASE_ACTION_NUMBER, _constant(n)),
+                Instance(TIMEBASE_PATTERN.instance(n), TIMEBASE_PATTERN,
+                         _constant(schedule[n - 1].pattern if schedule else 0))]
+    return out
+
+
+def _action_now(schedule: Sequence[ScheduleEntry], tick_of_day: int) -> int:
+    """The number (1-based, in the config's order) of the schedule entry in effect at this tick of the day: the last to
+    start at or before it, or else the day's last (it runs on from the evening before); 0 with no schedule."""
+    if not schedule:
+        return 0
+    started = [(e.start, n) for n, e in enumerate(schedule, start=1) if e.start * 10 <= tick_of_day]
+    return max(started or [(e.start, n) for n, e in enumerate(schedule, start=1)])[1]
 
 
 def _coordination(c: Controller | DelayedController) -> list[Instance]:
@@ -492,6 +601,17 @@ def _preempts(c: Controller | DelayedController) -> list[Instance]:
         out.append(Instance(PREEMPT_CONTROL_STATE.instance(n), PREEMPT_CONTROL_STATE,
                             lambda n=n: int(n in pe.control),
                             lambda v, n=n: c.set_preempt_control(pe.control - {n} | ({n} if v else set()))))
+    # v03's preempt status: "the preempt number that is currently being serviced" (the lowest in service: lower
+    # numbers override higher), and the preempt inputs by group of 8, of which the MIB allows 2 at most.
+    out.append(Instance(PREEMPT_STATUS.instance(), PREEMPT_STATUS,
+                        lambda: min((n for n, s in pe.states.items() if s.in_service), default=0)))
+    groups = group_count(numbers[-1])
+    if groups <= MAX_PREEMPT_GROUPS.high:
+        out.append(Instance(MAX_PREEMPT_GROUPS.instance(), MAX_PREEMPT_GROUPS, _constant(groups)))
+        for g in range(1, groups + 1):
+            out += [Instance(PREEMPT_STATUS_GROUP_NUMBER.instance(g), PREEMPT_STATUS_GROUP_NUMBER, _constant(g)),
+                    Instance(PREEMPT_STATUS_GROUP.instance(g), PREEMPT_STATUS_GROUP,
+                             _group_reader(lambda: pe.control, g, groups))]
     return out
 
 

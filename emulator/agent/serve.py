@@ -52,7 +52,7 @@ from emulator.model.datalogger import DataLogger
 from emulator.model.delays import DelayedController
 from hils.protocol.config import IntersectionConfig
 from hils.protocol.errors import UserError
-from hils.protocol.ntcip import Latency
+from hils.protocol.ntcip import Latency, Version
 from hils.protocol.timegrid import Grid
 
 log = logging.getLogger(__name__)
@@ -139,6 +139,7 @@ class ServeOptions:
     v3_user: V3User | None = None  # the SNMPv3 user accepted besides the communities; None: v1/v2c only
     http: int | None = None  # TCP port of the first controller's MaxTime event-log endpoint; None: no endpoint
     log_events: int = 100_000  # the hi-res events each controller keeps (its last ones, as a controller's ring buffer)
+    ntcip: Version | None = None  # the edition of NTCIP 1202 served; None: each config's [emulator] ntcip
 
 
 @dataclass(frozen=True, slots=True)
@@ -177,7 +178,7 @@ class ServedController:
         self.log = DataLogger(self.controller, capacity=options.log_events)
         self.asclog = AsclogServer(self.log.snapshot, connections)
         self.unit = DelayedController(self.controller, config.emulator)
-        self.view = MibView(self.unit)
+        self.view = MibView(self.unit, options.ntcip)
         self.agent = SnmpAgent(self.view, ro_community=options.ro_community, rw_community=options.rw_community,
                                latency=options.latency, seed=options.seed, v3_user=options.v3_user, reports=reports)
 

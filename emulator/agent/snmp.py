@@ -515,7 +515,7 @@ class SnmpAgent:
     def _read(self, oid: Oid) -> Value | Missing:
         if oid in self.view:
             return self.view.get(oid)
-        return Missing.NO_SUCH_INSTANCE if object_for(oid) is not None else Missing.NO_SUCH_OBJECT
+        return Missing.NO_SUCH_INSTANCE if self.view.definition(oid) is not None else Missing.NO_SUCH_OBJECT
 
     def _next(self, oid: Oid) -> _Result:
         following = self.view.next_oid(oid)
@@ -523,12 +523,11 @@ class SnmpAgent:
             return oid, Missing.END_OF_MIB_VIEW
         return following, self.view.get(following)
 
-    @staticmethod
-    def _set_status(exc: SnmpError, oids: Sequence[Oid]) -> ErrorStatus:
+    def _set_status(self, exc: SnmpError, oids: Sequence[Oid]) -> ErrorStatus:
         """The SNMPv2 status of a refused SET (RFC 3416 4.2.5)."""
         if exc.status is not ErrorStatus.NO_SUCH_NAME:
             return exc.status
-        obj = object_for(oids[exc.index - 1])
+        obj = self.view.definition(oids[exc.index - 1])
         # A missing row of a writable column "could not ever be created" (noCreation); any other
         # unknown name has nothing writable under it (notWritable).
         return ErrorStatus.NO_CREATION if obj is not None and obj.access is Access.READ_WRITE \

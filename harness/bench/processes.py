@@ -60,7 +60,8 @@ class Served:
 
 
 _LOG_LINE = re.compile(r"event log of .+: http://127\.0\.0\.1:(\d+)/v1/asclog/xml/full\n")
-_CONTROLLER_LINE = re.compile(r"serving (.+) on udp:127\.0\.0\.1:(\d+) \(ro=(\S+) rw=(\S+)( v3=\S+)?\)\n")
+_CONTROLLER_LINE = re.compile(r"serving (.+) on udp:127\.0\.0\.1:(\d+) "
+                              r"\(ro=(\S+) rw=(\S+)( v3=\S+)? ntcip=(v0[23])\)\n")
 
 
 def start_emulator(log: Path, *args: str, count: int = 1, verbose: bool = False, http: bool = False) -> Served:

@@ -48,6 +48,7 @@ from hils.protocol import config as config_mod
 from hils.protocol.ntcip import (
     ALL_OBJECTS,
     ASC,
+    DEFAULT_VERSION,
     V03_CHANGES,
     Access,
     ObjectDef,
@@ -141,6 +142,15 @@ class NetSnmp:
             raise RuntimeError(f"snmpwalk of {self.host}:{self.port} failed: {done.stderr.strip() or done.stdout}")
         return parse_walk(done.stdout)
 
+    def get(self, oid: Oid) -> Value | str:
+        """The value of one instance (as :class:`Walked` holds it)."""
+        done = self._run("snmpget", self.read_community, oid_str(oid))
+        got = parse_walk(done.stdout)
+        if done.returncode != 0 or len(got) != 1:
+            raise RuntimeError(f"snmpget {oid_str(oid)} at {self.host}:{self.port} failed: "
+                               f"{done.stderr.strip() or done.stdout.strip()}")
+        return got[0].value
+
     def set(self, oid: Oid, value: Value) -> str:
         """SET one value; ``noError`` or the error status net-snmp reports (``notWritable``, ``wrongValue``...)."""
         arg = ("i", str(value)) if isinstance(value, int) else ("x", value.hex()) if value else ("s", "")
@@ -157,10 +167,12 @@ class NetSnmp:
 # --- the definitions hils holds ----------------------------------------------------------------------------------
 
 
-def _v02_change(name: str) -> str | None:
-    """How v03 changed an object hils defines as v02 does, or None (not listed, or defined as v03 does)."""
+def _v02_change(name: str, edition: Version) -> str | None:
+    """How v03 changed an object hils serves as v02 does in this edition, or None (not listed, or served as v03
+    defines it)."""
     declared = next((d for d in ALL_OBJECTS if d.name == name), None)
-    return V03_CHANGES.get(name) if declared is not None and declared.version is Version.V02 else None
+    served = declared.in_edition(edition) if declared is not None else None
+    return V03_CHANGES.get(name) if served is not None and served.version is Version.V02 else None
 
 
 def _integer_bounds(obj: MibObject) -> tuple[int, int] | None:
@@ -171,17 +183,18 @@ def _integer_bounds(obj: MibObject) -> tuple[int, int] | None:
     return None
 
 
-def definition_findings(mib: Mib, objects: Iterable[ObjectDef] = ALL_OBJECTS) -> list[Finding]:
-    """hils' object definitions (:mod:`hils.protocol.ntcip`) against the MIB: name and OID, type, access, and a
-    declared range that is the MIB's or a sub-range of it."""
+def definition_findings(mib: Mib, objects: Iterable[ObjectDef] = ALL_OBJECTS,
+                        edition: Version = DEFAULT_VERSION) -> list[Finding]:
+    """hils' object definitions (:mod:`hils.protocol.ntcip`) as ``edition`` serves them, against the MIB: name and
+    OID, type, access, and a declared range that is the MIB's or a sub-range of it."""
     out = []
-    for d in objects:
+    for d in filter(None, (o.in_edition(edition) for o in objects)):
         ref = mib.objects.get(d.name)
         if ref is None:
             out.append(Finding(Verdict.FINDING, d.name, "definition", "no object of this name in the MIB",
                                oid_str(d.prefix)))
             continue
-        listed = _v02_change(d.name)
+        listed = _v02_change(d.name, edition)
         if ref.oid != d.prefix:
             out.append(Finding(Verdict.FINDING, d.name, "definition",
                                f"OID {oid_str(d.prefix)}; the MIB's is {oid_str(ref.oid)}", oid_str(d.prefix)))
@@ -219,7 +232,7 @@ def _index(mib: Mib, obj: MibObject, instance: Oid) -> list[str]:
             if name in mib.objects and not mib.objects[name].allows(v)]
 
 
-def walk_findings(mib: Mib, walked: Sequence[Walked]) -> list[Finding]:
+def walk_findings(mib: Mib, walked: Sequence[Walked], edition: Version = DEFAULT_VERSION) -> list[Finding]:
     """Every walked instance against the MIB: known, its type, its value, its index; and each static table whose
     number of rows the MIB ties to a max object, its rows numbered 1..that value."""
     out = []
@@ -230,10 +243,13 @@ def walk_findings(mib: Mib, walked: Sequence[Walked]) -> list[Finding]:
         if obj is None:
             out.append(Finding(Verdict.FINDING, "?", "known", "no object of the MIB has this OID", shown))
             continue
+        if object_for(w.oid, edition) is None and object_for(w.oid, Version.V03) is not None:
+            out.append(Finding(Verdict.FINDING, obj.name, "edition", f"served under {edition}, which has no such "
+                               "object (v03 added it)", shown))
         if w.type != obj.type:
             out.append(Finding(Verdict.FINDING, obj.name, "type", f"{w.type}; the MIB's is {obj.type}", shown))
         elif isinstance(w.value, int | bytes) and not obj.allows(w.value):
-            listed = _v02_change(obj.name)
+            listed = _v02_change(obj.name, edition)
             out.append(Finding(Verdict.V02 if listed else Verdict.FINDING, obj.name, "value",
                                f"{w.value!r} outside {obj.describe()}" + (f" ({listed})" if listed else ""), shown))
         out += [Finding(Verdict.FINDING, obj.name, "index", problem, shown) for problem in _index(mib, obj, w.oid)]
@@ -267,7 +283,8 @@ def _ranges(numbers: Iterable[int]) -> str:
 # --- SETs -------------------------------------------------------------------------------------------------------
 
 
-def set_findings(mib: Mib, agent: NetSnmp, walked: Sequence[Walked]) -> list[Finding]:
+def set_findings(mib: Mib, agent: NetSnmp, walked: Sequence[Walked], edition: Version = DEFAULT_VERSION
+                 ) -> list[Finding]:
     """One instance of each walked object: a read-only one (for the MIB or here) SET to its own value, refused; a
     writable INTEGER SET at the edges of the MIB's range and of hils' declared one, and one past them; then its
     value put back."""
@@ -278,7 +295,7 @@ def set_findings(mib: Mib, agent: NetSnmp, walked: Sequence[Walked]) -> list[Fin
         if obj is not None and isinstance(w.value, int | bytes):
             first.setdefault(obj.name, w)
     for name, w in first.items():
-        obj, declared = mib.objects[name], object_for(w.oid)
+        obj, declared = mib.objects[name], object_for(w.oid, edition)
         writable_here = declared is not None and declared.access is Access.READ_WRITE and name not in NOT_WRITABLE_HERE
         shown = oid_str(w.oid)
         if obj.access is Access.READ_ONLY or not writable_here:
@@ -291,7 +308,7 @@ def set_findings(mib: Mib, agent: NetSnmp, walked: Sequence[Walked]) -> list[Fin
                                        shown))
                 continue
             if status == "noError" and obj.access is Access.READ_ONLY:
-                listed = _v02_change(name)
+                listed = _v02_change(name, edition)
                 out.append(Finding(Verdict.V02 if listed else Verdict.FINDING, name, "set",
                                    "a SET of a read-only object is accepted" + (f" ({listed})" if listed else ""),
                                    shown))
@@ -309,24 +326,37 @@ def set_findings(mib: Mib, agent: NetSnmp, walked: Sequence[Walked]) -> list[Fin
 
 
 def _edges(agent: NetSnmp, obj: MibObject, declared: ObjectDef | None, w: Walked) -> list[Finding]:
+    """A writable INTEGER SET at the edges of the MIB's range and of the declared one, and one past them: first the
+    values to be refused (wrongValue, and a GET then reads the value the walk read: nothing changed), then those to
+    be taken."""
     inside, past = obj.edges()
     values = sorted({*inside, *past} | ({declared.low, declared.high, declared.low - 1, declared.high + 1}
                                         if declared is not None else set()))
+    shown = oid_str(w.oid)
+
+    def admitted(value: int) -> bool:
+        return obj.allows(value) and (declared is None or declared.low <= value <= declared.high)
+
     out = []
-    for value in values:
+    for value in (v for v in values if not admitted(v)):
         status = agent.set(w.oid, value)
-        in_mib = obj.allows(value)
-        in_declared = declared is None or declared.low <= value <= declared.high
-        shown = oid_str(w.oid)
-        if in_mib and in_declared and status != "noError":
-            out.append(Finding(Verdict.FINDING, obj.name, "set", f"{value} refused {status}, inside "
-                               f"{obj.describe()}", shown))
-        elif in_mib and not in_declared and status != "wrongValue":
+        if status == "wrongValue":
+            continue
+        if obj.allows(value):
             out.append(Finding(Verdict.FINDING, obj.name, "set", f"{value} outside the declared "
                                f"{declared.low}..{declared.high} answered {status}, not wrongValue", shown))
-        elif not in_mib and status != "wrongValue":
+        else:
             out.append(Finding(Verdict.FINDING, obj.name, "set", f"{value} outside {obj.describe()} answered "
                                f"{status}, not wrongValue", shown))
+    held = agent.get(w.oid)
+    if held != w.value:
+        out.append(Finding(Verdict.FINDING, obj.name, "set", f"refused SETs changed it: {w.value!r} became "
+                           f"{held!r}", shown))
+    for value in filter(admitted, values):
+        status = agent.set(w.oid, value)
+        if status != "noError":
+            out.append(Finding(Verdict.FINDING, obj.name, "set", f"{value} refused {status}, inside "
+                               f"{obj.describe()}", shown))
     return out
 
 
@@ -336,6 +366,7 @@ def _edges(agent: NetSnmp, obj: MibObject, declared: ObjectDef | None, w: Walked
 @dataclass
 class Report:
     title: str
+    edition: Version  # the edition of NTCIP 1202 the agent was checked as serving
     accessible: int
     writable: int
     served: dict[str, list[str]]  # objects answered, by group of the MIB
@@ -350,25 +381,27 @@ class Report:
     def text(self) -> str:
         served = sum(len(v) for v in self.served.values())
         lines = [f"{self.title}: {self.accessible} accessible objects, {self.writable} read-write",
-                 f"served: {served} objects ({self.instances} instances)", "", "group                served / MIB"]
+                 f"served as NTCIP 1202 {self.edition}: {served} objects ({self.instances} instances)", "",
+                 "group                served / MIB"]
         lines += [f"{g:<20} {len(self.served.get(g, ())):>6} / {n}" for g, n in self.groups.items()]
         lines += ["", "  ".join(f"{k}: {n}" for k, n in self.counts.items())]
         lines += [f.line() for f in sorted(self.findings, key=lambda f: (list(Verdict).index(f.verdict), f.name))]
         return "\n".join(lines)
 
     def to_json(self) -> dict[str, object]:
-        return {"mib": self.title, "accessible": self.accessible, "read-write": self.writable,
+        return {"mib": self.title, "edition": self.edition.value, "accessible": self.accessible,
+                "read-write": self.writable,
                 "served": {g: sorted(v) for g, v in self.served.items()}, "instances": self.instances,
                 "counts": self.counts, "findings": [asdict(f) for f in self.findings]}
 
 
-def check(agent: NetSnmp, *, sets: bool, mib: Mib | None = None) -> Report:
-    """Walk the agent and check it against the MIB (with SETs when ``sets``)."""
+def check(agent: NetSnmp, *, sets: bool, mib: Mib | None = None, edition: Version = DEFAULT_VERSION) -> Report:
+    """Walk the agent, which serves ``edition``, and check it against the MIB (with SETs when ``sets``)."""
     mib = mib or load()
     walked = agent.walk()
-    findings = definition_findings(mib) + walk_findings(mib, walked)
+    findings = definition_findings(mib, edition=edition) + walk_findings(mib, walked, edition)
     if sets:
-        findings += set_findings(mib, agent, walked)
+        findings += set_findings(mib, agent, walked, edition)
     served: dict[str, set[str]] = defaultdict(set)
     for w in walked:
         obj = mib.object_for(w.oid)
@@ -377,15 +410,16 @@ def check(agent: NetSnmp, *, sets: bool, mib: Mib | None = None) -> Report:
     groups: dict[str, int] = defaultdict(int)
     for obj in mib.objects.values():
         groups[obj.group] += 1
-    return Report(mib.title, mib.accessible, mib.writable, {g: sorted(v) for g, v in served.items()}, dict(groups),
-                  len(walked), findings)
+    return Report(mib.title, edition, mib.accessible, mib.writable, {g: sorted(v) for g, v in served.items()},
+                  dict(groups), len(walked), findings)
 
 
 @contextmanager
-def served_emulator(config: str | None) -> Iterator[NetSnmp]:
-    """`hils emulator serve` on a free loopback port for the time of the check."""
+def served_emulator(config: str | None, edition: Version = DEFAULT_VERSION) -> Iterator[NetSnmp]:
+    """`hils emulator serve --ntcip EDITION` on a free loopback port for the time of the check."""
     with tempfile.TemporaryDirectory(prefix="hils-mib-") as tmp:
-        server = start_emulator(Path(tmp) / "serve.log", *(["--config", config] if config else []))
+        server = start_emulator(Path(tmp) / "serve.log", "--ntcip", edition.value,
+                                *(["--config", config] if config else []))
         try:
             yield NetSnmp("127.0.0.1", server.port, "public", "private")
         finally:
@@ -416,15 +450,20 @@ def main(argv: Sequence[str] | None = None) -> int:
                                                        "walked without SETs unless --set")
     parser.add_argument("--set", action="store_true", help="with --target: SET its objects too (a SET at a range "
                                                            "edge changes what a controller does: never on a street)")
+    parser.add_argument("--ntcip", choices=[v.value for v in Version], default=DEFAULT_VERSION.value,
+                        help="the edition of NTCIP 1202 the agent serves (the emulator is served with it): under v02 "
+                             "an object v03 added is a finding, and v02's definitions where v03 changed them are "
+                             f"verdicts of their own ({DEFAULT_VERSION.value})")
     parser.add_argument("--json", type=Path, metavar="FILE", help="also write the report as JSON")
     args = parser.parse_args(argv)
+    edition = Version(args.ntcip)
     try:
         if args.target:
-            report = check(_target(args.target), sets=args.set)
+            report = check(_target(args.target), sets=args.set, edition=edition)
         else:
             config_mod.load(args.config)  # a config that cannot serve is said in one line, before anything starts
-            with served_emulator(args.config) as agent:
-                report = check(agent, sets=True)
+            with served_emulator(args.config, edition) as agent:
+                report = check(agent, sets=True, edition=edition)
     except (ValueError, RuntimeError) as exc:
         parser.exit(2, f"{parser.prog}: {exc}\n")
     print(report.text())

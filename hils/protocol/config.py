@@ -26,6 +26,7 @@ from typing import Any
 from hils.protocol.conflict import Permissives, first_conflict
 from hils.protocol.errors import UserError
 from hils.protocol.ntcip import (
+    DEFAULT_VERSION,
     OVERLAP_TABLE,
     PHASE_TABLE,
     PREEMPT_TABLE,
@@ -37,6 +38,7 @@ from hils.protocol.ntcip import (
     PhaseStartup,
     PreemptColumn,
     SplitMode,
+    Version,
     group_count,
     overlap_letter,
 )
@@ -327,11 +329,13 @@ class EmulatorParams:
     its coordination and schedule follow; ``hils emulator serve`` sets the clock to the host's time instead).
 
     A real controller has these delays without any table: they only tell the emulator how late to be.
-    The defaults are calibrated on the paper's Cobalt (see :mod:`emulator.model.delays`)."""
+    The defaults are calibrated on the paper's Cobalt (see :mod:`emulator.model.delays`). ``ntcip`` is the edition
+    of NTCIP 1202 its SNMP objects follow (v02 by default, what the paper's Cobalt speaks)."""
 
     call_processing_ticks: int = 1  # a SET reaches the phase logic this many ticks after the next tick
     status_update_ticks: int = 0  # status objects lag the lamps by this many ticks
     start: datetime = DEFAULT_START
+    ntcip: Version = DEFAULT_VERSION
 
 
 @dataclass(frozen=True)
@@ -543,7 +547,17 @@ def _emulator(raw: Any, source: str) -> EmulatorParams:
         status_update_ticks=_number(raw, "status_update_ticks", w, source, d.status_update_ticks,
                                     integer=True, low=0, high=10),
         start=_start(raw.get("start", d.start), source),
+        ntcip=_edition(raw.get("ntcip", d.ntcip.value), source),
     )
+
+
+def _edition(value: Any, source: str) -> Version:
+    """``[emulator] ntcip``: the edition of NTCIP 1202 served."""
+    try:
+        return Version(value)
+    except (ValueError, TypeError):
+        raise ConfigError(source, "emulator.ntcip", f"is {value!r}; allowed: "
+                                                    f"{', '.join(repr(v.value) for v in Version)}") from None
 
 
 def _start(value: Any, source: str) -> datetime:

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import random
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from enum import Enum, IntEnum, IntFlag, StrEnum
 
 Oid = tuple[int, ...]
@@ -58,6 +58,16 @@ DEFAULT_VERSION = Version.V02
 V03_CHANGES: dict[str, str] = {
     "patternSplitNumber": 'read-write before v03 (ASC_MIB1: patternSplitNumber.setMaxAccess("read-write")); '
                           "read-only in v03 (1202v0328 5.5.7.4)",
+}
+#: The access v03 gives the objects of :data:`V03_CHANGES` whose access it changed: what is served under v03.
+V03_ACCESS: dict[str, Access] = {"patternSplitNumber": Access.READ_ONLY}
+#: Objects v03 added that are served under v02 too, and why: a real controller's detectors are wired to its cabinet,
+#: the emulator's reach it over SNMP only (hils' detector feed in virtual time and Signal-Replay SET them).
+SERVED_IN_V02: dict[str, str] = {
+    name: "the cabinet's detector inputs: the emulator has no wires, its detectors are actuated over SNMP"
+    for name in ("maxVehicleDetectorControlGroups", "vehicleDetectorControlGroupNumber",
+                 "vehicleDetectorControlGroupActuation", "pedestrianDetectorControlGroupNumber",
+                 "pedestrianDetectorControlGroupActuation")
 }
 
 
@@ -267,10 +277,18 @@ class ObjectDef:
     access: Access
     low: int = 0
     high: int = 255
-    version: Version = DEFAULT_VERSION  # the edition whose definition this is
+    version: Version = DEFAULT_VERSION  # the edition whose definition this is (v03: an object v03 added)
 
     def instance(self, *index: int) -> Oid:
         return self.prefix + (index or (0,))
+
+    def in_edition(self, edition: Version) -> ObjectDef | None:
+        """This object as ``edition`` defines it: None where that edition has no such object (one v03 added, under
+        v02, unless :data:`SERVED_IN_V02`), with v03's access where v03 changed it (:data:`V03_ACCESS`)."""
+        if edition is Version.V02:
+            return None if self.version is Version.V03 and self.name not in SERVED_IN_V02 else self
+        access = V03_ACCESS.get(self.name)
+        return self if access is None else replace(self, access=access, version=Version.V03)
 
 
 def _o(name: str, suffix: Oid, syntax: Syntax = Syntax.INTEGER, access: Access = Access.READ_ONLY,
@@ -572,6 +590,56 @@ PED_DETECTOR_STATUS_ACTIVE = _o("pedestrianDetectorStatusGroupActive", (2, 9, 1,
 PED_DETECTOR_ACTUATION = _o("pedestrianDetectorControlGroupActuation", (2, 13, 1, 2), access=Access.READ_WRITE,
                             version=Version.V03)
 
+# The index columns of the tables served (read-only, "the ... number for objects in this row"), each the row's or
+# group's number; a column of a table takes its table's edition.
+PHASE_NUMBER = _o("phaseNumber", (1, 2, 1, 1), low=1)
+PHASE_STATUS_GROUP_NUMBER = _o("phaseStatusGroupNumber", (1, 4, 1, 1), low=1)
+PHASE_CONTROL_GROUP_NUMBER = _o("phaseControlGroupNumber", (1, 5, 1, 1), low=1)
+VEHICLE_DETECTOR_NUMBER = _o("vehicleDetectorNumber", (2, 2, 1, 1), low=1)
+VEHICLE_DETECTOR_STATUS_GROUP_NUMBER = _o("vehicleDetectorStatusGroupNumber", (2, 4, 1, 1), low=1)
+PED_DETECTOR_NUMBER = _o("pedestrianDetectorNumber", (2, 7, 1, 1), low=1)
+PED_DETECTOR_STATUS_GROUP_NUMBER = _o("pedestrianDetectorStatusGroupNumber", (2, 9, 1, 1), low=1)
+VEHICLE_DETECTOR_CONTROL_GROUP_NUMBER = _o("vehicleDetectorControlGroupNumber", (2, 12, 1, 1), low=1,
+                                           version=Version.V03)
+PED_DETECTOR_CONTROL_GROUP_NUMBER = _o("pedestrianDetectorControlGroupNumber", (2, 13, 1, 1), low=1,
+                                       version=Version.V03)
+CHANNEL_STATUS_GROUP_NUMBER = _o("channelStatusGroupNumber", (8, 4, 1, 1), low=1)
+RING_CONTROL_GROUP_NUMBER = _o("ringControlGroupNumber", (7, 5, 1, 1), low=1)
+SEQUENCE_NUMBER = _o("sequenceNumber", (7, 3, 1, 1), low=1)
+SEQUENCE_RING_NUMBER = _o("sequenceRingNumber", (7, 3, 1, 2), low=1)
+MAX_RINGS = _o("maxRings", (7, 1), low=1)
+MAX_SEQUENCES = _o("maxSequences", (7, 2), low=1)
+
+# The channel table (A.8.2): which phase or overlap drives each load switch channel, and how.
+MAX_CHANNELS = _o("maxChannels", (8, 1), low=1)
+CHANNEL_NUMBER = _o("channelNumber", (8, 2, 1, 1), low=1)
+CHANNEL_CONTROL_SOURCE = _o("channelControlSource", (8, 2, 1, 2), access=Access.READ_WRITE)
+CHANNEL_CONTROL_TYPE = _o("channelControlType", (8, 2, 1, 3), access=Access.READ_WRITE, low=1, high=5)
+
+
+class ChannelControlType(IntEnum):
+    """channelControlType (A.8.2.1.3), the values v02 and v03 share."""
+
+    OTHER = 1
+    PHASE_VEHICLE = 2
+    PHASE_PEDESTRIAN = 3
+    OVERLAP = 4
+    PED_OVERLAP = 5
+
+
+# The time base action table (A.5.3): per action, the pattern it runs. The config's [[coordination.schedule]]
+# entries are its actions, in the order of the day; timebaseAscActionStatus is the action in effect now.
+MAX_TIMEBASE_ACTIONS = _o("maxTimebaseAscActions", (5, 2), low=1)
+TIMEBASE_ACTION_NUMBER = _o("timebaseAscActionNumber", (5, 3, 1, 1), low=1)
+TIMEBASE_PATTERN = _o("timebaseAscPattern", (5, 3, 1, 2), access=Access.READ_WRITE)
+TIMEBASE_ACTION_STATUS = _o("timebaseAscActionStatus", (5, 4))
+
+# v03's preempt status (A.6.4-6.6): the preempt being serviced, and the preempt inputs by group of 8 (at most 2).
+PREEMPT_STATUS = _o("preemptStatus", (6, 4), version=Version.V03)
+MAX_PREEMPT_GROUPS = _o("maxPreemptGroups", (6, 5), high=2, version=Version.V03)
+PREEMPT_STATUS_GROUP_NUMBER = _o("preemptStatusGroupNumber", (6, 6, 1, 1), low=1, version=Version.V03)
+PREEMPT_STATUS_GROUP = _o("preemptStatusGroup", (6, 6, 1, 2), version=Version.V03)
+
 ALL_OBJECTS: tuple[ObjectDef, ...] = (
     MAX_PHASES, MAX_PHASE_GROUPS, UNIT_STARTUP_FLASH, UNIT_BACKUP_TIME, UNIT_CONTROL_STATUS, UNIT_FLASH_STATUS,
     SYSTEM_PATTERN_CONTROL, COORD_CORRECTION_MODE, COORD_FORCE_MODE, MAX_PATTERNS, PATTERN_TABLE_TYPE, MAX_SPLITS,
@@ -584,6 +652,13 @@ ALL_OBJECTS: tuple[ObjectDef, ...] = (
     *CHANNEL_TABLE.values(),
     MAX_OVERLAPS, MAX_OVERLAP_STATUS_GROUPS, *OVERLAP_TABLE.values(), *OVERLAP_STATUS_TABLE.values(),
     MAX_PREEMPTS, SHORT_ALARM_STATUS, *PREEMPT_TABLE.values(), PREEMPT_CONTROL_NUMBER, PREEMPT_CONTROL_STATE,
+    PHASE_NUMBER, PHASE_STATUS_GROUP_NUMBER, PHASE_CONTROL_GROUP_NUMBER, VEHICLE_DETECTOR_NUMBER,
+    VEHICLE_DETECTOR_STATUS_GROUP_NUMBER, PED_DETECTOR_NUMBER, PED_DETECTOR_STATUS_GROUP_NUMBER,
+    VEHICLE_DETECTOR_CONTROL_GROUP_NUMBER, PED_DETECTOR_CONTROL_GROUP_NUMBER, CHANNEL_STATUS_GROUP_NUMBER,
+    RING_CONTROL_GROUP_NUMBER, SEQUENCE_NUMBER, SEQUENCE_RING_NUMBER, MAX_RINGS, MAX_SEQUENCES, MAX_CHANNELS,
+    CHANNEL_NUMBER, CHANNEL_CONTROL_SOURCE, CHANNEL_CONTROL_TYPE, MAX_TIMEBASE_ACTIONS, TIMEBASE_ACTION_NUMBER,
+    TIMEBASE_PATTERN, TIMEBASE_ACTION_STATUS, PREEMPT_STATUS, MAX_PREEMPT_GROUPS, PREEMPT_STATUS_GROUP_NUMBER,
+    PREEMPT_STATUS_GROUP,
 )
 
 
@@ -640,11 +715,11 @@ def parse_oid(text: str) -> Oid:
         raise ValueError(f"not a numeric OID: {text!r}") from None
 
 
-def object_for(oid: Oid) -> ObjectDef | None:
-    """The object type whose prefix the OID extends, or None."""
+def object_for(oid: Oid, edition: Version = DEFAULT_VERSION) -> ObjectDef | None:
+    """The object type whose prefix the OID extends, as ``edition`` defines it, or None."""
     for obj in ALL_OBJECTS:
         if oid[: len(obj.prefix)] == obj.prefix and len(oid) > len(obj.prefix):
-            return obj
+            return obj.in_edition(edition)
     return None
 
 

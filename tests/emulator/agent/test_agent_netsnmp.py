@@ -231,8 +231,8 @@ def test_walk_of_the_phase_table_gives_every_column_and_the_options(server: Serv
     assert done.returncode == 0, done.stderr
     got = values(done.stdout)
     columns = sorted({int(oid.split(".")[-2]) for oid in got})
-    assert columns == [2, 3, 4, 5, 6, 7, 8, 9, 10, 20, 21, 22, 23]
-    assert len(got) == 13 * 8
+    assert columns == [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 20, 21, 22, 23]  # phaseNumber, the index, first
+    assert len(got) == 14 * 8
     options = int(PhaseOption.ENABLED | PhaseOption.SIMULTANEOUS_GAP_DISABLE)
     assert {got[oid_str(phase_oid(PhaseColumn.OPTIONS, p))] for p in range(1, 9)} == {f"INTEGER: {options}"}
     assert got[oid_str(phase_oid(PhaseColumn.PASSAGE, 4))] == "INTEGER: 0"

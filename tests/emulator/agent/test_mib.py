@@ -297,9 +297,14 @@ def test_next_oid_walks_every_instance_in_increasing_order(mib: MibView) -> None
     # maxPreempts, the unprogrammed preempt 1 (20 columns) and its preemptControl row (2 columns); maxVehicleDetectors,
     # maxVehicleDetectorStatusGroups and ControlGroups, 2 detector columns x 8 detectors, detector status and
     # actuation of group 1; maxPedestrianDetectors, maxPedestrianDetectorGroups, the call phase of 8 push buttons,
-    # their status and actuation of group 1.
+    # their status and actuation of group 1. The index columns: phaseNumber x 8, the phase status, control and
+    # channel status group numbers, ringControlGroupNumber, sequenceNumber and sequenceRingNumber x 2 rings, the
+    # detectors' and push buttons' numbers x 8 and their status and control group numbers; maxRings, maxSequences;
+    # maxChannels and 3 channel columns x 8 channels; the time base (max, status, one action of 2 columns). Under
+    # v02 nothing of v03's preempt status.
     assert len(walked) == (8 + 9 + 5 + 5 * 8 + 13 * 8 + 1 + 19 + 2 + 1 + 1 + 2 + 7 + 4 + 1 + 20 + 2 + 3 + 2 * 8 + 2
-                           + 2 + 8 + 2)
+                           + 2 + 8 + 2
+                           + 8 + 3 + 1 + 2 * 2 + 2 * 8 + 2 * 2 + 2 + 1 + 3 * 8 + 4)
 
 
 def test_next_oid_from_an_object_prefix_gives_its_first_instance(mib: MibView) -> None:

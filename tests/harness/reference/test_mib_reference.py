@@ -13,11 +13,19 @@ import pytest
 
 from harness.reference import mib_compile, mib_conformance
 from harness.reference.mib import REFERENCE, load
-from harness.reference.mib_conformance import Verdict, Walked, definition_findings, parse_walk, walk_findings
+from harness.reference.mib_conformance import (
+    Verdict,
+    Walked,
+    definition_findings,
+    parse_walk,
+    set_findings,
+    walk_findings,
+)
 from hils.protocol.ntcip import (
     ALL_OBJECTS,
     MAX_PREEMPTS,
     PATTERN_TABLE,
+    PREEMPT_STATUS,
     PREEMPT_TABLE,
     V03_CHANGES,
     Access,
@@ -141,6 +149,43 @@ def test_the_walk_checks_find_what_departs_from_the_mib() -> None:
     assert found == {("maxPreempts", "value"), ("preemptTable", "rows"), ("preemptDelay", "index"),
                      ("preemptTrackPhase", "type"), ("?", "known"), ("maxPreempts", "index")}
     assert all(f.verdict is Verdict.FINDING for f in walk_findings(MIB, walked))
+
+
+def test_an_object_v03_added_served_under_v02_is_a_finding() -> None:
+    walked = [_walked(PREEMPT_STATUS.instance(), 0)]
+    assert [(f.name, f.check) for f in walk_findings(MIB, walked, Version.V02)] == [("preemptStatus", "edition")]
+    assert walk_findings(MIB, walked, Version.V03) == []
+
+
+def test_hils_defines_each_object_as_v03_does_when_it_serves_v03() -> None:
+    findings = definition_findings(MIB, edition=Version.V03)
+    assert [f for f in findings if f.verdict in (Verdict.FINDING, Verdict.V02)] == []
+
+
+class _Agent:
+    """An agent that refuses every SET outside 0..255 with wrongValue, but keeps the refused value when ``leaky``."""
+
+    def __init__(self, leaky: bool) -> None:
+        self.leaky = leaky
+        self.value = 5
+
+    def set(self, oid: tuple[int, ...], value: int) -> str:
+        if 0 <= value <= 255:
+            self.value = value
+            return "noError"
+        if self.leaky:
+            self.value = value
+        return "wrongValue"
+
+    def get(self, oid: tuple[int, ...]) -> int:
+        return self.value
+
+
+@pytest.mark.parametrize("leaky", [False, True])
+def test_a_refused_set_that_changes_the_value_is_a_finding(leaky: bool) -> None:
+    offset = PATTERN_TABLE[PatternColumn.OFFSET_TIME].instance(1)  # 0..255 in the MIB and here
+    found = set_findings(MIB, _Agent(leaky), [_walked(offset, 5)])
+    assert [f.detail for f in found] == (["refused SETs changed it: 5 became 256"] if leaky else [])
 
 
 def test_a_table_served_without_its_row_count_is_a_finding() -> None:
