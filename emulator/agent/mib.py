@@ -55,6 +55,7 @@ from hils.protocol.ntcip import (
     COORD_CORRECTION_MODE,
     COORD_CYCLE_STATUS,
     COORD_FORCE_MODE,
+    COORD_OPERATIONAL_MODE,
     COORD_PATTERN_STATUS,
     COORD_SYNC_STATUS,
     DETECTOR_ACTUATION,
@@ -111,9 +112,11 @@ from hils.protocol.ntcip import (
     TIMEBASE_ACTION_NUMBER,
     TIMEBASE_ACTION_STATUS,
     TIMEBASE_PATTERN,
+    TIMEBASE_PATTERN_SYNC,
     UNIT_BACKUP_TIME,
     UNIT_CONTROL_STATUS,
     UNIT_FLASH_STATUS,
+    UNIT_RED_REVERT,
     UNIT_STARTUP_FLASH,
     VEHICLE_DETECTOR_CALL_PHASE,
     VEHICLE_DETECTOR_CONTROL_GROUP_NUMBER,
@@ -195,6 +198,10 @@ NOT_WRITABLE_HERE: dict[str, str] = {
     "channelControlType": "the channel map: the emulator's load switches follow its phases one to one (channel i is "
                           "phase i), as the status of its channels does",
     "timebaseAscPattern": f"the time of day schedule ([[coordination.schedule]]): {_FROM_CONFIG}",
+    "timebaseAscPatternSync": "the coordinator counts every pattern's cycle from midnight (0 minutes past it), "
+                              "its one sync reference",
+    "coordOperationalMode": "automatic (0) only: the pattern comes from systemPatternControl and the time base; "
+                            "the coordinator has no manual override of them",
 }
 
 _RECALL_BITS = {
@@ -308,8 +315,10 @@ class MibView:
         c = self.controller
         cfg = c.config
         groups = cfg.groups
+        red_revert = _RedRevert(c)
         out = [
             Instance(MAX_PHASES.instance(), MAX_PHASES, lambda: max(cfg.phases)),
+            Instance(UNIT_RED_REVERT.instance(), UNIT_RED_REVERT, lambda: red_revert.unit, red_revert.set_unit),
             Instance(MAX_CHANNEL_STATUS_GROUPS.instance(), MAX_CHANNEL_STATUS_GROUPS, lambda: groups),
             Instance(MAX_RING_CONTROL_GROUPS.instance(), MAX_RING_CONTROL_GROUPS,
                      lambda: group_count(len(cfg.rings))),
@@ -335,6 +344,7 @@ class MibView:
                     for col, v in _phase_row(cfg, p, ph).items()]
             out += [Instance(PHASE_TABLE[col].instance(p), PHASE_TABLE[col],
                              *(_field_access(c, unprogrammed, name, unit) if unprogrammed
+                               else red_revert.phase_access(p) if col is PhaseColumn.RED_REVERT
                                else _timing_access(c, p, name, unit)))
                     for col, (name, unit) in _TIMING_COLUMNS.items()]
         out.append(Instance(RING_CONTROL_MAX2.instance(1), RING_CONTROL_MAX2,
@@ -429,6 +439,33 @@ def _detectors(call_phases: dict[int, int], table: tuple[ObjectDef, ObjectDef, O
     return out
 
 
+class _RedRevert:
+    """unitRedRevert beside each phase's phaseRedRevert: "if it is greater than a phaseRedRevert object value, then
+    this value shall be used as the red revert time for the affected phase". The model times a phase's red revert
+    from its timing row alone, so the view keeps what was SET of each and hands the model the greater of the two;
+    phaseRedRevert reads back what was SET of it."""
+
+    def __init__(self, c: Controller | DelayedController) -> None:
+        self.controller = c
+        self.unit = 0  # tenths, as the model's ticks
+        self.phases = {p: timing.red_revert for p, timing in c.timing.items()}
+
+    def set_unit(self, value: int) -> None:
+        self.unit = value
+        for p in self.phases:
+            self._apply(p)
+
+    def phase_access(self, phase: int) -> tuple[Callable[[], int], Callable[[int], None]]:
+        def write(value: int) -> None:
+            self.phases[phase] = value
+            self._apply(phase)
+
+        return lambda: self.phases[phase], write
+
+    def _apply(self, phase: int) -> None:
+        self.controller.set_timing(phase, "red_revert", max(self.phases[phase], self.unit))
+
+
 def _channels(cfg: IntersectionConfig) -> list[Instance]:
     """The channel table: channel i is driven by phase i (the emulator's load switches follow its phases one to
     one, as channelStatusGroup says); a channel whose phase the config leaves out has no control source ("Value 00
@@ -453,7 +490,8 @@ def _timebase(c: Controller | DelayedController) -> list[Instance]:
     Action is selected")."""
     schedule = c.config.coordination.schedule
     numbers = _rows(range(1, len(schedule) + 1))
-    out = [Instance(MAX_TIMEBASE_ACTIONS.instance(), MAX_TIMEBASE_ACTIONS, _constant(numbers[-1])),
+    out = [Instance(TIMEBASE_PATTERN_SYNC.instance(), TIMEBASE_PATTERN_SYNC, _constant(0)),
+           Instance(MAX_TIMEBASE_ACTIONS.instance(), MAX_TIMEBASE_ACTIONS, _constant(numbers[-1])),
            Instance(TIMEBASE_ACTION_STATUS.instance(), TIMEBASE_ACTION_STATUS,
                     lambda: _action_now(schedule, c.coordinator.clock % DAY))]
     for n in numbers:
@@ -485,6 +523,7 @@ def _coordination(c: Controller | DelayedController) -> list[Instance]:
         return write
 
     out = [
+        Instance(COORD_OPERATIONAL_MODE.instance(), COORD_OPERATIONAL_MODE, _constant(0)),
         Instance(COORD_CORRECTION_MODE.instance(), COORD_CORRECTION_MODE, lambda: int(co.correction),
                  table(lambda v: setattr(co, "correction", CoordCorrectionMode(v)))),
         Instance(COORD_FORCE_MODE.instance(), COORD_FORCE_MODE, lambda: int(co.force_mode),

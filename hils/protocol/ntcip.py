@@ -300,9 +300,17 @@ MAX_PHASES = _o("maxPhases", (1, 1), low=2)
 MAX_PHASE_GROUPS = _o("maxPhaseGroups", (1, 3), low=1)
 UNIT_STARTUP_FLASH = _o("unitStartUpFlash", (3, 1), access=Access.READ_WRITE)
 UNIT_BACKUP_TIME = _o("unitBackupTime", (3, 3), access=Access.READ_WRITE, high=65535)
+# unitRedRevert (A.3.4), tenths: "the minimum red revert time for all phases (i.e. if it is greater than a
+# phaseRedRevert object value, then this value shall be used as the red revert time for the affected phase)".
+UNIT_RED_REVERT = _o("unitRedRevert", (3, 4), access=Access.READ_WRITE)
 UNIT_CONTROL_STATUS = _o("unitControlStatus", (3, 5), low=1, high=8)
 UNIT_FLASH_STATUS = _o("unitFlashStatus", (3, 6), low=1, high=8)
 SYSTEM_PATTERN_CONTROL = _o("systemPatternControl", (4, 14), access=Access.READ_WRITE)
+# coordOperationalMode (A.4.1): "0 Automatic - ... coord operation, free, and flash to be determined automatically
+# by the possible sources (i.e. Interconnect, Time Base, or System Commands)"; 1-255 override them.
+COORD_OPERATIONAL_MODE = _o("coordOperationalMode", (4, 1), access=Access.READ_WRITE)
+# timebaseAscPatternSync (A.5.1): "Pattern Sync Reference in minutes past midnight".
+TIMEBASE_PATTERN_SYNC = _o("timebaseAscPatternSync", (5, 1), access=Access.READ_WRITE, high=65535)
 
 # Coordination (NTCIP 1202 v02 node coord, A.4; OIDs and ranges from the standard's ASC MIB, 1202ASC.mib as
 # compiled by pysmi into ASC_MIB1, the enumerations named there). The pattern table is indexed by pattern
@@ -658,7 +666,7 @@ ALL_OBJECTS: tuple[ObjectDef, ...] = (
     RING_CONTROL_GROUP_NUMBER, SEQUENCE_NUMBER, SEQUENCE_RING_NUMBER, MAX_RINGS, MAX_SEQUENCES, MAX_CHANNELS,
     CHANNEL_NUMBER, CHANNEL_CONTROL_SOURCE, CHANNEL_CONTROL_TYPE, MAX_TIMEBASE_ACTIONS, TIMEBASE_ACTION_NUMBER,
     TIMEBASE_PATTERN, TIMEBASE_ACTION_STATUS, PREEMPT_STATUS, MAX_PREEMPT_GROUPS, PREEMPT_STATUS_GROUP_NUMBER,
-    PREEMPT_STATUS_GROUP,
+    PREEMPT_STATUS_GROUP, UNIT_RED_REVERT, COORD_OPERATIONAL_MODE, TIMEBASE_PATTERN_SYNC,
 )
 
 

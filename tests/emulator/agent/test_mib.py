@@ -300,11 +300,11 @@ def test_next_oid_walks_every_instance_in_increasing_order(mib: MibView) -> None
     # their status and actuation of group 1. The index columns: phaseNumber x 8, the phase status, control and
     # channel status group numbers, ringControlGroupNumber, sequenceNumber and sequenceRingNumber x 2 rings, the
     # detectors' and push buttons' numbers x 8 and their status and control group numbers; maxRings, maxSequences;
-    # maxChannels and 3 channel columns x 8 channels; the time base (max, status, one action of 2 columns). Under
-    # v02 nothing of v03's preempt status.
+    # maxChannels and 3 channel columns x 8 channels; the time base (its sync, max, status, one action of 2
+    # columns); unitRedRevert and coordOperationalMode. Under v02 nothing of v03's preempt status.
     assert len(walked) == (8 + 9 + 5 + 5 * 8 + 13 * 8 + 1 + 19 + 2 + 1 + 1 + 2 + 7 + 4 + 1 + 20 + 2 + 3 + 2 * 8 + 2
                            + 2 + 8 + 2
-                           + 8 + 3 + 1 + 2 * 2 + 2 * 8 + 2 * 2 + 2 + 1 + 3 * 8 + 4)
+                           + 8 + 3 + 1 + 2 * 2 + 2 * 8 + 2 * 2 + 2 + 1 + 3 * 8 + 5 + 2)
 
 
 def test_next_oid_from_an_object_prefix_gives_its_first_instance(mib: MibView) -> None:

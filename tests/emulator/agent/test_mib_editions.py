@@ -36,15 +36,18 @@ from hils.protocol.ntcip import (
     SEQUENCE_RING_NUMBER,
     TIMEBASE_ACTION_STATUS,
     TIMEBASE_PATTERN,
+    UNIT_RED_REVERT,
     VEHICLE_DETECTOR_NUMBER,
     Access,
     ChannelControlType,
     ErrorStatus,
     PatternColumn,
+    PhaseColumn,
     PreemptColumn,
     PreemptState,
     SnmpError,
     Version,
+    phase_oid,
 )
 
 SPLIT_NUMBER_1 = PATTERN_TABLE[PatternColumn.SPLIT_NUMBER].instance(1)
@@ -170,3 +173,17 @@ def test_v03s_preempt_status_names_the_preempt_in_service_and_the_inputs_on() ->
     assert PreemptState(mib.get(state)).in_service and mib.get(PREEMPT_STATUS.instance()) == 1
     mib.set_many([(PREEMPT_CONTROL_STATE.instance(1), 0)])
     assert mib.get(PREEMPT_STATUS_GROUP.instance(1)) == 0
+
+
+def test_the_unit_red_revert_is_the_least_red_revert_of_every_phase() -> None:
+    """"if it is greater than a phaseRedRevert object value, then this value shall be used as the red revert time
+    for the affected phase": the model times the greater, and each phaseRedRevert reads back what was SET of it."""
+    mib = _city(Version.V02)
+    timing = mib.controller.timing
+    phase_1, phase_2 = phase_oid(PhaseColumn.RED_REVERT, 1), phase_oid(PhaseColumn.RED_REVERT, 2)
+    assert (mib.get(UNIT_RED_REVERT.instance()), mib.get(phase_1), timing[1].red_revert) == (0, 0, 0)
+    mib.set_many([(UNIT_RED_REVERT.instance(), 50), (phase_1, 70)])
+    assert (timing[1].red_revert, timing[2].red_revert) == (70, 50)
+    assert (mib.get(phase_1), mib.get(phase_2)) == (70, 0)
+    mib.set_many([(UNIT_RED_REVERT.instance(), 20)])
+    assert {p: t.red_revert for p, t in timing.items()} == {1: 70} | {p: 20 for p in range(2, 9)}
