@@ -142,25 +142,28 @@ class NetSnmp:
             raise RuntimeError(f"snmpwalk of {self.host}:{self.port} failed: {done.stderr.strip() or done.stdout}")
         return parse_walk(done.stdout)
 
-    def get(self, oid: Oid) -> Value | str:
-        """The value of one instance (as :class:`Walked` holds it)."""
-        done = self._run("snmpget", self.read_community, oid_str(oid))
+    def get(self, oids: Sequence[Oid]) -> list[Value | str]:
+        """The values of instances, in one GET (as :class:`Walked` holds them)."""
+        done = self._run("snmpget", self.read_community, *map(oid_str, oids))
         got = parse_walk(done.stdout)
-        if done.returncode != 0 or len(got) != 1:
-            raise RuntimeError(f"snmpget {oid_str(oid)} at {self.host}:{self.port} failed: "
+        if done.returncode != 0 or [w.oid for w in got] != [tuple(o) for o in oids]:
+            raise RuntimeError(f"snmpget of {len(oids)} instances at {self.host}:{self.port} failed: "
                                f"{done.stderr.strip() or done.stdout.strip()}")
-        return got[0].value
+        return [w.value for w in got]
 
-    def set(self, oid: Oid, value: Value) -> str:
-        """SET one value; ``noError`` or the error status net-snmp reports (``notWritable``, ``wrongValue``...)."""
-        arg = ("i", str(value)) if isinstance(value, int) else ("x", value.hex()) if value else ("s", "")
-        done = self._run("snmpset", self.write_community, oid_str(oid), *arg)
+    def set(self, varbinds: Sequence[tuple[Oid, Value]]) -> str:
+        """SET values in one request; ``noError`` or the error status net-snmp reports (``notWritable``,
+        ``wrongValue``...)."""
+        args = [part for oid, value in varbinds for part in (
+            oid_str(oid), *(("i", str(value)) if isinstance(value, int) else ("x", value.hex()) if value
+                            else ("s", "")))]
+        done = self._run("snmpset", self.write_community, *args)
         if done.returncode == 0:
             return "noError"
         reason = re.search(r"Reason: (\w+)", done.stderr)
         if reason:
             return reason[1]
-        raise RuntimeError(f"snmpset {oid_str(oid)} = {value!r} at {self.host}:{self.port} got no answer: "
+        raise RuntimeError(f"snmpset of {len(varbinds)} values at {self.host}:{self.port} got no answer: "
                            f"{done.stderr.strip()}")
 
 
@@ -283,23 +286,52 @@ def _ranges(numbers: Iterable[int]) -> str:
 # --- SETs -------------------------------------------------------------------------------------------------------
 
 
+#: Varbinds per request of a batch: well inside what an agent takes in one datagram.
+BATCH = 20
+
+
+@dataclass(frozen=True, slots=True)
+class _Edges:
+    """A writable INTEGER's values to SET: those to be refused (one past the edges of the MIB's range and of the
+    declared one) and those to be taken (the edges)."""
+
+    w: Walked
+    obj: MibObject
+    declared: ObjectDef | None
+    refused: tuple[int, ...]
+    taken: tuple[int, ...]
+
+    @classmethod
+    def of(cls, obj: MibObject, declared: ObjectDef | None, w: Walked) -> _Edges:
+        inside, past = obj.edges()
+        values = sorted({*inside, *past} | ({declared.low, declared.high, declared.low - 1, declared.high + 1}
+                                            if declared is not None else set()))
+
+        def admitted(value: int) -> bool:
+            return obj.allows(value) and (declared is None or declared.low <= value <= declared.high)
+
+        return cls(w, obj, declared, tuple(v for v in values if not admitted(v)), tuple(filter(admitted, values)))
+
+
 def set_findings(mib: Mib, agent: NetSnmp, walked: Sequence[Walked], edition: Version = DEFAULT_VERSION
                  ) -> list[Finding]:
     """One instance of each walked object: a read-only one (for the MIB or here) SET to its own value, refused; a
-    writable INTEGER SET at the edges of the MIB's range and of hils' declared one, and one past them; then its
-    value put back."""
+    writable INTEGER SET one past the edges of the MIB's range and of hils' declared one (refused with wrongValue,
+    and a GET then reads the value the walk read: nothing changed), then at the edges (taken), then its value put
+    back. The SETs that must be taken go in batches, the k-th edge of every object in one request."""
     out = []
     first: dict[str, Walked] = {}
     for w in walked:
         obj = mib.object_for(w.oid)
         if obj is not None and isinstance(w.value, int | bytes):
             first.setdefault(obj.name, w)
+    edges = []
     for name, w in first.items():
         obj, declared = mib.objects[name], object_for(w.oid, edition)
         writable_here = declared is not None and declared.access is Access.READ_WRITE and name not in NOT_WRITABLE_HERE
         shown = oid_str(w.oid)
         if obj.access is Access.READ_ONLY or not writable_here:
-            status = agent.set(w.oid, w.value)
+            status = agent.set([(w.oid, w.value)])
             if status in REFUSED_NOT_WRITABLE:
                 if obj.access is Access.READ_WRITE:
                     why = NOT_WRITABLE_HERE.get(name)
@@ -317,46 +349,50 @@ def set_findings(mib: Mib, agent: NetSnmp, walked: Sequence[Walked], edition: Ve
                                    f"a SET of a read-only object is refused {status}, not notWritable", shown))
                 continue
         if isinstance(w.value, int):
-            out += _edges(agent, obj, declared, w)
-            restored = agent.set(w.oid, w.value)
-            if restored != "noError":
-                out.append(Finding(Verdict.FINDING, name, "set", f"its value {w.value} could not be put back: "
-                                   f"{restored}", shown))
+            edges.append(_Edges.of(obj, declared, w))
+    out += _refused(agent, edges)
+    for k in range(max((len(e.taken) for e in edges), default=0)):
+        out += _taken(agent, [(e, e.taken[k]) for e in edges if k < len(e.taken)], "an edge")
+    out += _taken(agent, [(e, e.w.value) for e in edges], "its value put back")
     return out
 
 
-def _edges(agent: NetSnmp, obj: MibObject, declared: ObjectDef | None, w: Walked) -> list[Finding]:
-    """A writable INTEGER SET at the edges of the MIB's range and of the declared one, and one past them: first the
-    values to be refused (wrongValue, and a GET then reads the value the walk read: nothing changed), then those to
-    be taken."""
-    inside, past = obj.edges()
-    values = sorted({*inside, *past} | ({declared.low, declared.high, declared.low - 1, declared.high + 1}
-                                        if declared is not None else set()))
-    shown = oid_str(w.oid)
-
-    def admitted(value: int) -> bool:
-        return obj.allows(value) and (declared is None or declared.low <= value <= declared.high)
-
+def _refused(agent: NetSnmp, edges: Sequence[_Edges]) -> list[Finding]:
+    """Each value past an edge SET alone: wrongValue; then the values read back in batches, each the walk's."""
     out = []
-    for value in (v for v in values if not admitted(v)):
-        status = agent.set(w.oid, value)
-        if status == "wrongValue":
+    for e in edges:
+        shown = oid_str(e.w.oid)
+        for value in e.refused:
+            status = agent.set([(e.w.oid, value)])
+            if status == "wrongValue":
+                continue
+            if e.obj.allows(value):
+                out.append(Finding(Verdict.FINDING, e.obj.name, "set", f"{value} outside the declared "
+                                   f"{e.declared.low}..{e.declared.high} answered {status}, not wrongValue", shown))
+            else:
+                out.append(Finding(Verdict.FINDING, e.obj.name, "set", f"{value} outside {e.obj.describe()} "
+                                   f"answered {status}, not wrongValue", shown))
+    for start in range(0, len(edges), BATCH):
+        batch = edges[start:start + BATCH]
+        held = agent.get([e.w.oid for e in batch])
+        out += [Finding(Verdict.FINDING, e.obj.name, "set", f"refused SETs changed it: {e.w.value!r} became "
+                        f"{value!r}", oid_str(e.w.oid)) for e, value in zip(batch, held, strict=True)
+                if value != e.w.value]
+    return out
+
+
+def _taken(agent: NetSnmp, sets: Sequence[tuple[_Edges, int]], what: str) -> list[Finding]:
+    """Values the agent must take, in batches; a batch refused is SET again one by one to find which was."""
+    out = []
+    for start in range(0, len(sets), BATCH):
+        batch = sets[start:start + BATCH]
+        if agent.set([(e.w.oid, value) for e, value in batch]) == "noError":
             continue
-        if obj.allows(value):
-            out.append(Finding(Verdict.FINDING, obj.name, "set", f"{value} outside the declared "
-                               f"{declared.low}..{declared.high} answered {status}, not wrongValue", shown))
-        else:
-            out.append(Finding(Verdict.FINDING, obj.name, "set", f"{value} outside {obj.describe()} answered "
-                               f"{status}, not wrongValue", shown))
-    held = agent.get(w.oid)
-    if held != w.value:
-        out.append(Finding(Verdict.FINDING, obj.name, "set", f"refused SETs changed it: {w.value!r} became "
-                           f"{held!r}", shown))
-    for value in filter(admitted, values):
-        status = agent.set(w.oid, value)
-        if status != "noError":
-            out.append(Finding(Verdict.FINDING, obj.name, "set", f"{value} refused {status}, inside "
-                               f"{obj.describe()}", shown))
+        for e, value in batch:
+            status = agent.set([(e.w.oid, value)])
+            if status != "noError":
+                out.append(Finding(Verdict.FINDING, e.obj.name, "set", f"{what}, {value}, refused {status}, inside "
+                                   f"{e.obj.describe()}", oid_str(e.w.oid)))
     return out
 
 

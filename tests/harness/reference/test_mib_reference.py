@@ -30,8 +30,10 @@ from hils.protocol.ntcip import (
     V03_CHANGES,
     Access,
     PatternColumn,
+    PhaseColumn,
     PreemptColumn,
     Version,
+    phase_oid,
 )
 
 MIB = load()
@@ -163,22 +165,27 @@ def test_hils_defines_each_object_as_v03_does_when_it_serves_v03() -> None:
 
 
 class _Agent:
-    """An agent that refuses every SET outside 0..255 with wrongValue, but keeps the refused value when ``leaky``."""
+    """An agent of one value that refuses every SET outside 0..255 with wrongValue, but keeps the refused value when
+    ``leaky``, and refuses ``bad`` too. A request of several values is taken whole or refused whole."""
 
-    def __init__(self, leaky: bool) -> None:
+    def __init__(self, leaky: bool, bad: int | None = None) -> None:
         self.leaky = leaky
+        self.bad = bad
         self.value = 5
+        self.requests = 0
 
-    def set(self, oid: tuple[int, ...], value: int) -> str:
-        if 0 <= value <= 255:
-            self.value = value
+    def set(self, varbinds: list[tuple[tuple[int, ...], int]]) -> str:
+        self.requests += 1
+        values = [value for _, value in varbinds]
+        if all(0 <= v <= 255 and v != self.bad for v in values):
+            self.value = values[-1]
             return "noError"
         if self.leaky:
-            self.value = value
+            self.value = values[-1]
         return "wrongValue"
 
-    def get(self, oid: tuple[int, ...]) -> int:
-        return self.value
+    def get(self, oids: list[tuple[int, ...]]) -> list[int]:
+        return [self.value for _ in oids]
 
 
 @pytest.mark.parametrize("leaky", [False, True])
@@ -186,6 +193,22 @@ def test_a_refused_set_that_changes_the_value_is_a_finding(leaky: bool) -> None:
     offset = PATTERN_TABLE[PatternColumn.OFFSET_TIME].instance(1)  # 0..255 in the MIB and here
     found = set_findings(MIB, _Agent(leaky), [_walked(offset, 5)])
     assert [f.detail for f in found] == (["refused SETs changed it: 5 became 256"] if leaky else [])
+
+
+def test_the_edges_are_set_in_batches_and_one_refused_is_found_in_its_batch(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(mib_conformance, "BATCH", 4)
+    columns = (PhaseColumn.WALK, PhaseColumn.PEDESTRIAN_CLEAR, PhaseColumn.MINIMUM_GREEN, PhaseColumn.PASSAGE,
+               PhaseColumn.MAXIMUM1, PhaseColumn.MAXIMUM2, PhaseColumn.RED_CLEAR, PhaseColumn.RED_REVERT)
+    instances = ([_walked(phase_oid(col, 1), 5) for col in columns]
+                 + [_walked(PATTERN_TABLE[col].instance(1), 5) for col in (PatternColumn.CYCLE_TIME,
+                                                                           PatternColumn.OFFSET_TIME)])
+    agent = _Agent(leaky=False)
+    assert set_findings(MIB, agent, instances) == []  # every one 0..255, in the MIB and here
+    # 2 past-edge SETs each (-1, 256), then 0, 255 and the put-back in batches of 4: 3 requests each.
+    assert agent.requests == 2 * 10 + 3 * 3
+    found = set_findings(MIB, _Agent(leaky=False, bad=255), instances)
+    assert len(found) == 10 and {f.detail for f in found} == {"an edge, 255, refused wrongValue, inside INTEGER "
+                                                              "(0..255)"}
 
 
 def test_a_table_served_without_its_row_count_is_a_finding() -> None:
