@@ -5,12 +5,14 @@ base actions, v03's preempt status."""
 from __future__ import annotations
 
 import tomllib
-from datetime import datetime
+from datetime import datetime, timedelta
 from importlib import resources
 from typing import Any
 
 import pytest
 import simpy
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from emulator.agent.mib import MibView
 from emulator.inprocess import VirtualTarget
@@ -187,3 +189,20 @@ def test_the_unit_red_revert_is_the_least_red_revert_of_every_phase() -> None:
     assert (mib.get(phase_1), mib.get(phase_2)) == (70, 0)
     mib.set_many([(UNIT_RED_REVERT.instance(), 20)])
     assert {p: t.red_revert for p, t in timing.items()} == {1: 70} | {p: 20 for p in range(2, 9)}
+
+
+@settings(max_examples=40, deadline=None)
+@given(starts=st.lists(st.integers(0, 24 * 60 - 1), min_size=1, max_size=4, unique=True),
+       patterns=st.lists(st.sampled_from([1, "free"]), min_size=4, max_size=4), which=st.integers(0, 3))
+def test_the_action_in_effect_runs_the_pattern_the_coordinator_takes_up(starts: list[int], patterns: list[object],
+                                                                        which: int) -> None:
+    """Across any schedule boundary, the coordinator's time-of-day pattern is the one timebaseAscActionStatus
+    names."""
+    schedule = [{"from": f"{m // 60:02d}:{m % 60:02d}", "pattern": p} for m, p in zip(starts, patterns, strict=False)]
+    boundary = sorted(starts)[which % len(starts)]
+    start = datetime(2024, 4, 15) + timedelta(minutes=boundary) - timedelta(seconds=1)
+    mib = MibView(Controller(_config("four_leg_city.toml", schedule=schedule), start=start))
+    for _ in range(20):  # 2 s: the boundary passes
+        mib.controller.step()
+    action = mib.get(TIMEBASE_ACTION_STATUS.instance())
+    assert mib.get(TIMEBASE_PATTERN.instance(action)) == mib.controller.coordinator.local
