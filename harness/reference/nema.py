@@ -703,6 +703,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _figure(label: str, results: Sequence[Differential]) -> None:
+    if not results:
+        return
     matched, total = pooled([d.comparison for d in results])
     print(f"{label:52s} {matched / max(total, 1):6.1%} of {total} changes, whole sequences")
     classes = tally(results)

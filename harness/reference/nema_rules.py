@@ -151,7 +151,8 @@ ENDED_BEFORE_MIN = DifferenceClass(
 ENDED_WHILE_EXTENDING = DifferenceClass(
     "green ended while its call extended it",
     "a green ends while its own call is on, before its maximum timed from a serviceable conflicting call, and "
-    "without having gapped out in the presence of one", Right.KEEPER, (PASSAGE, MAXIMUM))
+    "without having gapped out past its minimum (a gap-out held when the call comes back is simultaneous gap "
+    "disable, a setting)", Right.KEEPER, (PASSAGE, MAXIMUM))
 RE_EXTENDED = DifferenceClass(
     "gapped-out green re-extended by its returning call",
     "a green that gapped out after its minimum gets its call back while it still shows: one side ends it (the "
@@ -330,26 +331,17 @@ class Rules:
     def ended_before_min(self, e: Ending) -> bool:
         return e.green > 0 and e.yellow - e.green < self.min[e.phase] - 1
 
-    def returning(self, e: Ending) -> bool:
-        """The green's call came back just before it ended, after a gap-out past its minimum."""
-        p, since = e.phase, e.green + self.min[e.phase]
-        return p in self.calls(e.yellow) and any(p not in self.calls(k) for k in range(max(since, e.yellow - 2),
-                                                                                      e.yellow))
-
-    def latched(self, e: Ending) -> bool:
-        """The green gapped out past its minimum while a serviceable conflicting call waited, which kept waiting
-        until it ended (NEMA's simultaneous gap disable holds such a gap-out)."""
-        p = e.phase
-        return any(p not in self.calls(k) and all(self.conflicting(p, j) for j in range(k, e.yellow + 1))
-                   for k in range(e.green + self.min[p], e.yellow))
+    def gapped(self, e: Ending) -> bool:
+        """The green gapped out past its minimum (its call off) before it ended: with simultaneous gap disable the
+        gap-out holds, whenever the call comes back."""
+        return any(e.phase not in self.calls(k) for k in range(e.green + self.min[e.phase] - 1, e.yellow))
 
     def ready(self, p: int, green: int, k: int, slack: int = 1) -> bool:
         """The green of ``p`` from ``green`` may end at tick ``k``: past its minimum, and gapped out or maxed out."""
         return k - green >= self.min[p] - slack and (p not in self.calls(k) or self.maxed(p, green, k, slack))
 
     def ended_while_extending(self, e: Ending) -> bool:
-        return (e.phase in self.calls(e.yellow) and not self.maxed(e.phase, e.green, e.yellow)
-                and not self.latched(e) and not self.returning(e))
+        return e.phase in self.calls(e.yellow) and not self.maxed(e.phase, e.green, e.yellow) and not self.gapped(e)
 
     def clearance(self, p: int) -> int:
         ph = self.config.phases[p]

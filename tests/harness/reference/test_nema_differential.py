@@ -43,6 +43,7 @@ from harness.reference.nema import (
     traffic_differential,
 )
 from harness.reference.nema_rules import (
+    BACKED_WITH_CALL_ACROSS,
     CLASSES,
     CONDITIONAL_SERVICE,
     NTCIP,
@@ -51,6 +52,7 @@ from harness.reference.nema_rules import (
     ColorChange,
     DifferenceClass,
     Right,
+    Settings,
     Side,
     Verdict,
     classify,
@@ -183,6 +185,19 @@ def test_a_rule_holds_ours_to_it_too(paper_config: IntersectionConfig) -> None:
     first = compare(ours, ref).first_difference
     judged = classify(paper_config, calls_read(calls, ticks), ref, ours, first.tick)  # the sides swapped
     assert judged.kind is SKIPPED and judged.breaker is Side.OURS
+
+
+def test_conditional_service_is_a_setting_only_on_a_side_that_has_it(paper_config: IntersectionConfig) -> None:
+    """SUMO's backing shown as ours is our fault (the model has no conditional service), and a setting once ours is
+    given the setting."""
+    _, calls, ticks = EXAMPLES[CONDITIONAL_SERVICE]
+    ours, ref = run_ours(paper_config, calls, ticks), run_reference(paper_config, calls, ticks)
+    tick, called = compare(ours, ref).first_difference.tick, calls_read(calls, ticks)
+    judged = classify(paper_config, called, ref, ours, tick)  # the sides swapped
+    assert judged.kind is BACKED_WITH_CALL_ACROSS and judged.verdict is Verdict.MODEL
+    given = {Side.OURS: Settings(conditional_service=True), Side.SUMO: Settings(conditional_service=False)}
+    judged = classify(paper_config, called, ref, ours, tick, settings=given)
+    assert judged.kind is CONDITIONAL_SERVICE and judged.verdict is Verdict.SETTING
 
 
 # --- divergences -------------------------------------------------------------------------------
