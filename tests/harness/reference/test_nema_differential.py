@@ -275,6 +275,21 @@ def test_detector_driven_traffic_keeps_the_floor_with_no_model_fault(paper_confi
 
 
 
+def test_a_gap_out_held_when_its_call_comes_back_is_no_fault_however_late(paper_config: IntersectionConfig) -> None:
+    """Pattern 1, the sixth random sequence of seed 1 to 200 s: 4 gaps out at 180.8 s with nothing called, its call
+    comes back at 181.8 s with calls on 5 and 6 across, and both controllers hold the gap-out: 4 ends with 8 at
+    186.7 s, its call on (simultaneous gap disable). The rule excused that only when the call came back within
+    0.2 s of the end, or a conflicting call had waited since the gap-out; the bit's words set no such limit."""
+    config, rng = in_mode(paper_config, Mode.TS2), random.Random(1)
+    for _ in range(6):
+        calls = random_calls(rng, 3000, sorted(config.phases))
+    calls = tuple((k, ps) for k, ps in calls if k < 2000)
+    result = differential(config, calls, 2000)
+    four = [c for c in result.comparison.ours if c.phase == 4 and c.color is Color.YELLOW]
+    assert four[-1].tick == 1867 and 4 in calls_read(calls, 2000)[1867]  # the case: ended with its call on
+    assert not result.model_faults, [str(f) for f in result.model_faults]
+
+
 # --- coordinated ------------------------------------------------------------------------------
 
 
