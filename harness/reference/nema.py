@@ -36,11 +36,16 @@ clearance may still change the decision on the same side of the barrier) and no 
 :func:`compare` pairs the changes of the two timelines over whole sequences (same phase, same
 colour, at most ``tolerance`` ticks apart, in order; no cut-off) and reports the agreement:
 matched changes over all distinct changes (matched + unmatched on either side), so a change
-only one side makes counts against it. :func:`differential` also judges the first difference
-by the sourced rules of :mod:`harness.reference.nema_rules`. Calls come from a :data:`CallSequence`
-(targeted scenarios, seeded random sequences) or from SUMO's own detectors while it serves the
-shipped demand (:func:`run_traffic`). ``python -m harness.reference.nema`` prints the figures and
-the classes of the first differences.
+only one side makes counts against it. :func:`differential` also judges every divergence (the
+first change only one side makes, and each one after the two showed the same colours again) by
+the sourced rules of :mod:`harness.reference.nema_rules`, and audits every green our controller
+ends against the same rules, whatever SUMO did there; each judgement is one of three verdicts:
+SUMO departs from a quoted rule, a setting both may take, the model's fault. Calls come from a
+:data:`CallSequence` (targeted scenarios, seeded random sequences) or from SUMO's own detectors
+while it serves the shipped demand (:func:`run_traffic`). ``python -m harness.reference.nema``
+prints the figures and the three counts. Our side is built by a ``model`` factory (the
+:class:`~emulator.model.controller.Controller`): the judge's own tests give it a faulty subclass
+and ask for a model fault.
 """
 
 from __future__ import annotations
@@ -52,16 +57,17 @@ import random
 import sys
 import tempfile
 from collections import Counter
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from enum import StrEnum
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
-from emulator.model.controller import Controller
+from emulator.model.controller import Controller, tenths
 from emulator.model.coordination import Coordinator
 from harness.reference.nema_rules import (
     BACKED_WITH_CALL_ACROSS,
+    CONDITIONAL_SERVICE,
     COORD_WAITS_FOR_OTHER_RING,
     ENDED_BEFORE_MIN,
     ENDED_WHILE_EXTENDING,
@@ -76,6 +82,8 @@ from harness.reference.nema_rules import (
     DifferenceClass,
     Judgement,
     Timeline,
+    Verdict,
+    audit,
     classify,
 )
 from hils.protocol.config import FREE, ForceOff, IntersectionConfig, NextPhaseLock, OffsetReference, Pattern, load
@@ -89,6 +97,9 @@ SUMO_PASSAGE = 0.1  # s: SUMO's vehicle extension, one step (see the theory of o
 
 CallSequence = tuple[tuple[int, frozenset[int]], ...]
 """``(tick, phases)`` in ascending tick order: from that tick on exactly these phases are called."""
+
+Model = Callable[[IntersectionConfig], Controller]
+"""What builds our side from its config: the controller, or (in the judge's own tests) a faulty subclass."""
 
 
 class NemaReferenceError(ValueError):
@@ -113,8 +124,51 @@ class Comparison:
 
     @property
     def first_difference(self) -> ColorChange | None:
-        """The earliest change only one side makes: where the timelines part (the rest often follows from it)."""
+        """The earliest change only one side makes: where the timelines part."""
         return min((*self.only_ours, *self.only_reference), default=None)
+
+    def divergences(self, red_settled: int) -> tuple[int, ...]:
+        """The tick each divergence starts at: the first change only one side makes, and every later one made
+        after a resync: both sides show the same colours, each green and yellow since a change they both made (a
+        matched pair), each red since such a change or for ``red_settled`` ticks on both (its clearance and red
+        revert over). Equal colours alone are no resync: two sides making the same changes a second apart show the
+        same colours in between, and a yellow or red begun later ends later."""
+        partner = {a: b for a, b in self.matched}
+        before = {Color.GREEN: Color.RED, Color.YELLOW: Color.GREEN, Color.RED: Color.YELLOW}
+        start: dict[int, Color] = {}  # both start alike: a phase's colour before its first change on either side
+        for c in sorted((*self.ours, *self.reference)):
+            start.setdefault(c.phase, before[c.color])
+        last: dict[str, dict[int, ColorChange]] = {"ours": {}, "SUMO": {}}  # per phase, its latest change
+        by_tick: dict[int, list[tuple[str, ColorChange]]] = {}
+        for name, timeline in (("ours", self.ours), ("SUMO", self.reference)):
+            for c in timeline:
+                by_tick.setdefault(c.tick, []).append((name, c))
+
+        def in_step(now: int) -> bool:
+            for p, color in start.items():
+                ours, sumo = last["ours"].get(p), last["SUMO"].get(p)
+                shown = ours.color if ours else color
+                if shown is not (sumo.color if sumo else color):
+                    return False
+                if ours is sumo is None or (ours is not None and partner.get(ours) == sumo):
+                    continue
+                if shown is not Color.RED or any(c and now - c.tick < red_settled for c in (ours, sumo)):
+                    return False
+            return True
+
+        resyncs = []
+        for t in sorted(by_tick):
+            if in_step(t - 1):  # the colours shown until this tick's changes
+                resyncs.append(t - 1)
+            for name, c in by_tick[t]:
+                last[name][c.phase] = c
+            if in_step(t):
+                resyncs.append(t)
+        starts: list[int] = []
+        for t in sorted({c.tick for c in (*self.only_ours, *self.only_reference)}):
+            if not starts or any(starts[-1] < r < t for r in resyncs):
+                starts.append(t)
+        return tuple(starts)
 
     def report(self, calls: CallSequence = (), window: int = 150) -> str:
         """Agreement and, around the first difference, the calls and both timelines."""
@@ -257,10 +311,10 @@ def _changes(previous: Mapping[int, Color], now: Mapping[int, Color], tick: int)
     return [ColorChange(tick, p, c) for p, c in now.items() if previous[p] is not c]
 
 
-def run_ours(config: IntersectionConfig, calls: CallSequence, ticks: int) -> Timeline:
+def run_ours(config: IntersectionConfig, calls: CallSequence, ticks: int, model: Model = Controller) -> Timeline:
     """Our controller (on :func:`comparable_config`) under ``calls`` for ``ticks`` steps."""
     _check(calls, ticks, config)
-    controller = Controller(comparable_config(config))
+    controller = model(comparable_config(config))
     pending = dict(calls)
 
     def colors() -> dict[int, Color]:
@@ -400,35 +454,67 @@ def compare(ours: Timeline, reference: Timeline, tolerance: int = 1) -> Comparis
 
 @dataclass(frozen=True)
 class Differential:
-    """Both controllers under one call sequence: the comparison over the whole sequence and the judged first
-    difference (None when they agree throughout)."""
+    """Both controllers under one call sequence: the comparison over the whole sequence, every divergence judged,
+    and the faults the audit of our own greens found."""
 
     calls: CallSequence
     comparison: Comparison
-    first: Judgement | None
+    judgements: tuple[Judgement, ...]
+    audited: tuple[Judgement, ...]
+
+    @property
+    def first(self) -> Judgement | None:
+        """The first divergence judged (None when the two agree throughout)."""
+        return self.judgements[0] if self.judgements else None
+
+    @property
+    def model_faults(self) -> tuple[Judgement, ...]:
+        """Every fault of the model: divergences judged ours, and greens the audit found at fault (once each)."""
+        faults = [j for j in self.judgements if j.verdict is Verdict.MODEL]
+        seen = {(j.tick, j.phase) for j in faults}
+        return tuple(faults + [j for j in self.audited if (j.tick, j.phase) not in seen])
+
+    def counts(self) -> Counter[Verdict]:
+        """The three counts: divergences by verdict, the audit's further faults counted as the model's."""
+        out = Counter({v: 0 for v in Verdict})
+        out.update(j.verdict for j in self.judgements if j.verdict is not Verdict.MODEL)
+        out[Verdict.MODEL] += len(self.model_faults)
+        return out
 
 
-def differential(config: IntersectionConfig, calls: CallSequence, ticks: int) -> Differential:
-    """Both controllers under the same calls, compared within 0.1 s over the whole sequence; the first
-    difference judged by :func:`harness.reference.nema_rules.classify`."""
-    return _judged(config, calls, ticks, run_ours(config, calls, ticks), run_reference(config, calls, ticks))
+JUDGE_MARGIN = 400
+"""Ticks both sides run on past a sequence's end, its last calls held, for the judge only: a green ending near the
+end shows where its ring goes. The comparison stops at the sequence's end."""
 
 
-def traffic_differential(config: IntersectionConfig, ticks: int, seed: int) -> Differential:
+def differential(config: IntersectionConfig, calls: CallSequence, ticks: int,
+                 model: Model = Controller) -> Differential:
+    """Both controllers under the same calls, compared within 0.1 s over the whole sequence; every divergence
+    judged by :func:`harness.reference.nema_rules.classify`, every green of ours by its ``audit``."""
+    longer = ticks + JUDGE_MARGIN
+    return _judged(config, calls, ticks, run_ours(config, calls, longer, model),
+                   run_reference(config, calls, longer))
+
+
+def traffic_differential(config: IntersectionConfig, ticks: int, seed: int, model: Model = Controller) -> Differential:
     """SUMO's NEMA controller serving traffic, and ours given the calls its detectors placed."""
-    calls, reference = run_traffic(config, ticks, seed)
-    return _judged(config, calls, ticks, run_ours(config, calls, ticks), reference)
+    longer = ticks + JUDGE_MARGIN
+    calls, reference = run_traffic(config, longer, seed)
+    return _judged(config, calls, ticks, run_ours(config, calls, longer, model), reference)
 
 
 def _judged(config: IntersectionConfig, calls: CallSequence, ticks: int, ours: Timeline,
             reference: Timeline) -> Differential:
-    comparison = compare(ours, reference)
+    """Compare up to ``ticks``; judge on the timelines as long as they run."""
+    comparison = compare(*(tuple(c for c in timeline if c.tick <= ticks) for timeline in (ours, reference)))
     pattern = running_pattern(config)
     plan = None if pattern is None else Coordinator(config).plan
-    first = comparison.first_difference
-    judged = None if first is None else classify(config, calls_read(calls, ticks), ours, reference, first.tick,
-                                                 plan=plan)
-    return Differential(calls, comparison, judged)
+    called = calls_read(calls, ticks + JUDGE_MARGIN)
+    settled = max(tenths(ph.red_clear) + tenths(ph.red_revert) for ph in config.phases.values()) + 1
+    judged = tuple(classify(config, called, ours, reference, tick, plan=plan)
+                   for tick in comparison.divergences(settled))
+    faults = tuple(j for j in audit(config, called, ours, plan=plan) if j.tick <= ticks)
+    return Differential(tuple((k, ps) for k, ps in calls if k <= ticks), comparison, judged, faults)
 
 
 def calls_read(calls: CallSequence, ticks: int) -> list[frozenset[int]]:
@@ -499,8 +585,12 @@ def in_mode(config: IntersectionConfig, mode: Mode) -> IntersectionConfig:
 # A minimal sequence for each class of first difference (docs/nema_differences.md shows them): on the paper's
 # intersection, free or running its plan, SUMO's NEMA controller makes the difference and its rule names it.
 EXAMPLES: dict[DifferenceClass, tuple[Mode, CallSequence, int]] = {
-    # 2+6 green, 6's call drops as 4 (across) and 5 are called: SUMO backs ring 2 from 6 into 5
-    BACKED_WITH_CALL_ACROSS: (Mode.FREE, seconds((0, [2, 6]), (15, [2, 4, 5]), (45, [])), 500),
+    # 2+6 green, 6's call drops as 4 (across) and 5 are called: SUMO backs ring 2 from 6 into 5, with 20 s of 2's
+    # maximum left for 6's clearance and 5's minimum (8 s)
+    CONDITIONAL_SERVICE: (Mode.FREE, seconds((0, [2, 6]), (15, [2, 4, 5]), (45, [])), 500),
+    # the same backing with 4 called since 10 s: 2's maximum runs out at 30 s, 6 s after the backing at 24 s, too
+    # soon for 6's clearance and 5's minimum
+    BACKED_WITH_CALL_ACROSS: (Mode.FREE, seconds((0, [2, 6]), (10, [2, 4, 6]), (24, [2, 4, 5]), (50, [])), 600),
     # 3+7 green; calls on 1, 5 and 8: SUMO crosses to 1+5 and leaves 8 (after 7, before the barrier) unserved
     SKIPPED: (Mode.FREE, seconds((0, [3, 7]), (12, [1, 5, 8]), (30, [])), 400),
     # 2+5 green; 5 ends alone toward 6 (called), then 2 can go with 3 called: SUMO takes ring 2 across with ring 1
@@ -550,16 +640,27 @@ def pooled(results: Sequence[Comparison]) -> tuple[int, int]:
     return matched, matched + sum(len(r.only_ours) + len(r.only_reference) for r in results)
 
 
-def tally(results: Sequence[Differential]) -> Counter[tuple[str, str]]:
-    """First differences per class and the side that broke its rule."""
-    return Counter((str(d.first.kind), str(d.first.breaker or d.first.kind.right)) for d in results if d.first)
+def counts(results: Sequence[Differential]) -> Counter[Verdict]:
+    """The three counts over several differentials."""
+    return sum((d.counts() for d in results), Counter({v: 0 for v in Verdict}))
+
+
+def tally(results: Sequence[Differential]) -> Counter[tuple[Verdict, str]]:
+    """Judgements per verdict and class: every divergence, and the model's faults the audit found besides."""
+    out: Counter[tuple[Verdict, str]] = Counter()
+    for d in results:
+        out.update((j.verdict, str(j.kind)) for j in d.judgements if j.verdict is not Verdict.MODEL)
+        out.update((Verdict.MODEL, str(j.kind)) for j in d.model_faults)
+    return out
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m harness.reference.nema",
                                      description="Agreement of our controller with SUMO's NEMA controller over whole "
                                                  "call sequences, free and running the config's coordination plan, "
-                                                 "and the class of each first difference.")
+                                                 "and every divergence judged by quoted rules, counted in three "
+                                                 "kinds: SUMO departs from a rule, a setting both may take, the "
+                                                 "model's fault (every green of ours is audited too).")
     parser.add_argument("--config", help="intersection TOML (default: the shipped four-leg intersection)")
     parser.add_argument("--random", type=int, default=50, help="random call sequences per mode (default 50)")
     parser.add_argument("--length", type=float, default=300.0, help="seconds per random sequence (default 300)")
@@ -570,7 +671,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--mode", choices=[m.name.lower() for m in Mode], action="append",
                         help="compare in this mode only (repeatable; default: every mode, coordinated ones when the "
                              "config has a plan)")
-    parser.add_argument("-v", "--verbose", action="store_true", help="show where each sequence first differs")
+    parser.add_argument("-v", "--verbose", action="store_true",
+                        help="show each random sequence's judgements and where it first differs")
     args = parser.parse_args(argv)
     ticks = round(args.length * 10)
     try:
@@ -587,8 +689,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             randoms = []
             for i in range(args.random):
                 randoms.append(differential(cfg, random_calls(rng, ticks, sorted(cfg.phases)), ticks))
-                if args.verbose and randoms[-1].first:
-                    print(f"random {i}: {randoms[-1].first}\n" + randoms[-1].comparison.report(randoms[-1].calls))
+                d = randoms[-1]
+                if args.verbose and (d.judgements or d.audited):
+                    judged = "\n  ".join(map(str, (*d.judgements, *d.audited)))
+                    print(f"random {i}:\n  {judged}\n" + d.comparison.report(d.calls))
             traffic = [traffic_differential(cfg, ticks, seed) for seed in range(args.traffic)]
             _figure(f"{args.random} random sequences of {args.length:g} s", randoms)
             _figure(f"{args.traffic} runs of {args.length:g} s of detector-driven traffic", traffic)
@@ -599,11 +703,17 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _figure(label: str, results: Sequence[Differential]) -> None:
+    if not results:
+        return
     matched, total = pooled([d.comparison for d in results])
     print(f"{label:52s} {matched / max(total, 1):6.1%} of {total} changes, whole sequences")
     classes = tally(results)
-    for (kind, who), n in classes.most_common():
-        print(f"  {n:3d}  first difference: {kind} ({who})")
+    total = counts(results)
+    for verdict in Verdict:
+        print(f"  {total[verdict]:4d}  {verdict}")
+        for (v, kind), m in sorted(classes.items(), key=lambda item: -item[1]):
+            if v is verdict:
+                print(f"        {m:4d}  {kind}")
 
 
 if __name__ == "__main__":

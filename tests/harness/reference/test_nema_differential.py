@@ -1,12 +1,14 @@
-"""Our controller against SUMO's own NEMA controller (issues 9 and 24, "Proof").
+"""Our controller against SUMO's own NEMA controller (issues 9, 24 and 35, "Proof").
 
 The reference side is checked first, so that a broken harness cannot pass for agreement: SUMO's
 NEMA logic must show each rule of the targeted scenarios in its own timeline. Then both
 controllers get the same calls (targeted, random, and those SUMO's detectors placed serving
-traffic) and are compared over whole sequences: the targeted scenarios agree change for change,
-and every first difference falls in a class whose rule, quoted from a source, our controller
-keeps. libsumo runs one simulation per process and each run starts and closes its own (about
-10 ms), so the tests run sequentially in this process.
+traffic) and are compared over whole sequences: the targeted scenarios (the paper's intersection)
+agree change for change, every divergence is judged by a rule quoted from a source, and neither
+a divergence nor the audit of our own greens finds a fault of the model. The agreement figures of
+issue 35 stay as floors. That the judge can fail is tested in test_nema_judge_fails.py. libsumo
+runs one simulation per process and each run starts and closes its own (about 10 ms), so the
+tests run sequentially in this process.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from harness.reference.mib import REFERENCE
 from harness.reference.nema import (
     EXAMPLES,
     SCENARIOS,
@@ -40,14 +43,18 @@ from harness.reference.nema import (
     traffic_differential,
 )
 from harness.reference.nema_rules import (
+    BACKED_WITH_CALL_ACROSS,
     CLASSES,
+    CONDITIONAL_SERVICE,
+    NTCIP,
     SKIPPED,
-    UNEXPLAINED,
     Color,
     ColorChange,
     DifferenceClass,
     Right,
+    Settings,
     Side,
+    Verdict,
     classify,
 )
 from hils.protocol.config import IntersectionConfig, NextPhaseLock
@@ -129,9 +136,11 @@ def test_reference_redirects_a_ring_during_clearance(paper_config: IntersectionC
 
 @pytest.mark.parametrize("name", sorted(SCENARIOS))
 def test_targeted_scenarios_agree_change_for_change(paper_config: IntersectionConfig, name: str) -> None:
+    """The paper's intersection under issue 9's call patterns: 100 % of the changes, nothing to judge."""
     calls, ticks = SCENARIOS[name]
     result = differential(paper_config, calls, ticks)
     assert result.first is None, f"{name}: {result.first}\n{result.comparison.report(calls)}"
+    assert result.comparison.agreement == 1.0 and not result.audited
 
 
 def test_barrier_crossing_example_of_the_issue(paper_config: IntersectionConfig) -> None:
@@ -149,13 +158,23 @@ def test_each_class_is_recognised_on_its_minimal_example(paper_config: Intersect
     mode, calls, ticks = EXAMPLES[kind]
     first = differential(in_mode(paper_config, mode), calls, ticks).first
     assert first is not None and first.kind is kind, first
-    assert first.breaker is (None if kind.right is Right.BOTH else Side.SUMO)
+    assert first.breaker is (None if kind.right is Right.SETTING else Side.SUMO)
+    assert first.verdict is (Verdict.SETTING if kind.right is Right.SETTING else Verdict.REFERENCE)
 
 
 def test_every_class_has_a_rule_a_source_and_an_example() -> None:
     assert set(EXAMPLES) == set(CLASSES)
     for kind in CLASSES:
-        assert kind.rule and kind.source and kind.source.count('"') >= 2, kind  # a quoted source
+        assert kind.rule and kind.quotes and all(q.text for q in kind.quotes), kind  # a quoted source
+
+
+def test_every_quote_of_ntcip_1202_is_in_the_mib_text() -> None:
+    """Word for word (spacing aside) in the NTCIP 1202 v03 MIB text kept beside the compiled MIB."""
+    text = " ".join((REFERENCE.parent / "NTCIP1202-v03.mib").read_text(encoding="utf-8").split())
+    quotes = {q for kind in CLASSES for q in kind.quotes if q.where.startswith(NTCIP)}
+    assert len(quotes) >= 8
+    for q in quotes:
+        assert " ".join(q.text.split()) in text, q
 
 
 def test_a_rule_holds_ours_to_it_too(paper_config: IntersectionConfig) -> None:
@@ -168,31 +187,107 @@ def test_a_rule_holds_ours_to_it_too(paper_config: IntersectionConfig) -> None:
     assert judged.kind is SKIPPED and judged.breaker is Side.OURS
 
 
+def test_conditional_service_is_a_setting_only_on_a_side_that_has_it(paper_config: IntersectionConfig) -> None:
+    """SUMO's backing shown as ours is our fault (the model has no conditional service), and a setting once ours is
+    given the setting."""
+    _, calls, ticks = EXAMPLES[CONDITIONAL_SERVICE]
+    ours, ref = run_ours(paper_config, calls, ticks), run_reference(paper_config, calls, ticks)
+    tick, called = compare(ours, ref).first_difference.tick, calls_read(calls, ticks)
+    judged = classify(paper_config, called, ref, ours, tick)  # the sides swapped
+    assert judged.kind is BACKED_WITH_CALL_ACROSS and judged.verdict is Verdict.MODEL
+    given = {Side.OURS: Settings(conditional_service=True), Side.SUMO: Settings(conditional_service=False)}
+    judged = classify(paper_config, called, ref, ours, tick, settings=given)
+    assert judged.kind is CONDITIONAL_SERVICE and judged.verdict is Verdict.SETTING
+
+
+# --- divergences -------------------------------------------------------------------------------
+
+
+def _changes(*spec: tuple[float, int, str]) -> tuple[ColorChange, ...]:
+    return tuple(sorted(ColorChange(round(t * 10), p, Color(c)) for t, p, c in spec))
+
+
+def test_two_sides_a_second_apart_are_one_divergence_until_they_change_together_again() -> None:
+    """Equal colours are no resync while the greens and yellows shown began at different times; once both show the
+    same colours since changes they made together, the next difference is a divergence of its own."""
+    ours = _changes((10, 2, "yellow"), (13, 2, "red"), (15, 3, "green"), (30, 3, "yellow"), (33, 3, "red"),
+                    (35, 4, "green"), (50, 4, "yellow"))
+    sumo = _changes((11, 2, "yellow"), (14, 2, "red"), (16, 3, "green"), (30, 3, "yellow"), (33, 3, "red"),
+                    (35, 4, "green"), (52, 4, "yellow"))
+    result = compare(ours, sumo)
+    assert result.divergences(red_settled=21) == (100, 500)  # 3 yellow at 30 s, paired: back in step
+    lagging = compare(ours, _changes(*((t + 1.1, p, c.value) for t, p, c in ((c.tick / 10, c.phase, c.color)
+                                                                               for c in ours))))
+    assert lagging.divergences(red_settled=21) == (100,)  # never in step again: one divergence
+
+
+def test_a_red_begun_apart_is_in_step_once_its_clearance_is_over() -> None:
+    ours = _changes((10, 2, "yellow"), (13, 2, "red"), (40, 3, "green"))
+    sumo = _changes((11, 2, "yellow"), (14, 2, "red"), (41, 3, "green"))
+    assert compare(ours, sumo).divergences(red_settled=21) == (100, 400)
+    assert compare(ours, sumo).divergences(red_settled=300) == (100,)
+
+
+def test_every_divergence_is_judged(paper_config: IntersectionConfig) -> None:
+    """Two of the examples one after the other (the second after both sides are back in step): both judged."""
+    first, second = EXAMPLES[SKIPPED][1], seconds((60, [2, 6]), (75, [2, 4, 5]), (105, []))
+    result = differential(paper_config, first[:-1] + second, 1100)
+    assert [j.kind for j in result.judgements] == [SKIPPED, CONDITIONAL_SERVICE], [str(j) for j in result.judgements]
+
+
 # --- whole sequences ---------------------------------------------------------------------------
 
 
-def _every_first_difference_explained_and_kept_by_ours(results: list[Differential]) -> None:
-    """No first difference is unexplained, and our controller breaks none of the rules."""
-    bad = [d for d in results if d.first and (d.first.kind is UNEXPLAINED or d.first.breaker is Side.OURS)]
-    assert not bad, "\n".join(f"{d.first}\n{d.comparison.report(d.calls)}" for d in bad)
+def _no_model_fault(results: list[Differential]) -> None:
+    """Every divergence explained, and our controller breaks none of the rules there nor in any green it ends."""
+    bad = [d for d in results if d.model_faults]
+    assert not bad, "\n".join(f"{list(map(str, d.model_faults))}\n{d.comparison.report(d.calls)}" for d in bad)
+
+
+#: Issue 35's figures of python -m harness.reference.nema (free mode, 50 random sequences of 300 s per seed), kept
+#: as floors: matched over distinct changes, rounded down to 0.1 %. The 80 % goal of issue 24 is withdrawn: what
+#: keeps the figures below it is SUMO departing from quoted rules (docs/nema_differences.md).
+RANDOM_FLOORS = {1: 0.670, 2: 0.709, 3: 0.740}
+TRAFFIC_FLOOR = 0.713  # 10 runs of 300 s of detector-driven traffic, SUMO seeds 0-9
 
 
 @pytest.mark.slow
-def test_fifty_random_sequences_every_first_difference_in_a_known_class(paper_config: IntersectionConfig) -> None:
-    """The figure of python -m harness.reference.nema (seed 1): whole five-minute sequences, no cut-off."""
-    rng = random.Random(1)
+@pytest.mark.parametrize("seed", sorted(RANDOM_FLOORS))
+def test_fifty_random_sequences_keep_the_floor_with_no_model_fault(paper_config: IntersectionConfig,
+                                                                   seed: int) -> None:
+    """The figures of python -m harness.reference.nema --seed N: whole five-minute sequences, no cut-off."""
+    rng = random.Random(seed)
     results = [differential(paper_config, random_calls(rng, 3000, sorted(paper_config.phases)), 3000)
                for _ in range(50)]
-    _every_first_difference_explained_and_kept_by_ours(results)
-    _, total = pooled([d.comparison for d in results])
-    assert total > 4000 and sum(d.first is not None for d in results) > 25  # the sequences exercise both sides
+    _no_model_fault(results)
+    matched, total = pooled([d.comparison for d in results])
+    assert total > 4000 and matched >= RANDOM_FLOORS[seed] * total, f"{matched} of {total}"
+    assert sum(len(d.judgements) for d in results) > 50  # the sequences exercise both sides
 
 
-def test_detector_driven_traffic_first_differences_in_a_known_class(paper_config: IntersectionConfig) -> None:
+def test_detector_driven_traffic_keeps_the_floor_with_no_model_fault(paper_config: IntersectionConfig) -> None:
     """SUMO serving the shipped demand on its own detectors; ours given the calls those detectors placed."""
-    results = [traffic_differential(paper_config, 3000, seed) for seed in range(5)]
+    results = [traffic_differential(paper_config, 3000, seed) for seed in range(10)]
     assert all(len(d.calls) > 20 for d in results)  # vehicles did call phases
-    _every_first_difference_explained_and_kept_by_ours(results)
+    _no_model_fault(results)
+    matched, total = pooled([d.comparison for d in results])
+    assert matched >= TRAFFIC_FLOOR * total, f"{matched} of {total}"
+
+
+
+def test_a_gap_out_held_when_its_call_comes_back_is_no_fault_however_late(paper_config: IntersectionConfig) -> None:
+    """Pattern 1, the sixth random sequence of seed 1 to 200 s: 4 gaps out at 180.8 s with nothing called, its call
+    comes back at 181.8 s with calls on 5 and 6 across, and both controllers hold the gap-out: 4 ends with 8 at
+    186.7 s, its call on (simultaneous gap disable). The rule excused that only when the call came back within
+    0.2 s of the end, or a conflicting call had waited since the gap-out; the bit's words set no such limit."""
+    config, rng = in_mode(paper_config, Mode.TS2), random.Random(1)
+    for _ in range(6):
+        calls = random_calls(rng, 3000, sorted(config.phases))
+    calls = tuple((k, ps) for k, ps in calls if k < 2000)
+    result = differential(config, calls, 2000)
+    four = [c for c in result.comparison.ours if c.phase == 4 and c.color is Color.YELLOW]
+    assert four[-1].tick == 1867 and 4 in calls_read(calls, 2000)[1867]  # the case: ended with its call on
+    assert not result.model_faults, [str(f) for f in result.model_faults]
 
 
 # --- coordinated ------------------------------------------------------------------------------
@@ -225,20 +320,20 @@ def test_the_sumo_program_runs_the_plan(paper_config: IntersectionConfig) -> Non
 
 
 @pytest.mark.slow
-def test_coordinated_random_sequences_agree_and_every_first_difference_is_known(
+def test_coordinated_random_sequences_agree_with_no_model_fault(
         paper_config: IntersectionConfig) -> None:
     """Issue 24's goal for coordinated operation: at least 95 % of the changes over whole sequences."""
     config = in_mode(paper_config, Mode.TS2)
     rng = random.Random(1)
     results = [differential(config, random_calls(rng, 3000, sorted(config.phases)), 3000) for _ in range(50)]
-    _every_first_difference_explained_and_kept_by_ours(results)
+    _no_model_fault(results)
     matched, total = pooled([d.comparison for d in results])
     assert total > 2000 and matched >= 0.95 * total, f"{matched} of {total}"
 
 
-def test_coordinated_traffic_first_differences_in_a_known_class(paper_config: IntersectionConfig) -> None:
+def test_coordinated_traffic_has_no_model_fault(paper_config: IntersectionConfig) -> None:
     results = [traffic_differential(in_mode(paper_config, Mode.TS2), 3000, seed) for seed in range(3)]
-    _every_first_difference_explained_and_kept_by_ours(results)
+    _no_model_fault(results)
 
 
 @st.composite
@@ -255,6 +350,6 @@ def call_sequences(draw: st.DrawFn) -> tuple[CallSequence, int]:
 
 @settings(max_examples=40, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
 @given(case=call_sequences())
-def test_random_call_sequences_first_difference_in_a_known_class(paper_config: IntersectionConfig,
+def test_random_call_sequences_have_no_model_fault(paper_config: IntersectionConfig,
                                                                  case: tuple[CallSequence, int]) -> None:
-    _every_first_difference_explained_and_kept_by_ours([differential(paper_config, *case)])
+    _no_model_fault([differential(paper_config, *case)])
