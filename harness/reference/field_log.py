@@ -176,8 +176,10 @@ def _spans(rows: Sequence[Row], greens: Mapping[int, list[tuple[datetime, dateti
     return out
 
 
-def _seconds_of_day(t: datetime) -> float:
-    return t.hour * 3600 + t.minute * 60 + t.second + t.microsecond / 1e6
+def _since_midnight(t: datetime, day0: datetime) -> float:
+    """Seconds from midnight of the log's first day: the emulator's clock, which counts on across midnights (so a
+    cycle that does not divide a day keeps its place over a log of several days)."""
+    return (t - day0).total_seconds()
 
 
 # --- inference -----------------------------------------------------------------------------------------------
@@ -238,13 +240,32 @@ def infer(rows: Sequence[Row], name: str = "field controller") -> Inferred:
     out.guessed.append("every calling detector also extends its phase's green (detector delay and extension are not "
                        "in the log: its detector events come after them)")
     coordination = _coordination(rows, structure, timing, greens, out)
+    coordinated = set(coordination["coord"]) if coordination else set()
+    for p in phases:
+        if p not in coordinated:
+            _recall(rows, p, timing[p], set(detectors.values()) | set(pushes.values()), out)
     overlaps = _overlaps(rows, phases, out)
-    out.guessed.append("no recalls, red revert, max 2 or dual entry (the log shows the service, not the settings); "
+    out.guessed.append("no other recalls, no red revert, max 2 or dual entry (the log shows the service, not the "
+                       "settings); "
                        "dynamic omits (46-49 logged by the field controller's own logic) are not modelled")
     start = rows[0].time.replace(microsecond=rows[0].time.microsecond // 100_000 * 100_000)
-    out.toml = _toml(name, structure, timing, detectors, pushes, coordination, overlaps, _startup(greens, structure),
-                     start)
+    startup = _startup(rows, greens, structure, out)
+    out.toml = _toml(name, structure, timing, detectors, pushes, coordination, overlaps, startup, start)
     return out
+
+
+def _recall(rows: Sequence[Row], p: int, timing: dict[str, Any], called: set[int], out: Inferred) -> None:
+    """A phase served that no detector or push button of the log calls is recalled (a pretimed plan's phases, or
+    detectors the log does not record): maximum recall when its greens end by force-off or max-out more often than
+    by gap-out (NTCIP 1202 phaseOptions: Max Vehicle Recall times the green to its maximum), else minimum recall."""
+    if p in called:
+        return
+    ends = Counter(r.code for r in rows if r.parameter == p and r.code in (E.PHASE_GAP_OUT, E.PHASE_MAX_OUT,
+                                                                           E.PHASE_FORCE_OFF))
+    timing["recall"] = "max" if ends[E.PHASE_GAP_OUT] < ends[E.PHASE_MAX_OUT] + ends[E.PHASE_FORCE_OFF] else "min"
+    out.guessed.append(f"phase {p}: {timing['recall']} recall (served, but no detector or push button of the log "
+                       f"calls it; its greens end by gap-out {ends[E.PHASE_GAP_OUT]} times, by max-out or force-off "
+                       f"{ends[E.PHASE_MAX_OUT] + ends[E.PHASE_FORCE_OFF]})")
 
 
 def _check_numbers(rows: Iterable[Row]) -> None:
@@ -367,7 +388,9 @@ def _timing(rows: Sequence[Row], p: int, greens: Sequence[tuple[datetime, dateti
              "min_green": _mode(_minimums(rows, p))}
     for key, default in (("yellow", 4.0), ("red_clear", 1.0), ("min_green", 5)):
         if found[key] is None:
-            out.guessed.append(f"phase {p}: {key} {default} (its events are not in the log)")
+            why = ("every green served a walk, whose timing is then the minimum" if key == "min_green" and
+                   _durations(rows, p, E.PHASE_BEGIN_GREEN, E.PHASE_MIN_COMPLETE) else "its events are not in the log")
+            out.guessed.append(f"phase {p}: {key} {default} ({why})")
         t[key] = found[key] if found[key] is not None else default
     # What NTCIP 1202's phase table carries (phaseYellowChange "NEMA range: 3.0-25.5 sec", ...), and what the config
     # asks beyond it: a red clearance of a tenth at least, greens of a second, walk and clearance within the maximum.
@@ -410,7 +433,7 @@ def _minimums(rows: Sequence[Row], p: int) -> list[float]:
         elif r.code == E.PHASE_MIN_COMPLETE and since is not None:
             out.append(round((r.time - since).total_seconds(), 1))
             since = None
-    return out or _durations(rows, p, E.PHASE_BEGIN_GREEN, E.PHASE_MIN_COMPLETE)
+    return out
 
 
 def _detector_phases(rows: Sequence[Row], on: int, call: int, phases: Sequence[int]) -> dict[int, int]:
@@ -471,7 +494,8 @@ def _coordination(rows: Sequence[Row], structure: Structure, timing: Mapping[int
         raise FieldLogError(f"local zeros (event 150, parameter 5) at {_when(a)} and {_when(b)}: {s:g} s apart, as "
                             f"most are, a cycle of {cycle} s; allowed: {CYCLES[0]}-{CYCLES[1]} s (NTCIP 1202 "
                             "patternCycleTime)")
-    zero = _mode(round(_seconds_of_day(t) % cycle, 1) for t in zeros)
+    day0 = datetime.combine(rows[0].time.date(), datetime.min.time())
+    zero = _mode(round(_since_midnight(t, day0) % cycle, 1) for t in zeros)
     ringed = set(structure.ring(1) + structure.ring(2))
     yields = Counter(r.parameter for r in rows if r.code == E.COORD_YIELD_POINT and r.parameter in ringed)
     covering = _covering(zeros, greens)
@@ -484,19 +508,53 @@ def _coordination(rows: Sequence[Row], structure: Structure, timing: Mapping[int
         if not yields[coord[r]]:
             out.guessed.append(f"coordinated phase of ring {r}: {coord[r]} (no yield point event, 151: the phase of "
                                "that ring green at the local zero)")
-    ends: dict[int, float] = {}
+    # Where each forced-off phase's split ends in the cycle: its force-off plus its clearance (seconds from midnight,
+    # modulo the cycle). The controller lays each ring's splits end to end from the start of its first barrier group
+    # (NTCIP 1202 sequenceData's order); that start is where the rings' last splits end. The local zero is where the
+    # field's controller counts from, which need not be at a coordinated green (an offset referred to a yield point):
+    # the offset is written for the emulator's reference, the start of the earliest coordinated split.
+    at_end: dict[int, float] = {}
     for p in timing:
-        force_offs = [round((_seconds_of_day(row.time) - zero) % cycle, 1) for row in rows
+        force_offs = [round(_since_midnight(row.time, day0) % cycle, 1) for row in rows
                       if row.code == E.PHASE_FORCE_OFF and row.parameter == p]
         if p in greens and force_offs and len(force_offs) >= FORCE_OFF_SHARE * len(greens[p]):  # not a stray one
-            ends[p] = _mode(force_offs) + timing[p]["yellow"] + timing[p]["red_clear"]
+            at_end[p] = (_mode(force_offs) + timing[p]["yellow"] + timing[p]["red_clear"]) % cycle
     logged = {p: s for p, s in _logged_splits(rows, zeros).items() if p in greens}
-    splits = _splits(structure, coord, ends, logged, cycle, timing, out)
-    out.read.append(f"coordination: cycle {cycle} s, local zero at {zero:g} s of the time of day modulo the cycle, "
-                    f"coordinated {coord[1]}+{coord[2]}, splits " + ", ".join(f"{p}: {s}" for p, s in splits.items())
+    orders = {r: structure.ring(r) for r in (1, 2)}
+    begin = _barrier_start(orders, logged, at_end, cycle)
+    if begin is None:  # no split end the log shows can be placed: the coordinated splits start at the local zero
+        begin = zero
+        orders = {r: mine[mine.index(coord[r]):] + mine[:mine.index(coord[r])] for r, mine in orders.items()}
+        out.guessed.append("offset reference: the local zero (event 150, 5) starts the coordinated greens (lead green; "
+                           "no split's end is placed by a force-off in the log)")
+    ends = {p: e if (e := (at - begin) % cycle) > 0.05 else float(cycle) for p, at in at_end.items()}
+    splits = _splits(structure, orders, ends, logged, cycle, timing, out)
+    raw_start = {p: sum(splits[q] for q in mine[:mine.index(p)]) for mine in orders.values() for p in mine}
+    lead = min(raw_start[c] for c in coord.values())
+    offset = round(begin + lead) % cycle
+    if 86_400 % cycle:
+        out.guessed.append(f"cycle {cycle} s does not divide a day: the cycle's place is counted from midnight of the "
+                           "log's first day on, as the emulator's clock counts, not from each day's midnight")
+    out.read.append(f"coordination: cycle {cycle} s, offset {offset} s (the start of the earliest coordinated split; "
+                    f"the field's local zero is at {zero:g} s of the day modulo the cycle), coordinated "
+                    f"{coord[1]}+{coord[2]}, splits " + ", ".join(f"{p}: {s}" for p, s in splits.items())
                     + (f" (as logged, events 134-149, for {', '.join(map(str, logged))})" if logged else ""))
-    out.guessed.append("offset reference: the local zero (event 150, 5) starts the coordinated greens (lead green)")
-    return {"cycle": cycle, "offset": round(zero) % cycle, "coord": [coord[1], coord[2]], "splits": splits}
+    return {"cycle": cycle, "offset": offset, "coord": [coord[1], coord[2]], "splits": splits}
+
+
+def _barrier_start(orders: Mapping[int, Sequence[int]], logged: Mapping[int, int], at_end: Mapping[int, float],
+                   cycle: int) -> float | None:
+    """Where the rings' orders start in the cycle (seconds from midnight modulo the cycle): where a ring's last split
+    ends, or, when every split of a ring was logged, where a forced-off phase's end puts it (the most frequent)."""
+    for mine in orders.values():
+        if mine[-1] in at_end:
+            return at_end[mine[-1]]
+    placed = []
+    for mine in orders.values():
+        if all(p in logged for p in mine):
+            placed += [(at_end[p] - sum(logged[q] for q in mine[:k + 1])) % cycle
+                       for k, p in enumerate(mine) if p in at_end]
+    return _mode(round(b, 1) for b in placed) if placed else None
 
 
 def _logged_splits(rows: Sequence[Row], zeros: Sequence[datetime]) -> dict[int, int]:
@@ -527,16 +585,12 @@ def _covering(zeros: Sequence[datetime], greens: Mapping[int, Sequence[tuple[dat
     return out
 
 
-def _splits(structure: Structure, coord: Mapping[int, int], ends: Mapping[int, float], logged: Mapping[int, int],
-            cycle: int, timing: Mapping[int, dict[str, Any]], out: Inferred) -> dict[int, int]:
-    """Each phase's split as logged, or from where it ends in the cycle (from the local zero, which starts the
-    coordinated splits): force-offs where the log has them, the other ring's end of the barrier group, the cycle's
-    end; then fitted (:func:`_fit`)."""
-    cyclic = {}
-    for r in (1, 2):
-        mine = structure.ring(r)
-        i = mine.index(coord[r])
-        cyclic[r] = mine[i:] + mine[:i]
+def _splits(structure: Structure, cyclic: Mapping[int, Sequence[int]], ends: Mapping[int, float],
+            logged: Mapping[int, int], cycle: int, timing: Mapping[int, dict[str, Any]], out: Inferred
+            ) -> dict[int, int]:
+    """Each phase's split as logged, or from where it ends in the cycle (from where each ring's order ``cyclic``
+    starts): force-offs where the log has them, the other ring's end of the barrier group, the cycle's end; then
+    fitted (:func:`_fit`)."""
 
     def last_of_group(order: Sequence[int], k: int) -> bool:
         return k == len(order) - 1 or structure.group_of(order[k + 1]) != structure.group_of(order[k])
@@ -646,9 +700,22 @@ def _overlaps(rows: Sequence[Row], phases: Sequence[int], out: Inferred) -> dict
     return overlaps
 
 
-def _startup(greens: Mapping[int, list[tuple[datetime, datetime]]], structure: Structure) -> list[int]:
-    """The phases to power up in: in each ring, the phase of the group served first that the log shows green first
-    (the group's first in the ring's order when none of its phases is)."""
+def _startup(rows: Sequence[Row], greens: Mapping[int, list[tuple[datetime, datetime]]], structure: Structure,
+             out: Inferred) -> list[int]:
+    """The phases to power up in: the log's first state, the phases green when it began (their first interval event
+    is the end of a green, begin yellow 8), when there is one in each ring of one barrier group; else in each ring
+    the phase of the group served first that the log shows green first (the group's first in the ring's order when
+    none of its phases is)."""
+    first_seen: dict[int, int] = {}
+    for r in rows:
+        if r.code in (E.PHASE_BEGIN_GREEN, E.PHASE_BEGIN_YELLOW):
+            first_seen.setdefault(r.parameter, r.code)
+    green_at_start = {p for p, code in first_seen.items() if code == E.PHASE_BEGIN_YELLOW and p in greens}
+    by_ring = {ring: [p for p in structure.ring(ring) if p in green_at_start] for ring in (1, 2)}
+    if all(len(mine) == 1 for mine in by_ring.values()) and \
+            structure.group_of(by_ring[1][0]) == structure.group_of(by_ring[2][0]):
+        out.read.append(f"start-up: phases {by_ring[1][0]} and {by_ring[2][0]}, green when the log begins")
+        return [by_ring[1][0], by_ring[2][0]]
     first = min((t0, p) for p, spans in greens.items() for t0, _ in spans)[1]
     g = structure.group_of(first)
     return [min(structure.order[r][g], key=lambda p: greens[p][0][0] if p in greens else datetime.max)
@@ -666,6 +733,8 @@ def _toml(name: str, structure: Structure, timing: Mapping[int, dict[str, Any]],
     for p in sorted(timing):
         fields = {k: timing[p][k] for k in ("min_green", "max_green", "yellow", "red_clear", "passage", "walk",
                                             "ped_clear") if k in timing[p]}
+        if "recall" in timing[p]:
+            fields["recall"] = f'"{timing[p]["recall"]}"'
         if p in startup:
             fields["startup"] = '"green"'
         lines.append(f"{p} = {{ " + ", ".join(f"{k} = {value(v)}" for k, v in fields.items()) + " }")

@@ -69,9 +69,9 @@ def run(rows: Sequence[_Logged], config: IntersectionConfig) -> Run:
         raise ValueError("an empty log has no inputs to replay")
     start, end = floor_tick(rows[0].time), floor_tick(rows[-1].time)
     controller = Controller(config, start=start)
-    logger = DataLogger(controller)
     on = _on_at_start(r for r in rows if r.code in INPUTS)
     _apply(controller, on)
+    logger = DataLogger(controller)  # after: it logs the inputs on at the start with the power-up
     clock = controller.coordinator  # its clock counts ticks since midnight of the start's day
     zero = clock.clock
     replayed = 0
