@@ -215,9 +215,12 @@ def infer(rows: Sequence[Row], name: str = "field controller") -> Inferred:
                             "event 8); a config needs at least two")
     out.read.append(f"phases served: {', '.join(map(str, phases))}")
     structure = _structure(phases, greens, _spans(rows, greens), out)
-    timing = {p: _timing(rows, p, greens[p], out) for p in phases}
+    shared_min = _mode(m for p in phases for m in _minimums(rows, p))
+    timing = {p: _timing(rows, p, greens[p], out, shared_min) for p in phases}
     detectors = _in_config(_detector_phases(rows, E.DETECTOR_ON, E.PHASE_CALL_REGISTERED, phases), "detector", out)
     pushes = _in_config(_detector_phases(rows, E.PED_DETECTOR_ON, E.PED_CALL_REGISTERED, phases), "push button", out)
+    recalled = _uncalled(rows, phases, structure)
+    _extenders(rows, detectors, recalled, out)
     gaps = {p: _gaps(rows, p, [d for d, q in detectors.items() if q == p]) for p in phases}
     shared = _mode(g for values in gaps.values() for g in values)
     for p in phases:
@@ -230,6 +233,14 @@ def infer(rows: Sequence[Row], name: str = "field controller") -> Inferred:
                                f"no gap of its own seen {PASSAGE_SEEN} times)")
         low, high = config_mod.phase_time_range("passage")
         timing[p]["passage"] = _within(p, "passage", timing[p]["passage"], low, min(high, timing[p]["max_green"]), out)
+    maxima = [t["maxed"] for t in timing.values() if "maxed" in t]
+    if maxima:  # a phase that never maxed out has the intersection's maximum, if its longest green is shorter
+        shared_max = math.ceil(max(maxima, key=maxima.count) - 1e-9)
+        for p in phases:
+            if "maxed" not in timing[p] and timing[p]["max_green"] < shared_max:
+                timing[p]["max_green"] = shared_max
+                out.guessed.append(f"phase {p}: max green {shared_max} s (it never maxed out: the intersection's most "
+                                   "frequent maximum, longer than its longest green)")
     for p, twin in structure.phantom.items():
         timing[p] = {k: v for k, v in timing[twin].items() if k not in ("walk", "ped_clear")}
     logged = sorted(d for d, q in detectors.items() if q == 0)
@@ -241,12 +252,17 @@ def infer(rows: Sequence[Row], name: str = "field controller") -> Inferred:
                        "in the log: its detector events come after them)")
     coordination = _coordination(rows, structure, timing, greens, out)
     coordinated = set(coordination["coord"]) if coordination else set()
-    for p in phases:
-        if p not in coordinated:
-            _recall(rows, p, timing[p], set(detectors.values()) | set(pushes.values()), out)
+    for p in recalled - coordinated:
+        _recall(rows, p, timing[p], out)
+    duals = _dual_entries(rows, structure, recalled)
+    for p in duals:
+        timing[p]["dual_entry"] = True
+    if duals:
+        out.read.append(f"dual entry: phase(s) {', '.join(map(str, duals))} (began green uncalled beside the other "
+                        "ring's phase as the rings crossed a barrier, at least twice)")
     overlaps = _overlaps(rows, phases, out)
-    out.guessed.append("no other recalls, no red revert, max 2 or dual entry (the log shows the service, not the "
-                       "settings); "
+    out.guessed.append("recalls and dual entry only as said, no red revert or max 2 (the log shows the service, not "
+                       "the settings); "
                        "dynamic omits (46-49 logged by the field controller's own logic) are not modelled")
     start = rows[0].time.replace(microsecond=rows[0].time.microsecond // 100_000 * 100_000)
     startup = _startup(rows, greens, structure, out)
@@ -254,17 +270,74 @@ def infer(rows: Sequence[Row], name: str = "field controller") -> Inferred:
     return out
 
 
-def _recall(rows: Sequence[Row], p: int, timing: dict[str, Any], called: set[int], out: Inferred) -> None:
-    """A phase served that no detector or push button of the log calls is recalled (a pretimed plan's phases, or
-    detectors the log does not record): maximum recall when its greens end by force-off or max-out more often than
-    by gap-out (NTCIP 1202 phaseOptions: Max Vehicle Recall times the green to its maximum), else minimum recall."""
-    if p in called:
-        return
+def _uncalled(rows: Sequence[Row], phases: Sequence[int], structure: Structure) -> set[int]:
+    """The phases served without a vehicle call the log registers (43): recalled. Only where the log registers calls
+    of other phases, or has no detector events at all (a pretimed log): some controllers log no calls."""
+    called = {r.parameter for r in rows if r.code == E.PHASE_CALL_REGISTERED}
+    detected = any(r.code == E.DETECTOR_ON for r in rows)
+    if detected and not called:
+        return set()
+    return {p for p in phases if p not in called and p not in structure.phantom}
+
+
+def _extenders(rows: Sequence[Row], detectors: dict[int, int], recalled: set[int], out: Inferred) -> None:
+    """A detector that calls nothing the log shows may extend a recalled phase (a recalled phase's calls are not
+    logged): the recalled phase whose gap-outs come the same time after its last off most often, at least
+    :data:`PASSAGE_SEEN` times and for a fifth of the phase's gap-outs."""
+    gap_outs = {p: [r.time for r in rows if r.code == E.PHASE_GAP_OUT and r.parameter == p] for p in recalled}
+    for d in [d for d, q in detectors.items() if q == 0]:
+        offs = [r.time for r in rows if r.code == E.DETECTOR_OFF and r.parameter == d]
+        best: tuple[int, int] | None = None
+        for p, times in gap_outs.items():
+            gaps = Counter()
+            for t in times:
+                k = bisect.bisect_right(offs, t) - 1
+                if k >= 0 and (t - offs[k]) <= timedelta(seconds=10):
+                    gaps[round((t - offs[k]).total_seconds(), 1)] += 1
+            n = max(gaps.values(), default=0)
+            if n >= PASSAGE_SEEN and n >= len(times) / 5 and (best is None or n > best[1]):
+                best = (p, n)
+        if best is not None:
+            detectors[d] = best[0]
+            out.guessed.append(f"detector {d}: extends recalled phase {best[0]} (it registers no call; phase "
+                               f"{best[0]} gaps out the same time after it goes off {best[1]} times)")
+
+
+def _dual_entries(rows: Sequence[Row], structure: Structure, recalled: set[int]) -> list[int]:
+    """The phases that began green with no call since their last green, at a barrier crossing (31 on the tick)
+    beside a phase of the other ring, at least twice: dual entry (NTCIP 1202 v03 phaseOptions bit 10, "Dual Entry
+    Phase - in multi-ring configurations when set to 1 causes the phase to become active upon entry into a
+    concurrency group (crossing a barrier) when no calls exist in its ring within its concurrency group")."""
+    called: set[int] = set()
+    crossing: set[datetime] = {r.time for r in rows if r.code == E.BARRIER_TERMINATION}
+    begins: dict[datetime, list[int]] = defaultdict(list)
+    uncalled: dict[datetime, list[int]] = defaultdict(list)
+    for r in rows:
+        if r.code in (E.PHASE_CALL_REGISTERED, E.PED_CALL_REGISTERED):  # since its last green: a call dropped during
+            called.add(r.parameter)  # the clearance still has the phase served (committed at the green's end)
+        elif r.code == E.PHASE_BEGIN_GREEN:
+            begins[r.time].append(r.parameter)
+            if r.parameter not in called and r.parameter not in recalled and r.time in crossing:
+                uncalled[r.time].append(r.parameter)
+            called.discard(r.parameter)
+    seen: Counter[int] = Counter()
+    ring = {p: r for r in (1, 2) for p in structure.ring(r)}
+    for t, phases in uncalled.items():
+        for p in phases:
+            if any(ring.get(q) != ring.get(p) for q in begins[t]):
+                seen[p] += 1
+    return sorted(p for p, n in seen.items() if n >= 2)
+
+
+def _recall(rows: Sequence[Row], p: int, timing: dict[str, Any], out: Inferred) -> None:
+    """A phase served without a call the log registers is recalled (a pretimed plan's phases, a recall, or detectors
+    the log does not record): maximum recall when its greens end by force-off or max-out more often than by gap-out
+    (NTCIP 1202 phaseOptions: Max Vehicle Recall times the green to its maximum), else minimum recall."""
     ends = Counter(r.code for r in rows if r.parameter == p and r.code in (E.PHASE_GAP_OUT, E.PHASE_MAX_OUT,
                                                                            E.PHASE_FORCE_OFF))
     timing["recall"] = "max" if ends[E.PHASE_GAP_OUT] < ends[E.PHASE_MAX_OUT] + ends[E.PHASE_FORCE_OFF] else "min"
-    out.guessed.append(f"phase {p}: {timing['recall']} recall (served, but no detector or push button of the log "
-                       f"calls it; its greens end by gap-out {ends[E.PHASE_GAP_OUT]} times, by max-out or force-off "
+    out.guessed.append(f"phase {p}: {timing['recall']} recall (served, but the log registers no vehicle call of "
+                       f"it; its greens end by gap-out {ends[E.PHASE_GAP_OUT]} times, by max-out or force-off "
                        f"{ends[E.PHASE_MAX_OUT] + ends[E.PHASE_FORCE_OFF]})")
 
 
@@ -381,16 +454,20 @@ def _service_order(mine: Sequence[int], follows: Mapping[tuple[int, int], int]) 
     return order
 
 
-def _timing(rows: Sequence[Row], p: int, greens: Sequence[tuple[datetime, datetime]], out: Inferred) -> dict[str, Any]:
+def _timing(rows: Sequence[Row], p: int, greens: Sequence[tuple[datetime, datetime]], out: Inferred,
+            shared_min: float | None = None) -> dict[str, Any]:
+    """The phase's timings (see the module's header); ``shared_min``: the intersection's most frequent minimum green,
+    for a phase that shows none of its own."""
     t: dict[str, Any] = {}
     found = {"yellow": _mode(_durations(rows, p, E.PHASE_BEGIN_YELLOW, E.PHASE_END_YELLOW)),
              "red_clear": _mode(_durations(rows, p, E.PHASE_BEGIN_RED_CLEARANCE, E.PHASE_END_RED_CLEARANCE)),
              "min_green": _mode(_minimums(rows, p))}
-    for key, default in (("yellow", 4.0), ("red_clear", 1.0), ("min_green", 5)):
+    for key, default in (("yellow", 4.0), ("red_clear", 1.0), ("min_green", shared_min or 5)):
         if found[key] is None:
             why = ("every green served a walk, whose timing is then the minimum" if key == "min_green" and
                    _durations(rows, p, E.PHASE_BEGIN_GREEN, E.PHASE_MIN_COMPLETE) else "its events are not in the log")
-            out.guessed.append(f"phase {p}: {key} {default} ({why})")
+            whose = "the intersection's most frequent, " if key == "min_green" and shared_min else ""
+            out.guessed.append(f"phase {p}: {key} {default:g} ({whose}{why})")
         t[key] = found[key] if found[key] is not None else default
     # What NTCIP 1202's phase table carries (phaseYellowChange "NEMA range: 3.0-25.5 sec", ...), and what the config
     # asks beyond it: a red clearance of a tenth at least, greens of a second, walk and clearance within the maximum.
@@ -405,9 +482,14 @@ def _timing(rows: Sequence[Row], p: int, greens: Sequence[tuple[datetime, dateti
     if walk and ped_clear:
         t["walk"] = _within(p, "walk", math.ceil(walk), 1, top - 1, out)
         t["ped_clear"] = _within(p, "ped_clear", math.ceil(ped_clear), 1, top - t["walk"], out)
+    # The maximum: the shortest green that maxed out (max-out, 5, on its end: no green maxes out before its maximum,
+    # and one whose max timer started with it, by a call waiting or max recall, maxes out at it), else the longest.
+    maxed = _durations(rows, p, E.PHASE_BEGIN_GREEN, E.PHASE_MAX_OUT)
     longest = max(((b - a).total_seconds() for a, b in greens), default=0.0)
+    if maxed:
+        longest = t["maxed"] = min(maxed)
     t["max_green"] = _within(p, "max_green", max(t["min_green"], t.get("walk", 0) + t.get("ped_clear", 0),
-                                                 math.ceil(longest)), 1, top, out)
+                                                 math.ceil(longest - 1e-9)), 1, top, out)
     return t
 
 
@@ -733,6 +815,8 @@ def _toml(name: str, structure: Structure, timing: Mapping[int, dict[str, Any]],
     for p in sorted(timing):
         fields = {k: timing[p][k] for k in ("min_green", "max_green", "yellow", "red_clear", "passage", "walk",
                                             "ped_clear") if k in timing[p]}
+        if timing[p].get("dual_entry"):
+            fields["dual_entry"] = "true"
         if "recall" in timing[p]:
             fields["recall"] = f'"{timing[p]["recall"]}"'
         if p in startup:

@@ -4,7 +4,6 @@ logged at; the emulator's own log comes back event for event, a real field log i
 
 from __future__ import annotations
 
-import random
 import subprocess
 import sys
 from datetime import datetime, timedelta
@@ -12,12 +11,10 @@ from pathlib import Path
 
 import atspm
 
-from emulator.model.controller import Controller
-from emulator.model.datalogger import DataLogger
 from harness.reference import field_log, hires_file, replay_match, replay_virtual
 from harness.reference.hires_file import Row
 from harness.reference.replay_match import Ending, Equivalence, green_table, match_table, overall
-from hils.protocol.config import IntersectionConfig
+from harness.reference.round_trip import emulator_log
 from hils.protocol.hires import EventCode
 from tests.emulator.model.test_hires import config_with
 
@@ -25,28 +22,6 @@ E = EventCode
 SAMPLE = Path(atspm.__file__).parent / "data" / "sample_raw_data.parquet"
 LOGS = Path(__file__).parent / "field_logs"
 INPUT_CODES = {E.DETECTOR_ON, E.DETECTOR_OFF, E.PED_DETECTOR_ON, E.PED_DETECTOR_OFF}
-
-
-def emulator_log(cfg: IntersectionConfig, seconds: int, seed: int, start: datetime = datetime(2024, 5, 1, 7)
-                 ) -> list[Row]:
-    """The emulator's own log under ``cfg``: ``seconds`` of random vehicle detector and push-button inputs on the
-    detectors the config has, then a minute without any."""
-    c = Controller(cfg, start=start)
-    log = DataLogger(c)
-    rng = random.Random(seed)
-    on: set[int] = set()
-    pushed: set[int] = set()
-    for k in range((seconds + 60) * 10):
-        if k < seconds * 10:
-            on = {d for d in cfg.detectors
-                  if (d in on and rng.random() > 0.15) or (d not in on and rng.random() < 0.012)}
-            pushed = {d for d in cfg.ped_detectors if (d in pushed and rng.random() > 0.3) or rng.random() < 0.003}
-        else:
-            on, pushed = set(), set()
-        c.set_actuations(on)
-        c.set_ped_actuations(pushed)
-        c.step()
-    return [Row(e.time, e.code, e.parameter) for e in log.events()]
 
 
 def test_the_emulators_own_log_comes_back_event_for_event() -> None:
