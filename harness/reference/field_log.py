@@ -81,6 +81,7 @@ TICK = timedelta(milliseconds=100)
 CALL_SHARE = 0.10  # a detector calls a phase when at least this share of its actuations registers the call
 LOCAL_ZERO = 5  # event 150's parameter at the local zero
 PASSAGE_SEEN = 3  # a phase's own most frequent gap counts as its passage when seen this often
+RECALL_SHARE = 0.9  # a phase whose call registers as its yellow begins this often is recalled
 FORCE_OFF_SHARE = 0.2  # a phase's force-offs mark where its split ends when they end at least this share of its greens
 #: What the emulator's config holds (:mod:`hils.protocol.config`): phases 1-255, detectors and push buttons 1-64,
 #: overlaps A-P (1-16), cycles 30-255 s.
@@ -214,7 +215,7 @@ def infer(rows: Sequence[Row], name: str = "field controller") -> Inferred:
         raise FieldLogError(f"the log shows {len(phases)} phase(s) served (begin green, event 1, then begin yellow, "
                             "event 8); a config needs at least two")
     out.read.append(f"phases served: {', '.join(map(str, phases))}")
-    structure = _structure(phases, greens, _spans(rows, greens), out)
+    structure = _structure(phases, greens, _spans(rows, greens), out, _unbarred(rows))
     shared_min = _mode(m for p in phases for m in _minimums(rows, p))
     timing = {p: _timing(rows, p, greens[p], out, shared_min) for p in phases}
     detectors = _in_config(_detector_phases(rows, E.DETECTOR_ON, E.PHASE_CALL_REGISTERED, phases), "detector", out)
@@ -271,13 +272,21 @@ def infer(rows: Sequence[Row], name: str = "field controller") -> Inferred:
 
 
 def _uncalled(rows: Sequence[Row], phases: Sequence[int], structure: Structure) -> set[int]:
-    """The phases served without a vehicle call the log registers (43): recalled. Only where the log registers calls
-    of other phases, or has no detector events at all (a pretimed log): some controllers log no calls."""
+    """The phases served without a vehicle call the log registers (43), or whose call registers as their yellow begins
+    (at least :data:`RECALL_SHARE` of the time): recalled. The first only where the log registers calls of other
+    phases, or has no detector events at all (a pretimed log): some controllers log no calls."""
     called = {r.parameter for r in rows if r.code == E.PHASE_CALL_REGISTERED}
     detected = any(r.code == E.DETECTOR_ON for r in rows)
     if detected and not called:
         return set()
-    return {p for p in phases if p not in called and p not in structure.phantom}
+    # A controller that logs a recall's call (an Econolite: 43 on the tick after the phase's own yellow begins, every
+    # time) shows the recall that way.
+    calls = {(r.time, r.parameter) for r in rows if r.code == E.PHASE_CALL_REGISTERED}
+    yellows = Counter(r.parameter for r in rows if r.code == E.PHASE_BEGIN_YELLOW)
+    recalled_call = Counter(r.parameter for r in rows if r.code == E.PHASE_BEGIN_YELLOW
+                            and ((r.time, r.parameter) in calls or (r.time + TICK, r.parameter) in calls))
+    logged = {p for p, n in recalled_call.items() if n >= 2 and n >= RECALL_SHARE * yellows[p]}
+    return {p for p in phases if (p not in called or p in logged) and p not in structure.phantom}
 
 
 def _extenders(rows: Sequence[Row], detectors: dict[int, int], recalled: set[int], out: Inferred) -> None:
@@ -353,12 +362,42 @@ def _check_numbers(rows: Iterable[Row]) -> None:
             raise FieldLogError(f"{_event(r)}: {r.parameter} is not {kind} number; allowed: {allowed}")
 
 
+def _unbarred(rows: Sequence[Row]) -> set[frozenset[int]]:
+    """Pairs of phases that began green one after the other with no barrier termination (31) logged at or before
+    the second: one barrier group (the data logger logs 31 on the tick "all active phases become inactive in the
+    ring and cross barrier phases are next"). None when the log has no 31 at all (a controller that does not log
+    it)."""
+    if not any(r.code == E.BARRIER_TERMINATION for r in rows):
+        return set()
+    out: set[frozenset[int]] = set()
+    last: list[int] = []
+    crossed = False
+    tick: datetime | None = None
+    now: list[int] = []
+    for r in rows:
+        if r.time != tick:
+            if now:
+                if not crossed:
+                    out.update(frozenset((a, b)) for a in last for b in now if a != b)
+                last, now, crossed = now, [], False
+            tick = r.time
+        if r.code == E.BARRIER_TERMINATION:
+            crossed = True
+        elif r.code == E.PHASE_BEGIN_GREEN:
+            now.append(r.parameter)
+    if now and not crossed:
+        out.update(frozenset((a, b)) for a in last for b in now if a != b)
+    return out
+
+
 def _structure(phases: Sequence[int], greens: Mapping[int, list[tuple[datetime, datetime]]],
-               spans: Mapping[int, list[tuple[datetime, datetime]]], out: Inferred) -> Structure:
+               spans: Mapping[int, list[tuple[datetime, datetime]]], out: Inferred,
+               unbarred: set[frozenset[int]] = frozenset()) -> Structure:
     concurrent = _concurrent(spans)
+    linked = concurrent | unbarred
     groups: list[set[int]] = []
     for p in phases:
-        touching = [g for g in groups if any(frozenset((p, q)) in concurrent for q in g)]
+        touching = [g for g in groups if any(frozenset((p, q)) in linked for q in g)]
         groups = [g for g in groups if g not in touching] + [{p}.union(*touching)]
     ordered = sorted((sorted(g) for g in groups), key=min)
     ring_of: dict[int, int] = {}

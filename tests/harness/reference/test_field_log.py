@@ -260,3 +260,19 @@ def test_the_emulators_log_round_trips_at_99_percent(seed: int) -> None:
     drawn = round_trip.random_config(random.Random(seed), recalls=(), dual_entry=False)
     share = round_trip.round_trip(drawn, 300, seed)
     assert share is not None and share >= 99, drawn.features
+
+
+def test_barrier_groups_come_from_the_barrier_events() -> None:
+    """Five minutes of a coordinated plan whose leading lefts (1+5) never ran beside the other ring's through: their
+    greens alone make three barrier groups; the log's barrier terminations (31) say 1, 2, 5, 6 are one."""
+    drawn = round_trip.random_config(random.Random(55), recalls=(), dual_entry=False)
+    cfg = config_mod.parse(drawn.toml, "drawn.toml")
+    got = field_log.infer(round_trip.emulator_log(cfg, 300, 55)).config()
+    assert sorted(map(sorted, got.barriers)) == sorted(map(sorted, cfg.barriers))
+
+
+def test_a_recall_logged_as_a_call_as_its_yellow_begins_is_read() -> None:
+    """An Econolite logs the call of a recalled phase on the tick after its own yellow begins, every time (2 and 6
+    here, which no detector calls)."""
+    cfg = field_log.infer(hires_file.load(LOGS / "1210_ECON_10.204.7.239_2021_08_09_1841.datZ")).config()
+    assert {p for p, ph in cfg.phases.items() if ph.recall is not config_mod.Recall.NONE} == {2, 6}
