@@ -11,9 +11,10 @@ the log's own events (Indiana enumerations) and says which values it had to gues
   phases "may run concurrently" ("Phases that are contained in the same ring may NOT run concurrently"). Greens
   alone are not enough: in a pretimed plan a phase may begin green as soon as the phase beside it ends its green,
   and two phases across a barrier never overlap at all. Barrier groups are the connected sets of concurrent
-  phases; rings split each group by concurrency (NEMA's numbering, 1-4 and 9-12 in ring 1, when it agrees). A
-  ring without a phase in a group gets an unused phase number there that nothing calls (the controller skips it;
-  NTCIP's split table needs a split for it);
+  phases and of phases that began green one after the other with no barrier termination (31) logged between
+  (:func:`_unbarred`); rings split each group by concurrency (NEMA's numbering, 1-4 and 9-12 in ring 1, when it
+  agrees). A ring without a phase in a group gets an unused phase number there that nothing calls (the controller
+  skips it; NTCIP's split table needs a split for it);
 - **service order** (:func:`_service_order`), in time polynomial in the phases (O(n^3) for the n phases of a ring
   in a group): NTCIP 1202 sequenceData, "The order of phase numbers determines the phase sequence for the ring",
   and a ring goes on to the next phase of that order that is called, within its barrier group until both rings
@@ -32,7 +33,8 @@ the log's own events (Indiana enumerations) and says which values it had to gues
 - **timings**: yellow (8 to 9) and red clearance (10 to 11), the minimum (1 to 3, the most frequent), walk (21 to 22)
   and pedestrian clearance (22 to 23), passage (a gap-out, 4, after the last of the phase's calling detectors
   went off, 81: the most frequent gap, counted from the last tick with the call; the intersection's when a
-  phase shows too few), the maximum (the longest green; coordination does not time it), each within what NTCIP's
+  phase shows too few), the maximum (the shortest green that maxed out, 5; else the longest green, or the
+  intersection's maximum when longer), each within what NTCIP's
   phase table holds (said when a value had to be brought inside);
 - **detectors**: a detector calls the phase whose call registrations (43) its actuations (82) bring most often, at
   the same tick or the next, when they do for at least a tenth of them; the others are logged but call nothing
@@ -40,23 +42,34 @@ the log's own events (Indiana enumerations) and says which values it had to gues
   emulator's 64 are said and left out;
 - **overlaps**: an overlap that begins green (61) with phases (1, the same tick, nine times in ten) includes them
   (a normal overlap); overlaps past P (16) are said and left out;
-- **coordination**: the cycle is the spacing of the local zeros (event 150, parameter 5; two at one time are one),
-  the offset their time of day modulo the cycle with the local zero at the start of the coordinated greens
-  (NEMA TS 2's lead-green reference); the coordinated phases are the ones with the most yield point events (151)
-  in the group that has them, else the phases green at the local zero; each phase's split is what the controller
-  logged (split change, events 134-149, phases 1-16: the value in effect at most local zeros), else it ends where
-  its force-offs (6) fall in the cycle plus its clearance (when at least a fifth of its greens end so), a ring's
-  last phase before a barrier where the other ring's ends, the last phase with the cycle; then each split is made
-  at least its phase's minimum green and clearance, the rings reach each barrier together and each ring fills the
-  cycle, as NTCIP 1202's splitTime and the barrier require (what had to move is said).
+- **recalls and dual entry** (:func:`_uncalled`, :func:`_extenders`, :func:`_dual_entries`): a phase served with no
+  call the log registers (43), where the log registers calls of others or has no detector events (pretimed), or
+  whose call registers as its own yellow begins (an Econolite's recall), is recalled: max recall when its greens end
+  by force-off or max-out, else min; a detector that calls nothing may extend a recalled phase (its gap-outs come the
+  same time after the detector's off); a phase that began green uncalled beside the other ring's phase at a barrier
+  crossing, twice, is dual entry;
+- **start-up**: the phases green when the log begins (their first interval event is a begin yellow);
+- **coordination**: the cycle is the spacing of the local zeros (event 150, parameter 5; two at one time are one);
+  the coordinated phases are the ones with the most yield point events (151) in the group that has them, else the
+  phases green at the local zero; each phase's split is what the controller logged (split change, events 134-149,
+  phases 1-16: the value in effect at most local zeros), else it ends where its force-offs (6) fall in the cycle
+  plus its clearance (when at least a fifth of its greens end so), a ring's last phase before a barrier where the
+  other ring's ends, the last phase with the cycle. Positions are seconds from midnight of the log's first day
+  modulo the cycle (the emulator's clock, which counts on across midnights). The rings' orders are laid from the
+  barrier where a ring's last split ends, as the controller lays them (:func:`_barrier_start`), and the offset is
+  the start of the earliest coordinated split there (NEMA TS 2's lead-green reference, the emulator's), wherever
+  the field's local zero is; only when no split's end is placed does the local zero stand for it (said). Then each
+  split is made at least its phase's minimum green and clearance, the rings reach each barrier together and each
+  ring fills the cycle, as NTCIP 1202's splitTime and the barrier require (what had to move is said).
 
 A log whose events cannot make a config is refused with one line naming the event (its time, code and parameter)
 and why: a begin green or yellow of phase 0 or past 255 (NTCIP's largest phase number), an overlap, detector or
 push button 0, local zeros whose spacing is no cycle NTCIP allows (30-255 s) or shorter than the phases' minimum
 service, no phase number left for a ring's group. Reading the file is :mod:`harness.reference.hires_file`'s job.
 
-What the log does not show is guessed and said: a value a phase never showed (its event never logged), the
-offset reference, detector extension, max 2, recalls, red revert, dual entry, overlaps and dynamic omits.
+What the log does not show is guessed and said: a value a phase never showed (its event never logged; the
+intersection's minimum and maximum for a phase that shows none), the offset reference when no split end is placed,
+detector delay and extension (the config has no detector delay), max 2, red revert, overlaps and dynamic omits.
 """
 
 from __future__ import annotations
