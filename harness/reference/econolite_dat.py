@@ -24,7 +24,7 @@ import zlib
 from datetime import datetime, timedelta
 from pathlib import Path
 
-from harness.reference.hires_file import FieldLogError, Row
+from harness.reference.hires_file import FieldLogError, Row, read_bytes
 
 ZLIB_HEADERS = (b"\x78\x01", b"\x78\x9c", b"\x78\xda")
 HEADER_LINES = 7
@@ -35,10 +35,7 @@ _START = re.compile(rb"(\d{1,2})-(\d{1,2})-(\d{4}) (\d{1,2}):(\d{2}):(\d{2})(?:\
 def read(path: str | Path) -> list[Row]:
     """The events of an Econolite ``.dat`` (or ``.datZ``) file, in time order (see the module's header)."""
     path = Path(path)
-    try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise FieldLogError(f"{path}: cannot be read ({exc.strerror})") from None
+    data = read_bytes(path)
     if data[:2] in ZLIB_HEADERS:
         try:
             data = zlib.decompress(data[2:], wbits=-15)

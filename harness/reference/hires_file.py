@@ -116,6 +116,14 @@ def load(path: str | Path, device: Any | None = None, start: datetime | None = N
                                                          frame.Parameter, strict=True)]
 
 
+def read_bytes(path: Path) -> bytes:
+    """A vendor file's bytes, or one line saying why it cannot be read."""
+    try:
+        return path.read_bytes()
+    except OSError as exc:
+        raise FieldLogError(f"{path}: cannot be read ({exc.strerror})") from None
+
+
 def _econolite(path: Path) -> list[Row]:
     from harness.reference import econolite_dat
 

@@ -13,17 +13,14 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from harness.reference.hires_file import FieldLogError, Row
+from harness.reference.hires_file import FieldLogError, Row, read_bytes
 from hils.protocol.hires import AsclogError, parse_asclog
 
 
 def read(path: str | Path) -> list[Row]:
     """The events of a MaxTime asclog XML file, in time order."""
     path = Path(path)
-    try:
-        body = path.read_bytes()
-    except OSError as exc:
-        raise FieldLogError(f"{path}: cannot be read ({exc.strerror})") from None
+    body = read_bytes(path)
     try:
         events = parse_asclog(body)
     except AsclogError as exc:

@@ -111,3 +111,10 @@ def test_hils_replay_runs_a_vendor_log_in_virtual_time_from_another_folder(tmp_p
     assert "in virtual time" in done.stdout and "over the whole log: " in done.stdout
     assert "field green ended by" in done.stdout and "Econolite: field event 65" in done.stdout
     assert {p.name for p in (tmp_path / "out").iterdir()} == {"inferred.toml", "match.csv", "bench.csv"}
+
+
+def test_signal_replays_zero_is_said_as_thrown_out() -> None:
+    from harness.reference.replay import THROWN_OUT, signal_replay_score
+
+    assert signal_replay_score(0.0) == f"0.0 % ({THROWN_OUT})" and "phase-call similarity check" in THROWN_OUT
+    assert signal_replay_score(59.9) == "59.9 %"
