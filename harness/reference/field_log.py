@@ -598,18 +598,22 @@ def _in_config(detectors: Mapping[int, int], kind: str, out: Inferred) -> dict[i
 
 
 def _gaps(rows: Sequence[Row], p: int, detectors: Sequence[int]) -> list[float]:
-    """Each time from the last of the phase's detectors going off to its gap-out (a gap-out logged when the green
-    ends may come later than the gap: at a barrier, the green waits for the other ring)."""
+    """Each time from the last of the phase's detectors going off, during the green, to its gap-out (a gap-out logged
+    when the green ends may come later than the gap: at a barrier, the green waits for the other ring)."""
     if not detectors:
         return []
     mine, on, gaps = set(detectors), set(), []
     last_off: datetime | None = None
+    began: datetime | None = None
     for r in rows:
         if r.parameter in mine and r.code in (E.DETECTOR_ON, E.DETECTOR_OFF):
             (on.add if r.code == E.DETECTOR_ON else on.discard)(r.parameter)
             if r.code == E.DETECTOR_OFF and not on:
                 last_off = r.time
-        elif r.code == E.PHASE_GAP_OUT and r.parameter == p and not on and last_off is not None:
+        elif r.code == E.PHASE_BEGIN_GREEN and r.parameter == p:
+            began = r.time
+        elif (r.code == E.PHASE_GAP_OUT and r.parameter == p and not on and last_off is not None
+              and began is not None and last_off > began):  # an off before the green extended nothing
             # the off event is the first tick without the call; passage counts from the last tick with it
             gaps.append(round((r.time - last_off + TICK).total_seconds(), 1))
     return gaps
@@ -837,14 +841,15 @@ def _overlaps(rows: Sequence[Row], phases: Sequence[int], out: Inferred) -> dict
 def _startup(rows: Sequence[Row], greens: Mapping[int, list[tuple[datetime, datetime]]], structure: Structure,
              out: Inferred) -> list[int]:
     """The phases to power up in: the log's first state, the phases green when it began (their first interval event
-    is the end of a green, begin yellow 8), when there is one in each ring of one barrier group; else in each ring
+    is the end of a green: gap-out, max-out, force-off, green termination or begin yellow, 4-8), when there is one
+    in each ring of one barrier group; else in each ring
     the phase of the group served first that the log shows green first (the group's first in the ring's order when
     none of its phases is)."""
     first_seen: dict[int, int] = {}
     for r in rows:
-        if r.code in (E.PHASE_BEGIN_GREEN, E.PHASE_BEGIN_YELLOW):
+        if r.code == E.PHASE_BEGIN_GREEN or E.PHASE_GAP_OUT <= r.code <= E.PHASE_BEGIN_YELLOW:
             first_seen.setdefault(r.parameter, r.code)
-    green_at_start = {p for p, code in first_seen.items() if code == E.PHASE_BEGIN_YELLOW and p in greens}
+    green_at_start = {p for p, code in first_seen.items() if code != E.PHASE_BEGIN_GREEN and p in greens}
     by_ring = {ring: [p for p in structure.ring(ring) if p in green_at_start] for ring in (1, 2)}
     if all(len(mine) == 1 for mine in by_ring.values()) and \
             structure.group_of(by_ring[1][0]) == structure.group_of(by_ring[2][0]):
