@@ -139,10 +139,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="Write a config for the controller of a hi-res log (phases, rings, clearances, minimums, "
                     "detectors, push buttons, the coordination plan: from the log's own events, saying what it had to "
                     "guess), run the log's detector, push-button and preempt inputs into the emulator's controller "
-                    "model in virtual time (each on the tick it was logged at; a day of log in about a minute and a "
-                    "half), and report how many of the log's events the emulator logged within 1 s: over the whole "
-                    "log, per green (re-anchored at each field green: how it ended) and per event type and phase. "
-                    "--bench signal-replay replays through Signal-Replay at the wall clock instead (pip install "
+                    "model in virtual time (each on the tick it was logged at; two hours of a busy coordinated log in "
+                    "about 10 s), and report how many of the log's events the emulator logged within 1 s: over the "
+                    "whole log, per green (re-anchored at each field green: how it ended) and per event type and "
+                    "phase. --bench signal-replay replays through Signal-Replay at the wall clock instead (pip install "
                     "'hils[test]' brings signal_replay).")
     p.add_argument("log", metavar="LOG",
                    help="hi-res log: ATSPM layout (.parquet or .csv), Econolite .dat/.datZ or MaxTime asclog .xml")
