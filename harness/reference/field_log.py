@@ -94,6 +94,10 @@ TICK = timedelta(milliseconds=100)
 CALL_SHARE = 0.10  # a detector calls a phase when at least this share of its actuations registers the call
 LOCAL_ZERO = 5  # event 150's parameter at the local zero
 PASSAGE_SEEN = 3  # a phase's own most frequent gap counts as its passage when seen this often
+DELAY_SHARE = 0.3  # a detector's actuations followed by one phase's call the same time later this often: a delay
+#: The longest detector delay looked for (NTCIP 1202 vehicleDetectorDelay holds 0-255.0 s, "the period a detector
+#: actuation ... shall be delayed when the phase is not Green"; the longer, the likelier a chance coincidence).
+MAX_DELAY = timedelta(seconds=25.5)
 RECALL_SHARE = 0.9  # a phase whose call registers as its yellow begins this often is recalled
 FORCE_OFF_SHARE = 0.2  # a phase's force-offs mark where its split ends when they end at least this share of its greens
 #: What the emulator's config holds (:mod:`hils.protocol.config`): phases 1-255, detectors and push buttons 1-64,
@@ -235,6 +239,7 @@ def infer(rows: Sequence[Row], name: str = "field controller") -> Inferred:
     pushes = _in_config(_detector_phases(rows, E.PED_DETECTOR_ON, E.PED_CALL_REGISTERED, phases), "push button", out)
     recalled = _uncalled(rows, phases, structure)
     _extenders(rows, detectors, recalled, out)
+    _delays(rows, detectors, phases, out)
     gaps = {p: _gaps(rows, p, [d for d, q in detectors.items() if q == p]) for p in phases}
     shared = _mode(g for values in gaps.values() for g in values)
     for p in phases:
@@ -323,6 +328,34 @@ def _extenders(rows: Sequence[Row], detectors: dict[int, int], recalled: set[int
             detectors[d] = best[0]
             out.guessed.append(f"detector {d}: extends recalled phase {best[0]} (it registers no call; phase "
                                f"{best[0]} gaps out the same time after it goes off {best[1]} times)")
+
+
+def _delays(rows: Sequence[Row], detectors: Mapping[int, int], phases: Sequence[int], out: Inferred) -> None:
+    """A detector that calls nothing on its tick but whose actuations are followed by a phase's call registration
+    (43) the same time later, for at least :data:`DELAY_SHARE` of them and :data:`PASSAGE_SEEN` times, has a
+    detector delay. The config has none (:mod:`hils.protocol.config`), so it is said and not applied: the detector
+    is left calling nothing."""
+    calls: dict[int, list[datetime]] = defaultdict(list)
+    for r in rows:
+        if r.code == E.PHASE_CALL_REGISTERED:
+            calls[r.parameter].append(r.time)
+    for d in sorted(d for d, q in detectors.items() if q == 0):
+        ons = [r.time for r in rows if r.code == E.DETECTOR_ON and r.parameter == d]
+        best: tuple[int, float, int] | None = None
+        for p in phases:
+            lags: Counter[float] = Counter()
+            for t in ons:
+                k = bisect.bisect_right(calls[p], t + TICK)
+                if k < len(calls[p]) and calls[p][k] - t <= MAX_DELAY:
+                    lags[round((calls[p][k] - t).total_seconds(), 1)] += 1
+            if lags:
+                lag, n = lags.most_common(1)[0]
+                if n >= max(PASSAGE_SEEN, DELAY_SHARE * len(ons)) and (best is None or n > best[2]):
+                    best = (p, lag, n)
+        if best is not None:
+            p, lag, n = best
+            out.guessed.append(f"detector {d}: calls phase {p} {lag:g} s after its actuation ({n} of {len(ons)}): a "
+                               "detector delay, not applied (the config has no detector delay), so it calls nothing")
 
 
 def _dual_entries(rows: Sequence[Row], structure: Structure, recalled: set[int]) -> list[int]:

@@ -296,3 +296,27 @@ def test_a_gap_is_counted_only_from_an_off_during_the_green() -> None:
     rows = [at(0, 82, 2), at(1, 81, 2), at(5, 1, 2), at(10, 4, 2), at(20, 1, 2), at(21, 82, 2), at(22, 81, 2),
             at(24.9, 4, 2)]
     assert field_log._gaps(rows, 2, [2]) == [3.0]
+
+
+def test_a_constant_gap_from_actuation_to_call_is_said_as_a_detector_delay_not_applied() -> None:
+    """Detector 9 calls nothing on its tick; phase 3's call registers 3.0 s after each of its twelve actuations (the
+    issue's Econolite): a detector delay, which the config cannot hold, so it is said and the detector calls
+    nothing."""
+    t0 = datetime(2024, 5, 1, 7)
+
+    def at(s: float, code: int, p: int) -> Row:
+        return Row(t0 + timedelta(seconds=s), code, p)
+
+    rows = [at(0, 1, 2), at(0, 1, 6)]
+    for k in range(12):
+        base = 60 * k
+        rows += [at(base + 10, 82, 9), at(base + 11, 81, 9), at(base + 13, 43, 3), at(base + 20, 8, 2),
+                 at(base + 20, 8, 6), at(base + 25, 1, 3), at(base + 25, 1, 7), at(base + 40, 8, 3),
+                 at(base + 40, 8, 7), at(base + 45, 43, 2), at(base + 45, 43, 6), at(base + 50, 1, 2),
+                 at(base + 50, 1, 6)]
+    rows.sort(key=lambda r: (r.time, r.code, r.parameter))
+    inferred = field_log.infer(rows)
+    said = [g for g in inferred.guessed if g.startswith("detector 9:")]
+    assert said == ["detector 9: calls phase 3 3 s after its actuation (12 of 12): a detector delay, not applied (the "
+                    "config has no detector delay), so it calls nothing"]
+    assert inferred.config().detectors.get(9, 0) == 0
