@@ -11,9 +11,10 @@ the log's own events (Indiana enumerations) and says which values it had to gues
   phases "may run concurrently" ("Phases that are contained in the same ring may NOT run concurrently"). Greens
   alone are not enough: in a pretimed plan a phase may begin green as soon as the phase beside it ends its green,
   and two phases across a barrier never overlap at all. Barrier groups are the connected sets of concurrent
-  phases; rings split each group by concurrency (NEMA's numbering, 1-4 and 9-12 in ring 1, when it agrees). A
-  ring without a phase in a group gets an unused phase number there that nothing calls (the controller skips it;
-  NTCIP's split table needs a split for it);
+  phases and of phases that began green one after the other with no barrier termination (31) logged between
+  (:func:`_unbarred`); rings split each group by concurrency (NEMA's numbering, 1-4 and 9-12 in ring 1, when it
+  agrees). A ring without a phase in a group gets an unused phase number there that nothing calls (the controller
+  skips it; NTCIP's split table needs a split for it);
 - **service order** (:func:`_service_order`), in time polynomial in the phases (O(n^3) for the n phases of a ring
   in a group): NTCIP 1202 sequenceData, "The order of phase numbers determines the phase sequence for the ring",
   and a ring goes on to the next phase of that order that is called, within its barrier group until both rings
@@ -32,7 +33,8 @@ the log's own events (Indiana enumerations) and says which values it had to gues
 - **timings**: yellow (8 to 9) and red clearance (10 to 11), the minimum (1 to 3, the most frequent), walk (21 to 22)
   and pedestrian clearance (22 to 23), passage (a gap-out, 4, after the last of the phase's calling detectors
   went off, 81: the most frequent gap, counted from the last tick with the call; the intersection's when a
-  phase shows too few), the maximum (the longest green; coordination does not time it), each within what NTCIP's
+  phase shows too few), the maximum (the shortest green that maxed out, 5; else the longest green, or the
+  intersection's maximum when longer), each within what NTCIP's
   phase table holds (said when a value had to be brought inside);
 - **detectors**: a detector calls the phase whose call registrations (43) its actuations (82) bring most often, at
   the same tick or the next, when they do for at least a tenth of them; the others are logged but call nothing
@@ -40,23 +42,34 @@ the log's own events (Indiana enumerations) and says which values it had to gues
   emulator's 64 are said and left out;
 - **overlaps**: an overlap that begins green (61) with phases (1, the same tick, nine times in ten) includes them
   (a normal overlap); overlaps past P (16) are said and left out;
-- **coordination**: the cycle is the spacing of the local zeros (event 150, parameter 5; two at one time are one),
-  the offset their time of day modulo the cycle with the local zero at the start of the coordinated greens
-  (NEMA TS 2's lead-green reference); the coordinated phases are the ones with the most yield point events (151)
-  in the group that has them, else the phases green at the local zero; each phase's split is what the controller
-  logged (split change, events 134-149, phases 1-16: the value in effect at most local zeros), else it ends where
-  its force-offs (6) fall in the cycle plus its clearance (when at least a fifth of its greens end so), a ring's
-  last phase before a barrier where the other ring's ends, the last phase with the cycle; then each split is made
-  at least its phase's minimum green and clearance, the rings reach each barrier together and each ring fills the
-  cycle, as NTCIP 1202's splitTime and the barrier require (what had to move is said).
+- **recalls and dual entry** (:func:`_uncalled`, :func:`_extenders`, :func:`_dual_entries`): a phase served with no
+  call the log registers (43), where the log registers calls of others or has no detector events (pretimed), or
+  whose call registers as its own yellow begins (an Econolite's recall), is recalled: max recall when its greens end
+  by force-off or max-out, else min; a detector that calls nothing may extend a recalled phase (its gap-outs come the
+  same time after the detector's off); a phase that began green uncalled beside the other ring's phase at a barrier
+  crossing, twice, is dual entry;
+- **start-up**: the phases green when the log begins (their first interval event is a begin yellow);
+- **coordination**: the cycle is the spacing of the local zeros (event 150, parameter 5; two at one time are one);
+  the coordinated phases are the ones with the most yield point events (151) in the group that has them, else the
+  phases green at the local zero; each phase's split is what the controller logged (split change, events 134-149,
+  phases 1-16: the value in effect at most local zeros), else it ends where its force-offs (6) fall in the cycle
+  plus its clearance (when at least a fifth of its greens end so), a ring's last phase before a barrier where the
+  other ring's ends, the last phase with the cycle. Positions are seconds from midnight of the log's first day
+  modulo the cycle (the emulator's clock, which counts on across midnights). The rings' orders are laid from the
+  barrier where a ring's last split ends, as the controller lays them (:func:`_barrier_start`), and the offset is
+  the start of the earliest coordinated split there (NEMA TS 2's lead-green reference, the emulator's), wherever
+  the field's local zero is; only when no split's end is placed does the local zero stand for it (said). Then each
+  split is made at least its phase's minimum green and clearance, the rings reach each barrier together and each
+  ring fills the cycle, as NTCIP 1202's splitTime and the barrier require (what had to move is said).
 
 A log whose events cannot make a config is refused with one line naming the event (its time, code and parameter)
 and why: a begin green or yellow of phase 0 or past 255 (NTCIP's largest phase number), an overlap, detector or
 push button 0, local zeros whose spacing is no cycle NTCIP allows (30-255 s) or shorter than the phases' minimum
 service, no phase number left for a ring's group. Reading the file is :mod:`harness.reference.hires_file`'s job.
 
-What the log does not show is guessed and said: a value a phase never showed (its event never logged), the
-offset reference, detector extension, max 2, recalls, red revert, dual entry, overlaps and dynamic omits.
+What the log does not show is guessed and said: a value a phase never showed (its event never logged; the
+intersection's minimum and maximum for a phase that shows none), the offset reference when no split end is placed,
+detector delay and extension (the config has no detector delay), max 2, red revert, overlaps and dynamic omits.
 """
 
 from __future__ import annotations
@@ -81,6 +94,11 @@ TICK = timedelta(milliseconds=100)
 CALL_SHARE = 0.10  # a detector calls a phase when at least this share of its actuations registers the call
 LOCAL_ZERO = 5  # event 150's parameter at the local zero
 PASSAGE_SEEN = 3  # a phase's own most frequent gap counts as its passage when seen this often
+DELAY_SHARE = 0.3  # a detector's actuations followed by one phase's call the same time later this often: a delay
+#: The longest detector delay looked for (NTCIP 1202 vehicleDetectorDelay holds 0-255.0 s, "the period a detector
+#: actuation ... shall be delayed when the phase is not Green"; the longer, the likelier a chance coincidence).
+MAX_DELAY = timedelta(seconds=25.5)
+RECALL_SHARE = 0.9  # a phase whose call registers as its yellow begins this often is recalled
 FORCE_OFF_SHARE = 0.2  # a phase's force-offs mark where its split ends when they end at least this share of its greens
 #: What the emulator's config holds (:mod:`hils.protocol.config`): phases 1-255, detectors and push buttons 1-64,
 #: overlaps A-P (1-16), cycles 30-255 s.
@@ -176,8 +194,10 @@ def _spans(rows: Sequence[Row], greens: Mapping[int, list[tuple[datetime, dateti
     return out
 
 
-def _seconds_of_day(t: datetime) -> float:
-    return t.hour * 3600 + t.minute * 60 + t.second + t.microsecond / 1e6
+def _since_midnight(t: datetime, day0: datetime) -> float:
+    """Seconds from midnight of the log's first day: the emulator's clock, which counts on across midnights (so a
+    cycle that does not divide a day keeps its place over a log of several days)."""
+    return (t - day0).total_seconds()
 
 
 # --- inference -----------------------------------------------------------------------------------------------
@@ -212,10 +232,14 @@ def infer(rows: Sequence[Row], name: str = "field controller") -> Inferred:
         raise FieldLogError(f"the log shows {len(phases)} phase(s) served (begin green, event 1, then begin yellow, "
                             "event 8); a config needs at least two")
     out.read.append(f"phases served: {', '.join(map(str, phases))}")
-    structure = _structure(phases, greens, _spans(rows, greens), out)
-    timing = {p: _timing(rows, p, greens[p], out) for p in phases}
+    structure = _structure(phases, greens, _spans(rows, greens), out, _unbarred(rows))
+    shared_min = _mode(m for p in phases for m in _minimums(rows, p))
+    timing = {p: _timing(rows, p, greens[p], out, shared_min) for p in phases}
     detectors = _in_config(_detector_phases(rows, E.DETECTOR_ON, E.PHASE_CALL_REGISTERED, phases), "detector", out)
     pushes = _in_config(_detector_phases(rows, E.PED_DETECTOR_ON, E.PED_CALL_REGISTERED, phases), "push button", out)
+    recalled = _uncalled(rows, phases, structure)
+    _extenders(rows, detectors, recalled, out)
+    _delays(rows, detectors, phases, out)
     gaps = {p: _gaps(rows, p, [d for d, q in detectors.items() if q == p]) for p in phases}
     shared = _mode(g for values in gaps.values() for g in values)
     for p in phases:
@@ -228,6 +252,14 @@ def infer(rows: Sequence[Row], name: str = "field controller") -> Inferred:
                                f"no gap of its own seen {PASSAGE_SEEN} times)")
         low, high = config_mod.phase_time_range("passage")
         timing[p]["passage"] = _within(p, "passage", timing[p]["passage"], low, min(high, timing[p]["max_green"]), out)
+    maxima = [t["maxed"] for t in timing.values() if "maxed" in t]
+    if maxima:  # a phase that never maxed out has the intersection's maximum, if its longest green is shorter
+        shared_max = math.ceil(max(maxima, key=maxima.count) - 1e-9)
+        for p in phases:
+            if "maxed" not in timing[p] and timing[p]["max_green"] < shared_max:
+                timing[p]["max_green"] = shared_max
+                out.guessed.append(f"phase {p}: max green {shared_max} s (it never maxed out: the intersection's most "
+                                   "frequent maximum, longer than its longest green)")
     for p, twin in structure.phantom.items():
         timing[p] = {k: v for k, v in timing[twin].items() if k not in ("walk", "ped_clear")}
     logged = sorted(d for d, q in detectors.items() if q == 0)
@@ -238,13 +270,130 @@ def infer(rows: Sequence[Row], name: str = "field controller") -> Inferred:
     out.guessed.append("every calling detector also extends its phase's green (detector delay and extension are not "
                        "in the log: its detector events come after them)")
     coordination = _coordination(rows, structure, timing, greens, out)
+    coordinated = set(coordination["coord"]) if coordination else set()
+    for p in recalled - coordinated:
+        _recall(rows, p, timing[p], out)
+    duals = _dual_entries(rows, structure, recalled)
+    for p in duals:
+        timing[p]["dual_entry"] = True
+    if duals:
+        out.read.append(f"dual entry: phase(s) {', '.join(map(str, duals))} (began green uncalled beside the other "
+                        "ring's phase as the rings crossed a barrier, at least twice)")
     overlaps = _overlaps(rows, phases, out)
-    out.guessed.append("no recalls, red revert, max 2 or dual entry (the log shows the service, not the settings); "
+    out.guessed.append("recalls and dual entry only as said, no red revert or max 2 (the log shows the service, not "
+                       "the settings); "
                        "dynamic omits (46-49 logged by the field controller's own logic) are not modelled")
     start = rows[0].time.replace(microsecond=rows[0].time.microsecond // 100_000 * 100_000)
-    out.toml = _toml(name, structure, timing, detectors, pushes, coordination, overlaps, _startup(greens, structure),
-                     start)
+    startup = _startup(rows, greens, structure, out)
+    out.toml = _toml(name, structure, timing, detectors, pushes, coordination, overlaps, startup, start)
     return out
+
+
+def _uncalled(rows: Sequence[Row], phases: Sequence[int], structure: Structure) -> set[int]:
+    """The phases served without a vehicle call the log registers (43), or whose call registers as their yellow begins
+    (at least :data:`RECALL_SHARE` of the time): recalled. The first only where the log registers calls of other
+    phases, or has no detector events at all (a pretimed log): some controllers log no calls."""
+    called = {r.parameter for r in rows if r.code == E.PHASE_CALL_REGISTERED}
+    detected = any(r.code == E.DETECTOR_ON for r in rows)
+    if detected and not called:
+        return set()
+    # A controller that logs a recall's call (an Econolite: 43 on the tick after the phase's own yellow begins, every
+    # time) shows the recall that way.
+    calls = {(r.time, r.parameter) for r in rows if r.code == E.PHASE_CALL_REGISTERED}
+    yellows = Counter(r.parameter for r in rows if r.code == E.PHASE_BEGIN_YELLOW)
+    recalled_call = Counter(r.parameter for r in rows if r.code == E.PHASE_BEGIN_YELLOW
+                            and ((r.time, r.parameter) in calls or (r.time + TICK, r.parameter) in calls))
+    logged = {p for p, n in recalled_call.items() if n >= 2 and n >= RECALL_SHARE * yellows[p]}
+    return {p for p in phases if (p not in called or p in logged) and p not in structure.phantom}
+
+
+def _extenders(rows: Sequence[Row], detectors: dict[int, int], recalled: set[int], out: Inferred) -> None:
+    """A detector that calls nothing the log shows may extend a recalled phase (a recalled phase's calls are not
+    logged): the recalled phase whose gap-outs come the same time after its last off most often, at least
+    :data:`PASSAGE_SEEN` times and for a fifth of the phase's gap-outs."""
+    gap_outs = {p: [r.time for r in rows if r.code == E.PHASE_GAP_OUT and r.parameter == p] for p in recalled}
+    for d in [d for d, q in detectors.items() if q == 0]:
+        offs = [r.time for r in rows if r.code == E.DETECTOR_OFF and r.parameter == d]
+        best: tuple[int, int] | None = None
+        for p, times in gap_outs.items():
+            gaps = Counter()
+            for t in times:
+                k = bisect.bisect_right(offs, t) - 1
+                if k >= 0 and (t - offs[k]) <= timedelta(seconds=10):
+                    gaps[round((t - offs[k]).total_seconds(), 1)] += 1
+            n = max(gaps.values(), default=0)
+            if n >= PASSAGE_SEEN and n >= len(times) / 5 and (best is None or n > best[1]):
+                best = (p, n)
+        if best is not None:
+            detectors[d] = best[0]
+            out.guessed.append(f"detector {d}: extends recalled phase {best[0]} (it registers no call; phase "
+                               f"{best[0]} gaps out the same time after it goes off {best[1]} times)")
+
+
+def _delays(rows: Sequence[Row], detectors: Mapping[int, int], phases: Sequence[int], out: Inferred) -> None:
+    """A detector that calls nothing on its tick but whose actuations are followed by a phase's call registration
+    (43) the same time later, for at least :data:`DELAY_SHARE` of them and :data:`PASSAGE_SEEN` times, has a
+    detector delay. The config has none (:mod:`hils.protocol.config`), so it is said and not applied: the detector
+    is left calling nothing."""
+    calls: dict[int, list[datetime]] = defaultdict(list)
+    for r in rows:
+        if r.code == E.PHASE_CALL_REGISTERED:
+            calls[r.parameter].append(r.time)
+    for d in sorted(d for d, q in detectors.items() if q == 0):
+        ons = [r.time for r in rows if r.code == E.DETECTOR_ON and r.parameter == d]
+        best: tuple[int, float, int] | None = None
+        for p in phases:
+            lags: Counter[float] = Counter()
+            for t in ons:
+                k = bisect.bisect_right(calls[p], t + TICK)
+                if k < len(calls[p]) and calls[p][k] - t <= MAX_DELAY:
+                    lags[round((calls[p][k] - t).total_seconds(), 1)] += 1
+            if lags:
+                lag, n = lags.most_common(1)[0]
+                if n >= max(PASSAGE_SEEN, DELAY_SHARE * len(ons)) and (best is None or n > best[2]):
+                    best = (p, lag, n)
+        if best is not None:
+            p, lag, n = best
+            out.guessed.append(f"detector {d}: calls phase {p} {lag:g} s after its actuation ({n} of {len(ons)}): a "
+                               "detector delay, not applied (the config has no detector delay), so it calls nothing")
+
+
+def _dual_entries(rows: Sequence[Row], structure: Structure, recalled: set[int]) -> list[int]:
+    """The phases that began green with no call since their last green, at a barrier crossing (31 on the tick)
+    beside a phase of the other ring, at least twice: dual entry (NTCIP 1202 v03 phaseOptions bit 10, "Dual Entry
+    Phase - in multi-ring configurations when set to 1 causes the phase to become active upon entry into a
+    concurrency group (crossing a barrier) when no calls exist in its ring within its concurrency group")."""
+    called: set[int] = set()
+    crossing: set[datetime] = {r.time for r in rows if r.code == E.BARRIER_TERMINATION}
+    begins: dict[datetime, list[int]] = defaultdict(list)
+    uncalled: dict[datetime, list[int]] = defaultdict(list)
+    for r in rows:
+        if r.code in (E.PHASE_CALL_REGISTERED, E.PED_CALL_REGISTERED):  # since its last green: a call dropped during
+            called.add(r.parameter)  # the clearance still has the phase served (committed at the green's end)
+        elif r.code == E.PHASE_BEGIN_GREEN:
+            begins[r.time].append(r.parameter)
+            if r.parameter not in called and r.parameter not in recalled and r.time in crossing:
+                uncalled[r.time].append(r.parameter)
+            called.discard(r.parameter)
+    seen: Counter[int] = Counter()
+    ring = {p: r for r in (1, 2) for p in structure.ring(r)}
+    for t, phases in uncalled.items():
+        for p in phases:
+            if any(ring.get(q) != ring.get(p) for q in begins[t]):
+                seen[p] += 1
+    return sorted(p for p, n in seen.items() if n >= 2)
+
+
+def _recall(rows: Sequence[Row], p: int, timing: dict[str, Any], out: Inferred) -> None:
+    """A phase served without a call the log registers is recalled (a pretimed plan's phases, a recall, or detectors
+    the log does not record): maximum recall when its greens end by force-off or max-out more often than by gap-out
+    (NTCIP 1202 phaseOptions: Max Vehicle Recall times the green to its maximum), else minimum recall."""
+    ends = Counter(r.code for r in rows if r.parameter == p and r.code in (E.PHASE_GAP_OUT, E.PHASE_MAX_OUT,
+                                                                           E.PHASE_FORCE_OFF))
+    timing["recall"] = "max" if ends[E.PHASE_GAP_OUT] < ends[E.PHASE_MAX_OUT] + ends[E.PHASE_FORCE_OFF] else "min"
+    out.guessed.append(f"phase {p}: {timing['recall']} recall (served, but the log registers no vehicle call of "
+                       f"it; its greens end by gap-out {ends[E.PHASE_GAP_OUT]} times, by max-out or force-off "
+                       f"{ends[E.PHASE_MAX_OUT] + ends[E.PHASE_FORCE_OFF]})")
 
 
 def _check_numbers(rows: Iterable[Row]) -> None:
@@ -259,12 +408,42 @@ def _check_numbers(rows: Iterable[Row]) -> None:
             raise FieldLogError(f"{_event(r)}: {r.parameter} is not {kind} number; allowed: {allowed}")
 
 
+def _unbarred(rows: Sequence[Row]) -> set[frozenset[int]]:
+    """Pairs of phases that began green one after the other with no barrier termination (31) logged at or before
+    the second: one barrier group (the data logger logs 31 on the tick "all active phases become inactive in the
+    ring and cross barrier phases are next"). None when the log has no 31 at all (a controller that does not log
+    it)."""
+    if not any(r.code == E.BARRIER_TERMINATION for r in rows):
+        return set()
+    out: set[frozenset[int]] = set()
+    last: list[int] = []
+    crossed = False
+    tick: datetime | None = None
+    now: list[int] = []
+    for r in rows:
+        if r.time != tick:
+            if now:
+                if not crossed:
+                    out.update(frozenset((a, b)) for a in last for b in now if a != b)
+                last, now, crossed = now, [], False
+            tick = r.time
+        if r.code == E.BARRIER_TERMINATION:
+            crossed = True
+        elif r.code == E.PHASE_BEGIN_GREEN:
+            now.append(r.parameter)
+    if now and not crossed:
+        out.update(frozenset((a, b)) for a in last for b in now if a != b)
+    return out
+
+
 def _structure(phases: Sequence[int], greens: Mapping[int, list[tuple[datetime, datetime]]],
-               spans: Mapping[int, list[tuple[datetime, datetime]]], out: Inferred) -> Structure:
+               spans: Mapping[int, list[tuple[datetime, datetime]]], out: Inferred,
+               unbarred: set[frozenset[int]] = frozenset()) -> Structure:
     concurrent = _concurrent(spans)
+    linked = concurrent | unbarred
     groups: list[set[int]] = []
     for p in phases:
-        touching = [g for g in groups if any(frozenset((p, q)) in concurrent for q in g)]
+        touching = [g for g in groups if any(frozenset((p, q)) in linked for q in g)]
         groups = [g for g in groups if g not in touching] + [{p}.union(*touching)]
     ordered = sorted((sorted(g) for g in groups), key=min)
     ring_of: dict[int, int] = {}
@@ -360,14 +539,20 @@ def _service_order(mine: Sequence[int], follows: Mapping[tuple[int, int], int]) 
     return order
 
 
-def _timing(rows: Sequence[Row], p: int, greens: Sequence[tuple[datetime, datetime]], out: Inferred) -> dict[str, Any]:
+def _timing(rows: Sequence[Row], p: int, greens: Sequence[tuple[datetime, datetime]], out: Inferred,
+            shared_min: float | None = None) -> dict[str, Any]:
+    """The phase's timings (see the module's header); ``shared_min``: the intersection's most frequent minimum green,
+    for a phase that shows none of its own."""
     t: dict[str, Any] = {}
     found = {"yellow": _mode(_durations(rows, p, E.PHASE_BEGIN_YELLOW, E.PHASE_END_YELLOW)),
              "red_clear": _mode(_durations(rows, p, E.PHASE_BEGIN_RED_CLEARANCE, E.PHASE_END_RED_CLEARANCE)),
              "min_green": _mode(_minimums(rows, p))}
-    for key, default in (("yellow", 4.0), ("red_clear", 1.0), ("min_green", 5)):
+    for key, default in (("yellow", 4.0), ("red_clear", 1.0), ("min_green", shared_min or 5)):
         if found[key] is None:
-            out.guessed.append(f"phase {p}: {key} {default} (its events are not in the log)")
+            why = ("every green served a walk, whose timing is then the minimum" if key == "min_green" and
+                   _durations(rows, p, E.PHASE_BEGIN_GREEN, E.PHASE_MIN_COMPLETE) else "its events are not in the log")
+            whose = "the intersection's most frequent, " if key == "min_green" and shared_min else ""
+            out.guessed.append(f"phase {p}: {key} {default:g} ({whose}{why})")
         t[key] = found[key] if found[key] is not None else default
     # What NTCIP 1202's phase table carries (phaseYellowChange "NEMA range: 3.0-25.5 sec", ...), and what the config
     # asks beyond it: a red clearance of a tenth at least, greens of a second, walk and clearance within the maximum.
@@ -382,9 +567,14 @@ def _timing(rows: Sequence[Row], p: int, greens: Sequence[tuple[datetime, dateti
     if walk and ped_clear:
         t["walk"] = _within(p, "walk", math.ceil(walk), 1, top - 1, out)
         t["ped_clear"] = _within(p, "ped_clear", math.ceil(ped_clear), 1, top - t["walk"], out)
+    # The maximum: the shortest green that maxed out (max-out, 5, on its end: no green maxes out before its maximum,
+    # and one whose max timer started with it, by a call waiting or max recall, maxes out at it), else the longest.
+    maxed = _durations(rows, p, E.PHASE_BEGIN_GREEN, E.PHASE_MAX_OUT)
     longest = max(((b - a).total_seconds() for a, b in greens), default=0.0)
+    if maxed:
+        longest = t["maxed"] = min(maxed)
     t["max_green"] = _within(p, "max_green", max(t["min_green"], t.get("walk", 0) + t.get("ped_clear", 0),
-                                                 math.ceil(longest)), 1, top, out)
+                                                 math.ceil(longest - 1e-9)), 1, top, out)
     return t
 
 
@@ -410,7 +600,7 @@ def _minimums(rows: Sequence[Row], p: int) -> list[float]:
         elif r.code == E.PHASE_MIN_COMPLETE and since is not None:
             out.append(round((r.time - since).total_seconds(), 1))
             since = None
-    return out or _durations(rows, p, E.PHASE_BEGIN_GREEN, E.PHASE_MIN_COMPLETE)
+    return out
 
 
 def _detector_phases(rows: Sequence[Row], on: int, call: int, phases: Sequence[int]) -> dict[int, int]:
@@ -441,18 +631,22 @@ def _in_config(detectors: Mapping[int, int], kind: str, out: Inferred) -> dict[i
 
 
 def _gaps(rows: Sequence[Row], p: int, detectors: Sequence[int]) -> list[float]:
-    """Each time from the last of the phase's detectors going off to its gap-out (a gap-out logged when the green
-    ends may come later than the gap: at a barrier, the green waits for the other ring)."""
+    """Each time from the last of the phase's detectors going off, during the green, to its gap-out (a gap-out logged
+    when the green ends may come later than the gap: at a barrier, the green waits for the other ring)."""
     if not detectors:
         return []
     mine, on, gaps = set(detectors), set(), []
     last_off: datetime | None = None
+    began: datetime | None = None
     for r in rows:
         if r.parameter in mine and r.code in (E.DETECTOR_ON, E.DETECTOR_OFF):
             (on.add if r.code == E.DETECTOR_ON else on.discard)(r.parameter)
             if r.code == E.DETECTOR_OFF and not on:
                 last_off = r.time
-        elif r.code == E.PHASE_GAP_OUT and r.parameter == p and not on and last_off is not None:
+        elif r.code == E.PHASE_BEGIN_GREEN and r.parameter == p:
+            began = r.time
+        elif (r.code == E.PHASE_GAP_OUT and r.parameter == p and not on and last_off is not None
+              and began is not None and last_off > began):  # an off before the green extended nothing
             # the off event is the first tick without the call; passage counts from the last tick with it
             gaps.append(round((r.time - last_off + TICK).total_seconds(), 1))
     return gaps
@@ -471,7 +665,8 @@ def _coordination(rows: Sequence[Row], structure: Structure, timing: Mapping[int
         raise FieldLogError(f"local zeros (event 150, parameter 5) at {_when(a)} and {_when(b)}: {s:g} s apart, as "
                             f"most are, a cycle of {cycle} s; allowed: {CYCLES[0]}-{CYCLES[1]} s (NTCIP 1202 "
                             "patternCycleTime)")
-    zero = _mode(round(_seconds_of_day(t) % cycle, 1) for t in zeros)
+    day0 = datetime.combine(rows[0].time.date(), datetime.min.time())
+    zero = _mode(round(_since_midnight(t, day0) % cycle, 1) for t in zeros)
     ringed = set(structure.ring(1) + structure.ring(2))
     yields = Counter(r.parameter for r in rows if r.code == E.COORD_YIELD_POINT and r.parameter in ringed)
     covering = _covering(zeros, greens)
@@ -484,19 +679,53 @@ def _coordination(rows: Sequence[Row], structure: Structure, timing: Mapping[int
         if not yields[coord[r]]:
             out.guessed.append(f"coordinated phase of ring {r}: {coord[r]} (no yield point event, 151: the phase of "
                                "that ring green at the local zero)")
-    ends: dict[int, float] = {}
+    # Where each forced-off phase's split ends in the cycle: its force-off plus its clearance (seconds from midnight,
+    # modulo the cycle). The controller lays each ring's splits end to end from the start of its first barrier group
+    # (NTCIP 1202 sequenceData's order); that start is where the rings' last splits end. The local zero is where the
+    # field's controller counts from, which need not be at a coordinated green (an offset referred to a yield point):
+    # the offset is written for the emulator's reference, the start of the earliest coordinated split.
+    at_end: dict[int, float] = {}
     for p in timing:
-        force_offs = [round((_seconds_of_day(row.time) - zero) % cycle, 1) for row in rows
+        force_offs = [round(_since_midnight(row.time, day0) % cycle, 1) for row in rows
                       if row.code == E.PHASE_FORCE_OFF and row.parameter == p]
         if p in greens and force_offs and len(force_offs) >= FORCE_OFF_SHARE * len(greens[p]):  # not a stray one
-            ends[p] = _mode(force_offs) + timing[p]["yellow"] + timing[p]["red_clear"]
+            at_end[p] = (_mode(force_offs) + timing[p]["yellow"] + timing[p]["red_clear"]) % cycle
     logged = {p: s for p, s in _logged_splits(rows, zeros).items() if p in greens}
-    splits = _splits(structure, coord, ends, logged, cycle, timing, out)
-    out.read.append(f"coordination: cycle {cycle} s, local zero at {zero:g} s of the time of day modulo the cycle, "
-                    f"coordinated {coord[1]}+{coord[2]}, splits " + ", ".join(f"{p}: {s}" for p, s in splits.items())
+    orders = {r: structure.ring(r) for r in (1, 2)}
+    begin = _barrier_start(orders, logged, at_end, cycle)
+    if begin is None:  # no split end the log shows can be placed: the coordinated splits start at the local zero
+        begin = zero
+        orders = {r: mine[mine.index(coord[r]):] + mine[:mine.index(coord[r])] for r, mine in orders.items()}
+        out.guessed.append("offset reference: the local zero (event 150, 5) starts the coordinated greens (lead green; "
+                           "no split's end is placed by a force-off in the log)")
+    ends = {p: e if (e := (at - begin) % cycle) > 0.05 else float(cycle) for p, at in at_end.items()}
+    splits = _splits(structure, orders, ends, logged, cycle, timing, out)
+    raw_start = {p: sum(splits[q] for q in mine[:mine.index(p)]) for mine in orders.values() for p in mine}
+    lead = min(raw_start[c] for c in coord.values())
+    offset = round(begin + lead) % cycle
+    if 86_400 % cycle:
+        out.guessed.append(f"cycle {cycle} s does not divide a day: the cycle's place is counted from midnight of the "
+                           "log's first day on, as the emulator's clock counts, not from each day's midnight")
+    out.read.append(f"coordination: cycle {cycle} s, offset {offset} s (the start of the earliest coordinated split; "
+                    f"the field's local zero is at {zero:g} s of the day modulo the cycle), coordinated "
+                    f"{coord[1]}+{coord[2]}, splits " + ", ".join(f"{p}: {s}" for p, s in splits.items())
                     + (f" (as logged, events 134-149, for {', '.join(map(str, logged))})" if logged else ""))
-    out.guessed.append("offset reference: the local zero (event 150, 5) starts the coordinated greens (lead green)")
-    return {"cycle": cycle, "offset": round(zero) % cycle, "coord": [coord[1], coord[2]], "splits": splits}
+    return {"cycle": cycle, "offset": offset, "coord": [coord[1], coord[2]], "splits": splits}
+
+
+def _barrier_start(orders: Mapping[int, Sequence[int]], logged: Mapping[int, int], at_end: Mapping[int, float],
+                   cycle: int) -> float | None:
+    """Where the rings' orders start in the cycle (seconds from midnight modulo the cycle): where a ring's last split
+    ends, or, when every split of a ring was logged, where a forced-off phase's end puts it (the most frequent)."""
+    for mine in orders.values():
+        if mine[-1] in at_end:
+            return at_end[mine[-1]]
+    placed = []
+    for mine in orders.values():
+        if all(p in logged for p in mine):
+            placed += [(at_end[p] - sum(logged[q] for q in mine[:k + 1])) % cycle
+                       for k, p in enumerate(mine) if p in at_end]
+    return _mode(round(b, 1) for b in placed) if placed else None
 
 
 def _logged_splits(rows: Sequence[Row], zeros: Sequence[datetime]) -> dict[int, int]:
@@ -527,16 +756,12 @@ def _covering(zeros: Sequence[datetime], greens: Mapping[int, Sequence[tuple[dat
     return out
 
 
-def _splits(structure: Structure, coord: Mapping[int, int], ends: Mapping[int, float], logged: Mapping[int, int],
-            cycle: int, timing: Mapping[int, dict[str, Any]], out: Inferred) -> dict[int, int]:
-    """Each phase's split as logged, or from where it ends in the cycle (from the local zero, which starts the
-    coordinated splits): force-offs where the log has them, the other ring's end of the barrier group, the cycle's
-    end; then fitted (:func:`_fit`)."""
-    cyclic = {}
-    for r in (1, 2):
-        mine = structure.ring(r)
-        i = mine.index(coord[r])
-        cyclic[r] = mine[i:] + mine[:i]
+def _splits(structure: Structure, cyclic: Mapping[int, Sequence[int]], ends: Mapping[int, float],
+            logged: Mapping[int, int], cycle: int, timing: Mapping[int, dict[str, Any]], out: Inferred
+            ) -> dict[int, int]:
+    """Each phase's split as logged, or from where it ends in the cycle (from where each ring's order ``cyclic``
+    starts): force-offs where the log has them, the other ring's end of the barrier group, the cycle's end; then
+    fitted (:func:`_fit`)."""
 
     def last_of_group(order: Sequence[int], k: int) -> bool:
         return k == len(order) - 1 or structure.group_of(order[k + 1]) != structure.group_of(order[k])
@@ -646,9 +871,23 @@ def _overlaps(rows: Sequence[Row], phases: Sequence[int], out: Inferred) -> dict
     return overlaps
 
 
-def _startup(greens: Mapping[int, list[tuple[datetime, datetime]]], structure: Structure) -> list[int]:
-    """The phases to power up in: in each ring, the phase of the group served first that the log shows green first
-    (the group's first in the ring's order when none of its phases is)."""
+def _startup(rows: Sequence[Row], greens: Mapping[int, list[tuple[datetime, datetime]]], structure: Structure,
+             out: Inferred) -> list[int]:
+    """The phases to power up in: the log's first state, the phases green when it began (their first interval event
+    is the end of a green: gap-out, max-out, force-off, green termination or begin yellow, 4-8), when there is one
+    in each ring of one barrier group; else in each ring
+    the phase of the group served first that the log shows green first (the group's first in the ring's order when
+    none of its phases is)."""
+    first_seen: dict[int, int] = {}
+    for r in rows:
+        if r.code == E.PHASE_BEGIN_GREEN or E.PHASE_GAP_OUT <= r.code <= E.PHASE_BEGIN_YELLOW:
+            first_seen.setdefault(r.parameter, r.code)
+    green_at_start = {p for p, code in first_seen.items() if code != E.PHASE_BEGIN_GREEN and p in greens}
+    by_ring = {ring: [p for p in structure.ring(ring) if p in green_at_start] for ring in (1, 2)}
+    if all(len(mine) == 1 for mine in by_ring.values()) and \
+            structure.group_of(by_ring[1][0]) == structure.group_of(by_ring[2][0]):
+        out.read.append(f"start-up: phases {by_ring[1][0]} and {by_ring[2][0]}, green when the log begins")
+        return [by_ring[1][0], by_ring[2][0]]
     first = min((t0, p) for p, spans in greens.items() for t0, _ in spans)[1]
     g = structure.group_of(first)
     return [min(structure.order[r][g], key=lambda p: greens[p][0][0] if p in greens else datetime.max)
@@ -666,6 +905,10 @@ def _toml(name: str, structure: Structure, timing: Mapping[int, dict[str, Any]],
     for p in sorted(timing):
         fields = {k: timing[p][k] for k in ("min_green", "max_green", "yellow", "red_clear", "passage", "walk",
                                             "ped_clear") if k in timing[p]}
+        if timing[p].get("dual_entry"):
+            fields["dual_entry"] = "true"
+        if "recall" in timing[p]:
+            fields["recall"] = f'"{timing[p]["recall"]}"'
         if p in startup:
             fields["startup"] = '"green"'
         lines.append(f"{p} = {{ " + ", ".join(f"{k} = {value(v)}" for k, v in fields.items()) + " }")

@@ -1,4 +1,7 @@
-"""A controller's hi-res log file in the ATSPM layout, read strictly: its rows, or one line saying which is wrong.
+"""A controller's hi-res log file, read strictly: its rows, or one line saying which is wrong.
+
+:func:`load` reads the file by its suffix: an Econolite ``.dat``/``.datZ`` (:mod:`harness.reference.econolite_dat`),
+a MaxTime asclog ``.xml`` (:mod:`harness.reference.maxtime_xml`), else the ATSPM layout, read here.
 
 A log comes from a field controller through collectors, exports and spreadsheets, so anything may be in a cell.
 :func:`load` reads ``TimeStamp, DeviceId, EventId, Parameter`` (parquet, or CSV read as text) and refuses the first
@@ -51,6 +54,13 @@ def load(path: str | Path, device: Any | None = None, start: datetime | None = N
     import pandas as pd
 
     path = Path(path)
+    vendor = _VENDOR.get(path.suffix.lower())
+    if vendor is not None:
+        rows = vendor(path)
+        rows = [r for r in rows if (start is None or r.time >= start) and (end is None or r.time < end)]
+        if not rows:
+            raise FieldLogError(f"{path}: no events in the time asked; allowed: a start and end within the log")
+        return rows
     csv = path.suffix != ".parquet"
     try:
         frame = pd.read_csv(path, dtype=str, keep_default_na=False) if csv else pd.read_parquet(path)
@@ -104,6 +114,30 @@ def load(path: str | Path, device: Any | None = None, start: datetime | None = N
     frame = frame.sort_values(["TimeStamp", "EventId", "Parameter"], kind="stable")
     return [Row(t, int(c), int(p)) for t, c, p in zip(frame.TimeStamp.array.to_pydatetime(), frame.EventId,
                                                          frame.Parameter, strict=True)]
+
+
+def read_bytes(path: Path) -> bytes:
+    """A vendor file's bytes, or one line saying why it cannot be read."""
+    try:
+        return path.read_bytes()
+    except OSError as exc:
+        raise FieldLogError(f"{path}: cannot be read ({exc.strerror})") from None
+
+
+def _econolite(path: Path) -> list[Row]:
+    from harness.reference import econolite_dat
+
+    return econolite_dat.read(path)
+
+
+def _maxtime(path: Path) -> list[Row]:
+    from harness.reference import maxtime_xml
+
+    return maxtime_xml.read(path)
+
+
+#: A vendor's own file form, by suffix (lower case).
+_VENDOR = {".dat": _econolite, ".datz": _econolite, ".xml": _maxtime}
 
 
 def _times(column: Any) -> Any:

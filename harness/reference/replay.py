@@ -22,17 +22,17 @@ once and reads its inputs at the next tick.
 from __future__ import annotations
 
 import argparse
-import csv
 import logging
 import tempfile
 import time
 from collections import Counter, defaultdict
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from datetime import datetime, timedelta
 from pathlib import Path
 
 from harness.reference.hires_file import Row
+from harness.reference.replay_match import GreenRow, MatchRow, green_table, match_table, overall
 from hils.protocol import config as config_mod
 from hils.protocol.hires import Event, EventCode
 from hils.shell.asclog import collect
@@ -41,43 +41,25 @@ log = logging.getLogger(__name__)
 
 E = EventCode
 LATENCY_S = 0.05
-#: The events the bench is judged on: Signal-Replay's COMPARISON_EVENT_IDS (phase, pedestrian, overlap, preempt)
-#: and what else a controller decides (gap/max/force-off, min complete, barrier) besides calls.
-JUDGED = (E.PHASE_BEGIN_GREEN, E.PHASE_MIN_COMPLETE, E.PHASE_GAP_OUT, E.PHASE_MAX_OUT, E.PHASE_FORCE_OFF,
-          E.PHASE_GREEN_TERMINATION, E.PHASE_END_YELLOW, E.PHASE_END_RED_CLEARANCE, E.PED_BEGIN_WALK,
-          E.PED_BEGIN_CLEARANCE, E.PED_BEGIN_SOLID_DONT_WALK, E.BARRIER_TERMINATION, E.OVERLAP_BEGIN_GREEN,
-          E.OVERLAP_BEGIN_YELLOW, E.OVERLAP_OFF, E.OVERLAP_DARK, E.PREEMPT_ENTRY_STARTED, E.PREEMPT_BEGIN_EXIT)
-
-
-@dataclass(frozen=True, slots=True)
-class MatchRow:
-    """One event type of one phase (or overlap, barrier...): the log's count, the bench's, and how many of the log's
-    the bench logged within the tolerance."""
-
-    code: int
-    parameter: int
-    field: int
-    bench: int
-    matched: int
-
-    @property
-    def share(self) -> float | None:
-        return None if not self.field else round(100 * self.matched / self.field, 1)
+#: What Signal-Replay's own score is when it is 0.0 (signal_replay 1.0.1; issue 35).
+THROWN_OUT = ("every chunk thrown out by its phase-call similarity check: it keeps only its comparison event types "
+              "of the field log, so the field side has no phase calls (43/44) to be similar to; not a measure of the "
+              "bench")
 
 
 @dataclass
 class Replayed:
-    """What one replay gave: Signal-Replay's own match, the bench's events and the table."""
+    """What one Signal-Replay bench run gave: Signal-Replay's own match, the bench's events and the tables."""
 
     signal_replay_match: float
     shift: timedelta  # bench time minus log time
     field: list[Row]
     bench: list[Event]
     table: list[MatchRow]
+    green: list[GreenRow]
 
     def overall(self) -> float | None:
-        n = sum(r.field for r in self.table)
-        return None if not n else round(100 * sum(r.matched for r in self.table) / n, 1)
+        return overall(self.table)
 
 
 def replay(rows: Sequence[Row], config: Path, work: Path, *, device: str = "field", tolerance_s: float = 1.0,
@@ -115,8 +97,10 @@ def replay(rows: Sequence[Row], config: Path, work: Path, *, device: str = "fiel
         served.stop()
     matches = [c.match_percentage for c in result.comparisons if c.run_a == "input"]
     shift = input_shift(rows, bench)
+    span = (bench[0].time - shift, bench[-1].time - shift) if bench else None
     return Replayed(matches[0] if matches else float("nan"), shift, list(rows), bench,
-                    match_table(rows, bench, shift, tolerance_s))
+                    match_table(rows, bench, shift, tolerance_s, span=span),
+                    green_table(rows, bench, shift, tolerance_s))
 
 
 def input_shift(rows: Sequence[Row], bench: Sequence[Event]) -> timedelta:
@@ -137,83 +121,50 @@ def input_shift(rows: Sequence[Row], bench: Sequence[Event]) -> timedelta:
     return offsets.most_common(1)[0][0]
 
 
-def match_table(rows: Iterable[Row], bench: Iterable[Event], shift: timedelta, tolerance_s: float = 1.0,
-                codes: Sequence[int] = JUDGED) -> list[MatchRow]:
-    """Per event type and parameter over the bench's span: the log's events, the bench's, and how many of the log's
-    have a bench event of the same type and parameter within ``tolerance_s`` (each bench event matched once)."""
-    bench = list(bench)
-    if not bench:
-        return []
-    lo, hi = bench[0].time - shift, bench[-1].time - shift
-    mine: dict[tuple[int, int], list[datetime]] = defaultdict(list)
-    theirs: dict[tuple[int, int], list[datetime]] = defaultdict(list)
-    for r in rows:
-        if r.code in codes and lo <= r.time <= hi:
-            mine[(r.code, r.parameter)].append(r.time)
-    for e in bench:
-        if e.code in codes:
-            theirs[(e.code, e.parameter)].append(e.time - shift)
-    tolerance = timedelta(seconds=tolerance_s)
-    out = []
-    for key in sorted(set(mine) | set(theirs)):
-        free = sorted(theirs.get(key, []))
-        matched = 0
-        for t in sorted(mine.get(key, [])):
-            near = [u for u in free if abs(u - t) <= tolerance]
-            if near:
-                free.remove(min(near, key=lambda u: abs(u - t)))
-                matched += 1
-        out.append(MatchRow(key[0], key[1], len(mine.get(key, [])), len(theirs.get(key, [])), matched))
-    return out
-
-
-def render(replayed: Replayed, tolerance_s: float = 1.0) -> str:
-    """The table as text: per event type and phase, the log's events found by the bench."""
-    names = {int(c): c.name.lower().replace("_", " ") for c in E}
-    lines = [f"Signal-Replay's match (its DTW of phase and overlap events): {replayed.signal_replay_match:.1f} %",
-             f"events of the log found in the bench's log within {tolerance_s:g} s (bench clock {replayed.shift} "
-             f"after the log's): {replayed.overall()} %", "",
-             f"{'event':<34}{'no.':>4}{'log':>7}{'bench':>7}{'found':>7}{'share':>8}"]
-    for r in replayed.table:
-        share = "-" if r.share is None else f"{r.share:.1f} %"
-        lines.append(f"{names.get(r.code, str(r.code)):<34}{r.parameter:>4}{r.field:>7}{r.bench:>7}{r.matched:>7}"
-                     f"{share:>8}")
-    return "\n".join(lines)
-
-
-def write_table(replayed: Replayed, path: Path) -> None:
-    with path.open("w", newline="", encoding="utf-8") as f:
-        out = csv.writer(f)
-        out.writerow(["EventId", "Parameter", "log", "bench", "found", "share_percent"])
-        out.writerows((r.code, r.parameter, r.field, r.bench, r.matched, r.share) for r in replayed.table)
+def signal_replay_score(match: float) -> str:
+    """Signal-Replay's own score, said as what it is."""
+    said = f"{match:.1f} %"
+    return f"{said} ({THROWN_OUT})" if match == 0.0 else said
 
 
 # --- `hils replay` -------------------------------------------------------------------------------------------
 
+#: The vendor whose logging variants apply, by the log file's suffix (a vendor's own form says whose it is).
+VENDOR_BY_SUFFIX = {".dat": "Econolite", ".datz": "Econolite", ".xml": "MaxTime"}
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
-        "replay", help="replay a controller's hi-res log into the emulator with Signal-Replay and compare",
-        description="Write a config for the controller of an ATSPM-layout hi-res log (phases, rings, clearances, "
-                    "minimums, detectors, push buttons, the coordination plan: from the log's own events, saying what "
-                    "it had to guess), serve the emulator with it, let Signal-Replay replay the log's detector and "
-                    "pedestrian inputs into it in real time, and report Signal-Replay's match and, per event type and "
-                    "phase, how many of the log's events the emulator logged too (pip install 'hils[test]' brings "
-                    "signal_replay).")
-    p.add_argument("log", metavar="LOG", help="hi-res log in the ATSPM layout (.parquet or .csv)")
-    p.add_argument("--device", metavar="ID", help="the controller's DeviceId when the log holds several")
+        "replay", help="replay a controller's hi-res log into the emulator (virtual time) and compare",
+        description="Write a config for the controller of a hi-res log (phases, rings, clearances, minimums, "
+                    "detectors, push buttons, the coordination plan: from the log's own events, saying what it had to "
+                    "guess), run the log's detector, push-button and preempt inputs into the emulator's controller "
+                    "model in virtual time (each on the tick it was logged at; two hours of a busy coordinated log in "
+                    "about 10 s), and report how many of the log's events the emulator logged within 1 s: over the "
+                    "whole log, per green (re-anchored at each field green: how it ended) and per event type and "
+                    "phase. --bench signal-replay replays through Signal-Replay at the wall clock instead (pip install "
+                    "'hils[test]' brings signal_replay).")
+    p.add_argument("log", metavar="LOG",
+                   help="hi-res log: ATSPM layout (.parquet or .csv), Econolite .dat/.datZ or MaxTime asclog .xml")
+    p.add_argument("--device", metavar="ID", help="the controller's DeviceId when an ATSPM log holds several")
     p.add_argument("--config", metavar="FILE", type=Path,
                    help="the emulator's config (default: written from the log into OUT/inferred.toml)")
     p.add_argument("--start", metavar="TIME", type=datetime.fromisoformat,
                    help="replay from this time of the log (ISO, e.g. 2024-04-15T12:30:00; default: its start)")
     p.add_argument("--minutes", type=float, metavar="M", help="replay this many minutes (default: to the log's end)")
+    p.add_argument("--bench", choices=("virtual", "signal-replay"), default="virtual",
+                   help="virtual: the emulator's model in process, in virtual time (default); signal-replay: "
+                        "Signal-Replay replays the log into `hils emulator serve` in real time")
+    p.add_argument("--vendor", choices=sorted(set(VENDOR_BY_SUFFIX.values())),
+                   help="whose logging variants to count as equivalent (default: from the file: .dat Econolite, "
+                        ".xml MaxTime; an ATSPM file: none)")
     p.add_argument("--infer-only", action="store_true", help="write the config and stop")
     p.add_argument("--out", metavar="DIR", type=Path, help="output folder (default: a new temporary one)")
     p.set_defaults(func=_command)
 
 
 def _command(args: argparse.Namespace) -> int:
-    from harness.reference import field_log, hires_file
+    from harness.reference import field_log, hires_file, replay_match, replay_virtual
     from harness.reference.hires_file import FieldLogError
 
     every = hires_file.load(args.log, args.device)
@@ -236,10 +187,43 @@ def _command(args: argparse.Namespace) -> int:
     start = args.start or every[0].time
     end = start + timedelta(minutes=args.minutes) if args.minutes else None
     rows = [r for r in every if r.time >= start and (end is None or r.time < end)]
-    minutes = (rows[-1].time - rows[0].time).total_seconds() / 60 if rows else 0
-    print(f"Replaying {len(rows)} events ({minutes:.1f} minutes, in real time) into the emulator...", flush=True)
-    replayed = replay(rows, config, out)
-    print(render(replayed))
-    write_table(replayed, out / "match.csv")
-    print(f"Outputs in {out}/: {'inferred.toml, ' if args.config is None else ''}match.csv, signal_replay/")
+    if not rows:
+        raise FieldLogError(f"{args.log}: no events from {start} on; allowed: --start and --minutes within the log "
+                            f"({every[0].time} to {every[-1].time})")
+    minutes = (rows[-1].time - rows[0].time).total_seconds() / 60
+    vendor = args.vendor or VENDOR_BY_SUFFIX.get(Path(args.log).suffix.lower())
+    equivalences = [q for q in replay_match.EQUIVALENCES if q.vendor == vendor]
+    if args.bench == "signal-replay":
+        print(f"Replaying {len(rows)} events ({minutes:.1f} minutes, in real time) into the emulator with "
+              "Signal-Replay...", flush=True)
+        replayed = replay(rows, config, out)
+        table, green = replayed.table, replayed.green
+        headline = (f"Signal-Replay's match (its DTW of phase and overlap events): "
+                    f"{signal_replay_score(replayed.signal_replay_match)}\n"
+                    f"events of the log found in the bench's log within 1 s (bench clock {replayed.shift} after the "
+                    f"log's, over the bench's span): {replayed.overall()} %")
+    else:
+        print(f"Replaying {len(rows)} events ({minutes:.1f} minutes) into the emulator in virtual time...", flush=True)
+        wall = time.perf_counter()
+        ran = replay_virtual.run(rows, config_mod.load(config))
+        wall = time.perf_counter() - wall
+        table = replay_match.match_table(rows, ran.events, equivalences=equivalences)
+        green = replay_match.green_table(rows, ran.events)
+        headline = (f"{ran.inputs} inputs replayed in {wall:.1f} s of wall time\n"
+                    f"events of the log found in the emulator's log within 1 s, over the whole log: "
+                    f"{replayed_share(table)}")
+        (out / "bench.csv").write_text("TimeStamp,EventId,Parameter\n" + "".join(
+            f"{e.time.isoformat(sep=' ', timespec='milliseconds')[:-2]},{e.code},{e.parameter}\n" for e in ran.events))
+    print(headline)
+    print(replay_match.render_equivalences(equivalences))
+    print(replay_match.render(table, green))
+    replay_match.write_table(table, out / "match.csv")
+    outputs = ["inferred.toml"] if args.config is None else []
+    outputs += ["match.csv", "signal_replay/" if args.bench == "signal-replay" else "bench.csv"]
+    print(f"Outputs in {out}/: {', '.join(outputs)}")
     return 0
+
+
+def replayed_share(table: Sequence[MatchRow]) -> str:
+    n, share = sum(r.field for r in table), overall(table)
+    return f"{share} % of {n}" if share is not None else f"none to judge ({n} judged events in the log)"

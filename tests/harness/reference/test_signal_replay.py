@@ -22,7 +22,8 @@ from emulator.model.controller import Controller
 from emulator.model.datalogger import DataLogger
 from harness.reference import field_log, hires_file
 from harness.reference.hires_file import Row
-from harness.reference.replay import match_table, replay
+from harness.reference.replay import replay
+from harness.reference.replay_match import match_table
 from hils.protocol.hires import EventCode
 from tests.emulator.model.test_hires import config_text, config_with
 

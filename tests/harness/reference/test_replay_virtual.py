@@ -1,0 +1,120 @@
+"""`hils replay` in virtual time: a log's inputs run into the emulator's model in process, each on the tick it was
+logged at; the emulator's own log comes back event for event, a real field log is replayed whole, and the measures
+(the whole-log match, the per-green measure, the declared logging variants) say what they claim."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from datetime import datetime, timedelta
+from pathlib import Path
+
+import atspm
+
+from harness.reference import field_log, hires_file, replay_match, replay_virtual
+from harness.reference.hires_file import Row
+from harness.reference.replay_match import Ending, Equivalence, green_table, match_table, overall
+from harness.reference.round_trip import emulator_log
+from hils.protocol.hires import EventCode
+from tests.emulator.model.test_hires import config_with
+
+E = EventCode
+SAMPLE = Path(atspm.__file__).parent / "data" / "sample_raw_data.parquet"
+LOGS = Path(__file__).parent / "field_logs"
+INPUT_CODES = {E.DETECTOR_ON, E.DETECTOR_OFF, E.PED_DETECTOR_ON, E.PED_DETECTOR_OFF}
+
+
+def test_the_emulators_own_log_comes_back_event_for_event() -> None:
+    cfg = config_with()
+    rows = emulator_log(cfg, 300, seed=4)
+    ran = replay_virtual.run(rows, cfg)
+    assert [(e.time, e.code, e.parameter) for e in ran.events] == [(r.time, r.code, r.parameter) for r in rows]
+    assert ran.inputs == sum(r.code in INPUT_CODES for r in rows) > 300
+    table = match_table(rows, ran.events)
+    assert overall(table) == 100.0 and all(r.matched == r.field == r.bench for r in table)
+    assert {g.ending for g in green_table(rows, ran.events)} >= {Ending.GAP_OUT}
+    assert all(g.field == g.anchored == g.ended == g.same for g in green_table(rows, ran.events))
+
+
+def test_a_replay_is_the_same_every_time() -> None:
+    rows = hires_file.load(SAMPLE, end=datetime(2024, 4, 15, 12, 10))
+    cfg = field_log.infer(rows).config()
+    first, second = replay_virtual.run(rows, cfg), replay_virtual.run(rows, cfg)
+    assert first.events == second.events and len(first.events) > 1000
+
+
+def test_a_field_logs_inputs_land_on_their_ticks_and_the_bench_spans_the_log() -> None:
+    rows = hires_file.load(SAMPLE, end=datetime(2024, 4, 15, 12, 20))
+    ran = replay_virtual.run(rows, field_log.infer(rows).config())
+    field = [(r.time, r.code, r.parameter) for r in rows if r.code in INPUT_CODES]
+    bench = {(e.time, e.code, e.parameter) for e in ran.events if e.code in INPUT_CODES}
+    # The field's MaxTime logs a detector on again while it is on (2 % of its ons): the model cannot, nothing else
+    # is missing.
+    missing = [f for f in field if f not in bench]
+    assert len(missing) < 0.03 * len(field) and all(code == E.DETECTOR_ON for _, code, _ in missing)
+    assert ran.events[0].time == rows[0].time.replace(microsecond=rows[0].time.microsecond // 100_000 * 100_000)
+    assert ran.events[-1].time >= rows[-1].time - timedelta(seconds=5)
+
+
+def test_a_detector_whose_first_event_is_off_starts_actuated() -> None:
+    cfg = config_with()
+    start = datetime(2024, 5, 1, 7)
+    rows = [Row(start, E.POWER_RESTORED, 1), Row(start + timedelta(seconds=30), E.DETECTOR_OFF, 4)]
+    ran = replay_virtual.run(rows, cfg)
+    ons = [e for e in ran.events if e.code == E.DETECTOR_ON and e.parameter == 4]
+    offs = [e for e in ran.events if e.code == E.DETECTOR_OFF and e.parameter == 4]
+    assert [e.time for e in ons] == [start] and [e.time for e in offs] == [start + timedelta(seconds=30)]
+    assert any(e.code == E.PHASE_BEGIN_GREEN and e.parameter == 4 for e in ran.events)  # its call was served
+
+
+def test_the_per_green_measure_reanchors_at_each_field_green() -> None:
+    t0 = datetime(2024, 5, 1, 7)
+
+    def green(p: int, begin: float, end: float, why: int) -> list[Row]:
+        return [Row(t0 + timedelta(seconds=begin), E.PHASE_BEGIN_GREEN, p), Row(t0 + timedelta(seconds=end), why, p),
+                Row(t0 + timedelta(seconds=end), E.PHASE_BEGIN_YELLOW, p)]
+
+    field = green(2, 0, 10, E.PHASE_GAP_OUT) + green(2, 30, 40, E.PHASE_GAP_OUT) + green(2, 60, 80, E.PHASE_MAX_OUT)
+    # The bench began the first green 0.5 s late and ended it right, missed the second's start by 3 s, and ended
+    # the third 0.5 s early by gap-out.
+    bench = green(2, 0.5, 10.2, E.PHASE_GAP_OUT) + green(2, 33, 40, E.PHASE_GAP_OUT) + green(2, 60, 79.5,
+                                                                                          E.PHASE_GAP_OUT)
+    rows = {g.ending: g for g in green_table(field, bench)}
+    assert (rows[Ending.GAP_OUT].field, rows[Ending.GAP_OUT].anchored, rows[Ending.GAP_OUT].ended,
+            rows[Ending.GAP_OUT].same) == (2, 1, 1, 1)
+    assert (rows[Ending.MAX_OUT].field, rows[Ending.MAX_OUT].anchored, rows[Ending.MAX_OUT].ended,
+            rows[Ending.MAX_OUT].same) == (1, 1, 1, 0)
+
+
+def test_a_declared_variant_is_judged_where_it_says_and_nowhere_else() -> None:
+    t0 = datetime(2024, 5, 1, 7)
+    field = [Row(t0, E.OVERLAP_BEGIN_RED_CLEARANCE, 3), Row(t0 + timedelta(seconds=1.8), E.OVERLAP_OFF, 3)]
+    bench = [Row(t0, E.OVERLAP_OFF, 3)]
+    assert overall(match_table(field, bench)) == 0.0
+    econolite = [q for q in replay_match.EQUIVALENCES if q.vendor == "Econolite"]
+    assert overall(match_table(field, bench, equivalences=econolite)) == 100.0
+    assert overall(match_table(field, [Row(t0 + timedelta(seconds=1.8), E.OVERLAP_OFF, 3)],
+                               equivalences=econolite)) == 0.0
+
+
+def test_every_declared_variant_cites_its_source() -> None:
+    for q in replay_match.EQUIVALENCES:
+        assert isinstance(q, Equivalence) and q.vendor and q.says
+        assert ("log " in q.source and "/" in q.source) or "manual" in q.source.lower(), q
+
+
+def test_hils_replay_runs_a_vendor_log_in_virtual_time_from_another_folder(tmp_path: Path) -> None:
+    log = LOGS / "ECON_10.205.17.215_2024_02_21_1115.dat"
+    done = subprocess.run([sys.executable, "-m", "hils", "replay", str(log), "--out", "out"], cwd=tmp_path,
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert "in virtual time" in done.stdout and "over the whole log: " in done.stdout
+    assert "field green ended by" in done.stdout and "Econolite: field event 65" in done.stdout
+    assert {p.name for p in (tmp_path / "out").iterdir()} == {"inferred.toml", "match.csv", "bench.csv"}
+
+
+def test_signal_replays_zero_is_said_as_thrown_out() -> None:
+    from harness.reference.replay import THROWN_OUT, signal_replay_score
+
+    assert signal_replay_score(0.0) == f"0.0 % ({THROWN_OUT})" and "phase-call similarity check" in THROWN_OUT
+    assert signal_replay_score(59.9) == "59.9 %"
