@@ -29,7 +29,7 @@ import numpy as np
 from hypothesis import HealthCheck, settings
 from hypothesis.stateful import RuleBasedStateMachine, initialize, precondition, rule
 
-from hils.control.actions import ActionConverter, ActionError, ActionType, Command, PreemptedError
+from hils.control.actions import PAPER_ACTION_TYPES, ActionConverter, ActionError, ActionType, Command, PreemptedError
 from hils.control.manager import CLEAR_ATTEMPTS, Ev, Manager, Mode, State, graph
 from hils.control.manager_io import (
     AgentOverdue,
@@ -172,7 +172,7 @@ class ManagerMachine(RuleBasedStateMachine):
     def __init__(self) -> None:
         super().__init__()
         self.manager = manager()
-        self.converters = {t: ActionConverter(CONFIG, t) for t in ActionType}
+        self.converters = {t: ActionConverter(CONFIG, t) for t in PAPER_ACTION_TYPES}
         self.t = 0.0
         self.actions = 0
         self.polls = 0
@@ -556,7 +556,7 @@ class ManagerMachine(RuleBasedStateMachine):
         self.feed(Started(self._tick(0.0135), greens, backup))
         self.shown = greens
 
-    @rule(data=st.data(), action_type=st.sampled_from(ActionType), dt=DT)
+    @rule(data=st.data(), action_type=st.sampled_from(PAPER_ACTION_TYPES), dt=DT)
     def act(self, data: st.DataObject, action_type: ActionType, dt: float) -> None:
         self._act(data, action_type, dt)
 
