@@ -769,6 +769,8 @@ class Manager:
     def _recovery_failed(self, ev: ControllerUnreadable | SetFailed, out: list[Effect]) -> None:
         if isinstance(ev, SetFailed):
             self._settled(ev, out)
+            if self.phase_control:  # it may have landed: in TIMEOUT the run holds nothing
+                self._let_go(Purpose.RELEASE, ev.t, out)
         what = ev.error if isinstance(ev, ControllerUnreadable) else "the recovery SET got no answer"
         out.append(Note(f"recovery failed, still in TIMEOUT: {what}"))
         self._arm_recovery(out)
