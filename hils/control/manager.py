@@ -769,8 +769,10 @@ class Manager:
     def _recovery_failed(self, ev: ControllerUnreadable | SetFailed, out: list[Effect]) -> None:
         if isinstance(ev, SetFailed):
             self._settled(ev, out)
-            if self.phase_control:  # it may have landed: in TIMEOUT the run holds nothing
+            if self.phase_control and ev.lost:  # it may have landed: in TIMEOUT the run holds nothing
                 self._let_go(Purpose.RELEASE, ev.t, out)
+            elif self.phase_control:  # refused: an SNMP SET applies whole or not at all, so nothing of it landed
+                self.sent = no_controls()
         what = ev.error if isinstance(ev, ControllerUnreadable) else "the recovery SET got no answer"
         out.append(Note(f"recovery failed, still in TIMEOUT: {what}"))
         self._arm_recovery(out)

@@ -90,8 +90,8 @@ from hils.control.manager_io import (
     Verified,
     WatchCalls,
 )
-from hils.protocol.config import load
 from hils.control.phase_control import Control
+from hils.protocol.config import load
 from hils.protocol.ntcip import CONTROL_TABLE, ControlColumn, SignalState
 
 CONFIG = load()
@@ -222,7 +222,7 @@ class ManagerMachine(RuleBasedStateMachine):
         m = self.manager
         self.consistent = False
         before, open_before, position_before, call_before = m.mode, self.open, m.position, m.call
-        sent_before, running_before = dict(m.sent), m.running
+        sent_before, running_before, sets_sent_before = dict(m.sent), m.running, self.sets_sent
         effects = m.handle(ev)
         after = m.mode
 
@@ -251,9 +251,8 @@ class ManagerMachine(RuleBasedStateMachine):
             assert isinstance(refused, Refused) and refused.action_id == ev.action_id
             assert isinstance(refused.error, PreemptedError) and refused.error.reason == "preempted"
             assert after is Mode.PREEMPTED
-        elif isinstance(ev, CommandRequested) and before is not Mode.IDLE:
-            assert effects == [Dropped(ev.action_id, before.log_name)]
-        elif isinstance(ev, ScheduleRequested) and before not in (Mode.IDLE, Mode.SCHEDULED):
+        elif (isinstance(ev, CommandRequested) and before is not Mode.IDLE) or (
+                isinstance(ev, ScheduleRequested) and before not in (Mode.IDLE, Mode.SCHEDULED)):
             assert effects == [Dropped(ev.action_id, before.log_name)]
         assert (m.refusal() is not None) == (after is Mode.PREEMPTED), "refused exactly while PREEMPTED"
         if isinstance(ev, CloseRequested) and before is not Mode.CLOSED:
@@ -481,7 +480,7 @@ class ManagerMachine(RuleBasedStateMachine):
         # A control object the run never sets found set while working is a TIMEOUT; so is VehCall other than the
         # call last SET, read when no SET of the run could race with the read; else nothing happens.
         if isinstance(ev, ControlsRead) and m.phase_control:
-            self._check_read_back(ev, before, after, effects, sent_before)
+            self._check_read_back(ev, before, after, effects, sent_before, sets_sent_before)
         elif isinstance(ev, ControlsRead):
             sent_then, clean = self.readback
             foreign = any(phases for _name, phases in ev.held) or (
@@ -610,11 +609,16 @@ class ManagerMachine(RuleBasedStateMachine):
             assert (after is Mode.SCHEDULED) == (m.running is not None)
         if after in (Mode.PREEMPTED, Mode.TIMEOUT):
             assert not any(held.values()), f"{after.name} and still holding {held}"
-        C = ControlColumn
-        for a, b in ((C.HOLD, C.FORCE_OFF), (C.VEH_CALL, C.PHASE_OMIT), (C.PED_CALL, C.PED_OMIT),
-                     (C.HOLD, C.PHASE_OMIT)):
+        if after in WORKING and m.backup_time and m.keepalive_on and any(held.values()):
+            # MMITSS re-sends every active command each (backup time - 1) s; ours is due no later
+            due = [d for d, _kind, token in self.timers if token == self.keepalive_token]
+            assert due and due[0] <= self.last_set + m.backup_time - 1 + 1e-9, (
+                f"holding {held}, last SET at {self.last_set}, backup time {m.backup_time} s, keepalive due {due}")
+        c = ControlColumn
+        for a, b in ((c.HOLD, c.FORCE_OFF), (c.VEH_CALL, c.PHASE_OMIT), (c.PED_CALL, c.PED_OMIT),
+                     (c.HOLD, c.PHASE_OMIT)):
             assert not held[a] & held[b], f"{a.name} and {b.name} on {sorted(held[a] & held[b])}"
-        assert not any(set(ring) <= held[C.PHASE_OMIT] for ring in CONFIG.rings), "a whole ring omitted"
+        assert not any(set(ring) <= held[c.PHASE_OMIT] for ring in CONFIG.rings), "a whole ring omitted"
         if isinstance(ev, ScheduleRequested) and before in (Mode.IDLE, Mode.SCHEDULED):
             assert after is (Mode.SCHEDULED if ev.schedule.orders else Mode.IDLE)
 
@@ -964,11 +968,12 @@ class PhaseControlMachine(ManagerMachine):
         self.feed(SetAnswered(self._tick(0.01), done.purpose, done.command_id))
 
     def _check_read_back(self, ev: ControlsRead, before: Mode, after: Mode, effects: list[Effect],
-                         sent_before: dict[ControlColumn, frozenset[int]]) -> None:
+                         sent_before: dict[ControlColumn, frozenset[int]], sets_sent_before: int) -> None:
         sent_then, clean = self.readback
         read = {**{c: p for name, p in ev.held for c in ControlColumn if CONTROL_TABLE[c].name == name},
                 ControlColumn.VEH_CALL: ev.veh_call}
-        judged = clean and sent_then == self.sets_sent and ev.veh_call is not None
+        # (judged as the read came in: the TIMEOUT it may cause SETs the objects to 0 after)
+        judged = clean and sent_then == sets_sent_before and ev.veh_call is not None
         foreign = judged and any(read[c] - sent_before[c] for c in ControlColumn)
         lost = judged and any(sent_before[c] - read[c] for c in ControlColumn if c is not ControlColumn.FORCE_OFF)
         if before not in WORKING or not (foreign or lost):
