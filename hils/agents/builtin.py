@@ -60,12 +60,10 @@ def _issues_only(name: str, allowed: ActionType, action_type: ActionType | str) 
 
 
 class RandomAgent:
-    """Uniformly random actions of one type (a baseline, and a fuzzer of the middleware)."""
+    """Uniformly random actions of one type (a baseline, and a fuzzer of the middleware). Phase control: a step
+    that calls a random pair of the config's and holds each of its phases or not, at random."""
 
     def __init__(self, config: IntersectionConfig, action_type: ActionType | str, seed: int = 0) -> None:
-        if ActionType(action_type) is ActionType.CONTROL:
-            raise AgentError("the random agent issues selection, switch or duration actions; for phase control use "
-                             "omit-hold or a schedule (--schedule FILE)")
         self.config = config
         self.action_type = ActionType(action_type)
         self.rng = random.Random(seed)
@@ -75,6 +73,10 @@ class RandomAgent:
             return self.rng.choice(self.config.pairs)
         if self.action_type is ActionType.SWITCH:
             return self.rng.randint(0, 1)
+        if self.action_type is ActionType.CONTROL:
+            pair = self.rng.choice(self.config.pairs)
+            held = [p for p in pair if self.rng.random() < 0.5]
+            return {Control.CALL_VEH.value: list(pair), Control.HOLD.value: held}
         return self.rng.random()
 
 
