@@ -868,6 +868,7 @@ class IndicationMonitor:
         self.conflicts: list[ShownConflict] = []
         self.mmu_flash_at: float | None = None
         self.status_first_seen: dict[UnitControlStatus, float] = {}
+        self.controls: list[tuple[float, dict[ControlColumn, frozenset[int]]]] = []  # the six objects, at each change
         env.process(self._sample())
 
     def _sample(self) -> Generator[simpy.Event, Any, None]:
@@ -883,6 +884,8 @@ class IndicationMonitor:
         c = self.controller
         self.samples += 1
         self.status_first_seen.setdefault(c.control_status, self.env.now)
+        if not self.controls or self.controls[-1][1] != c.control:
+            self.controls.append((self.env.now, dict(c.control)))
         if c.flash_status is UnitFlashStatus.MMU and self.mmu_flash_at is None:
             self.mmu_flash_at = self.env.now
         lit = conflicts(self.config.permissives, c.greens | c.yellows, c.overlap_greens | c.overlap_yellows)
