@@ -47,9 +47,10 @@ The rules a schedule is checked by (each refusal's ``reason``)
 What the other commands mean, accepted as they are
 --------------------------------------------------
 - A hold on a phase that is not green is *armed*: it holds nothing and calls nothing until its phase next shows
-  green, then keeps that green until released ("retain the existing Green interval", NEMA TS 2 3.5.3.11.1, which
-  phaseControlGroupHold cites). MMITSS holds the next phase before it starts so; a hold whose phase never shows
-  green in its window *lapsed*.
+  green, then keeps that green until released: phaseControlGroupHold activates "the System Phase Hold control for
+  that phase" (NTCIP 1202 v03), a hold of the green, and places no call (VehCall does). (The NEMA TS 2 text of the
+  Hold input was not among the stored references: this rests on the NTCIP text.) MMITSS holds the next phase before
+  it starts so; a hold whose phase never shows green in its window *lapsed*.
 - A force-off ends its phase's green once the minimum has been served, and only to serve a conflicting call: with
   no conflicting call the green rests, as a NEMA green with nowhere to go does. Its bit stays set until that green
   ends ("When the phase green terminates, the associated bit shall be reset to 0", 5.2.5.5): the order is then
