@@ -58,10 +58,11 @@ choosing phase pairs every 10 s, one simulated hour of SUMO traffic, and the
 built-in NTCIP 1202 emulator in virtual time. With --schedule FILE the run
 commands by phase control instead: the holds, force-offs, omits and calls of
 MMITSS's schedule JSON, from the run's start, re-sent before the controller's
-backup time runs out and cleared at its end (docs/phase-control.md). Outputs go to a run folder under
-reports/runs/: the JSON Lines event log, summary.json, a signal timeline and a
-queue plot, and the controller's hi-res log (hires.parquet) with its ATSPM
-measures and charts. The event log and the hi-res log (hires.journal.csv until
+backup time runs out and cleared at its end (docs/phase-control.md).
+
+Outputs go to a run folder under reports/runs/: the JSON Lines event log,
+summary.json, a signal timeline and a queue plot, and the controller's hi-res
+log (hires.parquet) with its ATSPM measures and charts. The event log and the hi-res log (hires.journal.csv until
 the run ends) are written as the run goes: a run killed with SIGKILL keeps them.
 At the end the small files come first (summary.json before the pictures, the
 pictures before hires.parquet); a file that cannot be written is named with why

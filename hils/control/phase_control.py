@@ -172,6 +172,7 @@ class Schedule:
 
     orders: tuple[Order, ...] = ()
     dropped: tuple[str, ...] = ()
+    sources: tuple[str, ...] = ()  # where each order came from (``Schedule[3]``), when read from a message or list
     instants: tuple[int, ...] = field(init=False)  # every tenth at which an order starts or ends, sorted
 
     def __post_init__(self) -> None:
@@ -265,7 +266,7 @@ def _message(value: Mapping[str, Any]) -> Schedule:
 
 
 def _commands(items: Sequence[Any]) -> Schedule:
-    orders, dropped = [], []
+    orders, dropped, sources = [], [], []
     for i, item in enumerate(items):
         where = f"Schedule[{i}]"
         if not isinstance(item, Mapping):
@@ -285,7 +286,8 @@ def _commands(items: Sequence[Any]) -> Schedule:
             dropped.append(f"{where} ({order.control.value} {phase} at {start / 10:g} s) starts and ends at once")
         else:
             orders.append(order)
-    return Schedule(tuple(orders), tuple(dropped))
+            sources.append(where)
+    return Schedule(tuple(orders), tuple(dropped), tuple(sources))
 
 
 def _step(value: Mapping[Any, Any]) -> Schedule:
@@ -340,9 +342,14 @@ _EXCLUSIVE = ((Control.HOLD, Control.FORCE_OFF, HoldForceOffError, "held and for
 def check(schedule: Schedule, config: IntersectionConfig) -> None:
     """Refuse a schedule that breaks a rule of the module header, with the error naming it."""
     allowed = list(config.phase_numbers)
+    where = dict(zip(schedule.orders, schedule.sources, strict=False))
+
+    def named(o: Order) -> str:
+        return f"{where[o]}: {o}" if o in where else str(o)
+
     for o in schedule.orders:
         if o.phase not in config.phases:
-            raise UnknownPhaseError(f"unknown phase {o.phase} in {o}; allowed phases: {allowed}")
+            raise UnknownPhaseError(f"unknown phase {o.phase} in {named(o)}; allowed phases: {allowed}")
     by_phase: dict[int, list[Order]] = {}
     for o in schedule.orders:
         by_phase.setdefault(o.phase, []).append(o)
@@ -352,15 +359,17 @@ def check(schedule: Schedule, config: IntersectionConfig) -> None:
                           if b.control is b_type and a.overlaps(b)), None)
             if clash is not None:
                 a, b = clash
-                raise error(f"phase {phase} is {what} at once ({a}; {b}): refused, nothing sent")
+                raise error(f"phase {phase} is {what} at once ({named(a)}; {named(b)}): refused, nothing sent; "
+                            "allowed: one of the two at a time")
     omits = [o for o in schedule.orders if o.control is Control.OMIT_VEH]
     for tenth in sorted({o.start for o in omits}):
         omitted = {o.phase for o in omits if o.on_at(tenth)}
         for number, ring in enumerate(config.rings, start=1):
             if set(ring) <= omitted:
+                by = "; ".join(named(o) for o in omits if o.on_at(tenth) and o.phase in ring)
                 raise RingOmittedError(f"every phase of ring {number} ({', '.join(map(str, ring))}) is omitted at "
-                                       f"{tenth / 10:g} s: the ring would have no phase to serve; refused, nothing "
-                                       "sent")
+                                       f"{tenth / 10:g} s ({by}): the ring would have no phase to serve; refused, "
+                                       "nothing sent; allowed: at least one phase of each ring not omitted")
 
 
 # --- the life of an order -----------------------------------------------------------------------------------------

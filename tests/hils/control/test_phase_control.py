@@ -70,7 +70,8 @@ def test_the_clear_message_and_a_step() -> None:
 
 @pytest.mark.parametrize(("value", "error", "says"), [
     (message(command("hold", 2, 0, 20), command("forceoff", 2, 10, 11)), HoldForceOffError,
-     "phase 2 is held and forced off at once (hold 2 (0 s to 20 s); forceoff 2 (10 s to 11 s))"),
+     "phase 2 is held and forced off at once (Schedule[0]: hold 2 (0 s to 20 s); Schedule[1]: forceoff 2 (10 s to "
+     "11 s))"),
     (message(command("call_veh", 4, 0, 20), command("omit_veh", 4, 19.9, 30)), CallOmittedError,
      "phase 4 is called and omitted at once"),
     (message(command("call_ped", 4, 0, 20), command("omit_ped", 4, 5, 6)), CallOmittedError,
@@ -78,8 +79,8 @@ def test_the_clear_message_and_a_step() -> None:
     (message(command("hold", 6, 0, 20), command("omit_veh", 6, 0, 20)), HoldOmittedError, "held and omitted"),
     ({"omit_veh": [1, 2, 3, 4]}, RingOmittedError, "every phase of ring 1 (1, 2, 3, 4) is omitted at 0 s"),
     (message(*(command("omit_veh", p, 10 * (p == 8), 30) for p in (5, 6, 7, 8))), RingOmittedError,
-     "every phase of ring 2 (5, 6, 7, 8) is omitted at 10 s"),
-    (message(command("hold", 9, 0, 5)), UnknownPhaseError, "unknown phase 9 in hold 9 (0 s to 5 s)"),
+     "every phase of ring 2 (5, 6, 7, 8) is omitted at 10 s (Schedule[0]: omit_veh 5"),
+    (message(command("hold", 9, 0, 5)), UnknownPhaseError, "unknown phase 9 in Schedule[0]: hold 9 (0 s to 5 s)"),
     (message(command("hold", 2, 5, 4)), ScheduleTimeError, "ends at 4 s, before it starts at 5 s"),
     (message(command("hold", 2, -1, 4)), ScheduleTimeError, "seconds >= 0"),
     (message(command("hold", 2, 0, math.nan)), ScheduleTimeError, "a finite number"),
