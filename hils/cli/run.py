@@ -265,7 +265,9 @@ def run_command(args: argparse.Namespace) -> int:
                  duration=spec.duration, log_path=log_path, hires_path=out / hiresjournal.NAME,
                  recover_after=spec.recover_after,
                  on_reset=_hooks(status.start if status else None, dashboard.attach if dashboard else None),
-                 sumo_config=sumo_config, take_over=args.take_over)
+                 sumo_config=sumo_config, take_over=args.take_over,
+                 # a schedule drives an actuated controller (MMITSS's premise): SUMO's loops call its phases too
+                 detectors=True if schedule_agent is not None else None)
     error: BaseException | None = None
     started = datetime.now()  # the controller's clock is the host's when it is `hils emulator serve`
     with _terminate_as_interrupt(), tb, _served(dashboard):

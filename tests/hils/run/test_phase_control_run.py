@@ -104,3 +104,12 @@ def test_the_environment_takes_a_step_of_six_rows_of_bits() -> None:
     assert adapter.action(np.zeros((6, 8), dtype=np.int8)) == "clear"
     with pytest.raises(EnvOptionError, match="allowed: 0/1 of shape"):
         adapter.action(np.zeros((8,)))
+
+
+def test_a_schedule_with_traffic_runs_the_controller_on_its_detectors_too(tmp_path) -> None:
+    """MMITSS's schedules drive an actuated controller: SUMO's stop-bar loops call its phases beside the schedule."""
+    out = tmp_path / "run"
+    assert main(["run", "--schedule", str(MMITSS / "schedule_ev.json"), "--duration", "120", "--out", str(out),
+                 "--no-progress"]) == 0
+    actuations = json.loads((out / "summary.json").read_text())["detector_actuations"]
+    assert sum(actuations.values()) > 10
