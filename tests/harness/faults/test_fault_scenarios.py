@@ -17,7 +17,7 @@ from harness.faults.reader import default_suite, load_fault_scenario, parse_faul
 from harness.faults.runner import run_fault_scenario
 from harness.faults.table import FaultScenarioError
 from hils.cli.main import main
-from hils.protocol.ntcip import UnitControlStatus, UnitFlashStatus
+from hils.protocol.ntcip import ControlColumn, UnitControlStatus, UnitFlashStatus
 from hils.run.testbed import run_spec
 from hils.shell.events import Kind
 from hils.shell.events import read as read_events
@@ -159,7 +159,8 @@ def test_the_judge_names_an_overlap_shown_beside_a_phase_it_conflicts_with(city_
     env = simpy.Environment()
     shown = SimpleNamespace(greens=frozenset({2, 6}), yellows=frozenset(), overlap_greens=frozenset({1}),
                             overlap_yellows=frozenset(), flash_status=UnitFlashStatus.NOT_FLASH,
-                            control_status=UnitControlStatus.SYSTEM_CONTROL)
+                            control_status=UnitControlStatus.SYSTEM_CONTROL,
+                            control={c: frozenset() for c in ControlColumn})
     monitor = IndicationMonitor(env, shown, city_config)
     env.run(until=0.2)
     result = evaluate(scenario, records, faults, {TLS_ID: monitor})
