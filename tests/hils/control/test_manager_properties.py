@@ -1302,3 +1302,26 @@ def test_a_preempt_ends_the_transition_without_a_timeout_and_only_a_failure_of_t
     for i in range(5, 5 + N_TIMEOUT):
         effects = m.handle(PollFailed(33.0 + i, i, 0, "CommunicationTimeout", "lost"))
     assert m.mode is Mode.TIMEOUT and m.timeout_reason is TimeoutReason.COMMUNICATION
+
+
+def test_a_refused_recovery_set_under_phase_control_sends_nothing_and_holds_nothing() -> None:
+    """An SNMP SET applies whole or not at all: a refused recovery SET landed nothing, so the manager, back in
+    TIMEOUT, holds nothing and sends no release (a lost one may have landed: it is released)."""
+    for lost in (False, True):
+        m = Manager(TAU_TRANS, sequence=CONFIG.sequence, recover_after=None, phase_control=True)
+        m.handle(Started(0.0, frozenset({2, 6}), 30))
+        schedule = ActionConverter(CONFIG, ActionType.CONTROL).convert({"hold": [2, 6], "call_veh": [2, 6]})
+        m.handle(ScheduleRequested(1.0, 1, schedule))
+        m.handle(SetAnswered(1.01, Purpose.SCHEDULE, None))
+        m.handle(AgentOverdue(2.0, 10.0))
+        assert m.mode is Mode.TIMEOUT
+        m.handle(SetFailed(2.1, Purpose.RELEASE, None, lost=True, error="lost"))
+        m.handle(RecoveryRequested(3.0))
+        effects = m.handle(ControllerRead(3.1, frozenset({2, 6}), None, False))
+        assert any(isinstance(e, SendControls) and e.purpose is Purpose.RECOVERY for e in effects)
+        effects = m.handle(SetFailed(3.2, Purpose.RECOVERY, None, lost=lost, error="lost" if lost else "genErr"))
+        assert m.mode is Mode.TIMEOUT
+        released = [e for e in effects if isinstance(e, SendControls)]
+        assert released == ([SendControls(tuple((c, frozenset()) for c in ControlColumn), Purpose.RELEASE)]
+                            if lost else []), "a refused SET is never followed by another"
+        assert not any(m.sent.values()), "in TIMEOUT the run holds nothing"
