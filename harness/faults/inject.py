@@ -602,6 +602,8 @@ BAD_KINDS: dict[ActionType, frozenset[BadActionKind]] = {
                                      BadActionKind.NAN, BadActionKind.WRONG_TYPE}),
     ActionType.SWITCH: frozenset({BadActionKind.NAN, BadActionKind.OUT_OF_RANGE, BadActionKind.WRONG_TYPE}),
     ActionType.DURATION: frozenset({BadActionKind.NAN, BadActionKind.OUT_OF_RANGE, BadActionKind.WRONG_TYPE}),
+    ActionType.CONTROL: frozenset({BadActionKind.CONFLICT, BadActionKind.UNKNOWN_PHASE, BadActionKind.NAN,
+                                   BadActionKind.WRONG_TYPE}),
 }
 
 
@@ -612,6 +614,12 @@ def bad_value(kind: BadActionKind, action_type: ActionType, config: Intersection
                          f"{', '.join(sorted(BAD_KINDS[action_type]))}")
     ring1 = [p for p in config.phase_numbers if config.ring_of(p) == 1]
     ring2 = [p for p in config.phase_numbers if config.ring_of(p) == 2]
+    if action_type is ActionType.CONTROL:  # a step that breaks a rule of hils.control.phase_control
+        return {BadActionKind.CONFLICT: {"hold": [ring1[0]], "forceoff": [ring1[0]]},
+                BadActionKind.UNKNOWN_PHASE: {"hold": [max(config.phases) + 1]},
+                BadActionKind.NAN: [{"commandType": "hold", "commandPhase": ring1[0], "commandStartTime": math.nan,
+                                     "commandEndTime": 5.0}],
+                BadActionKind.WRONG_TYPE: "advance"}[kind]
     match kind:
         case BadActionKind.CONFLICT:
             return next([a, b] for a in ring1 for b in ring2 if first_conflict(config.permissives, (a, b)))
@@ -868,6 +876,7 @@ class IndicationMonitor:
         self.conflicts: list[ShownConflict] = []
         self.mmu_flash_at: float | None = None
         self.status_first_seen: dict[UnitControlStatus, float] = {}
+        self.controls: list[tuple[float, dict[ControlColumn, frozenset[int]]]] = []  # the six objects, at each change
         env.process(self._sample())
 
     def _sample(self) -> Generator[simpy.Event, Any, None]:
@@ -883,6 +892,8 @@ class IndicationMonitor:
         c = self.controller
         self.samples += 1
         self.status_first_seen.setdefault(c.control_status, self.env.now)
+        if not self.controls or self.controls[-1][1] != c.control:
+            self.controls.append((self.env.now, dict(c.control)))
         if c.flash_status is UnitFlashStatus.MMU and self.mmu_flash_at is None:
             self.mmu_flash_at = self.env.now
         lit = conflicts(self.config.permissives, c.greens | c.yellows, c.overlap_greens | c.overlap_yellows)

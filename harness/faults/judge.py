@@ -23,6 +23,7 @@ controller's samples, and the report gives each intersection's outcome.
 from __future__ import annotations
 
 import itertools
+import math
 from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass
 from typing import Any
@@ -31,6 +32,7 @@ from harness.faults.inject import Fault, IndicationMonitor
 from harness.faults.reader import ANY_TIMEOUT, NO_TIMEOUT, Expectations, FaultScenario, status_name
 from hils.protocol.config import IntersectionConfig
 from hils.protocol.conflict import first_conflict
+from hils.protocol.ntcip import ControlColumn
 from hils.shell.events import Kind
 
 __all__ = ["Check", "Episode", "FaultReport", "FaultScenarioResult", "Outcome", "evaluate"]
@@ -275,6 +277,8 @@ def _judge(scenario: FaultScenario, tls: str, cfg: IntersectionConfig, records: 
     for kind, n in ex.records.items():
         got = len(by_kind.get(kind, []))
         check(f"records.{kind}", got == n, f"{n} {kind} records" + ("" if got == n else f"; got {got}"))
+    if ex.held_as_scheduled_from is not None:
+        _check_held(ex.held_as_scheduled_from, scenario, by_kind.get(Kind.SCHEDULE_STARTED, []), monitor, check)
     if ex.no_conflicting_command:
         _check_commands(cfg, by_kind.get(Kind.SET_SENT, []), check)
     if ex.no_commands_in_timeout:
@@ -375,6 +379,35 @@ def _check_commands(cfg: IntersectionConfig, sets: list[dict[str, Any]],
     check("no_conflicting_command", not bad,
           f"no SET of conflicting or unknown phases ({len(sets)} SETs checked)" + (
               "" if not bad else "; got: " + "; ".join(bad[:5])))
+
+
+def _check_held(since: float, scenario: FaultScenario, started: list[dict[str, Any]],
+                monitor: IndicationMonitor | None, check: Checker) -> None:
+    """From ``since`` to the end, every change of the controller's control objects (and what they held at ``since``)
+    is what the schedule asks then, counted from its receipt; force-offs aside (the controller resets them itself
+    when their green ends)."""
+    if not started or monitor is None:
+        check("held_as_scheduled_from", False, "a schedule started and the controller sampled; got "
+              f"{len(started)} schedules started")
+        return
+    received = started[0]["t"]
+    changes = monitor.controls
+    # each change, and half a second after each instant of the schedule (a change that should have come)
+    moments = sorted({since, *(t for t, _ in changes if t > since),
+                      *(t for i in scenario.schedule.instants if since < (t := received + i / 10 + 0.5)
+                        <= scenario.duration)})
+    wrong = []
+    for t in moments:
+        held = next(h for at, h in reversed(changes) if at <= t)
+        asked = scenario.schedule.at(math.floor((t - received) * 10 + 1e-6))
+        if any(held[c] != asked[c] for c in ControlColumn if c is not ControlColumn.FORCE_OFF):
+            wrong.append(f"at {t:.1f} s the controller held {_named(held)}, the schedule asks {_named(asked)}")
+    check("held_as_scheduled_from", not wrong, f"the controller holds what the schedule asks from {since:g} s"
+          + ("" if not wrong else "; " + "; ".join(wrong[:3])))
+
+
+def _named(controls: Mapping[ControlColumn, frozenset[int]]) -> str:
+    return ", ".join(f"{c.name.lower()} {sorted(p)}" for c, p in controls.items() if p) or "nothing"
 
 
 def _check_quiet_in_timeout(records: list[dict[str, Any]], check: Checker) -> None:

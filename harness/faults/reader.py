@@ -19,6 +19,11 @@ The format (only ``duration`` and one ``[[faults]]`` are required)::
                                         # shipped scenario's name or a .scenario.toml path), run without SUMO
     action_type = "selection"           # selection | switch | duration
     agent = "random"                    # built-in or package.module:Class; default: the action type's
+    [[schedule]]                        # instead of an agent (action_type = "control"): a phase-control schedule
+    commandType = "omit_veh"            # in MMITSS's keys, handed over at the first decision
+    commandPhase = 1
+    commandStartTime = 0.0
+    commandEndTime = 120.0
     duration = 60.0                     # simulated seconds
     seed = 1
     recover_after = 5.0                 # s in TIMEOUT before recover() is called; negative: never
@@ -52,6 +57,8 @@ The format (only ``duration`` and one ``[[faults]]`` are required)::
     recovered_greens = [2, 6]           # phases every recovery's re-read found green (after a reboot: start-up)
     preemptions = 1                     # exactly this many PREEMPTED episodes, each ended by the controller (no
                                         # TIMEOUT within), no command SET in it, a transition verified after it
+    held_as_scheduled_from = 60.0       # from this time to the end, the controller's control objects (force-offs
+                                        # aside: they reset themselves) hold what the schedule asks, every tick
 
     [expect.J2]                         # several controllers: J2 is judged by this table alone, and every
     timeout = "communication"           # intersection without a table of its own by [expect]
@@ -70,8 +77,10 @@ from harness.faults.inject import Fault
 from harness.faults.registry import FAULT_TYPES, FaultSpec
 from harness.faults.table import FaultScenarioError, TableReader
 from hils.agents.builtin import AgentError, load_agent
+from hils.control import phase_control
 from hils.control.actions import ActionError, ActionType
 from hils.control.manager_io import TimeoutReason
+from hils.control.phase_control import Schedule
 from hils.protocol import config as config_mod
 from hils.protocol.config import ConfigError, IntersectionConfig, MiddlewareParams
 from hils.protocol.ntcip import UnitControlStatus
@@ -92,7 +101,7 @@ __all__ = [
     "status_name",
 ]
 
-_FILE_KEYS = ("name", "description", "config", "scenario", "action_type", "agent", "duration", "seed",
+_FILE_KEYS = ("name", "description", "config", "scenario", "action_type", "agent", "schedule", "duration", "seed",
               "recover_after", "middleware", "faults", "expect")
 
 
@@ -143,6 +152,7 @@ class Expectations:
     verified_every: float | None = None  # s: longest stretch allowed without a verified transition
     recovered_greens: tuple[int, ...] | None = None  # what every recovery's re-read must find green
     preemptions: int | None = None  # exact number of PREEMPTED episodes, each ended, quiet, and commanding after
+    held_as_scheduled_from: float | None = None  # s: from then on the controller holds what the schedule asks
     no_conflicting_command: bool = True
     no_conflicting_indication: bool = True
     no_commands_in_timeout: bool = True
@@ -206,6 +216,7 @@ def _expectations(raw: Any, where: str, source: str, fault_names: Iterable[str],
         verified_every=r.optional_number("verified_every", low=0, low_open=True),
         recovered_greens=r.phases("recovered_greens", phases) if r.has("recovered_greens") else None,
         preemptions=r.optional_number("preemptions", integer=True, low=0),
+        held_as_scheduled_from=r.optional_number("held_as_scheduled_from", low=0),
         no_conflicting_command=r.boolean("no_conflicting_command", True),
         no_conflicting_indication=r.boolean("no_conflicting_indication", True),
         no_commands_in_timeout=r.boolean("no_commands_in_timeout", True),
@@ -226,6 +237,7 @@ class FaultScenario:
     config: IntersectionConfig  # the first intersection's, with several
     action_type: ActionType
     agent: str | None
+    schedule: Schedule | None  # phase control by a schedule, instead of an agent
     duration: float
     seed: int
     recover_after: float | None
@@ -286,6 +298,8 @@ def parse_fault_scenario(text: str, source: str = "<memory>", *, base: Path | No
             if spec.acts_at(tls) and (problem := check(spec.raw, cfg)):
                 raise FaultScenarioError(source, f"faults[{spec.index}].{problem[0]}", problem[1])
     expect, expect_at = _expect_tables(raw.get("expect", {}), source, faults, intersections)
+    if any(e.held_as_scheduled_from is not None for e in (expect, *expect_at.values())) and not r.has("schedule"):
+        raise FaultScenarioError(source, "expect.held_as_scheduled_from", "needs a [[schedule]] to compare with")
     scenario = FaultScenario(
         name=r.string("name", default_name),
         source=source,
@@ -293,6 +307,7 @@ def parse_fault_scenario(text: str, source: str = "<memory>", *, base: Path | No
         config=next(iter(intersections.values())),
         action_type=action_type,
         agent=r.string("agent") if r.has("agent") else None,
+        schedule=_schedule(r, action_type, next(iter(intersections.values()))),
         duration=r.number("duration", low=0, low_open=True, high=24 * 3600),
         seed=r.number("seed", 0, integer=True, low=0),
         recover_after=None if recover_after < 0 else recover_after,
@@ -303,11 +318,23 @@ def parse_fault_scenario(text: str, source: str = "<memory>", *, base: Path | No
         expect_at=expect_at,
     )
     try:
-        for config in intersections.values():
+        for config in intersections.values() if scenario.schedule is None else ():
             load_agent(scenario.spec().agent_spec, config, action_type, scenario.seed)
     except AgentError as exc:
         raise r.error("agent", str(exc)) from None
     return scenario
+
+
+def _schedule(r: TableReader, action_type: ActionType, config: IntersectionConfig) -> Schedule | None:
+    """The ``[[schedule]]`` of a phase-control scenario, checked as the middleware checks one (None without it)."""
+    if not r.has("schedule"):
+        return None
+    if action_type is not ActionType.CONTROL or r.has("agent"):
+        raise r.error("schedule", "is phase control's agent: allowed with action_type = 'control' and no agent")
+    try:
+        return phase_control.parse(r.raw["schedule"], config)
+    except ActionError as exc:
+        raise r.error("schedule", str(exc)) from None
 
 
 def _config(r: TableReader, base: Path | None) -> IntersectionConfig:

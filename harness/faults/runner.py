@@ -14,6 +14,7 @@ from typing import Any
 from harness.faults.inject import FaultTarget, IndicationMonitor
 from harness.faults.judge import FaultScenarioResult, evaluate
 from harness.faults.reader import FaultScenario
+from hils.agents.builtin import ScheduleAgent
 from hils.protocol.config import IntersectionConfig
 from hils.run.testbed import Testbed
 
@@ -43,8 +44,10 @@ def run_fault_scenario(scenario: FaultScenario, *, log_path: Path | None = None)
 
     with Testbed(None if scenario.network else scenario.config, scenario=scenario.network,
                  action_type=scenario.action_type, target={tls: target_factory(tls) for tls in scenario.intersections},
-                 seed=scenario.seed, agent=scenario.agent, duration=scenario.duration, log_path=log_path,
-                 recover_after=scenario.recover_after, on_reset=configure) as tb:
+                 seed=scenario.seed,
+                 agent=scenario.agent if scenario.schedule is None else ScheduleAgent(scenario.schedule),
+                 duration=scenario.duration, log_path=log_path, recover_after=scenario.recover_after,
+                 on_reset=configure) as tb:
         tb.reset_all()
         tb.run()
         records = tb.records

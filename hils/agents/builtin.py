@@ -1,9 +1,10 @@
 """Control agents behind one small protocol: observe, then return an action value.
 
-An agent has an ``action_type`` (selection, switch or duration) and an ``act``
-method that takes an :class:`Observation` and returns the action value for its
-type: a pair of phases, 0 or 1, or x in [0, 1]. A user's own agent class is
-loaded with :func:`load_agent` from ``package.module:Class``.
+An agent has an ``action_type`` (selection, switch, duration or control) and an
+``act`` method that takes an :class:`Observation` and returns the action value
+for its type: a pair of phases, 0 or 1, x in [0, 1], or a phase-control schedule
+or step (:mod:`hils.control.phase_control`). A user's own agent class is loaded
+with :func:`load_agent` from ``package.module:Class``.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from dataclasses import dataclass
 from typing import Any, Protocol, runtime_checkable
 
 from hils.control.actions import ActionType
+from hils.control.phase_control import Control, Schedule
 from hils.protocol.config import IntersectionConfig, Pair
 from hils.protocol.errors import STOPS, AgentFailed, UserError, described
 from hils.protocol.ntcip import SignalState
@@ -23,8 +25,8 @@ from hils.sim.webster import webster_plan
 
 __all__ = [
     "BUILTIN", "ActuatedAgent", "Agent", "AgentError", "CoordinatedAgent", "FixedCycleAgent", "FixedTimeAgent",
-    "MaxPressureAgent", "Observation",
-    "QueueProportionalAgent", "RandomAgent", "WebsterAgent", "load_agent",
+    "MaxPressureAgent", "Observation", "OmitHoldAgent",
+    "QueueProportionalAgent", "RandomAgent", "ScheduleAgent", "WebsterAgent", "load_agent",
 ]
 
 
@@ -58,7 +60,8 @@ def _issues_only(name: str, allowed: ActionType, action_type: ActionType | str) 
 
 
 class RandomAgent:
-    """Uniformly random actions of one type (a baseline, and a fuzzer of the middleware)."""
+    """Uniformly random actions of one type (a baseline, and a fuzzer of the middleware). Phase control: a step
+    that calls a random pair of the config's and holds each of its phases or not, at random."""
 
     def __init__(self, config: IntersectionConfig, action_type: ActionType | str, seed: int = 0) -> None:
         self.config = config
@@ -70,6 +73,10 @@ class RandomAgent:
             return self.rng.choice(self.config.pairs)
         if self.action_type is ActionType.SWITCH:
             return self.rng.randint(0, 1)
+        if self.action_type is ActionType.CONTROL:
+            pair = self.rng.choice(self.config.pairs)
+            held = [p for p in pair if self.rng.random() < 0.5]
+            return {Control.CALL_VEH.value: list(pair), Control.HOLD.value: held}
         return self.rng.random()
 
 
@@ -160,6 +167,54 @@ class WebsterAgent:
         return (self.plan.green_of(pair) - g_min) / (g_max - g_min)
 
 
+class OmitHoldAgent:
+    """Phase control step by step, as CARMA Streets commands a controller (``tsc_client_service``,
+    ``control_tsc_state``): at each decision a target pair, every other phase omitted, the target called and held.
+
+    The target is the max-pressure pair (Varaiya 2013, as :class:`MaxPressureAgent`) when the traffic is observed,
+    else the next pair of the configured sequence. A target already green is held (a hold on a phase not green is
+    armed: it keeps the target's green once it comes). The phases showing green outside the target are forced off, so
+    that their green ends at its minimum for the target's call."""
+
+    action_type = ActionType.CONTROL
+
+    def __init__(self, config: IntersectionConfig, action_type: ActionType | str = ActionType.CONTROL,
+                 seed: int = 0) -> None:
+        _issues_only("omit-hold", ActionType.CONTROL, action_type)
+        self.config = config
+        self.pressure = MaxPressureAgent(config)
+        self._position = -1
+
+    def act(self, observation: Observation) -> dict[str, list[int]]:
+        if observation.traffic is not None:
+            target = self.pressure.act(observation)
+        else:
+            self._position = (self._position + 1) % len(self.config.sequence)
+            target = self.config.sequence[self._position]
+        others = [p for p in self.config.phase_numbers if p not in target]
+        greens = observation.signal.greens if observation.signal is not None else frozenset()
+        return {Control.OMIT_VEH.value: others, Control.CALL_VEH.value: list(target), Control.HOLD.value: list(target),
+                Control.FORCE_OFF.value: sorted(greens - set(target))}
+
+
+class ScheduleAgent:
+    """Phase control by a schedule given up front (MMITSS's JSON: :func:`hils.control.phase_control.load`): hands it
+    over at the first decision, then nothing (the schedule runs on its own times; the controller runs as it asks,
+    and as it is set up, after its end)."""
+
+    action_type = ActionType.CONTROL
+
+    def __init__(self, schedule: Schedule) -> None:
+        self.schedule = schedule
+        self._given = False
+
+    def act(self, observation: Observation) -> Schedule | None:
+        if self._given:
+            return None
+        self._given = True
+        return self.schedule
+
+
 class ActuatedAgent:
     """No agent: the controller runs fully actuated on its detectors (SUMO's stop-bar presence, see
     :mod:`hils.run.detectors`) with the config's recalls; the middleware only observes. Never acts."""
@@ -208,7 +263,7 @@ class FixedTimeAgent(_PlanAgent):
 BUILTIN: dict[str, type] = {"random": RandomAgent, "fixed-cycle": FixedCycleAgent, "max-pressure": MaxPressureAgent,
                             "queue-proportional": QueueProportionalAgent, "webster": WebsterAgent,
                             "actuated": ActuatedAgent, "coordinated": CoordinatedAgent,
-                            "fixed-time": FixedTimeAgent}
+                            "fixed-time": FixedTimeAgent, "omit-hold": OmitHoldAgent}
 
 #: Built-in agents that leave the controller to its own operation (the middleware observes), and the config each
 #: makes the controller run: its plan from power-up for coordinated, pretimed for fixed-time, as given (free by

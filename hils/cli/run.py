@@ -22,8 +22,16 @@ from datetime import datetime, timedelta
 from pathlib import Path
 from typing import Any
 
-from hils.agents.builtin import PLAN_AGENTS, check_plans, controlled_by, controller_config, describe_plan
+from hils.agents.builtin import (
+    PLAN_AGENTS,
+    ScheduleAgent,
+    check_plans,
+    controlled_by,
+    controller_config,
+    describe_plan,
+)
 from hils.cli.status import Notices, StatusLine
+from hils.control import phase_control
 from hils.control.actions import ActionType
 from hils.protocol import config as config_mod
 from hils.protocol.config import ConfigError, IntersectionConfig
@@ -47,10 +55,14 @@ Run a control agent against a signal controller through the middleware.
 
 Default (no arguments): the shipped four-leg intersection, the max-pressure agent
 choosing phase pairs every 10 s, one simulated hour of SUMO traffic, and the
-built-in NTCIP 1202 emulator in virtual time. Outputs go to a run folder under
-reports/runs/: the JSON Lines event log, summary.json, a signal timeline and a
-queue plot, and the controller's hi-res log (hires.parquet) with its ATSPM
-measures and charts. The event log and the hi-res log (hires.journal.csv until
+built-in NTCIP 1202 emulator in virtual time. With --schedule FILE the run
+commands by phase control instead: the holds, force-offs, omits and calls of
+MMITSS's schedule JSON, from the run's start, re-sent before the controller's
+backup time runs out and cleared at its end (docs/phase-control.md).
+
+Outputs go to a run folder under reports/runs/: the JSON Lines event log,
+summary.json, a signal timeline and a queue plot, and the controller's hi-res
+log (hires.parquet) with its ATSPM measures and charts. The event log and the hi-res log (hires.journal.csv until
 the run ends) are written as the run goes: a run killed with SIGKILL keeps them.
 At the end the small files come first (summary.json before the pictures, the
 pictures before hires.parquet); a file that cannot be written is named with why
@@ -79,9 +91,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("run", help="run an agent against a controller (the main job)", description=RUN_HELP,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--config", metavar="FILE", help="intersection config (TOML); default: the shipped four-leg")
-    p.add_argument("--action-type", choices=[t.value for t in ActionType], default=ActionType.SELECTION.value,
+    p.add_argument("--action-type", choices=[t.value for t in ActionType],
                    help="action design: selection (pick a pair), switch (0 keep / 1 advance), duration "
-                        "(green time of the next pair); default: selection")
+                        "(green time of the next pair), control (holds, force-offs, omits and calls per phase: "
+                        "docs/phase-control.md); default: selection, control with --schedule")
+    p.add_argument("--schedule", metavar="FILE", type=Path,
+                   help="phase control by a schedule: MMITSS's JSON ({\"MsgType\": \"Schedule\", \"Schedule\": "
+                        "[{\"commandPhase\": 2, \"commandType\": \"hold\", \"commandStartTime\": 0, "
+                        "\"commandEndTime\": 24}, ...]} or its list of commands; types hold, forceoff, omit_veh, "
+                        "omit_ped, call_veh, call_ped; times in seconds from the run's start), handed over at the "
+                        "first decision; one intersection, no --agent")
     p.add_argument("--agent", metavar="NAME|MODULE:CLASS",
                    help="built-in agent (random, fixed-cycle, max-pressure, queue-proportional, webster; actuated: "
                         "none, the controller runs on its detectors; coordinated: none, the controller runs its "
@@ -194,11 +213,28 @@ def _config(args: argparse.Namespace) -> IntersectionConfig:
         raise UsageError(f"--poll-hz {exc.message} (polls per second)") from None
 
 
+def _schedule_agent(args: argparse.Namespace, cfg: IntersectionConfig,
+                    scenario: Scenario | None) -> ScheduleAgent | None:
+    """The agent that hands over ``--schedule``'s schedule, checked against the config (None without it); sets the
+    action type it implies."""
+    if args.schedule is None:
+        args.action_type = args.action_type or ActionType.SELECTION.value
+        return None
+    if args.action_type not in (None, ActionType.CONTROL.value):
+        raise UsageError(f"--schedule commands by phase control; --action-type is {args.action_type}: leave it out "
+                         "or give control")
+    if args.agent is not None or scenario is not None:
+        raise UsageError("--schedule is the agent of one intersection: leave out --agent and --scenario")
+    args.action_type = ActionType.CONTROL.value
+    return ScheduleAgent(phase_control.load(args.schedule, cfg))
+
+
 def run_command(args: argparse.Namespace) -> int:
     _check_values(args)
     cfg = _config(args)
     window = _window(args.plot_window)
     scenario = _scenario(args)
+    schedule_agent = _schedule_agent(args, cfg, scenario)
     dashboard = _dashboard(args)
     if args.asclog is not None and (not args.target or scenario is not None):
         raise UsageError("--asclog collects the log of the one controller a wall-clock run drives: use it with "
@@ -224,11 +260,14 @@ def run_command(args: argparse.Namespace) -> int:
     # A wall-clock run is never silent: a live status line (periodic log lines when not on a terminal).
     status = StatusLine() if args.target and not args.no_progress else None
     tb = Testbed(None if scenario else cfg, scenario=scenario, action_type=spec.action_type,
-                 target=_targets(args.target, scenario), sumo=spec.sumo, seed=spec.seed, agent=spec.agent,
+                 target=_targets(args.target, scenario), sumo=spec.sumo, seed=spec.seed,
+                 agent=schedule_agent or spec.agent,
                  duration=spec.duration, log_path=log_path, hires_path=out / hiresjournal.NAME,
                  recover_after=spec.recover_after,
                  on_reset=_hooks(status.start if status else None, dashboard.attach if dashboard else None),
-                 sumo_config=sumo_config, take_over=args.take_over)
+                 sumo_config=sumo_config, take_over=args.take_over,
+                 # a schedule drives an actuated controller (MMITSS's premise): SUMO's loops call its phases too
+                 detectors=True if schedule_agent is not None else None)
     error: BaseException | None = None
     started = datetime.now()  # the controller's clock is the host's when it is `hils emulator serve`
     with _terminate_as_interrupt(), tb, _served(dashboard):

@@ -1,10 +1,13 @@
 """Agent actions, their conversion to one unified phase command, and conflict detection.
 
 The three action designs of the paper all become a :class:`Command`: the phase
-of each ring, plus a green time for phase duration. Anything that cannot be
-served safely is refused here with a typed :class:`ActionError` whose message
-says what was wrong and what is allowed; a refused action never reaches the
-manager, so nothing is sent for it.
+of each ring, plus a green time for phase duration. The fourth way to command,
+phase control (holds, force-offs, omits and calls per phase, as a schedule or
+step by step), becomes a checked :class:`hils.control.phase_control.Schedule`.
+Anything that cannot be served safely is refused here with a typed
+:class:`ActionError` (:mod:`hils.control.errors`) whose message says what was
+wrong and what is allowed; a refused action never reaches the manager, so
+nothing is sent for it.
 """
 
 from __future__ import annotations
@@ -14,12 +17,23 @@ import numbers
 from dataclasses import dataclass
 from enum import StrEnum
 
+from hils.control import phase_control
+from hils.control.errors import (
+    ActionError,
+    ActionTypeError,
+    ConflictError,
+    DurationRangeError,
+    NotInActionSetError,
+    PreemptedError,
+    UnknownPhaseError,
+)
+from hils.control.phase_control import Schedule
 from hils.protocol.config import IntersectionConfig, Pair
 from hils.protocol.conflict import first_conflict
 
 __all__ = [
-    "ActionConverter", "ActionError", "ActionType", "ActionTypeError", "Command", "ConflictError", "ConflictMatrix",
-    "DurationRangeError", "NotInActionSetError", "PreemptedError", "UnknownPhaseError",
+    "PAPER_ACTION_TYPES", "ActionConverter", "ActionError", "ActionType", "ActionTypeError", "Command", "ConflictError",
+    "ConflictMatrix", "DurationRangeError", "NotInActionSetError", "PreemptedError", "UnknownPhaseError",
 ]
 
 
@@ -27,6 +41,11 @@ class ActionType(StrEnum):
     SELECTION = "selection"  # a compatible pair from the configured set (acyclic)
     SWITCH = "switch"  # 0 keep the current pair, 1 advance in the cyclic sequence
     DURATION = "duration"  # x in [0, 1]: green time of the next pair in the sequence
+    CONTROL = "control"  # phase control: holds, force-offs, omits and calls per phase (hils.control.phase_control)
+
+
+#: The paper's three action designs, each converted to a phase command (a pair); phase control is the fourth way.
+PAPER_ACTION_TYPES = (ActionType.SELECTION, ActionType.SWITCH, ActionType.DURATION)
 
 
 @dataclass(frozen=True, slots=True)
@@ -36,39 +55,6 @@ class Command:
     phases: Pair  # (ring 1 phase, ring 2 phase)
     green: float | None = None  # seconds of green to serve (duration actions only)
     keep: bool = False  # the agent asked to stay: completes without a transition
-
-
-class ActionError(ValueError):
-    """An action that cannot be converted; nothing is sent for it."""
-
-    reason = "invalid"
-
-
-class ActionTypeError(ActionError, TypeError):
-    reason = "wrong_type"
-
-
-class UnknownPhaseError(ActionError):
-    reason = "unknown_phase"
-
-
-class ConflictError(ActionError):
-    reason = "conflict"
-
-
-class NotInActionSetError(ActionError):
-    reason = "not_in_action_set"
-
-
-class DurationRangeError(ActionError):
-    reason = "duration_out_of_range"
-
-
-class PreemptedError(ActionError):
-    """A valid action that arrived while the controller serves a preempt: the preempt drives the signals, so the
-    middleware commands nothing until the controller reports it over (the manager's PREEMPTED)."""
-
-    reason = "preempted"
 
 
 def _short(value: object) -> str:
@@ -135,10 +121,12 @@ class ActionConverter:
             ActionType.SELECTION: self._selection,
             ActionType.SWITCH: self._switch,
             ActionType.DURATION: self._duration,
+            ActionType.CONTROL: self._control,
         }[self.action_type]
 
-    def convert(self, value: object, position: int = -1) -> Command:
-        """The command for an action value at sequence ``position``, or an :class:`ActionError`."""
+    def convert(self, value: object, position: int = -1) -> Command | Schedule:
+        """The command for an action value at sequence ``position`` (a checked schedule for phase control), or an
+        :class:`ActionError`."""
         return self._convert(value, position)
 
     def pair_after(self, position: int) -> Pair:
@@ -192,6 +180,9 @@ class ActionConverter:
         pair = self.pair_after(position)
         g_min, g_max = self.green_range(pair)
         return Command(pair, green=g_min + x * (g_max - g_min))
+
+    def _control(self, value: object, position: int) -> Schedule:
+        return phase_control.parse(value, self.config)
 
     def green_range(self, pair: Pair) -> tuple[float, float]:
         """Green-time bounds of a pair: the larger minimum and the smaller maximum of its phases

@@ -41,6 +41,8 @@ States (:class:`Mode`), with the paper's names (:class:`State`) that the log and
   (lost, not refused) is SET again while the transition is awaited; tau_trans still bounds the wait.
   If the transition timer expires first: TIMEOUT.
 - SERVING (paper ON_HOLD): the prescribed green is being served; back to IDLE when it has passed.
+- SCHEDULED (paper IDLE: the next action is taken, and replaces it): a phase-control schedule runs (see Phase
+  control below); IDLE again when it is done or cleared.
 - PREEMPTED (its own name, ``preempted``): the controller serves a preempt (a poll read a preemptState in
   service: entry, track clearance, dwell, linked or exit; see Preemption below). Entered from IDLE,
   IN_TRANSITION or SERVING; left for IDLE when a poll reads no preempt in service.
@@ -98,6 +100,26 @@ else are TIMEOUTs as anywhere at work: a preempt explains the signals leaving th
 else. The first poll that reads no preempt in service ends it (:class:`PreemptEnded`): the sequence position
 follows the greens shown (the exit phases), the manager is IDLE and the agent's next action is a command again.
 
+Phase control (``phase_control``: the run's action type is ``control``). The agent hands schedules of holds,
+force-offs, omits and calls per phase (:mod:`hils.control.phase_control`, which checks them and keeps the life cycle
+of each order: waiting, armed, acting, spent, ended, lapsed). The run owns all six phaseControlGroup objects, and
+``sent`` is what each holds by the run. In IDLE or SCHEDULED a schedule replaces the one running (MMITSS's way: what
+both ask stays set, in one SET of the objects that change) and the machine is SCHEDULED; a schedule without orders
+clears everything (IDLE). At each instant of the running schedule (the control timer) its orders end, then start,
+and the objects whose phases that changes are SET (purpose ``schedule``); after its last instant the schedule is
+done (IDLE). A step, whose orders have no end, runs until the next action replaces it. Every poll tells the orders
+what shows green: a hold or force-off on a phase not green is armed, and acts when its phase shows green; a force-off
+whose green ended is spent (the controller reset its bit: ``sent`` drops it, nothing is SET). The keepalive SETs
+again every object that holds phases but ForceOff, and VehCall. The read-back judges all six objects when no SET of
+the run could race it: phases the run did not SET are FOREIGN_CONTROL; phases it SET that are gone (ForceOff aside)
+mean the controller lost them (CONTROLS_LOST: the six SET again, ``reestablish``). Every way out of commanding lets
+go of them: entering TIMEOUT SETs all six to 0 (``release``: nobody manages them now, and a hold left on would keep
+its green); in TIMEOUT the schedule's orders go on and nothing is sent; the recovery re-reads the controller, says
+when it reports backupMode (its backup timer ran out and reset every object: :class:`ControlsReset`), and SETs all
+six to what the running schedule asks then (SCHEDULED, or IDLE when none runs). A preempt ends the schedule and
+SETs all six to 0 (``withdraw``); the close ends it and clears all six. In PREEMPTED a schedule is refused; in
+STARTING, TIMEOUT, RECOVERING and CLOSED it is dropped.
+
 Commands arriving anywhere but IDLE and PREEMPTED are dropped. Every dispatched command ends exactly once
 (:class:`CommandEnded`: verified, served, timeout or preempted), except the one pending when the run closes.
 The keepalive re-SETs the call when no SET has gone out for a keepalive period (a third of the
@@ -128,6 +150,7 @@ from hils.control.manager_io import (
     ControllerUnreachable,
     ControllerUnreadable,
     ControlsRead,
+    ControlsReset,
     Dispatch,
     DriftSeen,
     Dropped,
@@ -136,6 +159,7 @@ from hils.control.manager_io import (
     HaltPolling,
     KeepaliveSwitched,
     Note,
+    OrderChanged,
     PollAnswered,
     PollFailed,
     PollFailureSeen,
@@ -151,7 +175,11 @@ from hils.control.manager_io import (
     Refused,
     ResumePolling,
     RetryStartup,
+    ScheduleBegan,
+    ScheduleEnded,
+    ScheduleRequested,
     SendCall,
+    SendControls,
     SetAnswered,
     SetFailed,
     ShowSignal,
@@ -168,7 +196,9 @@ from hils.control.manager_io import (
     Verified,
     WatchCalls,
 )
+from hils.control.phase_control import Change, OrderState, Running, no_controls
 from hils.protocol.config import Pair
+from hils.protocol.ntcip import CONTROL_TABLE, ControlColumn
 
 __all__ = ["CLEAR_ATTEMPTS", "Ev", "Manager", "Mode", "Pending", "State", "graph"]
 
@@ -197,6 +227,7 @@ class Mode(_Singletons):
     IDLE = "idle"
     IN_TRANSITION = "in_transition"
     SERVING = "serving"
+    SCHEDULED = "scheduled"
     PREEMPTED = "preempted"
     TIMEOUT = "timeout"
     RECOVERING = "recovering"
@@ -214,8 +245,8 @@ class Mode(_Singletons):
 
 
 _PAPER = {Mode.STARTING: State.IDLE, Mode.IDLE: State.IDLE, Mode.IN_TRANSITION: State.ON_HOLD,
-          Mode.SERVING: State.ON_HOLD, Mode.PREEMPTED: State.PREEMPTED, Mode.TIMEOUT: State.TIMEOUT,
-          Mode.RECOVERING: State.TIMEOUT, Mode.CLOSED: None}
+          Mode.SERVING: State.ON_HOLD, Mode.SCHEDULED: State.IDLE, Mode.PREEMPTED: State.PREEMPTED,
+          Mode.TIMEOUT: State.TIMEOUT, Mode.RECOVERING: State.TIMEOUT, Mode.CLOSED: None}
 
 
 @dataclass(frozen=True, slots=True)
@@ -274,6 +305,13 @@ class Ev(_Singletons):
     AGENT_OVERDUE = auto()  # AgentOverdue
     KEEPALIVE_SWITCHED = auto()  # KeepaliveSwitched
     CLOSE = auto()  # CloseRequested
+    SCHEDULE = auto()  # ScheduleRequested with orders
+    SCHEDULE_CLEAR = auto()  # ScheduleRequested without any: clear everything
+    CONTROL_DUE = auto()  # TimerExpired: the live control timer, an instant of the running schedule, not its last
+    SCHEDULE_DONE = auto()  # TimerExpired: the live control timer, the running schedule's last instant
+    CONTROLS_LOST = auto()  # ControlsRead, phase control, judged: nothing foreign, but a control object the run SET
+    #                         (a force-off aside: it resets itself) no longer holds all its phases
+    RECOVERED_TO_SCHEDULE = auto()  # SetAnswered of the recovery SET while a schedule runs
 
 
 #: How many times in all the closing clear is sent while its datagrams get no answer (see CLOSED).
@@ -289,11 +327,13 @@ class Manager:
     ``n_timeout``: failed polls in a row (and start-up reads without answer) that are a communication
     failure. ``recover_after``: seconds in TIMEOUT before the manager recovers by itself (None: never).
     ``watch``, ``watch_period``: how long and how often the start-up watches calls found on the controller;
-    ``take_over``: take the controller without watching (another manager's calls are cleared)."""
+    ``take_over``: take the controller without watching (another manager's calls are cleared).
+    ``phase_control``: the run commands by phase control (schedules of holds, force-offs, omits and calls) rather
+    than by phase commands (VehCall alone)."""
 
     def __init__(self, tau_trans: float, *, sequence: tuple[Pair, ...] = (), n_drift: int = 5, n_timeout: int = 5,
                  keepalive_period: float = 0.0, recover_after: float | None = None, watch: float = 20.0,
-                 watch_period: float = 0.1, take_over: bool = False) -> None:
+                 watch_period: float = 0.1, take_over: bool = False, phase_control: bool = False) -> None:
         self.tau_trans = tau_trans
         self.sequence = sequence
         self.n_drift = n_drift
@@ -303,11 +343,15 @@ class Manager:
         self.watch = watch
         self.watch_period = watch_period
         self.take_over = take_over
+        self.phase_control = phase_control
         self.mode = Mode.STARTING
         self.pending: Pending | None = None
         self.timeout_reason: TimeoutReason | None = None
         self.position = -1  # index in the sequence of the pair last commanded or shown; -1: none yet
-        self.call: frozenset[int] = frozenset()  # VehCall as last SET
+        self.sent = no_controls()  # each control object as last SET (a force-off the controller reset: without it)
+        self.greens: frozenset[int] = frozenset()  # the greens last shown (a poll, the start-up or recovery read)
+        self.running: Running | None = None  # the schedule being carried out (phase control)
+        self.backup_time = 0  # the controller's unitBackupTime, as the start-up read it
         self.last_set = float("-inf")
         self.keepalive_on = True
         self.drifted_in_a_row = 0
@@ -332,6 +376,12 @@ class Manager:
         self._next_token = 0
         self._keepalive_token: int | None = None
         self._recover_token: int | None = None
+        self._control_token: int | None = None  # the control timer of the running schedule's next instant
+
+    @property
+    def call(self) -> frozenset[int]:
+        """VehCall as last SET."""
+        return self.sent[ControlColumn.VEH_CALL]
 
     @property
     def state(self) -> State | None:
@@ -345,8 +395,8 @@ class Manager:
         return took > step or self.drifted_in_a_row > 0
 
     def refusal(self) -> ActionError | None:
-        """The typed error a command handed over now would be refused with (None: it would not be); looks, never
-        changes. Only PREEMPTED refuses: elsewhere a command is sent, kept or dropped."""
+        """The typed error a command (or schedule) handed over now would be refused with (None: it would not be);
+        looks, never changes. Only PREEMPTED refuses: elsewhere a command is sent, kept or dropped."""
         if self.mode is not Mode.PREEMPTED:
             return None
         return PreemptedError(f"the controller serves preempt {', '.join(map(str, sorted(self.preempts)))} (since "
@@ -398,6 +448,14 @@ class Manager:
                 if calls != found:
                     return Ev.CALLS_CHANGED
                 return Ev.CALLS_LEFT if t - since >= self.watch else Ev.CALLS_WATCHED
+            case ScheduleRequested(schedule=schedule):
+                return Ev.SCHEDULE if schedule.orders else Ev.SCHEDULE_CLEAR
+            case TimerExpired(kind=TimerKind.CONTROL, token=token):
+                if token != self._control_token or self.running is None:
+                    return Ev.STALE_TIMER
+                schedule = self.running.schedule
+                last = not schedule.open and self.running.next_instant == schedule.instants[-1]
+                return Ev.SCHEDULE_DONE if last else Ev.CONTROL_DUE
             case TimerExpired(kind=kind, token=token):
                 if kind is TimerKind.KEEPALIVE:
                     return Ev.KEEPALIVE_DUE if token == self._keepalive_token else Ev.STALE_TIMER
@@ -410,9 +468,10 @@ class Manager:
                 if took <= step:
                     return Ev.ON_TIME
                 return Ev.DRIFT_LIMIT if self.drifted_in_a_row + 1 >= self.n_drift else Ev.DRIFTED
+            case SetAnswered(purpose=Purpose.RECOVERY):
+                return Ev.RECOVERY_SET_ANSWERED if self.running is None else Ev.RECOVERED_TO_SCHEDULE
             case SetAnswered(purpose=purpose):
-                return {Purpose.RECOVERY: Ev.RECOVERY_SET_ANSWERED, Purpose.CLEAR: Ev.CLEAR_ANSWERED}.get(
-                    purpose, Ev.SET_RESULT)
+                return Ev.CLEAR_ANSWERED if purpose is Purpose.CLEAR else Ev.SET_RESULT
             case SetFailed(purpose=purpose, command_id=command_id, lost=lost):
                 if purpose is Purpose.RECOVERY:
                     return Ev.RECOVERY_SET_FAILED
@@ -426,7 +485,9 @@ class Manager:
             case ReadbackDue():
                 return Ev.READBACK_WAITS if self.polls_failing else Ev.READBACK
             case ControlsRead():
-                return Ev.FOREIGN_CONTROL if self._foreign(ev) else Ev.CONTROLS_OURS
+                if self._foreign(ev):
+                    return Ev.FOREIGN_CONTROL
+                return Ev.CONTROLS_LOST if self._lost(ev) else Ev.CONTROLS_OURS
         return _PLAIN_KINDS[type(ev)]
 
     @property
@@ -445,12 +506,33 @@ class Manager:
 
     def _foreign(self, ev: ControlsRead) -> str:
         """What of the read-back is not ours ('' when all of it is)."""
+        if self.phase_control:
+            read = self._judged(ev)
+            return "; ".join(f"{CONTROL_TABLE[c].name} on phases {sorted(read[c] - self.sent[c])} (the run's: "
+                             f"{sorted(self.sent[c])})" for c in ControlColumn if read and read[c] - self.sent[c])
         found = [f"{name} on phases {sorted(phases)}" for name, phases in ev.held if phases]
         sent_then, judged = self._readback
         if ev.veh_call is not None and judged and sent_then == self._sets_sent and ev.veh_call != self.call:
             found.append(f"phaseControlGroupVehCall on phases {sorted(ev.veh_call)} (the run's call: "
                          f"{sorted(self.call)})")
         return "; ".join(found)
+
+    def _lost(self, ev: ControlsRead) -> str:
+        """Phase control: what the run SET that the read-back no longer finds ('' when nothing). A force-off is
+        not lost when its bit is gone: "When the phase green terminates, the associated bit shall be reset to 0"
+        (NTCIP 1202, phaseControlGroupForceOff)."""
+        read = self._judged(ev) if self.phase_control else None
+        return "; ".join(f"{CONTROL_TABLE[c].name} lost phases {sorted(self.sent[c] - read[c])}"
+                         for c in ControlColumn if read and c is not ControlColumn.FORCE_OFF and self.sent[c] - read[c])
+
+    def _judged(self, ev: ControlsRead) -> dict[ControlColumn, frozenset[int]] | None:
+        """Phase control: the six objects as read back, when no SET of the run could race the read (none sent
+        between the read and its answer, every one answered); None when the read cannot be judged. Every object may
+        be the run's, so a racing read tells nothing of whose it is."""
+        sent_then, clean = self._readback
+        if ev.veh_call is None or not clean or sent_then != self._sets_sent:
+            return None
+        return {**{_BY_NAME[name]: phases for name, phases in ev.held}, ControlColumn.VEH_CALL: ev.veh_call}
 
     def _call_known(self) -> bool:
         """True when the controller holds the call last SET for sure: every SET answered, the last one too."""
@@ -460,6 +542,8 @@ class Manager:
 
     def _started(self, ev: Started, out: list[Effect]) -> None:
         self._sync(ev.greens)
+        self.greens = ev.greens
+        self.backup_time = ev.backup_time
         if ev.backup_time:
             limit = ev.backup_time / 3.0  # the controller's own backup time rules
             self.keepalive_period = min(self.keepalive_period, limit) if self.keepalive_period else limit
@@ -542,7 +626,10 @@ class Manager:
         self.preempts = ev.preempts
         self.preempted_since = ev.t
         out.append(PreemptBegan(ev.preempts, p.command_id if p else None))
-        if self.call:
+        if self.phase_control:
+            self._end_schedule("preempted", out)
+            self._let_go(Purpose.WITHDRAW, ev.t, out)
+        elif self.call:
             self._send(frozenset(), Purpose.WITHDRAW, None, ev.t, out)
 
     def _still_preempted(self, ev: PollAnswered, out: list[Effect]) -> None:
@@ -561,7 +648,10 @@ class Manager:
         after_failures = self.polls_failing and any(self.newest_poll < i < ev.poll_id for i in self._failed)
         self.newest_poll = ev.poll_id
         self.polls_answered += 1
+        self.greens = ev.state.greens
         out.append(ShowSignal(ev.poll_id, ev.state, after_failures))
+        if self.running is not None:
+            self._orders_changed(self.running.seen(self.greens), out)
 
     def _late(self, ev: PollAnswered, out: list[Effect]) -> None:
         self.polls_late += 1
@@ -610,7 +700,14 @@ class Manager:
     def _keepalive(self, ev: TimerExpired, out: list[Effect]) -> None:
         # Any SET of a control object restarts the controller's backup timer: refresh only when no
         # SET went out for a whole period (a later SET re-armed the timer, so this one is stale).
-        if self.keepalive_on:
+        if self.keepalive_on and self.phase_control:
+            # Any SET of a control object restarts the backup timer (NTCIP 1202, unitBackupTime): the objects that
+            # hold phases are SET again as they stand, a force-off aside (it resets itself when its green ends, and
+            # set again after a green ended unseen it would end the phase's next green), and VehCall always.
+            kept = {c: p for c, p in self.sent.items() if (p and c is not ControlColumn.FORCE_OFF)
+                    or c is ControlColumn.VEH_CALL}
+            self._send_controls(kept, Purpose.KEEPALIVE, ev.t, out)
+        elif self.keepalive_on:
             self._send(self.call, Purpose.KEEPALIVE, None, ev.t, out)
         else:
             self._arm_keepalive(out)
@@ -646,8 +743,17 @@ class Manager:
 
     def _recovery_set(self, ev: ControllerRead, out: list[Effect]) -> None:
         self._sync(ev.greens)
+        self.greens = ev.greens
         self._recovering_greens = ev.greens
-        self._send(ev.greens, Purpose.RECOVERY, None, ev.t, out)
+        if not self.phase_control:
+            self._send(ev.greens, Purpose.RECOVERY, None, ev.t, out)
+            return
+        # Phase control: every object SET to what the schedule asks now (what someone else set goes too).
+        if ev.backup_mode:
+            out.append(ControlsReset(f"the controller reports backupMode: no control object was SET within its "
+                                     f"backup time ({self.backup_time} s), and it reset every one; SET again as the "
+                                     "schedule asks now"))
+        self._send_controls(self._asked(), Purpose.RECOVERY, ev.t, out)
 
     def _recovered(self, ev: SetAnswered, out: list[Effect]) -> None:
         self._settled(ev, out)
@@ -657,10 +763,16 @@ class Manager:
         self.newest_failed = 0
         out.append(Recovered(self._recovering_greens))
         out.append(ResumePolling())
+        if self.running is not None:  # an order started or ended while the recovery SET was on its way
+            self._send_changes(Purpose.SCHEDULE, ev.t, out)
 
     def _recovery_failed(self, ev: ControllerUnreadable | SetFailed, out: list[Effect]) -> None:
         if isinstance(ev, SetFailed):
             self._settled(ev, out)
+            if self.phase_control and ev.lost:  # it may have landed: in TIMEOUT the run holds nothing
+                self._let_go(Purpose.RELEASE, ev.t, out)
+            elif self.phase_control:  # refused: an SNMP SET applies whole or not at all, so nothing of it landed
+                self.sent = no_controls()
         what = ev.error if isinstance(ev, ControllerUnreadable) else "the recovery SET got no answer"
         out.append(Note(f"recovery failed, still in TIMEOUT: {what}"))
         self._arm_recovery(out)
@@ -687,6 +799,7 @@ class Manager:
         self._halt(out)
         self._keepalive_token = None
         self._recover_token = None
+        self._end_schedule("closed", out)
         if self.last_set > float("-inf"):  # a run that never SET a call has none to clear
             self._clear(ev.t, out)
         else:
@@ -706,7 +819,96 @@ class Manager:
 
     def _clear(self, t: float, out: list[Effect]) -> None:
         self.clears_sent += 1
-        self._send(frozenset(), Purpose.CLEAR, None, t, out)
+        if self.phase_control:
+            self._send_controls(no_controls(), Purpose.CLEAR, t, out)
+        else:
+            self._send(frozenset(), Purpose.CLEAR, None, t, out)
+
+    # --- phase control ----------------------------------------------------------------------------------
+
+    def _schedule(self, ev: ScheduleRequested, out: list[Effect]) -> None:
+        self._end_schedule("replaced" if ev.schedule.orders else "cleared", out)
+        if ev.schedule.orders:
+            self.running = Running(ev.schedule, ev.t)
+            out.append(ScheduleBegan(ev.action_id, ev.schedule))
+            if self.running.next_instant == 0:
+                self._orders_changed(self.running.pass_instant(self.greens), out)
+        self._send_changes(Purpose.SCHEDULE, ev.t, out)
+        self._arm_control(ev.t, out)
+
+    def _control_due(self, ev: TimerExpired, out: list[Effect]) -> None:
+        self._orders_changed(self.running.pass_instant(self.greens), out)
+        self._send_changes(Purpose.SCHEDULE, ev.t, out)
+        self._arm_control(ev.t, out)
+
+    def _schedule_done(self, ev: TimerExpired, out: list[Effect]) -> None:
+        self._orders_changed(self.running.pass_instant(self.greens), out)
+        self._end_schedule("done", out)
+        self._send_changes(Purpose.SCHEDULE, ev.t, out)
+
+    def _control_due_halted(self, ev: TimerExpired, out: list[Effect]) -> None:
+        # Nothing is sent while halted: the orders go on, and the recovery SETs what they ask then.
+        self._orders_changed(self.running.pass_instant(self.greens), out)
+        self._arm_control(ev.t, out)
+
+    def _schedule_done_halted(self, ev: TimerExpired, out: list[Effect]) -> None:
+        self._orders_changed(self.running.pass_instant(self.greens), out)
+        self._end_schedule("done", out)
+
+    def _reestablish(self, ev: ControlsRead, out: list[Effect]) -> None:
+        out.append(ControlsReset(f"the controller no longer holds what the run SET ({self._lost(ev)}); SET again as "
+                                 "the schedule asks now"))
+        self._send_controls(self._asked(), Purpose.REESTABLISH, ev.t, out)
+
+    def _end_schedule(self, reason: str, out: list[Effect]) -> None:
+        if self.running is None:
+            return
+        self._orders_changed(self.running.cancel(), out)
+        self.running = None
+        self._control_token = None
+        out.append(ScheduleEnded(reason))
+
+    def _orders_changed(self, changes: list[Change], out: list[Effect]) -> None:
+        for change in changes:
+            out.append(OrderChanged(change))
+            if change.after is OrderState.SPENT:
+                # "When the phase green terminates, the associated bit shall be reset to 0": the controller did it.
+                self.sent[ControlColumn.FORCE_OFF] -= {change.order.phase}
+
+    def _asked(self) -> dict[ControlColumn, frozenset[int]]:
+        """What the control objects hold by the running schedule now (all at 0 when none runs)."""
+        return self.running.image() if self.running is not None else no_controls()
+
+    def _send_changes(self, purpose: Purpose, t: float, out: list[Effect]) -> None:
+        """SET the control objects whose phases the running schedule now asks other than as last SET."""
+        changed = {c: p for c, p in self._asked().items() if p != self.sent[c]}
+        if changed:
+            self._send_controls(changed, purpose, t, out)
+
+    def _let_go(self, purpose: Purpose, t: float, out: list[Effect]) -> None:
+        """Every control object at 0, when any holds phases by the run."""
+        if any(self.sent.values()):
+            self._send_controls(no_controls(), purpose, t, out)
+
+    def _arm_control(self, t: float, out: list[Effect]) -> None:
+        running = self.running
+        nxt = running.next_instant if running is not None else None
+        if nxt is None:
+            self._control_token = None
+            return
+        self._control_token = self._new_token()
+        out.append(StartTimer(TimerKind.CONTROL, max(0.0, running.received + nxt / 10 - t), self._control_token))
+
+    def _send_controls(self, controls: dict[ControlColumn, frozenset[int]], purpose: Purpose, t: float,
+                       out: list[Effect]) -> None:
+        self.sent.update(controls)
+        self.last_set = t
+        self._sets_sent += 1
+        self._sets_pending += 1
+        self._set_failed = False
+        out.append(SendControls(tuple((c, controls[c]) for c in ControlColumn if c in controls), purpose))
+        if purpose is not Purpose.CLEAR:
+            self._arm_keepalive(out)
 
     # --- helpers ---------------------------------------------------------------------------------------
 
@@ -718,6 +920,8 @@ class Manager:
         self.timeout_reason = reason
         out.append(TimeoutEntered(reason, detail, p.command_id if p else None))
         self._halt(out)
+        if self.phase_control:  # nobody manages the control objects now: a hold left on would keep its green
+            self._let_go(Purpose.RELEASE, t, out)
         self._arm_recovery(out)
 
     def _halt(self, out: list[Effect]) -> None:
@@ -731,7 +935,7 @@ class Manager:
 
     def _send(self, phases: frozenset[int], purpose: Purpose, command_id: int | None, t: float,
               out: list[Effect]) -> None:
-        self.call = phases
+        self.sent[ControlColumn.VEH_CALL] = phases
         self.last_set = t
         self._sets_sent += 1
         self._sets_pending += 1
@@ -761,6 +965,8 @@ class Manager:
         return self._next_token
 
 
+_BY_NAME = {CONTROL_TABLE[c].name: c for c in ControlColumn}
+
 _PLAIN_KINDS: dict[type, Ev] = {
     Started: Ev.STARTED, StartupRefused: Ev.STARTUP_REFUSED, RecoveryRequested: Ev.RECOVERY_REQUESTED,
     ControllerRead: Ev.CONTROLLER_READ, ControllerUnreadable: Ev.CONTROLLER_UNREADABLE,
@@ -772,7 +978,7 @@ M = Mode
 H = Manager
 
 # The states of a machine commanding; at work (keepalive, drift, polls, read-back), PREEMPTED too; halted.
-_RUNNING = (M.IDLE, M.IN_TRANSITION, M.SERVING)
+_RUNNING = (M.IDLE, M.IN_TRANSITION, M.SERVING, M.SCHEDULED)
 _WORKING = (*_RUNNING, M.PREEMPTED)
 _DOWN = (M.TIMEOUT, M.RECOVERING)
 
@@ -808,6 +1014,8 @@ _TRANSITIONS: dict[tuple[Mode, Ev], tuple[Mode, _Handler]] = {
     (M.IDLE, Ev.KEEP): (M.IDLE, H._keep),
     **{(s, Ev.COMMAND): (s, H._drop) for s in (M.STARTING, M.IN_TRANSITION, M.SERVING, *_DOWN, M.CLOSED)},
     **{(s, Ev.KEEP): (s, H._drop) for s in (M.STARTING, M.IN_TRANSITION, M.SERVING, *_DOWN, M.CLOSED)},
+    # (a run commands by phase commands or by phase control, never both: SCHEDULED sees no command, IN_TRANSITION
+    # and SERVING no schedule)
     (M.PREEMPTED, Ev.COMMAND): (M.PREEMPTED, H._refuse),
     (M.PREEMPTED, Ev.KEEP): (M.PREEMPTED, H._refuse),
     (M.IN_TRANSITION, Ev.COMMAND_SET_LOST): (M.IN_TRANSITION, H._retry),
@@ -815,6 +1023,21 @@ _TRANSITIONS: dict[tuple[Mode, Ev], tuple[Mode, _Handler]] = {
     (M.SERVING, Ev.DURATION_ELAPSED): (M.IDLE, H._served),
     (M.CLOSED, Ev.TRANSITION_EXPIRED): (M.CLOSED, None),  # the command pending at the close stays open
     (M.CLOSED, Ev.DURATION_ELAPSED): (M.CLOSED, None),
+    # --- phase control: a schedule replaces the one running; a step (orders without end) runs until replaced --
+    (M.IDLE, Ev.SCHEDULE): (M.SCHEDULED, H._schedule),
+    (M.SCHEDULED, Ev.SCHEDULE): (M.SCHEDULED, H._schedule),
+    (M.IDLE, Ev.SCHEDULE_CLEAR): (M.IDLE, H._schedule),
+    (M.SCHEDULED, Ev.SCHEDULE_CLEAR): (M.IDLE, H._schedule),
+    (M.PREEMPTED, Ev.SCHEDULE): (M.PREEMPTED, H._refuse),
+    (M.PREEMPTED, Ev.SCHEDULE_CLEAR): (M.PREEMPTED, H._refuse),
+    **{(s, Ev.SCHEDULE): (s, H._drop) for s in (M.STARTING, *_DOWN, M.CLOSED)},
+    **{(s, Ev.SCHEDULE_CLEAR): (s, H._drop) for s in (M.STARTING, *_DOWN, M.CLOSED)},
+    (M.SCHEDULED, Ev.CONTROL_DUE): (M.SCHEDULED, H._control_due),
+    (M.SCHEDULED, Ev.SCHEDULE_DONE): (M.IDLE, H._schedule_done),
+    **{(s, Ev.CONTROL_DUE): (s, H._control_due_halted) for s in _DOWN},  # the orders go on; nothing is sent
+    **{(s, Ev.SCHEDULE_DONE): (s, H._schedule_done_halted) for s in _DOWN},
+    **{(s, Ev.CONTROLS_LOST): (s, H._reestablish) for s in _WORKING},
+    **{(s, Ev.CONTROLS_LOST): (s, None) for s in (*_DOWN, M.CLOSED)},  # halted: the recovery SETs them all
     # --- polls (halted in TIMEOUT, RECOVERING and CLOSED: every result there is from before the halt) ----
     (M.IN_TRANSITION, Ev.VERIFIED): (M.IDLE, H._verified),
     (M.IN_TRANSITION, Ev.VERIFIED_DURATION): (M.SERVING, H._serve),
@@ -842,6 +1065,7 @@ _TRANSITIONS: dict[tuple[Mode, Ev], tuple[Mode, _Handler]] = {
     # --- SET answers ------------------------------------------------------------------------------------
     **{(s, Ev.SET_RESULT): (s, H._settled) for s in Mode},
     (M.RECOVERING, Ev.RECOVERY_SET_ANSWERED): (M.IDLE, H._recovered),
+    (M.RECOVERING, Ev.RECOVERED_TO_SCHEDULE): (M.SCHEDULED, H._recovered),
     (M.RECOVERING, Ev.RECOVERY_SET_FAILED): (M.TIMEOUT, H._recovery_failed),
     (M.CLOSED, Ev.RECOVERY_SET_ANSWERED): (M.CLOSED, H._settled),  # a recovery overtaken by the close
     (M.CLOSED, Ev.RECOVERY_SET_FAILED): (M.CLOSED, H._settled),

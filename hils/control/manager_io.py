@@ -10,7 +10,8 @@ from dataclasses import dataclass
 from enum import StrEnum
 
 from hils.control.actions import ActionError, Command
-from hils.protocol.ntcip import SignalState
+from hils.control.phase_control import Change, Controls, Schedule
+from hils.protocol.ntcip import ControlColumn, SignalState
 
 __all__ = [
     "AgentOverdue",
@@ -25,6 +26,7 @@ __all__ = [
     "ControllerUnreachable",
     "ControllerUnreadable",
     "ControlsRead",
+    "ControlsReset",
     "Dispatch",
     "DriftSeen",
     "Dropped",
@@ -33,6 +35,7 @@ __all__ = [
     "HaltPolling",
     "KeepaliveSwitched",
     "Note",
+    "OrderChanged",
     "PollAnswered",
     "PollFailed",
     "PollFailureSeen",
@@ -48,7 +51,11 @@ __all__ = [
     "Refused",
     "ResumePolling",
     "RetryStartup",
+    "ScheduleBegan",
+    "ScheduleEnded",
+    "ScheduleRequested",
     "SendCall",
+    "SendControls",
     "SetAnswered",
     "SetFailed",
     "ShowSignal",
@@ -80,17 +87,21 @@ class TimerKind(StrEnum):
     DURATION = "duration"
     KEEPALIVE = "keepalive"
     RECOVER = "recover"
+    CONTROL = "control"  # the running schedule's next instant (an order starts or ends)
 
 
 class Purpose(StrEnum):
-    """Why a SET of VehCall was sent."""
+    """Why a SET of the control objects (VehCall alone, in a run of phase commands) was sent."""
 
     COMMAND = "command"
     RETRY = "retry"
     KEEPALIVE = "keepalive"
     RECOVERY = "recovery"
-    WITHDRAW = "withdraw"  # a preempt began: the call of the command it interrupted goes
+    WITHDRAW = "withdraw"  # a preempt began: the call of the command it interrupted goes (phase control: all six)
     CLEAR = "clear"
+    SCHEDULE = "schedule"  # phase control: what the schedule asks changed (an order started or ended, a new one)
+    REESTABLISH = "reestablish"  # phase control: the controller lost the run's control objects; all six SET again
+    RELEASE = "release"  # phase control: entering TIMEOUT, the run lets go of every control object
 
 
 # --- input events -----------------------------------------------------------------------------
@@ -127,6 +138,15 @@ class CommandRequested:
     action_id: int
     command: Command
     shown: frozenset[int]  # the greens shown when the command was requested (the signal cache's)
+
+
+@dataclass(frozen=True, slots=True)
+class ScheduleRequested:
+    """A phase-control action, converted: the schedule to carry out from ``t`` (empty: clear everything)."""
+
+    t: float
+    action_id: int
+    schedule: Schedule
 
 
 @dataclass(frozen=True, slots=True)
@@ -190,10 +210,13 @@ class RecoveryRequested:
 
 @dataclass(frozen=True, slots=True)
 class ControllerRead:
-    """The recovery's re-read of the controller succeeded."""
+    """The recovery's re-read of the controller succeeded; in a phase-control run it read the control objects and
+    whether the controller reports backupMode (unitControlStatus) too."""
 
     t: float
     greens: frozenset[int]
+    controls: Controls | None = None
+    backup_mode: bool = False
 
 
 @dataclass(frozen=True, slots=True)
@@ -255,7 +278,8 @@ class CloseRequested:
 
 Event = (Started | StartupLost | StartupRefused | CallsFound | CallsWatched | CommandRequested | PollAnswered
          | PollFailed | TimerExpired | StepTimed | SetAnswered | SetFailed | RecoveryRequested | ControllerRead
-         | ControllerUnreadable | ReadbackDue | ControlsRead | AgentOverdue | KeepaliveSwitched | CloseRequested)
+         | ControllerUnreadable | ReadbackDue | ControlsRead | AgentOverdue | KeepaliveSwitched | CloseRequested
+         | ScheduleRequested)
 
 # --- effects --------------------------------------------------------------------------------------
 
@@ -307,6 +331,49 @@ class SendCall:
     phases: frozenset[int]
     purpose: Purpose
     command_id: int | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class SendControls:
+    """SET these control objects (phase control), each to its phases, in one request."""
+
+    controls: tuple[tuple[ControlColumn, frozenset[int]], ...]
+    purpose: Purpose
+
+    @property
+    def columns(self) -> dict[ControlColumn, frozenset[int]]:
+        return dict(self.controls)
+
+
+@dataclass(frozen=True, slots=True)
+class ScheduleBegan:
+    """The schedule of action ``action_id`` runs from now."""
+
+    action_id: int
+    schedule: Schedule
+
+
+@dataclass(frozen=True, slots=True)
+class ScheduleEnded:
+    """The running schedule is over: ``done`` (its last order ended), ``replaced``, ``cleared`` (by the next action),
+    ``preempted`` or ``closed``."""
+
+    reason: str
+
+
+@dataclass(frozen=True, slots=True)
+class OrderChanged:
+    """An order of the running schedule moved in its life cycle (:mod:`hils.control.phase_control`)."""
+
+    change: Change
+
+
+@dataclass(frozen=True, slots=True)
+class ControlsReset:
+    """The controller no longer holds the control objects the run SET (its backup timer ran out, or someone cleared
+    them): they are SET again."""
+
+    detail: str
 
 
 @dataclass(frozen=True, slots=True)
@@ -439,4 +506,5 @@ class Note:
 Effect = (RetryStartup | StartupDone | WatchCalls | AnotherManager | ControllerUnreachable | Dispatch | SendCall |
           StartTimer | Refused | Dropped | ShowSignal | PollFailureSeen | Verified | CommandEnded | TimeoutEntered |
           DriftSeen | HaltPolling | ResumePolling | ReadControls | ReadController | RecoveryStarted | Recovered |
-          CloseDone | Note | PreemptBegan | PreemptEnded)
+          CloseDone | Note | PreemptBegan | PreemptEnded | SendControls | ScheduleBegan | ScheduleEnded | OrderChanged
+          | ControlsReset)

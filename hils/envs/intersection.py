@@ -17,6 +17,11 @@ slice              size        value
 ``[3n+1, 3n+5)``   4           the manager's state, one-hot: idle, on_hold, timeout, preempted
 =================  ==========  ==================================================================
 
+Actions: selection ``Discrete(len(pairs))``, switch ``Discrete(2)``, duration ``Box(0, 1, (1,))``; control
+(phase control, docs/phase-control.md) ``MultiBinary((6, n))``, row k setting command type k of
+:class:`hils.control.phase_control.Control` (hold, forceoff, omit_veh, omit_ped, call_veh, call_ped) on each phase,
+from now until the next step (all zeros clears them); a schedule (MMITSS's JSON as a dict) is taken as it is.
+
 Rewards (``reward=``): ``"queue"`` minus the total queue, ``"pressure"`` minus the summed pressure,
 ``"wait"`` the decrease of the waiting time accumulated by the vehicles on the signal's lanes, or
 any callable ``(previous, current) -> float`` of two :class:`hils.Observation` s.
@@ -38,7 +43,7 @@ Rules
 from __future__ import annotations
 
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -49,6 +54,7 @@ from gymnasium import spaces
 from hils.agents.builtin import Observation
 from hils.control.actions import ActionError, ActionType
 from hils.control.manager import State
+from hils.control.phase_control import Control, Schedule
 from hils.protocol import config as config_mod
 from hils.protocol.config import IntersectionConfig
 from hils.protocol.errors import UserError
@@ -147,6 +153,8 @@ class IntersectionAdapter:
             self.action_space: spaces.Space = spaces.Discrete(len(config.pairs))
         elif action_type is ActionType.SWITCH:
             self.action_space = spaces.Discrete(2)
+        elif action_type is ActionType.CONTROL:  # a step: row k sets command type k (Control's order) on each phase
+            self.action_space = spaces.MultiBinary((len(Control), n))
         else:
             self.action_space = spaces.Box(0.0, 1.0, (1,), np.float32)
         low = np.concatenate([np.zeros(n), np.full(n, -np.inf), np.zeros(n), [0.0], np.zeros(len(STATES))])
@@ -170,7 +178,21 @@ class IntersectionAdapter:
             return self.config.pairs[int(value.reshape(()))]
         if self.action_type is ActionType.SWITCH:
             return int(value.reshape(())) if value.size == 1 else action
+        if self.action_type is ActionType.CONTROL:
+            return self._step(action, value)
         return float(np.clip(value.reshape(-1)[0], 0.0, 1.0)) if value.size == 1 else action
+
+    def _step(self, action: Any, value: np.ndarray) -> Any:
+        """A phase-control step from the action space's array (a schedule or a step mapping goes as it is)."""
+        if isinstance(action, Mapping | str | Schedule):
+            return action
+        shape = (len(Control), len(self.phases))
+        if value.shape != shape or not np.isin(value, (0, 1)).all():
+            raise EnvOptionError(f"control action of shape {value.shape}: allowed: 0/1 of shape {shape}, row k "
+                                 f"setting {', '.join(c.value for c in Control)}[k] on phases {list(self.phases)}, "
+                                 "or a schedule (docs/phase-control.md)")
+        return {c.value: [p for p, bit in zip(self.phases, value[k], strict=True) if bit]
+                for k, c in enumerate(Control) if value[k].any()} or "clear"
 
     def vector(self, obs: Observation) -> np.ndarray:
         """The observation as the module's layout says."""
@@ -187,7 +209,7 @@ class IntersectionAdapter:
 
 
 class IntersectionEnv(gymnasium.Env):
-    """``gymnasium.make("hils/Intersection-v1", action_type="selection" | "switch" | "duration", ...)``.
+    """``gymnasium.make("hils/Intersection-v1", action_type="selection" | "switch" | "duration" | "control", ...)``.
 
     ``config``: an intersection config (object or TOML path; default: the shipped four-leg).
     ``net``/``routes`` or ``sumocfg``: your own SUMO scenario (default: the shipped one).

@@ -83,8 +83,9 @@ log = logging.getLogger(__name__)
 
 #: Agents used when none is named: with traffic to observe, and without (no SUMO).
 DEFAULT_AGENTS = {ActionType.SELECTION: "max-pressure", ActionType.SWITCH: "fixed-cycle",
-                  ActionType.DURATION: "queue-proportional"}
-BLIND_AGENTS = {ActionType.SELECTION: "random", ActionType.SWITCH: "fixed-cycle", ActionType.DURATION: "random"}
+                  ActionType.DURATION: "queue-proportional", ActionType.CONTROL: "omit-hold"}
+BLIND_AGENTS = {ActionType.SELECTION: "random", ActionType.SWITCH: "fixed-cycle", ActionType.DURATION: "random",
+                ActionType.CONTROL: "omit-hold"}
 
 
 

@@ -45,13 +45,18 @@ class Kind(StrEnum):
     RUN_STARTED = "run_started"                # config, source, seed, mode, action_type, agent, duration
     #                                                        (several: scenario, source, intersections; no config)
     ACTION_RECEIVED = "action_received"        # action_id, action_type, value
-    ACTION_CONVERTED = "action_converted"      # action_id, command [p1, p2], green (s or null), keep
+    ACTION_CONVERTED = "action_converted"      # action_id, command [p1, p2], green (s or null), keep; a phase-
+    #                                                        control schedule: command [], orders (how many),
+    #                                                        span_s (null: a step), dropped (orders left out)
     ACTION_REFUSED = "action_refused"          # action_id, error, reason
     ACTION_DROPPED = "action_dropped"          # action_id, state
     COMMAND_DISPATCHED = "command_dispatched"  # action_id, command_id, command, green
     SET_SENT = "set_sent"                      # command_id, phases, purpose: startup|command|retry|keepalive|
     #                                                        recovery|withdraw|clear (startup: all six objects
-    #                                                        at 0; withdraw: no phase, as a preempt begins)
+    #                                                        at 0; withdraw: no phase, as a preempt begins);
+    #                                                        phase control: controls {object: phases} SET,
+    #                                                        phases its VehCall, purposes schedule|reestablish|
+    #                                                        release too
     SET_ANSWERED = "set_answered"              # command_id, purpose
     SET_FAILED = "set_failed"                  # command_id, purpose, error
     POLL = "poll"                              # poll_id, greens, yellows: a read that changed the state seen, or
@@ -82,6 +87,12 @@ class Kind(StrEnum):
     #                                                        runs on detectors, e.g. --agent actuated)
     PREEMPT_INPUTS = "preempt_inputs"          # active: preempts SUMO calls now (on change; configs whose
     #                                                        preempts name a detection zone)
+    SCHEDULE_STARTED = "schedule_started"      # action_id, orders [[type, phase, start_s, end_s or null]], span_s
+    SCHEDULE_ENDED = "schedule_ended"          # reason (done|replaced|cleared|preempted|closed)
+    CONTROL_ORDER = "control_order"            # index, control, phase, from, to: an order's life cycle (waiting,
+    #                                                        armed, acting, spent, ended, lapsed)
+    CONTROLS_RESET = "controls_reset"          # detail: the controller no longer held the control objects the run
+    #                                                        SET (backupMode, or cleared): SET again
     NOTE = "note"                              # free text for harness faults and components
 
 

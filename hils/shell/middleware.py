@@ -1,12 +1,12 @@
 """The middleware: the manager's SimPy shell and the poller.
 
 The manager (:mod:`hils.control.manager`) decides; this module does, and decides nothing. It turns agent
-actions into manager events, carries out the effects the manager returns (SET the call, start
-timers, halt or resume polling, read the controller, log) and feeds back what happened: the start-up
-read, every poll's answer or failure (a poll reads the signal state and, when the config lists preempts, their
-preemptState in the same GET), timer expiries, the answers to SETs, the read-back of the control
-objects, the cost of simulation steps. It runs unchanged in virtual and wall-clock time: only the
-environment's driver and the transport differ.
+actions (phase commands, or phase-control schedules) into manager events, carries out the effects the manager
+returns (SET the call or the control objects, start timers, halt or resume polling, read the controller, log) and
+feeds back what happened: the start-up read, every poll's answer or failure (a poll reads the signal state and,
+when the config lists preempts, their preemptState in the same GET), timer expiries, the answers to SETs, the
+read-back of the control objects, the cost of simulation steps. It runs unchanged in virtual and wall-clock time:
+only the environment's driver and the transport differ.
 """
 
 from __future__ import annotations
@@ -34,6 +34,7 @@ from hils.control.manager_io import (
     ControllerUnreachable,
     ControllerUnreadable,
     ControlsRead,
+    ControlsReset,
     Dispatch,
     DriftSeen,
     Dropped,
@@ -42,6 +43,7 @@ from hils.control.manager_io import (
     HaltPolling,
     KeepaliveSwitched,
     Note,
+    OrderChanged,
     PollAnswered,
     PollFailed,
     PollFailureSeen,
@@ -57,7 +59,11 @@ from hils.control.manager_io import (
     Refused,
     ResumePolling,
     RetryStartup,
+    ScheduleBegan,
+    ScheduleEnded,
+    ScheduleRequested,
     SendCall,
+    SendControls,
     SetAnswered,
     SetFailed,
     ShowSignal,
@@ -73,17 +79,20 @@ from hils.control.manager_io import (
     Verified,
     WatchCalls,
 )
+from hils.control.phase_control import Schedule
 from hils.protocol.config import IntersectionConfig, Pair
 from hils.protocol.ntcip import (
     CONTROL_TABLE,
     FOREIGN_COLUMNS,
     SYSTEM_PATTERN_CONTROL,
     UNIT_BACKUP_TIME,
+    UNIT_CONTROL_STATUS,
     UNIT_FLASH_STATUS,
     ControlColumn,
     ErrorStatus,
     SignalState,
     SnmpError,
+    UnitControlStatus,
     control_oid,
     groups_to_phases,
     phases_to_groups,
@@ -112,7 +121,7 @@ class Received:
 
     value: Any
     wall_ns: int
-    command: Command | None
+    command: Command | Schedule | None  # a schedule for phase control
     error: ActionError | None = None  # refused by the converter, or preempted: nothing will be sent
 
 
@@ -150,7 +159,8 @@ class Middleware:
         self.manager = Manager(params.tau_trans, sequence=config.sequence, n_drift=params.n_drift,
                                n_timeout=params.n_timeout, keepalive_period=params.keepalive_period or 0.0,
                                recover_after=recover_after, watch=2 * params.control_interval,
-                               watch_period=params.poll_period, take_over=take_over)
+                               watch_period=params.poll_period, take_over=take_over,
+                               phase_control=ActionType(action_type) is ActionType.CONTROL)
         self.converter = ActionConverter(config, ActionType(action_type))
         self.cache = SignalCache()
         # One GET per poll: the signal state, then the state of each preempt the config lists (none: no more).
@@ -246,10 +256,15 @@ class Middleware:
         if received.error is not None:
             return self._refused(action_id, received.error)
         command = received.command
-        self.log.emit(Kind.ACTION_CONVERTED, action_id=action_id, command=command.phases, green=command.green,
-                      keep=command.keep)
-        shown = self.cache.state.greens if self.cache.state is not None else frozenset()
-        effects = self._feed(CommandRequested(self.env.now, action_id, command, shown))
+        if isinstance(command, Schedule):
+            self.log.emit(Kind.ACTION_CONVERTED, action_id=action_id, command=(), green=None, keep=False,
+                          orders=len(command.orders), span_s=command.span, dropped=command.dropped)
+            effects = self._feed(ScheduleRequested(self.env.now, action_id, command))
+        else:
+            self.log.emit(Kind.ACTION_CONVERTED, action_id=action_id, command=command.phases, green=command.green,
+                          keep=command.keep)
+            shown = self.cache.state.greens if self.cache.state is not None else frozenset()
+            effects = self._feed(CommandRequested(self.env.now, action_id, command, shown))
         refused = next((e for e in effects if isinstance(e, Refused)), None)
         if refused is not None:
             return self._refused(action_id, refused.error)
@@ -401,13 +416,23 @@ class Middleware:
         return not self.timeout_flag
 
     def _read_controller(self) -> Generator[simpy.Event, Any, None]:
+        """The recovery's re-read: the signal state; under phase control the control objects and unitControlStatus
+        too (has the controller's backup timer run out meanwhile?)."""
+        controls, backup_mode = None, False
         try:
             seen = yield from self._read_signal()
-        except (TransportError, SnmpError) as exc:
+            if self.manager.phase_control:
+                groups = self.config.groups
+                values = yield self.transport.get([*(control_oid(c, g) for c in ControlColumn
+                                                     for g in range(1, groups + 1)), UNIT_CONTROL_STATUS.instance()])
+                controls = {c: groups_to_phases([int(v) for v in values[i * groups:(i + 1) * groups]])
+                            for i, c in enumerate(ControlColumn)}
+                backup_mode = int(values[-1]) == UnitControlStatus.BACKUP_MODE
+        except (TransportError, SnmpError, ValueError) as exc:
             self._feed(ControllerUnreadable(self.env.now, str(exc)))
             return
         self._show(seen, self.poller.polls)
-        self._feed(ControllerRead(self.env.now, seen.greens))
+        self._feed(ControllerRead(self.env.now, seen.greens, controls, backup_mode))
 
     # --- polls ------------------------------------------------------------------------------------
 
@@ -472,6 +497,20 @@ class Middleware:
                 self.log.emit(Kind.POLL_FAILED, poll_id=poll_id, error=error, consecutive=consecutive)
             case SendCall(phases, purpose, command_id):
                 self._send(phases, purpose, command_id)
+            case SendControls(controls, purpose):
+                self._send_controls(dict(controls), purpose)
+            case OrderChanged(change):
+                o = change.order
+                self.log.emit(Kind.CONTROL_ORDER, index=change.index, control=o.control.value, phase=o.phase,
+                              **{"from": change.before.value, "to": change.after.value})
+            case ScheduleBegan(action_id, schedule):
+                self.log.emit(Kind.SCHEDULE_STARTED, action_id=action_id, orders=schedule.as_rows(),
+                              span_s=schedule.span)
+            case ScheduleEnded(reason):
+                self.log.emit(Kind.SCHEDULE_ENDED, reason=reason)
+            case ControlsReset(detail):
+                log.warning("%s", detail)
+                self.log.emit(Kind.CONTROLS_RESET, detail=detail)
             case StartTimer(kind, delay, token):
                 self.env.timeout(delay).callbacks.append(
                     lambda _ev, kind=kind, token=token: self._feed(TimerExpired(self.env.now, kind, token)))
@@ -548,10 +587,23 @@ class Middleware:
         done = self._logged_set(varbinds, phases, purpose.value, command_id)
         done.callbacks.append(lambda ev: self._answered(ev, purpose, command_id))
 
+    def _send_controls(self, controls: dict[ControlColumn, frozenset[int]], purpose: Purpose) -> None:
+        """Phase control: SET each of ``controls`` to its phases in one request; logs it and its answer, and feeds
+        the answer back."""
+        groups = self.config.groups
+        varbinds = [(control_oid(c, g), m) for c, phases in controls.items()
+                    for g, m in enumerate(phases_to_groups(phases, groups), start=1)]
+        done = self._logged_set(varbinds, controls.get(ControlColumn.VEH_CALL, self.manager.call), purpose.value,
+                                None, {CONTROL_TABLE[c].name: phases for c, phases in controls.items()})
+        done.callbacks.append(lambda ev: self._answered(ev, purpose, None))
+
     def _logged_set(self, varbinds: list[tuple[Any, int]], phases: frozenset[int], purpose: str,
-                    command_id: int | None) -> simpy.Event:
+                    command_id: int | None, controls: dict[str, frozenset[int]] | None = None) -> simpy.Event:
         """One SET, logged when sent and when answered or failed; every SET of the run goes through here."""
-        self.log.emit(Kind.SET_SENT, command_id=command_id, phases=phases, purpose=purpose)
+        if controls is None:
+            self.log.emit(Kind.SET_SENT, command_id=command_id, phases=phases, purpose=purpose)
+        else:
+            self.log.emit(Kind.SET_SENT, command_id=command_id, phases=phases, purpose=purpose, controls=controls)
         ours = self._quiet_readbacks.writing() if self._quiet_readbacks is not None else None
         done = self.transport.set(varbinds)
         if ours is not None:
@@ -568,7 +620,7 @@ class Middleware:
         return done
 
     def _answered(self, ev: simpy.Event, purpose: Purpose, command_id: int | None) -> None:
-        """Feed a VehCall SET's answer back to the manager, which decides what follows a failure."""
+        """Feed a SET's answer back to the manager, which decides what follows a failure."""
         if ev.ok:
             self._feed(SetAnswered(self.env.now, purpose, command_id))
             return

@@ -17,7 +17,7 @@ from harness.faults.reader import default_suite, load_fault_scenario, parse_faul
 from harness.faults.runner import run_fault_scenario
 from harness.faults.table import FaultScenarioError
 from hils.cli.main import main
-from hils.protocol.ntcip import UnitControlStatus, UnitFlashStatus
+from hils.protocol.ntcip import ControlColumn, UnitControlStatus, UnitFlashStatus
 from hils.run.testbed import run_spec
 from hils.shell.events import Kind
 from hils.shell.events import read as read_events
@@ -159,7 +159,8 @@ def test_the_judge_names_an_overlap_shown_beside_a_phase_it_conflicts_with(city_
     env = simpy.Environment()
     shown = SimpleNamespace(greens=frozenset({2, 6}), yellows=frozenset(), overlap_greens=frozenset({1}),
                             overlap_yellows=frozenset(), flash_status=UnitFlashStatus.NOT_FLASH,
-                            control_status=UnitControlStatus.SYSTEM_CONTROL)
+                            control_status=UnitControlStatus.SYSTEM_CONTROL,
+                            control={c: frozenset() for c in ControlColumn})
     monitor = IndicationMonitor(env, shown, city_config)
     env.run(until=0.2)
     result = evaluate(scenario, records, faults, {TLS_ID: monitor})
@@ -196,6 +197,12 @@ def test_a_scenario_is_reproducible_from_its_seed():
         "seed = 1", 'seed = 1\naction_type = "duration"'), "faults[0].action", "a duration agent cannot issue"),
     (lambda t: t.replace('type = "drop"', 'type = "snmp_error"\nstatus = "oops"'), "faults[0].status",
      "unknown SNMP error status"),
+    (lambda t: t.replace("seed = 1", 'seed = 1\naction_type = "control"\n[[schedule]]\ncommandType = "hold"\n'
+                                       'commandPhase = 2\ncommandStartTime = 0\ncommandEndTime = 9\n[[schedule]]\n'
+                                       'commandType = "forceoff"\ncommandPhase = 2\ncommandStartTime = 5\n'
+                                       'commandEndTime = 6\n'), "schedule", "phase 2 is held and forced off at once"),
+    (lambda t: t.replace("recover_within = 0.1", "recover_within = 0.1\nheld_as_scheduled_from = 5.0"),
+     "expect.held_as_scheduled_from", "needs a [[schedule]]"),
     (lambda t: t.replace('type = "drop"', 'type = "preempt"\nhold = 5.0').replace("end = 35.0", ""),
      "faults[0].preempt", "is 1, which the config 'paper four-leg intersection' has not; allowed: its [preempts] "
      "(none)"),
@@ -452,3 +459,34 @@ def test_a_preempt_during_a_commanded_transition_is_judged_preempted_and_its_bre
     assert "preemptions" in failed
     assert re.search(r"the preemption at 20\.\d+ s never ended; the preemption at 20\.\d+ s sent command SET at",
                      failed["preemptions"])
+
+
+def test_a_schedule_through_a_link_outage_is_re_established_after_the_backup_reset():
+    scenario = load_fault_scenario(SUITE / "schedule-through-link-outage.toml")
+    result = run_fault_scenario(scenario)
+    assert result.passed, [f.message for f in result.failures]
+
+
+def test_a_schedule_not_re_established_after_the_backup_reset_fails(monkeypatch):
+    """Planted: the recovery SETs every object to 0 and nothing after (re-establishing broken): the scenario fails."""
+    from hils.control import manager as manager_mod
+    from hils.control.phase_control import no_controls
+
+    real_set, real_recovered = manager_mod.Manager._recovery_set, manager_mod.Manager._recovered
+
+    def recovery_set_nothing(self, ev, out):
+        self._sync(ev.greens)
+        self._recovering_greens = ev.greens
+        self._send_controls(no_controls(), manager_mod.Purpose.RECOVERY, ev.t, out)
+
+    def recovered_without_changes(self, ev, out):
+        running, self.running = self.running, None
+        real_recovered(self, ev, out)
+        self.running = running
+
+    for key, (target, handler) in list(manager_mod._TRANSITIONS.items()):
+        planted = {real_set: recovery_set_nothing, real_recovered: recovered_without_changes}.get(handler)
+        if planted is not None:
+            monkeypatch.setitem(manager_mod._TRANSITIONS, key, (target, planted))
+    result = run_fault_scenario(load_fault_scenario(SUITE / "schedule-through-link-outage.toml"))
+    assert "held_as_scheduled_from" in [f.expectation for f in result.failures]

@@ -354,7 +354,8 @@ def lit(greens=(), yellows=(), overlap_greens=(), overlap_yellows=()) -> SimpleN
     """What a controller shows, as the monitor samples it."""
     return SimpleNamespace(greens=frozenset(greens), yellows=frozenset(yellows),
                            overlap_greens=frozenset(overlap_greens), overlap_yellows=frozenset(overlap_yellows),
-                           flash_status=UnitFlashStatus.NOT_FLASH, control_status=UnitControlStatus.SYSTEM_CONTROL)
+                           flash_status=UnitFlashStatus.NOT_FLASH, control_status=UnitControlStatus.SYSTEM_CONTROL,
+                           control={c: frozenset() for c in ControlColumn})
 
 
 def test_the_monitor_sees_conflicting_indications_and_mmu_flash(paper_config):

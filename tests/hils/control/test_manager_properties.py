@@ -29,7 +29,7 @@ import numpy as np
 from hypothesis import HealthCheck, settings
 from hypothesis.stateful import RuleBasedStateMachine, initialize, precondition, rule
 
-from hils.control.actions import ActionConverter, ActionError, ActionType, Command, PreemptedError
+from hils.control.actions import PAPER_ACTION_TYPES, ActionConverter, ActionError, ActionType, Command, PreemptedError
 from hils.control.manager import CLEAR_ATTEMPTS, Ev, Manager, Mode, State, graph
 from hils.control.manager_io import (
     AgentOverdue,
@@ -44,6 +44,7 @@ from hils.control.manager_io import (
     ControllerUnreachable,
     ControllerUnreadable,
     ControlsRead,
+    ControlsReset,
     Dispatch,
     DriftSeen,
     Dropped,
@@ -52,6 +53,7 @@ from hils.control.manager_io import (
     HaltPolling,
     KeepaliveSwitched,
     Note,
+    OrderChanged,
     PollAnswered,
     PollFailed,
     PollFailureSeen,
@@ -67,7 +69,11 @@ from hils.control.manager_io import (
     Refused,
     ResumePolling,
     RetryStartup,
+    ScheduleBegan,
+    ScheduleEnded,
+    ScheduleRequested,
     SendCall,
+    SendControls,
     SetAnswered,
     SetFailed,
     ShowSignal,
@@ -84,8 +90,9 @@ from hils.control.manager_io import (
     Verified,
     WatchCalls,
 )
+from hils.control.phase_control import Control
 from hils.protocol.config import load
-from hils.protocol.ntcip import SignalState
+from hils.protocol.ntcip import CONTROL_TABLE, ControlColumn, SignalState
 
 CONFIG = load()
 PHASES = CONFIG.phase_numbers
@@ -135,7 +142,7 @@ GREENS = st.frozensets(st.sampled_from(PHASES), max_size=4)
 N_DRIFT = CONFIG.middleware.n_drift
 STEP = CONFIG.middleware.sumo_step
 BACKUP = st.sampled_from([0, 6, 30, 300])
-RUNNING = (Mode.IDLE, Mode.IN_TRANSITION, Mode.SERVING)  # commanding
+RUNNING = (Mode.IDLE, Mode.IN_TRANSITION, Mode.SERVING, Mode.SCHEDULED)  # commanding
 WORKING = (*RUNNING, Mode.PREEMPTED)  # polling, keepalive, drift, read-back
 DOWN = (Mode.TIMEOUT, Mode.RECOVERING)
 PREEMPTS = st.frozensets(st.integers(1, 4), min_size=1, max_size=2)
@@ -172,7 +179,7 @@ class ManagerMachine(RuleBasedStateMachine):
     def __init__(self) -> None:
         super().__init__()
         self.manager = manager()
-        self.converters = {t: ActionConverter(CONFIG, t) for t in ActionType}
+        self.converters = {t: ActionConverter(CONFIG, t) for t in PAPER_ACTION_TYPES}
         self.t = 0.0
         self.actions = 0
         self.polls = 0
@@ -215,6 +222,7 @@ class ManagerMachine(RuleBasedStateMachine):
         m = self.manager
         self.consistent = False
         before, open_before, position_before, call_before = m.mode, self.open, m.position, m.call
+        sent_before, running_before, sets_sent_before = dict(m.sent), m.running, self.sets_sent
         effects = m.handle(ev)
         after = m.mode
 
@@ -229,27 +237,28 @@ class ManagerMachine(RuleBasedStateMachine):
         if before is Mode.CLOSED:
             # Closed, only this happens: a command is dropped, a clear that got no answer is sent again, the
             # close ends, the start-up (if it was still going) ends.
-            assert after is Mode.CLOSED and all(isinstance(e, Dropped | SendCall | CloseDone | StartupDone)
-                                                for e in effects), f"closed, yet {effects}"
+            assert after is Mode.CLOSED and all(isinstance(e, Dropped | SendCall | SendControls | CloseDone
+                                                           | StartupDone) for e in effects), f"closed, yet {effects}"
             if isinstance(ev, SetFailed) and ev.purpose is Purpose.CLEAR:
                 self.clears_lost += ev.lost
                 again = ev.lost and self.clears_lost < CLEAR_ATTEMPTS
-                assert effects == ([SendCall(frozenset(), Purpose.CLEAR)] if again else [CloseDone(ev.error)]), (
+                assert effects == ([self.let_go(Purpose.CLEAR)] if again else [CloseDone(ev.error)]), (
                     "a lost clear is sent again, CLEAR_ATTEMPTS times in all; then the close is over")
             if isinstance(ev, SetAnswered) and ev.purpose is Purpose.CLEAR:
                 assert effects == [CloseDone()]
-        if isinstance(ev, CommandRequested) and before is Mode.PREEMPTED:
+        if isinstance(ev, CommandRequested | ScheduleRequested) and before is Mode.PREEMPTED:
             (refused,) = effects
             assert isinstance(refused, Refused) and refused.action_id == ev.action_id
             assert isinstance(refused.error, PreemptedError) and refused.error.reason == "preempted"
             assert after is Mode.PREEMPTED
-        elif isinstance(ev, CommandRequested) and before is not Mode.IDLE:
+        elif (isinstance(ev, CommandRequested) and before is not Mode.IDLE) or (
+                isinstance(ev, ScheduleRequested) and before not in (Mode.IDLE, Mode.SCHEDULED)):
             assert effects == [Dropped(ev.action_id, before.log_name)]
         assert (m.refusal() is not None) == (after is Mode.PREEMPTED), "refused exactly while PREEMPTED"
         if isinstance(ev, CloseRequested) and before is not Mode.CLOSED:
             assert after is Mode.CLOSED and effects[0] == HaltPolling()
             if self.last_set > -math.inf:
-                assert effects[-1] == SendCall(frozenset(), Purpose.CLEAR), "closing clears the call"
+                assert effects[-1] == self.let_go(Purpose.CLEAR), "closing clears the call"
             else:
                 assert effects == [HaltPolling(), CloseDone()], "nothing was SET, nothing to clear"
 
@@ -284,8 +293,13 @@ class ManagerMachine(RuleBasedStateMachine):
                 if before is not Mode.PREEMPTED and ev.preempts:
                     assert PreemptBegan(ev.preempts, open_before) in effects
                     assert m.preempts == ev.preempts and m.preempted_since == ev.t
-                    withdrawn = SendCall(frozenset(), Purpose.WITHDRAW) in effects
-                    assert withdrawn == bool(call_before), "the interrupted call is withdrawn (when there is one)"
+                    withdrawn = self.let_go(Purpose.WITHDRAW) in effects
+                    # (under phase control, less the force-offs this very poll saw spent: the controller reset them)
+                    spent = {e.change.order.phase for e in effects
+                             if isinstance(e, OrderChanged) and e.change.after.name == "SPENT"}
+                    held = (any(p - spent if c is ControlColumn.FORCE_OFF else p for c, p in sent_before.items())
+                            if m.phase_control else bool(call_before))
+                    assert withdrawn == held, "the interrupted call is withdrawn (when there is one)"
                 elif before is Mode.PREEMPTED and not ev.preempts:
                     assert effects[1:] == [PreemptEnded(ev.t - self.preempted_at, ev.state.greens)]
                     assert after is Mode.IDLE
@@ -322,7 +336,8 @@ class ManagerMachine(RuleBasedStateMachine):
             if ev.calls != found:
                 assert after is Mode.TIMEOUT and isinstance(effects[0], AnotherManager)
                 assert effects[-1] == StartupDone() and m.timeout_reason is TimeoutReason.FOREIGN_CONTROL
-                assert not any(isinstance(e, SendCall) for e in effects), "nothing is SET on someone's controller"
+                assert not any(isinstance(e, SendCall | SendControls) for e in effects), (
+                    "nothing is SET on someone's controller")
             else:
                 assert after is Mode.STARTING
                 assert effects == ([] if ev.t - since >= WATCH else [WatchCalls(WATCH_PERIOD)])
@@ -349,7 +364,26 @@ class ManagerMachine(RuleBasedStateMachine):
                     self.dispatched_at[command_id] = ev.t
                     self.open = command_id
                 case SendCall(phases, purpose, command_id):
+                    assert not m.phase_control, "a phase-control run SETs the control objects, never VehCall alone"
                     self._check_send(ev, before, phases, purpose, command_id)
+                case SendControls(controls, purpose):
+                    assert m.phase_control, "a run of phase commands SETs VehCall alone"
+                    self._check_controls(ev, before, after, dict(controls), purpose, effects, sent_before)
+                case ScheduleBegan(action_id, schedule):
+                    assert isinstance(ev, ScheduleRequested) and (action_id, schedule) == (ev.action_id, ev.schedule)
+                    assert before in (Mode.IDLE, Mode.SCHEDULED) and schedule.orders and m.running is not None
+                case ScheduleEnded(reason):
+                    assert running_before is not None and m.running is not running_before
+                    assert reason == {ScheduleRequested: "replaced" if getattr(ev, "schedule", None) and
+                                      ev.schedule.orders else "cleared", CloseRequested: "closed",
+                                      PollAnswered: "preempted", TimerExpired: "done"}[type(ev)]
+                case OrderChanged(change):
+                    assert change.before is not change.after
+                    if change.after.name == "SPENT":
+                        assert change.order.phase not in m.sent[ControlColumn.FORCE_OFF], "the controller reset it"
+                case ControlsReset():
+                    assert isinstance(ev, ControlsRead | ControllerRead) and m.phase_control
+                    assert isinstance(ev, ControlsRead) or ev.backup_mode
                 case StartTimer(kind, delay, token):
                     assert token not in self.fired and all(token != t for _, _, t in self.timers)
                     if kind is TimerKind.KEEPALIVE:
@@ -362,6 +396,9 @@ class ManagerMachine(RuleBasedStateMachine):
                         self.recover_token = token
                     elif kind is TimerKind.TRANSITION:
                         assert delay == TAU_TRANS and isinstance(ev, CommandRequested)
+                    elif kind is TimerKind.CONTROL:
+                        assert delay >= 0 and token == m._control_token and m.running is not None
+                        assert isinstance(ev, ScheduleRequested | TimerExpired)
                     else:
                         command = self.dispatched[self.open]
                         assert isinstance(ev, PollAnswered) and set(command.phases) <= ev.state.greens
@@ -394,7 +431,7 @@ class ManagerMachine(RuleBasedStateMachine):
                     self.ended[command_id] = outcome
                     self.open = None
                 case Dropped(action_id, state):
-                    assert isinstance(ev, CommandRequested) and action_id == ev.action_id
+                    assert isinstance(ev, CommandRequested | ScheduleRequested) and action_id == ev.action_id
                     assert state == before.log_name and before is not Mode.IDLE
                 case TimeoutEntered(reason, _detail, command_id):
                     assert after is Mode.TIMEOUT and before in (Mode.STARTING, *WORKING)
@@ -420,7 +457,8 @@ class ManagerMachine(RuleBasedStateMachine):
                     assert isinstance(ev, RecoveryRequested) or (by_timer and ev.token == self.recover_token)
                     self.read_pending = True
                 case Recovered(greens):
-                    assert before is Mode.RECOVERING and after is Mode.IDLE and ResumePolling() in effects
+                    assert before is Mode.RECOVERING and after in (Mode.IDLE, Mode.SCHEDULED)
+                    assert ResumePolling() in effects
                     assert greens == self.read_greens, "recovered to what the re-read showed"
                 case HaltPolling():
                     self.epoch += 1
@@ -441,7 +479,9 @@ class ManagerMachine(RuleBasedStateMachine):
 
         # A control object the run never sets found set while working is a TIMEOUT; so is VehCall other than the
         # call last SET, read when no SET of the run could race with the read; else nothing happens.
-        if isinstance(ev, ControlsRead):
+        if isinstance(ev, ControlsRead) and m.phase_control:
+            self._check_read_back(ev, before, after, effects, sent_before, sets_sent_before)
+        elif isinstance(ev, ControlsRead):
             sent_then, clean = self.readback
             foreign = any(phases for _name, phases in ev.held) or (
                 ev.veh_call is not None and clean and sent_then == self.sets_sent and ev.veh_call != m.call)
@@ -455,7 +495,7 @@ class ManagerMachine(RuleBasedStateMachine):
         if isinstance(ev, SetAnswered) and before is Mode.RECOVERING and ev.purpose is Purpose.RECOVERY:
             self.drifted = 0
             self.failed_ids.clear()
-        if after is Mode.IDLE and before is Mode.RECOVERING:
+        if after in (Mode.IDLE, Mode.SCHEDULED) and before is Mode.RECOVERING:
             assert m.drifted_in_a_row == 0 and not m.polls_failing
         if (before is Mode.RECOVERING and isinstance(ev, ControllerRead)) or any(
                 isinstance(e, PreemptEnded) for e in effects):
@@ -470,6 +510,8 @@ class ManagerMachine(RuleBasedStateMachine):
         assert (m.pending is None) == (self.open is None)
         assert m.state is after.paper
         assert after is not Mode.PREEMPTED or m.call == frozenset(), "no call stands while preempted"
+        if m.phase_control:
+            self._check_held(before, after, ev)
         assert len(self.dispatched) - len(self.ended) <= 1
         assert m.poll_epoch == self.epoch
         self.consistent = True
@@ -505,10 +547,80 @@ class ManagerMachine(RuleBasedStateMachine):
             assert before in WORKING or purpose is Purpose.CLEAR, f"{purpose} SET in {before.name}"
         if before is Mode.PREEMPTED:  # no command ever: the keepalive of no call, and the close's clear
             assert purpose in (Purpose.KEEPALIVE, Purpose.CLEAR) and phases == frozenset(), f"{purpose} SET preempted"
+        self._sent(ev, purpose, command_id, phases)
+
+    def _sent(self, ev: Event, purpose: Purpose, command_id: int | None, phases: frozenset[int]) -> None:
         self.last_set = ev.t
         self.sets_sent += 1
         self.set_unsure = False
         self.sets.append(Outstanding(purpose, command_id, phases))
+
+    def let_go(self, purpose: Purpose) -> SendCall | SendControls:
+        """The SET that lets go of what the run holds: VehCall at 0, or, under phase control, all six objects."""
+        if self.manager.phase_control:
+            return SendControls(tuple((c, frozenset()) for c in ControlColumn), purpose)
+        return SendCall(frozenset(), purpose)
+
+    def _check_controls(self, ev: Event, before: Mode, after: Mode, controls: dict[ControlColumn, frozenset[int]],
+                        purpose: Purpose, effects: list[Effect], sent_before: dict[ControlColumn, frozenset[int]],
+                        ) -> None:
+        """A SET of the control objects (phase control): only where, when and what the rules allow."""
+        m = self.manager
+        for phases in controls.values():
+            assert phases <= set(PHASES), f"a SET of unknown phases {controls}"
+        assert m.keepalive_period == 0 or purpose is Purpose.CLEAR or any(
+            isinstance(e, StartTimer) and e.kind is TimerKind.KEEPALIVE for e in effects), (
+            "every SET but the close's restarts the keepalive: the backup timer never runs out while at work")
+        everything = set(controls) == set(ControlColumn)
+        if purpose is Purpose.SCHEDULE:
+            assert (before in (Mode.IDLE, Mode.SCHEDULED) and isinstance(ev, ScheduleRequested | TimerExpired)) or (
+                before is Mode.RECOVERING and isinstance(ev, SetAnswered) and after is Mode.SCHEDULED)
+            assert all(controls[c] != sent_before[c] for c in controls), "only the objects that change are SET"
+        elif purpose is Purpose.KEEPALIVE:
+            assert before in WORKING and isinstance(ev, TimerExpired) and ev.token == self.keepalive_token
+            assert m.keepalive_on and ev.t - self.last_set >= m.keepalive_period - 1e-9
+            assert ControlColumn.FORCE_OFF not in controls and ControlColumn.VEH_CALL in controls
+            assert controls == {c: p for c, p in sent_before.items() if c in controls}, "SET again as they stand"
+            assert all(controls[c] for c in controls if c is not ControlColumn.VEH_CALL)
+        elif purpose is Purpose.RECOVERY:
+            assert before is Mode.RECOVERING and isinstance(ev, ControllerRead) and everything
+        elif purpose is Purpose.REESTABLISH:
+            assert before in WORKING and isinstance(ev, ControlsRead) and everything
+            assert any(isinstance(e, ControlsReset) for e in effects)
+        elif purpose is Purpose.RELEASE:
+            assert after is Mode.TIMEOUT and before is not Mode.TIMEOUT and everything
+            assert not any(controls.values()) and any(sent_before.values()), "let go, when holding anything"
+        elif purpose is Purpose.WITHDRAW:
+            assert isinstance(ev, PollAnswered) and ev.preempts and after is Mode.PREEMPTED
+            assert everything and not any(controls.values())
+        else:
+            assert purpose is Purpose.CLEAR and everything and not any(controls.values())
+            assert isinstance(ev, CloseRequested) or (isinstance(ev, SetFailed) and ev.purpose is Purpose.CLEAR)
+        self._sent(ev, purpose, None, controls.get(ControlColumn.VEH_CALL, frozenset()))
+
+    def _check_held(self, before: Mode, after: Mode, ev: Event) -> None:
+        """Phase control: what the run holds is what the running schedule asks, while it commands, and nothing
+        while it does not; and never what a schedule may not ask."""
+        m = self.manager
+        held = m.sent
+        asked = m.running.image() if m.running is not None else {c: frozenset() for c in ControlColumn}
+        if after in (Mode.IDLE, Mode.SCHEDULED):
+            assert held == asked, f"holds {held}, the schedule asks {asked}"
+            assert (after is Mode.SCHEDULED) == (m.running is not None)
+        if after in (Mode.PREEMPTED, Mode.TIMEOUT):
+            assert not any(held.values()), f"{after.name} and still holding {held}"
+        if after in WORKING and m.backup_time and m.keepalive_on and any(held.values()):
+            # MMITSS re-sends every active command each (backup time - 1) s; ours is due no later
+            due = [d for d, _kind, token in self.timers if token == self.keepalive_token]
+            assert due and due[0] <= self.last_set + m.backup_time - 1 + 1e-9, (
+                f"holding {held}, last SET at {self.last_set}, backup time {m.backup_time} s, keepalive due {due}")
+        c = ControlColumn
+        for a, b in ((c.HOLD, c.FORCE_OFF), (c.VEH_CALL, c.PHASE_OMIT), (c.PED_CALL, c.PED_OMIT),
+                     (c.HOLD, c.PHASE_OMIT)):
+            assert not held[a] & held[b], f"{a.name} and {b.name} on {sorted(held[a] & held[b])}"
+        assert not any(set(ring) <= held[c.PHASE_OMIT] for ring in CONFIG.rings), "a whole ring omitted"
+        if isinstance(ev, ScheduleRequested) and before in (Mode.IDLE, Mode.SCHEDULED):
+            assert after is (Mode.SCHEDULED if ev.schedule.orders else Mode.IDLE)
 
     # --- rules ---------------------------------------------------------------------------------
 
@@ -556,7 +668,7 @@ class ManagerMachine(RuleBasedStateMachine):
         self.feed(Started(self._tick(0.0135), greens, backup))
         self.shown = greens
 
-    @rule(data=st.data(), action_type=st.sampled_from(ActionType), dt=DT)
+    @rule(data=st.data(), action_type=st.sampled_from(PAPER_ACTION_TYPES), dt=DT)
     def act(self, data: st.DataObject, action_type: ActionType, dt: float) -> None:
         self._act(data, action_type, dt)
 
@@ -604,7 +716,7 @@ class ManagerMachine(RuleBasedStateMachine):
             return
         self.in_flight.remove(poll)
         effects = self.feed(PollAnswered(self._tick(dt), poll.poll_id, poll.epoch, shown(greens), preempts))
-        assert not any(isinstance(e, SendCall) and e.purpose is not Purpose.WITHDRAW for e in effects)
+        assert not any(isinstance(e, SendCall | SendControls) and e.purpose is not Purpose.WITHDRAW for e in effects)
 
     @precondition(lambda self: self.open is not None)
     @rule(dt=DT, greens=GREENS)
@@ -647,6 +759,8 @@ class ManagerMachine(RuleBasedStateMachine):
         m = self.manager
         if kind is TimerKind.KEEPALIVE:
             live = token == self.keepalive_token
+        elif kind is TimerKind.CONTROL:
+            live = token == m._control_token and m.running is not None
         elif kind is TimerKind.RECOVER:
             live = token == self.recover_token and m.mode is Mode.TIMEOUT
         else:
@@ -669,7 +783,8 @@ class ManagerMachine(RuleBasedStateMachine):
         else:
             effects = self.feed(SetFailed(t, done.purpose, done.command_id, lost=fate == "lost", error=fate))
             if fate == "refused":
-                assert not any(isinstance(e, SendCall) for e in effects), "a refused SET is never retried"
+                assert not any(isinstance(e, SendCall | SendControls) for e in effects), (
+                    "a refused SET is never retried")
 
     @rule(dt=DT, drifted=st.booleans())
     def step_timed(self, dt: float, drifted: bool) -> None:
@@ -681,15 +796,20 @@ class ManagerMachine(RuleBasedStateMachine):
             assert effects == [] and (m.mode, m.drifted_in_a_row) == before
 
     @precondition(lambda self: self.read_pending)
-    @rule(dt=DT, greens=GREENS, readable=st.booleans())
-    def controller_answers_the_recovery(self, dt: float, greens: frozenset[int], readable: bool) -> None:
+    @rule(dt=DT, greens=GREENS, readable=st.booleans(), backup_mode=st.booleans())
+    def controller_answers_the_recovery(self, dt: float, greens: frozenset[int], readable: bool,
+                                        backup_mode: bool) -> None:
         self.read_pending = False
         t = self._tick(dt)
         if readable:
             self.shown = self.read_greens = greens
-            self.feed(ControllerRead(t, greens))
+            self.feed(self._read(t, greens, backup_mode))
         else:
             self.feed(ControllerUnreadable(t, "no answer"))
+
+    def _read(self, t: float, greens: frozenset[int], backup_mode: bool) -> ControllerRead:
+        """The recovery's re-read, as the middleware reports it (the signal state alone, for phase commands)."""
+        return ControllerRead(t, greens)
 
     # Recovery requests, keepalive switching, read-backs and stale timers share one rule, so that they
     # come rarely enough for commands to run their course in between.
@@ -702,7 +822,7 @@ class ManagerMachine(RuleBasedStateMachine):
         if what == "recovery":
             effects = self.feed(RecoveryRequested(t))
             if mode is not Mode.TIMEOUT:
-                assert self.manager.mode is mode and not any(isinstance(e, SendCall) for e in effects)
+                assert self.manager.mode is mode and not any(isinstance(e, SendCall | SendControls) for e in effects)
         elif what == "readback":
             self.feed(ReadbackDue(t))
         elif what == "agent_overdue":
@@ -754,6 +874,125 @@ class ManagerMachine(RuleBasedStateMachine):
 ManagerMachine.TestCase.settings = settings(max_examples=200, stateful_step_count=60, deadline=None,
                                             suppress_health_check=[HealthCheck.too_slow])
 TestManagerMachine = ManagerMachine.TestCase
+
+
+# --- phase control: the same machine driven by schedules ------------------------------------------------------------
+
+_TIME = st.one_of(st.sampled_from([0.0, 0.0, 0.05, 1.0, 2.0, 5.0, 11.0, 24.0]), st.floats(0.0, 40.0))
+_LENGTH = st.one_of(st.sampled_from([1.0, 5.0, 20.0, 60.0]), st.floats(-1.0, 30.0))
+_COMMAND = st.builds(
+    lambda kind, phase, start, length: {"commandType": kind, "commandPhase": phase, "commandStartTime": start,
+                                        "commandEndTime": start + length},
+    st.sampled_from([c.value for c in Control]), st.sampled_from([*PHASES, *PHASES, *PHASES, 9]), _TIME, _LENGTH)
+SCHEDULES = st.one_of(
+    st.lists(_COMMAND, min_size=1, max_size=5).map(lambda cmds: {"MsgType": "Schedule", "Schedule": cmds}),
+    st.lists(_COMMAND, max_size=3),
+    st.dictionaries(st.sampled_from([c.value for c in Control]), st.lists(st.sampled_from(PHASES), max_size=2),
+                    min_size=1, max_size=3),
+    st.sampled_from(["clear", {"MsgType": "Schedule", "Schedule": "Clear"}, 1.5, None, {"MsgType": "Status"}]),
+)
+
+
+class PhaseControlMachine(ManagerMachine):
+    """The manager of a phase-control run (:mod:`hils.control.phase_control`) driven as the other machine is, with
+    schedules, steps and clears (valid and not) for actions, recovery re-reads that find the controller in backup
+    mode, and read-backs of all six control objects as the run SET them, with phases lost or added. On top of every
+    check of the other machine: what the run holds is what the running schedule asks while it commands (IDLE,
+    SCHEDULED) and nothing while it does not (PREEMPTED, TIMEOUT); never a phase held and forced off, called and
+    omitted, held and omitted, nor a whole ring omitted; only the objects that change are SET; the keepalive SETs
+    them again as they stand (ForceOff aside) and every SET but the close's restarts it; a read-back that finds the
+    run's phases gone SETs all six again; every exit lets go of all six."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.manager = Manager(TAU_TRANS, sequence=CONFIG.sequence, n_drift=N_DRIFT, n_timeout=N_TIMEOUT,
+                               keepalive_period=CONFIG.middleware.keepalive_period or 0.0,
+                               recover_after=RECOVER_AFTER, watch=WATCH, watch_period=WATCH_PERIOD, phase_control=True)
+        self.converter = ActionConverter(CONFIG, ActionType.CONTROL)
+
+    def _act(self, data: st.DataObject, action_type: ActionType, dt: float) -> None:
+        value = data.draw(SCHEDULES, label="schedule")
+        try:
+            schedule = self.converter.convert(value)
+        except ActionError:
+            return  # nothing reaches the manager
+        self.actions += 1
+        self.feed(ScheduleRequested(self._tick(dt), self.actions, schedule))
+
+    def _read(self, t: float, greens: frozenset[int], backup_mode: bool) -> ControllerRead:
+        held = {c: frozenset() for c in ControlColumn} if backup_mode else dict(self.manager.sent)
+        return ControllerRead(t, greens, held, backup_mode)
+
+    @precondition(lambda self: self.manager.running is not None and self.manager._control_token is not None)
+    @rule()
+    def next_instant(self) -> None:
+        """The running schedule's next instant comes (its control timer fires), before anything else happens."""
+        m = self.manager
+        due, kind, token = next(t for t in self.timers if t[2] == m._control_token)
+        self.timers.remove((due, kind, token))
+        self.t = max(self.t, due)
+        self.fired.add(token)
+        self.feed(TimerExpired(self.t, kind, token))
+
+    @rule(data=st.data(), dt=DT, change=st.sampled_from(["same", "same", "lost", "added"]))
+    def controls_read_back(self, data: st.DataObject, dt: float, change: str) -> None:
+        """A read-back of all six objects, answered before anything else happens: as the run SET them, or with a
+        phase lost (the controller reset them) or added (someone else's)."""
+        t = self._tick(dt)
+        if data.draw(st.booleans(), label="answered first"):  # every SET answered: the read can be judged
+            while self.sets:
+                done = self.sets.pop(0)
+                self.feed(SetAnswered(t, done.purpose, done.command_id))
+        self.feed(ReadbackDue(t))
+        held = dict(self.manager.sent)
+        column = data.draw(st.sampled_from(list(ControlColumn)), label="object")
+        phase = data.draw(st.sampled_from(PHASES), label="phase")
+        held[column] = held[column] - {phase} if change == "lost" else held[column] | {phase} if change == "added" \
+            else held[column]
+        names = {CONTROL_TABLE[c].name: c for c in ControlColumn}
+        read = tuple((name, held[c]) for name, c in names.items() if c is not ControlColumn.VEH_CALL)
+        self.feed(ControlsRead(self._tick(0.005), read, held[ControlColumn.VEH_CALL]))
+
+    @precondition(lambda self: self.manager.mode is Mode.TIMEOUT)
+    @rule(dt=DT, greens=GREENS, backup_mode=st.booleans())
+    def recovery_round(self, dt: float, greens: frozenset[int], backup_mode: bool) -> None:
+        """A recovery that goes through at once: asked, the controller re-read (in backup mode or not), its SET
+        answered."""
+        t = self._tick(dt)
+        self.feed(RecoveryRequested(t))
+        self.read_pending = False
+        self.shown = self.read_greens = greens
+        self.feed(self._read(self._tick(0.01), greens, backup_mode))
+        done = next(o for o in reversed(self.sets) if o.purpose is Purpose.RECOVERY)
+        self.sets.remove(done)
+        self.feed(SetAnswered(self._tick(0.01), done.purpose, done.command_id))
+
+    def _check_read_back(self, ev: ControlsRead, before: Mode, after: Mode, effects: list[Effect],
+                         sent_before: dict[ControlColumn, frozenset[int]], sets_sent_before: int) -> None:
+        sent_then, clean = self.readback
+        read = {**{c: p for name, p in ev.held for c in ControlColumn if CONTROL_TABLE[c].name == name},
+                ControlColumn.VEH_CALL: ev.veh_call}
+        # (judged as the read came in: the TIMEOUT it may cause SETs the objects to 0 after)
+        judged = clean and sent_then == sets_sent_before and ev.veh_call is not None
+        foreign = judged and any(read[c] - sent_before[c] for c in ControlColumn)
+        lost = judged and any(sent_before[c] - read[c] for c in ControlColumn if c is not ControlColumn.FORCE_OFF)
+        if before not in WORKING or not (foreign or lost):
+            assert effects == [] and after is before, "a read-back that cannot be judged, or finds all as SET"
+        elif foreign:
+            assert after is Mode.TIMEOUT and m_reason(self.manager) is TimeoutReason.FOREIGN_CONTROL
+        else:
+            assert after is before and isinstance(effects[0], ControlsReset)
+            (again,) = [e for e in effects if isinstance(e, SendControls)]
+            assert again.purpose is Purpose.REESTABLISH
+
+
+def m_reason(m: Manager) -> TimeoutReason | None:
+    return m.timeout_reason
+
+
+PhaseControlMachine.TestCase.settings = settings(max_examples=200, stateful_step_count=60, deadline=None,
+                                                 suppress_health_check=[HealthCheck.too_slow])
+TestPhaseControlMachine = PhaseControlMachine.TestCase
 
 
 def started(greens: frozenset[int] = frozenset({2, 6}), backup: int = 0, **options: Any) -> Manager:
@@ -1063,3 +1302,26 @@ def test_a_preempt_ends_the_transition_without_a_timeout_and_only_a_failure_of_t
     for i in range(5, 5 + N_TIMEOUT):
         effects = m.handle(PollFailed(33.0 + i, i, 0, "CommunicationTimeout", "lost"))
     assert m.mode is Mode.TIMEOUT and m.timeout_reason is TimeoutReason.COMMUNICATION
+
+
+def test_a_refused_recovery_set_under_phase_control_sends_nothing_and_holds_nothing() -> None:
+    """An SNMP SET applies whole or not at all: a refused recovery SET landed nothing, so the manager, back in
+    TIMEOUT, holds nothing and sends no release (a lost one may have landed: it is released)."""
+    for lost in (False, True):
+        m = Manager(TAU_TRANS, sequence=CONFIG.sequence, recover_after=None, phase_control=True)
+        m.handle(Started(0.0, frozenset({2, 6}), 30))
+        schedule = ActionConverter(CONFIG, ActionType.CONTROL).convert({"hold": [2, 6], "call_veh": [2, 6]})
+        m.handle(ScheduleRequested(1.0, 1, schedule))
+        m.handle(SetAnswered(1.01, Purpose.SCHEDULE, None))
+        m.handle(AgentOverdue(2.0, 10.0))
+        assert m.mode is Mode.TIMEOUT
+        m.handle(SetFailed(2.1, Purpose.RELEASE, None, lost=True, error="lost"))
+        m.handle(RecoveryRequested(3.0))
+        effects = m.handle(ControllerRead(3.1, frozenset({2, 6}), None, False))
+        assert any(isinstance(e, SendControls) and e.purpose is Purpose.RECOVERY for e in effects)
+        effects = m.handle(SetFailed(3.2, Purpose.RECOVERY, None, lost=lost, error="lost" if lost else "genErr"))
+        assert m.mode is Mode.TIMEOUT
+        released = [e for e in effects if isinstance(e, SendControls)]
+        assert released == ([SendControls(tuple((c, frozenset()) for c in ControlColumn), Purpose.RELEASE)]
+                            if lost else []), "a refused SET is never followed by another"
+        assert not any(m.sent.values()), "in TIMEOUT the run holds nothing"

@@ -46,7 +46,7 @@ def rollout(env: gymnasium.Env, seed: int, actions: list[object]) -> tuple[list[
     return observations, rewards
 
 
-@pytest.mark.parametrize("action_type", ["selection", "switch", "duration"])
+@pytest.mark.parametrize("action_type", ["selection", "switch", "duration", "control"])
 def test_gymnasium_check_env_passes(action_type: str) -> None:
     env = make(action_type)
     try:

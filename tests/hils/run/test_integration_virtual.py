@@ -7,7 +7,7 @@ import math
 import pytest
 
 from harness.faults.inject import FaultTarget, StuckController, Window
-from hils.control.actions import ActionType
+from hils.control.actions import PAPER_ACTION_TYPES, ActionType
 from hils.protocol import config as config_mod
 from hils.protocol.ntcip import ControlColumn
 from hils.run.testbed import RunSpec, run_spec
@@ -28,7 +28,7 @@ def _kinds(records, kind):
 
 
 
-@pytest.mark.parametrize("action_type", list(ActionType))
+@pytest.mark.parametrize("action_type", PAPER_ACTION_TYPES)
 def test_one_hour_every_transition_verified_within_clearance_plus_one_poll(action_type):
     result = run_spec(RunSpec(CFG, action_type, duration=3600.0, seed=3))
     records = result.records
@@ -60,6 +60,19 @@ def test_one_hour_every_transition_verified_within_clearance_plus_one_poll(actio
         green_began = verified_at[cmd["command_id"]]
     # Calls cleared at the end of the run (in the controller's database; its phase logic follows a tick later).
     assert result.target.unit.control[ControlColumn.VEH_CALL] == frozenset()
+
+
+def test_one_hour_of_phase_control_steps_serves_every_target_and_clears_all_six_objects():
+    """The omit-hold agent (CARMA Streets' way) for an hour: each step's target pair shows green, nothing times out,
+    and the run's end leaves every control object at 0."""
+    result = run_spec(RunSpec(CFG, ActionType.CONTROL, duration=3600.0, seed=3))
+    records = result.records
+    steps = _kinds(records, Kind.SCHEDULE_STARTED)
+    assert len(steps) >= 300 and not _kinds(records, Kind.TIMEOUT_ENTERED)
+    shown = {tuple(r["greens"]) for r in _kinds(records, Kind.POLL)}
+    assert {(1, 5), (2, 6), (3, 7), (4, 8)} <= shown, "every pair of the sequence served"
+    assert result.target.controller.flash_status.name == "NOT_FLASH"
+    assert not any(result.target.unit.control.values())
 
 
 

@@ -128,7 +128,8 @@ def test_same_seed_same_log_and_another_seed_differs(paper_config, tmp_path: Pat
     first = _log_of(paper_config, action_type, 7, tmp_path / "a.jsonl")
     again = _log_of(paper_config, action_type, 7, tmp_path / "b.jsonl")
     other = _log_of(paper_config, action_type, 8, tmp_path / "c.jsonl")
-    assert len([r for r in first if r["kind"] == "command_dispatched"]) >= 10
+    commanded = "schedule_started" if action_type is ActionType.CONTROL else "command_dispatched"
+    assert len([r for r in first if r["kind"] == commanded]) >= 10
     assert first == again
     # Beyond the seed written in the first record, the agent's choices differ.
     assert first[1:] != other[1:]
