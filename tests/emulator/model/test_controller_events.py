@@ -98,7 +98,9 @@ def memory(c: Controller) -> dict[str, object]:
     """The controller's whole working memory."""
     co = c.coordinator
     return {"tick": c.tick, "rings": [dataclasses.astuple(r) for r in c.rings], "group": c.group,
-            "since_set": c._since_set, "yellow_end": dict(c._yellow_end), "ped_calls": c.ped_calls,
+            "since_set": c._since_set, "ped_calls": c.ped_calls,
+            "latches": (dict(c.coordinated.forced), dict(c.coordinated.limit), dict(c.coordinated.yielded),
+                        dict(c.preempting.cut)),
             "coordination": (co.clock, co.command, co.local, co.running, co.timer, co.budget, co.free_status,
                              co.replan),
             "overlaps": (dict(c.overlaps.shown), dict(c.overlaps.ticks)),
