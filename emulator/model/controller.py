@@ -18,7 +18,7 @@ Rules of this file
   what a pattern or a preempt asks is theirs (:mod:`emulator.model.coordinated`,
   :mod:`emulator.model.preempted`).
 - :meth:`Controller.advance` (n ticks) is exactly n calls of :meth:`Controller.step`:
-  it only skips ticks that :meth:`Controller.quiet_ticks` proves change
+  it only skips ticks that quiet time (:mod:`emulator.model.quiet`) proves change
   nothing but counters (a property test holds the two together).
 - A recorder (the data logger, :mod:`emulator.model.datalogger`) hears every
   interval change, a yellow with why its green ended (the very reason the
@@ -35,72 +35,47 @@ the sequencer (:mod:`emulator.model.sequencer`), the coordinator
 (:mod:`emulator.model.coordination`) and its part in the rings
 (:mod:`emulator.model.coordinated`), the preemptor
 (:mod:`emulator.model.preemption`) and its part in the rings
-(:mod:`emulator.model.preempted`), the overlaps (:mod:`emulator.model.overlaps`)
-and the monitor (:mod:`emulator.model.monitor`). The inputs are read as phase
-sets (:mod:`emulator.model.inputs`) once per write.
+(:mod:`emulator.model.preempted`), the overlaps (:mod:`emulator.model.overlaps`),
+the pedestrian calls (:mod:`emulator.model.pedestrians`), the backup timer
+(:mod:`emulator.model.backup`) and the monitor (:mod:`emulator.model.monitor`).
+The inputs are read as phase sets (:mod:`emulator.model.inputs`) once per write.
 
-A walk is served when the phase's green starts with a pedestrian call (latched
-from phaseControlGroupPedCall, ped recall or a push button, not on a PedOmit
-phase) and, while a pattern runs, fits before the phase's force-off point
-(:meth:`emulator.model.coordinated.Coordinated.walk_fits`); a call the green
-does not serve stays latched for the next cycle. PedOmit stops new walks only;
-a walk being timed completes.
-
-unitBackupTime is armed by the first SET of a control object; when it passes
-without another, the controller reports backupMode and clears every control
-object. After power-up the controller flashes for unitStartUpFlash seconds, then
-starts its start-up intervals. The monitor (the cabinet's MMU,
+When the backup timer (unitBackupTime) passes without a control SET, the
+controller reports backupMode and clears every control object. After power-up
+the controller flashes for unitStartUpFlash seconds, then starts its start-up
+intervals. The monitor (the cabinet's MMU,
 :mod:`emulator.model.monitor`) sees the lamps after every tick that changed
 them: two conflicting signals lit together (phases, or an overlap and a phase)
 or a channel leaving its green without a yellow of at least 2.7 s is a fault,
 and the controller goes to flash (all red) and stops timing. Overlaps follow the
 phases at the end of each tick.
 
-Quiet time. Most ticks change nothing but counters: a green resting on its
-call, a yellow timing its length. A tick's discrete effects (intervals,
-targets, the gap latch, the status, latched pedestrian calls, the control
-objects, flash and control status) depend on the inputs, on the discrete
-state and on a few comparisons of counters with thresholds (minimum,
-walk, pedestrian clearance, passage, maximum, clearance lengths, red
-revert, backup time, start-up flash). So once a step has changed nothing
-discrete, every following step with the same inputs changes nothing either
-until a counter reaches its next threshold: :meth:`quiet_ticks` says how
-many steps that is (the least of the thresholds each unit reports), and
-:meth:`skip` advances the counters over the quiet ones at once. A step that
-did change something is mostly followed by one that does not (a green or a
-clearance just started); where that is short to prove (:meth:`_settles`),
-quiet time starts at once instead of after that step. In quiet time a gap
-counter that runs is above zero (an extending green resets it every tick), a
-max-out counter that runs is above zero (it is held at zero without
-conflicting demand unless the phase is on max recall, and its first tick of a
-green is a real step) and the conflicting demand a green registered
-(``Ring.conflict``) stays as it is, which is all :meth:`skip` needs to know. A
-green's minimum is a threshold only while it has conflicting demand (or a
-pattern runs, or a preempt is served): without any, a ready green has nowhere
-to go, even one that max recall has maxed out. The data logger still logs it at
-its tick, so with a recorder that tick is stepped for the recorder alone
-(:meth:`step` skips it, quiet as :meth:`quiet_ticks` proved). Any input (a SET,
-a detector, a retiming) makes the next step a real one: :meth:`touch`.
+Quiet time (:mod:`emulator.model.quiet`). Most ticks change nothing but counters: every unit says when it next
+acts (the backup timer, the coordinator, the preemptor, the overlaps and, through the sequencer, the ring
+timers), and :meth:`Controller.advance` skips the ticks before the least of those deadlines at once
+(:meth:`Controller.skip`). Any input (a SET, a detector, a retiming) makes the next step a real one:
+:meth:`Controller.touch`.
 """
 
 from __future__ import annotations
 
 import logging
-import math
 from collections.abc import Callable, Iterable
 from datetime import datetime
 from typing import Protocol
 
 import simpy
 
-from emulator.model import inputs as reading
+from emulator.model.backup import BackupTimer
 from emulator.model.coordinated import Coordinated
 from emulator.model.coordination import Coordinator
 from emulator.model.inputs import Inputs, Reader
 from emulator.model.monitor import Lamps, Monitor
 from emulator.model.overlaps import Overlaps, Phases
+from emulator.model.pedestrians import PedCalls
 from emulator.model.preempted import Preempted
 from emulator.model.preemption import Preemptor
+from emulator.model.quiet import QuietTime
 from emulator.model.ring import (
     CLEARANCE,
     STARTUP,
@@ -115,7 +90,7 @@ from emulator.model.ring import (
 from emulator.model.sequencer import Sequencer
 from emulator.model.status import Images
 from hils.protocol.config import IntersectionConfig, NextPhaseLock
-from hils.protocol.ntcip import ControlColumn, PreemptState, ShortAlarm, UnitControlStatus, UnitFlashStatus
+from hils.protocol.ntcip import ControlColumn, ShortAlarm, UnitControlStatus, UnitFlashStatus
 from hils.protocol.timegrid import Grid
 
 __all__ = ["TICK", "Change", "Controller", "Inputs", "Interval", "Recorder", "Termination", "Timing", "tenths"]
@@ -150,7 +125,7 @@ class Controller:
         self._barrier = {p: config.barrier_of(p) for p in config.phases}
         self._ring_of = {p: config.ring_of(p) for p in config.phases}
         self._reader = Reader(config)
-        self.backup_time = config.middleware.backup_time
+        self.backup = BackupTimer(config.middleware.backup_time)
         self.startup_flash = config.startup_flash
         # The controller's clock: local time, in ticks since midnight of the day it first powered up.
         start = start or config.emulator.start
@@ -163,6 +138,7 @@ class Controller:
         self.preemptor = Preemptor(config)
         self.preempting = Preempted(config, self.preemptor, self.timing)
         self.monitor = Monitor(config)
+        self.peds = PedCalls(self.timing, self.coordinated)
         self.sequencer = Sequencer(config, self.rings, self.timing, self.control, self.coordinated, self.preemptor,
                                    self.overlaps, self._move)
         # Counts changes of the status objects (what a poll reads), across power cycles too.
@@ -171,6 +147,7 @@ class Controller:
         self._inputs: Inputs | None = None  # derived from the inputs since the last write, if read since
         self._status_seen: tuple = ()
         self.images = Images(config)
+        self.quiet = QuietTime(self)
         self._status: tuple[frozenset[int], ...] | None = None  # the image shown now
         self.reset()
 
@@ -183,14 +160,14 @@ class Controller:
         self.max2_rings: frozenset[int] = frozenset()
         self.control_status = UnitControlStatus.OTHER
         self.flash_status = UnitFlashStatus.STARTUP if self.startup_flash else UnitFlashStatus.NOT_FLASH
-        self.ped_calls: frozenset[int] = frozenset()  # latched pedestrian calls
+        self.peds.reset()
         self.actuations: frozenset[int] = frozenset()  # vehicle detectors actuated now
         self.ped_actuations: frozenset[int] = frozenset()  # pedestrian detectors actuated now
         self._inputs = None
         # The image the monitor last passed: a power cycle puts every lamp out, so the monitor starts afresh.
         self._checked: tuple[frozenset[int], ...] | None = None
         self.monitor.reset()
-        self._since_set: int | None = None  # ticks since the last control SET; None = backup timer disarmed
+        self.backup.reset()
         self.rings[:] = [Ring(i + 1, order) for i, order in enumerate(self.config.rings)]
         self.coordinator.reset()
         self.coordinated.reset()
@@ -198,10 +175,7 @@ class Controller:
         self.preemptor.reset()
         self.preempting.reset()
         self.sequencer.reset()
-        self._quiet = False  # the last step changed nothing discrete, and no input came since
-        self._settled: tuple | None = None  # the discrete state the last step left, if nothing changed it since
-        # quiet_ticks' proof: steps before this tick change nothing (None: none proven; every step is real)
-        self._next_real: float | None = None
+        self.quiet.touched()
         if not self.flashing:
             self._power_up()
         self._refresh_status()
@@ -240,8 +214,8 @@ class Controller:
         if phases == self.control[column] and self.control_status is UnitControlStatus.SYSTEM_CONTROL:
             # The same phases again (a middleware repeats its calls): no input a step reads changed, so quiet time
             # goes on; the backup timer restarts (its threshold only moves later) and the status counts the write.
-            self._since_set = 0
-            self._settled = None
+            self.backup.restart()
+            self.quiet.settled = None
             self.status_version += 1
             return
         self.control[column] = phases
@@ -254,7 +228,7 @@ class Controller:
 
     def set_backup_time(self, seconds: int) -> None:
         """A SET of unitBackupTime: the backup timer's threshold moves at once."""
-        self.backup_time = seconds
+        self.backup.seconds = seconds
         self.touch()
 
     def set_pattern_control(self, value: int) -> None:
@@ -274,17 +248,18 @@ class Controller:
         self.max2_rings = frozenset(rings)
         self._system_set()
 
+    backup_time = property(lambda self: self.backup.seconds, lambda self, s: setattr(self.backup, "seconds", s),
+                           doc="unitBackupTime, in seconds (the backup timer's).")
+
     def _system_set(self) -> None:
-        self._since_set = 0
+        self.backup.restart()
         self.control_status = UnitControlStatus.SYSTEM_CONTROL
         self.touch()
 
     def touch(self) -> None:
         """An input changed (a SET, a detector, a retimed phase, the backup time): the next step is a real one,
         and the status counts as changed (the calls it shows may have)."""
-        self._quiet = False
-        self._settled = None
-        self._next_real = None
+        self.quiet.touched()
         self._inputs = None
         self.status_version += 1
 
@@ -310,6 +285,11 @@ class Controller:
         if self._inputs is None or self._inputs.plan is not plan:
             self._inputs = self._reader.read(self.coordinator, self.control, self.actuations, self.ped_actuations)
         return self._inputs
+
+    @property
+    def ped_calls(self) -> frozenset[int]:
+        """The latched pedestrian calls (the pedestrian unit's)."""
+        return self.peds.calls
 
     @property
     def calls(self) -> frozenset[int]:
@@ -347,20 +327,15 @@ class Controller:
             self._status_seen = seen
             self.status_version += 1
 
-    def _backup_timer(self) -> None:
-        if self._since_set is None or self.backup_time == 0:
-            return
-        self._since_set += 1
-        if self._since_set >= self.backup_time * 10:
-            log.warning("backup time %d s passed without a control SET: backup mode, control objects cleared",
-                        self.backup_time)
-            self.control.update(dict.fromkeys(ControlColumn, frozenset()))
-            self.max2_rings = frozenset()
-            self.coordinator.set_command(0)  # systemPatternControl: "reset ... to ZERO when in BACKUP Mode"
-            self.preemptor.set_control(frozenset())  # preemptControlState, likewise
-            self.control_status = UnitControlStatus.BACKUP_MODE
-            self._since_set = None
-            self.touch()  # the calls it shows are gone
+    def _backup_mode(self) -> None:
+        log.warning("backup time %d s passed without a control SET: backup mode, control objects cleared",
+                    self.backup_time)
+        self.control.update(dict.fromkeys(ControlColumn, frozenset()))
+        self.max2_rings = frozenset()
+        self.coordinator.set_command(0)  # systemPatternControl: "reset ... to ZERO when in BACKUP Mode"
+        self.preemptor.set_control(frozenset())  # preemptControlState, likewise
+        self.control_status = UnitControlStatus.BACKUP_MODE
+        self.touch()  # the calls it shows are gone
 
     def advance(self, n: int) -> None:
         """Exactly ``n`` steps, quiet stretches skipped at once."""
@@ -378,24 +353,20 @@ class Controller:
 
     def step(self) -> None:
         """Advance one tick (0.1 s)."""
-        if self._next_real is not None and self.tick + 1 < self._next_real:
-            # A tick quiet_ticks proved quiet, stepped for the recorder (a green's minimum to log at its tick).
-            self.skip(1)
-            if self.recorder is not None:
-                self.recorder.stepped()
-            return
-        self._next_real = None
-        before = self._settled if self._settled is not None else self._discrete()
-        self._step()
-        self._settled = self._discrete()
-        self._quiet = self._settled == before or self._settles()
+        if self.quiet.proven():
+            self.skip(1)  # a tick quiet time proved quiet, stepped for the recorder (a green's minimum to log)
+        else:
+            before = self.quiet.before()
+            self._step()
+            self.quiet.stepped(before)
         if self.recorder is not None:
             self.recorder.stepped()
 
     def _step(self) -> None:
         """One tick of the units, in their order."""
         self.tick += 1
-        self._backup_timer()
+        if self.backup.step():
+            self._backup_mode()
         self.coordinator.step()
         self.coordinated.step(self.rings)
         if self.flash_status is UnitFlashStatus.STARTUP and self.tick >= self.startup_flash * 10:
@@ -406,7 +377,7 @@ class Controller:
         if self.flashing:
             return
         inputs = self.inputs
-        demand = self._demand(inputs)
+        demand = self.peds.latch(self._greens(), inputs)
         pe, seq = self.preemptor, self.sequencer
         pe.step()
         self.preempting.caps_now()
@@ -432,20 +403,13 @@ class Controller:
         self._refresh_status()
         self._monitor()
 
-    def _demand(self, inputs: Inputs) -> frozenset[int]:
-        """Phases wanting service this tick, once the pedestrian calls of phases not showing green latched."""
-        ped_calls = reading.latched(self.ped_calls, self._greens(), inputs)
-        if ped_calls != self.ped_calls:  # kept while it holds the same calls: the logger compares it every step
-            self.ped_calls = ped_calls
-        return reading.demand(inputs, self.ped_calls)
-
     def _greens(self) -> set[int]:
         return {r.phase for r in self.rings if r.interval is Interval.GREEN}
 
     def _move(self, r: Ring, event: Event, *, reason: Termination | None = None, notify: bool = True) -> None:
         """Move ``r`` by ``event`` (its table) and tell the units that care: the coordinator's latches, a preempt's
         entry minimum (none yet for a new green), the listeners."""
-        interval = r.move(event, self.timing[r.phase], walk=self._serve_walk, max2=r.number in self.max2_rings,
+        interval = r.move(event, self.timing[r.phase], walk=self.peds.serve, max2=r.number in self.max2_rings,
                           caps=self.preempting.caps)
         self.coordinated.entered(r)
         if interval is Interval.GREEN:
@@ -456,15 +420,6 @@ class Controller:
                 self.on_change(change)
             if self.recorder is not None:
                 self.recorder.changed(change)
-
-    def _serve_walk(self, phase: int) -> bool:
-        """A green of ``phase`` starts: it serves a walk if it has a pedestrian call and the walk fits; the call is
-        answered (cleared) unless it waits for a walk that did not fit."""
-        called = phase in self.ped_calls and self.timing[phase].walk > 0
-        served = called and self.coordinated.walk_fits(phase)
-        if served or not called:
-            self.ped_calls -= {phase}
-        return served
 
     def _step_overlaps(self) -> None:
         """The overlaps follow what the phases show after this tick's timing."""
@@ -485,77 +440,10 @@ class Controller:
 
     # --- quiet time ----------------------------------------------------------------------
 
-    def _discrete(self) -> tuple:
-        """Everything a step can change but counters (see "Quiet time" above)."""
-        return (self.flash_status, self.control_status, self.ped_calls, self.status_version,
-                tuple(self.control.values()), self.coordinator.discrete(), self.overlaps.discrete(),
-                self.preemptor.discrete(), self.coordinated.discrete(), self.preempting.discrete(),
-                self.sequencer.discrete())
-
-    def _settles(self) -> bool:
-        """After a step that changed something: the next step changes nothing but counters, as a step that
-        changed nothing would show (see "Quiet time" above). Proven here only where it is short: free, no
-        preempt, no overlap, the next phase locked at the end of green.
-
-        Nothing is proven for a next step that :meth:`quiet_ticks` makes real anyway (a counter reaches a
-        threshold), so every comparison of a counter with a threshold is the same at the next tick as now: the
-        predicates below are the step's own, read now. What the next step does, part by part: the backup timer,
-        start-up flash and time-of-day plan act only at thresholds; the coordinator retries a pattern that this
-        step could not start and fails alike; no preempt is called or active; the pedestrian calls latch as
-        checked; a clearance only counts; a green's conflicting demand is what this step registered and its gap
-        and max-out counters run as :meth:`skip` runs them (max recall runs the latter without conflicting
-        demand), as checked, so its gap latch is decided as this step decided it; no ring is both ready and
-        wishing, so the sequencer commits nothing and no green ends; a ring resting in red with a phase to start
-        stays blocked (by another ring's green or clearance, which stays, or its red revert, a threshold); the
-        status image, its walk thresholds unpassed, stays."""
-        if (self.flashing or self.coordinated.running or self.config.overlaps
-                or self.config.next_phase_lock is not NextPhaseLock.GREEN_END):
-            return False
-        pe = self.preemptor
-        if pe.control or any(s is not PreemptState.NOT_ACTIVE for s in pe.states.values()):
-            return False
-        inputs = self.inputs
-        if reading.latched(self.ped_calls, self._greens(), inputs) != self.ped_calls:
-            return False
-        return self.sequencer.settled(reading.demand(inputs, self.ped_calls), inputs)
-
     def quiet_ticks(self) -> int | None:
-        """How many steps from now the next one that may change anything is, inputs staying as they are:
-        1 unless quiet time started (the last step changed nothing discrete, or :meth:`_settles` proved the
-        next one will not) and no input came since; None when no step will. It is the least of the deadlines
-        the units report: their timers' next thresholds."""
-        self._next_real = None
-        if not self._quiet:
-            return 1
-        ahead: list[int] = []
-        logged: list[int] = []  # ticks the recorder needs stepped, though nothing changes there
-        if self._since_set is not None and self.backup_time and self._since_set < self.backup_time * 10:
-            ahead.append(self.backup_time * 10 - self._since_set)
-        if self.flash_status is UnitFlashStatus.STARTUP and self.tick < self.startup_flash * 10:
-            ahead.append(self.startup_flash * 10 - self.tick)
-        coordination = self.coordinator.quiet_ticks()
-        if coordination is not None:
-            ahead.append(coordination)
-        if self.flashing:
-            return min(ahead, default=None)
-        preempt = self.preemptor.quiet_ticks()
-        if preempt is not None:
-            ahead.append(preempt)
-        trailing = self.overlaps.quiet_ticks()
-        if trailing is not None:
-            ahead.append(max(1, trailing))
-        # A green's minimum matters only with conflicting demand (registered by the last step, and constant in
-        # quiet time): without any, the ready green has nowhere to go and no ring waits across the barrier for it.
-        # While a pattern runs or a preempt is served it may be what ends it. The data logger logs it.
-        minimums = self.coordinated.running or self.preemptor.serving is not None
-        for r in self.rings:
-            ahead += r.thresholds(self.tick, self.timing, minimum=minimums or r.conflict)
-            if r.interval is Interval.GREEN:
-                if not (minimums or r.conflict) and self.recorder is not None and r.ticks < r.minimum:
-                    logged.append(r.minimum - r.ticks)
-                ahead += self.coordinated.thresholds(r) + self.preempting.thresholds(r)
-        self._next_real = self.tick + min(ahead) if ahead else math.inf
-        return min(ahead + logged, default=None)
+        """How many steps from now the next one that may change anything is, inputs staying as they are (None:
+        none will): :meth:`emulator.model.quiet.QuietTime.ticks`."""
+        return self.quiet.ticks()
 
     def skip(self, n: int) -> None:
         """Advance ``n`` quiet ticks at once; ``n`` must be below :meth:`quiet_ticks` (or any, when None)."""
@@ -563,8 +451,7 @@ class Controller:
             return
         self.tick += n
         self.coordinator.skip(n)
-        if self._since_set is not None and self.backup_time:
-            self._since_set += n
+        self.backup.skip(n)
         if self.flashing:
             return
         self.overlaps.skip(n)

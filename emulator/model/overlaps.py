@@ -237,9 +237,9 @@ class Overlaps:
     # --- quiet time (see emulator/model/controller.py) -------------------------------------------------
 
     def quiet_ticks(self) -> int | None:
-        """Steps until a trailing interval ends (None: no overlap is timing)."""
+        """Steps until a trailing interval ends (None: no overlap is timing); at least the next step."""
         ahead = [self._length(n, s) - self.ticks[n] for n, s in self.shown.items() if s in TRAILING]
-        return min(ahead, default=None)
+        return max(1, min(ahead)) if ahead else None
 
     def skip(self, n: int) -> None:
         for k, s in self.shown.items():

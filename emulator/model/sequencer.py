@@ -57,14 +57,19 @@ a minus-green-yellow overlap's modifier waits for it likewise (:meth:`emulator.m
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, MutableMapping, Sequence
+from typing import TYPE_CHECKING
 
+from emulator.model import inputs as reading
 from emulator.model.coordinated import Coordinated
 from emulator.model.inputs import Inputs
 from emulator.model.overlaps import Overlaps, Phases
 from emulator.model.preemption import Preemptor
 from emulator.model.ring import Event, Interval, Ring, Termination, Timing
-from hils.protocol.config import IntersectionConfig
-from hils.protocol.ntcip import ControlColumn
+from hils.protocol.config import IntersectionConfig, NextPhaseLock
+from hils.protocol.ntcip import ControlColumn, PreemptState
+
+if TYPE_CHECKING:
+    from emulator.model.preempted import Preempted
 
 #: How the sequencer moves a ring: the controller's move (the ring's table, and what the other units do then).
 Move = Callable[..., None]
@@ -278,6 +283,51 @@ class Sequencer:
         self.move(r, Event.START)
 
     # --- quiet time (see emulator/model/controller.py) -------------------------------------------------
+
+    def deadline(self, tick: int, preempted: Preempted, *, logging: bool) -> tuple[int | None, int | None]:
+        """Ticks to the next threshold of the rings' timers in quiet time (None: none ahead), as the pattern and a
+        preempt being served set them too; and, with ``logging``, to the next tick a recorder logs though nothing
+        changes there. A green's minimum matters only with conflicting demand (registered by the last step, and
+        constant in quiet time): without any, the ready green has nowhere to go and no ring waits across the
+        barrier for it. While a pattern runs or a preempt is served it may be what ends it; the data logger
+        logs it in any case."""
+        minimums = self.coordinated.running or self.preemptor.serving is not None
+        ahead: list[int] = []
+        logged: list[int] = []
+        for r in self.rings:
+            ahead += r.thresholds(tick, self.timing, minimum=minimums or r.conflict)
+            if r.interval is Interval.GREEN:
+                if logging and not (minimums or r.conflict) and r.ticks < r.minimum:
+                    logged.append(r.minimum - r.ticks)
+                ahead += self.coordinated.thresholds(r) + preempted.thresholds(r)
+        return min(ahead, default=None), min(logged, default=None)
+
+    def settles(self, ped_calls: frozenset[int], inputs: Inputs) -> bool:
+        """After a step that changed something: the next step changes nothing but counters, as a step that changed
+        nothing would show (the controller's "Quiet time"). Proven here only where it is short: free, no preempt,
+        no overlap, the next phase locked at the end of green, the controller not flashing.
+
+        Nothing is proven for a next step that the controller's quiet time makes real anyway (a counter reaches a
+        threshold), so every comparison of a counter with a threshold is the same at the next tick as now: the
+        predicates below are the step's own, read now. What the next step does, part by part: the backup timer,
+        start-up flash and time-of-day plan act only at thresholds; the coordinator retries a pattern that this
+        step could not start and fails alike; no preempt is called or active; the pedestrian calls latch as
+        checked; a clearance only counts; a green's conflicting demand is what this step registered and its gap
+        and max-out counters run as the ring's ``skip`` runs them (max recall runs the latter without conflicting
+        demand), as checked, so its gap latch is decided as this step decided it; no ring is both ready and
+        wishing, so nothing is committed and no green ends; a ring resting in red with a phase to start stays
+        blocked (by another ring's green or clearance, which stays, or its red revert, a threshold); the status
+        image, its walk thresholds unpassed, stays."""
+        if (self.coordinated.running or self.config.overlaps
+                or self.config.next_phase_lock is not NextPhaseLock.GREEN_END):
+            return False
+        pe = self.preemptor
+        if pe.control or any(s is not PreemptState.NOT_ACTIVE for s in pe.states.values()):
+            return False
+        greens = {r.phase for r in self.rings if r.interval is Interval.GREEN}
+        if reading.latched(ped_calls, greens, inputs) != ped_calls:
+            return False
+        return self.settled(reading.demand(inputs, ped_calls), inputs)
 
     def settled(self, demand: frozenset[int], inputs: Inputs) -> bool:
         """The next tick, with this demand, changes nothing here but counters: no ring's timer starts or stops (its

@@ -282,7 +282,8 @@ def test_coordinated_phases_are_served_every_cycle_and_fixed_force_offs_hold(
                 other = c.rings[2 - r.number]
                 waits = other.interval is not Interval.DWELL and c.config.barrier_of(other.phase) == c.group
                 assert waits, (f"phase {p} green at tick {c.tick}, past its force-off at {overdue[r.number] - 1}",
-                               [(x.phase, x.interval, x.ticks, x.target, c.coordinated.forced[x.number]) for x in c.rings], co.timer,
+                               [(x.phase, x.interval, x.ticks, x.target, c.coordinated.forced[x.number])
+                                for x in c.rings], co.timer,
                                dict(plan.force_off), c.calls, c.config.phases[p])
             if plan.force_off[p] in co.passed:
                 overdue.setdefault(r.number, c.tick + 1)
