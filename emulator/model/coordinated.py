@@ -31,7 +31,7 @@ controller without stop-in-walk keeps to its splits, and stop-in-walk "will allo
 call to push the controller out of coordination" (Naztec, Coordination Modes+, MM->2->1).
 
 Deadlines. While a pattern runs a green's minimum and its floating limit are thresholds of the rings
-(:meth:`Coordinated.thresholds`); the coordinator's own marks are its ``quiet_ticks``.
+(:meth:`Coordinated.thresholds`); the coordinator's own marks are its ``deadline``.
 """
 
 from __future__ import annotations

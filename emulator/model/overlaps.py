@@ -236,7 +236,7 @@ class Overlaps:
 
     # --- quiet time (see emulator/model/controller.py) -------------------------------------------------
 
-    def quiet_ticks(self) -> int | None:
+    def deadline(self) -> int | None:
         """Steps until a trailing interval ends (None: no overlap is timing); at least the next step."""
         ahead = [self._length(n, s) - self.ticks[n] for n, s in self.shown.items() if s in TRAILING]
         return max(1, min(ahead)) if ahead else None

@@ -33,7 +33,7 @@ its next, and the barrier group is the preempt's. A preempt overrides phase omit
 or exit is done when every ring shows its phase (or, without one, rests in red).
 
 Deadlines. A green's entry minimum (``cut``) is a threshold of its ring (:meth:`Preempted.thresholds`); the
-preemptor's own timers are its ``quiet_ticks``.
+preemptor's own timers are its ``deadline``.
 """
 
 from __future__ import annotations

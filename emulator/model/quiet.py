@@ -89,13 +89,13 @@ class QuietTime:
         self.next_real = None
         if not self.quiet:
             return 1
-        deadlines = [c.backup.deadline(), c.coordinator.quiet_ticks()]
+        deadlines = [c.backup.deadline(), c.coordinator.deadline()]
         if c.flash_status is UnitFlashStatus.STARTUP and c.tick < c.startup_flash * 10:
             deadlines.append(c.startup_flash * 10 - c.tick)
         if c.flashing:
             return min((d for d in deadlines if d is not None), default=None)
         rings, logged = c.sequencer.deadline(c.tick, c.preempting, logging=c.recorder is not None)
-        deadlines += [c.preemptor.quiet_ticks(), c.overlaps.quiet_ticks(), rings]
+        deadlines += [c.preemptor.deadline(), c.overlaps.deadline(), rings]
         ahead = min((d for d in deadlines if d is not None), default=None)
         self.next_real = math.inf if ahead is None else c.tick + ahead
         return min((d for d in (ahead, logged) if d is not None), default=None)
