@@ -88,6 +88,7 @@ from emulator.model.ring import (
     tenths,
 )
 from emulator.model.sequencer import Sequencer
+from emulator.model.spat import SignalTiming, announce
 from emulator.model.status import Images
 from hils.protocol.config import IntersectionConfig, NextPhaseLock
 from hils.protocol.ntcip import ControlColumn, ShortAlarm, UnitControlStatus, UnitFlashStatus
@@ -437,6 +438,11 @@ class Controller:
             log.error("conflict monitor: %s at tick %d: flash", fault, self.tick)
             self.flash_status = UnitFlashStatus.MMU
             self._refresh_status()
+
+    def spat(self) -> tuple[SignalTiming, ...]:
+        """Each phase's and overlap's indication and the earliest, latest and likely tick of its next change, in
+        ticks from now (:mod:`emulator.model.spat`)."""
+        return announce(self)
 
     # --- quiet time ----------------------------------------------------------------------
 
