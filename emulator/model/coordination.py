@@ -9,7 +9,7 @@ Rules of this file
   passed this tick); the controller (:mod:`emulator.model.controller`) decides *what the rings do*. The
   coordinator never looks at rings, the controller never computes a cycle position.
 - :meth:`Coordinator.step` is the only thing that moves the local cycle timer; :meth:`Coordinator.skip`
-  moves it over quiet ticks, which :meth:`Coordinator.quiet_ticks` vouches pass no mark.
+  moves it over quiet ticks, which :meth:`Coordinator.deadline` vouches pass no mark.
 - A pattern's timings are copied into a :class:`Plan` when the pattern starts; a SET of the pattern or
   split table (NTCIP) takes effect at the next local cycle zero, as a pattern change does.
 
@@ -380,7 +380,7 @@ class Coordinator:
 
     # --- quiet time ---------------------------------------------------------------------------------
 
-    def quiet_ticks(self) -> int | None:
+    def deadline(self) -> int | None:
         """Steps until the next one at which anything discrete may happen here (None: never, inputs kept)."""
         ahead = [self._until_schedule()] if self.config.coordination.schedule else []
         plan = self.plan
@@ -395,7 +395,7 @@ class Coordinator:
         return min((e.start * 10 - now - 1) % DAY + 1 for e in self.config.coordination.schedule)
 
     def skip(self, n: int) -> None:
-        """``n`` quiet ticks at once (fewer than :meth:`quiet_ticks`)."""
+        """``n`` quiet ticks at once (fewer than :meth:`deadline`)."""
         self.clock += n
         if self.plan is not None:
             self.timer = (self.timer + n) % self.plan.cycle

@@ -61,10 +61,11 @@ arrow when the protected phase starts.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from enum import Enum, StrEnum
 
+from emulator.model.ring import Interval, Ring
 from hils.protocol.config import IntersectionConfig, Overlap, OverlapKind
 
 
@@ -121,6 +122,16 @@ class Phases:
     starting: frozenset[int]  # phases whose yellow starts this tick
     nexts: Mapping[int, int | None]  # each phase clearing or resting in red: its ring's committed next phase
     committed: frozenset[int]  # every ring's committed next phase (phaseStatusGroupPhaseNexts)
+
+    @classmethod
+    def of(cls, rings: Sequence[Ring]) -> Phases:
+        """What ``rings`` show now."""
+        return cls(
+            greens=frozenset(r.phase for r in rings if r.interval is Interval.GREEN),
+            yellows=frozenset(r.phase for r in rings if r.interval is Interval.YELLOW),
+            starting=frozenset(r.phase for r in rings if r.interval is Interval.YELLOW and r.ticks == 0),
+            nexts={r.phase: r.target for r in rings if r.interval is not Interval.GREEN and r.phase is not None},
+            committed=frozenset(r.target for r in rings if r.target is not None))
 
 
 @dataclass(slots=True)
@@ -225,10 +236,10 @@ class Overlaps:
 
     # --- quiet time (see emulator/model/controller.py) -------------------------------------------------
 
-    def quiet_ticks(self) -> int | None:
-        """Steps until a trailing interval ends (None: no overlap is timing)."""
+    def deadline(self) -> int | None:
+        """Steps until a trailing interval ends (None: no overlap is timing); at least the next step."""
         ahead = [self._length(n, s) - self.ticks[n] for n, s in self.shown.items() if s in TRAILING]
-        return min(ahead, default=None)
+        return max(1, min(ahead)) if ahead else None
 
     def skip(self, n: int) -> None:
         for k, s in self.shown.items():

@@ -199,7 +199,7 @@ class Preemptor:
 
     # --- quiet time (see emulator/model/controller.py) -------------------------------------------------
 
-    def quiet_ticks(self) -> int | None:
+    def deadline(self) -> int | None:
         """Steps until a delay, a maximum presence, a track green, a minimum dwell or duration runs out."""
         ahead = []
         for n, s in self.states.items():

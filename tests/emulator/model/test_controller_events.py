@@ -3,7 +3,8 @@
 :meth:`Controller.advance` skips the ticks that :meth:`Controller.quiet_ticks` proves change nothing
 but counters. Here one controller steps every tick and its twin advances over the same stretches,
 for random configs (every phase option, start-up flash, backup time, the controller's delays) and
-random inputs (every control object, Max2, detectors, retimed phases, backup time, power cycles):
+random inputs (every control object, Max2, detectors, push buttons, retimed phases, backup time, patterns,
+preempts, power cycles):
 after every stretch the two must agree on everything a read can see and on their whole working
 memory, and their interval timelines must be the same, tick for tick.
 """
@@ -49,6 +50,7 @@ inputs = st.one_of(
     st.tuples(st.sampled_from(list(ControlColumn) + [ControlColumn.VEH_CALL] * 3), phase_sets),
     st.tuples(st.just("max2"), st.frozensets(st.sampled_from([1, 2]))),
     st.tuples(st.just("detectors"), phase_sets),
+    st.tuples(st.just("push_buttons"), phase_sets),
     st.tuples(st.just("retime"), st.tuples(st.sampled_from(sorted(ALL_PHASES)), st.sampled_from(TIMING_FIELDS),
                                            st.integers(0, 80))),
     st.tuples(st.just("backup_time"), st.sampled_from([0, 1, 3, 30])),
@@ -71,6 +73,8 @@ def apply(unit: Controller | DelayedController, op: str, value: object, *, ticke
         unit.set_max2(value)
     elif op == "detectors":
         unit.set_actuations(value)
+    elif op == "push_buttons":
+        unit.set_ped_actuations(value)
     elif op == "retime":
         unit.set_timing(*value)
     elif op == "backup_time":
@@ -89,8 +93,8 @@ def readable(unit: Controller | DelayedController) -> dict[str, object]:
     """What the NTCIP agent can read of the unit (status as the agent answers it)."""
     out = {name: getattr(unit, name) for name in STATUS_ATTRIBUTES}
     out |= {"control": dict(unit.control), "control_status": unit.control_status, "flash": unit.flash_status,
-            "max2": unit.max2_rings, "actuations": unit.actuations, "backup_time": unit.backup_time,
-            "status_version": unit.status_version}
+            "max2": unit.max2_rings, "actuations": unit.actuations, "ped_actuations": unit.ped_actuations,
+            "backup_time": unit.backup_time, "status_version": unit.status_version}
     return out
 
 
@@ -98,7 +102,9 @@ def memory(c: Controller) -> dict[str, object]:
     """The controller's whole working memory."""
     co = c.coordinator
     return {"tick": c.tick, "rings": [dataclasses.astuple(r) for r in c.rings], "group": c.group,
-            "since_set": c._since_set, "yellow_end": dict(c._yellow_end), "ped_calls": c.ped_calls,
+            "since_set": c.backup.since, "ped_calls": c.ped_calls,
+            "latches": (dict(c.coordinated.forced), dict(c.coordinated.limit), dict(c.coordinated.yielded),
+                        dict(c.preempting.cut)),
             "coordination": (co.clock, co.command, co.local, co.running, co.timer, co.budget, co.free_status,
                              co.replan),
             "overlaps": (dict(c.overlaps.shown), dict(c.overlaps.ticks)),

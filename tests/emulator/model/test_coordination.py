@@ -259,7 +259,7 @@ def test_coordinated_phases_are_served_every_cycle_and_fixed_force_offs_hold(
     overdue: dict[int, int] = {}  # ring -> the last tick its green may show after passing its force-off point
     late: dict[int, bool] = {}  # ring -> its green started past its force-off point (it ends at its minimum)
     shown = {r.number: r.interval for r in c.rings}
-    late = {r.number: r.forced for r in c.rings if r.interval is Interval.GREEN}
+    late = {r.number: c.coordinated.forced[r.number] for r in c.rings if r.interval is Interval.GREEN}
     for _ in range(6 * plan.cycle):
         if c.tick in due:
             c.set_control(CALL, due[c.tick])
@@ -273,7 +273,7 @@ def test_coordinated_phases_are_served_every_cycle_and_fixed_force_offs_hold(
         for r in c.rings:
             p = r.phase
             if r.interval is Interval.GREEN and shown[r.number] is not Interval.GREEN:
-                late[r.number] = r.forced
+                late[r.number] = c.coordinated.forced[r.number]
             shown[r.number] = r.interval
             if r.interval is not Interval.GREEN or p in plan.coord.values() or late[r.number]:
                 overdue.pop(r.number, None)
@@ -282,7 +282,8 @@ def test_coordinated_phases_are_served_every_cycle_and_fixed_force_offs_hold(
                 other = c.rings[2 - r.number]
                 waits = other.interval is not Interval.DWELL and c.config.barrier_of(other.phase) == c.group
                 assert waits, (f"phase {p} green at tick {c.tick}, past its force-off at {overdue[r.number] - 1}",
-                               [(x.phase, x.interval, x.ticks, x.target, x.forced) for x in c.rings], co.timer,
+                               [(x.phase, x.interval, x.ticks, x.target, c.coordinated.forced[x.number])
+                                for x in c.rings], co.timer,
                                dict(plan.force_off), c.calls, c.config.phases[p])
             if plan.force_off[p] in co.passed:
                 overdue.setdefault(r.number, c.tick + 1)

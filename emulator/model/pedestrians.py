@@ -1,0 +1,56 @@
+"""The pedestrian calls: latched until a green serves their walk.
+
+Rules of this file
+------------------
+- The latched calls change only here: :meth:`PedCalls.latch` once per tick before the rings time, and
+  :meth:`PedCalls.serve` as a green starts. The set is replaced, never changed in place, and kept as it is while it
+  holds the same calls (the data logger compares it by identity every tick).
+- What latches is :func:`emulator.model.inputs.latched`; whether a walk fits a running pattern is the
+  coordinator's part in the rings (:meth:`emulator.model.coordinated.Coordinated.walk_fits`).
+
+Theory of operation
+-------------------
+A pedestrian call (phaseControlGroupPedCall, pedestrian recall, the pattern's pedestrian recall, a push button)
+latches on a phase not showing green and stays until a green of its phase serves a walk. A green serves one when
+it starts with the call latched, the phase has a walk time and, while a pattern runs, the walk and the pedestrian
+clearance end by the phase's force-off point; a call the green does not serve stays latched for the next cycle.
+PedOmit (and an omitted phase) stops new calls latching; a walk being timed completes.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+
+from emulator.model import inputs as reading
+from emulator.model.coordinated import Coordinated
+from emulator.model.inputs import Inputs
+from emulator.model.ring import Timing
+
+
+class PedCalls:
+    """One controller's latched pedestrian calls."""
+
+    def __init__(self, timing: Mapping[int, Timing], coordinated: Coordinated) -> None:
+        self.timing = timing
+        self.coordinated = coordinated
+        self.reset()
+
+    def reset(self) -> None:
+        """Power-up: no call latched."""
+        self.calls: frozenset[int] = frozenset()
+
+    def latch(self, greens: Iterable[int], inputs: Inputs) -> frozenset[int]:
+        """This tick's calls latch; the demand they make with the inputs."""
+        calls = reading.latched(self.calls, greens, inputs)
+        if calls != self.calls:
+            self.calls = calls
+        return reading.demand(inputs, self.calls)
+
+    def serve(self, phase: int) -> bool:
+        """A green of ``phase`` starts: True when it serves a walk; the call is answered (cleared) unless it waits
+        for a walk that did not fit."""
+        called = phase in self.calls and self.timing[phase].walk > 0
+        served = called and self.coordinated.walk_fits(phase)
+        if served or not called:
+            self.calls -= {phase}
+        return served

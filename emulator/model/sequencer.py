@@ -1,0 +1,349 @@
+"""The sequencer: which phase each ring serves next, the barrier, backing, dual entry, the committed next phase.
+
+Rules of this file
+------------------
+- The sequencer chooses; the rings time (:mod:`emulator.model.ring`). It moves a ring only through the
+  controller's ``move`` (which takes the ring's table, :meth:`emulator.model.ring.Ring.move`): a green ends
+  only by :meth:`Sequencer.commit` committing the ring's next phase (or none), and a ring leaves DWELL only by
+  :meth:`Sequencer.start` starting its committed phase.
+- Every answer that depends on a running pattern comes from the coordinator's part in the rings
+  (:mod:`emulator.model.coordinated`), which gives the free answer when none runs.
+- It reads the inputs of the tick (:class:`emulator.model.inputs.Inputs`, the demand) as the controller hands
+  them; its own state is the barrier group being served and what it worked out before the rings timed.
+
+Theory of operation
+-------------------
+Both rings work inside one barrier group (``group``) at a time, so any two phases they show are concurrent by
+the ring-and-barrier structure. A green is *ready to end* when it has timed its minimum (and Walk plus
+pedestrian clearance if it served a walk), is not held, and has gapped out, maxed out or been forced off
+(:meth:`Sequencer.ending`). A green without anywhere to go rests in green, maxed out or not.
+
+A ready ring *wishes* for the nearest phase with demand in its ring order after its own (1, 2, 3, 4, 1, ...).
+Within the barrier group it goes there at once: forward, or backing into an earlier phase of the group while
+the other ring still times, but only when no demand waits across the barrier: a controller backs "into a
+protected left-turn phase when the cross street phases and the opposing left-turn are skipped" (Naztec
+TecNote 3013), not when they are called. A ring may not back from a phase with ``backup_prevent`` either. A
+backing refused counts as a wish beyond the barrier (the phase waits for the group's next visit, or, with
+nothing across, both rings clear and restart the group for it); when both rings are ready and one wishes
+beyond, the other does not back either (crossing goes first). While a pattern runs, no ring backs while
+``backup_prevent`` makes another restart the group, even before that one is ready: backed into its
+coordinated phase, it would rest there to its yield point and hold the restart for a cycle (:meth:`_beyond`
+says why). A wish beyond the barrier is served only when every ring is ready (or idle in red) and wishes
+beyond or nowhere: then all rings clear together into the new group, a ring without demand there taking its
+``dual_entry`` phase if it has one and resting in red otherwise. Until then the ring wishing across keeps its
+green (it waits at the barrier).
+
+The next phase is *committed at the start of yellow* (shown in phaseStatusGroupPhaseNexts from then). With
+``next_phase_lock = "green_end"`` (the default; NTCIP 1202: PhaseNext "shall be determined at the end of the
+green interval of the terminating phase") a call arriving during the clearance does not redirect it. With
+``"red_end"`` (controllers that lock their detectors at the start of red, SUMO issue 9989) a call during the
+yellow or red clearance redirects the ring to the nearest phase with demand on the committed phase's side of
+the barrier. A committed phase that loses its call during the clearance is still served (its minimum green,
+then it ends as usual): NEMA TS 2 commits Phase Next at the end of the green, and SUMO's NEMA controller,
+validated against Econolite SIL, does the same (NEMAController.cpp, NEMAPhase::exit enters
+``lastTransitionDecision`` at the end of red without re-checking its call). A committed phase that is
+*omitted* during the clearance is dropped: the ring ends its clearance in red with nothing committed and
+chooses again at the next tick, because phaseControlGroupPhaseOmit (NTCIP 1202) says an omitted phase is not
+serviced. A committed phase starts when its ring's clearance is over, no other ring still shows a phase of
+another barrier group (both rings enter a new group together) and its red revert since its own last yellow
+has passed. Omitted phases never start; ForceOff bits clear themselves when that phase's green ends.
+
+An overlap that will still show green or yellow after this tick (its own trailing green, yellow and red
+after its parents ended, or a green whose included next was taken away) holds back a committed phase that
+conflicts with it until it has cleared, as controllers do when their overlap clearance locks the next phase;
+a minus-green-yellow overlap's modifier waits for it likewise (:meth:`emulator.model.overlaps.Overlaps.blocks`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, MutableMapping, Sequence
+from typing import TYPE_CHECKING
+
+from emulator.model import inputs as reading
+from emulator.model.coordinated import Coordinated
+from emulator.model.inputs import Inputs
+from emulator.model.overlaps import Overlaps, Phases
+from emulator.model.preemption import Preemptor
+from emulator.model.ring import Event, Interval, Ring, Termination, Timing
+from hils.protocol.config import IntersectionConfig, NextPhaseLock
+from hils.protocol.ntcip import ControlColumn, PreemptState
+
+if TYPE_CHECKING:
+    from emulator.model.preempted import Preempted
+
+#: How the sequencer moves a ring: the controller's move (the ring's table, and what the other units do then).
+Move = Callable[..., None]
+
+
+class Sequencer:
+    """The ring sequence of one controller: the barrier group served, the decisions of each tick."""
+
+    def __init__(self, config: IntersectionConfig, rings: Sequence[Ring], timing: Mapping[int, Timing],
+                 control: MutableMapping[ControlColumn, frozenset[int]], coordinated: Coordinated,
+                 preemptor: Preemptor, overlaps: Overlaps, move: Move) -> None:
+        self.config = config
+        self.rings = rings
+        self.timing = timing
+        self.control = control
+        self.coordinated = coordinated
+        self.preemptor = preemptor
+        self.overlaps = overlaps
+        self.move = move
+        self._barrier = {p: config.barrier_of(p) for p in config.phases}
+        self._order = {p: ring.index(p) for ring in config.rings for p in ring}
+        self._ring_of = {p: config.ring_of(p) for p in config.phases}
+        self._gap_disable = frozenset(p for p, ph in config.phases.items() if ph.simultaneous_gap_disable)
+        self.reset()
+
+    def reset(self) -> None:
+        self.group = 0
+        self.waiting_across = False  # demand on a phase of another barrier group, this tick
+        self.restarting = False  # a pattern runs and a ring must restart its group through the barrier, this tick
+
+    def barrier_of(self, phase: int) -> int:
+        return self._barrier[phase]
+
+    # --- before the rings time ---------------------------------------------------------------------------
+
+    def prepare(self, demand: frozenset[int], inputs: Inputs) -> None:
+        """What the tick's decisions read before the rings time: demand across the barrier, a group restart."""
+        self.waiting_across = self.waits_across(demand, inputs)
+        self.restarting = self.coordinated.running and any(self._restarts(r, demand, inputs) for r in self.rings)
+
+    def waits_across(self, demand: frozenset[int], inputs: Inputs) -> bool:
+        """Demand waits across the barrier (which forbids backing); while a pattern runs only demand that can still
+        be served in this cycle counts (a phase past its permissive period is skipped anyway), measured as its own
+        ring measures it (:meth:`serviceable`)."""
+        return any(self._barrier[q] != self.group
+                   and self.coordinated.fits(self.rings, self.rings[self._ring_of[q] - 1], q, demand, inputs)
+                   for q in demand)
+
+    def _restarts(self, r: Ring, demand: frozenset[int], inputs: Inputs) -> bool:
+        """``r``'s next service is a backing that ``backup_prevent`` on its phase forbids: the ring will restart its
+        barrier group through the barrier (see :meth:`_beyond`)."""
+        if r.phase is None or not self.config.phases[r.phase].backup_prevent or not (
+                r.interval is Interval.GREEN or (r.interval is Interval.DWELL and r.target is None)):
+            return False
+        q = self.wish(r, demand, inputs)
+        return q is not None and self._backing(r, q)
+
+    def redirect(self, r: Ring, demand: frozenset[int], inputs: Inputs) -> None:
+        """``red_end`` lock: a ring in its clearance takes the nearest phase with demand after its own on the
+        committed phase's side of the barrier (SUMO's ``NEMAPhase::trySwitch`` lets a later call override the
+        decision "only if the new transition is on the same side of a barrier"); without one it keeps it."""
+        side = self._barrier[r.target]
+        n, i = len(r.order), self._order[r.phase]
+        for k in range(1, n):
+            q = r.order[(i + k) % n]
+            if (self._barrier[q] == side and self.serviceable(r, q, demand, inputs)
+                    and (side != self.group or not self._beyond(q))):
+                r.target = q
+                return
+
+    def time(self, r: Ring, demand: frozenset[int], inputs: Inputs, tick: int) -> None:
+        """One tick of a ring's timers (a green's with the demand conflicting with it); a clearance that has run its
+        length moves on (a red clearance a preempt's entry cut to nothing ends on the tick it starts)."""
+        if r.interval is Interval.DWELL:
+            return
+        if r.interval is Interval.GREEN:
+            max_recall = r.phase in inputs.extending
+            r.time_green(extending=r.phase in inputs.calls or max_recall, conflict=self.conflicting(r, demand),
+                         max_recall=max_recall, gap_disable=r.phase in self._gap_disable)
+        elif r.time_clearance(tick):
+            self.move(r, Event.TIMED)
+            if r.interval is Interval.RED_CLEAR and r.length == 0:
+                self.move(r, Event.TIMED)
+
+    # --- what a ring may do ------------------------------------------------------------------------------
+
+    def _backing(self, r: Ring, q: int) -> bool:
+        """Serving ``q`` next would back ``r`` up: ``q`` comes before the ring's phase in their barrier group."""
+        p = r.phase
+        return p is not None and self._barrier[p] == self._barrier[q] and self._order[q] < self._order[p]
+
+    def _beyond(self, q: int) -> bool:
+        """True when a phase with demand cannot be served in this visit of the barrier group: it lies across
+        the barrier, or its ring would have to back into it while demand waits across the barrier, from a
+        phase with ``backup_prevent``, or (a pattern running) while another ring restarts the group.
+
+        The last case keeps the coordinated phases served. A ring that ``backup_prevent`` keeps from backing
+        restarts its group through the barrier, which takes every ring: Naztec TecNote 3013 gives the option's
+        purpose, to "insure that the controller never 'backs into' a protected left-turn phase", so it holds under
+        coordination too. Had the other ring backed meanwhile into its coordinated phase, that phase would rest
+        to its yield point a cycle later and hold the restarting ring at the barrier until then, its own
+        coordinated phase unserved for that cycle. No source found (NTCIP 1202 defines no backup prevent; SUMO's
+        NEMA controller has none) says what a controller does here; this choice keeps coordination's promise,
+        every coordinated phase served every cycle, and in free mode (where a backed phase ends by its maximum)
+        nothing changes."""
+        if self._barrier[q] != self.group:
+            return True
+        r = self.rings[self._ring_of[q] - 1]
+        return self._backing(r, q) and (self.waiting_across or self.config.phases[r.phase].backup_prevent
+                                        or self.restarting)
+
+    def conflicting(self, r: Ring, demand: frozenset[int]) -> bool:
+        """Demand conflicts with ``r``'s green: in its own ring, or beyond this visit of the barrier group."""
+        return any(q != r.phase and (self._ring_of[q] == r.number or self._beyond(q)) for q in demand)
+
+    def ending(self, r: Ring, inputs: Inputs) -> Termination | None:
+        """Why the ring's green may end now (None: it may not); a force-off before a gap-out before a max-out."""
+        if r.interval is not Interval.GREEN or r.ticks < r.minimum or r.phase in inputs.holds:
+            return None
+        if r.phase in self.control[ControlColumn.FORCE_OFF]:
+            return Termination.FORCE_OFF
+        return self.coordinated.ending(r)
+
+    def ready(self, r: Ring, inputs: Inputs) -> bool:
+        """A green that may end now, or a ring resting in red with nothing committed."""
+        if r.interval is Interval.DWELL:
+            return r.target is None
+        return self.ending(r, inputs) is not None
+
+    def wish(self, r: Ring, demand: frozenset[int], inputs: Inputs) -> int | None:
+        """The nearest phase with demand after the ring's own, in ring order (a ring resting in red may re-serve
+        its own phase, last in the order); a ring showing its coordinated phase leaves it only in the next phase's
+        permissive period (:meth:`emulator.model.coordinated.Coordinated.stays`)."""
+        n = len(r.order)
+        i = 0 if r.phase is None else self._order[r.phase]
+        stop = n + 1 if r.interval is Interval.DWELL else n
+        for k in range(1, stop):
+            q = r.order[(i + k) % n]
+            if self.serviceable(r, q, demand, inputs):
+                if self.coordinated.stays(r, r.order[(i + k - 1) % n]):
+                    return None  # outside q's permissive period the coordinated phase stays
+                return q
+        return None
+
+    def serviceable(self, r: Ring, q: int, demand: frozenset[int], inputs: Inputs) -> bool:
+        """``q`` has demand and fits what the running pattern leaves (:meth:`Coordinated.fits`)."""
+        return q in demand and self.coordinated.fits(self.rings, r, q, demand, inputs)
+
+    # --- after the rings timed -----------------------------------------------------------------------------
+
+    def decide(self, demand: frozenset[int], inputs: Inputs) -> None:
+        """Commit the next phase of every ready ring that may go: within the group at once, across the barrier
+        when every ring is ready for it."""
+        ready = {r.number: self.ready(r, inputs) for r in self.rings}
+        if not any(ready.values()):
+            return  # most ticks: every ring is timing
+        wish = {r.number: self.wish(r, demand, inputs) for r in self.rings if ready[r.number]}
+        across = {n: q for n, q in wish.items() if q is not None and self._beyond(q)}
+        all_ready = all(ready.values())
+        for r in self.rings:
+            q = wish.get(r.number)
+            if q is None or r.number in across:
+                continue
+            if r.interval is Interval.GREEN and self._order[q] < self._order[r.phase] and all_ready and across:
+                wish[r.number] = None  # both rings could cross: crossing goes before backing
+                continue
+            self.commit(r, q, inputs)
+        if not across or not all(ready[r.number] and (wish[r.number] is None or r.number in across)
+                                 for r in self.rings):
+            return  # the ring wishing across waits at the barrier
+        # Cross to the nearest group (cyclically) that a wish lies in; restart the group only when every
+        # wish beyond it is a backing that backup_prevent forbids (crossing serves those on the way back).
+        groups = {self._barrier[q] for q in across.values()}
+        n = len(self.config.barriers)
+        self.group = next(g for g in ((self.group + k) % n for k in range(1, n + 1)) if g in groups)
+        for r in self.rings:
+            target = across.get(r.number)
+            if target is None or self._barrier[target] != self.group:
+                # Nearest demand of the ring in the new group; a restarted group serves its own phase again.
+                target = next((q for q in r.order if self._barrier[q] == self.group
+                               and self.serviceable(r, q, demand, inputs)), None)
+            if target is None:
+                omit = self.control[ControlColumn.PHASE_OMIT]
+                target = next((q for q in r.order if self._barrier[q] == self.group
+                               and self.config.phases[q].dual_entry and q not in omit), None)
+            self.commit(r, target, inputs)
+
+    def commit(self, r: Ring, target: int | None, inputs: Inputs) -> None:
+        """Commit the ring's next phase: a green ends (yellow starts), a resting red ring takes it."""
+        r.target = target
+        if r.interval is Interval.GREEN:
+            reason = self.ending(r, inputs)
+            self.control[ControlColumn.FORCE_OFF] -= {r.phase}
+            self.move(r, Event.END, reason=reason)
+
+    def start(self, r: Ring, tick: int) -> None:
+        """A ring resting in red starts its committed phase when it may."""
+        if r.interval is not Interval.DWELL or r.target is None:
+            return
+        t = r.target
+        if t in self.control[ControlColumn.PHASE_OMIT] and self.preemptor.serving is None:
+            r.target = None  # omitted during the clearance: not serviced, choose again (a preempt overrides omits)
+            return
+        others_elsewhere = any(o is not r and o.interval is not Interval.DWELL
+                               and self._barrier[o.phase] != self._barrier[t] for o in self.rings)
+        if others_elsewhere or r.reverting(t, tick, self.timing[t]):
+            return
+        if self.config.overlaps and self.overlaps.blocks(t, Phases.of(self.rings)):
+            return  # an overlap it waits for still shows (or clears) after this tick
+        r.phase, r.target = t, None
+        self.move(r, Event.START)
+
+    # --- quiet time (see emulator/model/controller.py) -------------------------------------------------
+
+    def deadline(self, tick: int, preempted: Preempted, *, logging: bool) -> tuple[int | None, int | None]:
+        """Ticks to the next threshold of the rings' timers in quiet time (None: none ahead), as the pattern and a
+        preempt being served set them too; and, with ``logging``, to the next tick a recorder logs though nothing
+        changes there. A green's minimum matters only with conflicting demand (registered by the last step, and
+        constant in quiet time): without any, the ready green has nowhere to go and no ring waits across the
+        barrier for it. While a pattern runs or a preempt is served it may be what ends it; the data logger
+        logs it in any case."""
+        minimums = self.coordinated.running or self.preemptor.serving is not None
+        ahead: list[int] = []
+        logged: list[int] = []
+        for r in self.rings:
+            ahead += r.thresholds(tick, self.timing, minimum=minimums or r.conflict)
+            if r.interval is Interval.GREEN:
+                if logging and not (minimums or r.conflict) and r.ticks < r.minimum:
+                    logged.append(r.minimum - r.ticks)
+                ahead += self.coordinated.thresholds(r) + preempted.thresholds(r)
+        return min(ahead, default=None), min(logged, default=None)
+
+    def settles(self, ped_calls: frozenset[int], inputs: Inputs) -> bool:
+        """After a step that changed something: the next step changes nothing but counters, as a step that changed
+        nothing would show (the controller's "Quiet time"). Proven here only where it is short: free, no preempt,
+        no overlap, the next phase locked at the end of green, the controller not flashing.
+
+        Nothing is proven for a next step that the controller's quiet time makes real anyway (a counter reaches a
+        threshold), so every comparison of a counter with a threshold is the same at the next tick as now: the
+        predicates below are the step's own, read now. What the next step does, part by part: the backup timer,
+        start-up flash and time-of-day plan act only at thresholds; the coordinator retries a pattern that this
+        step could not start and fails alike; no preempt is called or active; the pedestrian calls latch as
+        checked; a clearance only counts; a green's conflicting demand is what this step registered and its gap
+        and max-out counters run as the ring's ``skip`` runs them (max recall runs the latter without conflicting
+        demand), as checked, so its gap latch is decided as this step decided it; no ring is both ready and
+        wishing, so nothing is committed and no green ends; a ring resting in red with a phase to start stays
+        blocked (by another ring's green or clearance, which stays, or its red revert, a threshold); the status
+        image, its walk thresholds unpassed, stays."""
+        if (self.coordinated.running or self.config.overlaps
+                or self.config.next_phase_lock is not NextPhaseLock.GREEN_END):
+            return False
+        pe = self.preemptor
+        if pe.control or any(s is not PreemptState.NOT_ACTIVE for s in pe.states.values()):
+            return False
+        greens = {r.phase for r in self.rings if r.interval is Interval.GREEN}
+        if reading.latched(ped_calls, greens, inputs) != ped_calls:
+            return False
+        return self.settled(reading.demand(inputs, ped_calls), inputs)
+
+    def settled(self, demand: frozenset[int], inputs: Inputs) -> bool:
+        """The next tick, with this demand, changes nothing here but counters: no ring's timer starts or stops (its
+        counters run as :meth:`emulator.model.ring.Ring.skip` runs them) and no ring is both ready and wishing, so
+        nothing is committed and no green ends (the predicates are the step's own, read now)."""
+        # What the next step computes before anything reads it: set now, so the predicates below read it.
+        self.waiting_across = self.waits_across(demand, inputs)
+        for r in self.rings:
+            if r.interval is Interval.GREEN:
+                max_recall = r.phase in inputs.extending
+                if not r.steady(extending=r.phase in inputs.calls or max_recall,
+                                conflict=self.conflicting(r, demand), max_recall=max_recall):
+                    return False  # a counter starts or stops, or the conflicting demand changes: not skip's work
+            if self.ready(r, inputs) and self.wish(r, demand, inputs) is not None:
+                return False
+        return True
+
+    def discrete(self) -> tuple:
+        return self.group, tuple((r.phase, r.interval, r.target, r.gapped) for r in self.rings)

@@ -1,0 +1,67 @@
+"""The status a controller shows: its phase and overlap status groups, as one image per distinct state.
+
+Rules of this file
+------------------
+- An image is a tuple of phase (and overlap) sets (greens, yellows, phase ons, reds, walks, pedestrian clears,
+  don't walks, phase nexts, overlap greens, yellows and reds); it is built from
+  what the rings and the overlaps show and nothing else, and never changed once built.
+- A controller shows a handful of distinct images: each is built once, keyed by what it is made of (every
+  ring's interval, phase, next phase and pedestrian interval, and the overlaps' displays), and shared.
+
+Theory of operation
+-------------------
+NTCIP 1202 phaseStatusGroup: Greens, Yellows and Reds of each phase, its Walk, pedestrian clearance and Don't
+Walk, PhaseOns (the phase is timing: green, yellow or red clearance) and PhaseNexts (the phase each clearing
+ring has committed to serve next, decided at the start of its yellow); overlapStatusGroup likewise for the
+overlaps' greens, yellows and reds. In flash (start-up or the monitor's) every phase and overlap is red.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from emulator.model.overlaps import Overlaps
+from emulator.model.ring import Interval, Ring
+from hils.protocol.config import IntersectionConfig
+
+
+class Images:
+    """The status images of one controller, each built once."""
+
+    def __init__(self, config: IntersectionConfig) -> None:
+        self._phases = frozenset(config.phases)
+        self._overlaps = frozenset(config.overlaps)
+        self._images: dict[tuple | None, tuple[frozenset[int], ...]] = {}
+
+    def of(self, rings: Sequence[Ring], overlaps: Overlaps, flashing: bool) -> tuple[frozenset[int], ...]:
+        """The image of what ``rings`` and ``overlaps`` show now (all red when ``flashing``)."""
+        key = None if flashing else (tuple(
+            (r.interval, r.phase, r.target,
+             r.interval is Interval.GREEN and (r.ticks < r.walk) + (r.ticks < r.walk + r.ped_clear))
+            for r in rings), overlaps.discrete())
+        image = self._images.get(key)
+        if image is None:
+            image = self._images[key] = self._build(rings, overlaps, flashing)
+        return image
+
+    def _build(self, rings: Sequence[Ring], ov: Overlaps, flashing: bool) -> tuple[frozenset[int], ...]:
+        greens, yellows, ons, walks, clears, nexts = set(), set(), set(), set(), set(), set()
+        if not flashing:
+            for r in rings:
+                if r.interval is Interval.GREEN:
+                    greens.add(r.phase)
+                    if r.ticks < r.walk:
+                        walks.add(r.phase)
+                    elif r.ticks < r.walk + r.ped_clear:
+                        clears.add(r.phase)
+                elif r.interval is Interval.YELLOW:
+                    yellows.add(r.phase)
+                if r.interval is not Interval.DWELL:
+                    ons.add(r.phase)
+                if r.target is not None:
+                    nexts.add(r.target)
+        every = self._phases
+        overlaps = (frozenset(), frozenset()) if flashing else (ov.greens, ov.yellows)
+        return (frozenset(greens), frozenset(yellows), frozenset(ons), every - greens - yellows, frozenset(walks),
+                frozenset(clears), every - walks - clears, frozenset(nexts), *overlaps,
+                self._overlaps - overlaps[0] - overlaps[1])
