@@ -93,7 +93,7 @@ from hils.protocol.ntcip import (
 )
 from hils.protocol.timegrid import Grid
 from hils.shell.events import EventLog, Kind
-from hils.shell.fastpath import QuietPolls, QuietReadbacks
+from hils.shell.fastpath import Foresight, QuietPolls, QuietReadbacks
 from hils.shell.poller import Poller, SignalCache
 from hils.shell.preflight import ControllerReading, Verdict, judge
 from hils.shell.transport import CommunicationTimeout, SecurityRefused, Transport, TransportError
@@ -129,14 +129,15 @@ class Middleware:
     """Everything between the agent and the transport, on one SimPy environment.
 
     ``recover_after``: seconds in TIMEOUT before the manager recovers by itself (None: only when asked).
-    ``fast_path``: leave out the polls and read-backs that cannot see a change (:mod:`hils.shell.fastpath`).
+    ``foresight``: the transport's knowledge of when its answer can change (:mod:`hils.shell.fastpath`), given on
+    virtual time's fast path: the polls and read-backs that cannot see a change are left out.
     ``take_over``: take a controller whose calls someone else placed without watching them first (see the
     manager's STARTING)."""
 
     def __init__(self, env: simpy.Environment, transport: Transport, config: IntersectionConfig,
                  action_type: ActionType | str, events: EventLog, *, where: str = "the controller",
-                 community: str | None = None, recover_after: float | None = None, fast_path: bool = True,
-                 take_over: bool = False) -> None:
+                 community: str | None = None, recover_after: float | None = None,
+                 foresight: Foresight | None = None, take_over: bool = False) -> None:
         params = config.middleware
         self.where = where  # how messages name the controller (HOST:PORT)
         self.community = community  # SNMPv1/v2c's; "" over SNMPv3 (none), None in process
@@ -160,9 +161,9 @@ class Middleware:
         # The read-back: the control objects the run never sets, then VehCall.
         self._control_oids = [*(control_oid(c, g) for c in FOREIGN_COLUMNS for g in range(1, config.groups + 1)),
                               *self._veh_call_oids]
-        self.poller = Poller(env, rate_hz=params.poll_hz, send=self._poll,
-                             quiet=QuietPolls(transport, lambda: self.manager.newest_poll) if fast_path else None)
-        self._quiet_readbacks = QuietReadbacks(transport) if fast_path else None
+        quiet = QuietPolls(foresight, lambda: self.manager.newest_poll) if foresight is not None else None
+        self.poller = Poller(env, rate_hz=params.poll_hz, send=self._poll, quiet=quiet)
+        self._quiet_readbacks = QuietReadbacks(foresight) if foresight is not None else None
         self.ready = env.event()
         self._entering: dict[State, simpy.Event] = {}  # events of processes waiting for a state
         self._leaving_recovery: simpy.Event | None = None
