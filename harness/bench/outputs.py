@@ -4,7 +4,8 @@
 (default: the tree this file is in; another clone or worktree, read only, for the code before a change), each in a
 fresh process, and writes their outputs under DIR with ``manifest.json``: every file's SHA-256 after taking out what
 the wall clock stamps (an event record's ``wall_ns``; the summary's wall time and internal latencies,
-:mod:`tests.hils.run.same_seed`'s rule; a fault report's wall seconds). ``python harness/bench/outputs.py compare A B``
+:mod:`tests.hils.run.same_seed`'s rule; a fault report's wall seconds; SUMO's date in its outputs' header) and
+where the tree and the outputs lie. ``python harness/bench/outputs.py compare A B``
 says how many outputs the two manifests hold and names every one that differs or is missing from either.
 
 It is run by path, not as a module, so that it runs the code of a tree that does not hold it.
@@ -39,6 +40,7 @@ RUNS: dict[str, list[str]] = {
        for name in ("grid4x4", "cologne8") for agent in ("max-pressure", "actuated")},
 }
 FAULT_SEEDS = "1,1001,2002"
+TREE_FILE = "tree.txt"  # the tree whose code wrote the outputs
 
 #: An episode of an environment, as a program run in the tree: it prints one JSON document of everything it gave.
 EPISODES = {
@@ -87,7 +89,7 @@ print(json.dumps({"steps": out, "records": [{k: v for k, v in r.items() if k != 
                  default=plain, sort_keys=True))
 """
 
-WALL_CLOCK_FIGURES = frozenset({"wall_time_s", "internal_latency_ms", "wall_s", "wall_seconds", "took_s"})
+WALL_CLOCK_FIGURES = frozenset({"wall_time_s", "internal_latency_ms", "wall_s"})
 
 
 def _python(tree: Path, args: list[str], cwd: Path) -> subprocess.CompletedProcess:
@@ -116,25 +118,39 @@ def write(out: Path, tree: Path) -> int:
             failed.append(f"{name}: {done.stderr.strip()[-400:]}")
             continue
         (out / f"{name}.json").write_text(done.stdout, encoding="utf-8")
-    manifest = {str(p.relative_to(out)): _digest(p) for p in sorted(out.rglob("*"))
-                if p.is_file() and p.name != "manifest.json"}
-    (out / "manifest.json").write_text(json.dumps(manifest, indent=1, sort_keys=True), encoding="utf-8")
-    print(f"{len(manifest)} outputs in {out / 'manifest.json'}")
+    (out / TREE_FILE).write_text(str(tree), encoding="utf-8")
+    manifest = digests(out)
+    print(f"{len(manifest)} outputs in {out}")
     for line in failed:
         print(f"FAILED {line}", file=sys.stderr)
     return 1 if failed else 0
 
 
-def _digest(path: Path) -> str:
-    """The file's SHA-256 after taking out what the wall clock stamps."""
+def digests(out: Path) -> dict[str, str]:
+    """Every output's SHA-256 (by its path under ``out``), written to ``out/manifest.json`` too."""
+    tree = (out / TREE_FILE).read_text(encoding="utf-8")
+    manifest = {str(p.relative_to(out)): _digest(p, {tree: "TREE", str(out): "OUT"}) for p in sorted(out.rglob("*"))
+                if p.is_file() and p.name not in ("manifest.json", TREE_FILE)}
+    (out / "manifest.json").write_text(json.dumps(manifest, indent=1, sort_keys=True), encoding="utf-8")
+    return manifest
+
+
+def _digest(path: Path, places: dict[str, str]) -> str:
+    """The file's SHA-256 after taking out what the wall clock stamps and where the tree and the outputs lie (a
+    config's source path, SUMO's header)."""
     data = path.read_bytes()
+    for place, name in places.items():
+        data = data.replace(place.encode(), name.encode())
+    if path.suffix == ".xml":  # SUMO's header comment: when it was generated
+        data = b"\n".join(line for line in data.splitlines() if not line.startswith(b"<!-- generated on"))
     if path.suffix == ".jsonl":
         data = b"".join(json.dumps({k: v for k, v in json.loads(line).items() if k != "wall_ns"},
                                    sort_keys=True).encode() + b"\n" for line in data.splitlines() if line.strip())
     elif path.suffix == ".json":
         data = json.dumps(_without_wall(json.loads(data)), sort_keys=True).encode()
-    elif path.suffix == ".md" and path.parent.name == "faults":
-        data = b"\n".join(line for line in data.splitlines() if b" s wall" not in line and b"took" not in line)
+    elif path.suffix == ".md" and path.parent.name == "faults":  # its table's last column is each run's wall time
+        data = b"\n".join(line.rstrip(b"|").rsplit(b"|", 1)[0] if line.startswith(b"|") else line
+                          for line in data.splitlines() if b"of wall time" not in line)
     return hashlib.sha256(data).hexdigest()
 
 
@@ -147,8 +163,7 @@ def _without_wall(value: Any) -> Any:
 
 
 def compare(a: Path, b: Path) -> int:
-    first = json.loads((a / "manifest.json").read_text(encoding="utf-8"))
-    second = json.loads((b / "manifest.json").read_text(encoding="utf-8"))
+    first, second = digests(a.resolve()), digests(b.resolve())
     differ = sorted(k for k in first.keys() & second.keys() if first[k] != second[k])
     only = sorted(first.keys() ^ second.keys())
     same = len(first.keys() & second.keys()) - len(differ)
