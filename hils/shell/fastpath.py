@@ -21,7 +21,10 @@ What is left out, and why the result is the same
    none. A poll whose feed version is the one the newest answered poll read would get
    that same answer at the same latency: it is counted on the poll grid (its poll id used up) and not sent,
    and the poller sleeps until the feed moves. What the signal cache holds, and when the manager sees it, is
-   what polling every period gives.
+   what polling every period gives. A SET of ours moves the feed but changes no answer by itself: when the
+   newest answer read again would only be counted (:meth:`hils.control.manager.Manager.counts_only`: no transition
+   it verifies), the polls stay left out, and the one poll the SET would have sent (the first of the grid not before
+   it) is counted as answered, as it was when a SET woke the poller: ``run_ended``'s counts are what they were.
 3. Read-backs of the control objects that cannot see a change (:class:`QuietReadbacks`): only a write of a
    control object can give one phases (the controller itself only clears them); the feed's ``controls``
    moves on such a write, and a read-back that found the objects ours sleeps until someone else's moves it
@@ -136,11 +139,14 @@ def steps_before(until: float, grid: Grid, k: int) -> int:
 
 
 class QuietPolls:
-    """Which polls of a poller need not be sent (rule 2): ``newest()`` is the newest poll answered and applied."""
+    """Which polls of a poller need not be sent (rule 2): ``newest()`` is the newest poll answered and applied;
+    ``counts_only()`` says whether an answer showing what it showed would only be counted (no transition verified by
+    it, no state left)."""
 
-    def __init__(self, foresight: Foresight, newest: Callable[[], int]) -> None:
+    def __init__(self, foresight: Foresight, newest: Callable[[], int], counts_only: Callable[[], bool]) -> None:
         self.foresight = foresight
         self.newest = newest
+        self.counts_only = counts_only
         self._sent = 0  # the newest poll sent
         self._seen: int | None = None  # the feed's version when the newest poll sent read the controller
 
@@ -152,6 +158,25 @@ class QuietPolls:
         feed = self.foresight.change_feed
         self._sent, self._seen = poll_id, feed.version if feed is not None else None
         return False
+
+    def still(self) -> bool:
+        """True while a poll would get the newest answer again (the feed moved by a SET of ours alone, say)."""
+        return self._unchanged()
+
+    def before_write(self) -> int | None:
+        """A SET of ours is about to be sent: the feed's version while polls would be left out, else None."""
+        return self.foresight.change_feed.version if self._unchanged() else None
+
+    def written(self, before: int | None) -> bool:
+        """The SET is sent: True when the polls left out before it stay left out. A write moves the feed's version
+        once and changes no answer of a poll by itself (the controller's next step may, and moves it again); so when
+        the feed moved by that one move alone and the newest answer would only be counted again, the next poll would
+        read what the newest did, to no effect."""
+        feed = self.foresight.change_feed
+        if before is None or feed is None or feed.version != before + 1 or not self.counts_only():
+            return False
+        self._seen = feed.version
+        return True
 
     def moved(self) -> simpy.Event:
         """After a poll left out: the event to sleep on, the feed's next move (every poll until then would be left

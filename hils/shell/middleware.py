@@ -161,7 +161,8 @@ class Middleware:
         # The read-back: the control objects the run never sets, then VehCall.
         self._control_oids = [*(control_oid(c, g) for c in FOREIGN_COLUMNS for g in range(1, config.groups + 1)),
                               *self._veh_call_oids]
-        quiet = QuietPolls(foresight, lambda: self.manager.newest_poll) if foresight is not None else None
+        quiet = QuietPolls(foresight, lambda: self.manager.newest_poll,
+                           lambda: self.manager.counts_only(self.cache.state)) if foresight is not None else None
         self.poller = Poller(env, rate_hz=params.poll_hz, send=self._poll, quiet=quiet)
         self._quiet_readbacks = QuietReadbacks(foresight) if foresight is not None else None
         self.ready = env.event()
@@ -209,7 +210,9 @@ class Middleware:
     def poll_counts(self) -> dict[str, int]:
         """Polls on the grid so far, and how each ended (``elided``: not sent, it could not see a change)."""
         m = self.manager
-        return {**self.poller.counts, "answered": m.polls_answered, "failed": m.polls_failed, "late": m.polls_late}
+        counts = self.poller.counts
+        return {**counts, "answered": m.polls_answered + self.poller.answered_unsent, "failed": m.polls_failed,
+                "late": m.polls_late}
 
     @property
     def keepalive_enabled(self) -> bool:
@@ -554,9 +557,12 @@ class Middleware:
         """One SET, logged when sent and when answered or failed; every SET of the run goes through here."""
         self.log.emit(Kind.SET_SENT, command_id=command_id, phases=phases, purpose=purpose)
         ours = self._quiet_readbacks.writing() if self._quiet_readbacks is not None else None
+        polls = self.poller.writing()
         done = self.transport.set(varbinds)
         if ours is not None:
             ours()
+        if polls is not None:
+            polls()
 
         def logged(ev: simpy.Event) -> None:
             if ev.ok:
