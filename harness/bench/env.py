@@ -42,10 +42,10 @@ def hils_episode(seed: int, duration: float = EPISODE_S) -> dict[str, Any]:
     sumo_s = time_sumo_steps()
     env = gym.make("hils/Intersection-v1", action_type="selection", sumo_step=SUMO_STEP,
                    control_interval=DECISION_S, episode_length=duration)
-    steps, wall = _random_episode(env, seed)
+    steps, wall, cpu = _random_episode(env, seed)
     traffic = env.unwrapped.testbed.traffic
     env.close()
-    return {"steps": steps, "wall_s": wall, "sumo_s": sumo_s[0], "inserted": traffic.departed,
+    return {"steps": steps, "wall_s": wall, "cpu_s": cpu, "sumo_s": sumo_s[0], "inserted": traffic.departed,
             "arrived": traffic.arrived}
 
 
@@ -66,12 +66,13 @@ def sumo_rl_episode(seed: int, duration: float = EPISODE_S, converted: bool = Tr
                                   additional_sumo_cmd=f"--step-length {SUMO_STEP}")
     # Set after construction: its constructor compares the yellow, in steps, with delta_time, in seconds.
     env.yellow_time, env.min_green, env.max_green = sumo_rl_timing() if converted else _config_timing()
-    steps, wall = _random_episode(env, seed)
+    steps, wall, cpu = _random_episode(env, seed)
     stats = env.sumo.simulation
     inserted = int(stats.getParameter("", "stats.vehicles.inserted"))
     running = int(stats.getParameter("", "stats.vehicles.running"))
     env.close()
-    return {"steps": steps, "wall_s": wall, "sumo_s": sumo_s[0], "inserted": inserted, "arrived": inserted - running}
+    return {"steps": steps, "wall_s": wall, "cpu_s": cpu, "sumo_s": sumo_s[0], "inserted": inserted,
+            "arrived": inserted - running}
 
 
 def sumo_rl_timing() -> tuple[int, int, int]:
@@ -89,15 +90,16 @@ def _config_timing() -> tuple[float, float, float]:
     return phase.yellow, phase.min_green, phase.max_green
 
 
-def _random_episode(env: Any, seed: int) -> tuple[int, float]:
-    """Reset with ``seed`` and step a seeded random policy to the episode's end: (steps, wall seconds)."""
+def _random_episode(env: Any, seed: int) -> tuple[int, float, float]:
+    """Reset with ``seed`` and step a seeded random policy to the episode's end: (steps, wall seconds, CPU seconds of
+    the process)."""
     env.reset(seed=seed)
     env.action_space.seed(seed)
-    steps, done, started = 0, False, time.perf_counter()
+    steps, done, started, cpu = 0, False, time.perf_counter(), time.process_time()
     while not done:
         _, _, terminated, truncated, _ = env.step(env.action_space.sample())
         steps, done = steps + 1, terminated or truncated
-    return steps, time.perf_counter() - started
+    return steps, time.perf_counter() - started, time.process_time() - cpu
 
 
 def measure_env(seeds: Sequence[int], duration: float = EPISODE_S, *, progress: bool = True) -> dict[str, Any]:

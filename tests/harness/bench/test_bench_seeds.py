@@ -56,6 +56,22 @@ def test_an_episode_is_split_into_sumo_and_own_work_per_simulated_hour_and_contr
     assert compared["own"]["min"] == 4.0 / 1.0 and compared["own"]["max"] == 6.0 / 1.0
 
 
+def test_the_cpu_time_of_an_episode_stands_beside_its_wall_time() -> None:
+    """The CPU seconds an episode's process took, per simulated hour and compared seed by seed, beside the wall time
+    (issue 37: the goal is on the wall time, and the CPU it cost is reported beside it)."""
+    from harness.bench.seeds import episode_table, ratio_line
+
+    runs = {0: {"wall_s": 3.0, "cpu_s": 2.5, "sumo_s": 1.0, "steps": 180, "inserted": 100, "arrived": 90},
+            1: {"wall_s": 5.0, "cpu_s": 4.0, "sumo_s": 2.0, "steps": 180, "inserted": 110, "arrived": 95}}
+    f = episode_figures(runs, 1800.0)
+    assert f["per_seed"][1]["cpu_per_sim_hour_s"] == 8.0 and f["cpu_per_sim_hour_s"]["median"] == 6.5
+    other = episode_figures({s: {**r, "cpu_s": r["cpu_s"] / 2} for s, r in runs.items()}, 1800.0)
+    compared = compare_episodes(f, other)
+    assert compared["cpu"]["median"] == 2.0 and compared["wall"]["median"] == 1.0
+    assert "CPU s / sim h" in episode_table({"a": f, "b": other})[0]
+    assert "CPU 2.00 [2.00-2.00]" in ratio_line("a / b", compared)
+
+
 def _pid(seed: int) -> dict[str, int]:
     return {"seed": seed, "pid": os.getpid()}
 
