@@ -109,11 +109,11 @@ class Poller:
 
     def halt(self) -> None:
         self.halted = True
-        self._owed.clear()
         if self.quiet is not None:
             self.quiet.forget()
         if self._alarm is not None:
-            self._wake(self._alarm)
+            self._wake(self._alarm)  # the polls passed asleep are counted first, those owed to SETs among them
+        self._owed.clear()  # the polls owed after now would not have gone out: polling halts
 
     def resume(self) -> None:
         self.halted = False
