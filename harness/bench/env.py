@@ -13,7 +13,8 @@ The two still serve different signal sequences (hils adds the 2 s all-red and de
 pairs) and the same demand becomes different traffic, which SUMO takes longer or shorter to step: each
 side's vehicles inserted and arrived are reported beside its time, and its time is split into SUMO's steps
 and the environment's own work (controller, middleware, observations), the part an environment is
-answerable for.
+answerable for. With the same clearances on both sides, hils' controller is also run without its red clearance
+(``hils_no_all_red``: sumo-rl's yellow and no all-red), and compared with sumo-rl.
 sumo-rl is the `bench` extra (`pip install 'hils[bench]'`).
 """
 
@@ -33,15 +34,17 @@ DECISION_S = 10.0
 TIMINGS = ("yellow", "min_green", "max_green")
 
 
-def hils_episode(seed: int, duration: float = EPISODE_S) -> dict[str, Any]:
-    """One episode of `hils/Intersection-v1` (selection) with a random policy."""
+def hils_episode(seed: int, duration: float = EPISODE_S, all_red: bool = True) -> dict[str, Any]:
+    """One episode of `hils/Intersection-v1` (selection) with a random policy. ``all_red=False``: the shipped config
+    with no red clearance, the clearances sumo-rl gives (a yellow, no all-red)."""
     import gymnasium as gym
 
     import hils.envs  # noqa: F401  (registers the environment)
 
     sumo_s = time_sumo_steps()
     env = gym.make("hils/Intersection-v1", action_type="selection", sumo_step=SUMO_STEP,
-                   control_interval=DECISION_S, episode_length=duration)
+                   control_interval=DECISION_S, episode_length=duration,
+                   **({} if all_red else {"config": without_red_clearance()}))
     steps, wall, cpu = _random_episode(env, seed)
     traffic = env.unwrapped.testbed.traffic
     env.close()
@@ -75,6 +78,17 @@ def sumo_rl_episode(seed: int, duration: float = EPISODE_S, converted: bool = Tr
             "arrived": inserted - running}
 
 
+def without_red_clearance() -> Any:
+    """The shipped config, every phase's red clearance 0 s: the same clearances as sumo-rl's (its yellow, no
+    all-red)."""
+    from dataclasses import replace
+
+    from hils.protocol.config import load
+
+    cfg = load()
+    return replace(cfg, phases={n: replace(p, red_clear=0.0) for n, p in cfg.phases.items()})
+
+
 def sumo_rl_timing() -> tuple[int, int, int]:
     """The shipped config's yellow, minimum and maximum green in sumo-rl's unit: SUMO steps, since its
     TrafficSignal counts a yellow and a minimum green by calls of ``update()``, one per step."""
@@ -106,6 +120,7 @@ def measure_env(seeds: Sequence[int], duration: float = EPISODE_S, *, progress: 
     """One episode of each side per seed, alternately, each in a fresh process (:mod:`harness.bench.seeds`): every
     run, each side's figures over the seeds, and hils' per-seed ratios to each sumo-rl side."""
     runs = alternate(seeds, {"hils": partial(hils_episode, duration=duration),
+                             "hils_no_all_red": partial(hils_episode, duration=duration, all_red=False),
                              "sumo_rl": partial(sumo_rl_episode, duration=duration),
                              "sumo_rl_unconverted": partial(sumo_rl_episode, duration=duration, converted=False)},
                      progress=progress)
@@ -115,4 +130,5 @@ def measure_env(seeds: Sequence[int], duration: float = EPISODE_S, *, progress: 
             "sumo_rl_timing_steps": dict(zip(TIMINGS, sumo_rl_timing(), strict=True)),
             "runs": runs, "sides": sides,
             "hils_to_sumo_rl": compare_episodes(sides["hils"], sides["sumo_rl"]),
+            "same_clearances": compare_episodes(sides["hils_no_all_red"], sides["sumo_rl"]),
             "hils_to_sumo_rl_unconverted": compare_episodes(sides["hils"], sides["sumo_rl_unconverted"])}

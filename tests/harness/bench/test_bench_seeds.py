@@ -130,3 +130,17 @@ def test_the_overhead_bench_runs_the_loop_and_its_floor_seed_by_seed_in_fresh_pr
     assert f["runs"]["hils"]["0"]["departed"] != f["runs"]["hils"]["1"]["departed"]
     assert "ratio to the same-traffic floor, per seed" in done.stdout
 
+
+
+def test_the_environment_bench_also_runs_hils_with_sumo_rl_s_clearances() -> None:
+    """Issue 37: the single-intersection environment beside sumo-rl given the same clearances: sumo-rl shows a yellow
+    and no all-red, so hils' controller is also run with the shipped config's red clearance at 0 s, all else kept."""
+    from dataclasses import replace
+
+    from harness.bench.env import without_red_clearance
+    from hils.protocol.config import load
+
+    shipped, same = load(), without_red_clearance()
+    assert all(p.red_clear > 0 for p in shipped.phases.values())
+    assert all(p.red_clear == 0 and p.yellow == shipped.phases[n].yellow for n, p in same.phases.items())
+    assert replace(same, phases=shipped.phases) == shipped
