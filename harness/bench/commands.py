@@ -537,7 +537,8 @@ def _env_command(args: argparse.Namespace) -> int:
     print(f"  sumo-rl counts its yellow and minimum green in SUMO steps: it is given the config's {c['yellow']:g} s "
           f"and {c['min_green']:g} s as {t['yellow']} and {t['min_green']} steps; 'unconverted' is the same numbers "
           f"as steps (a {c['yellow'] * f['sumo_step_s']:g} s yellow), as its own docs suggest writing them")
-    labels = {"hils": "hils", "sumo_rl": "sumo-rl", "sumo_rl_unconverted": "sumo-rl, unconverted"}
+    labels = {"hils": "hils", "hils_no_all_red": "hils, no all-red", "sumo_rl": "sumo-rl",
+              "sumo_rl_unconverted": "sumo-rl, unconverted"}
     for line in bench_seeds.episode_table({labels[side]: figures for side, figures in f["sides"].items()}):
         print(line)
     print(bench_seeds.ratio_line("hils / sumo-rl", f["hils_to_sumo_rl"])
@@ -545,6 +546,8 @@ def _env_command(args: argparse.Namespace) -> int:
             "other signals, other traffic, which SUMO steps at its own cost)")
     print(bench_seeds.ratio_line("hils / sumo-rl unconverted", f["hils_to_sumo_rl_unconverted"])
           + " (shorter clearances, lighter traffic)")
+    print(bench_seeds.ratio_line("hils, no all-red / sumo-rl", f["same_clearances"])
+          + " (the same clearances: the config's red clearance set to 0 s, as sumo-rl has none; goal: wall <= 1)")
     _write_figures(folder / "env.json", {"machine": info, "env": f})
     return 0
 

@@ -13,7 +13,8 @@ The two still serve different signal sequences (hils adds the 2 s all-red and de
 pairs) and the same demand becomes different traffic, which SUMO takes longer or shorter to step: each
 side's vehicles inserted and arrived are reported beside its time, and its time is split into SUMO's steps
 and the environment's own work (controller, middleware, observations), the part an environment is
-answerable for.
+answerable for. With the same clearances on both sides, hils' controller is also run without its red clearance
+(``hils_no_all_red``: sumo-rl's yellow and no all-red), and compared with sumo-rl.
 sumo-rl is the `bench` extra (`pip install 'hils[bench]'`).
 """
 
@@ -33,19 +34,21 @@ DECISION_S = 10.0
 TIMINGS = ("yellow", "min_green", "max_green")
 
 
-def hils_episode(seed: int, duration: float = EPISODE_S) -> dict[str, Any]:
-    """One episode of `hils/Intersection-v1` (selection) with a random policy."""
+def hils_episode(seed: int, duration: float = EPISODE_S, all_red: bool = True) -> dict[str, Any]:
+    """One episode of `hils/Intersection-v1` (selection) with a random policy. ``all_red=False``: the shipped config
+    with no red clearance, the clearances sumo-rl gives (a yellow, no all-red)."""
     import gymnasium as gym
 
     import hils.envs  # noqa: F401  (registers the environment)
 
     sumo_s = time_sumo_steps()
     env = gym.make("hils/Intersection-v1", action_type="selection", sumo_step=SUMO_STEP,
-                   control_interval=DECISION_S, episode_length=duration)
-    steps, wall = _random_episode(env, seed)
+                   control_interval=DECISION_S, episode_length=duration,
+                   **({} if all_red else {"config": without_red_clearance()}))
+    steps, wall, cpu = _random_episode(env, seed)
     traffic = env.unwrapped.testbed.traffic
     env.close()
-    return {"steps": steps, "wall_s": wall, "sumo_s": sumo_s[0], "inserted": traffic.departed,
+    return {"steps": steps, "wall_s": wall, "cpu_s": cpu, "sumo_s": sumo_s[0], "inserted": traffic.departed,
             "arrived": traffic.arrived}
 
 
@@ -66,12 +69,24 @@ def sumo_rl_episode(seed: int, duration: float = EPISODE_S, converted: bool = Tr
                                   additional_sumo_cmd=f"--step-length {SUMO_STEP}")
     # Set after construction: its constructor compares the yellow, in steps, with delta_time, in seconds.
     env.yellow_time, env.min_green, env.max_green = sumo_rl_timing() if converted else _config_timing()
-    steps, wall = _random_episode(env, seed)
+    steps, wall, cpu = _random_episode(env, seed)
     stats = env.sumo.simulation
     inserted = int(stats.getParameter("", "stats.vehicles.inserted"))
     running = int(stats.getParameter("", "stats.vehicles.running"))
     env.close()
-    return {"steps": steps, "wall_s": wall, "sumo_s": sumo_s[0], "inserted": inserted, "arrived": inserted - running}
+    return {"steps": steps, "wall_s": wall, "cpu_s": cpu, "sumo_s": sumo_s[0], "inserted": inserted,
+            "arrived": inserted - running}
+
+
+def without_red_clearance() -> Any:
+    """The shipped config, every phase's red clearance 0 s: the same clearances as sumo-rl's (its yellow, no
+    all-red)."""
+    from dataclasses import replace
+
+    from hils.protocol.config import load
+
+    cfg = load()
+    return replace(cfg, phases={n: replace(p, red_clear=0.0) for n, p in cfg.phases.items()})
 
 
 def sumo_rl_timing() -> tuple[int, int, int]:
@@ -89,21 +104,23 @@ def _config_timing() -> tuple[float, float, float]:
     return phase.yellow, phase.min_green, phase.max_green
 
 
-def _random_episode(env: Any, seed: int) -> tuple[int, float]:
-    """Reset with ``seed`` and step a seeded random policy to the episode's end: (steps, wall seconds)."""
+def _random_episode(env: Any, seed: int) -> tuple[int, float, float]:
+    """Reset with ``seed`` and step a seeded random policy to the episode's end: (steps, wall seconds, CPU seconds of
+    the process)."""
     env.reset(seed=seed)
     env.action_space.seed(seed)
-    steps, done, started = 0, False, time.perf_counter()
+    steps, done, started, cpu = 0, False, time.perf_counter(), time.process_time()
     while not done:
         _, _, terminated, truncated, _ = env.step(env.action_space.sample())
         steps, done = steps + 1, terminated or truncated
-    return steps, time.perf_counter() - started
+    return steps, time.perf_counter() - started, time.process_time() - cpu
 
 
 def measure_env(seeds: Sequence[int], duration: float = EPISODE_S, *, progress: bool = True) -> dict[str, Any]:
     """One episode of each side per seed, alternately, each in a fresh process (:mod:`harness.bench.seeds`): every
     run, each side's figures over the seeds, and hils' per-seed ratios to each sumo-rl side."""
     runs = alternate(seeds, {"hils": partial(hils_episode, duration=duration),
+                             "hils_no_all_red": partial(hils_episode, duration=duration, all_red=False),
                              "sumo_rl": partial(sumo_rl_episode, duration=duration),
                              "sumo_rl_unconverted": partial(sumo_rl_episode, duration=duration, converted=False)},
                      progress=progress)
@@ -113,4 +130,5 @@ def measure_env(seeds: Sequence[int], duration: float = EPISODE_S, *, progress: 
             "sumo_rl_timing_steps": dict(zip(TIMINGS, sumo_rl_timing(), strict=True)),
             "runs": runs, "sides": sides,
             "hils_to_sumo_rl": compare_episodes(sides["hils"], sides["sumo_rl"]),
+            "same_clearances": compare_episodes(sides["hils_no_all_red"], sides["sumo_rl"]),
             "hils_to_sumo_rl_unconverted": compare_episodes(sides["hils"], sides["sumo_rl_unconverted"])}

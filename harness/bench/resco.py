@@ -36,7 +36,7 @@ def hils_episode(seed: int, *, scenario: str, duration: float = EPISODE_S) -> di
 
     sumo_s = time_sumo_steps()
     env = hils.envs.parallel_env(scenario=f"resco:{scenario}", action_type="selection", episode_length=duration)
-    started = time.perf_counter()
+    started, cpu = time.perf_counter(), time.process_time()
     env.reset(seed=seed)
     for agent in env.possible_agents:
         env.action_space(agent).seed(seed)
@@ -44,10 +44,10 @@ def hils_episode(seed: int, *, scenario: str, duration: float = EPISODE_S) -> di
     while env.agents:
         env.step({agent: env.action_space(agent).sample() for agent in env.agents})
         steps += 1
-    wall = time.perf_counter() - started
+    wall, cpu = time.perf_counter() - started, time.process_time() - cpu
     traffic = env.testbed.traffic
     env.close()
-    return {"steps": steps, "wall_s": wall, "sumo_s": sumo_s[0], "inserted": traffic.departed,
+    return {"steps": steps, "wall_s": wall, "cpu_s": cpu, "sumo_s": sumo_s[0], "inserted": traffic.departed,
             "arrived": traffic.arrived}
 
 

@@ -99,11 +99,14 @@ def ratios(numerator: Mapping[int, float], denominator: Mapping[int, float]) -> 
 
 def episode_figures(runs: Mapping[int, Mapping[str, Any]], duration: float, controllers: int = 1) -> dict[str, Any]:
     """Figures of one side's episodes (each a mapping with ``wall_s``, ``sumo_s``, ``steps``, ``inserted`` and
-    ``arrived``) of ``duration`` simulated seconds: per seed and over the seeds, wall seconds per simulated hour,
-    of it SUMO's steps and the environment's own work (the rest), own work per simulated controller-hour, steps
-    per second, vehicles inserted and arrived."""
+    ``arrived``, and ``cpu_s`` when measured) of ``duration`` simulated seconds: per seed and over the seeds, wall
+    seconds per simulated hour, of it SUMO's steps and the environment's own work (the rest), the CPU seconds the
+    episode's process took per simulated hour beside them, own work per simulated controller-hour, steps per second,
+    vehicles inserted and arrived."""
     hours = duration / 3600.0
-    per_seed = {seed: {"wall_per_sim_hour_s": r["wall_s"] / hours, "sumo_per_sim_hour_s": r["sumo_s"] / hours,
+    per_seed = {seed: {"wall_per_sim_hour_s": r["wall_s"] / hours,
+                       **({"cpu_per_sim_hour_s": r["cpu_s"] / hours} if "cpu_s" in r else {}),
+                       "sumo_per_sim_hour_s": r["sumo_s"] / hours,
                        "own_per_sim_hour_s": (r["wall_s"] - r["sumo_s"]) / hours,
                        "own_per_controller_hour_s": (r["wall_s"] - r["sumo_s"]) / (hours * controllers),
                        "steps_per_s": r["steps"] / r["wall_s"], "inserted": r["inserted"], "arrived": r["arrived"]}
@@ -138,8 +141,10 @@ def time_sumo_steps() -> list[float]:
     return total
 
 
-#: What :func:`compare_episodes` compares, and the figure of :func:`episode_figures` each is the ratio of.
-COMPARED = {"wall": "wall_per_sim_hour_s", "sumo": "sumo_per_sim_hour_s", "own": "own_per_sim_hour_s"}
+#: What :func:`compare_episodes` compares, and the figure of :func:`episode_figures` each is the ratio of (the CPU
+#: time where both sides measured it).
+COMPARED = {"wall": "wall_per_sim_hour_s", "cpu": "cpu_per_sim_hour_s", "sumo": "sumo_per_sim_hour_s",
+            "own": "own_per_sim_hour_s"}
 
 
 def compare_episodes(numerator: Mapping[str, Any], denominator: Mapping[str, Any]) -> dict[str, dict[str, float]]:
@@ -147,28 +152,32 @@ def compare_episodes(numerator: Mapping[str, Any], denominator: Mapping[str, Any
     their own work, over the seeds."""
     a, b = numerator["per_seed"], denominator["per_seed"]
     return {name: ratios({s: v[f] for s, v in a.items()}, {s: v[f] for s, v in b.items()}).as_dict()
-            for name, f in COMPARED.items()}
+            for name, f in COMPARED.items() if f in numerator and f in denominator}
 
 
 def episode_table(sides: Mapping[str, Mapping[str, Any]], *, per_controller: bool = False) -> list[str]:
     """Console lines: per side (its label, its :func:`episode_figures`) median [min-max] over the seeds."""
-    head = (f"  {'':22} {'steps/s':>17} {'wall s / sim h':>19} {'of it SUMO':>19} {'own work':>19}"
+    cpu = all("cpu_per_sim_hour_s" in f for f in sides.values())
+    head = (f"  {'':22} {'steps/s':>17} {'wall s / sim h':>19}" + (f" {'CPU s / sim h':>19}" if cpu else "")
+            + f" {'of it SUMO':>19} {'own work':>19}"
             + (f" {'own / controller-h':>19}" if per_controller else "") + f" {'inserted':>17} {'arrived':>17}")
     lines = [head]
     for label, f in sides.items():
-        cells = [_spread(f["steps_per_s"], 1), *(_spread(f[k]) for k in ("wall_per_sim_hour_s", "sumo_per_sim_hour_s",
-                                                                          "own_per_sim_hour_s"))]
+        cells = [_spread(f["steps_per_s"], 1), *(_spread(f[k]) for k in (
+            "wall_per_sim_hour_s", *(["cpu_per_sim_hour_s"] if cpu else []), "sumo_per_sim_hour_s",
+            "own_per_sim_hour_s"))]
         if per_controller:
             cells.append(_spread(f["own_per_controller_hour_s"], 3))
         cells += [_spread(f["inserted"], 0), _spread(f["arrived"], 0)]
-        widths = [17, 19, 19, 19, *([19] if per_controller else []), 17, 17]
+        widths = [17, 19, *([19] if cpu else []), 19, 19, *([19] if per_controller else []), 17, 17]
         lines.append(f"  {label:22} " + " ".join(f"{c:>{w}}" for c, w in zip(cells, widths, strict=True)))
     return lines
 
 
 def ratio_line(label: str, compared: Mapping[str, Mapping[str, float]]) -> str:
     """One console line of :func:`compare_episodes`."""
-    return (f"  {label}, per seed: wall {_spread(compared['wall'])}, SUMO {_spread(compared['sumo'])}, "
+    cpu = f"CPU {_spread(compared['cpu'])}, " if "cpu" in compared else ""
+    return (f"  {label}, per seed: wall {_spread(compared['wall'])}, {cpu}SUMO {_spread(compared['sumo'])}, "
             f"own work {_spread(compared['own'])}")
 
 

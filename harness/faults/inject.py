@@ -65,7 +65,7 @@ from hils.protocol.ntcip import (
 from hils.protocol.timegrid import Grid
 from hils.run.intersection import Intersection
 from hils.run.testbed import Testbed
-from hils.shell.fastpath import StepCost
+from hils.shell.fastpath import Foresight, StepCost
 from hils.shell.middleware import Middleware
 from hils.shell.transport import CommunicationTimeout, LocalTransport, ObjectSurface, Transport, Value, VarBind
 
@@ -222,15 +222,18 @@ class FaultyTransport:
     and the controller never sees the request, as an agent refusing it would.
     A request no fault touches is the inner transport's own event.
 
-    On virtual time's fast path (:mod:`hils.shell.fastpath`) it offers the inner transport's change feed while no
-    fault may act on a request, and none while one may (every request then goes out, for the fault to judge):
-    a poller or read-back asleep meanwhile is woken when the next fault's window opens.
+    On virtual time's fast path (:mod:`hils.shell.fastpath`) it is a foresight when the inner transport has one
+    (``foresight``): it offers the inner change feed while no fault may act on a request, and none while one may
+    (every request then goes out, for the fault to judge): a poller or read-back asleep meanwhile is woken when the
+    next fault's window opens.
     """
 
     def __init__(self, env: simpy.Environment, inner: Transport, *, tau_udp: float,
-                 faults: Sequence[TransportFault] = (), error_latency: float = 0.002) -> None:
+                 faults: Sequence[TransportFault] = (), error_latency: float = 0.002,
+                 foresight: Foresight | None = None) -> None:
         self.env = env
         self.inner = inner
+        self.inner_foresight = foresight
         self.tau_udp = tau_udp
         self.faults: list[TransportFault] = list(faults)
         self.error_latency = error_latency
@@ -241,26 +244,27 @@ class FaultyTransport:
     @property
     def change_feed(self) -> FaultyTransport | None:
         now = self.env.now
-        if self.inner.change_feed is None or any(f.active(now) for f in self.faults):
+        inner = self.inner_foresight
+        if inner is None or inner.change_feed is None or any(f.active(now) for f in self.faults):
             return None
         return self
 
     @property
     def version(self) -> int:
-        return self.inner.change_feed.version
+        return self.inner_foresight.change_feed.version
 
     @property
     def controls(self) -> int:
-        return self.inner.change_feed.controls
+        return self.inner_foresight.change_feed.controls
 
     def changed(self) -> simpy.Event:
-        return self._or_next_window(self.inner.change_feed.changed())
+        return self._or_next_window(self.inner_foresight.change_feed.changed())
 
     def controls_changed(self) -> simpy.Event:
-        return self._or_next_window(self.inner.change_feed.controls_changed())
+        return self._or_next_window(self.inner_foresight.change_feed.controls_changed())
 
     def bump(self) -> None:
-        self.inner.change_feed.bump()
+        self.inner_foresight.change_feed.bump()
 
     def _or_next_window(self, event: simpy.Event) -> simpy.Event:
         """``event``, or the opening of the next fault's window if that comes first."""
@@ -848,7 +852,11 @@ class FaultTarget:
             surface = fault.wrap_surface(surface, env)
         inner = LocalTransport(env, surface, tau_udp=config.middleware.tau_udp, get_latency=self.base.get_latency,
                                set_latency=self.base.set_latency, seed=seed, change_feed=self.base.change_feed)
-        self.transport = FaultyTransport(env, inner, tau_udp=config.middleware.tau_udp)
+        self.transport = FaultyTransport(env, inner, tau_udp=config.middleware.tau_udp,
+                                         foresight=inner if self.base.change_feed is not None else None)
+        # The fast path's foresight (:class:`hils.shell.fastpath.Foresight`): the faulty transport's own, which knows
+        # when a fault may act.
+        self.foresight = self.transport
         for fault in faults:
             fault.on_target(self)
 

@@ -208,7 +208,7 @@ def episode(seed: int, *, scenario: str, duration: float, agent: str = "random",
         env = module.SumoEnvironment(net_file=str(net), route_file=str(routes), begin_time=int(begin),
                                      num_seconds=int(duration), delta_time=int(interval), single_agent=False,
                                      sumo_seed=seed, sumo_warnings=False, additional_sumo_cmd=" ".join(options))
-    started = time.perf_counter()
+    started, cpu = time.perf_counter(), time.process_time()
     env.reset(seed=seed)
     lights = _lights(env, configs)
     maps = _phase_maps(lights, scenario_) if agent != "random" or tripinfo is not None else {}
@@ -222,12 +222,12 @@ def episode(seed: int, *, scenario: str, duration: float, agent: str = "random",
         if queue is not None:
             queue.sample()
         decisions, done = decisions + 1, dones["__all__"]
-    wall = time.perf_counter() - started
+    wall, cpu = time.perf_counter() - started, time.process_time() - cpu
     stats = env.sumo.simulation
     inserted = int(stats.getParameter("", "stats.vehicles.inserted"))
     running = int(stats.getParameter("", "stats.vehicles.running"))
     env.close()
-    out = {"steps": decisions, "wall_s": wall, "sumo_s": sumo_s[0], "inserted": inserted,
+    out = {"steps": decisions, "wall_s": wall, "cpu_s": cpu, "sumo_s": sumo_s[0], "inserted": inserted,
            "arrived": inserted - running}
     if tripinfo is not None:
         from hils.sim.resco_metrics import metrics, read_tripinfo

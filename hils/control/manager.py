@@ -198,7 +198,7 @@ from hils.control.manager_io import (
 )
 from hils.control.phase_control import Change, OrderState, Running, no_controls
 from hils.protocol.config import Pair
-from hils.protocol.ntcip import CONTROL_TABLE, ControlColumn
+from hils.protocol.ntcip import CONTROL_TABLE, ControlColumn, SignalState
 
 __all__ = ["CLEAR_ATTEMPTS", "Ev", "Manager", "Mode", "Pending", "State", "graph"]
 
@@ -393,6 +393,15 @@ class Manager:
         ends a run of drifted ones. (The shell reports only those: four steps a second are timed, and an
         on-time step after an on-time step is ON_TIME with nothing to reset.)"""
         return took > step or self.drifted_in_a_row > 0
+
+    def counts_only(self, state: SignalState) -> bool:
+        """Whether an answer showing ``state`` again (the newest applied) would only be counted: no verification, no
+        preemption, no state left; looks, never changes. The fast path leaves such a poll unsent after a SET of ours
+        (:mod:`hils.shell.fastpath`, rule 2). Only a state that commands counts an answer alone, and there the newest
+        answer read no preempt in service (it would have entered PREEMPTED): the probe reads none either."""
+        probe = PollAnswered(0.0, self.newest_poll + 1, self.poll_epoch, state, frozenset())
+        entry = _TRANSITIONS.get((self.mode, self._classify(probe)))
+        return entry is not None and entry == (self.mode, Manager._answered)
 
     def refusal(self) -> ActionError | None:
         """The typed error a command (or schedule) handed over now would be refused with (None: it would not be);

@@ -47,30 +47,42 @@ class Tally:
         self.kinds[kind] += 1
         if kind in self.KEPT:
             self.records.append(record)
-        if kind in self._WATCHED:
-            self._watch(kind, record)
+        watch = _WATCHES.get(kind)
+        if watch is not None:
+            watch(self, record)
 
-    _WATCHED = frozenset({Kind.TIMEOUT_ENTERED, Kind.STATE, Kind.SET_SENT, Kind.SET_ANSWERED, Kind.SET_FAILED,
-                          Kind.ACTION_REFUSED, Kind.PREEMPT_BEGIN})
+    # How the run stands at its end: in TIMEOUT or not, its calls cleared or not, why an action was refused. One
+    # handler per kind watched, found by the record's kind (a chain of comparisons with Kind's members cost every
+    # record several enum lookups).
 
-    def _watch(self, kind: str, record: dict[str, Any]) -> None:
-        """How the run stands at its end: in TIMEOUT or not, its calls cleared or not, why an action was refused."""
-        if kind == Kind.TIMEOUT_ENTERED:
-            self.timeout = record
-        elif kind == Kind.PREEMPT_BEGIN:
-            self.preemptions.append({"t": record["t"], "preempts": list(record["preempts"]), "duration_s": None})
-        elif kind == Kind.STATE and record["from"] == "preempted":
+    def _timeout_entered(self, record: dict[str, Any]) -> None:
+        self.timeout = record
+
+    def _preempt_began(self, record: dict[str, Any]) -> None:
+        self.preemptions.append({"t": record["t"], "preempts": list(record["preempts"]), "duration_s": None})
+
+    def _state(self, record: dict[str, Any]) -> None:
+        if record["from"] == "preempted":
             # Over when the controller reported it (preempt_end), or cut by a TIMEOUT (then unknown beyond it).
             self.preemptions[-1]["duration_s"] = record["t"] - self.preemptions[-1]["t"]
             self.preemptions[-1]["ended"] = "over" if record["to"] == "idle" else record["to"]
-        if kind == Kind.STATE and record["to"] != "timeout":
+        if record["to"] != "timeout":
             self.timeout = None  # recovered (a close leaves the state as it was: no record)
-        elif kind in (Kind.SET_SENT, Kind.SET_ANSWERED, Kind.SET_FAILED) and record.get("purpose") == "clear":
+
+    def _set(self, record: dict[str, Any]) -> None:
+        if record.get("purpose") == "clear":
             if self.clear is None:
                 self.records.append(record)  # polling halted with the close: the timeline's no data from here
             self.clear = record
-        elif kind == Kind.ACTION_REFUSED and self.first_refusal is None:
+
+    def _action_refused(self, record: dict[str, Any]) -> None:
+        if self.first_refusal is None:
             self.first_refusal = record
+
+
+_WATCHES = {Kind.TIMEOUT_ENTERED.value: Tally._timeout_entered, Kind.PREEMPT_BEGIN.value: Tally._preempt_began,
+            Kind.STATE.value: Tally._state, Kind.SET_SENT.value: Tally._set, Kind.SET_ANSWERED.value: Tally._set,
+            Kind.SET_FAILED.value: Tally._set, Kind.ACTION_REFUSED.value: Tally._action_refused}
 
 
 def summarize(intersections: Mapping[str | None, tuple[Tally, IntersectionConfig]], *, traffic: Any = None,

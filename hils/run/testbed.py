@@ -411,15 +411,17 @@ class Testbed(_OneIntersection):
         # Every controller of a run of several has its own seeded draws (its tick phase, its latencies); a lone
         # one draws from the run's seed itself.
         seed = self.seed if label is None else self.seed * 1009 + index
-        target, transport, where, community = connect(env, cfg, spec, self._wall_targets.get(name), self._driver,
-                                                      seed=seed, fast_path=self.fast_path, hires=self.keeps_hires)
+        target, transport, foresight, where, community = connect(
+            env, cfg, spec, self._wall_targets.get(name), self._driver, seed=seed, fast_path=self.fast_path,
+            hires=self.keeps_hires)
         events = TaggedLog(self.events, label) if label is not None else self.events
         # The summary's figures, kept as the run goes (its end re-reads nothing): each intersection's tally is handed
         # its own records and the run's (a lone one's, every record).
         tally = Tally(label)
         self.events.subscribe(tally, intersection=label)
         middleware = Middleware(env, transport, cfg, self.action_type, events, where=where, community=community,
-                                recover_after=self.recover_after, fast_path=self.fast_path, take_over=self.take_over)
+                                recover_after=self.recover_after, foresight=foresight if self.fast_path else None,
+                                take_over=self.take_over)
         return Intersection(name, label, cfg, target, transport, middleware, events, tally)
     @property
     def devices(self) -> dict[str, int]:

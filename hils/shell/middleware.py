@@ -102,7 +102,7 @@ from hils.protocol.ntcip import (
 )
 from hils.protocol.timegrid import Grid
 from hils.shell.events import EventLog, Kind
-from hils.shell.fastpath import QuietPolls, QuietReadbacks
+from hils.shell.fastpath import Foresight, QuietPolls, QuietReadbacks
 from hils.shell.poller import Poller, SignalCache
 from hils.shell.preflight import ControllerReading, Verdict, judge
 from hils.shell.transport import CommunicationTimeout, SecurityRefused, Transport, TransportError
@@ -138,14 +138,15 @@ class Middleware:
     """Everything between the agent and the transport, on one SimPy environment.
 
     ``recover_after``: seconds in TIMEOUT before the manager recovers by itself (None: only when asked).
-    ``fast_path``: leave out the polls and read-backs that cannot see a change (:mod:`hils.shell.fastpath`).
+    ``foresight``: the transport's knowledge of when its answer can change (:mod:`hils.shell.fastpath`), given on
+    virtual time's fast path: the polls and read-backs that cannot see a change are left out.
     ``take_over``: take a controller whose calls someone else placed without watching them first (see the
     manager's STARTING)."""
 
     def __init__(self, env: simpy.Environment, transport: Transport, config: IntersectionConfig,
                  action_type: ActionType | str, events: EventLog, *, where: str = "the controller",
-                 community: str | None = None, recover_after: float | None = None, fast_path: bool = True,
-                 take_over: bool = False) -> None:
+                 community: str | None = None, recover_after: float | None = None,
+                 foresight: Foresight | None = None, take_over: bool = False) -> None:
         params = config.middleware
         self.where = where  # how messages name the controller (HOST:PORT)
         self.community = community  # SNMPv1/v2c's; "" over SNMPv3 (none), None in process
@@ -170,9 +171,10 @@ class Middleware:
         # The read-back: the control objects the run never sets, then VehCall.
         self._control_oids = [*(control_oid(c, g) for c in FOREIGN_COLUMNS for g in range(1, config.groups + 1)),
                               *self._veh_call_oids]
-        self.poller = Poller(env, rate_hz=params.poll_hz, send=self._poll,
-                             quiet=QuietPolls(transport, lambda: self.manager.newest_poll) if fast_path else None)
-        self._quiet_readbacks = QuietReadbacks(transport) if fast_path else None
+        quiet = QuietPolls(foresight, lambda: self.manager.newest_poll,
+                           lambda: self.manager.counts_only(self.cache.state)) if foresight is not None else None
+        self.poller = Poller(env, rate_hz=params.poll_hz, send=self._poll, quiet=quiet)
+        self._quiet_readbacks = QuietReadbacks(foresight) if foresight is not None else None
         self.ready = env.event()
         self._entering: dict[State, simpy.Event] = {}  # events of processes waiting for a state
         self._leaving_recovery: simpy.Event | None = None
@@ -218,7 +220,9 @@ class Middleware:
     def poll_counts(self) -> dict[str, int]:
         """Polls on the grid so far, and how each ended (``elided``: not sent, it could not see a change)."""
         m = self.manager
-        return {**self.poller.counts, "answered": m.polls_answered, "failed": m.polls_failed, "late": m.polls_late}
+        counts = self.poller.counts
+        return {**counts, "answered": m.polls_answered + self.poller.answered_unsent, "failed": m.polls_failed,
+                "late": m.polls_late}
 
     @property
     def keepalive_enabled(self) -> bool:
@@ -605,9 +609,12 @@ class Middleware:
         else:
             self.log.emit(Kind.SET_SENT, command_id=command_id, phases=phases, purpose=purpose, controls=controls)
         ours = self._quiet_readbacks.writing() if self._quiet_readbacks is not None else None
+        polls = self.poller.writing()
         done = self.transport.set(varbinds)
         if ours is not None:
             ours()
+        if polls is not None:
+            polls()
 
         def logged(ev: simpy.Event) -> None:
             if ev.ok:

@@ -78,6 +78,8 @@ class Poller:
         self.quiet = quiet
         self.polls = 0  # polls on the grid, sent or not
         self.elided = 0  # polls not sent: they could not see a change
+        self.answered_unsent = 0  # polls not sent that a SET of ours would once have sent, counted as answered
+        self._owed: set[int] = set()  # grid instants of such polls, not yet passed
         self.halted = False
         self._resume = env.event()
         self._alarm: _Alarm | None = None  # an elided sleep's: set off when the feed moves or polling halts
@@ -85,17 +87,33 @@ class Poller:
 
     @property
     def counts(self) -> dict[str, int]:
-        """Polls on the grid so far and those not sent (``elided``: they could not see a change)."""
+        """Polls on the grid so far and those not sent (``elided``: they could not see a change; those a SET of ours
+        once sent are in ``answered_unsent``)."""
         if self._alarm is not None and not self._alarm.triggered:
             self._pass_quiet_polls()
         return {"polls": self.polls, "elided": self.elided}
+
+    def writing(self) -> Callable[[], None] | None:
+        """A SET of ours is about to be sent: call the function returned once it is (None off the fast path). When
+        the polls left out stay left out (:meth:`QuietPolls.written`), the poll of the grid's first instant not
+        before now is owed: counted as answered when it passes."""
+        quiet = self.quiet
+        if quiet is None:
+            return None
+        before = quiet.before_write()
+
+        def sent() -> None:
+            if quiet.written(before):
+                self._owed.add(self._grid.first_at_or_after(self.env.now, self._k))
+        return sent
 
     def halt(self) -> None:
         self.halted = True
         if self.quiet is not None:
             self.quiet.forget()
         if self._alarm is not None:
-            self._wake(self._alarm)
+            self._wake(self._alarm)  # the polls passed asleep are counted first, those owed to SETs among them
+        self._owed.clear()  # the polls owed after now would not have gone out: polling halts
 
     def resume(self) -> None:
         self.halted = False
@@ -113,16 +131,34 @@ class Poller:
             self.polls += 1
             self._k += 1
             if self.quiet is None or not self.quiet.leaves_out(self.polls):
+                self._owed.discard(self._k - 1)
                 self.send(self.polls)
                 yield env.timeout(self._grid.delay(self._k, env.now))
                 continue
             # Left out: every poll until the feed moves would be this one again. Sleep until it does (or polling
             # halts), on to the first instant of the grid from then; the polls due meanwhile are counted as they pass.
-            self.elided += 1
+            self._left_out(self._k - 1, self._k)
             self._alarm = alarm = _Alarm(env)
-            self.quiet.moved().callbacks.append(lambda _ev, alarm=alarm: self._wake(alarm))
+            self.quiet.moved().callbacks.append(lambda _ev, alarm=alarm: self._moved(alarm))
             yield alarm
             self._alarm = None
+
+    def _moved(self, alarm: _Alarm) -> None:
+        """The feed moved during an elided sleep: wake, unless a poll would still read the newest answer (a SET of
+        ours moved it): then sleep on until its next move."""
+        if not self.halted and not alarm.triggered and self.quiet.still():
+            self.quiet.moved().callbacks.append(lambda _ev: self._moved(alarm))
+            return
+        self._wake(alarm)
+
+    def _left_out(self, first: int, end: int) -> None:
+        """Count the polls of the grid's instants ``first`` to ``end - 1`` as not sent: as answered those a SET of ours
+        would once have sent, as elided the others."""
+        owed = [k for k in self._owed if k < end]
+        passed = sum(1 for k in owed if k >= first)
+        self._owed.difference_update(owed)
+        self.answered_unsent += passed
+        self.elided += end - first - passed
 
     def _wake(self, alarm: _Alarm) -> None:
         """End an elided sleep: the feed moved (the grid's next instant polls) or polling halted (at once)."""
@@ -135,7 +171,7 @@ class Poller:
         """Count, as elided, the polls of the grid due before now that an elided sleep passed over."""
         due = self._grid.first_at_or_after(self.env.now, self._k)
         self.polls += due - self._k
-        self.elided += due - self._k
+        self._left_out(self._k, due)
         self._k = due
 
 

@@ -311,7 +311,6 @@ class SnmpTransport:
         self.driver = driver
         self.target = target
         self.tau_udp = tau_udp
-        self.change_feed = None  # over the wire nobody knows when the answer changes: every poll is sent
         self._address = address or resolve(target)
         # Taken now rather than on the first request: building one takes ~50 ms, which
         # would otherwise stall the loop in the middle of a run.

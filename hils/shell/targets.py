@@ -17,6 +17,7 @@ import simpy
 
 from hils.protocol.config import IntersectionConfig
 from hils.protocol.errors import UserError
+from hils.shell.fastpath import Foresight
 from hils.shell.transport import LocalTransport, Transport
 
 __all__ = ["VIRTUAL", "TargetError", "TargetFactory", "check_target", "connect", "target_specs",
@@ -24,8 +25,10 @@ __all__ = ["VIRTUAL", "TargetError", "TargetFactory", "check_target", "connect",
 
 VIRTUAL = "virtual"
 
-#: ``(env, config, *, seed, fast_path, hires) -> target``: a target with a ``transport``, or a ``surface`` (with
-#: ``get_latency`` and ``set_latency``) that an in-process transport reaches. ``hires``: the run keeps the
+#: ``(env, config, *, seed, fast_path, hires) -> target``: a target with a ``transport`` (and its ``foresight``, a
+#: :class:`hils.shell.fastpath.Foresight`, when that transport knows when its answer can change), or a ``surface``
+#: (with ``get_latency`` and ``set_latency``, and its ``change_feed`` when it has one) that an in-process transport
+#: reaches. ``hires``: the run keeps the
 #: controller's hi-res record (a target that keeps one offers ``hires()`` and ``hires_to()``); when it does not,
 #: a controller held in process runs no data logger.
 TargetFactory = Callable[..., Any]
@@ -90,21 +93,25 @@ def check_target(url: str, label: str | None) -> tuple[Any, tuple[str, int]]:
 
 def connect(env: simpy.Environment, config: IntersectionConfig, spec: str | TargetFactory,
             wall: tuple[Any, tuple[str, int]] | None, driver: Any, *, seed: int, fast_path: bool, hires: bool
-            ) -> tuple[Any, Transport, str, str | None]:
-    """Reach one intersection's controller: its target, the transport to it, how messages name it (where) and
-    the community it is written with (None in process). ``wall``: the parsed URL and address of a wall-clock
-    target (:func:`check_target`), reached through ``driver``. ``seed``, ``fast_path``, ``hires``: the run's, for a
-    target made in process (:data:`TargetFactory`)."""
+            ) -> tuple[Any, Transport, Foresight | None, str, str | None]:
+    """Reach one intersection's controller: its target, the transport to it, that transport's foresight (None
+    over the wire, and for a target whose transport has none), how messages name it (where) and the community it is
+    written with (None in process). ``wall``: the parsed URL and address of a wall-clock target
+    (:func:`check_target`), reached through ``driver``. ``seed``, ``fast_path``, ``hires``: the run's, for a target
+    made in process (:data:`TargetFactory`)."""
     if wall is None:
         factory = virtual_target_factory() if spec == VIRTUAL else spec
         target = factory(env, config, seed=seed, fast_path=fast_path, hires=hires)
         # A target brings its transport, or an object surface that an in-process transport reaches.
-        transport = getattr(target, "transport", None) or LocalTransport(
-            env, target.surface, tau_udp=config.middleware.tau_udp, get_latency=target.get_latency,
-            set_latency=target.set_latency, seed=seed, change_feed=getattr(target, "change_feed", None))
-        return target, transport, "the in-process emulator", None
+        transport = getattr(target, "transport", None)
+        if transport is not None:
+            return target, transport, getattr(target, "foresight", None), "the in-process emulator", None
+        feed = getattr(target, "change_feed", None)
+        local = LocalTransport(env, target.surface, tau_udp=config.middleware.tau_udp, get_latency=target.get_latency,
+                               set_latency=target.set_latency, seed=seed, change_feed=feed)
+        return target, local, local if feed is not None else None, "the in-process emulator", None
     from hils.shell.snmp import SnmpTransport
 
     target, address = wall
     transport = SnmpTransport(env, driver, target, tau_udp=config.middleware.tau_udp, address=address)
-    return target, transport, f"{target.host}:{target.port}", getattr(target, "community", None)
+    return target, transport, None, f"{target.host}:{target.port}", getattr(target, "community", None)

@@ -25,7 +25,6 @@ from hils.shell.fastpath import ChangeFeed
 VarBind = tuple[Oid, int]
 
 __all__ = [
-    "ChangeFeed",
     "CommunicationTimeout",
     "Latency",
     "LocalTransport",
@@ -52,7 +51,6 @@ class SecurityRefused(TransportError):
 
 class Transport(Protocol):
     env: simpy.Environment
-    change_feed: ChangeFeed | None
 
     def get(self, oids: Sequence[Oid]) -> simpy.Event:
         """GET of several objects in one PDU; the event's value is a tuple in the same order."""
@@ -82,7 +80,8 @@ class LocalTransport:
 
     ``change_feed`` (the surface's, when it has one) is offered to the poller only when a GET
     draws nothing at random (no loss, no jitter): a poll left out then (:mod:`hils.shell.fastpath`) is one whose
-    answer, and its time, are known without sending it, and the draws of every other request stay the same.
+    answer, and its time, are known without sending it, and the draws of every other request stay the same. It
+    is this transport's own (it is a :class:`hils.shell.fastpath.Foresight`), not the transport interface's.
     """
 
     def __init__(self, env: simpy.Environment, surface: ObjectSurface, *, tau_udp: float = 1.0,

@@ -56,6 +56,22 @@ def test_an_episode_is_split_into_sumo_and_own_work_per_simulated_hour_and_contr
     assert compared["own"]["min"] == 4.0 / 1.0 and compared["own"]["max"] == 6.0 / 1.0
 
 
+def test_the_cpu_time_of_an_episode_stands_beside_its_wall_time() -> None:
+    """The CPU seconds an episode's process took, per simulated hour and compared seed by seed, beside the wall time
+    (issue 37: the goal is on the wall time, and the CPU it cost is reported beside it)."""
+    from harness.bench.seeds import episode_table, ratio_line
+
+    runs = {0: {"wall_s": 3.0, "cpu_s": 2.5, "sumo_s": 1.0, "steps": 180, "inserted": 100, "arrived": 90},
+            1: {"wall_s": 5.0, "cpu_s": 4.0, "sumo_s": 2.0, "steps": 180, "inserted": 110, "arrived": 95}}
+    f = episode_figures(runs, 1800.0)
+    assert f["per_seed"][1]["cpu_per_sim_hour_s"] == 8.0 and f["cpu_per_sim_hour_s"]["median"] == 6.5
+    other = episode_figures({s: {**r, "cpu_s": r["cpu_s"] / 2} for s, r in runs.items()}, 1800.0)
+    compared = compare_episodes(f, other)
+    assert compared["cpu"]["median"] == 2.0 and compared["wall"]["median"] == 1.0
+    assert "CPU s / sim h" in episode_table({"a": f, "b": other})[0]
+    assert "CPU 2.00 [2.00-2.00]" in ratio_line("a / b", compared)
+
+
 def _pid(seed: int) -> dict[str, int]:
     return {"seed": seed, "pid": os.getpid()}
 
@@ -114,3 +130,17 @@ def test_the_overhead_bench_runs_the_loop_and_its_floor_seed_by_seed_in_fresh_pr
     assert f["runs"]["hils"]["0"]["departed"] != f["runs"]["hils"]["1"]["departed"]
     assert "ratio to the same-traffic floor, per seed" in done.stdout
 
+
+
+def test_the_environment_bench_also_runs_hils_with_sumo_rl_s_clearances() -> None:
+    """Issue 37: the single-intersection environment beside sumo-rl given the same clearances: sumo-rl shows a yellow
+    and no all-red, so hils' controller is also run with the shipped config's red clearance at 0 s, all else kept."""
+    from dataclasses import replace
+
+    from harness.bench.env import without_red_clearance
+    from hils.protocol.config import load
+
+    shipped, same = load(), without_red_clearance()
+    assert all(p.red_clear > 0 for p in shipped.phases.values())
+    assert all(p.red_clear == 0 and p.yellow == shipped.phases[n].yellow for n, p in same.phases.items())
+    assert replace(same, phases=shipped.phases) == shipped

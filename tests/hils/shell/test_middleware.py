@@ -385,7 +385,6 @@ class _FirstSetLost:
 
     def __init__(self, inner, tau_udp: float) -> None:
         self.inner, self.env, self.tau_udp, self.sets = inner, inner.env, tau_udp, 0
-        self.change_feed = inner.change_feed  # polls pass through untouched
 
     def get(self, oids):
         return self.inner.get(oids)

@@ -170,3 +170,73 @@ def test_someone_elses_call_is_seen_on_the_fast_path_as_on_the_reference() -> No
     (entered,) = [r for r in fast if r["kind"] == Kind.TIMEOUT_ENTERED]
     assert entered["reason"] == "foreign_control" and "phaseControlGroupVehCall on phases [3, 7]" in entered["detail"]
     assert 33.3 < entered["t"] <= 33.3 + 2.1
+
+
+class SignalGets:
+    """The emulator's surface, noting when a GET of the signal state reached it."""
+
+    def __init__(self, inner: Any, oids: Any) -> None:
+        self.inner, self.oids, self.times = inner, tuple(oids), []
+        self.env: Any = None
+
+    def get_many(self, oids: Any) -> Any:
+        if tuple(oids) == self.oids:
+            self.times.append(self.env.now)
+        return self.inner.get_many(oids)
+
+    def set_many(self, varbinds: Any) -> None:
+        self.inner.set_many(varbinds)
+
+
+def test_a_set_of_ours_sends_no_poll_and_counts_it_answered(paper_config) -> None:
+    """A SET changes no answer of a poll by itself (only the controller's next step may): a keepalive re-SETting the
+    call of a resting controller sends no GET of the signal state at the poll after it (the controller's step that
+    takes the SET in may send one later), and that poll is counted as answered, so that run_ended's counts are what
+    they were."""
+    from hils.protocol.ntcip import signal_oids
+
+    cfg = paper_config.with_middleware(backup_time=15)  # a keepalive every 5 s
+    surfaces: list[SignalGets] = []
+
+    def target(env: Any, config: Any, *, seed: int, fast_path: bool, hires: bool) -> VirtualTarget:
+        t = VirtualTarget(env, config, seed=seed, fast_path=fast_path, hires=hires)
+        surfaces.append(SignalGets(t.surface, signal_oids(config.groups)))
+        surfaces[-1].env = env
+        t.surface = surfaces[-1]
+        return t
+
+    tb = Testbed(cfg, action_type="selection", sumo=False, target=target)
+    tb.reset()
+    tb.run_for(1.0)
+    tb.middleware.submit((4, 8))
+    tb.run_for(30.0)  # served, then resting in 4+8: nothing calls another phase
+    (verified,) = tb.events.of(Kind.TRANSITION_VERIFIED)
+    gets, before = len(surfaces[0].times), tb.middleware.poll_counts
+    tb.run_for(60.0)
+    keepalives = [r for r in tb.events.of(Kind.SET_SENT) if r["purpose"] == "keepalive" and r["t"] > tb.now - 60.0]
+    after = tb.middleware.poll_counts
+    tb.close()
+    assert len(keepalives) >= 10 and verified["command"] == (4, 8)
+    period = cfg.middleware.poll_period
+    woken = [t for t in surfaces[0].times[gets:] if any(0 <= t - r["t"] < period for r in keepalives)]
+    assert woken == [], "a keepalive SET sent the next poll"
+    sent = len(surfaces[0].times) - gets
+    assert after["answered"] - before["answered"] == sent + len(keepalives), "each counted as the poll it once sent"
+    assert after["polls"] - before["polls"] == 600 == (after["answered"] - before["answered"]
+                                                       + after["elided"] - before["elided"])
+
+
+def test_a_command_a_poll_of_the_state_shown_verifies_still_sends_that_poll(paper_config) -> None:
+    """The SET of a duration command for the pair already green is no reason to leave the next poll out: its answer
+    verifies the command (:meth:`hils.control.manager.Manager.counts_only` is False), as on the reference."""
+    holds = {}
+    for fast_path in (True, False):
+        tb = Testbed(paper_config, action_type="duration", sumo=False, fast_path=fast_path)
+        tb.reset()
+        tb.run_for(1.0)
+        tb.middleware.manager.position = paper_config.sequence.index((1, 5))  # the next pair is 2+6, green now
+        tb.middleware.submit(0.0)
+        tb.run_for(10.0)
+        holds[fast_path] = [(r["t"], r["hold_s"]) for r in tb.events.of(Kind.TRANSITION_VERIFIED)]
+        tb.close()
+    assert holds[True] == holds[False] and holds[True][0][1] <= 0.1 + 1e-9

@@ -243,7 +243,6 @@ class Reordering:
 
     def __init__(self, env: simpy.Environment, mib: MibView, latencies: list[float]) -> None:
         self.env, self.mib, self.latencies = env, mib, latencies
-        self.change_feed = None
 
     def get(self, oids: Sequence[Oid]) -> simpy.Event:
         values = self.mib.get_many(oids)
