@@ -22,7 +22,7 @@ and nothing in between. A write in between catches the counters up to the
 present first, so a SET lands on the tick it would have landed on.
 
 The clock is also the change feed of the in-process transport
-(:class:`hils.shell.transport.ChangeFeed`): ``version`` counts the moments a GET could
+(:class:`hils.shell.fastpath.ChangeFeed`): ``version`` counts the moments a GET could
 start answering differently (every write, every real step that changed the
 status the agent answers or the controller's own status and control objects),
 and ``changed()`` fires at the next one. A poller
