@@ -610,19 +610,24 @@ def _train_command(args: argparse.Namespace) -> int:
     f = measure_train(args.seeds, timesteps=args.timesteps, iterations=args.iterations, batch=args.batch,
                       threads=args.torch_threads, parts=args.parts)
     print(machine.header(info))
+    threads = f"{f['torch_threads']} thread{'s' * (f['torch_threads'] > 1)}"
     print(f"each side once per seed (seeds {seeds_text(f['seeds'])}), each run in a fresh process, alternately; torch "
-          f"{f['versions']['torch']} with {f['torch_threads']} thread(s); median [min-max] over the seeds; shares of "
-          "each run's training wall time:")
+          f"{f['versions']['torch']}, {threads} each; median [min-max] over the seeds; a run's "
+          "training (not its imports and build) split by wall time into SUMO, the environment's own work and the "
+          "learner, and the environment's share of its CPU time:")
     titles = {"sb3": f"Stable-Baselines3 {f['versions']['stable-baselines3']} PPO, {args.timesteps} steps of sumo-rl's "
                      "single intersection (a decision every 5 s):",
-              "rllib": f"RLlib {f['versions']['ray']} PPO, {args.iterations} iterations of {args.batch} steps of "
-                       "grid4x4 (16 lights, PettingZoo parallel, a decision every 5 s):"}
+              "rllib": f"RLlib {f['versions']['ray']} PPO, {args.iterations} iteration(s) of {args.batch} environment "
+                       "steps of grid4x4 (16 lights, each step 16 agents' steps; PettingZoo parallel, a decision every "
+                       "5 s):"}
     for part in args.parts:
         p = f[part]
         print(titles[part])
         for line in table({LABELS[side]: figures for side, figures in p["sides"].items()}):
             print(line)
-        print(f"  hils / sumo-rl steps per second, per seed: {Spread(**p['hils_to_sumo_rl_steps_per_s']).text()}")
+        ratio = {f: Spread(**p["hils_to_sumo_rl"][f]).text() for f in ("steps_per_s", "steps_per_cpu_s")}
+        print(f"  hils / sumo-rl, per seed: steps per second {ratio['steps_per_s']}, steps per CPU second "
+              f"{ratio['steps_per_cpu_s']}")
     _write_figures(folder / "train.json", {"machine": info, "train": f})
     return 0
 

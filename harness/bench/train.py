@@ -26,8 +26,8 @@ the ``rl`` extra; sumo-rl the ``bench`` extra.
 
 from __future__ import annotations
 
+import logging
 import os
-import resource
 import time
 from collections.abc import Callable, Mapping, Sequence
 from functools import partial
@@ -42,15 +42,20 @@ SINGLE = MappingProxyType({"single_agent": True, "delta_time": 5, "yellow_time":
                            "num_seconds": 3600, "sumo_warnings": False})
 #: Stable-Baselines3 PPO's settings, on both sides: a rollout of 256 steps, 10 epochs of minibatches of 64.
 SB3_PPO = MappingProxyType({"n_steps": 256, "batch_size": 64, "n_epochs": 10, "learning_rate": 3e-4})
-#: RLlib PPO's settings on grid4x4, on both sides (its batch in environment steps is ``--batch``).
+#: RLlib PPO's settings on grid4x4, on both sides (its batch in environment steps is ``--batch``; minibatches of 128
+#: or the whole batch if smaller: :func:`minibatch`).
 RLLIB_PPO = MappingProxyType({"minibatch_size": 128, "num_epochs": 5, "lr": 3e-4})
 #: The grid's options beside RESCO's network, demand and hour, on both sides: sumo-rl's defaults but the yellow.
 GRID = MappingProxyType({"yellow_time": 3, "sumo_warnings": False})
 SIDES = ("hils", "sumo_rl")
 LABELS = MappingProxyType({"hils": "hils", "sumo_rl": "sumo-rl"})
 
-#: The environment's step and reset of the run in this process: calls, agent steps and wall seconds.
-_ENV = {"steps": 0, "agent_steps": 0, "seconds": 0.0}
+#: The environment's step and reset of the run in this process: calls, agent steps, wall and CPU seconds.
+_ENV = {"steps": 0, "agent_steps": 0, "seconds": 0.0, "cpu_s": 0.0}
+
+
+def _restart_count() -> None:
+    _ENV.update(steps=0, agent_steps=0, seconds=0.0, cpu_s=0.0)
 
 
 def single_intersection_files() -> dict[str, str]:
@@ -83,24 +88,27 @@ def grid4x4(side: str, seed: int) -> Any:
 
 
 def timed(env: Any) -> Any:
-    """``env`` with its ``step`` and ``reset`` timed into this process's totals (calls, agent steps, seconds)."""
+    """``env`` with its ``step`` and ``reset`` timed into this process's totals (calls, agent steps, wall and CPU
+    seconds)."""
     step, reset = env.step, env.reset
 
     def timed_step(action: Any) -> Any:
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         try:
             return step(action)
         finally:
             _ENV["seconds"] += time.perf_counter() - t0
+            _ENV["cpu_s"] += time.process_time() - c0
             _ENV["steps"] += 1
             _ENV["agent_steps"] += len(action) if isinstance(action, Mapping) else 1
 
     def timed_reset(*args: Any, **kwargs: Any) -> Any:
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         try:
             return reset(*args, **kwargs)
         finally:
             _ENV["seconds"] += time.perf_counter() - t0
+            _ENV["cpu_s"] += time.process_time() - c0
 
     env.step, env.reset = timed_step, timed_reset
     return env
@@ -117,13 +125,13 @@ def sb3_run(seed: int, *, side: str, timesteps: int, threads: int = 1) -> dict[s
     from stable_baselines3 import PPO
 
     _threads(threads)
-    _ENV.update(steps=0, agent_steps=0, seconds=0.0)
+    _restart_count()
     sumo_s = time_sumo_steps()
     env = timed(sumo_environment(side)(**single_intersection_files(), **SINGLE, sumo_seed=seed))
     model = PPO("MlpPolicy", env, seed=seed, device="cpu", verbose=0, **SB3_PPO)
-    cpu, started = _cpu_s(), time.perf_counter()
+    cpu, started = time.process_time(), time.perf_counter()
     model.learn(total_timesteps=timesteps)
-    wall, cpu = time.perf_counter() - started, _cpu_s() - cpu
+    wall, cpu = time.perf_counter() - started, time.process_time() - cpu
     env.close()
     return _run(model.num_timesteps, wall, cpu, sumo_s[0])
 
@@ -142,62 +150,75 @@ def rllib_run(seed: int, *, side: str, iterations: int, batch: int, threads: int
     from ray.rllib.algorithms.ppo import PPOConfig
     from ray.tune.registry import register_env
 
+    # Ray's notices about itself (its token authentication, its new API stack, its own PPO module's deprecated
+    # constructor) say nothing about the figures: errors only (RLlib gives its loggers a level of their own).
+    for name in ("ray", "ray.rllib"):
+        logging.getLogger(name).setLevel(logging.ERROR)
     _threads(threads)
     sumo_s = time_sumo_steps()
     ray.init(num_cpus=1, include_dashboard=False, configure_logging=False, log_to_driver=False)
     register_env("hils_bench_train", _grid_env)
     config = (PPOConfig()
+              .api_stack(enable_rl_module_and_learner=True, enable_env_runner_and_connector_v2=True)
               .environment("hils_bench_train", env_config={"side": side, "seed": seed})
               .env_runners(num_env_runners=0)
               .multi_agent(policies={"shared"}, policy_mapping_fn=lambda *_, **__: "shared")
-              .training(train_batch_size_per_learner=batch, **RLLIB_PPO)
-              .debugging(seed=seed))
+              .training(train_batch_size_per_learner=batch, **{**RLLIB_PPO, "minibatch_size": minibatch(batch)})
+              .debugging(seed=seed, log_level="ERROR"))
     algo = config.build_algo()
     try:
-        cpu, started, sumo_before = _cpu_s(), time.perf_counter(), sumo_s[0]
-        _ENV.update(steps=0, agent_steps=0, seconds=0.0)  # building the algorithm reset the environment once
+        cpu, started, sumo_before = time.process_time(), time.perf_counter(), sumo_s[0]
+        _restart_count()  # building the algorithm reset the environment once
         for _ in range(iterations):
             algo.train()
-        wall, cpu = time.perf_counter() - started, _cpu_s() - cpu
+        wall, cpu = time.perf_counter() - started, time.process_time() - cpu
     finally:
         algo.stop()
         ray.shutdown()
     return _run(_ENV["steps"], wall, cpu, sumo_s[0] - sumo_before)
 
 
-def _cpu_s() -> float:
-    """CPU seconds of this process and its children so far."""
-    own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
-    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
+def minibatch(batch: int) -> int:
+    """RLlib PPO's minibatch for a batch of ``batch`` steps: PPO refuses one larger than the batch."""
+    return min(RLLIB_PPO["minibatch_size"], batch)
 
 
 def _run(steps: int, wall: float, cpu: float, sumo: float) -> dict[str, Any]:
-    """One run's figures: environment steps (and agent steps), wall and CPU seconds of training, of the wall time
-    SUMO's, the environment's own and the learner's, and the machine's load (1 min) at its end."""
-    env = _ENV["seconds"]
+    """One run's figures: environment steps (and agent steps); wall and CPU seconds of training (the CPU this process
+    took: the sampling and the learning, not Ray's own daemons), of the wall time SUMO's, the environment's own and
+    the learner's, of the CPU time the environment's (SUMO's included); the machine's load (1 min) at its end."""
     return {"steps": steps, "agent_steps": _ENV["agent_steps"], "wall_s": wall, "cpu_s": cpu, "sumo_s": sumo,
-            "env_own_s": env - sumo, "learner_s": wall - env, "load_1min": os.getloadavg()[0]}
+            "env_own_s": _ENV["seconds"] - sumo, "learner_s": wall - _ENV["seconds"], "env_cpu_s": _ENV["cpu_s"],
+            "load_1min": os.getloadavg()[0]}
 
 
-#: Figures of a run taken over the seeds, and the ratio of the two sides compared seed by seed.
-FIGURES = ("steps_per_s", "wall_s", "cpu_share", "sumo_share", "env_own_share", "learner_share", "load_1min")
+#: Each side's figures over the seeds: (console title, digits) of each.
+FIGURES = MappingProxyType({
+    "steps_per_s": ("steps/s", 1), "steps_per_cpu_s": ("steps/CPU s", 1), "sumo_share": ("wall: SUMO", 2),
+    "env_own_share": ("env's own", 2), "learner_share": ("learner", 2), "env_cpu_share": ("CPU: env", 2),
+    "cpu_per_wall": ("CPU/wall", 2), "load_1min": ("load (1 min)", 1)})
+#: The figures whose ratio hils / sumo-rl is taken seed by seed.
+COMPARED = ("steps_per_s", "steps_per_cpu_s")
 
 
 def figures(runs: Mapping[int, Mapping[str, Any]]) -> dict[str, Any]:
-    """One side's runs, per seed and over the seeds (:class:`Spread`): steps per second of training, the shares of
-    its wall time (SUMO, the environment's own work, the learner) and its CPU seconds per wall second."""
-    per_seed = {seed: {"steps_per_s": r["steps"] / r["wall_s"], "wall_s": r["wall_s"], "cpu_share": r["cpu_s"] /
-                       r["wall_s"], "sumo_share": r["sumo_s"] / r["wall_s"],
-                       "env_own_share": r["env_own_s"] / r["wall_s"], "learner_share": r["learner_s"] / r["wall_s"],
-                       "load_1min": r["load_1min"]} for seed, r in runs.items()}
+    """One side's runs, per seed and over the seeds (:class:`Spread`): environment steps per second of training's
+    wall time and of its CPU time, the shares of the wall time (SUMO, the environment's own work, the learner) and of
+    the CPU time (the environment, SUMO's included), CPU seconds per wall second and the load."""
+    per_seed = {seed: {"steps_per_s": r["steps"] / r["wall_s"], "steps_per_cpu_s": r["steps"] / r["cpu_s"],
+                       "sumo_share": r["sumo_s"] / r["wall_s"], "env_own_share": r["env_own_s"] / r["wall_s"],
+                       "learner_share": r["learner_s"] / r["wall_s"], "env_cpu_share": r["env_cpu_s"] / r["cpu_s"],
+                       "cpu_per_wall": r["cpu_s"] / r["wall_s"], "load_1min": r["load_1min"]}
+                for seed, r in runs.items()}
     return {"per_seed": per_seed, **{f: Spread.of([v[f] for v in per_seed.values()]).as_dict() for f in FIGURES}}
 
 
 def _compare(runs: Mapping[str, Mapping[int, Mapping[str, Any]]]) -> dict[str, Any]:
+    """Both sides' :func:`figures` and hils' ratio to sumo-rl seed by seed (steps per second, per CPU second)."""
     sides = {side: figures(by_seed) for side, by_seed in runs.items()}
-    rate = {side: {seed: v["steps_per_s"] for seed, v in f["per_seed"].items()} for side, f in sides.items()}
-    return {"runs": runs, "sides": sides,
-            "hils_to_sumo_rl_steps_per_s": ratios(rate["hils"], rate["sumo_rl"]).as_dict()}
+    hils, peer = sides["hils"]["per_seed"], sides["sumo_rl"]["per_seed"]
+    return {"runs": runs, "sides": sides, "hils_to_sumo_rl": {
+        f: ratios({s: v[f] for s, v in hils.items()}, {s: v[f] for s, v in peer.items()}).as_dict() for f in COMPARED}}
 
 
 def measure_train(seeds: Sequence[int], *, timesteps: int, iterations: int, batch: int, threads: int = 1,
@@ -213,19 +234,17 @@ def measure_train(seeds: Sequence[int], *, timesteps: int, iterations: int, batc
         runs = alternate(seeds, {side: partial(rllib_run, side=side, iterations=iterations, batch=batch,
                                                threads=threads) for side in SIDES}, progress=progress)
         out["rllib"] = {"environment": "RESCO's grid4x4 as sumo-rl gives it (16 lights, PettingZoo parallel)",
-                        "options": dict(GRID), "ppo": {**RLLIB_PPO, "train_batch_size_per_learner": batch},
+                        "options": dict(GRID),
+                        "ppo": {**RLLIB_PPO, "minibatch_size": minibatch(batch), "train_batch_size_per_learner": batch},
                         "iterations": iterations, **_compare(runs)}
     return out
 
 
 def table(sides: Mapping[str, Mapping[str, Any]]) -> list[str]:
     """Console lines: per side (its label, its :func:`figures`) median [min-max] over the seeds."""
-    columns = {"steps_per_s": ("steps/s", 1), "wall_s": ("wall s", 1), "sumo_share": ("of it SUMO", 2),
-               "env_own_share": ("env's own", 2), "learner_share": ("learner", 2), "cpu_share": ("CPU/wall", 2),
-               "load_1min": ("load (1 min)", 1)}
-    lines = ["  " + f"{'':10}" + "".join(f"{title:>20}" for title, _ in columns.values())]
+    lines = ["  " + f"{'':10}" + "".join(f"{title:>19}" for title, _ in FIGURES.values())]
     for label, f in sides.items():
-        lines.append("  " + f"{label:10}" + "".join(f"{Spread(**f[k]).text(d):>20}" for k, (_, d) in columns.items()))
+        lines.append("  " + f"{label:10}" + "".join(f"{Spread(**f[k]).text(d):>19}" for k, (_, d) in FIGURES.items()))
     return lines
 
 

@@ -5,9 +5,10 @@ their time as they say, and sumo-rl's own PettingZoo environment starts for the 
 from __future__ import annotations
 
 import argparse
+import json
 import subprocess
 import sys
-from functools import partial
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,8 +18,7 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.env_checker import check_env
 
 from harness.bench import commands as bench
-from harness.bench.processes import in_fresh_process
-from harness.bench.train import SB3_PPO, SINGLE, sb3_run, single_intersection_files
+from harness.bench.train import SB3_PPO, SINGLE, single_intersection_files
 from harness.reference.sumo_rl_peer import sumo_rl_pettingzoo
 from hils.sim.quiet_libsumo import libsumo
 from hils.sumo_rl import SumoEnvironment
@@ -53,13 +53,28 @@ def test_ppo_learns_on_the_single_intersection_and_its_policy_drives_the_control
         env.close()
 
 
-@pytest.mark.parametrize("side", ["hils", "sumo_rl"])
-def test_a_bench_run_trains_in_a_fresh_process_and_splits_its_wall_time(side: str) -> None:
-    run = in_fresh_process(partial(sb3_run, side=side, timesteps=256), 0)
-    assert run["steps"] == run["agent_steps"] == 256
-    assert run["sumo_s"] > 0 and run["env_own_s"] > 0 and run["learner_s"] > 0
-    assert run["sumo_s"] + run["env_own_s"] + run["learner_s"] == pytest.approx(run["wall_s"])
-    assert run["cpu_s"] > 0 and run["load_1min"] >= 0
+def test_the_bench_trains_each_side_in_a_fresh_process_and_splits_its_wall_time(tmp_path: Path) -> None:
+    out = tmp_path / "figures"
+    done = subprocess.run([sys.executable, "-m", "hils", "bench", "train", "--parts", "sb3", "--seeds", "0",
+                           "--timesteps", "256", "--out", str(out)], capture_output=True, text=True, timeout=600,
+                          cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    doc = json.loads((out / "train.json").read_text())
+    assert len(doc["machine"]["load"]) == 3 and "load" in done.stdout.splitlines()[0]
+    f = doc["train"]
+    assert f["seeds"] == [0] and "rllib" not in f and f["versions"]["torch"].startswith("2.13.0")
+    runs = f["sb3"]["runs"]
+    assert set(runs) == {"hils", "sumo_rl"}
+    for run in (runs["hils"]["0"], runs["sumo_rl"]["0"]):
+        assert run["steps"] == run["agent_steps"] == 256
+        assert run["sumo_s"] > 0 and run["env_own_s"] > 0 and run["learner_s"] > 0
+        assert run["sumo_s"] + run["env_own_s"] + run["learner_s"] == pytest.approx(run["wall_s"])
+        assert run["cpu_s"] > 0
+        assert 0 < run["env_cpu_s"] < run["cpu_s"]
+    for figure, time in (("steps_per_s", "wall_s"), ("steps_per_cpu_s", "cpu_s")):
+        rate = {side: runs[side]["0"]["steps"] / runs[side]["0"][time] for side in runs}
+        assert f["sb3"]["hils_to_sumo_rl"][figure]["median"] == pytest.approx(rate["hils"] / rate["sumo_rl"])
+    assert "hils / sumo-rl, per seed: steps per second" in done.stdout
 
 
 def test_sumo_rls_own_parallel_environment_starts_on_the_installed_pettingzoo() -> None:
