@@ -150,9 +150,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                                             "parallel API, 16 lights, one shared policy), environment steps per second "
                                             "of its training iterations, sampled and learnt in one process. Each side "
                                             "once per seed, each run in a fresh process, alternately; medians and "
-                                            "min-max over the seeds, hils' ratio to sumo-rl seed by seed, each run's "
-                                            "wall time split into SUMO, the environment's own work and the learner, "
-                                            "its CPU seconds and the machine's load. Needs the training libraries "
+                                            "min-max over the seeds, hils' ratio to sumo-rl seed by seed (steps per "
+                                            "second and per CPU second), each run's wall time split into SUMO, the "
+                                            "environment's own work and the learner, the environment's share of its "
+                                            "CPU time and the machine's load. Needs the training libraries "
                                             "and sumo-rl: pip install 'hils[rl,bench]' (torch's CPU build first: "
                                             "docs/rl.md).")
     train.add_argument("--parts", type=_train_parts, default="sb3,rllib", metavar="sb3,rllib",

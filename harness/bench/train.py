@@ -242,9 +242,9 @@ def measure_train(seeds: Sequence[int], *, timesteps: int, iterations: int, batc
 
 def table(sides: Mapping[str, Mapping[str, Any]]) -> list[str]:
     """Console lines: per side (its label, its :func:`figures`) median [min-max] over the seeds."""
-    lines = ["  " + f"{'':10}" + "".join(f"{title:>19}" for title, _ in FIGURES.values())]
+    lines = ["  " + f"{'':10}" + "".join(f"{title:>21}" for title, _ in FIGURES.values())]
     for label, f in sides.items():
-        lines.append("  " + f"{label:10}" + "".join(f"{Spread(**f[k]).text(d):>19}" for k, (_, d) in FIGURES.items()))
+        lines.append("  " + f"{label:10}" + "".join(f"{Spread(**f[k]).text(d):>21}" for k, (_, d) in FIGURES.items()))
     return lines
 
 
