@@ -152,10 +152,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                                             "once per seed, each run in a fresh process, alternately; medians and "
                                             "min-max over the seeds, hils' ratio to sumo-rl seed by seed (steps per "
                                             "second and per CPU second), each run's wall time split into SUMO, the "
-                                            "environment's own work and the learner, the environment's share of its "
-                                            "CPU time and the machine's load. Needs the training libraries "
-                                            "and sumo-rl: pip install 'hils[rl,bench]' (torch's CPU build first: "
-                                            "docs/rl.md).")
+                                            "environment's own work and the learner, its CPU time per step into the "
+                                            "environment's and the learner's, and the machine's load. Needs the "
+                                            "training libraries and sumo-rl: pip install 'hils[rl,bench]' (torch's "
+                                            "CPU build first: docs/rl.md).")
     train.add_argument("--parts", type=_train_parts, default="sb3,rllib", metavar="sb3,rllib",
                        help="which trainings (sb3,rllib)")
     train.add_argument("--timesteps", type=_positive, default=2048, metavar="N",
@@ -615,7 +615,7 @@ def _train_command(args: argparse.Namespace) -> int:
     print(f"each side once per seed (seeds {seeds_text(f['seeds'])}), each run in a fresh process, alternately; torch "
           f"{f['versions']['torch']}, {threads} each; median [min-max] over the seeds; a run's "
           "training (not its imports and build) split by wall time into SUMO, the environment's own work and the "
-          "learner, and the environment's share of its CPU time:")
+          "learner, and its CPU time per environment step into the environment's (SUMO's included) and the learner's:")
     titles = {"sb3": f"Stable-Baselines3 {f['versions']['stable-baselines3']} PPO, {args.timesteps} steps of sumo-rl's "
                      "single intersection (a decision every 5 s):",
               "rllib": f"RLlib {f['versions']['ray']} PPO, {args.iterations} iteration(s) of {args.batch} environment "
@@ -626,9 +626,9 @@ def _train_command(args: argparse.Namespace) -> int:
         print(titles[part])
         for line in table({LABELS[side]: figures for side, figures in p["sides"].items()}):
             print(line)
-        ratio = {f: Spread(**p["hils_to_sumo_rl"][f]).text() for f in ("steps_per_s", "steps_per_cpu_s")}
+        ratio = {f: Spread(**r).text() for f, r in p["hils_to_sumo_rl"].items()}
         print(f"  hils / sumo-rl, per seed: steps per second {ratio['steps_per_s']}, steps per CPU second "
-              f"{ratio['steps_per_cpu_s']}")
+              f"{ratio['steps_per_cpu_s']}, the environment's CPU per step {ratio['env_cpu_ms']}")
     _write_figures(folder / "train.json", {"machine": info, "train": f})
     return 0
 

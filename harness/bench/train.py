@@ -195,26 +195,30 @@ def _run(steps: int, wall: float, cpu: float, sumo: float) -> dict[str, Any]:
 #: Each side's figures over the seeds: (console title, digits) of each.
 FIGURES = MappingProxyType({
     "steps_per_s": ("steps/s", 1), "steps_per_cpu_s": ("steps/CPU s", 1), "sumo_share": ("wall: SUMO", 2),
-    "env_own_share": ("env's own", 2), "learner_share": ("learner", 2), "env_cpu_share": ("CPU: env", 2),
-    "cpu_per_wall": ("CPU/wall", 2), "load_1min": ("load (1 min)", 1)})
+    "env_own_share": ("env's own", 2), "learner_share": ("learner", 2), "env_cpu_ms": ("CPU ms/step: env", 2),
+    "learner_cpu_ms": ("learner", 2), "cpu_per_wall": ("CPU/wall", 2), "load_1min": ("load (1 min)", 1)})
 #: The figures whose ratio hils / sumo-rl is taken seed by seed.
-COMPARED = ("steps_per_s", "steps_per_cpu_s")
+COMPARED = ("steps_per_s", "steps_per_cpu_s", "env_cpu_ms")
 
 
 def figures(runs: Mapping[int, Mapping[str, Any]]) -> dict[str, Any]:
     """One side's runs, per seed and over the seeds (:class:`Spread`): environment steps per second of training's
-    wall time and of its CPU time, the shares of the wall time (SUMO, the environment's own work, the learner) and of
-    the CPU time (the environment, SUMO's included), CPU seconds per wall second and the load."""
+    wall time and of its CPU time, the shares of the wall time (SUMO, the environment's own work, the learner), the
+    CPU milliseconds per environment step of the environment (SUMO's included) and of the learner (the rest), CPU
+    seconds per wall second and the load. The learner's CPU per step is a check: the same networks learn from either
+    side's steps, so it should come out the same on both."""
     per_seed = {seed: {"steps_per_s": r["steps"] / r["wall_s"], "steps_per_cpu_s": r["steps"] / r["cpu_s"],
                        "sumo_share": r["sumo_s"] / r["wall_s"], "env_own_share": r["env_own_s"] / r["wall_s"],
-                       "learner_share": r["learner_s"] / r["wall_s"], "env_cpu_share": r["env_cpu_s"] / r["cpu_s"],
+                       "learner_share": r["learner_s"] / r["wall_s"], "env_cpu_ms": 1e3 * r["env_cpu_s"] / r["steps"],
+                       "learner_cpu_ms": 1e3 * (r["cpu_s"] - r["env_cpu_s"]) / r["steps"],
                        "cpu_per_wall": r["cpu_s"] / r["wall_s"], "load_1min": r["load_1min"]}
                 for seed, r in runs.items()}
     return {"per_seed": per_seed, **{f: Spread.of([v[f] for v in per_seed.values()]).as_dict() for f in FIGURES}}
 
 
 def _compare(runs: Mapping[str, Mapping[int, Mapping[str, Any]]]) -> dict[str, Any]:
-    """Both sides' :func:`figures` and hils' ratio to sumo-rl seed by seed (steps per second, per CPU second)."""
+    """Both sides' :func:`figures` and hils' ratio to sumo-rl seed by seed (steps per second and per CPU second, the
+    environment's CPU per step)."""
     sides = {side: figures(by_seed) for side, by_seed in runs.items()}
     hils, peer = sides["hils"]["per_seed"], sides["sumo_rl"]["per_seed"]
     return {"runs": runs, "sides": sides, "hils_to_sumo_rl": {
@@ -242,10 +246,12 @@ def measure_train(seeds: Sequence[int], *, timesteps: int, iterations: int, batc
 
 def table(sides: Mapping[str, Mapping[str, Any]]) -> list[str]:
     """Console lines: per side (its label, its :func:`figures`) median [min-max] over the seeds."""
-    lines = ["  " + f"{'':10}" + "".join(f"{title:>21}" for title, _ in FIGURES.values())]
-    for label, f in sides.items():
-        lines.append("  " + f"{label:10}" + "".join(f"{Spread(**f[k]).text(d):>21}" for k, (_, d) in FIGURES.items()))
-    return lines
+    cells = {label: [Spread(**f[k]).text(d) for k, (_, d) in FIGURES.items()] for label, f in sides.items()}
+    titles = [title for title, _ in FIGURES.values()]
+    widths = [2 + max(len(titles[i]), *(len(row[i]) for row in cells.values())) for i in range(len(titles))]
+    return ["  " + f"{'':10}" + "".join(f"{t:>{w}}" for t, w in zip(titles, widths, strict=True)),
+            *("  " + f"{label:10}" + "".join(f"{c:>{w}}" for c, w in zip(row, widths, strict=True))
+              for label, row in cells.items())]
 
 
 def missing_libraries(parts: Sequence[str]) -> list[str]:
