@@ -628,7 +628,8 @@ def _train_command(args: argparse.Namespace) -> int:
             print(line)
         ratio = {f: Spread(**r).text() for f, r in p["hils_to_sumo_rl"].items()}
         print(f"  hils / sumo-rl, per seed: steps per second {ratio['steps_per_s']}, steps per CPU second "
-              f"{ratio['steps_per_cpu_s']}, the environment's CPU per step {ratio['env_cpu_ms']}")
+              f"{ratio['steps_per_cpu_s']}; CPU per step: the environment's {ratio['env_cpu_ms']}, the learner's "
+              f"{ratio['learner_cpu_ms']}")
     _write_figures(folder / "train.json", {"machine": info, "train": f})
     return 0
 

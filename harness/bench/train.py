@@ -198,7 +198,7 @@ FIGURES = MappingProxyType({
     "env_own_share": ("env's own", 2), "learner_share": ("learner", 2), "env_cpu_ms": ("CPU ms/step: env", 2),
     "learner_cpu_ms": ("learner", 2), "cpu_per_wall": ("CPU/wall", 2), "load_1min": ("load (1 min)", 1)})
 #: The figures whose ratio hils / sumo-rl is taken seed by seed.
-COMPARED = ("steps_per_s", "steps_per_cpu_s", "env_cpu_ms")
+COMPARED = ("steps_per_s", "steps_per_cpu_s", "env_cpu_ms", "learner_cpu_ms")
 
 
 def figures(runs: Mapping[int, Mapping[str, Any]]) -> dict[str, Any]:
@@ -218,7 +218,7 @@ def figures(runs: Mapping[int, Mapping[str, Any]]) -> dict[str, Any]:
 
 def _compare(runs: Mapping[str, Mapping[int, Mapping[str, Any]]]) -> dict[str, Any]:
     """Both sides' :func:`figures` and hils' ratio to sumo-rl seed by seed (steps per second and per CPU second, the
-    environment's CPU per step)."""
+    environment's and the learner's CPU per step)."""
     sides = {side: figures(by_seed) for side, by_seed in runs.items()}
     hils, peer = sides["hils"]["per_seed"], sides["sumo_rl"]["per_seed"]
     return {"runs": runs, "sides": sides, "hils_to_sumo_rl": {
