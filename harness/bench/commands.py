@@ -140,6 +140,35 @@ def register(sub: argparse._SubParsersAction) -> None:
     bench_seeds.seeds_option(res)
     published.options(res, "bench-resco", "bench")
     res.set_defaults(func=_resco_command)
+    train = commands.add_parser("train", help="PPO training steps per second, hils beside sumo-rl (SB3, RLlib)",
+                                description="Training throughput on PyTorch's CPU build, hils beside sumo-rl: "
+                                            "(1) Stable-Baselines3 PPO on sumo-rl's single intersection, "
+                                            "hils.sumo_rl.SumoEnvironment beside sumo-rl's SumoEnvironment (the same "
+                                            "arguments: a decision every 5 s, yellow 3 s, min green 5 s; the same PPO "
+                                            "settings), environment steps per second of learn(); (2) RLlib PPO on "
+                                            "RESCO's grid4x4 as both give it (grid4x4(parallel=True): PettingZoo's "
+                                            "parallel API, 16 lights, one shared policy), environment steps per second "
+                                            "of its training iterations, sampled and learnt in one process. Each side "
+                                            "once per seed, each run in a fresh process, alternately; medians and "
+                                            "min-max over the seeds, hils' ratio to sumo-rl seed by seed (steps per "
+                                            "second and per CPU second), each run's wall time split into SUMO, the "
+                                            "environment's own work and the learner, its CPU time per step into the "
+                                            "environment's and the learner's, and the machine's load. Needs the "
+                                            "training libraries and sumo-rl: pip install 'hils[rl,bench]' (torch's "
+                                            "CPU build first: docs/rl.md).")
+    train.add_argument("--parts", type=_train_parts, default="sb3,rllib", metavar="sb3,rllib",
+                       help="which trainings (sb3,rllib)")
+    train.add_argument("--timesteps", type=_positive, default=2048, metavar="N",
+                       help="Stable-Baselines3 PPO: environment steps learnt per run (2048: 8 rollouts of 256)")
+    train.add_argument("--iterations", type=_positive, default=3, metavar="N",
+                       help="RLlib PPO: training iterations per run (3)")
+    train.add_argument("--batch", type=_positive, default=400, metavar="N",
+                       help="RLlib PPO: environment steps per iteration (400)")
+    train.add_argument("--torch-threads", type=_positive, default=1, metavar="N",
+                       help="torch's threads in each run (1: small networks, a shared machine)")
+    bench_seeds.seeds_option(train, "0-2")
+    published.options(train, "bench-train", "bench")
+    train.set_defaults(func=_train_command)
     corridor = commands.add_parser("corridor", help="controllers one process drives at wall clock; virtual time and "
                                                     "memory per controller",
                                    description="(1) Wall clock: N controllers of one `hils emulator serve --count N` "
@@ -571,6 +600,49 @@ def _resco_command(args: argparse.Namespace) -> int:
         print(bench_seeds.ratio_line("hils / sumo-rl", sc["hils_to_sumo_rl"]) + " (goal: wall <= 1)")
     _write_figures(folder / "resco.json", {"machine": info, "resco": f})
     return 0
+
+
+def _train_command(args: argparse.Namespace) -> int:
+    from harness.bench.train import LABELS, measure_train, missing_libraries, table
+
+    missing = missing_libraries(args.parts)
+    if missing:
+        raise SystemExit(f"hils bench train needs {', '.join(missing)}: pip install 'hils[rl,bench]' (PyTorch's CPU "
+                         "build first: docs/rl.md)")
+    folder = published.folder(args)
+    info = machine.describe()
+    f = measure_train(args.seeds, timesteps=args.timesteps, iterations=args.iterations, batch=args.batch,
+                      threads=args.torch_threads, parts=args.parts)
+    print(machine.header(info))
+    threads = f"{f['torch_threads']} thread{'s' * (f['torch_threads'] > 1)}"
+    print(f"each side once per seed (seeds {seeds_text(f['seeds'])}), each run in a fresh process, alternately; torch "
+          f"{f['versions']['torch']}, {threads} each; median [min-max] over the seeds; a run's "
+          "training (not its imports and build) split by wall time into SUMO, the environment's own work and the "
+          "learner, and its CPU time per environment step into the environment's (SUMO's included) and the learner's:")
+    titles = {"sb3": f"Stable-Baselines3 {f['versions']['stable-baselines3']} PPO, {args.timesteps} steps of sumo-rl's "
+                     "single intersection (a decision every 5 s):",
+              "rllib": f"RLlib {f['versions']['ray']} PPO, {args.iterations} iteration(s) of {args.batch} environment "
+                       "steps of grid4x4 (16 lights, each step 16 agents' steps; PettingZoo parallel, a decision every "
+                       "5 s):"}
+    for part in args.parts:
+        p = f[part]
+        print(titles[part])
+        for line in table({LABELS[side]: figures for side, figures in p["sides"].items()}):
+            print(line)
+        ratio = {f: Spread(**r).text() for f, r in p["hils_to_sumo_rl"].items()}
+        print(f"  hils / sumo-rl, per seed: steps per second {ratio['steps_per_s']}, steps per CPU second "
+              f"{ratio['steps_per_cpu_s']}; CPU per step: the environment's {ratio['env_cpu_ms']}, the learner's "
+              f"{ratio['learner_cpu_ms']}")
+    _write_figures(folder / "train.json", {"machine": info, "train": f})
+    return 0
+
+
+def _train_parts(text: str) -> list[str]:
+    """``--parts`` of the training bench: sb3, rllib or both, comma-separated."""
+    parts = [p.strip() for p in text.split(",")]
+    if not parts or not set(parts) <= {"sb3", "rllib"} or len(set(parts)) < len(parts):
+        raise argparse.ArgumentTypeError(f"{text!r}: allowed: sb3, rllib or sb3,rllib")
+    return parts
 
 
 def _resco_names(text: str) -> list[str]:

@@ -22,8 +22,13 @@ def describe() -> dict[str, object]:
         "python": platform.python_version(),
         "system": f"{platform.system()} {platform.release()}",
         "date": time.strftime("%Y-%m-%d %H:%M:%S"),
+        # Runnable processes averaged over 1, 5 and 15 min as the benchmark starts: on a shared machine, what the
+        # others left it (a load over the core count means runs that waited for a core).
+        "load": [round(x, 2) for x in os.getloadavg()],
     }
 
 
 def header(info: dict[str, object]) -> str:
-    return f"machine: {info['cpu']}, {info['cores']} cores, Python {info['python']}, {info['system']}"
+    load = "/".join(f"{x:.1f}" for x in info["load"])
+    return (f"machine: {info['cpu']}, {info['cores']} cores, Python {info['python']}, {info['system']}; load {load} "
+            "(1/5/15 min) at the start")

@@ -57,7 +57,7 @@ from typing import Any
 
 from hils.protocol.config import IntersectionConfig, Pair
 
-__all__ = ["HOW_IT_RUNS", "TRIPINFO_OPTIONS", "Light", "episode", "sumo_rl"]
+__all__ = ["HOW_IT_RUNS", "TRIPINFO_OPTIONS", "Light", "episode", "sumo_rl", "sumo_rl_pettingzoo"]
 
 #: How the peer runs, for consoles and reports.
 HOW_IT_RUNS = ("sumo-rl's SumoEnvironment(single_agent=False) stepped directly through libsumo (its PettingZoo "
@@ -92,6 +92,20 @@ def sumo_rl() -> ModuleType:
             sys.modules["traci"] = traci
         else:
             del sys.modules["traci"]
+    return module
+
+
+def sumo_rl_pettingzoo() -> ModuleType:
+    """sumo-rl (:func:`sumo_rl`) with its PettingZoo environments started: its AEC wrapper calls
+    ``agent_selector(agents)``, the name it imports from ``pettingzoo.utils``, which pettingzoo 1.27 made a module; it
+    is given the class that module holds (``AgentSelector``, the same methods), and nothing else of sumo-rl changes.
+    For training, whose libraries take PettingZoo environments (RLlib's ``ParallelPettingZooEnv``)."""
+    module = sumo_rl()
+    from pettingzoo.utils import AgentSelector
+
+    env_module = sys.modules["sumo_rl.environment.env"]
+    if not callable(env_module.agent_selector):
+        env_module.agent_selector = AgentSelector
     return module
 
 

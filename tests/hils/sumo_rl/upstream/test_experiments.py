@@ -6,8 +6,10 @@ episode is cut to :data:`EPISODE` simulated seconds and each script to its first
 there). A script that ends by itself ends the test; one cut short raises :class:`Enough` from its next reset.
 
 Not here: ``dqn_2way-single-intersection.py``, ``dqn_big-intersection.py``, ``ppo_4x4grid.py`` and ``sb3_grid4x4.py``
-need PyTorch (Stable-Baselines3, RLlib), which hils' test extra does not install (``dqn_big-intersection`` also names
-a network sumo-rl does not ship, ``sb3_grid4x4`` also sumo-gui, a virtual display and ffmpeg to film it).
+need PyTorch (Stable-Baselines3, RLlib) and are not among the files kept; the test extra has torch and
+Stable-Baselines3 (not RLlib) for hils' own training smoke test (``tests/harness/bench/test_train.py``).
+``dqn_big-intersection`` also names a network sumo-rl does not ship, ``sb3_grid4x4`` also sumo-gui, a virtual display
+and ffmpeg to film it.
 """
 
 from __future__ import annotations
