@@ -78,6 +78,7 @@ from emulator.model.preemption import Preemptor
 from emulator.model.quiet import QuietTime
 from emulator.model.ring import (
     CLEARANCE,
+    GREEN,
     STARTUP,
     Change,
     Event,
@@ -405,7 +406,7 @@ class Controller:
         self._monitor()
 
     def _greens(self) -> set[int]:
-        return {r.phase for r in self.rings if r.interval is Interval.GREEN}
+        return {r.phase for r in self.rings if r.interval is GREEN}
 
     def _move(self, r: Ring, event: Event, *, reason: Termination | None = None, notify: bool = True) -> None:
         """Move ``r`` by ``event`` (its table) and tell the units that care: the coordinator's latches, a preempt's
@@ -413,7 +414,7 @@ class Controller:
         interval = r.move(event, self.timing[r.phase], walk=self.peds.serve, max2=r.number in self.max2_rings,
                           caps=self.preempting.caps)
         self.coordinated.entered(r)
-        if interval is Interval.GREEN:
+        if interval is GREEN:
             self.preempting.cut[r.number] = 0
         if notify and (self.on_change is not None or self.recorder is not None):
             change = Change(self.tick, r.number, r.phase, interval, reason)

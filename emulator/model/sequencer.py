@@ -64,7 +64,7 @@ from emulator.model.coordinated import Coordinated
 from emulator.model.inputs import Inputs
 from emulator.model.overlaps import Overlaps, Phases
 from emulator.model.preemption import Preemptor
-from emulator.model.ring import Event, Interval, Ring, Termination, Timing
+from emulator.model.ring import DWELL, GREEN, RED_CLEAR, Event, Ring, Termination, Timing
 from hils.protocol.config import IntersectionConfig, NextPhaseLock
 from hils.protocol.ntcip import ControlColumn, PreemptState
 
@@ -122,7 +122,7 @@ class Sequencer:
         """``r``'s next service is a backing that ``backup_prevent`` on its phase forbids: the ring will restart its
         barrier group through the barrier (see :meth:`_beyond`)."""
         if r.phase is None or not self.config.phases[r.phase].backup_prevent or not (
-                r.interval is Interval.GREEN or (r.interval is Interval.DWELL and r.target is None)):
+                r.interval is GREEN or (r.interval is DWELL and r.target is None)):
             return False
         q = self.wish(r, demand, inputs)
         return q is not None and self._backing(r, q)
@@ -143,15 +143,15 @@ class Sequencer:
     def time(self, r: Ring, demand: frozenset[int], inputs: Inputs, tick: int) -> None:
         """One tick of a ring's timers (a green's with the demand conflicting with it); a clearance that has run its
         length moves on (a red clearance a preempt's entry cut to nothing ends on the tick it starts)."""
-        if r.interval is Interval.DWELL:
+        if r.interval is DWELL:
             return
-        if r.interval is Interval.GREEN:
+        if r.interval is GREEN:
             max_recall = r.phase in inputs.extending
             r.time_green(extending=r.phase in inputs.calls or max_recall, conflict=self.conflicting(r, demand),
                          max_recall=max_recall, gap_disable=r.phase in self._gap_disable)
         elif r.time_clearance(tick):
             self.move(r, Event.TIMED)
-            if r.interval is Interval.RED_CLEAR and r.length == 0:
+            if r.interval is RED_CLEAR and r.length == 0:
                 self.move(r, Event.TIMED)
 
     # --- what a ring may do ------------------------------------------------------------------------------
@@ -187,7 +187,7 @@ class Sequencer:
 
     def ending(self, r: Ring, inputs: Inputs) -> Termination | None:
         """Why the ring's green may end now (None: it may not); a force-off before a gap-out before a max-out."""
-        if r.interval is not Interval.GREEN or r.ticks < r.minimum or r.phase in inputs.holds:
+        if r.interval is not GREEN or r.ticks < r.minimum or r.phase in inputs.holds:
             return None
         if r.phase in self.control[ControlColumn.FORCE_OFF]:
             return Termination.FORCE_OFF
@@ -195,7 +195,7 @@ class Sequencer:
 
     def ready(self, r: Ring, inputs: Inputs) -> bool:
         """A green that may end now, or a ring resting in red with nothing committed."""
-        if r.interval is Interval.DWELL:
+        if r.interval is DWELL:
             return r.target is None
         return self.ending(r, inputs) is not None
 
@@ -205,7 +205,7 @@ class Sequencer:
         permissive period (:meth:`emulator.model.coordinated.Coordinated.stays`)."""
         n = len(r.order)
         i = 0 if r.phase is None else self._order[r.phase]
-        stop = n + 1 if r.interval is Interval.DWELL else n
+        stop = n + 1 if r.interval is DWELL else n
         for k in range(1, stop):
             q = r.order[(i + k) % n]
             if self.serviceable(r, q, demand, inputs):
@@ -233,7 +233,7 @@ class Sequencer:
             q = wish.get(r.number)
             if q is None or r.number in across:
                 continue
-            if r.interval is Interval.GREEN and self._order[q] < self._order[r.phase] and all_ready and across:
+            if r.interval is GREEN and self._order[q] < self._order[r.phase] and all_ready and across:
                 wish[r.number] = None  # both rings could cross: crossing goes before backing
                 continue
             self.commit(r, q, inputs)
@@ -260,20 +260,20 @@ class Sequencer:
     def commit(self, r: Ring, target: int | None, inputs: Inputs) -> None:
         """Commit the ring's next phase: a green ends (yellow starts), a resting red ring takes it."""
         r.target = target
-        if r.interval is Interval.GREEN:
+        if r.interval is GREEN:
             reason = self.ending(r, inputs)
             self.control[ControlColumn.FORCE_OFF] -= {r.phase}
             self.move(r, Event.END, reason=reason)
 
     def start(self, r: Ring, tick: int) -> None:
         """A ring resting in red starts its committed phase when it may."""
-        if r.interval is not Interval.DWELL or r.target is None:
+        if r.interval is not DWELL or r.target is None:
             return
         t = r.target
         if t in self.control[ControlColumn.PHASE_OMIT] and self.preemptor.serving is None:
             r.target = None  # omitted during the clearance: not serviced, choose again (a preempt overrides omits)
             return
-        others_elsewhere = any(o is not r and o.interval is not Interval.DWELL
+        others_elsewhere = any(o is not r and o.interval is not DWELL
                                and self._barrier[o.phase] != self._barrier[t] for o in self.rings)
         if others_elsewhere or r.reverting(t, tick, self.timing[t]):
             return
@@ -296,7 +296,7 @@ class Sequencer:
         logged: list[int] = []
         for r in self.rings:
             ahead += r.thresholds(tick, self.timing, minimum=minimums or r.conflict)
-            if r.interval is Interval.GREEN:
+            if r.interval is GREEN:
                 if logging and not (minimums or r.conflict) and r.ticks < r.minimum:
                     logged.append(r.minimum - r.ticks)
                 ahead += self.coordinated.thresholds(r) + preempted.thresholds(r)
@@ -324,7 +324,7 @@ class Sequencer:
         pe = self.preemptor
         if pe.control or any(s is not PreemptState.NOT_ACTIVE for s in pe.states.values()):
             return False
-        greens = {r.phase for r in self.rings if r.interval is Interval.GREEN}
+        greens = {r.phase for r in self.rings if r.interval is GREEN}
         if reading.latched(ped_calls, greens, inputs) != ped_calls:
             return False
         return self.settled(reading.demand(inputs, ped_calls), inputs)
@@ -336,7 +336,7 @@ class Sequencer:
         # What the next step computes before anything reads it: set now, so the predicates below read it.
         self.waiting_across = self.waits_across(demand, inputs)
         for r in self.rings:
-            if r.interval is Interval.GREEN:
+            if r.interval is GREEN:
                 max_recall = r.phase in inputs.extending
                 if not r.steady(extending=r.phase in inputs.calls or max_recall,
                                 conflict=self.conflicting(r, demand), max_recall=max_recall):
