@@ -80,6 +80,9 @@ class Event(StrEnum):
     STARTUP_RED = "power-up: the phase starts in its red clearance"
 
 
+START, END, TIMED = Event.START, Event.END, Event.TIMED  # bound once, as the intervals are
+
+
 _NEXT: dict[tuple[Interval, Event], Interval] = {
     (DWELL, Event.START): GREEN,
     (GREEN, Event.END): YELLOW,
@@ -198,7 +201,7 @@ class Ring:
             self.maximum = timing.max2 if max2 else timing.max1
             self.passage = timing.passage
         else:
-            self.length = {YELLOW: timing.yellow, RED_CLEAR: timing.red_clear}.get(to, 0)
+            self.length = timing.yellow if to is YELLOW else timing.red_clear if to is RED_CLEAR else 0
             if caps is not None and to in CLEARANCE:
                 self.length = min(self.length, caps[to is RED_CLEAR])
         return to
@@ -254,28 +257,22 @@ class Ring:
         """Ticks from now to each next threshold of the ring's timers (those a step compares): a clearance's
         length, the red revert of a committed phase waiting in red, and a green's walk, pedestrian clearance,
         passage and maximum (a running timer only) and its minimum when ``minimum`` says it matters."""
-        ahead: list[int] = []
-
-        def until(counter: int, threshold: int) -> None:
-            if counter < threshold:
-                ahead.append(threshold - counter)
-
-        if self.interval is GREEN:
-            if minimum:
-                until(self.ticks, self.minimum)
-            until(self.ticks, self.walk)
-            until(self.ticks, self.walk + self.ped_clear)
-            if self.gap:
-                until(self.gap, self.passage)
-            if self.max_ticks:
-                until(self.max_ticks, self.maximum)
-        elif self.interval is DWELL:
+        interval = self.interval
+        if interval is GREEN:
+            ticks = self.ticks
+            ahead = [threshold - ticks for threshold in (self.minimum if minimum else 0, self.walk,
+                                                         self.walk + self.ped_clear) if ticks < threshold]
+            if self.gap and self.gap < self.passage:
+                ahead.append(self.passage - self.gap)
+            if self.max_ticks and self.max_ticks < self.maximum:
+                ahead.append(self.maximum - self.max_ticks)
+            return ahead
+        if interval is DWELL:
             revert = None if self.target is None else self.yellow_end.get(self.target)
-            if revert is not None:
-                until(tick, revert + timing[self.target].red_revert)
-        else:
-            until(self.ticks, self.length)
-        return ahead
+            if revert is not None and tick < revert + timing[self.target].red_revert:
+                return [revert + timing[self.target].red_revert - tick]
+            return []
+        return [self.length - self.ticks] if self.ticks < self.length else []
 
     def steady(self, *, extending: bool, conflict: bool, max_recall: bool) -> bool:
         """A green's timers run at the next tick as :meth:`skip` runs them, with these inputs: its passage timer
