@@ -75,6 +75,7 @@ import bisect
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime, timedelta
+from types import SimpleNamespace
 
 from emulator.model.controller import Change, Controller, Inputs, Termination
 from emulator.model.coordination import Coordinator, Plan
@@ -84,7 +85,9 @@ from hils.protocol.config import Recall
 from hils.protocol.hires import MAX_PARAMETER, CycleState, Event, EventCode, split_code
 from hils.protocol.ntcip import ControlColumn, CoordCorrectionMode, PreemptState, UnitFlashStatus
 
-E = EventCode
+# The codes as plain ints: the logger names a few at every interval change, and Python 3.11's EnumType.__getattr__
+# makes each EventCode.X lookup about ten times a plain attribute's.
+E = SimpleNamespace(**{code.name: int(code) for code in EventCode})
 
 _TERMINATIONS = {Termination.GAP_OUT: E.PHASE_GAP_OUT, Termination.MAX_OUT: E.PHASE_MAX_OUT,
                  Termination.FORCE_OFF: E.PHASE_FORCE_OFF}

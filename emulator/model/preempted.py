@@ -90,7 +90,9 @@ class Preempted:
     def caps_now(self) -> None:
         """The yellow and red clearance a preempt-initiated transition may shorten to now (entry, track), or None."""
         pe = self.preemptor
-        if pe.state is PreemptState.ENTRY_STARTED:
+        if pe.serving is None:
+            self.caps = None
+        elif pe.state is PreemptState.ENTRY_STARTED:
             tm = pe.timing[pe.serving]
             self.caps = tm.enter_yellow, tm.enter_red
         elif pe.state is PreemptState.TRACK_SERVICE:
