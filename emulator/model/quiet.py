@@ -32,6 +32,10 @@ it is, which is all skipping needs to know. A green's minimum is a threshold onl
 (or a pattern runs, or a preempt is served): without any, a ready green has nowhere to go, even one that max
 recall has maxed out. The data logger still logs it at its tick, so with a recorder that tick is stepped for the
 recorder alone (:meth:`QuietTime.proven` says it is quiet, and the controller skips it).
+
+The units are asked once per quiet stretch: quiet ticks only count, so the ticks their deadlines fall on (and the
+recorder's) stay where they were until the next real step or input, and a step for the recorder alone is
+followed by the same answer without asking them again.
 """
 
 from __future__ import annotations
