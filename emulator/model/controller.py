@@ -78,6 +78,7 @@ from emulator.model.preemption import Preemptor
 from emulator.model.quiet import QuietTime
 from emulator.model.ring import (
     CLEARANCE,
+    GREEN,
     STARTUP,
     Change,
     Event,
@@ -125,6 +126,7 @@ class Controller:
         self.timing = {p: Timing.of(ph) for p, ph in config.phases.items()}
         self._barrier = {p: config.barrier_of(p) for p in config.phases}
         self._ring_of = {p: config.ring_of(p) for p in config.phases}
+        self._red_end_lock = config.next_phase_lock is NextPhaseLock.RED_END
         self._reader = Reader(config)
         self.backup = BackupTimer(config.middleware.backup_time)
         self.startup_flash = config.startup_flash
@@ -216,7 +218,7 @@ class Controller:
             # The same phases again (a middleware repeats its calls): no input a step reads changed, so quiet time
             # goes on; the backup timer restarts (its threshold only moves later) and the status counts the write.
             self.backup.restart()
-            self.quiet.settled = None
+            self.quiet.written()
             self.status_version += 1
             return
         self.control[column] = phases
@@ -301,8 +303,14 @@ class Controller:
     # --- status -------------------------------------------------------------------------
 
     @property
-    def flashing(self) -> bool:
-        return self.flash_status is not UnitFlashStatus.NOT_FLASH
+    def flash_status(self) -> UnitFlashStatus:
+        """unitFlashStatus; ``flashing`` follows it (read every tick, so kept, not derived)."""
+        return self._flash_status
+
+    @flash_status.setter
+    def flash_status(self, status: UnitFlashStatus) -> None:
+        self._flash_status = status
+        self.flashing = status is not UnitFlashStatus.NOT_FLASH
 
     @property
     def short_alarm(self) -> ShortAlarm:
@@ -370,7 +378,7 @@ class Controller:
             self._backup_mode()
         self.coordinator.step()
         self.coordinated.step(self.rings)
-        if self.flash_status is UnitFlashStatus.STARTUP and self.tick >= self.startup_flash * 10:
+        if self.flashing and self.flash_status is UnitFlashStatus.STARTUP and self.tick >= self.startup_flash * 10:
             self.flash_status = UnitFlashStatus.NOT_FLASH
             self._power_up()
             self._refresh_status()
@@ -385,7 +393,7 @@ class Controller:
         if pe.started:
             self.preempting.entry(self.rings)
         seq.prepare(demand, inputs)
-        if self.config.next_phase_lock is NextPhaseLock.RED_END and pe.serving is None:
+        if self._red_end_lock and pe.serving is None:
             # before timing: the tick that ends a red clearance still reads the calls of that clearance
             for r in self.rings:
                 if r.interval in CLEARANCE and r.target is not None:
@@ -405,7 +413,7 @@ class Controller:
         self._monitor()
 
     def _greens(self) -> set[int]:
-        return {r.phase for r in self.rings if r.interval is Interval.GREEN}
+        return {r.phase for r in self.rings if r.interval is GREEN}
 
     def _move(self, r: Ring, event: Event, *, reason: Termination | None = None, notify: bool = True) -> None:
         """Move ``r`` by ``event`` (its table) and tell the units that care: the coordinator's latches, a preempt's
@@ -413,7 +421,7 @@ class Controller:
         interval = r.move(event, self.timing[r.phase], walk=self.peds.serve, max2=r.number in self.max2_rings,
                           caps=self.preempting.caps)
         self.coordinated.entered(r)
-        if interval is Interval.GREEN:
+        if interval is GREEN:
             self.preempting.cut[r.number] = 0
         if notify and (self.on_change is not None or self.recorder is not None):
             change = Change(self.tick, r.number, r.phase, interval, reason)
@@ -460,7 +468,9 @@ class Controller:
         self.backup.skip(n)
         if self.flashing:
             return
-        self.overlaps.skip(n)
-        self.preemptor.skip(n)
+        if self.config.overlaps:
+            self.overlaps.skip(n)
+        if self.config.preempts:
+            self.preemptor.skip(n)
         for r in self.rings:
             r.skip(n)

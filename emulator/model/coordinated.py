@@ -40,7 +40,7 @@ from collections.abc import Mapping, Sequence
 
 from emulator.model.coordination import Coordinator
 from emulator.model.inputs import Inputs
-from emulator.model.ring import Interval, Ring, Termination, Timing
+from emulator.model.ring import DWELL, GREEN, YELLOW, Ring, Termination, Timing
 from hils.protocol.config import IntersectionConfig
 from hils.protocol.ntcip import CoordForceMode
 
@@ -84,22 +84,22 @@ class Coordinated:
         for r in rings:
             if plan.force_off[plan.coord[r.number]] in co.passed:
                 self.yielded[r.number] = True
-            if (r.interval is Interval.GREEN and r.phase not in plan.coord.values()
+            if (r.interval is GREEN and r.phase not in plan.coord.values()
                     and plan.force_off[r.phase] in co.passed):
                 self.forced[r.number] = True
 
     def entered(self, r: Ring) -> None:
         """``r`` entered an interval: a coordinated phase's yellow waits for the next yield point, a green is placed."""
         plan = self.coordinator.plan
-        if plan is not None and r.phase == plan.coord[r.number] and r.interval is Interval.YELLOW:
+        if plan is not None and r.phase == plan.coord[r.number] and r.interval is YELLOW:
             self.yielded[r.number] = False
-        if r.interval is Interval.GREEN:
+        if r.interval is GREEN:
             self._place(r)
 
     def _place(self, r: Ring) -> None:
         """A green starts (or a pattern starts under it): its force-off latch and floating limit."""
         plan, co = self.coordinator.plan, self.coordinator
-        if plan is None or r.interval is not Interval.GREEN or r.phase in plan.coord.values():
+        if plan is None or r.interval is not GREEN or r.phase in plan.coord.values():
             self.forced[r.number], self.limit[r.number] = False, 0
             return
         self.forced[r.number] = not plan.in_window(r.phase, co.timer)
@@ -127,7 +127,7 @@ class Coordinated:
         """``r`` shows its coordinated phase in green and may not leave it for the phase after ``prior``: that
         phase's permissive period is closed."""
         plan = self.coordinator.plan
-        return (plan is not None and r.interval is Interval.GREEN and r.phase == plan.coord[r.number]
+        return (plan is not None and r.interval is GREEN and r.phase == plan.coord[r.number]
                 and not plan.permitted(prior, self.coordinator.timer))
 
     def fits(self, rings: Sequence[Ring], r: Ring, q: int, demand: frozenset[int], inputs: Inputs) -> bool:
@@ -139,7 +139,7 @@ class Coordinated:
         side = self._barrier[q]
         timing = self.timing
         clear = max(o.clearance_left(None if o.phase is None else timing[o.phase]) for o in rings
-                    if o is r or (o.interval is not Interval.DWELL and self._barrier[o.phase] != side))
+                    if o is r or (o.interval is not DWELL and self._barrier[o.phase] != side))
         # wanted for a vehicle, not only for its pedestrian call (soft recall counts as demand counts it: when
         # nothing else wants service)
         vehicle = (q in inputs.calls and q not in inputs.omits) or q in inputs.recalled or (
@@ -157,7 +157,7 @@ class Coordinated:
     def thresholds(self, r: Ring) -> list[int]:
         """Ticks from now to the floating limit of ``r``'s green, if it has one still ahead."""
         limit = self.limit[r.number]
-        return [limit - r.ticks] if r.interval is Interval.GREEN and r.ticks < limit else []
+        return [limit - r.ticks] if r.interval is GREEN and r.ticks < limit else []
 
     def discrete(self) -> tuple:
         return tuple(self.forced.values()), tuple(self.yielded.values())

@@ -382,13 +382,14 @@ class Coordinator:
 
     def deadline(self) -> int | None:
         """Steps until the next one at which anything discrete may happen here (None: never, inputs kept)."""
-        ahead = [self._until_schedule()] if self.config.coordination.schedule else []
         plan = self.plan
+        if plan is not None and self.lag:
+            return 1
+        ahead = self._until_schedule() if self.config.coordination.schedule else None
         if plan is not None:
-            if self.lag:
-                return 1
-            ahead.append(min((m - self.timer - 1) % plan.cycle + 1 for m in plan.marks()))
-        return min(ahead, default=None)
+            mark = min((m - self.timer - 1) % plan.cycle + 1 for m in plan.marks())
+            ahead = mark if ahead is None else min(ahead, mark)
+        return ahead
 
     def _until_schedule(self) -> int:
         now = self.clock % DAY

@@ -75,15 +75,19 @@ import bisect
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime, timedelta
+from types import SimpleNamespace
 
-from emulator.model.controller import Change, Controller, Inputs, Interval, Termination
+from emulator.model.controller import Change, Controller, Inputs, Termination
 from emulator.model.coordination import Coordinator, Plan
 from emulator.model.overlaps import Show
+from emulator.model.ring import DWELL, GREEN, RED_CLEAR, YELLOW
 from hils.protocol.config import Recall
 from hils.protocol.hires import MAX_PARAMETER, CycleState, Event, EventCode, split_code
 from hils.protocol.ntcip import ControlColumn, CoordCorrectionMode, PreemptState, UnitFlashStatus
 
-E = EventCode
+# The codes as plain ints: the logger names a few at every interval change, and Python 3.11's EnumType.__getattr__
+# makes each EventCode.X lookup about ten times a plain attribute's.
+E = SimpleNamespace(**{code.name: int(code) for code in EventCode})
 
 _TERMINATIONS = {Termination.GAP_OUT: E.PHASE_GAP_OUT, Termination.MAX_OUT: E.PHASE_MAX_OUT,
                  Termination.FORCE_OFF: E.PHASE_FORCE_OFF}
@@ -205,7 +209,7 @@ class DataLogger:
 
     def changed(self, change: Change) -> None:
         r, p = self.controller.rings[change.ring - 1], change.phase
-        if change.interval is Interval.GREEN:
+        if change.interval is GREEN:
             group = self.controller.config.barrier_of(p)
             if self._group is not None and group != self._group:
                 self._add(E.BARRIER_TERMINATION, self._group + 1)
@@ -213,7 +217,7 @@ class DataLogger:
             self._greens[change.ring] = _Green(self._clock, r.minimum)
             self._add(E.PHASE_ON, p)
             self._add(E.PHASE_BEGIN_GREEN, p)
-        elif change.interval is Interval.YELLOW:
+        elif change.interval is YELLOW:
             green = self._greens.pop(change.ring, None)
             if green is not None:
                 self._min_complete(green, p)
@@ -225,7 +229,7 @@ class DataLogger:
                 self._add(E.PHASE_FORCE_OFF, p)
             self._add(E.PHASE_GREEN_TERMINATION, p)
             self._add(E.PHASE_BEGIN_YELLOW, p)
-        elif change.interval is Interval.RED_CLEAR:
+        elif change.interval is RED_CLEAR:
             self._add(E.PHASE_END_YELLOW, p)
             self._red_served[change.ring] = r.length > 0
             if r.length:
@@ -289,13 +293,13 @@ class DataLogger:
     def _intervals(self) -> None:
         """The intervals the rings start in (power-up and the end of start-up flash start them unannounced)."""
         for ring in self.controller.rings:
-            if ring.interval is Interval.GREEN:
+            if ring.interval is GREEN:
                 self.changed(Change(self.controller.tick, ring.number, ring.phase, ring.interval))
-            elif ring.interval is not Interval.DWELL:
-                if ring.interval is Interval.RED_CLEAR:
+            elif ring.interval is not DWELL:
+                if ring.interval is RED_CLEAR:
                     self._red_served[ring.number] = ring.length > 0
                 self._add(E.PHASE_ON, ring.phase)
-                self._add(E.PHASE_BEGIN_YELLOW if ring.interval is Interval.YELLOW else E.PHASE_BEGIN_RED_CLEARANCE,
+                self._add(E.PHASE_BEGIN_YELLOW if ring.interval is YELLOW else E.PHASE_BEGIN_RED_CLEARANCE,
                           ring.phase)
 
     def _at_force_off(self, phase: int) -> bool:

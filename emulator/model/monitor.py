@@ -56,6 +56,7 @@ class Monitor:
 
     def __init__(self, config: IntersectionConfig) -> None:
         self.permissives = config.permissives
+        self._conflicts: dict[tuple[frozenset[int], frozenset[int]], str | None] = {}  # lamps lit -> their fault
         self.reset()
 
     def reset(self) -> None:
@@ -71,9 +72,11 @@ class Monitor:
         return fault
 
     def _conflict(self, lamps: Lamps) -> str | None:
-        conflict = first_conflict(self.permissives, lamps.greens | lamps.yellows,
-                                  lamps.overlap_greens | lamps.overlap_yellows)
-        return None if conflict is None else f"{conflict} shown together"
+        lit = lamps.greens | lamps.yellows, lamps.overlap_greens | lamps.overlap_yellows
+        if lit not in self._conflicts:  # a controller shows few sets of lamps: each is judged once
+            conflict = first_conflict(self.permissives, *lit)
+            self._conflicts[lit] = None if conflict is None else f"{conflict} shown together"
+        return self._conflicts[lit]
 
     def _short_yellow(self, lamps: Lamps, tick: int) -> str | None:
         was, began = self._passed, self._yellow_began

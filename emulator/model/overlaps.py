@@ -65,7 +65,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from enum import Enum, StrEnum
 
-from emulator.model.ring import Interval, Ring
+from emulator.model.ring import GREEN, YELLOW, Ring
 from hils.protocol.config import IntersectionConfig, Overlap, OverlapKind
 
 
@@ -127,10 +127,10 @@ class Phases:
     def of(cls, rings: Sequence[Ring]) -> Phases:
         """What ``rings`` show now."""
         return cls(
-            greens=frozenset(r.phase for r in rings if r.interval is Interval.GREEN),
-            yellows=frozenset(r.phase for r in rings if r.interval is Interval.YELLOW),
-            starting=frozenset(r.phase for r in rings if r.interval is Interval.YELLOW and r.ticks == 0),
-            nexts={r.phase: r.target for r in rings if r.interval is not Interval.GREEN and r.phase is not None},
+            greens=frozenset(r.phase for r in rings if r.interval is GREEN),
+            yellows=frozenset(r.phase for r in rings if r.interval is YELLOW),
+            starting=frozenset(r.phase for r in rings if r.interval is YELLOW and r.ticks == 0),
+            nexts={r.phase: r.target for r in rings if r.interval is not GREEN and r.phase is not None},
             committed=frozenset(r.target for r in rings if r.target is not None))
 
 

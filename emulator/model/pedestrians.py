@@ -49,7 +49,9 @@ class PedCalls:
     def serve(self, phase: int) -> bool:
         """A green of ``phase`` starts: True when it serves a walk; the call is answered (cleared) unless it waits
         for a walk that did not fit."""
-        called = phase in self.calls and self.timing[phase].walk > 0
+        if phase not in self.calls:
+            return False  # the calls stay the very set they were: what reads them sees no change
+        called = self.timing[phase].walk > 0
         served = called and self.coordinated.walk_fits(phase)
         if served or not called:
             self.calls -= {phase}

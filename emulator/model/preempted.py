@@ -42,7 +42,7 @@ from collections.abc import Sequence
 
 from emulator.model.inputs import Inputs
 from emulator.model.preemption import Event, Preemptor
-from emulator.model.ring import CLEARANCE, Interval, Ring, Timing
+from emulator.model.ring import CLEARANCE, DWELL, GREEN, RED_CLEAR, Ring, Timing
 from emulator.model.sequencer import Sequencer
 from hils.protocol.config import IntersectionConfig
 from hils.protocol.ntcip import PreemptState
@@ -90,7 +90,9 @@ class Preempted:
     def caps_now(self) -> None:
         """The yellow and red clearance a preempt-initiated transition may shorten to now (entry, track), or None."""
         pe = self.preemptor
-        if pe.state is PreemptState.ENTRY_STARTED:
+        if pe.serving is None:
+            self.caps = None
+        elif pe.state is PreemptState.ENTRY_STARTED:
             tm = pe.timing[pe.serving]
             self.caps = tm.enter_yellow, tm.enter_red
         elif pe.state is PreemptState.TRACK_SERVICE:
@@ -105,8 +107,8 @@ class Preempted:
         tm = self.preemptor.timing[self.preemptor.serving]
         for r in rings:
             if r.interval in CLEARANCE:
-                r.length = min(r.length, self.caps[r.interval is Interval.RED_CLEAR])
-            elif r.interval is Interval.GREEN:
+                r.length = min(r.length, self.caps[r.interval is RED_CLEAR])
+            elif r.interval is GREEN:
                 walked = r.walk > 0  # this green serves a walk (its walk may be cut to nothing below)
                 if walked and r.ticks < r.walk:
                     r.walk = max(r.ticks, min(r.walk, tm.min_walk))
@@ -125,9 +127,9 @@ class Preempted:
         for r in sequencer.rings:
             t = targets.get(r.number)
             if t is None and state is PreemptState.EXIT_STARTED and (
-                    r.interval is not Interval.GREEN or exit_group in (None, sequencer.barrier_of(r.phase))):
+                    r.interval is not GREEN or exit_group in (None, sequencer.barrier_of(r.phase))):
                 continue  # no exit phase of its own: left to itself, unless it holds the exit across a barrier
-            if r.interval is Interval.GREEN:
+            if r.interval is GREEN:
                 if r.phase == t:
                     continue
                 limit = {PreemptState.ENTRY_STARTED: self.cut[r.number],
@@ -149,8 +151,8 @@ class Preempted:
         def there(r: Ring) -> bool:
             t = targets.get(r.number)
             if t is None:
-                return state is PreemptState.EXIT_STARTED or (r.interval is Interval.DWELL and r.target is None)
-            return r.interval is Interval.GREEN and r.phase == t
+                return state is PreemptState.EXIT_STARTED or (r.interval is DWELL and r.target is None)
+            return r.interval is GREEN and r.phase == t
 
         if not all(there(r) for r in rings):
             return
@@ -167,7 +169,7 @@ class Preempted:
     def thresholds(self, r: Ring) -> list[int]:
         """Ticks from now to the entry minimum of ``r``'s green, if still ahead."""
         cut = self.cut[r.number]
-        return [cut - r.ticks] if r.interval is Interval.GREEN and r.ticks < cut else []
+        return [cut - r.ticks] if r.interval is GREEN and r.ticks < cut else []
 
     def discrete(self) -> tuple:
         return tuple(self.cut.values())

@@ -201,6 +201,8 @@ class Preemptor:
 
     def deadline(self) -> int | None:
         """Steps until a delay, a maximum presence, a track green, a minimum dwell or duration runs out."""
+        if not self.preempts:
+            return None
         ahead = []
         for n, s in self.states.items():
             tm = self.timing[n]

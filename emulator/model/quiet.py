@@ -32,6 +32,10 @@ it is, which is all skipping needs to know. A green's minimum is a threshold onl
 (or a pattern runs, or a preempt is served): without any, a ready green has nowhere to go, even one that max
 recall has maxed out. The data logger still logs it at its tick, so with a recorder that tick is stepped for the
 recorder alone (:meth:`QuietTime.proven` says it is quiet, and the controller skips it).
+
+The units are asked once per quiet stretch: quiet ticks only count, so the ticks their deadlines fall on (and the
+recorder's) stay where they were until the next real step or input, and a step for the recorder alone is
+followed by the same answer without asking them again.
 """
 
 from __future__ import annotations
@@ -57,6 +61,15 @@ class QuietTime:
         self.quiet = False  # the last step changed nothing discrete, and no input came since
         self.settled: tuple | None = None  # the discrete state the last step left, if nothing changed it since
         self.next_real: float | None = None  # ticks before this one change nothing (None: none proven)
+        # The ticks the units' deadlines fall on, and those the recorder logs at, while quiet time lasts: quiet ticks
+        # only count, so they stay where they were until the next real step or input.
+        self._ahead: tuple[float, tuple[int, ...]] | None = None
+
+    def written(self) -> None:
+        """A write that changed no input a step reads (a repeated control SET): the discrete state is read anew, and
+        the deadlines too (the backup timer restarted)."""
+        self.settled = None
+        self._ahead = None
 
     def proven(self) -> bool:
         """The next tick is one :meth:`ticks` proved quiet (stepped for a recorder alone)."""
@@ -72,6 +85,7 @@ class QuietTime:
     def before(self) -> tuple:
         """The discrete state a real step starts from."""
         self.next_real = None
+        self._ahead = None
         return self.settled if self.settled is not None else self.discrete()
 
     def discrete(self) -> tuple:
@@ -86,16 +100,21 @@ class QuietTime:
         quiet time started and no input came since; None when no step will. Otherwise the least of the units'
         deadlines."""
         c = self.c
+        if self._ahead is not None:
+            self.next_real, logged = self._ahead
+            due = min((t for t in logged if t > c.tick), default=self.next_real)
+            return None if due is math.inf else min(due, self.next_real) - c.tick
         self.next_real = None
         if not self.quiet:
             return 1
         deadlines = [c.backup.deadline(), c.coordinator.deadline()]
-        if c.flash_status is UnitFlashStatus.STARTUP and c.tick < c.startup_flash * 10:
-            deadlines.append(c.startup_flash * 10 - c.tick)
         if c.flashing:
+            if c.flash_status is UnitFlashStatus.STARTUP and c.tick < c.startup_flash * 10:
+                deadlines.append(c.startup_flash * 10 - c.tick)
             return min((d for d in deadlines if d is not None), default=None)
         rings, logged = c.sequencer.deadline(c.tick, c.preempting, logging=c.recorder is not None)
         deadlines += [c.preemptor.deadline(), c.overlaps.deadline(), rings]
         ahead = min((d for d in deadlines if d is not None), default=None)
         self.next_real = math.inf if ahead is None else c.tick + ahead
-        return min((d for d in (ahead, logged) if d is not None), default=None)
+        self._ahead = self.next_real, tuple(c.tick + d for d in logged)
+        return min((d for d in (ahead, *logged) if d is not None), default=None)

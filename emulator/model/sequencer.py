@@ -64,12 +64,15 @@ from emulator.model.coordinated import Coordinated
 from emulator.model.inputs import Inputs
 from emulator.model.overlaps import Overlaps, Phases
 from emulator.model.preemption import Preemptor
-from emulator.model.ring import Event, Interval, Ring, Termination, Timing
+from emulator.model.ring import DWELL, END, GREEN, RED_CLEAR, START, TIMED, Ring, Termination, Timing
 from hils.protocol.config import IntersectionConfig, NextPhaseLock
 from hils.protocol.ntcip import ControlColumn, PreemptState
 
 if TYPE_CHECKING:
     from emulator.model.preempted import Preempted
+
+# The control objects read every tick, bound once (as ring.py binds the intervals).
+FORCE_OFF, PHASE_OMIT = ControlColumn.FORCE_OFF, ControlColumn.PHASE_OMIT
 
 #: How the sequencer moves a ring: the controller's move (the ring's table, and what the other units do then).
 Move = Callable[..., None]
@@ -92,6 +95,8 @@ class Sequencer:
         self._barrier = {p: config.barrier_of(p) for p in config.phases}
         self._order = {p: ring.index(p) for ring in config.rings for p in ring}
         self._ring_of = {p: config.ring_of(p) for p in config.phases}
+        # settles' proof holds without overlaps and with the next phase locked at the end of green
+        self._provable = not config.overlaps and config.next_phase_lock is NextPhaseLock.GREEN_END
         self._gap_disable = frozenset(p for p, ph in config.phases.items() if ph.simultaneous_gap_disable)
         self.reset()
 
@@ -122,7 +127,7 @@ class Sequencer:
         """``r``'s next service is a backing that ``backup_prevent`` on its phase forbids: the ring will restart its
         barrier group through the barrier (see :meth:`_beyond`)."""
         if r.phase is None or not self.config.phases[r.phase].backup_prevent or not (
-                r.interval is Interval.GREEN or (r.interval is Interval.DWELL and r.target is None)):
+                r.interval is GREEN or (r.interval is DWELL and r.target is None)):
             return False
         q = self.wish(r, demand, inputs)
         return q is not None and self._backing(r, q)
@@ -143,16 +148,16 @@ class Sequencer:
     def time(self, r: Ring, demand: frozenset[int], inputs: Inputs, tick: int) -> None:
         """One tick of a ring's timers (a green's with the demand conflicting with it); a clearance that has run its
         length moves on (a red clearance a preempt's entry cut to nothing ends on the tick it starts)."""
-        if r.interval is Interval.DWELL:
+        if r.interval is DWELL:
             return
-        if r.interval is Interval.GREEN:
+        if r.interval is GREEN:
             max_recall = r.phase in inputs.extending
             r.time_green(extending=r.phase in inputs.calls or max_recall, conflict=self.conflicting(r, demand),
                          max_recall=max_recall, gap_disable=r.phase in self._gap_disable)
         elif r.time_clearance(tick):
-            self.move(r, Event.TIMED)
-            if r.interval is Interval.RED_CLEAR and r.length == 0:
-                self.move(r, Event.TIMED)
+            self.move(r, TIMED)
+            if r.interval is RED_CLEAR and r.length == 0:
+                self.move(r, TIMED)
 
     # --- what a ring may do ------------------------------------------------------------------------------
 
@@ -187,15 +192,15 @@ class Sequencer:
 
     def ending(self, r: Ring, inputs: Inputs) -> Termination | None:
         """Why the ring's green may end now (None: it may not); a force-off before a gap-out before a max-out."""
-        if r.interval is not Interval.GREEN or r.ticks < r.minimum or r.phase in inputs.holds:
+        if r.interval is not GREEN or r.ticks < r.minimum or r.phase in inputs.holds:
             return None
-        if r.phase in self.control[ControlColumn.FORCE_OFF]:
+        if r.phase in self.control[FORCE_OFF]:
             return Termination.FORCE_OFF
         return self.coordinated.ending(r)
 
     def ready(self, r: Ring, inputs: Inputs) -> bool:
         """A green that may end now, or a ring resting in red with nothing committed."""
-        if r.interval is Interval.DWELL:
+        if r.interval is DWELL:
             return r.target is None
         return self.ending(r, inputs) is not None
 
@@ -205,7 +210,7 @@ class Sequencer:
         permissive period (:meth:`emulator.model.coordinated.Coordinated.stays`)."""
         n = len(r.order)
         i = 0 if r.phase is None else self._order[r.phase]
-        stop = n + 1 if r.interval is Interval.DWELL else n
+        stop = n + 1 if r.interval is DWELL else n
         for k in range(1, stop):
             q = r.order[(i + k) % n]
             if self.serviceable(r, q, demand, inputs):
@@ -233,7 +238,7 @@ class Sequencer:
             q = wish.get(r.number)
             if q is None or r.number in across:
                 continue
-            if r.interval is Interval.GREEN and self._order[q] < self._order[r.phase] and all_ready and across:
+            if r.interval is GREEN and self._order[q] < self._order[r.phase] and all_ready and across:
                 wish[r.number] = None  # both rings could cross: crossing goes before backing
                 continue
             self.commit(r, q, inputs)
@@ -252,7 +257,7 @@ class Sequencer:
                 target = next((q for q in r.order if self._barrier[q] == self.group
                                and self.serviceable(r, q, demand, inputs)), None)
             if target is None:
-                omit = self.control[ControlColumn.PHASE_OMIT]
+                omit = self.control[PHASE_OMIT]
                 target = next((q for q in r.order if self._barrier[q] == self.group
                                and self.config.phases[q].dual_entry and q not in omit), None)
             self.commit(r, target, inputs)
@@ -260,33 +265,33 @@ class Sequencer:
     def commit(self, r: Ring, target: int | None, inputs: Inputs) -> None:
         """Commit the ring's next phase: a green ends (yellow starts), a resting red ring takes it."""
         r.target = target
-        if r.interval is Interval.GREEN:
+        if r.interval is GREEN:
             reason = self.ending(r, inputs)
-            self.control[ControlColumn.FORCE_OFF] -= {r.phase}
-            self.move(r, Event.END, reason=reason)
+            self.control[FORCE_OFF] -= {r.phase}
+            self.move(r, END, reason=reason)
 
     def start(self, r: Ring, tick: int) -> None:
         """A ring resting in red starts its committed phase when it may."""
-        if r.interval is not Interval.DWELL or r.target is None:
+        if r.interval is not DWELL or r.target is None:
             return
         t = r.target
-        if t in self.control[ControlColumn.PHASE_OMIT] and self.preemptor.serving is None:
+        if t in self.control[PHASE_OMIT] and self.preemptor.serving is None:
             r.target = None  # omitted during the clearance: not serviced, choose again (a preempt overrides omits)
             return
-        others_elsewhere = any(o is not r and o.interval is not Interval.DWELL
+        others_elsewhere = any(o is not r and o.interval is not DWELL
                                and self._barrier[o.phase] != self._barrier[t] for o in self.rings)
         if others_elsewhere or r.reverting(t, tick, self.timing[t]):
             return
         if self.config.overlaps and self.overlaps.blocks(t, Phases.of(self.rings)):
             return  # an overlap it waits for still shows (or clears) after this tick
         r.phase, r.target = t, None
-        self.move(r, Event.START)
+        self.move(r, START)
 
     # --- quiet time (see emulator/model/controller.py) -------------------------------------------------
 
-    def deadline(self, tick: int, preempted: Preempted, *, logging: bool) -> tuple[int | None, int | None]:
+    def deadline(self, tick: int, preempted: Preempted, *, logging: bool) -> tuple[int | None, list[int]]:
         """Ticks to the next threshold of the rings' timers in quiet time (None: none ahead), as the pattern and a
-        preempt being served set them too; and, with ``logging``, to the next tick a recorder logs though nothing
+        preempt being served set them too; and, with ``logging``, to each tick a recorder logs though nothing
         changes there. A green's minimum matters only with conflicting demand (registered by the last step, and
         constant in quiet time): without any, the ready green has nowhere to go and no ring waits across the
         barrier for it. While a pattern runs or a preempt is served it may be what ends it; the data logger
@@ -296,11 +301,11 @@ class Sequencer:
         logged: list[int] = []
         for r in self.rings:
             ahead += r.thresholds(tick, self.timing, minimum=minimums or r.conflict)
-            if r.interval is Interval.GREEN:
+            if r.interval is GREEN:
                 if logging and not (minimums or r.conflict) and r.ticks < r.minimum:
                     logged.append(r.minimum - r.ticks)
                 ahead += self.coordinated.thresholds(r) + preempted.thresholds(r)
-        return min(ahead, default=None), min(logged, default=None)
+        return min(ahead, default=None), logged
 
     def settles(self, ped_calls: frozenset[int], inputs: Inputs) -> bool:
         """After a step that changed something: the next step changes nothing but counters, as a step that changed
@@ -318,13 +323,12 @@ class Sequencer:
         wishing, so nothing is committed and no green ends; a ring resting in red with a phase to start stays
         blocked (by another ring's green or clearance, which stays, or its red revert, a threshold); the status
         image, its walk thresholds unpassed, stays."""
-        if (self.coordinated.running or self.config.overlaps
-                or self.config.next_phase_lock is not NextPhaseLock.GREEN_END):
+        if self.coordinated.running or not self._provable:
             return False
         pe = self.preemptor
         if pe.control or any(s is not PreemptState.NOT_ACTIVE for s in pe.states.values()):
             return False
-        greens = {r.phase for r in self.rings if r.interval is Interval.GREEN}
+        greens = {r.phase for r in self.rings if r.interval is GREEN}
         if reading.latched(ped_calls, greens, inputs) != ped_calls:
             return False
         return self.settled(reading.demand(inputs, ped_calls), inputs)
@@ -336,7 +340,7 @@ class Sequencer:
         # What the next step computes before anything reads it: set now, so the predicates below read it.
         self.waiting_across = self.waits_across(demand, inputs)
         for r in self.rings:
-            if r.interval is Interval.GREEN:
+            if r.interval is GREEN:
                 max_recall = r.phase in inputs.extending
                 if not r.steady(extending=r.phase in inputs.calls or max_recall,
                                 conflict=self.conflicting(r, demand), max_recall=max_recall):

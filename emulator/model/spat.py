@@ -42,7 +42,7 @@ from dataclasses import dataclass
 from enum import StrEnum
 from typing import TYPE_CHECKING
 
-from emulator.model.ring import Interval, Ring
+from emulator.model.ring import DWELL, GREEN, YELLOW, Ring
 from hils.protocol.ntcip import UnitFlashStatus
 
 if TYPE_CHECKING:
@@ -80,11 +80,11 @@ def announce(c: Controller) -> tuple[SignalTiming, ...]:
     out = []
     for p in sorted(c.config.phases):
         r = c.rings[c.config.ring_of(p) - 1]
-        if r.phase == p and r.interval is Interval.GREEN:
+        if r.phase == p and r.interval is GREEN:
             earliest = bounds.green_end(r)
             likely = max(earliest, r.maximum - r.max_ticks) if r.max_ticks else None
             out.append(SignalTiming("phase", p, Indication.GREEN, earliest, None, likely))
-        elif r.phase == p and r.interval is Interval.YELLOW:
+        elif r.phase == p and r.interval is YELLOW:
             left = max(1, r.length - r.ticks)
             out.append(SignalTiming("phase", p, Indication.YELLOW, bounds.clearance_end(r), left, left))
         else:
@@ -120,7 +120,7 @@ class _Bounds:
 
     def clearance_end(self, r: Ring) -> int:
         """Ticks from now to the soonest the ring's running clearance interval may end."""
-        cap = self.yellow if r.interval is Interval.YELLOW else self.red
+        cap = self.yellow if r.interval is YELLOW else self.red
         length = r.length if cap is None else min(r.length, cap)
         return max(1, length - r.ticks)
 
@@ -129,12 +129,12 @@ class _Bounds:
 
     def cleared(self, r: Ring) -> int:
         """Ticks from now to the soonest the ring may start a phase: what it shows ended and cleared."""
-        if r.interval is Interval.DWELL:
+        if r.interval is DWELL:
             return 1
         timing = self.c.timing[r.phase]
         red = self._least(timing.red_clear, self.red)
-        if r.interval is Interval.GREEN:
+        if r.interval is GREEN:
             return self.green_end(r) + max(1, self._least(timing.yellow, self.yellow)) + red
-        if r.interval is Interval.YELLOW:
+        if r.interval is YELLOW:
             return self.clearance_end(r) + red
         return self.clearance_end(r)

@@ -21,7 +21,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from emulator.model.overlaps import Overlaps
-from emulator.model.ring import Interval, Ring
+from emulator.model.ring import DWELL, GREEN, YELLOW, Ring
 from hils.protocol.config import IntersectionConfig
 
 
@@ -37,7 +37,7 @@ class Images:
         """The image of what ``rings`` and ``overlaps`` show now (all red when ``flashing``)."""
         key = None if flashing else (tuple(
             (r.interval, r.phase, r.target,
-             r.interval is Interval.GREEN and (r.ticks < r.walk) + (r.ticks < r.walk + r.ped_clear))
+             r.interval is GREEN and (r.ticks < r.walk) + (r.ticks < r.walk + r.ped_clear))
             for r in rings), overlaps.discrete())
         image = self._images.get(key)
         if image is None:
@@ -48,15 +48,15 @@ class Images:
         greens, yellows, ons, walks, clears, nexts = set(), set(), set(), set(), set(), set()
         if not flashing:
             for r in rings:
-                if r.interval is Interval.GREEN:
+                if r.interval is GREEN:
                     greens.add(r.phase)
                     if r.ticks < r.walk:
                         walks.add(r.phase)
                     elif r.ticks < r.walk + r.ped_clear:
                         clears.add(r.phase)
-                elif r.interval is Interval.YELLOW:
+                elif r.interval is YELLOW:
                     yellows.add(r.phase)
-                if r.interval is not Interval.DWELL:
+                if r.interval is not DWELL:
                     ons.add(r.phase)
                 if r.target is not None:
                     nexts.add(r.target)

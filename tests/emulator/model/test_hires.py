@@ -117,6 +117,24 @@ def test_a_minimum_timed_in_quiet_time_is_logged_at_its_tick(power_failure: bool
     assert (E.POWER_FAILURE in {e.code for e in later if e.time == later[0].time}) if power_failure else not later
 
 
+def test_two_minimums_timed_in_one_quiet_stretch_are_each_logged_at_their_tick() -> None:
+    """4 and 8 start green together with minimums of 8 s and 15 s, nothing else called: quiet time asks the units
+    once for the stretch, and the skipping controller still steps for its logger at each minimum (4's, then 8's,
+    the one after the first step for the logger), as the controller stepped every tick logs them."""
+    logs = []
+    for ticked in (True, False):
+        c = Controller(config_mod.load().with_middleware(backup_time=0))
+        c.set_timing(4, "min_green", 80)
+        c.set_timing(8, "min_green", 150)
+        log, _ = logged(c)
+        apply(c, ControlColumn.VEH_CALL, frozenset({4, 8}), ticked=ticked)
+        apply(c, "ticks", 400, ticked=ticked)
+        logs.append(log.events())
+    assert logs[1] == logs[0]
+    minimums = {e.parameter: e.time for e in logs[0] if e.code == E.PHASE_MIN_COMPLETE and e.parameter in (4, 8)}
+    assert minimums[8] - minimums[4] == timedelta(seconds=7)
+
+
 def config_text(text: str = "", timing: str = "") -> str:
     """The shipped four-leg with walks on its throughs, a passage time and some TOML added (``text`` after its last
     table, [emulator], without a plan; ``timing`` in [timing])."""
