@@ -103,10 +103,23 @@ def _register_serve(commands: argparse._SubParsersAction) -> None:
                             "in the paper's lab) answers noSuchObject for the objects v03 added, but the detector "
                             "inputs; v03 serves them with v03's access (patternSplitNumber read-only). Default: the "
                             "config's [emulator] ntcip, v02 unless it says otherwise")
+    serve.add_argument("--spat", type=_address, metavar="HOST:PORT",
+                       help="also send each controller's SPaT every tick (10 Hz) as an Econolite controller "
+                            "broadcasts it, in the UDP layout V2X Hub's SpatPlugin and MMITSS parse (per phase the "
+                            "min and max time to change, status bitmasks), to HOST:PORT, the next controllers to "
+                            "PORT+1..; see docs/spat.md")
     serve.add_argument("--log-events", type=int, default=100_000, metavar="N",
                        help="hi-res events each controller keeps, its last ones, as a controller's ring buffer "
                             "(100000; an Intelight MaxTime keeps about 10000)")
     serve.set_defaults(func=_serve)
+
+
+def _address(text: str) -> tuple[str, int]:
+    """HOST:PORT of ``--spat``."""
+    host, _, port = text.rpartition(":")
+    if not host or not port.isdigit() or not 0 < int(port) <= 65535:
+        raise argparse.ArgumentTypeError(f"{text!r}: allowed: HOST:PORT with PORT 1..65535, e.g. 127.0.0.1:6053")
+    return host, int(port)
 
 
 def _v3_user(args: argparse.Namespace) -> V3User | None:
@@ -169,7 +182,7 @@ def _serve(args: argparse.Namespace) -> int:
     options = ServeOptions(host=args.host, port=args.port, ro_community=args.ro_community,
                            rw_community=args.rw_community, latency=Latency(args.latency_ms / 1e3, args.jitter_ms / 1e3),
                            trace=args.trace, v3_user=v3_user, http=http, log_events=args.log_events,
-                           ntcip=Version(args.ntcip) if args.ntcip else None)
+                           ntcip=Version(args.ntcip) if args.ntcip else None, spat=args.spat)
 
     def ready(server: EmulatorServer, addresses: list[tuple[str, int]]) -> None:
         # Scripts and tests wait for these lines: they are printed only once requests are answered.
@@ -185,6 +198,9 @@ def _serve(args: argparse.Namespace) -> int:
         for (tls, cfg), (host, port) in zip(controllers, server.http_addresses, strict=False):
             label = f" [{tls}]" if tls is not None else ""
             print(f"event log of {cfg.name}{label}: http://{host}:{port}{ASCLOG_PATH}")
+        for (tls, cfg), sender in zip(controllers, server.spat, strict=False):
+            label = f" [{tls}]" if tls is not None else ""
+            print(f"SPaT of {cfg.name}{label} to udp:{sender.address[0]}:{sender.address[1]} (10 Hz)")
         sys.stdout.flush()
 
     try:

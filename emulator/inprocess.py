@@ -23,6 +23,8 @@ from emulator.model.event_clock import ClockedSurface, EventClock
 from hils.protocol.config import IntersectionConfig
 from hils.protocol.hires import Event
 from hils.protocol.ntcip import Latency
+from hils.protocol.spat import MovementTiming
+from hils.protocol.timegrid import Grid
 
 #: Modeled answer times of the in-process controller: a GET of the signal state, and a SET (the
 #: paper measured 7.5 ms for a SET to a Cobalt).
@@ -57,6 +59,7 @@ class VirtualTarget:
         # The controller powered up at some instant of its own: its tick grid has a phase, drawn from
         # the seed, against the middleware's poll and decision times.
         self.tick_phase = random.Random(f"tick-phase-{seed}").uniform(0.0, TICK)
+        self._ticks = Grid(env.now + self.tick_phase, TICK)  # the controller's tick count k is reached at at(k)
         self.clock: EventClock | None = None
         self._ticking: simpy.Process | None = None
         if fast_path:
@@ -69,6 +72,20 @@ class VirtualTarget:
     def hires(self) -> list[Event]:
         """The controller's hi-res event log so far (complete: only real steps log, and they run when due)."""
         return self._logger().events()
+
+    def spat(self) -> tuple[MovementTiming, ...]:
+        """Each phase's and overlap's indication and the times of its next change, in the run's seconds: the
+        controller's own announcement (:meth:`emulator.model.controller.Controller.spat`), brought to the present
+        first (on the fast path quiet ticks are counted only when something reads or writes the controller)."""
+        if self.clock is not None:
+            self.clock.catch_up()
+        tick = self.controller.tick
+
+        def at(ticks: int | None) -> float | None:
+            return None if ticks is None else self._ticks.at(tick + ticks)
+
+        return tuple(MovementTiming(s.kind, s.number, s.indication.value, at(s.earliest), at(s.latest), at(s.likely))
+                     for s in self.controller.spat())
 
     def hires_to(self, sink: Callable[[Sequence[Event]], None]) -> None:
         """Hand ``sink`` the hi-res log so far, then each tick's events as they are logged (the other optional

@@ -46,6 +46,7 @@ from emulator.model.overlaps import OverlapTiming
 from emulator.model.preemption import PreemptTiming
 from hils.protocol.config import IntersectionConfig, Overlap, OverlapKind, Phase, Preempt, Recall, ScheduleEntry
 from hils.protocol.ntcip import (
+    ASC_CURRENT_TICK,
     CHANNEL_CONTROL_SOURCE,
     CHANNEL_CONTROL_TYPE,
     CHANNEL_NUMBER,
@@ -106,6 +107,8 @@ from hils.protocol.ntcip import (
     SEQUENCE_NUMBER,
     SEQUENCE_RING_NUMBER,
     SHORT_ALARM_STATUS,
+    SPAT_OPTIONS,
+    SPAT_TIMESTAMP,
     SPLIT_TABLE,
     STATUS_TABLE,
     SYSTEM_PATTERN_CONTROL,
@@ -154,7 +157,10 @@ from hils.protocol.ntcip import (
     object_for,
     phases_to_groups,
     sequence_oid,
+    spat_timestamp,
 )
+
+TICKS_PER_HOUR = 36_000  # ascCurrentTick: "a zero representing the top of the hour"
 
 # Writable phase timing columns: the Timing field each sets, and ticks per unit of the NTCIP value.
 _TIMING_COLUMNS: dict[PhaseColumn, tuple[str, int]] = {
@@ -254,6 +260,7 @@ class MibView:
         self.controller = controller
         self.edition = edition or controller.config.emulator.ntcip
         self.set_count = 0
+        self.spat_options = 1  # spatOptions: "Bit 0: Enabled SPAT"; the UDP SPaT packet is sent while it is set
         instances = [replace(i, obj=obj) for i in self._build() if (obj := i.obj.in_edition(self.edition))]
         self._by_oid = {i.oid: i for i in instances}
         self._sorted = sorted(self._by_oid)
@@ -335,6 +342,7 @@ class MibView:
             *_coordination(c),
             *_timebase(c),
             *_channels(cfg),
+            *_spat(c, self),
         ]
         for p in _rows(cfg.phases):
             ph = cfg.phases.get(p)
@@ -616,6 +624,20 @@ _PREEMPT_TIMING: dict[PreemptColumn, tuple[str, int]] = {
     PreemptColumn.TRACK_YELLOW_CHANGE: ("track_yellow", 1),
     PreemptColumn.TRACK_RED_CLEAR: ("track_red", 1),
 }
+
+
+def _spat(c: Controller | DelayedController, view: MibView) -> list[Instance]:
+    """v03's ascSpat node: the controller's clock (spatTimestamp; ascCurrentTick, its tenths of the hour) and
+    spatOptions. Not served (docs/spat.md says why): the enabled lanes (no MAP plan in the model), the SPaT port
+    table (its rows are the RSU ports, maxRsuPorts, not modelled) and ascCurrentTickMsOffset (the model counts whole
+    ticks: the milliseconds into one are the agent's wall clock, not the controller's)."""
+
+    def set_options(v: int) -> None:
+        view.spat_options = v
+
+    return [Instance(SPAT_TIMESTAMP.instance(), SPAT_TIMESTAMP, lambda: spat_timestamp(c.coordinator.clock)),
+            Instance(SPAT_OPTIONS.instance(), SPAT_OPTIONS, lambda: view.spat_options, set_options),
+            Instance(ASC_CURRENT_TICK.instance(), ASC_CURRENT_TICK, lambda: c.coordinator.clock % TICKS_PER_HOUR)]
 
 
 def _preempts(c: Controller | DelayedController) -> list[Instance]:

@@ -23,7 +23,8 @@ a field tool that aligns a replay with the time of day (Signal-Replay's cycle
 alignment) finds the coordinated cycle where the time of day puts it. With
 ``http`` each controller also serves its log as an Intelight MaxTime does
 (:mod:`emulator.agent.asclog`), on consecutive TCP ports, on the same loop: a
-few events per turn of it, so that serving a log never holds a tick up.
+few events per turn of it, so that serving a log never holds a tick up. With ``spat`` each controller sends its
+10 Hz SPaT packet (:mod:`emulator.agent.spat_udp`) once its ticks due have run, to consecutive UDP ports.
 """
 
 from __future__ import annotations
@@ -47,6 +48,7 @@ from typing import TextIO
 from emulator.agent.asclog import AsclogServer, Connections, HttpStats
 from emulator.agent.mib import MibView
 from emulator.agent.snmp import AgentStats, DropReason, ReportBudget, RequestKind, SnmpAgent, V3User
+from emulator.agent.spat_udp import SpatSender
 from emulator.model.controller import TICK, Change, Controller
 from emulator.model.datalogger import DataLogger
 from emulator.model.delays import DelayedController
@@ -97,8 +99,9 @@ class WallClockTicker:
 
     def __init__(self, *controllers: Controller | DelayedController, period: float = TICK,
                  late_after: float = TICK / 2, observe: Callable[[float], None] | None = None,
-                 origin: float | None = None) -> None:
+                 origin: float | None = None, after: Sequence[Callable[[], None]] = ()) -> None:
         self.controllers = controllers
+        self.after = after  # called once the ticks due have run: what is sent each tick (SPaT) reads them
         self.period = period
         self.late_after = late_after
         self.observe = observe  # gets each tick's lateness (s), for benchmarks
@@ -125,6 +128,8 @@ class WallClockTicker:
                     self.stats.late += 1
                     log.debug("tick %d ran %.1f ms late", k, lateness * 1e3)
                 k += 1
+            for call in self.after:
+                call()
 
 
 @dataclass(frozen=True, slots=True)
@@ -140,6 +145,8 @@ class ServeOptions:
     http: int | None = None  # TCP port of the first controller's MaxTime event-log endpoint; None: no endpoint
     log_events: int = 100_000  # the hi-res events each controller keeps (its last ones, as a controller's ring buffer)
     ntcip: Version | None = None  # the edition of NTCIP 1202 served; None: each config's [emulator] ntcip
+    spat: tuple[str, int] | None = None  # where the first controller's 10 Hz SPaT packet goes, the others to the
+    # next ports; None: not sent
 
 
 @dataclass(frozen=True, slots=True)
@@ -225,7 +232,17 @@ class EmulatorServer:
         connections = Connections()
         self.controllers = tuple(ServedController(config, self.options, self._trace, reports, start, connections)
                                  for config in configs)
-        self.ticker = WallClockTicker(*(served.unit for served in self.controllers), origin=tenths / 10)
+        self.spat: list[SpatSender] = []
+        if self.options.spat is not None:
+            host, first = self.options.spat
+            if first + len(configs) - 1 > MAX_PORT:
+                raise ServeError(f"--spat {host}:{first} for {len(configs)} controllers needs ports up to "
+                                 f"{first + len(configs) - 1}; allowed: PORT 1..{MAX_PORT - len(configs) + 1}")
+            self.spat = [SpatSender(served.controller, host, first + i,
+                                    lambda view=served.view: view.spat_options & 1 == 1)
+                         for i, served in enumerate(self.controllers)]
+        self.ticker = WallClockTicker(*(served.unit for served in self.controllers), origin=tenths / 10,
+                                      after=[sender.send for sender in self.spat])
         self._ticking: asyncio.Task[None] | None = None
 
     async def start(self) -> list[tuple[str, int]]:
@@ -242,6 +259,12 @@ class EmulatorServer:
             except OSError as exc:
                 self._close()
                 raise BindError(self.options.host, port, exc, "tcp") from exc
+        for sender in self.spat:
+            try:
+                await sender.start()
+            except OSError as exc:
+                self._close()
+                raise BindError(*sender.address, exc, "udp (SPaT)") from exc
         self._ticking = asyncio.create_task(self.ticker.run(), name="controller-tick")
         return list(self.addresses)
 
@@ -255,6 +278,8 @@ class EmulatorServer:
         for served in self.controllers:
             served.agent.close()
             served.asclog.close()
+        for sender in self.spat:
+            sender.close()
         if self._trace is not None:
             self._trace.close()
 

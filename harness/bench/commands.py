@@ -140,6 +140,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     bench_seeds.seeds_option(res)
     published.options(res, "bench-resco", "bench")
     res.set_defaults(func=_resco_command)
+<<<<<<< HEAD
     train = commands.add_parser("train", help="PPO training steps per second, hils beside sumo-rl (SB3, RLlib)",
                                 description="Training throughput on PyTorch's CPU build, hils beside sumo-rl: "
                                             "(1) Stable-Baselines3 PPO on sumo-rl's single intersection, "
@@ -169,6 +170,20 @@ def register(sub: argparse._SubParsersAction) -> None:
     bench_seeds.seeds_option(train, "0-2")
     published.options(train, "bench-train", "bench")
     train.set_defaults(func=_train_command)
+=======
+    spat = commands.add_parser("spat", help="share of indication changes inside the window the SPaT announced",
+                               description="An hour of the four-leg with SUMO's traffic under the controller's "
+                                           "actuated operation, the city's coordinated pattern and the max-pressure "
+                                           "agent: the share of phase and overlap indication changes that came "
+                                           "within the earliest and latest the controller's SPaT announced for them "
+                                           "(goal 100 %). Virtual time, every tick stepped.")
+    spat.add_argument("--seconds", type=float, default=3600.0, metavar="S", help="simulated seconds per run (3600)")
+    spat.add_argument("--seed", type=int, default=1)
+    spat.add_argument("--operation", action="append", choices=["actuated", "coordinated", "max-pressure"],
+                      help="run only this operation (repeatable; default: all three)")
+    published.options(spat, "bench-spat", "bench")
+    spat.set_defaults(func=_spat_command)
+>>>>>>> spat36
     corridor = commands.add_parser("corridor", help="controllers one process drives at wall clock; virtual time and "
                                                     "memory per controller",
                                    description="(1) Wall clock: N controllers of one `hils emulator serve --count N` "
@@ -233,6 +248,22 @@ def _latency_command(args: argparse.Namespace) -> int:
                       "paper_over_ours": ratio}
     print("target: mean < 50 us, p99 < 200 us")
     _write_figures(folder / "latency.json", {"machine": info, "latency": rows})
+    return 0
+
+
+def _spat_command(args: argparse.Namespace) -> int:
+    from harness.bench import spat
+
+    folder = published.folder(args)
+    info = machine.describe()
+    print(machine.header(info))
+    shares = []
+    for operation in args.operation or list(spat.OPERATIONS):
+        print(f"{operation}: {args.seconds:g} s ...", flush=True)
+        shares.append(spat.measure(operation, args.seconds, args.seed))
+    text, figures = spat.report(shares)
+    print(text)
+    _write_figures(folder / "spat.json", {"machine": info, **figures})
     return 0
 
 

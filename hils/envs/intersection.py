@@ -15,6 +15,9 @@ slice              size        value
 ``[2n, 3n)``       n           signal of each phase: 0 red, 0.5 yellow, 1 green
 ``3n``             1           seconds since the signal last changed (time in the current interval)
 ``[3n+1, 3n+5)``   4           the manager's state, one-hot: idle, on_hold, timeout, preempted
+``[3n+5, 4n+5)``   n           with ``spat=True``: seconds to the earliest change of each phase's signal the
+                               controller announces (J2735's minEndTime; -1: none coming)
+``[4n+5, 5n+5)``   n           with ``spat=True``: seconds to the latest (maxEndTime; -1: unknown), docs/spat.md
 =================  ==========  ==================================================================
 
 Actions: selection ``Discrete(len(pairs))``, switch ``Discrete(2)``, duration ``Box(0, 1, (1,))``; control
@@ -43,7 +46,7 @@ Rules
 from __future__ import annotations
 
 import tempfile
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -58,6 +61,7 @@ from hils.control.phase_control import Control, Schedule
 from hils.protocol import config as config_mod
 from hils.protocol.config import IntersectionConfig
 from hils.protocol.errors import UserError
+from hils.protocol.spat import MovementTiming
 from hils.run.testbed import Testbed
 from hils.shell.poller import SignalCache, Snapshot
 from hils.shell.targets import VIRTUAL
@@ -144,9 +148,10 @@ class IntersectionAdapter:
     ``start`` it at every reset with the intersection's signal cache: the time in the current interval is
     counted from the signal's last change, which the cache reports."""
 
-    def __init__(self, config: IntersectionConfig, action_type: ActionType) -> None:
+    def __init__(self, config: IntersectionConfig, action_type: ActionType, spat: bool = False) -> None:
         self.config = config
         self.action_type = action_type
+        self.spat = spat
         self.phases = config.phase_numbers
         n = len(self.phases)
         if action_type is ActionType.SELECTION:
@@ -157,8 +162,11 @@ class IntersectionAdapter:
             self.action_space = spaces.MultiBinary((len(Control), n))
         else:
             self.action_space = spaces.Box(0.0, 1.0, (1,), np.float32)
-        low = np.concatenate([np.zeros(n), np.full(n, -np.inf), np.zeros(n), [0.0], np.zeros(len(STATES))])
-        high = np.concatenate([np.full(n, np.inf), np.full(n, np.inf), np.ones(n), [np.inf], np.ones(len(STATES))])
+        timing = 2 * n if spat else 0
+        low = np.concatenate([np.zeros(n), np.full(n, -np.inf), np.zeros(n), [0.0], np.zeros(len(STATES)),
+                              np.full(timing, -1.0)])
+        high = np.concatenate([np.full(n, np.inf), np.full(n, np.inf), np.ones(n), [np.inf], np.ones(len(STATES)),
+                               np.full(timing, np.inf)])
         self.observation_space = spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32)
         self._changed_at = 0.0
 
@@ -194,15 +202,25 @@ class IntersectionAdapter:
         return {c.value: [p for p, bit in zip(self.phases, value[k], strict=True) if bit]
                 for k, c in enumerate(Control) if value[k].any()} or "clear"
 
-    def vector(self, obs: Observation) -> np.ndarray:
-        """The observation as the module's layout says."""
+    def vector(self, obs: Observation, spat: Sequence[MovementTiming] = ()) -> np.ndarray:
+        """The observation as the module's layout says; ``spat``, the controller's announcement at ``obs.t``, fills
+        the timing entries of an adapter built with ``spat=True``."""
         traffic, signal = obs.traffic, obs.signal
         queue = [traffic.movements[p].upstream_queue for p in self.phases]
         pressure = [traffic.movements[p].pressure for p in self.phases]
         lights = [0.0 if signal is None else 1.0 if p in signal.greens else 0.5 if p in signal.yellows else 0.0
                   for p in self.phases]
         state = [float(obs.state is s) for s in STATES]
-        return np.array([*queue, *pressure, *lights, max(0.0, obs.t - self._changed_at), *state], dtype=np.float32)
+        timing: list[float] = []
+        if self.spat:
+            of = {t.number: t for t in spat if t.kind == "phase"}
+
+            def left(at: float | None) -> float:
+                return -1.0 if at is None else max(0.0, at - obs.t)
+
+            timing = [left(of[p].min_end) for p in self.phases] + [left(of[p].max_end) for p in self.phases]
+        return np.array([*queue, *pressure, *lights, max(0.0, obs.t - self._changed_at), *state, *timing],
+                        dtype=np.float32)
 
     def _on_signal_change(self, snapshot: Snapshot, changed: bool) -> None:
         self._changed_at = snapshot.t
@@ -220,6 +238,8 @@ class IntersectionEnv(gymnasium.Env):
     True to have ``testbed.traffic`` carry the run summary's delays and queues at an episode's end, and
     ``testbed.hires()`` the controllers' hi-res logs (they cost per-vehicle samples every second and a data
     logger in every controller, which training does not need: off by default; the episode is the same).
+    ``spat``: True to add the controller's announced earliest and latest change of each phase to the observation
+    (the in-process emulator, ``target="virtual"``, only: NTCIP 1202 has no per-phase timing object to poll).
     """
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": []}
@@ -229,8 +249,12 @@ class IntersectionEnv(gymnasium.Env):
                  routes: str | Path | None = None, sumocfg: str | Path | None = None, target: str = VIRTUAL,
                  sumo_step: float | None = None, control_interval: float | None = None,
                  episode_length: float = 3600.0, reward: str | Reward = "queue", recover_after: float = 5.0,
-                 log_path: str | Path | None = None, measure: bool = False) -> None:
+                 log_path: str | Path | None = None, measure: bool = False, spat: bool = False) -> None:
         self.action_type = action_type_of(action_type)
+        if spat and target != VIRTUAL:
+            raise EnvOptionError(f"spat=True with target={target!r}: allowed: spat=True with target={VIRTUAL!r} (the "
+                                 "in-process emulator announces its timing; NTCIP 1202 has no per-phase timing object "
+                                 "to poll a controller for)")
         cfg = config if isinstance(config, IntersectionConfig) else config_mod.load(config)
         self.config = with_timing(cfg, sumo_step, control_interval)
         self.reward_fn = reward_of(reward)
@@ -239,7 +263,7 @@ class IntersectionEnv(gymnasium.Env):
                                            directory=self._scenario_dir.name if self._scenario_dir else None)
         if net is not None:
             derive_phase_map(self.config, read_net(net), tls_id=TLS_ID)  # refuse an unmappable movement now
-        self.adapter = IntersectionAdapter(self.config, self.action_type)
+        self.adapter = IntersectionAdapter(self.config, self.action_type, spat)
         self.phases = self.adapter.phases
         self.action_space = self.adapter.action_space
         self.observation_space = self.adapter.observation_space
@@ -257,7 +281,7 @@ class IntersectionEnv(gymnasium.Env):
         obs = self.testbed.reset(seed=run_seed)
         self.adapter.start(self.testbed.middleware.cache, obs)
         self._last = obs
-        return self.adapter.vector(obs), reset_info(obs, run_seed)
+        return self.adapter.vector(obs, self._spat()), reset_info(obs, run_seed)
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         tb = self.testbed
@@ -271,7 +295,10 @@ class IntersectionEnv(gymnasium.Env):
         truncated = tb.done
         if truncated:
             tb.finish()
-        return self.adapter.vector(obs), reward, False, truncated, info
+        return self.adapter.vector(obs, self._spat()), reward, False, truncated, info
+
+    def _spat(self) -> tuple[MovementTiming, ...]:
+        return next(iter(self.testbed.spat().values())) if self.adapter.spat else ()
 
     def close(self) -> None:
         self.testbed.close()

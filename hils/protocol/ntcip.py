@@ -648,6 +648,12 @@ MAX_PREEMPT_GROUPS = _o("maxPreemptGroups", (6, 5), high=2, version=Version.V03)
 PREEMPT_STATUS_GROUP_NUMBER = _o("preemptStatusGroupNumber", (6, 6, 1, 1), low=1, version=Version.V03)
 PREEMPT_STATUS_GROUP = _o("preemptStatusGroup", (6, 6, 1, 2), version=Version.V03)
 
+# v03's ascSpat node (A.16): the time the SPaT data is generated, SPaT enabled (spatOptions bit 0), and the tick
+# counter of the hour ("Values equal to or greater than 36000 are reserved").
+SPAT_TIMESTAMP = _o("spatTimestamp", (16, 1), Syntax.OCTET_STRING, version=Version.V03)
+SPAT_OPTIONS = _o("spatOptions", (16, 4), access=Access.READ_WRITE, version=Version.V03)
+ASC_CURRENT_TICK = _o("ascCurrentTick", (16, 6), high=35999, version=Version.V03)
+
 ALL_OBJECTS: tuple[ObjectDef, ...] = (
     MAX_PHASES, MAX_PHASE_GROUPS, UNIT_STARTUP_FLASH, UNIT_BACKUP_TIME, UNIT_CONTROL_STATUS, UNIT_FLASH_STATUS,
     SYSTEM_PATTERN_CONTROL, COORD_CORRECTION_MODE, COORD_FORCE_MODE, MAX_PATTERNS, PATTERN_TABLE_TYPE, MAX_SPLITS,
@@ -666,8 +672,17 @@ ALL_OBJECTS: tuple[ObjectDef, ...] = (
     RING_CONTROL_GROUP_NUMBER, SEQUENCE_NUMBER, SEQUENCE_RING_NUMBER, MAX_RINGS, MAX_SEQUENCES, MAX_CHANNELS,
     CHANNEL_NUMBER, CHANNEL_CONTROL_SOURCE, CHANNEL_CONTROL_TYPE, MAX_TIMEBASE_ACTIONS, TIMEBASE_ACTION_NUMBER,
     TIMEBASE_PATTERN, TIMEBASE_ACTION_STATUS, PREEMPT_STATUS, MAX_PREEMPT_GROUPS, PREEMPT_STATUS_GROUP_NUMBER,
-    PREEMPT_STATUS_GROUP, UNIT_RED_REVERT, COORD_OPERATIONAL_MODE, TIMEBASE_PATTERN_SYNC,
+    PREEMPT_STATUS_GROUP, UNIT_RED_REVERT, COORD_OPERATIONAL_MODE, TIMEBASE_PATTERN_SYNC, SPAT_TIMESTAMP, SPAT_OPTIONS,
+    ASC_CURRENT_TICK,
 )
+
+
+def spat_timestamp(tenths: int) -> bytes:
+    """spatTimestamp of a time of day in tenths of a second since midnight: "Byte 1: hours (0..23) Byte 2: minutes
+    (0..59) Byte 3: seconds (0..60) ... Byte 4-5: milliseconds (0..999)" (NTCIP 1202 v03 5.17.1); the UDP SPaT
+    packet's clock has the same five bytes."""
+    minutes, tenth = divmod(tenths % 864_000, 600)
+    return bytes((minutes // 60, minutes % 60, tenth // 10)) + (tenth % 10 * 100).to_bytes(2, "big")
 
 
 def phase_oid(column: PhaseColumn, phase: int) -> Oid:

@@ -58,6 +58,7 @@ from hils.protocol.config import IntersectionConfig
 from hils.protocol.errors import AgentFailed, RunInterrupted, UserError, described
 from hils.protocol.hires import Event
 from hils.protocol.scenario import Scenario, labels, load_scenario
+from hils.protocol.spat import MovementTiming
 from hils.report.summary import Tally
 from hils.run.detectors import DetectorFeed
 from hils.run.intersection import Intersection
@@ -345,6 +346,15 @@ class Testbed(_OneIntersection):
             return {}
         return {name: i.target.hires() for name, i in self.intersections.items()
                 if callable(getattr(i.target, "hires", None))}
+
+    def spat(self) -> dict[str, tuple[MovementTiming, ...]]:
+        """Each controller's signal phase and timing now, where the run can read it: the in-process emulator's (a
+        target with a ``spat()`` method): per phase and overlap its indication and the earliest, latest and likely
+        time of its next change in the run's seconds (:class:`hils.protocol.spat.MovementTiming`). A controller
+        reached over SNMP has no per-phase timing object in NTCIP 1202 (docs/spat.md): it is left out."""
+        self._started()
+        return {name: i.target.spat() for name, i in self.intersections.items()
+                if callable(getattr(i.target, "spat", None))}
 
     @property
     def driver(self) -> Any:

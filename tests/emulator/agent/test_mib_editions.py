@@ -19,6 +19,7 @@ from emulator.inprocess import VirtualTarget
 from emulator.model.controller import Controller
 from hils.protocol.config import ConfigError, IntersectionConfig, from_dict
 from hils.protocol.ntcip import (
+    ASC_CURRENT_TICK,
     CHANNEL_CONTROL_SOURCE,
     CHANNEL_CONTROL_TYPE,
     DETECTOR_ACTUATION,
@@ -36,6 +37,8 @@ from hils.protocol.ntcip import (
     PREEMPT_STATUS_GROUP,
     PREEMPT_TABLE,
     SEQUENCE_RING_NUMBER,
+    SPAT_OPTIONS,
+    SPAT_TIMESTAMP,
     TIMEBASE_ACTION_STATUS,
     TIMEBASE_PATTERN,
     UNIT_RED_REVERT,
@@ -206,3 +209,20 @@ def test_the_action_in_effect_runs_the_pattern_the_coordinator_takes_up(starts: 
         mib.controller.step()
     action = mib.get(TIMEBASE_ACTION_STATUS.instance())
     assert mib.get(TIMEBASE_PATTERN.instance(action)) == mib.controller.coordinator.local
+
+
+def test_v03s_asc_spat_gives_the_controllers_clock_and_its_spat_enable() -> None:
+    """spatTimestamp: "Byte 1: hours (0..23) Byte 2: minutes (0..59) Byte 3: seconds ... Byte 4-5: milliseconds";
+    ascCurrentTick: tenths of a second, "a zero representing the top of the hour"; spatOptions bit 0 "Enabled SPAT".
+    Under v02 none of them is served."""
+    start = datetime(2026, 3, 2, 13, 59, 58, 700_000)
+    v02, v03 = _city(Version.V02, start), _city(Version.V03, start)
+    tick, stamp, options = ASC_CURRENT_TICK.instance(), SPAT_TIMESTAMP.instance(), SPAT_OPTIONS.instance()
+    assert not any(oid in v02 for oid in (tick, stamp, options))
+    assert v03.get(stamp) == bytes([13, 59, 58, 0x02, 0xBC]) and v03.get(tick) == 35987
+    for _ in range(14):
+        v03.controller.step()
+    assert v03.get(stamp) == bytes([14, 0, 0, 0x00, 0x64]) and v03.get(tick) == 1  # the hour rolled over
+    assert v03.get(options) == 1
+    v03.set_many([(options, 0)])
+    assert v03.get(options) == 0 and v03.spat_options == 0
