@@ -140,7 +140,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     bench_seeds.seeds_option(res)
     published.options(res, "bench-resco", "bench")
     res.set_defaults(func=_resco_command)
-<<<<<<< HEAD
     train = commands.add_parser("train", help="PPO training steps per second, hils beside sumo-rl (SB3, RLlib)",
                                 description="Training throughput on PyTorch's CPU build, hils beside sumo-rl: "
                                             "(1) Stable-Baselines3 PPO on sumo-rl's single intersection, "
@@ -170,7 +169,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     bench_seeds.seeds_option(train, "0-2")
     published.options(train, "bench-train", "bench")
     train.set_defaults(func=_train_command)
-=======
     spat = commands.add_parser("spat", help="share of indication changes inside the window the SPaT announced",
                                description="An hour of the four-leg with SUMO's traffic under the controller's "
                                            "actuated operation, the city's coordinated pattern and the max-pressure "
@@ -183,7 +181,6 @@ def register(sub: argparse._SubParsersAction) -> None:
                       help="run only this operation (repeatable; default: all three)")
     published.options(spat, "bench-spat", "bench")
     spat.set_defaults(func=_spat_command)
->>>>>>> spat36
     corridor = commands.add_parser("corridor", help="controllers one process drives at wall clock; virtual time and "
                                                     "memory per controller",
                                    description="(1) Wall clock: N controllers of one `hils emulator serve --count N` "
