@@ -34,7 +34,7 @@ from harness.bench import seeds as bench_seeds
 from harness.bench.processes import snmpd, start_emulator
 from harness.bench.seeds import Spread, seeds_text
 from harness.bench.serve import resident_mb
-from hils.control.actions import ActionType
+from hils.control.actions import PAPER_ACTION_TYPES, ActionType
 from hils.protocol import config as config_mod
 from hils.protocol.ntcip import signal_oids
 from hils.report import jsonout
@@ -215,7 +215,7 @@ def measure_latency(samples: int, seed: int = 0) -> dict[str, Stats]:
     cfg = config_mod.load()
     out = {}
     with tempfile.TemporaryDirectory() as tmp:
-        for action_type in ActionType:
+        for action_type in PAPER_ACTION_TYPES:
             # Seconds of simulated time per dispatched command: random selection repeats the pair shown
             # about one decision in four; a duration command lasts its clearance plus a green of 3..20 s.
             per_command = {ActionType.SELECTION: 14.0, ActionType.SWITCH: 10.0, ActionType.DURATION: 18.0}

@@ -19,7 +19,7 @@ from typing import Any
 from harness import published
 from harness.bench import machine
 from hils.agents.builtin import Observation
-from hils.control.actions import ActionType
+from hils.control.actions import PAPER_ACTION_TYPES, ActionType
 from hils.protocol import config as config_mod
 from hils.protocol.config import IntersectionConfig
 from hils.report import jsonout
@@ -61,7 +61,7 @@ class ScriptedSwitchAgent:
 
 def latency_table(cfg: IntersectionConfig, duration: float, seed: int) -> dict[str, Stats]:
     out = {}
-    for action_type in ActionType:
+    for action_type in PAPER_ACTION_TYPES:
         result = run_spec(RunSpec(cfg, action_type, duration=duration, seed=seed, sumo=True))
         out[action_type.value] = Stats.of(internal_latencies_ms(result.records).get(action_type.value, []))
     return out
