@@ -5,7 +5,18 @@ action reaches no manager: nothing is sent for it."""
 from __future__ import annotations
 
 __all__ = [
-    "ActionError", "ActionTypeError", "ConflictError", "DurationRangeError", "NotInActionSetError", "PreemptedError",
+    "ActionError",
+    "ActionTypeError",
+    "CallOmittedError",
+    "ConflictError",
+    "DurationRangeError",
+    "HoldForceOffError",
+    "HoldOmittedError",
+    "NotInActionSetError",
+    "PreemptedError",
+    "RingOmittedError",
+    "ScheduleConflictError",
+    "ScheduleTimeError",
     "UnknownPhaseError",
 ]
 
@@ -41,3 +52,27 @@ class PreemptedError(ActionError):
     middleware commands nothing until the controller reports it over (the manager's PREEMPTED)."""
 
     reason = "preempted"
+
+
+class ScheduleConflictError(ActionError):
+    """A schedule that asks two things of one phase at once, or leaves a ring nothing to serve."""
+
+
+class HoldForceOffError(ScheduleConflictError):
+    reason = "hold_and_force_off"
+
+
+class CallOmittedError(ScheduleConflictError):
+    reason = "call_of_omitted_phase"
+
+
+class HoldOmittedError(ScheduleConflictError):
+    reason = "hold_of_omitted_phase"
+
+
+class RingOmittedError(ScheduleConflictError):
+    reason = "ring_omitted"
+
+
+class ScheduleTimeError(ActionError):
+    reason = "schedule_time"

@@ -72,15 +72,23 @@ from enum import Enum, StrEnum, auto
 from pathlib import Path
 from typing import Any
 
-from hils.control.errors import ActionError, ActionTypeError, UnknownPhaseError
+from hils.control.errors import (
+    ActionError,
+    ActionTypeError,
+    CallOmittedError,
+    HoldForceOffError,
+    HoldOmittedError,
+    RingOmittedError,
+    ScheduleTimeError,
+    UnknownPhaseError,
+)
 from hils.protocol.config import IntersectionConfig
 from hils.protocol.errors import UserError
 from hils.protocol.ntcip import ControlColumn
 
 __all__ = [
-    "CallOmittedError", "Control", "Controls", "HoldForceOffError", "HoldOmittedError", "Order", "OrderState",
-    "RingOmittedError", "Running", "Schedule", "ScheduleConflictError", "ScheduleFileError", "ScheduleTimeError",
-    "load", "no_controls", "parse",
+    "Control", "Controls", "Order", "OrderState", "Running", "Schedule", "ScheduleFileError", "load", "no_controls",
+    "parse",
 ]
 
 
@@ -113,30 +121,6 @@ Controls = Mapping[ControlColumn, frozenset[int]]
 def no_controls() -> dict[ControlColumn, frozenset[int]]:
     """Every control object at 0."""
     return {c: frozenset() for c in ControlColumn}
-
-
-class ScheduleConflictError(ActionError):
-    """A schedule that asks two things of one phase at once, or leaves a ring nothing to serve."""
-
-
-class HoldForceOffError(ScheduleConflictError):
-    reason = "hold_and_force_off"
-
-
-class CallOmittedError(ScheduleConflictError):
-    reason = "call_of_omitted_phase"
-
-
-class HoldOmittedError(ScheduleConflictError):
-    reason = "hold_of_omitted_phase"
-
-
-class RingOmittedError(ScheduleConflictError):
-    reason = "ring_omitted"
-
-
-class ScheduleTimeError(ActionError):
-    reason = "schedule_time"
 
 
 class ScheduleFileError(UserError, ValueError):

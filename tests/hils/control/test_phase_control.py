@@ -10,20 +10,14 @@ from pathlib import Path
 import pytest
 
 from hils.control.actions import ActionConverter, ActionError, ActionType, ActionTypeError, UnknownPhaseError
-from hils.control.phase_control import (
+from hils.control.errors import (
     CallOmittedError,
-    Control,
     HoldForceOffError,
     HoldOmittedError,
-    OrderState,
     RingOmittedError,
-    Running,
-    Schedule,
-    ScheduleFileError,
     ScheduleTimeError,
-    load,
-    parse,
 )
+from hils.control.phase_control import Control, OrderState, Running, Schedule, ScheduleFileError, load, parse
 from hils.protocol.config import load as load_config
 from hils.protocol.ntcip import ControlColumn
 
