@@ -173,6 +173,9 @@ _TIMING_COLUMNS: dict[PhaseColumn, tuple[str, int]] = {
     PhaseColumn.YELLOW_CHANGE: ("yellow", 1),
     PhaseColumn.RED_CLEAR: ("red_clear", 1),
     PhaseColumn.RED_REVERT: ("red_revert", 1),
+    PhaseColumn.TIME_BEFORE_REDUCTION: ("time_before_reduction", 10),
+    PhaseColumn.TIME_TO_REDUCE: ("time_to_reduce", 10),
+    PhaseColumn.MINIMUM_GAP: ("min_gap", 1),
 }
 
 _FROM_CONFIG = "taken from the intersection config, which is validated whole before the controller starts"

@@ -99,6 +99,8 @@ DELAY_SHARE = 0.3  # a detector's actuations followed by one phase's call the sa
 #: actuation ... shall be delayed when the phase is not Green"; the longer, the likelier a chance coincidence).
 MAX_DELAY = timedelta(seconds=25.5)
 RECALL_SHARE = 0.9  # a phase whose call registers as its yellow begins this often is recalled
+REDUCTION_SEEN = 5  # gaps between the minimum gap and the passage, on one line, that show gap reduction
+REDUCTION_FIT = 0.3  # s a gap of the reduction may lie off its line
 FORCE_OFF_SHARE = 0.2  # a phase's force-offs mark where its split ends when they end at least this share of its greens
 #: What the emulator's config holds (:mod:`hils.protocol.config`): phases 1-255, detectors and push buttons 1-64,
 #: overlaps A-P (1-16), cycles 30-255 s.
@@ -240,11 +242,17 @@ def infer(rows: Sequence[Row], name: str = "field controller") -> Inferred:
     recalled = _uncalled(rows, phases, structure)
     _extenders(rows, detectors, recalled, out)
     _delays(rows, detectors, phases, out)
-    gaps = {p: _gaps(rows, p, [d for d, q in detectors.items() if q == p]) for p in phases}
+    samples = {p: _gaps(rows, p, [d for d, q in detectors.items() if q == p]) for p in phases}
+    gaps = {p: [g for _, g in mine] for p, mine in samples.items()}
     shared = _mode(g for values in gaps.values() for g in values)
     for p in phases:
         counts = Counter(gaps[p])
-        if counts and counts.most_common(1)[0][1] >= PASSAGE_SEEN:
+        if (reduced := _reduction(samples[p])) is not None:
+            timing[p] |= reduced
+            out.read.append(f"phase {p}: gap reduction, passage {reduced['passage']:g} s reduced after "
+                            f"{reduced['time_before_reduction']} s over {reduced['time_to_reduce']} s to "
+                            f"{reduced['min_gap']:g} s (its gap-outs' gaps fall with the green's time)")
+        elif counts and counts.most_common(1)[0][1] >= PASSAGE_SEEN:
             timing[p]["passage"] = _mode(gaps[p])
         else:
             timing[p]["passage"] = shared if shared is not None else 2.0
@@ -252,6 +260,8 @@ def infer(rows: Sequence[Row], name: str = "field controller") -> Inferred:
                                f"no gap of its own seen {PASSAGE_SEEN} times)")
         low, high = config_mod.phase_time_range("passage")
         timing[p]["passage"] = _within(p, "passage", timing[p]["passage"], low, min(high, timing[p]["max_green"]), out)
+        if "min_gap" in timing[p]:
+            timing[p]["min_gap"] = min(timing[p]["min_gap"], timing[p]["passage"])
     maxima = [t["maxed"] for t in timing.values() if "maxed" in t]
     if maxima:  # a phase that never maxed out has the intersection's maximum, if its longest green is shorter
         shared_max = math.ceil(max(maxima, key=maxima.count) - 1e-9)
@@ -630,9 +640,10 @@ def _in_config(detectors: Mapping[int, int], kind: str, out: Inferred) -> dict[i
     return {d: q for d, q in detectors.items() if d <= DETECTORS}
 
 
-def _gaps(rows: Sequence[Row], p: int, detectors: Sequence[int]) -> list[float]:
-    """Each time from the last of the phase's detectors going off, during the green, to its gap-out (a gap-out logged
-    when the green ends may come later than the gap: at a barrier, the green waits for the other ring)."""
+def _gaps(rows: Sequence[Row], p: int, detectors: Sequence[int]) -> list[tuple[float, float]]:
+    """Each gap-out's time into its green and its gap: the time from the last of the phase's detectors going off,
+    during the green, to the gap-out (a gap-out logged when the green ends may come later than the gap: at a barrier,
+    the green waits for the other ring)."""
     if not detectors:
         return []
     mine, on, gaps = set(detectors), set(), []
@@ -648,8 +659,34 @@ def _gaps(rows: Sequence[Row], p: int, detectors: Sequence[int]) -> list[float]:
         elif (r.code == E.PHASE_GAP_OUT and r.parameter == p and not on and last_off is not None
               and began is not None and last_off > began):  # an off before the green extended nothing
             # the off event is the first tick without the call; passage counts from the last tick with it
-            gaps.append(round((r.time - last_off + TICK).total_seconds(), 1))
+            gaps.append(((r.time - began).total_seconds(), round((r.time - last_off + TICK).total_seconds(), 1)))
     return gaps
+
+
+def _reduction(samples: Sequence[tuple[float, float]]) -> dict[str, float] | None:
+    """Gap reduction (NTCIP 1202 phaseTimeBeforeReduction, phaseTimeToReduce, phaseMinimumGap) from a phase's gap-outs
+    (time into the green, gap), when their gaps fall with the green's time: the minimum gap is the most frequent gap,
+    the passage the largest seen :data:`PASSAGE_SEEN` times, and the gaps between them lie on one line (least squares,
+    at least :data:`REDUCTION_SEEN` of them, none more than :data:`REDUCTION_FIT` s off it) that reaches the passage
+    at the time before reduction (counted from the green's start: a conflicting call waits from then on in these
+    logs) and the minimum gap a time to reduce later. None when they do not."""
+    counts = Counter(g for _, g in samples)
+    least = _mode(counts.elements())
+    seen = [g for g, n in counts.items() if n >= PASSAGE_SEEN and g > least]
+    if least is None or not seen:
+        return None
+    passage = max(seen)
+    ramp = [(t, g) for t, g in samples if least < g < passage]
+    if len(ramp) < REDUCTION_SEEN:
+        return None
+    mean_t, mean_g = sum(t for t, _ in ramp) / len(ramp), sum(g for _, g in ramp) / len(ramp)
+    spread = sum((t - mean_t) ** 2 for t, _ in ramp)
+    slope = sum((t - mean_t) * (g - mean_g) for t, g in ramp) / spread if spread else 0.0
+    if slope >= 0 or any(abs(mean_g + slope * (t - mean_t) - g) > REDUCTION_FIT for t, g in ramp):
+        return None
+    before = mean_t + (passage - mean_g) / slope
+    return {"passage": passage, "time_before_reduction": min(255, max(0, round(before))),
+            "time_to_reduce": min(255, max(1, round((least - passage) / slope))), "min_gap": least}
 
 
 def _coordination(rows: Sequence[Row], structure: Structure, timing: Mapping[int, dict[str, Any]],
@@ -903,7 +940,8 @@ def _toml(name: str, structure: Structure, timing: Mapping[int, dict[str, Any]],
     lines = ["# Written by harness.reference.field_log from a controller's hi-res log: what it read and guessed is "
              "printed with it.", f"name = {json.dumps(name)}", "", "[phases]"]
     for p in sorted(timing):
-        fields = {k: timing[p][k] for k in ("min_green", "max_green", "yellow", "red_clear", "passage", "walk",
+        fields = {k: timing[p][k] for k in ("min_green", "max_green", "yellow", "red_clear", "passage",
+                                            "time_before_reduction", "time_to_reduce", "min_gap", "walk",
                                             "ped_clear") if k in timing[p]}
         if timing[p].get("dual_entry"):
             fields["dual_entry"] = "true"

@@ -103,10 +103,14 @@ _PHASE_OBJECTS: dict[str, Carrier] = {
     "yellow": (PHASE_TABLE[PhaseColumn.YELLOW_CHANGE], 10),
     "red_clear": (PHASE_TABLE[PhaseColumn.RED_CLEAR], 10),
     "red_revert": (PHASE_TABLE[PhaseColumn.RED_REVERT], 10),
+    "time_before_reduction": (PHASE_TABLE[PhaseColumn.TIME_BEFORE_REDUCTION], 1),
+    "time_to_reduce": (PHASE_TABLE[PhaseColumn.TIME_TO_REDUCE], 1),
+    "min_gap": (PHASE_TABLE[PhaseColumn.MINIMUM_GAP], 10),
 }
 # Per-phase timings and options a phase may set itself or inherit from [timing].
 _PHASE_OPTIONS = ("min_green", "max_green", "max2", "passage", "walk", "ped_clear", "yellow", "red_clear",
-                  "red_revert", "recall", "dual_entry", "backup_prevent", "simultaneous_gap_disable")
+                  "red_revert", "time_before_reduction", "time_to_reduce", "min_gap", "recall", "dual_entry",
+                  "backup_prevent", "simultaneous_gap_disable")
 TURNS = ("left", "through")
 FREE = 254  # NTCIP's pattern number of free operation (systemPatternControl, coordPatternStatus)
 
@@ -288,6 +292,12 @@ class Phase:
     # Turns of the same approach that run permissive (yielding) while this phase is green,
     # e.g. the lefts of a four-phase plan without protected lefts.
     permissive: tuple[str, ...] = ()
+    # Gap reduction (volume density, NTCIP 1202 phaseTimeBeforeReduction, phaseTimeToReduce, phaseMinimumGap): after
+    # time_before_reduction s of serviceable conflicting demand the allowable gap falls linearly from the passage to
+    # min_gap over time_to_reduce s. None: no reduction (the allowable gap stays the passage).
+    time_before_reduction: float = 0.0
+    time_to_reduce: float = 0.0
+    min_gap: float | None = None
 
     @property
     def maximum2(self) -> float:
@@ -604,6 +614,14 @@ def _phase(number: int, raw: Any, defaults: Mapping[str, Any], ring: int, source
     walk = timing("walk", 0, integer=True)
     ped_clear = timing("ped_clear", 0, integer=True)
     red_revert = timing("red_revert", 0, step=0.1)
+    before_reduction = timing("time_before_reduction", 0, integer=True)
+    to_reduce = timing("time_to_reduce", 0, integer=True)
+    min_gap = merged.get("min_gap")
+    if min_gap is not None:
+        min_gap = timing("min_gap", step=0.1)
+        if min_gap > passage:
+            raise ConfigError(source, f"{where('min_gap')}min_gap", f"is {min_gap} s, beyond passage {passage} s; "
+                              "allowed: min_gap <= passage (the allowable gap is reduced from the passage to it)")
     max2 = merged.get("max2")
     if max2 is not None:
         max2 = timing("max2", integer=True, low=min_green)
@@ -641,7 +659,8 @@ def _phase(number: int, raw: Any, defaults: Mapping[str, Any], ring: int, source
     return Phase(number, ring, float(min_green), float(max_green), float(yellow), float(red_clear),
                  _STARTUP_NAMES[startup], approach, turn, float(passage), None if max2 is None else float(max2),
                  float(walk), float(ped_clear), float(red_revert), Recall(recall), flags["dual_entry"],
-                 flags["backup_prevent"], flags["simultaneous_gap_disable"], tuple(permissive))
+                 flags["backup_prevent"], flags["simultaneous_gap_disable"], tuple(permissive),
+                 float(before_reduction), float(to_reduce), None if min_gap is None else float(min_gap))
 
 
 def _pairs(raw: Any, name: str, phases: Mapping[int, Phase], permissives: Permissives,

@@ -128,6 +128,9 @@ class PhaseColumn(IntEnum):
     YELLOW_CHANGE = 8
     RED_CLEAR = 9
     RED_REVERT = 10
+    TIME_BEFORE_REDUCTION = 13
+    TIME_TO_REDUCE = 15
+    MINIMUM_GAP = 17
     STARTUP = 20
     OPTIONS = 21
     RING = 22
@@ -374,6 +377,9 @@ _PHASE_NAMES: dict[PhaseColumn, tuple[str, Syntax, Access, int, int]] = {
     PhaseColumn.YELLOW_CHANGE: ("phaseYellowChange", Syntax.INTEGER, _RW, 30, 255),
     PhaseColumn.RED_CLEAR: ("phaseRedClear", Syntax.INTEGER, _RW, 0, 255),
     PhaseColumn.RED_REVERT: ("phaseRedRevert", Syntax.INTEGER, _RW, 0, 255),
+    PhaseColumn.TIME_BEFORE_REDUCTION: ("phaseTimeBeforeReduction", Syntax.INTEGER, _RW, 0, 255),
+    PhaseColumn.TIME_TO_REDUCE: ("phaseTimeToReduce", Syntax.INTEGER, _RW, 0, 255),
+    PhaseColumn.MINIMUM_GAP: ("phaseMinimumGap", Syntax.INTEGER, _RW, 0, 255),
     PhaseColumn.STARTUP: ("phaseStartup", Syntax.INTEGER, _RW, 1, 6),
     PhaseColumn.OPTIONS: ("phaseOptions", Syntax.INTEGER, _RW, 0, 65535),
     PhaseColumn.RING: ("phaseRing", Syntax.INTEGER, _RW, 0, 255),

@@ -1,6 +1,6 @@
 """Safety and liveness of the controller model over random configs and random control SETs.
 
-Configs draw every phase option (passage, recalls, Max2, pedestrians, red
+Configs draw every phase option (passage, gap reduction, recalls, Max2, pedestrians, red
 revert, dual entry, backup prevent, simultaneous gap disable), both
 next-phase locks, overlaps of every type and preempts; SETs draw calls,
 pedestrian calls, omits, holds, force-offs, Max2 selection and preempt
@@ -58,6 +58,9 @@ def timings(draw: st.DrawFn) -> dict[str, object]:
     }
     if draw(st.booleans()):
         out["max2"] = draw(st.integers(min_green, 40))
+    if out["passage"] > 0 and draw(st.booleans()):  # gap reduction (volume density)
+        out |= {"time_before_reduction": draw(st.integers(0, 10)), "time_to_reduce": draw(st.integers(0, 10)),
+                "min_gap": draw(st.integers(0, round(10 * out["passage"]))) / 10}
     if max_green >= 2 and draw(st.booleans()):
         walk = draw(st.integers(1, max_green - 1))
         out |= {"walk": walk, "ped_clear": draw(st.integers(1, max_green - walk))}

@@ -295,7 +295,23 @@ def test_a_gap_is_counted_only_from_an_off_during_the_green() -> None:
 
     rows = [at(0, 82, 2), at(1, 81, 2), at(5, 1, 2), at(10, 4, 2), at(20, 1, 2), at(21, 82, 2), at(22, 81, 2),
             at(24.9, 4, 2)]
-    assert field_log._gaps(rows, 2, [2]) == [3.0]
+    assert field_log._gaps(rows, 2, [2]) == [(4.9, 3.0)]
+
+
+def test_gap_reduction_is_read_from_gaps_that_fall_with_the_greens_time() -> None:
+    """The atspm sample's phases 5 and 8 gap out 2.3 s after their detectors' last off early in their greens, then
+    ever sooner, and from about 11 s on 0.5 s after (NTCIP 1202 phaseTimeBeforeReduction, phaseTimeToReduce,
+    phaseMinimumGap; the passage counts from the last tick with the call, 0.1 s more): the config reduces their
+    passage, which a single passage cannot; 2 and 6 show no gap-out to read one from."""
+    cfg = field_log.infer(hires_file.load(SAMPLE)).config()
+    got = {p: (ph.passage, ph.time_before_reduction, ph.time_to_reduce, ph.min_gap) for p, ph in cfg.phases.items()}
+    assert got[5] == got[8] == (2.4, 8.0, 3.0, 0.6)
+    assert got[2][3] is None and got[6][3] is None
+    samples = [(t, 2.4) for t in (5.0, 6.0, 7.0)] + [(8.0 + k / 2, round(2.4 - 0.3 * k, 1)) for k in range(1, 6)] \
+        + [(12.0 + t, 0.6) for t in range(4)]
+    assert field_log._reduction(samples) == {"passage": 2.4, "time_before_reduction": 8, "time_to_reduce": 3,
+                                             "min_gap": 0.6}
+    assert field_log._reduction([(t, 2.4 - (t % 3) * 0.5) for t in range(4, 20)]) is None  # gaps that do not fall
 
 
 def test_a_constant_gap_from_actuation_to_call_is_said_as_a_detector_delay_not_applied() -> None:
