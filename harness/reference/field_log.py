@@ -101,6 +101,7 @@ MAX_DELAY = timedelta(seconds=25.5)
 RECALL_SHARE = 0.9  # a phase whose call registers as its yellow begins this often is recalled
 REDUCTION_SEEN = 5  # gaps between the minimum gap and the passage, on one line, that show gap reduction
 REDUCTION_FIT = 0.3  # s a gap of the reduction may lie off its line
+YIELD_SEEN = 3  # a coordinated phase's greens ending at one place this often: its yield point (the first such)
 FORCE_OFF_SHARE = 0.2  # a phase's force-offs mark where its split ends when they end at least this share of its greens
 #: What the emulator's config holds (:mod:`hils.protocol.config`): phases 1-255, detectors and push buttons 1-64,
 #: overlaps A-P (1-16), cycles 30-255 s.
@@ -468,27 +469,30 @@ def _structure(phases: Sequence[int], greens: Mapping[int, list[tuple[datetime, 
     order = {r: [_service_order([p for p in group if ring_of[p] == r], _successions(starts, r, ring_of, group_of))
                  for group in ordered] for r in (1, 2)}
     structure = Structure(ordered, order)
-    used = set(phases)
     for r in (1, 2):
         for g, mine in enumerate(order[r]):
-            if mine:
-                continue
-            twin = order[3 - r][g][0]
-            base = 0 if r == 1 else 4
-            # NEMA's numbering first: in ring 1 the second barrier group's through is 4, its left 3, and so on
-            free = next((n for n in (base + 2 * g + 2, base + 2 * g + 1, *range(1, PHASES + 1))
-                         if n not in used and n <= PHASES), None)
-            if free is None:
-                raise FieldLogError(f"the log's phases use every phase number 1-{PHASES}: none is left for ring {r} "
-                                    f"beside phase {twin}, where NTCIP's split table needs one; allowed: a log of "
-                                    "fewer phases")
-            used.add(free)
-            mine.append(free)
-            structure.phantom[free] = twin
-            out.guessed.append(f"phase {free}: not in the log; added to ring {r} beside {twin} (NTCIP's split table "
-                               "needs a phase of each ring in each barrier group; nothing calls it, so it is skipped)")
+            if not mine:
+                free = _phantom(structure, r, g, order[3 - r][g][0])
+                out.guessed.append(f"phase {free}: not in the log; added to ring {r} beside {structure.phantom[free]} "
+                                   "(NTCIP's split table needs a phase of each ring in each barrier group; nothing "
+                                   "calls it, so it is skipped)")
     out.read.append(f"rings: {structure.ring(1)} and {structure.ring(2)}; barrier groups: {structure.barriers}")
     return structure
+
+
+def _phantom(structure: Structure, r: int, g: int, twin: int) -> int:
+    """Add to ring ``r``'s barrier group ``g`` (last) a phase the log never shows, timed as ``twin``: its number."""
+    used = set(structure.ring(1) + structure.ring(2))
+    base = 0 if r == 1 else 4
+    # NEMA's numbering first: in ring 1 the second barrier group's through is 4, its left 3, and so on
+    free = next((n for n in (base + 2 * g + 2, base + 2 * g + 1, *range(1, PHASES + 1))
+                 if n not in used and n <= PHASES), None)
+    if free is None:
+        raise FieldLogError(f"the log's phases use every phase number 1-{PHASES}: none is left for ring {r} beside "
+                            f"phase {twin}, where NTCIP's split table needs one; allowed: a log of fewer phases")
+    structure.order[r][g].append(free)
+    structure.phantom[free] = twin
+    return free
 
 
 def _concurrent(spans: Mapping[int, Sequence[tuple[datetime, datetime]]]) -> set[frozenset[int]]:
@@ -727,6 +731,7 @@ def _coordination(rows: Sequence[Row], structure: Structure, timing: Mapping[int
                       if row.code == E.PHASE_FORCE_OFF and row.parameter == p]
         if p in greens and force_offs and len(force_offs) >= FORCE_OFF_SHARE * len(greens[p]):  # not a stray one
             at_end[p] = (_mode(force_offs) + timing[p]["yellow"] + timing[p]["red_clear"]) % cycle
+    _own_yield_points(rows, structure, coord, at_end, timing, day0, cycle, out)
     logged = {p: s for p, s in _logged_splits(rows, zeros).items() if p in greens}
     orders = {r: structure.ring(r) for r in (1, 2)}
     begin = _barrier_start(orders, logged, at_end, cycle)
@@ -748,6 +753,53 @@ def _coordination(rows: Sequence[Row], structure: Structure, timing: Mapping[int
                     f"{coord[1]}+{coord[2]}, splits " + ", ".join(f"{p}: {s}" for p, s in splits.items())
                     + (f" (as logged, events 134-149, for {', '.join(map(str, logged))})" if logged else ""))
     return {"cycle": cycle, "offset": offset, "coord": [coord[1], coord[2]], "splits": splits}
+
+
+def _own_yield_points(rows: Sequence[Row], structure: Structure, coord: Mapping[int, int], at_end: dict[int, float],
+                      timing: dict[int, dict[str, Any]], day0: datetime, cycle: int, out: Inferred) -> None:
+    """Each ring's coordinated phase ends its split at its own yield point: NTCIP 1202 splitTime is "the time in
+    seconds the splitPhase is allowed to receive (i.e. before a Force Off is applied)", the coordinated phase's as
+    any other's, ring by ring. A coordinated phase last of its ring in its barrier group, whose split end no force-off
+    places, would otherwise get the group's end; but where its greens end (begin yellow, 8) at one place of the cycle
+    again and again (:data:`YIELD_SEEN` times) before the group's end, which the other ring's last phase there puts
+    (the atspm sample: 2 ends with 6 at 6's force-off whenever 5 is not served, and with 5 otherwise), that is its
+    yield point (it never ends before it), and the rest of the group is a phase of its ring the log never shows
+    served. So the split table gets that phase, timed as the other ring's phase after its coordinated one, and
+    ``at_end`` the coordinated phase's end (its yield point plus its clearance)."""
+    for r in (1, 2):
+        c = coord[r]
+        g = structure.group_of(c)
+        other = structure.order[3 - r][g]
+        if c in at_end or structure.order[r][g][-1] != c or other[-1] not in at_end:
+            continue
+        point = _yield_point(rows, c, day0, cycle)
+        if point is None:
+            continue
+        end = (point + timing[c]["yellow"] + timing[c]["red_clear"]) % cycle
+        short = (at_end[other[-1]] - end) % cycle
+        if not 1 < short < cycle / 2:
+            continue
+        twin = other[other.index(coord[3 - r]) + 1] if coord[3 - r] in other[:-1] else other[-1]
+        free = _phantom(structure, r, g, twin)
+        timing[free] = {k: v for k, v in timing[twin].items() if k not in ("walk", "ped_clear")}
+        at_end[c] = end
+        out.read.append(f"coordinated phase {c}: its yield point at {point:g} s of the day modulo the cycle, where its "
+                        f"greens end when nothing holds them, {short:g} s before its barrier group's end; phase "
+                        f"{free} (not in the log, timed as {twin}) fills its ring's split there")
+
+
+def _yield_point(rows: Sequence[Row], phase: int, day0: datetime, cycle: int) -> float | None:
+    """The first place of the cycle (seconds of the day modulo the cycle) where the phase's greens end at least
+    :data:`YIELD_SEEN` times, its greens' ends read as one arc of the cycle (from past the widest stretch without
+    one); None when no place repeats."""
+    ends = Counter(round(_since_midnight(r.time, day0) % cycle, 1) for r in rows
+                   if r.code == E.PHASE_BEGIN_YELLOW and r.parameter == phase)
+    places = sorted(ends)
+    if not places:
+        return None
+    widest = max(range(len(places)), key=lambda k: (places[k] - places[k - 1]) % cycle)
+    arc = places[widest:] + places[:widest]
+    return next((x for x in arc if ends[x] >= YIELD_SEEN), None)
 
 
 def _barrier_start(orders: Mapping[int, Sequence[int]], logged: Mapping[int, int], at_end: Mapping[int, float],

@@ -58,12 +58,15 @@ def test_the_emulators_own_log_gives_back_its_config() -> None:
 def test_the_field_logs_plan_is_read_from_its_events() -> None:
     inferred = field_log.infer(hires_file.load(SAMPLE), "atspm sample 1136")
     cfg = inferred.config()
-    assert cfg.rings == ((2, 4), (6, 5, 8))  # 5 lags 6; ring 1 has no phase of its own beside 8
+    # 5 lags 6; ring 1 has no phase of its own beside 8, nor after 2 beside 5 (below)
+    assert cfg.rings == ((2, 1, 4), (6, 5, 8))
     plan = cfg.coordination.patterns[1]
     # The local zeros (150/5) are 75 s apart at 45 s of the time of day modulo 75; 6 and 5 are forced off 24.5 s
-    # and 43.5 s after it and 8 ends with the cycle, each split ending its clearance (4 s + 1.5 s) later.
+    # and 43.5 s after it and 8 ends with the cycle, each split ending its clearance (4 s + 1.5 s) later. 2, the
+    # coordinated phase of ring 1, ends with 6 at 6's force-off whenever 5 is not served: its own yield point is
+    # there, and the rest of its ring's group is a phase the log never shows (1, timed as 5).
     assert (plan.cycle, plan.offset, tuple(plan.coord_phases)) == (75, 45, (2, 6))
-    assert dict(plan.splits) == {2: 49, 4: 26, 5: 19, 6: 30, 8: 26}
+    assert dict(plan.splits) == {1: 19, 2: 30, 4: 26, 5: 19, 6: 30, 8: 26}
     assert all((ph.yellow, ph.red_clear) == (4.0, 1.5) for ph in cfg.phases.values())
     assert {p: cfg.phases[p].min_green for p in (2, 5, 6, 8)} == {2: 10, 5: 4, 6: 10, 8: 6}
     assert (cfg.phases[6].walk, cfg.phases[6].ped_clear) == (8, 26)
