@@ -11,11 +11,14 @@ module serves the emulator for it (:func:`harness.bench.processes.start_emulator
 table of its own: per event type and phase, how many of the log's events the bench logged within a tolerance
 (:func:`match_table`), so a difference can be read where it is.
 
-Times: the served controllers keep the host's clock, and Signal-Replay starts a coordinated replay at the cycle
-position the log started at (``cycle_length``), so the bench's cycle is where the log's was as long as whole
-days are whole cycles (86,400 s a multiple of the cycle). A free log is aligned to the second
-(``cycle_length=1``): the inputs land on the tenth of a second they were logged at. The SET of an input is sent
-:data:`LATENCY_S` before it is due (Signal-Replay's ``replay_latency_offset_seconds``): the emulator answers at
+Times: the served controllers keep the host's clock (their cycles counted from the host's midnight), and Signal-Replay
+starts a coordinated replay when the time since the log's start is a whole number of cycles past its ``cycle_offset``
+(signal_replay 1.0.1, ``_wait_until_next_cycle``). Where whole days are not whole cycles (86,400 s not a multiple of the
+cycle, 75 s for instance) the days between the config's day (its ``[emulator] start``: the log's first day for a written
+config, whose cycle positions count from its midnight on) and the bench's are not whole cycles either: that remainder is
+given as the ``cycle_offset`` (:func:`day_shift`), so the bench's cycle is where the log's was. A free log is aligned to
+the second (``cycle_length=1``): the inputs land on the tenth of a second they were logged at. The SET of an input is
+sent :data:`LATENCY_S` before it is due (Signal-Replay's ``replay_latency_offset_seconds``): the emulator answers at
 once and reads its inputs at the next tick.
 """
 
@@ -28,7 +31,7 @@ import time
 from collections import Counter, defaultdict
 from collections.abc import Sequence
 from dataclasses import dataclass
-from datetime import datetime, timedelta
+from datetime import date, datetime, timedelta
 from pathlib import Path
 
 from harness.reference.hires_file import Row
@@ -75,19 +78,20 @@ def replay(rows: Sequence[Row], config: Path, work: Path, *, device: str = "fiel
     plan = cfg.coordination.patterns.get(cfg.coordination.pattern) if isinstance(cfg.coordination.pattern, int) \
         else None
     cycle = plan.cycle if plan is not None else 1
-    if plan is not None and 86_400 % cycle:
-        log.warning("cycle %d s does not divide a day: the bench's cycle position is off by the days between the "
-                    "log and today modulo the cycle", cycle)
     frame = pd.DataFrame({"TimeStamp": [r.time for r in rows], "DeviceId": device, "EventId": [r.code for r in rows],
                           "Parameter": [r.parameter for r in rows]})
     work.mkdir(parents=True, exist_ok=True)
     served = start_emulator(work / "serve.log", "--config", str(config), http=True)
     try:
         since = datetime.now()
+        offset = day_shift(cfg.emulator.start.date(), since.date(), cycle)
+        if offset:
+            log.info("cycle %d s does not divide a day: Signal-Replay starts %d s into the cycle (the %d days since "
+                     "the config's day)", cycle, offset, (since.date() - cfg.emulator.start.date()).days)
         time.sleep(warm_up_s)
         sim = sr.ATCSimulation(
             signals=[sr.SignalConfig(device, "127.0.0.1", udp_port=served.port, http_port=served.http_ports[0],
-                                     cycle_length=cycle, replay_latency_offset_seconds=LATENCY_S,
+                                     cycle_length=cycle, cycle_offset=offset, replay_latency_offset_seconds=LATENCY_S,
                                      snmp_community="private")],
             events=frame, replays=1, post_replay_settle_seconds=settle_s, final_collection_poll_seconds=1,
             final_collection_timeout_seconds=60, work_dir=work / "signal_replay", stop_on_conflict=False)
@@ -101,6 +105,13 @@ def replay(rows: Sequence[Row], config: Path, work: Path, *, device: str = "fiel
     return Replayed(matches[0] if matches else float("nan"), shift, list(rows), bench,
                     match_table(rows, bench, shift, tolerance_s, span=span),
                     green_table(rows, bench, shift, tolerance_s))
+
+
+def day_shift(log_day: date, bench_day: date, cycle: int) -> int:
+    """Seconds past a whole number of cycles Signal-Replay waits from the log's start (its ``cycle_offset``) so that
+    the bench, counting its cycles from ``bench_day``'s midnight, is where the log's controller was, counting from
+    ``log_day``'s: the days between them modulo the cycle (0 when the cycle divides a day)."""
+    return (bench_day - log_day).days * 86_400 % cycle
 
 
 def input_shift(rows: Sequence[Row], bench: Sequence[Event]) -> timedelta:

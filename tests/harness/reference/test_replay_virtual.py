@@ -13,6 +13,7 @@ import atspm
 
 from harness.reference import field_log, hires_file, replay_match, replay_virtual
 from harness.reference.hires_file import Row
+from harness.reference.replay import day_shift
 from harness.reference.replay_match import Ending, Equivalence, green_table, match_table, overall
 from harness.reference.round_trip import emulator_log
 from hils.protocol.hires import EventCode
@@ -131,3 +132,21 @@ def test_the_atspm_sample_replays_whole_at_its_floor() -> None:
     assert overall(table) >= 83.0
     green = green_table(rows, ran.events)
     assert sum(g.ended for g in green) >= 0.95 * sum(g.anchored for g in green)
+
+
+def test_signal_replay_starts_where_the_logs_cycle_was_on_any_day() -> None:
+    """A 130 s cycle does not divide a day: 2 years later the bench, counting its cycles from its own midnight, would
+    be days * 86,400 s mod 75 off the log's. Signal-Replay starts the replay when the time since the log's start is a
+    whole number of cycles past its cycle_offset (signal_replay 1.0.1 ``_wait_until_next_cycle``); given the day
+    shift there, the bench's cycle position at the start is the log's."""
+    cycle, offset = 130, 45
+    log_start = datetime(2024, 4, 15, 12, 0, 3)
+    bench_day = datetime(2026, 11, 27)
+    shift = day_shift(log_start.date(), bench_day.date(), cycle)
+    assert shift == (bench_day - datetime(2024, 4, 15)).days * 86_400 % cycle != 0
+    # the first second of the bench's day on which Signal-Replay's wait ends
+    now = next(bench_day + timedelta(seconds=k) for k in range(cycle)
+               if ((bench_day + timedelta(seconds=k)) - log_start).total_seconds() % cycle == shift)
+    seconds_of_day = (now - bench_day).total_seconds()
+    assert (seconds_of_day - offset) % cycle == ((log_start - datetime(2024, 4, 15)).total_seconds() - offset) % cycle
+    assert day_shift(log_start.date(), bench_day.date(), 80) == 0  # 80 s divides a day
