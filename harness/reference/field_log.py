@@ -94,6 +94,7 @@ TICK = timedelta(milliseconds=100)
 CALL_SHARE = 0.10  # a detector calls a phase when at least this share of its actuations registers the call
 LOCAL_ZERO = 5  # event 150's parameter at the local zero
 PASSAGE_SEEN = 3  # a phase's own most frequent gap counts as its passage when seen this often
+_INPUTS = frozenset({E.DETECTOR_ON, E.DETECTOR_OFF, E.PED_DETECTOR_ON, E.PED_DETECTOR_OFF})
 DELAY_SHARE = 0.3  # a detector's actuations followed by one phase's call the same time later this often: a delay
 #: The longest detector delay looked for (NTCIP 1202 vehicleDetectorDelay holds 0-255.0 s, "the period a detector
 #: actuation ... shall be delayed when the phase is not Green"; the longer, the likelier a chance coincidence).
@@ -229,15 +230,18 @@ def infer(rows: Sequence[Row], name: str = "field controller") -> Inferred:
     """The config of the controller whose log ``rows`` are (see the module's header for how)."""
     _check_numbers(rows)
     out = Inferred("")
-    greens = _greens(rows)
+    # What the controller did, without the inputs (detector and push-button events, most of a busy log): what reads
+    # only that scans it, a day's log in a fraction of the time.
+    events = [r for r in rows if r.code not in _INPUTS]
+    greens = _greens(events)
     phases = sorted(greens)
     if len(phases) < 2:
         raise FieldLogError(f"the log shows {len(phases)} phase(s) served (begin green, event 1, then begin yellow, "
                             "event 8); a config needs at least two")
     out.read.append(f"phases served: {', '.join(map(str, phases))}")
-    structure = _structure(phases, greens, _spans(rows, greens), out, _unbarred(rows))
-    shared_min = _mode(m for p in phases for m in _minimums(rows, p))
-    timing = {p: _timing(rows, p, greens[p], out, shared_min) for p in phases}
+    structure = _structure(phases, greens, _spans(events, greens), out, _unbarred(events))
+    shared_min = _mode(m for p in phases for m in _minimums(events, p))
+    timing = {p: _timing(events, p, greens[p], out, shared_min) for p in phases}
     detectors = _in_config(_detector_phases(rows, E.DETECTOR_ON, E.PHASE_CALL_REGISTERED, phases), "detector", out)
     pushes = _in_config(_detector_phases(rows, E.PED_DETECTOR_ON, E.PED_CALL_REGISTERED, phases), "push button", out)
     recalled = _uncalled(rows, phases, structure)
@@ -280,22 +284,23 @@ def infer(rows: Sequence[Row], name: str = "field controller") -> Inferred:
         out.read.append("push buttons: " + ", ".join(f"{d}->{q}" for d, q in sorted(pushes.items()) if q))
     out.guessed.append("every calling detector also extends its phase's green (detector delay and extension are not "
                        "in the log: its detector events come after them)")
-    coordination = _coordination(rows, structure, timing, greens, out)
+    day0 = datetime.combine(rows[0].time.date(), datetime.min.time())
+    coordination = _coordination(events, day0, structure, timing, greens, out)
     coordinated = set(coordination["coord"]) if coordination else set()
     for p in recalled - coordinated:
-        _recall(rows, p, timing[p], out)
-    duals = _dual_entries(rows, structure, recalled)
+        _recall(events, p, timing[p], out)
+    duals = _dual_entries(events, structure, recalled)
     for p in duals:
         timing[p]["dual_entry"] = True
     if duals:
         out.read.append(f"dual entry: phase(s) {', '.join(map(str, duals))} (began green uncalled beside the other "
                         "ring's phase as the rings crossed a barrier, at least twice)")
-    overlaps = _overlaps(rows, phases, out)
+    overlaps = _overlaps(events, phases, out)
     out.guessed.append("recalls and dual entry only as said, no red revert or max 2 (the log shows the service, not "
                        "the settings); "
                        "dynamic omits (46-49 logged by the field controller's own logic) are not modelled")
     start = rows[0].time.replace(microsecond=rows[0].time.microsecond // 100_000 * 100_000)
-    startup = _startup(rows, greens, structure, out)
+    startup = _startup(events, greens, structure, out)
     out.toml = _toml(name, structure, timing, detectors, pushes, coordination, overlaps, startup, start)
     return out
 
@@ -693,7 +698,7 @@ def _reduction(samples: Sequence[tuple[float, float]]) -> dict[str, float] | Non
             "time_to_reduce": min(255, max(1, round((least - passage) / slope))), "min_gap": least}
 
 
-def _coordination(rows: Sequence[Row], structure: Structure, timing: Mapping[int, dict[str, Any]],
+def _coordination(rows: Sequence[Row], day0: datetime, structure: Structure, timing: Mapping[int, dict[str, Any]],
                   greens: Mapping[int, list[tuple[datetime, datetime]]], out: Inferred) -> dict[str, Any] | None:
     zeros = sorted({r.time for r in rows if r.code == E.COORD_CYCLE_STATE_CHANGE and r.parameter == LOCAL_ZERO})
     if len(zeros) < 2:
@@ -706,7 +711,6 @@ def _coordination(rows: Sequence[Row], structure: Structure, timing: Mapping[int
         raise FieldLogError(f"local zeros (event 150, parameter 5) at {_when(a)} and {_when(b)}: {s:g} s apart, as "
                             f"most are, a cycle of {cycle} s; allowed: {CYCLES[0]}-{CYCLES[1]} s (NTCIP 1202 "
                             "patternCycleTime)")
-    day0 = datetime.combine(rows[0].time.date(), datetime.min.time())
     zero = _mode(round(_since_midnight(t, day0) % cycle, 1) for t in zeros)
     ringed = set(structure.ring(1) + structure.ring(2))
     yields = Counter(r.parameter for r in rows if r.code == E.COORD_YIELD_POINT and r.parameter in ringed)
