@@ -339,3 +339,17 @@ def test_a_constant_gap_from_actuation_to_call_is_said_as_a_detector_delay_not_a
     assert said == ["detector 9: calls phase 3 3 s after its actuation (12 of 12): a detector delay, not applied (the "
                     "config has no detector delay), so it calls nothing"]
     assert inferred.config().detectors.get(9, 0) == 0
+
+
+def test_a_coordinated_phases_yield_point_is_the_first_place_its_greens_end_again_and_again() -> None:
+    """Its greens' ends read as one arc of the cycle, from past the widest stretch without one: ends at 69.5 s (3
+    times) then from 7.7 s to 13.5 s (with the other ring's phase) give 69.5 s, though 7.7 s is smaller; a place seen
+    fewer than 3 times is no yield point."""
+    day0 = datetime(2024, 4, 15)
+
+    def ends(*seconds: float) -> list[Row]:
+        return [Row(day0 + timedelta(seconds=75 * k + s), 8, 2) for k, s in enumerate(seconds)]
+
+    assert field_log._yield_point(ends(69.5, 69.5, 7.7, 13.5, 13.5, 69.5, 13.5, 10.2), 2, day0, 75) == 69.5
+    assert field_log._yield_point(ends(69.5, 7.7, 13.5, 13.5, 69.5, 13.5, 10.2), 2, day0, 75) == 13.5
+    assert field_log._yield_point(ends(69.5, 7.7, 10.2), 2, day0, 75) is None
