@@ -789,7 +789,8 @@ def _own_yield_points(rows: Sequence[Row], structure: Structure, coord: Mapping[
         at_end[c] = end
         out.read.append(f"coordinated phase {c}: its yield point at {point:g} s of the day modulo the cycle, where its "
                         f"greens end when nothing holds them, {short:g} s before its barrier group's end; phase "
-                        f"{free} (not in the log, timed as {twin}) fills its ring's split there")
+                        f"{free} (not in the log, timed as {twin}) fills its ring's split there: ring {r} "
+                        f"{structure.ring(r)}, barrier groups {structure.barriers}")
 
 
 def _yield_point(rows: Sequence[Row], phase: int, day0: datetime, cycle: int) -> float | None:
