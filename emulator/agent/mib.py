@@ -123,6 +123,8 @@ from hils.protocol.ntcip import (
     UNIT_STARTUP_FLASH,
     VEHICLE_DETECTOR_CALL_PHASE,
     VEHICLE_DETECTOR_CONTROL_GROUP_NUMBER,
+    VEHICLE_DETECTOR_DELAY,
+    VEHICLE_DETECTOR_EXTEND,
     VEHICLE_DETECTOR_NUMBER,
     VEHICLE_DETECTOR_OPTIONS,
     VEHICLE_DETECTOR_STATUS_GROUP_NUMBER,
@@ -404,6 +406,8 @@ class MibView:
         out.extend(Instance(VEHICLE_DETECTOR_OPTIONS.instance(d), VEHICLE_DETECTOR_OPTIONS,
                             _constant(int(DETECTOR_OPTIONS if d in cfg.detectors else 0)))
                    for d in _rows(cfg.detectors))
+        out += [Instance(obj.instance(d), obj, *_detector_timer(c, d, name))
+                for d in _rows(cfg.detectors) for obj, name in _DETECTOR_TIMERS.items()]
         out += _detectors(cfg.ped_detectors, (MAX_PED_DETECTORS, PED_DETECTOR_NUMBER, PED_DETECTOR_CALL_PHASE),
                           (MAX_PED_DETECTOR_GROUPS,), (PED_DETECTOR_STATUS_GROUP_NUMBER, PED_DETECTOR_STATUS_ACTIVE),
                           (PED_DETECTOR_CONTROL_GROUP_NUMBER, PED_DETECTOR_ACTUATION),
@@ -696,6 +700,21 @@ def _field_access(c: Controller | DelayedController, row: Any, name: str, unit: 
         c.touch()
 
     return lambda: getattr(row, name) // unit, write
+
+
+#: Writable detector table columns (tenths, the model's ticks): the detector unit's timer each sets.
+_DETECTOR_TIMERS = {VEHICLE_DETECTOR_DELAY: "delay", VEHICLE_DETECTOR_EXTEND: "extend"}
+
+
+def _detector_timer(c: Controller | DelayedController, d: int, name: str
+                    ) -> tuple[Callable[[], int], Callable[[int], None]]:
+    """Read and write one timer of detector ``d`` (:mod:`emulator.model.detectors`), acting from the next tick."""
+
+    def write(v: int) -> None:
+        c.detectors.retime(d, name, v)
+        c.touch()
+
+    return lambda: c.detectors.timer(d, name), write
 
 
 def _constant(value: Value) -> Callable[[], Value]:

@@ -32,6 +32,8 @@ from hils.protocol.ntcip import (
     PREEMPT_TABLE,
     UNIT_BACKUP_TIME,
     UNIT_STARTUP_FLASH,
+    VEHICLE_DETECTOR_DELAY,
+    VEHICLE_DETECTOR_EXTEND,
     ObjectDef,
     OverlapColumn,
     PhaseColumn,
@@ -198,6 +200,22 @@ OVERLAP_TURNS = ("left", "right")
 
 
 @dataclass(frozen=True, slots=True)
+class DetectorTiming:
+    """A vehicle detector's timers, in seconds (all 0: the actuation is the call, as it comes and goes).
+
+    NTCIP 1202 vehicleDetectorDelay: "The period a detector actuation (input recognition) shall be delayed when the
+    phase is not Green"; vehicleDetectorExtend: "The period a vehicle detector actuation (input duration) shall be
+    extended from the point of termination, when the phase is Green". Carryover has no NTCIP object: it is the
+    detector unit's own output extension, "the time following the loss of detection before the Detect Output is
+    dropped" whatever the phase shows (RAE H2 loop detector manual, "Detect Output Extension"); a controller's
+    detector table carries it beside delay and extend."""
+
+    delay: float = 0.0
+    extend: float = 0.0
+    carryover: float = 0.0
+
+
+@dataclass(frozen=True, slots=True)
 class Overlap:
     """One row of the overlap table: a signal output driven by its included (parent) phases.
 
@@ -355,6 +373,7 @@ class IntersectionConfig:
     emulator: EmulatorParams = field(default_factory=EmulatorParams)
     detector_phases: Mapping[int, int] = field(default_factory=dict)  # the [detectors] table, if any
     detector_lanes: Mapping[int, str] = field(default_factory=dict)  # the SUMO lane of a detector given one
+    detector_timing: Mapping[int, DetectorTiming] = field(default_factory=dict)  # a detector given any timer
     ped_detector_phases: Mapping[int, int] = field(default_factory=dict)  # the [pedestrian_detectors] table, if any
     overlaps: Mapping[int, Overlap] = field(default_factory=dict)  # by overlap number (1 = A)
     preempts: Mapping[int, Preempt] = field(default_factory=dict)  # by preempt number
@@ -837,32 +856,49 @@ def _ped_detectors(raw: Any, phases: Mapping[int, Phase], source: str) -> dict[i
 
 
 def _detectors(raw: Any, phases: Mapping[int, Phase], source: str) -> dict[str, dict[int, Any]]:
-    """``[detectors]``: vehicle detector number (1-64) = the phase it calls, or ``{ phase = P, lane = "ID" }``
-    for a loop on one SUMO lane (without a lane, the detector sees every approach lane of its phase). Phase 0 is
-    NTCIP's vehicleDetectorCallPhase 0: the controller logs the detector and places no call (a count station)."""
+    """``[detectors]``: vehicle detector number (1-128) = the phase it calls, or a table ``{ phase = P, lane = "ID",
+    delay = s, extend = s, carryover = s }``: a loop on one SUMO lane (without a lane, the detector sees every
+    approach lane of its phase) and its timers (:class:`DetectorTiming`). Phase 0 is NTCIP's vehicleDetectorCallPhase
+    0: the controller logs the detector and places no call (a count station)."""
     if not isinstance(raw, dict):
         raise ConfigError(source, "detectors", "must be a table: detector number = phase it calls, e.g. 1 = 2, or "
-                                               "1 = { phase = 2, lane = \"E2C_0\" }")
+                                               "1 = { phase = 2, lane = \"E2C_0\", delay = 3.0 }")
     out: dict[int, int] = {}
     lanes: dict[int, str] = {}
+    timing: dict[int, DetectorTiming] = {}
     for key, value in raw.items():
         where = f"detectors.{key}"
         if not (key.isdigit() and int(key) in DETECTOR_NUMBERS):
-            raise ConfigError(source, where, "unknown detector; allowed: detector numbers 1-64")
+            raise ConfigError(source, where, f"unknown detector; allowed: detector numbers 1-{DETECTOR_NUMBERS[-1]}")
         if isinstance(value, dict):
-            _unknown(value, ("phase", "lane"), f"{where}.", source)
+            _unknown(value, ("phase", "lane", *_DETECTOR_TIMERS), f"{where}.", source)
             phase, lane = value.get("phase"), value.get("lane")
             if lane is not None and not (isinstance(lane, str) and lane):
                 raise ConfigError(source, f"{where}.lane", "must be a SUMO lane id, e.g. \"E2C_0\"")
             if lane is not None:
                 lanes[int(key)] = lane
+            timers = {name: float(_number(value, name, f"{where}.", source, 0.0, low=0, high=high, step=0.1,
+                                          ntcip=carrier))
+                      for name, (carrier, high) in _DETECTOR_TIMERS.items()}
+            if any(timers.values()):
+                timing[int(key)] = DetectorTiming(**timers)
         else:
             phase = value
         if isinstance(phase, bool) or not isinstance(phase, int) or (phase not in phases and phase != 0):
             raise ConfigError(source, where, f"calls phase {phase!r}; allowed: the configured phases "
                                              f"{', '.join(map(str, phases))}, or 0 (logged, calls no phase)")
         out[int(key)] = phase
-    return {"detector_phases": out, "detector_lanes": lanes}
+    return {"detector_phases": out, "detector_lanes": lanes, "detector_timing": timing}
+
+
+#: Each detector timer of the config, the object that carries it (None: no NTCIP object) and its highest value in
+#: seconds: vehicleDetectorDelay "0-255.0 sec" (a value above 2550 tenths "is undefined"), vehicleDetectorExtend
+#: "0-25.5 sec"; carryover, carried by no object, as long as an extension.
+_DETECTOR_TIMERS: dict[str, tuple[Carrier | None, float]] = {
+    "delay": ((VEHICLE_DETECTOR_DELAY, 10), 255.0),
+    "extend": ((VEHICLE_DETECTOR_EXTEND, 10), 25.5),
+    "carryover": (None, 25.5),
+}
 
 
 # --- [coordination] ----------------------------------------------------------------------------

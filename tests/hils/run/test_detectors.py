@@ -17,8 +17,11 @@ from hils.protocol.config import ConfigError, IntersectionConfig, parse
 from hils.protocol.ntcip import (
     DETECTOR_ACTUATION,
     DETECTOR_STATUS_ACTIVE,
+    MAX_VEHICLE_DETECTOR_STATUS_GROUPS,
     MAX_VEHICLE_DETECTORS,
     VEHICLE_DETECTOR_CALL_PHASE,
+    VEHICLE_DETECTOR_DELAY,
+    VEHICLE_DETECTOR_EXTEND,
     StatusColumn,
     oid_str,
     status_oid,
@@ -54,6 +57,22 @@ def test_detector_objects_through_net_snmp(tmp_path: Path) -> None:
         assert snmp("snmpget", served.port, active).strip().endswith("INTEGER: 4")
         table = snmp("snmpwalk", served.port, oid_str(VEHICLE_DETECTOR_CALL_PHASE.prefix))
         assert [line.rsplit(" ", 1)[-1] for line in table.strip().splitlines()] == [str(p) for p in range(1, 9)]
+    finally:
+        served.stop()
+
+
+def test_detector_delay_and_extend_through_net_snmp(tmp_path: Path, paper_toml: str) -> None:
+    config = tmp_path / "timed.toml"
+    config.write_text(paper_toml + "\n[detectors]\n4 = { phase = 4, delay = 3.0, extend = 1.5 }\n")
+    served = start_emulator(tmp_path / "serve.log", "--config", str(config))
+    try:
+        delay, extend = oid_str(VEHICLE_DETECTOR_DELAY.instance(4)), oid_str(VEHICLE_DETECTOR_EXTEND.instance(4))
+        got = snmp("snmpget", served.port, delay, extend).strip().splitlines()
+        assert [line.rsplit(" ", 1)[-1] for line in got] == ["30", "15"]  # tenths of a second
+        snmp("snmpset", served.port, delay, "i", "55")
+        assert snmp("snmpget", served.port, delay).strip().endswith("INTEGER: 55")
+        table = snmp("snmpwalk", served.port, oid_str(VEHICLE_DETECTOR_EXTEND.prefix))
+        assert [line.rsplit(" ", 1)[-1] for line in table.strip().splitlines()] == ["0", "0", "0", "15"]
     finally:
         served.stop()
 
