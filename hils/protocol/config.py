@@ -87,10 +87,12 @@ class NextPhaseLock(StrEnum):
     RED_END = "red_end"      # a call during the clearance may still redirect it on the same side of the barrier
 
 
-#: What a config numbers: phases (NTCIP 1202 maxPhases, 1-255), the emulator's vehicle detectors and push buttons
-#: (1-64), overlaps (A-P, NTCIP's 1-16), and a pattern's cycle (patternCycleTime: "NEMA TS 2 range: 30-255").
+#: What a config numbers: phases (NTCIP 1202 maxPhases, 1-255), vehicle detectors (1-128: the emulator's
+#: maxVehicleDetectors, which NTCIP lets be 1-255), push buttons (maxPedestrianDetectors: 1-255), overlaps (A-P, NTCIP's
+#: 1-16), and a pattern's cycle (patternCycleTime: "NEMA TS 2 range: 30-255").
 PHASE_NUMBERS = range(1, 256)
-DETECTOR_NUMBERS = range(1, 65)
+DETECTOR_NUMBERS = range(1, 129)
+PED_DETECTOR_NUMBERS = range(1, 256)
 OVERLAP_NUMBERS = range(1, 17)
 CYCLE_SECONDS = range(30, 256)
 
@@ -839,15 +841,16 @@ def from_dict(raw: Mapping[str, Any], source: str = "<memory>") -> IntersectionC
 
 
 def _ped_detectors(raw: Any, phases: Mapping[int, Phase], source: str) -> dict[int, int]:
-    """``[pedestrian_detectors]``: push button number (1-64) = the phase whose pedestrian call it places."""
+    """``[pedestrian_detectors]``: push button number (1-255) = the phase whose pedestrian call it places."""
     if not isinstance(raw, dict):
         raise ConfigError(source, "pedestrian_detectors", "must be a table: push button number = phase it calls, "
                                                           "e.g. 1 = 2")
     out: dict[int, int] = {}
     for key, phase in raw.items():
         where = f"pedestrian_detectors.{key}"
-        if not (key.isdigit() and int(key) in DETECTOR_NUMBERS):
-            raise ConfigError(source, where, "unknown pedestrian detector; allowed: numbers 1-64")
+        if not (key.isdigit() and int(key) in PED_DETECTOR_NUMBERS):
+            raise ConfigError(source, where,
+                              f"unknown pedestrian detector; allowed: numbers 1-{PED_DETECTOR_NUMBERS[-1]}")
         if isinstance(phase, bool) or phase not in phases:
             raise ConfigError(source, where, f"calls phase {phase!r}; allowed: the configured phases "
                                              f"{', '.join(map(str, phases))}")
