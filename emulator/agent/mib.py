@@ -389,7 +389,7 @@ class MibView:
                              _group_writer(lambda col=col: c.control[col],
                                            lambda phases, col=col: c.set_control(col, phases), g))
                     for col in ControlColumn]
-        out += _overlaps(c, st)
+        out += _overlaps(c, st, self.edition)
         out += _preempts(c)
         # One sequence (sequenceData 1.r): the rings' order the config gives.
         out += [Instance(MAX_RINGS.instance(), MAX_RINGS, _constant(len(cfg.rings))),
@@ -574,7 +574,8 @@ def _coordination(c: Controller | DelayedController) -> list[Instance]:
 
 _OVERLAP_TYPES = {OverlapKind.NORMAL: OverlapType.NORMAL,
                   OverlapKind.MINUS_GREEN_YELLOW: OverlapType.MINUS_GREEN_YELLOW,
-                  OverlapKind.FYA: OverlapType.OTHER}
+                  OverlapKind.FYA: OverlapType.OTHER,
+                  OverlapKind.TRANSIT: OverlapType.TRANSIT_2}
 # Writable overlap columns: the OverlapTiming field each sets, and ticks per unit of the NTCIP value.
 _OVERLAP_TIMING: dict[OverlapColumn, tuple[str, int]] = {
     OverlapColumn.TRAIL_GREEN: ("trail_green", 10),
@@ -583,9 +584,11 @@ _OVERLAP_TIMING: dict[OverlapColumn, tuple[str, int]] = {
 }
 
 
-def _overlaps(c: Controller | DelayedController, st: Controller | DelayedController) -> list[Instance]:
+def _overlaps(c: Controller | DelayedController, st: Controller | DelayedController,
+              edition: Version) -> list[Instance]:
     """The overlap node: the overlap table (type and phases from the config, the trailing times writable, acting
-    from the next trailing interval on) and the overlap status by group of 8."""
+    from the next trailing interval on) and the overlap status by group of 8. A transit bar is v03's transit-2; v02
+    has no such type, other(1) there."""
     cfg = c.config
     numbers = _rows(cfg.overlaps)
     groups = group_count(numbers[-1])
@@ -594,7 +597,9 @@ def _overlaps(c: Controller | DelayedController, st: Controller | DelayedControl
     for n in numbers:
         o = cfg.overlaps.get(n) or Overlap(n, OverlapKind.NORMAL, ())  # unprogrammed: no included phase
         fixed: dict[OverlapColumn, Value] = {
-            OverlapColumn.NUMBER: n, OverlapColumn.TYPE: int(_OVERLAP_TYPES[o.kind]),
+            OverlapColumn.NUMBER: n,
+            OverlapColumn.TYPE: int(OverlapType.OTHER if o.kind is OverlapKind.TRANSIT and edition is Version.V02
+                                    else _OVERLAP_TYPES[o.kind]),
             OverlapColumn.INCLUDED_PHASES: bytes(o.included), OverlapColumn.MODIFIER_PHASES: bytes(o.modifiers)}
         out += [Instance(OVERLAP_TABLE[col].instance(n), OVERLAP_TABLE[col], lambda v=v: v) for col, v in fixed.items()]
         timing = c.overlaps.timing.get(n) or OverlapTiming.of(o)

@@ -6,8 +6,8 @@ Rules of this file
   next display (the same one: it stays). :meth:`Overlaps.step` evaluates them once per controller tick, after
   the rings have timed, from what the phases show then.
 - Time is integer ticks, as in the controller; only the overlap's own trailing intervals count ticks.
-- An overlap turns green only from red, from its trailing green or (a flashing yellow arrow) from flashing:
-  never from a yellow.
+- An overlap turns green only from red, from its trailing green, (a flashing yellow arrow) from flashing or (a
+  transit bar) from its flashing green: never from a yellow.
 
 Theory of operation
 -------------------
@@ -49,6 +49,16 @@ controllers whose "Lock Inhibit" is off, which "insures that the overlap clearan
 next eligible phase is serviced" (Naztec overlap programming, MM 1-5-1). Without a trailing green the overlap
 clears with its parent's yellow and is red during its parent's red clearance.
 
+A transit bar (``transit``) is NTCIP 1202 v03's transit-2: "The overlap output drives a 2-section bar signal for
+transit vehicles using overlap green (vertical bar) and red (horizontal bar) outputs. The overlap output shall be
+green ... when an overlap included phase is green. The overlap output shall be flashing green when an overlap
+included phase is yellow and an overlap included phase is not next. The overlap output shall be red whenever an
+overlap included phase is red." It has no yellow lamp, so it goes from (flashing) green to red, the one overlap
+that does (a log shows it: MaxTime 1015's overlaps A and B log begin green, 61, then red, 64, never a yellow); its
+flashing green is its green output, flashing, and the monitor does not time a yellow on its channel (an MMU's
+"Minimum Yellow Change Disable" jumper for that channel, Reno A&E MMU2-1600GE operations manual). It has neither
+modifiers nor a trailing green.
+
 The flashing yellow arrow (``fya``) is not in NTCIP 1202 v02 (a vendor's overlapType other(1) there); its
 v03 objects were found in no source we could read, so its status is served with the v02 objects: the arrow's
 yellow lamp sets the overlap's yellow bit, steady or flashing. It follows the practice the sources agree on:
@@ -76,6 +86,7 @@ class Show(StrEnum):
     GREEN = "green"
     YELLOW = "yellow"  # clearing with a parent's yellow
     FLASHING = "flashing"  # a flashing yellow arrow's permissive indication
+    FLASHING_GREEN = "flashing_green"  # a transit bar's green, flashing while its included phase clears
     TRAIL_GREEN = "trail_green"
     TRAIL_YELLOW = "trail_yellow"
     TRAIL_RED = "trail_red"
@@ -87,7 +98,9 @@ class Cond(Enum):
     HELD = "its included phases hold it green (and no modifier of a minus-green-yellow overlap is green or next)"
     FLASH = "a flashing yellow arrow's permissive (modifier) phase is green"
     MODIFIED = "a minus-green-yellow overlap's modifier phase is green or committed next"
-    TRAILS = "it has a trailing green"
+    TRAILS = "it has a trailing green (a transit bar has none)"
+    BAR_CLEARS = "it is a transit bar and the yellow of one of its included phases starts now"
+    BAR = "it is a transit bar (it has no yellow lamp)"
     CLEARS = "the yellow of a phase it follows starts now (and no modifier of a minus-green-yellow overlap is yellow)"
     CLEARING = "a phase it follows is yellow (and no modifier of a minus-green-yellow overlap is)"
     TIMED = "its trailing interval has run its length"
@@ -97,7 +110,9 @@ class Cond(Enum):
 _NEXT: dict[Show, tuple[tuple[Cond, Show], ...]] = {
     Show.RED: ((Cond.HELD, Show.GREEN), (Cond.FLASH, Show.FLASHING), (Cond.ALWAYS, Show.RED)),
     Show.GREEN: ((Cond.HELD, Show.GREEN), (Cond.MODIFIED, Show.TRAIL_YELLOW), (Cond.TRAILS, Show.TRAIL_GREEN),
-                 (Cond.CLEARS, Show.YELLOW), (Cond.ALWAYS, Show.TRAIL_YELLOW)),
+                 (Cond.BAR_CLEARS, Show.FLASHING_GREEN), (Cond.BAR, Show.RED), (Cond.CLEARS, Show.YELLOW),
+                 (Cond.ALWAYS, Show.TRAIL_YELLOW)),
+    Show.FLASHING_GREEN: ((Cond.HELD, Show.GREEN), (Cond.CLEARING, Show.FLASHING_GREEN), (Cond.ALWAYS, Show.RED)),
     Show.FLASHING: ((Cond.HELD, Show.GREEN), (Cond.FLASH, Show.FLASHING), (Cond.CLEARING, Show.YELLOW),
                     (Cond.ALWAYS, Show.RED)),
     Show.YELLOW: ((Cond.CLEARING, Show.YELLOW), (Cond.ALWAYS, Show.RED)),
@@ -107,7 +122,7 @@ _NEXT: dict[Show, tuple[tuple[Cond, Show], ...]] = {
     Show.TRAIL_RED: ((Cond.TIMED, Show.RED), (Cond.ALWAYS, Show.TRAIL_RED)),
 }
 
-_GREEN = frozenset({Show.GREEN, Show.TRAIL_GREEN})
+_GREEN = frozenset({Show.GREEN, Show.TRAIL_GREEN, Show.FLASHING_GREEN})
 _YELLOW = frozenset({Show.YELLOW, Show.TRAIL_YELLOW, Show.FLASHING})
 #: Displays that outlast the overlap's parents: a phase conflicting with the overlap waits for them to end.
 TRAILING = frozenset({Show.TRAIL_GREEN, Show.TRAIL_YELLOW, Show.TRAIL_RED})
@@ -221,7 +236,11 @@ class Overlaps:
         if cond is Cond.MODIFIED:
             return minus and not (greens | phases.committed).isdisjoint(o.modifiers)
         if cond is Cond.TRAILS:
-            return self.timing[n].trail_green > 0
+            return self.timing[n].trail_green > 0 and o.kind is not OverlapKind.TRANSIT
+        if cond is Cond.BAR:
+            return o.kind is OverlapKind.TRANSIT
+        if cond is Cond.BAR_CLEARS:
+            return o.kind is OverlapKind.TRANSIT and not phases.starting.isdisjoint(o.included)
         if cond in (Cond.CLEARS, Cond.CLEARING):
             followed = o.included + o.modifiers if o.kind is OverlapKind.FYA else o.included
             clearing = phases.starting if cond is Cond.CLEARS else yellows

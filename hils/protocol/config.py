@@ -196,6 +196,7 @@ class OverlapKind(StrEnum):
     MINUS_GREEN_YELLOW = "minus_green_yellow"  # as normal, but not while a modifier phase is green
     FYA = "fya"  # a flashing yellow arrow: green arrow with its protected (included) phases, flashing yellow while a
     # modifier (the opposing through, the movement it yields to) is green
+    TRANSIT = "transit"  # NTCIP 1202 v03 transit-2: a 2-section bar, green, flashing green, red: never yellow
 
 
 OVERLAP_TURNS = ("left", "right")
@@ -1081,7 +1082,10 @@ def _overlap(number: int, raw: Any, w: str, phases: Mapping[int, Phase], compati
     if kind is OverlapKind.NORMAL and modifiers:
         raise ConfigError(source, f"{w}modifiers", "is given for a normal overlap; allowed: none (modifiers make a "
                                                    "minus_green_yellow or fya overlap)")
-    if kind is not OverlapKind.NORMAL and not modifiers:
+    if kind is OverlapKind.TRANSIT and modifiers:
+        raise ConfigError(source, f"{w}modifiers", "is given for a transit overlap; allowed: none (NTCIP 1202 v03 "
+                                                   "transit-2 is controlled by its included phases alone)")
+    if kind not in (OverlapKind.NORMAL, OverlapKind.TRANSIT) and not modifiers:
         raise ConfigError(source, f"{w}modifiers", f"is required for type {kind.value!r}: "
                                                    + ("the phases whose green holds the overlap red"
                                                       if kind is OverlapKind.MINUS_GREEN_YELLOW else
@@ -1096,9 +1100,11 @@ def _overlap(number: int, raw: Any, w: str, phases: Mapping[int, Phase], compati
                                                        "permissive phases that conflict with every included phase")
     trail_green = _number(raw, "trail_green", w, source, 0, integer=True,
                           ntcip=(OVERLAP_TABLE[OverlapColumn.TRAIL_GREEN], 1))
-    if trail_green and kind is OverlapKind.FYA:
-        raise ConfigError(source, f"{w}trail_green", "is given for an fya overlap; allowed: 0 (a flashing yellow "
-                                                     "arrow clears with its phases)")
+    if trail_green and kind in (OverlapKind.FYA, OverlapKind.TRANSIT):
+        raise ConfigError(source, f"{w}trail_green", "is given for " + (
+            "an fya overlap; allowed: 0 (a flashing yellow arrow clears with its phases)" if kind is OverlapKind.FYA
+            else "a transit overlap; allowed: 0 (a transit bar flashes its green through its phases' yellow and has "
+                 "no yellow of its own)"))
     trail_yellow = _number(raw, "trail_yellow", w, source, 3.0, step=0.1,
                            ntcip=(OVERLAP_TABLE[OverlapColumn.TRAIL_YELLOW], 10))
     trail_red = _number(raw, "trail_red", w, source, 0.0, step=0.1, ntcip=(OVERLAP_TABLE[OverlapColumn.TRAIL_RED], 10))

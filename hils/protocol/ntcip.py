@@ -415,11 +415,12 @@ def overlap_letter(number: int) -> str:
 
 class OverlapType(IntEnum):
     """overlapType (A.9.2.1.2). NTCIP 1202 v02 knows normal and minusGreenYellow; a flashing yellow arrow is a
-    vendor's type there, other(1)."""
+    vendor's type there, other(1). v03 adds transit-2 (9), a 2-section transit bar."""
 
     OTHER = 1
     NORMAL = 2
     MINUS_GREEN_YELLOW = 3
+    TRANSIT_2 = 9
 
 
 class OverlapColumn(IntEnum):
@@ -447,7 +448,8 @@ class OverlapStatusColumn(IntEnum):
 # range: 3.0-25.5 sec", as the phase table's yellow change).
 OVERLAP_TABLE: dict[OverlapColumn, ObjectDef] = {
     OverlapColumn.NUMBER: _o("overlapNumber", (9, 2, 1, 1), low=1),
-    OverlapColumn.TYPE: _o("overlapType", (9, 2, 1, 2), access=Access.READ_WRITE, low=1, high=3),
+    # 1-3 as v02 has them, and v03's transit-2 (9), the one type v03 added that the emulator serves.
+    OverlapColumn.TYPE: _o("overlapType", (9, 2, 1, 2), access=Access.READ_WRITE, low=1, high=9),
     OverlapColumn.INCLUDED_PHASES: _o("overlapIncludedPhases", (9, 2, 1, 3), Syntax.OCTET_STRING,
                                       access=Access.READ_WRITE),
     OverlapColumn.MODIFIER_PHASES: _o("overlapModifierPhases", (9, 2, 1, 4), Syntax.OCTET_STRING,
