@@ -343,3 +343,13 @@ def test_an_overlap_that_never_shows_a_yellow_is_a_transit_bar() -> None:
     assert {n: (o.kind.value, o.included) for n, o in overlaps.items() if n <= 3} == {
         1: ("transit", (2, 6)), 2: ("transit", (2, 6)), 3: ("normal", (2,))}
     assert any("a transit bar of them (transit-2)" in line for line in inferred.read)
+
+
+def test_detectors_past_64_go_into_the_config() -> None:
+    """Detectors 65 and 66 (the issue's coordinated MaxTime logs had them) call their phases in the config written
+    from the log, as detector 128 would; before, past 64 they were left out."""
+    drawn = round_trip.random_config(random.Random(0), recalls=(), dual_entry=False, lag=False, coordination=False,
+                                     detector_timers=False)
+    text = drawn.toml + "[detectors]\n" + "\n".join(f"{p} = {p}" for p in range(1, 9)) + "\n65 = 4\n66 = 8\n"
+    got = field_log.infer(round_trip.emulator_log(config_mod.parse(text, "many.toml"), 600, seed=4)).config()
+    assert {d: got.detectors.get(d) for d in (65, 66)} == {65: 4, 66: 8}
