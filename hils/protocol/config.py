@@ -896,8 +896,8 @@ def _detectors(raw: Any, phases: Mapping[int, Phase], source: str) -> dict[str, 
 
 
 #: Each detector timer of the config, the object that carries it (None: no NTCIP object) and its highest value in
-#: seconds: vehicleDetectorDelay "0-255.0 sec" (a value above 2550 tenths "is undefined"), vehicleDetectorExtend
-#: "0-25.5 sec"; carryover, carried by no object, as long as an extension.
+#: seconds: vehicleDetectorDelay "0-255.0 sec", vehicleDetectorExtend "0-25.5 sec"; carryover, carried by no object,
+#: as long as an extension.
 _DETECTOR_TIMERS: dict[str, tuple[Carrier | None, float]] = {
     "delay": ((VEHICLE_DETECTOR_DELAY, 10), 255.0),
     "extend": ((VEHICLE_DETECTOR_EXTEND, 10), 25.5),

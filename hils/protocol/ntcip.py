@@ -585,9 +585,10 @@ class DetectorOption(IntFlag):
 MAX_VEHICLE_DETECTORS = _o("maxVehicleDetectors", (2, 1), low=1)
 VEHICLE_DETECTOR_OPTIONS = _o("vehicleDetectorOptions", (2, 2, 1, 2), access=Access.READ_WRITE)
 VEHICLE_DETECTOR_CALL_PHASE = _o("vehicleDetectorCallPhase", (2, 2, 1, 4), access=Access.READ_WRITE)
-# vehicleDetectorDelay (tenths, "0-255.0 sec"; "a value between 2551 and 65535, inclusive, the parameter is
-# undefined") and vehicleDetectorExtend (tenths, "0-25.5 sec").
-VEHICLE_DETECTOR_DELAY = _o("vehicleDetectorDelay", (2, 2, 1, 6), access=Access.READ_WRITE, high=65535)
+# vehicleDetectorDelay (tenths, "0-255.0 sec"; "If a management station attempts to set a value between 2551 and
+# 65535, inclusive, the parameter is undefined": such a SET is refused) and vehicleDetectorExtend (tenths, "0-25.5
+# sec").
+VEHICLE_DETECTOR_DELAY = _o("vehicleDetectorDelay", (2, 2, 1, 6), access=Access.READ_WRITE, high=2550)
 VEHICLE_DETECTOR_EXTEND = _o("vehicleDetectorExtend", (2, 2, 1, 7), access=Access.READ_WRITE)
 MAX_VEHICLE_DETECTOR_STATUS_GROUPS = _o("maxVehicleDetectorStatusGroups", (2, 3), low=1)
 DETECTOR_STATUS_ACTIVE = _o("vehicleDetectorStatusGroupActive", (2, 4, 1, 2))

@@ -10,7 +10,7 @@ from emulator.model.controller import Controller
 from emulator.model.datalogger import DataLogger
 from hils.protocol.config import ConfigError, DetectorTiming, IntersectionConfig, parse
 from hils.protocol.hires import EventCode as E
-from hils.protocol.ntcip import VEHICLE_DETECTOR_DELAY, VEHICLE_DETECTOR_EXTEND
+from hils.protocol.ntcip import VEHICLE_DETECTOR_DELAY, VEHICLE_DETECTOR_EXTEND, ErrorStatus, SnmpError
 
 
 def with_detector(paper_toml: str, entry: str) -> IntersectionConfig:
@@ -131,3 +131,8 @@ def test_the_detector_table_serves_delay_and_extend_and_a_set_retimes_the_detect
     assert mib.get_many([VEHICLE_DETECTOR_DELAY.instance(4)]) == (10,)
     c.set_actuations({4})
     assert steps(c, 11) == [False] * 10 + [True]
+    # "If a management station attempts to set a value between 2551 and 65535, inclusive, the parameter is undefined":
+    # the emulator refuses it, and keeps its delay.
+    with pytest.raises(SnmpError) as info:
+        mib.set_many([(VEHICLE_DETECTOR_DELAY.instance(4), 2551)])
+    assert info.value.status is ErrorStatus.WRONG_VALUE and mib.get(VEHICLE_DETECTOR_DELAY.instance(4)) == 10
