@@ -99,7 +99,7 @@ class Cond(Enum):
     FLASH = "a flashing yellow arrow's permissive (modifier) phase is green"
     MODIFIED = "a minus-green-yellow overlap's modifier phase is green or committed next"
     TRAILS = "it has a trailing green (a transit bar has none)"
-    BAR_CLEARS = "it is a transit bar and the yellow of one of its included phases starts now"
+    BAR_CLEARING = "it is a transit bar and one of its included phases is yellow"
     BAR = "it is a transit bar (it has no yellow lamp)"
     CLEARS = "the yellow of a phase it follows starts now (and no modifier of a minus-green-yellow overlap is yellow)"
     CLEARING = "a phase it follows is yellow (and no modifier of a minus-green-yellow overlap is)"
@@ -110,7 +110,7 @@ class Cond(Enum):
 _NEXT: dict[Show, tuple[tuple[Cond, Show], ...]] = {
     Show.RED: ((Cond.HELD, Show.GREEN), (Cond.FLASH, Show.FLASHING), (Cond.ALWAYS, Show.RED)),
     Show.GREEN: ((Cond.HELD, Show.GREEN), (Cond.MODIFIED, Show.TRAIL_YELLOW), (Cond.TRAILS, Show.TRAIL_GREEN),
-                 (Cond.BAR_CLEARS, Show.FLASHING_GREEN), (Cond.BAR, Show.RED), (Cond.CLEARS, Show.YELLOW),
+                 (Cond.BAR_CLEARING, Show.FLASHING_GREEN), (Cond.BAR, Show.RED), (Cond.CLEARS, Show.YELLOW),
                  (Cond.ALWAYS, Show.TRAIL_YELLOW)),
     Show.FLASHING_GREEN: ((Cond.HELD, Show.GREEN), (Cond.CLEARING, Show.FLASHING_GREEN), (Cond.ALWAYS, Show.RED)),
     Show.FLASHING: ((Cond.HELD, Show.GREEN), (Cond.FLASH, Show.FLASHING), (Cond.CLEARING, Show.YELLOW),
@@ -239,8 +239,9 @@ class Overlaps:
             return self.timing[n].trail_green > 0 and o.kind is not OverlapKind.TRANSIT
         if cond is Cond.BAR:
             return o.kind is OverlapKind.TRANSIT
-        if cond is Cond.BAR_CLEARS:
-            return o.kind is OverlapKind.TRANSIT and not phases.starting.isdisjoint(o.included)
+        if cond is Cond.BAR_CLEARING:
+            # "flashing green when an overlap included phase is yellow and an overlap included phase is not next"
+            return o.kind is OverlapKind.TRANSIT and not phases.yellows.isdisjoint(o.included)
         if cond in (Cond.CLEARS, Cond.CLEARING):
             followed = o.included + o.modifiers if o.kind is OverlapKind.FYA else o.included
             clearing = phases.starting if cond is Cond.CLEARS else yellows

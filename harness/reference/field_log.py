@@ -955,7 +955,7 @@ def _overlaps(rows: Sequence[Row], phases: Sequence[int], out: Inferred) -> dict
             included.append(p)
             left = [t for t in left if not began(t, p)]
         if included and len(left) <= 0.1 * len(times):
-            overlaps[o] = (included, "transit" if o not in yellowed and ended[o] >= PASSAGE_SEEN else "normal")
+            overlaps[o] = (sorted(included), "transit" if o not in yellowed and ended[o] >= PASSAGE_SEEN else "normal")
     beyond = sorted(o for o in overlaps if o > OVERLAPS)
     for o in beyond:
         out.guessed.append(f"overlap {o}: left out (it begins green with phase(s) {overlaps.pop(o)[0]}, but the "
