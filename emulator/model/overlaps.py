@@ -59,6 +59,13 @@ flashing green is its green output, flashing, and the monitor does not time a ye
 "Minimum Yellow Change Disable" jumper for that channel, Reno A&E MMU2-1600GE operations manual). It has neither
 modifiers nor a trailing green.
 
+A delayed green (``delay_green``): the overlap stays red so long after an included phase's green starts, then turns
+green if an included phase still holds it (it goes back to red at once otherwise), as a controller holds a signal
+"gaining ROW ... at red ... for the delay period" (Siemens T400 facilities manual, 8.3 phase delays; Naztec's
+overlaps have their "FYA Delay Time"). MaxTime 1015's log shows one: its overlaps G and H begin green 3.0 s after
+phases 4 and 8, 17 times in 18. No NTCIP 1202 object carries it. While it delays, the overlap is red but not at
+rest: a phase that conflicts with it waits, as for a trailing overlap.
+
 The flashing yellow arrow (``fya``) is not in NTCIP 1202 v02 (a vendor's overlapType other(1) there); its
 v03 objects were found in no source we could read, so its status is served with the v02 objects: the arrow's
 yellow lamp sets the overlap's yellow bit, steady or flashing. It follows the practice the sources agree on:
@@ -90,12 +97,15 @@ class Show(StrEnum):
     TRAIL_GREEN = "trail_green"
     TRAIL_YELLOW = "trail_yellow"
     TRAIL_RED = "trail_red"
+    DELAYED = "delayed"  # red, timing the delay of its green (delay_green)
 
 
 class Cond(Enum):
     """What decides an overlap's next display (see ``_NEXT``)."""
 
     HELD = "its included phases hold it green (and no modifier of a minus-green-yellow overlap is green or next)"
+    DELAYS = "its included phases hold it green and it has a delayed green"
+    RELEASED = "its included phases no longer hold it green"
     FLASH = "a flashing yellow arrow's permissive (modifier) phase is green"
     MODIFIED = "a minus-green-yellow overlap's modifier phase is green or committed next"
     TRAILS = "it has a trailing green (a transit bar has none)"
@@ -108,7 +118,9 @@ class Cond(Enum):
 
 
 _NEXT: dict[Show, tuple[tuple[Cond, Show], ...]] = {
-    Show.RED: ((Cond.HELD, Show.GREEN), (Cond.FLASH, Show.FLASHING), (Cond.ALWAYS, Show.RED)),
+    Show.RED: ((Cond.DELAYS, Show.DELAYED), (Cond.HELD, Show.GREEN), (Cond.FLASH, Show.FLASHING),
+               (Cond.ALWAYS, Show.RED)),
+    Show.DELAYED: ((Cond.RELEASED, Show.RED), (Cond.TIMED, Show.GREEN), (Cond.ALWAYS, Show.DELAYED)),
     Show.GREEN: ((Cond.HELD, Show.GREEN), (Cond.MODIFIED, Show.TRAIL_YELLOW), (Cond.TRAILS, Show.TRAIL_GREEN),
                  (Cond.BAR_CLEARING, Show.FLASHING_GREEN), (Cond.BAR, Show.RED), (Cond.CLEARS, Show.YELLOW),
                  (Cond.ALWAYS, Show.TRAIL_YELLOW)),
@@ -126,6 +138,8 @@ _GREEN = frozenset({Show.GREEN, Show.TRAIL_GREEN, Show.FLASHING_GREEN})
 _YELLOW = frozenset({Show.YELLOW, Show.TRAIL_YELLOW, Show.FLASHING})
 #: Displays that outlast the overlap's parents: a phase conflicting with the overlap waits for them to end.
 TRAILING = frozenset({Show.TRAIL_GREEN, Show.TRAIL_YELLOW, Show.TRAIL_RED})
+#: Displays the overlap times with its own timer: the trailing ones and a delayed green's red.
+TIMED = TRAILING | {Show.DELAYED}
 
 
 @dataclass(frozen=True, slots=True)
@@ -156,10 +170,11 @@ class OverlapTiming:
     trail_green: int
     trail_yellow: int
     trail_red: int
+    delay_green: int
 
     @classmethod
     def of(cls, o: Overlap) -> OverlapTiming:
-        return cls(o.trail_green * 10, round(o.trail_yellow * 10), round(o.trail_red * 10))
+        return cls(o.trail_green * 10, round(o.trail_yellow * 10), round(o.trail_red * 10), round(o.delay_green * 10))
 
 
 class Overlaps:
@@ -216,7 +231,7 @@ class Overlaps:
         """What overlap ``n`` shows once this tick's step has run, and the ticks its trailing interval then has
         timed (one more than now)."""
         s = self.shown[n]
-        ticks = self.ticks[n] + (s in TRAILING)
+        ticks = self.ticks[n] + (s in TIMED)
         to = next(to for cond, to in _NEXT[s] if self._holds(cond, n, phases, ticks))
         # A trailing red of no length is no interval at all: the overlap is red at once.
         return (Show.RED if to is Show.TRAIL_RED and self.timing[n].trail_red == 0 else to), ticks
@@ -231,6 +246,10 @@ class Overlaps:
             nexts = phases.nexts
             cycling = self.shown[n] in _GREEN and any(p in o.included and nexts.get(p) in o.included for p in nexts)
             return (cycling or not greens.isdisjoint(o.included)) and not self._holds(Cond.MODIFIED, n, phases, ticks)
+        if cond is Cond.DELAYS:
+            return self.timing[n].delay_green > 0 and self._holds(Cond.HELD, n, phases, ticks)
+        if cond is Cond.RELEASED:
+            return not self._holds(Cond.HELD, n, phases, ticks)
         if cond is Cond.FLASH:
             return o.kind is OverlapKind.FYA and not greens.isdisjoint(o.modifiers)
         if cond is Cond.MODIFIED:
@@ -252,16 +271,17 @@ class Overlaps:
 
     def _length(self, n: int, s: Show) -> int:
         tm = self.timing[n]
-        return {Show.TRAIL_GREEN: tm.trail_green, Show.TRAIL_YELLOW: tm.trail_yellow, Show.TRAIL_RED: tm.trail_red}[s]
+        return {Show.TRAIL_GREEN: tm.trail_green, Show.TRAIL_YELLOW: tm.trail_yellow, Show.TRAIL_RED: tm.trail_red,
+                Show.DELAYED: tm.delay_green}[s]
 
     # --- quiet time (see emulator/model/controller.py) -------------------------------------------------
 
     def deadline(self) -> int | None:
-        """Steps until a trailing interval ends (None: no overlap is timing); at least the next step."""
-        ahead = [self._length(n, s) - self.ticks[n] for n, s in self.shown.items() if s in TRAILING]
+        """Steps until a trailing interval or a delay ends (None: no overlap is timing); at least the next step."""
+        ahead = [self._length(n, s) - self.ticks[n] for n, s in self.shown.items() if s in TIMED]
         return max(1, min(ahead)) if ahead else None
 
     def skip(self, n: int) -> None:
         for k, s in self.shown.items():
-            if s in TRAILING:
+            if s in TIMED:
                 self.ticks[k] += n

@@ -234,6 +234,7 @@ class Overlap:
     trail_red: float = 0.0     # s of the overlap's own red clearance after a trailing green
     approach: str | None = None
     turn: str | None = None
+    delay_green: float = 0.0   # s the overlap stays red after an included phase's green starts (a delayed green)
 
     @property
     def letter(self) -> str:
@@ -1056,9 +1057,9 @@ def _overlap(number: int, raw: Any, w: str, phases: Mapping[int, Phase], compati
              source: str) -> Overlap:
     if not isinstance(raw, dict):
         raise ConfigError(source, w[:-1], "must be a table: included, modifiers, type, trail_green, trail_yellow, "
-                                          "trail_red, approach, turn")
-    _unknown(raw, ("type", "included", "modifiers", "trail_green", "trail_yellow", "trail_red", "approach", "turn"),
-             w, source)
+                                          "trail_red, delay_green, approach, turn")
+    _unknown(raw, ("type", "included", "modifiers", "trail_green", "trail_yellow", "trail_red", "delay_green",
+                   "approach", "turn"), w, source)
     kind = raw.get("type", OverlapKind.NORMAL.value)
     if kind not in tuple(OverlapKind):
         raise ConfigError(source, f"{w}type", f"is {kind!r}; allowed: {', '.join(k.value for k in OverlapKind)}")
@@ -1119,8 +1120,13 @@ def _overlap(number: int, raw: Any, w: str, phases: Mapping[int, Phase], compati
         raise ConfigError(source, f"{w}turn", f"is {turn!r}; allowed: {', '.join(allowed_turns)}"
                                               + (" (a flashing yellow arrow shows a left turn)"
                                                  if kind is OverlapKind.FYA else ""))
+    # No NTCIP object carries it: tenths up to 25.5 s, as the overlap's own trailing yellow and red.
+    delay_green = _number(raw, "delay_green", w, source, 0.0, low=0, high=25.5, step=0.1)
+    if delay_green and kind is OverlapKind.FYA:
+        raise ConfigError(source, f"{w}delay_green", "is given for an fya overlap; allowed: 0 (a flashing yellow arrow "
+                                                     "follows its protected and permissive phases at once)")
     return Overlap(number, kind, included, modifiers, trail_green, float(trail_yellow), float(trail_red), approach,
-                   turn)
+                   turn, float(delay_green))
 
 
 # --- [preempts] -----------------------------------------------------------------------------------

@@ -125,9 +125,9 @@ def preempt_tables(draw: st.DrawFn, compatible: list[list[int]], least: int = 0)
 
 @st.composite
 def overlap_tables(draw: st.DrawFn, compatible: list[list[int]], least: int = 0) -> dict:
-    """Up to three overlaps: normal, minus-green-yellow or transit ones with random parents (all but a transit bar
-    maybe with a trailing green), flashing yellow arrows with a protected phase and permissive phases that conflict
-    with it."""
+    """Up to three overlaps: normal, minus-green-yellow or transit ones with random parents (maybe a delayed green;
+    all but a transit bar maybe a trailing green), flashing yellow arrows with a protected phase and permissive
+    phases that conflict with it."""
     out = {}
     for letter in "ABC"[:draw(st.integers(least, 3))]:
         kind = draw(st.sampled_from(["normal", "minus_green_yellow", "fya", "transit"]))
@@ -148,6 +148,8 @@ def overlap_tables(draw: st.DrawFn, compatible: list[list[int]], least: int = 0)
         if kind == "minus_green_yellow":
             entry["modifiers"] = draw(st.lists(st.sampled_from(sorted(ALL_PHASES - set(included))), min_size=1,
                                                max_size=2, unique=True))
+        if draw(st.integers(0, 3)) == 0:
+            entry["delay_green"] = draw(st.integers(1, 40)) / 10
         if kind != "transit" and draw(st.booleans()):
             entry |= {"trail_green": draw(st.integers(1, 5)), "trail_yellow": draw(st.integers(30, 50)) / 10,
                       "trail_red": draw(st.integers(0, 20)) / 10}

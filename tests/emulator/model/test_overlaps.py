@@ -312,6 +312,9 @@ def test_the_dashboard_board_shows_the_overlaps_from_the_cabinet_read() -> None:
     ('A = { type = "transit", included = [2], modifiers = [1] }', "overlaps.A.modifiers",
      "is given for a transit overlap"),
     ('A = { type = "transit", included = [2], trail_green = 2 }', "overlaps.A.trail_green", "allowed: 0"),
+    ('A = { included = [2], delay_green = 30 }', "overlaps.A.delay_green", "allowed: >= 0 and <= 25.5"),
+    ('A = { type = "fya", included = [1], modifiers = [2], delay_green = 2 }', "overlaps.A.delay_green",
+     "allowed: 0"),
 ])
 def test_bad_overlaps_are_refused_naming_the_field(table: str, field: str, message: str) -> None:
     with pytest.raises(ConfigError) as info:
@@ -363,3 +366,25 @@ def test_the_monitor_times_no_yellow_on_a_transit_bar_alone(kind: str, fault: st
 def test_a_transit_bar_is_served_as_v03s_transit_2(edition: Version, served: OverlapType) -> None:
     mib = MibView(Controller(city('A = { type = "transit", included = [2] }\n')), edition)
     assert mib.get(OVERLAP_TABLE[OverlapColumn.TYPE].instance(A)) == served
+
+
+def test_a_delayed_green_overlap_turns_green_its_delay_after_its_phase_and_clears_with_it() -> None:
+    """delay_green 3.0 s: red for 30 ticks after its phase's green starts (logged: nothing), then green (61), then its
+    yellow with the phase's; a phase that conflicts with it waits while it delays, as for a trailing overlap."""
+    c = Controller(city('A = { included = [8], delay_green = 3.0 }\n'))
+    log = DataLogger(c)
+    seen = watch(c, 300, {0: {4, 8}, 150: {2, 6}})
+    assert seen["8"][:3] == [(1, "r"), (80, "G"), (151, "Y")]
+    assert seen["A"][:5] == [(1, "red"), (80, "delayed"), (110, "green"), (151, "yellow"), (181, "red")]
+    assert A not in c.overlap_greens or c.tick > 110
+    begins = [e for e in log.events() if e.code == EventCode.OVERLAP_BEGIN_GREEN and e.parameter == A]
+    eights = [e for e in log.events() if e.code == EventCode.PHASE_BEGIN_GREEN and e.parameter == 8]
+    assert (begins[0].time - eights[0].time).total_seconds() == pytest.approx(3.0)
+
+
+def test_a_delayed_green_whose_phase_ends_first_never_shows_green() -> None:
+    c = Controller(city('A = { included = [8], delay_green = 25.5 }\n'))
+    log = DataLogger(c)
+    seen = watch(c, 400, {0: {4, 8}, 90: {2, 6}})  # 8 gaps out at its minimum, long before 25.5 s
+    assert [v for _, v in seen["A"]] == ["red", "delayed", "red"]
+    assert not [e for e in log.events() if e.parameter == A and e.code in range(61, 66)]
