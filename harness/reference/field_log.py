@@ -45,8 +45,9 @@ the log's own events (Indiana enumerations) and says which values it had to gues
   phase's last detector to go, holds its call that long: an extension when seen on the phase's green, a carryover when
   seen off it (:func:`_holds`);
 - **overlaps**: an overlap that begins green (61) with phases (1, the same tick or the next: the fewest that together
-  come with nine in ten of its greens, each with a tenth) includes them; one that never logs a yellow (63) is a
-  transit bar (NTCIP 1202 v03 transit-2), else a normal overlap; overlaps past P (16) are said and left out;
+  come with nine in ten of its greens, each with a tenth) includes them, or, failing that, one same time after them
+  (a delayed green of that time); one that never logs a yellow (63) is a transit bar (NTCIP 1202 v03 transit-2),
+  else a normal overlap; overlaps past P (16) are said and left out;
 - **recalls and dual entry** (:func:`_uncalled`, :func:`_extenders`, :func:`_dual_entries`): a phase served with no
   call the log registers (43), where the log registers calls of others or has no detector events (pretimed), or
   whose call registers as its own yellow begins (an Econolite's recall), is recalled: max recall when its greens end
@@ -84,7 +85,7 @@ import itertools
 import json
 import math
 from collections import Counter, defaultdict
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime, timedelta
 from typing import Any
@@ -920,56 +921,86 @@ def _fit(splits: dict[int, int], structure: Structure, cyclic: Mapping[int, Sequ
     return splits
 
 
-def _overlaps(rows: Sequence[Row], phases: Sequence[int], out: Inferred) -> dict[int, tuple[list[int], str]]:
+@dataclass(frozen=True, slots=True)
+class InferredOverlap:
+    """An overlap as the log shows it: its included phases, its type and the delay of its green (s)."""
+
+    included: list[int]
+    kind: str
+    delay: float = 0.0
+
+
+def _overlaps(rows: Sequence[Row], phases: Sequence[int], out: Inferred) -> dict[int, InferredOverlap]:
     """Overlaps and their type: an overlap includes the phases whose begin greens (1) its own (61) come with, on the
     same tick or the next (a MaxTime logs some a tick later): the fewest that together come with nine in ten of
-    them, each with a tenth (an overlap of 2 and 6 begins green with whichever starts first). One that ends its greens
-    (64, 65) at least :data:`PASSAGE_SEEN` times and never logs a yellow (63) is a transit bar (NTCIP 1202 v03
-    transit-2: green, flashing green, red), else a normal overlap. An overlap that never begins green is not
-    inferred."""
+    them, each with a tenth (an overlap of 2 and 6 begins green with whichever starts first). Failing that, the
+    phases whose begin greens come one same time before its own, 0.2-25.5 s, nine in ten times: a delayed green of
+    that time. One that ends its greens (64, 65) at least :data:`PASSAGE_SEEN` times and never logs a yellow (63) is
+    a transit bar (NTCIP 1202 v03 transit-2: green, flashing green, red), else a normal overlap. An overlap that
+    never begins green is not inferred."""
     starts: dict[int, list[datetime]] = defaultdict(list)
-    greens: dict[int, set[datetime]] = defaultdict(set)
+    greens: dict[int, list[datetime]] = defaultdict(list)
     ended: Counter[int] = Counter()
     yellowed: set[int] = set()
     for r in rows:
         if r.code == E.OVERLAP_BEGIN_GREEN:
             starts[r.parameter].append(r.time)
         elif r.code == E.PHASE_BEGIN_GREEN:
-            greens[r.parameter].add(r.time)
+            greens[r.parameter].append(r.time)
         elif r.code in (E.OVERLAP_BEGIN_RED_CLEARANCE, E.OVERLAP_OFF):
             ended[r.parameter] += 1
         elif r.code == E.OVERLAP_BEGIN_YELLOW:
             yellowed.add(r.parameter)
-    overlaps: dict[int, tuple[list[int], str]] = {}
+    began_at = {p: set(times) for p, times in greens.items()}
+    overlaps: dict[int, InferredOverlap] = {}
     for o, times in starts.items():
-        def began(t: datetime, p: int) -> bool:
-            return t in greens[p] or t - TICK in greens[p]
-        # Greedy cover: the phase whose begin greens come with most of the overlap's, then the one that comes with
-        # most of those left, while it comes with a tenth of all.
-        included: list[int] = []
-        left = list(times)
-        while left:
-            p = max(phases, key=lambda p: sum(began(t, p) for t in left))
-            if sum(began(t, p) for t in left) < 0.1 * len(times):
-                break
-            included.append(p)
-            left = [t for t in left if not began(t, p)]
-        if included and len(left) <= 0.1 * len(times):
-            overlaps[o] = (sorted(included), "transit" if o not in yellowed and ended[o] >= PASSAGE_SEEN else "normal")
+        kind = "transit" if o not in yellowed and ended[o] >= PASSAGE_SEEN else "normal"
+        included = _cover(times, phases, lambda t, p: t in began_at.get(p, ()) or t - TICK in began_at.get(p, ()))
+        if included:
+            overlaps[o] = InferredOverlap(included, kind)
+            continue
+        lags: Counter[float] = Counter()  # the time from each phase's last begin green to the overlap's
+        for t in times:
+            for p in phases:
+                k = bisect.bisect_right(greens.get(p, []), t) - 1
+                if k >= 0 and TICK < t - greens[p][k] <= MAX_DELAY:
+                    lags[round((t - greens[p][k]).total_seconds(), 1)] += 1
+        for lag, _ in lags.most_common(1):
+            delay = timedelta(seconds=lag)
+            included = _cover(times, phases, lambda t, p, delay=delay: t - delay in began_at.get(p, ()))
+            if included:
+                overlaps[o] = InferredOverlap(included, kind, lag)
     beyond = sorted(o for o in overlaps if o > OVERLAPS)
     for o in beyond:
-        out.guessed.append(f"overlap {o}: left out (it begins green with phase(s) {overlaps.pop(o)[0]}, but the "
-                           f"emulator's overlaps are A-P, 1-{OVERLAPS})")
-    for o, (included, kind) in overlaps.items():
-        out.read.append(f"overlap {chr(64 + o)} ({o}): begins green with phase(s) {included}: "
-                        + ("a normal overlap of them" if kind == "normal" else
-                           f"never yellow ({ended[o]} greens end in red): a transit bar of them (transit-2)"))
+        out.guessed.append(f"overlap {o}: left out (it begins green with phase(s) {overlaps.pop(o).included}, but "
+                           f"the emulator's overlaps are A-P, 1-{OVERLAPS})")
+    for o, ov in overlaps.items():
+        after = f"{ov.delay:g} s after" if ov.delay else "with"
+        out.read.append(f"overlap {chr(64 + o)} ({o}): begins green {after} phase(s) {ov.included}: "
+                        + ("a normal overlap of them" if ov.kind == "normal" else
+                           f"never yellow ({ended[o]} greens end in red): a transit bar of them (transit-2)")
+                        + (f", its green delayed {ov.delay:g} s" if ov.delay else ""))
     seen = {r.parameter for r in rows if E.OVERLAP_BEGIN_GREEN <= r.code <= E.OVERLAP_DARK}
     for o in sorted(seen - set(overlaps) - set(beyond)):
         letter = f"{chr(64 + o)} ({o})" if o <= OVERLAPS else str(o)
-        out.guessed.append(f"overlap {letter}: not modelled (its begin greens come with no phase's; its other events "
-                           "fit none of the types: normal, transit, minus green-yellow, flashing yellow arrow)")
+        out.guessed.append(f"overlap {letter}: not modelled (its begin greens come with no phase's, nor one time "
+                           "after; its other events fit none of the types: normal, transit, minus green-yellow, "
+                           "flashing yellow arrow)")
     return overlaps
+
+
+def _cover(times: Sequence[datetime], phases: Sequence[int], began: Callable[[datetime, int], bool]) -> list[int]:
+    """The fewest phases whose begin greens come with nine in ten of ``times``, each with a tenth (greedy: the phase
+    that comes with most, then the one that comes with most of those left), sorted; none if no such set."""
+    included: list[int] = []
+    left = list(times)
+    while left:
+        p = max(phases, key=lambda p: sum(began(t, p) for t in left))
+        if sum(began(t, p) for t in left) < 0.1 * len(times):
+            break
+        included.append(p)
+        left = [t for t in left if not began(t, p)]
+    return sorted(included) if included and len(left) <= 0.1 * len(times) else []
 
 
 def _startup(rows: Sequence[Row], greens: Mapping[int, list[tuple[datetime, datetime]]], structure: Structure,
@@ -997,7 +1028,7 @@ def _startup(rows: Sequence[Row], greens: Mapping[int, list[tuple[datetime, date
 
 def _toml(name: str, structure: Structure, timing: Mapping[int, dict[str, Any]], detectors: Mapping[int, int],
           timers: Mapping[int, Mapping[str, float]], pushes: Mapping[int, int],
-          coordination: Mapping[str, Any] | None, overlaps: Mapping[int, tuple[list[int], str]], startup: Sequence[int],
+          coordination: Mapping[str, Any] | None, overlaps: Mapping[int, InferredOverlap], startup: Sequence[int],
           start: datetime) -> str:
     def value(v: Any) -> str:
         return f"{v:g}" if isinstance(v, float) else str(v)
@@ -1026,9 +1057,10 @@ def _toml(name: str, structure: Structure, timing: Mapping[int, dict[str, Any]],
         lines += ["", "[pedestrian_detectors]", *(f"{d} = {q}" for d, q in sorted(pushes.items()) if q)]
     if overlaps:
         lines += ["", "[overlaps]"]
-        for o, (included, kind) in sorted(overlaps.items()):
-            typed = "" if kind == "normal" else f'type = "{kind}", '
-            lines.append(f"{chr(64 + o)} = {{ {typed}included = {included} }}")
+        for o, ov in sorted(overlaps.items()):
+            typed = "" if ov.kind == "normal" else f'type = "{ov.kind}", '
+            delayed = f", delay_green = {ov.delay:g}" if ov.delay else ""
+            lines.append(f"{chr(64 + o)} = {{ {typed}included = {ov.included}{delayed} }}")
     if coordination is not None:
         c = coordination
         lines += ["", "[coordination]", "pattern = 1", 'force_off = "fixed"', 'offset_reference = "lead_green"',

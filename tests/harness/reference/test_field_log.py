@@ -353,3 +353,12 @@ def test_detectors_past_64_go_into_the_config() -> None:
     text = drawn.toml + "[detectors]\n" + "\n".join(f"{p} = {p}" for p in range(1, 9)) + "\n65 = 4\n66 = 8\n"
     got = field_log.infer(round_trip.emulator_log(config_mod.parse(text, "many.toml"), 600, seed=4)).config()
     assert {d: got.detectors.get(d) for d in (65, 66)} == {65: 4, 66: 8}
+
+
+def test_an_overlap_that_begins_green_a_constant_time_after_its_phase_has_a_delayed_green() -> None:
+    """MaxTime 1015's overlap G begins green 3.0 s after phase 4 does, every time: a normal overlap of 4 with its
+    green delayed 3 s (the config's delay_green)."""
+    inferred = field_log.infer(hires_file.load(LOGS / "maxtime_1015_2024_07_22_1333_excerpt.xml"))
+    g = inferred.config().overlaps[7]
+    assert (g.kind.value, g.included, g.delay_green) == ("normal", (4,), 3.0)
+    assert any(line.startswith("overlap G (7): begins green 3 s after phase(s) [4]") for line in inferred.read)
