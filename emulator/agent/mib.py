@@ -716,7 +716,7 @@ def _detector_timer(c: Controller | DelayedController, d: int, name: str
     """Read and write one timer of detector ``d`` (:mod:`emulator.model.detectors`), acting from the next tick."""
 
     def write(v: int) -> None:
-        c.detectors.retime(d, name, v)
+        c.detectors.retime(d, name, v, c.actuations)
         c.touch()
 
     return lambda: c.detectors.timer(d, name), write

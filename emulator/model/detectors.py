@@ -71,8 +71,11 @@ class Detectors:
         t = self.timers.get(d)
         return 0 if t is None else getattr(t, name)
 
-    def retime(self, d: int, name: str, ticks: int) -> None:
-        """A SET of the detector table: one timer of detector ``d``, acting from the controller's next tick."""
+    def retime(self, d: int, name: str, ticks: int, actuated: frozenset[int]) -> None:
+        """A SET of the detector table: one timer of detector ``d``, acting from the controller's next tick. A unit
+        that had no timer passed the inputs ``actuated`` now as they are: it recognizes them from here."""
+        if not self.timers:
+            self.recognized = actuated
         t = self.timers.setdefault(d, DetectorTimers())
         setattr(t, name, ticks)
         if not any(astuple(t)):

@@ -136,3 +136,14 @@ def test_the_detector_table_serves_delay_and_extend_and_a_set_retimes_the_detect
     with pytest.raises(SnmpError) as info:
         mib.set_many([(VEHICLE_DETECTOR_DELAY.instance(4), 2551)])
     assert info.value.status is ErrorStatus.WRONG_VALUE and mib.get(VEHICLE_DETECTOR_DELAY.instance(4)) == 10
+
+
+def test_a_detector_retimed_over_ntcip_keeps_the_calls_its_inputs_place(paper_toml: str) -> None:
+    """The first timer SET on a controller whose detectors had none: the call of an actuation already there stays."""
+    c = Controller(parse(paper_toml, "plain.toml"))
+    mib = MibView(c)
+    c.set_actuations({4})
+    c.step()
+    assert 4 in c.calls
+    mib.set_many([(VEHICLE_DETECTOR_EXTEND.instance(2), 20)])
+    assert 4 in c.calls
