@@ -69,6 +69,7 @@ import simpy
 from emulator.model.backup import BackupTimer
 from emulator.model.coordinated import Coordinated
 from emulator.model.coordination import Coordinator
+from emulator.model.detectors import Detectors
 from emulator.model.inputs import Inputs, Reader
 from emulator.model.monitor import Lamps, Monitor
 from emulator.model.overlaps import Overlaps, Phases
@@ -128,6 +129,7 @@ class Controller:
         self._ring_of = {p: config.ring_of(p) for p in config.phases}
         self._red_end_lock = config.next_phase_lock is NextPhaseLock.RED_END
         self._reader = Reader(config)
+        self.detectors = Detectors(config)
         self.backup = BackupTimer(config.middleware.backup_time)
         self.startup_flash = config.startup_flash
         # The controller's clock: local time, in ticks since midnight of the day it first powered up.
@@ -166,6 +168,7 @@ class Controller:
         self.peds.reset()
         self.actuations: frozenset[int] = frozenset()  # vehicle detectors actuated now
         self.ped_actuations: frozenset[int] = frozenset()  # pedestrian detectors actuated now
+        self.detectors.reset()
         self._inputs = None
         # The image the monitor last passed: a power cycle puts every lamp out, so the monitor starts afresh.
         self._checked: tuple[frozenset[int], ...] | None = None
@@ -286,8 +289,14 @@ class Controller:
         """The inputs as phase sets; a write (:meth:`touch`) or a new pattern derives them anew."""
         plan = self.coordinator.plan
         if self._inputs is None or self._inputs.plan is not plan:
-            self._inputs = self._reader.read(self.coordinator, self.control, self.actuations, self.ped_actuations)
+            self._inputs = self._reader.read(self.coordinator, self.control, self.detected, self.ped_actuations)
         return self._inputs
+
+    @property
+    def detected(self) -> frozenset[int]:
+        """The vehicle detectors the controller acts on: the actuated ones, as their delay, extension and carryover
+        pass them (the detector unit's, :mod:`emulator.model.detectors`)."""
+        return self.detectors.recognized if self.detectors.timers else self.actuations
 
     @property
     def ped_calls(self) -> frozenset[int]:
@@ -385,6 +394,9 @@ class Controller:
             return
         if self.flashing:
             return
+        if self.detectors.timers and self.detectors.step(self.actuations, self._greens()):
+            self._inputs = None  # the calls and extensions the detectors place changed: so may the status
+            self.status_version += 1
         inputs = self.inputs
         demand = self.peds.latch(self._greens(), inputs)
         pe, seq = self.preemptor, self.sequencer
@@ -470,6 +482,8 @@ class Controller:
             return
         if self.config.overlaps:
             self.overlaps.skip(n)
+        if self.detectors.timers:
+            self.detectors.skip(n)
         if self.config.preempts:
             self.preemptor.skip(n)
         for r in self.rings:

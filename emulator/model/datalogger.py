@@ -96,6 +96,8 @@ _OVERLAP = {Show.GREEN: E.OVERLAP_BEGIN_GREEN, Show.TRAIL_GREEN: E.OVERLAP_BEGIN
             Show.YELLOW: E.OVERLAP_BEGIN_YELLOW, Show.TRAIL_YELLOW: E.OVERLAP_BEGIN_YELLOW,
             Show.TRAIL_RED: E.OVERLAP_BEGIN_RED_CLEARANCE, Show.RED: E.OVERLAP_OFF,
             Show.FLASHING: E.FYA_BEGIN_PERMISSIVE}
+_GREENS = (Show.TRAIL_GREEN, Show.FLASHING_GREEN)
+_SILENT = (Show.FLASHING_GREEN, Show.DELAYED)
 # What a preempt logs as its service enters a state (NTCIP preemptState).
 _PREEMPT = {PreemptState.ENTRY_STARTED: E.PREEMPT_ENTRY_STARTED,
             PreemptState.TRACK_SERVICE: E.PREEMPT_BEGIN_TRACK_CLEARANCE, PreemptState.DWELL: E.PREEMPT_BEGIN_DWELL,
@@ -357,7 +359,10 @@ class DataLogger:
                     continue
                 if before is Show.FLASHING:
                     self._add(E.FYA_END_PERMISSIVE, n)
-                if not (shown is Show.GREEN and before is Show.TRAIL_GREEN):
+                # A green that goes on (from a trailing green, a transit bar's flashing green) is no new green; a
+                # flashing green is its green lamp, a delayed green's red is red: no event of their own.
+                goes_on = shown is Show.GREEN and before in _GREENS
+                if not (shown in _SILENT or goes_on or (shown is Show.RED and before is Show.DELAYED)):
                     self._add(_OVERLAP[shown], n)
             seen.overlaps = dict(c.overlaps.shown)
         if c.preemptor.states != seen.preempts:

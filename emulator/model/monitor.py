@@ -23,7 +23,9 @@ conflict has lasted 300 ms) has no counterpart here: the monitor faults the firs
 
 Short yellow: "When a channel has a Green or Walk that turns off, a Yellow must follow it and it must stay on
 for at least 2.7 seconds" (Reno A&E MMU-1600G, 2.5.5 Short Yellow Monitoring). A channel, phase or overlap,
-whose green goes straight to red, or whose yellow lasts under :data:`SHORT_YELLOW`, faults. A yellow that
+whose green goes straight to red, or whose yellow lasts under :data:`SHORT_YELLOW`, faults, but a transit bar's
+(an overlap with no yellow lamp, whose channel's check an MMU disables with its "Minimum Yellow Change Disable"
+jumper). A yellow that
 ends in green (a flashing yellow arrow's yellow lamp going to its green arrow) is no clearance and is not
 timed.
 """
@@ -32,7 +34,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from hils.protocol.config import IntersectionConfig
+from hils.protocol.config import IntersectionConfig, OverlapKind
 from hils.protocol.conflict import first_conflict
 
 SHORT_YELLOW = 27  # ticks: the least yellow a channel may show after its green (2.7 s)
@@ -56,6 +58,9 @@ class Monitor:
 
     def __init__(self, config: IntersectionConfig) -> None:
         self.permissives = config.permissives
+        #: Transit bars (two sections, no yellow lamp): their channels are jumpered "Minimum Yellow Change Disable"
+        #: (Reno A&E MMU2-1600GE operations manual), so a green going straight to red is no fault there.
+        self.bars = frozenset(n for n, o in config.overlaps.items() if o.kind is OverlapKind.TRANSIT)
         self._conflicts: dict[tuple[frozenset[int], frozenset[int]], str | None] = {}  # lamps lit -> their fault
         self.reset()
 
@@ -84,6 +89,8 @@ class Monitor:
                 ("phase", lamps.greens, lamps.yellows, was.greens, was.yellows),
                 ("overlap", lamps.overlap_greens, lamps.overlap_yellows, was.overlap_greens, was.overlap_yellows)):
             for n in was_green - greens - yellows:
+                if kind == "overlap" and n in self.bars:
+                    continue  # a transit bar has no yellow lamp: its channel's minimum yellow check is disabled
                 return f"{kind} {n} from green to red without a yellow"
             for n in yellows - was_yellow:
                 began[kind, n] = tick

@@ -8,8 +8,9 @@ Rules of this file
   property test steps one controller every tick and advances its twin over the same stretches
   (tests/emulator/model/test_controller_events.py).
 - Every unit reports its own deadline, the ticks until its timers reach their next threshold: the backup timer,
-  the coordinator, the preemptor, the overlaps' trailing intervals and, through the sequencer, every ring's timers
-  with what a pattern or a preempt sets them. The quiet time is the least of them.
+  the coordinator, the preemptor, the overlaps' trailing intervals, the detectors' delays and extensions and,
+  through the sequencer, every ring's timers with what a pattern or a preempt sets them. The quiet time is the
+  least of them.
 - Any input (a SET, a detector, a retiming, a power cycle) makes the next step a real one
   (:meth:`QuietTime.touched`).
 
@@ -43,6 +44,7 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
+from emulator.model.ring import GREEN
 from hils.protocol.ntcip import UnitFlashStatus
 
 if TYPE_CHECKING:
@@ -114,6 +116,8 @@ class QuietTime:
             return min((d for d in deadlines if d is not None), default=None)
         rings, logged = c.sequencer.deadline(c.tick, c.preempting, logging=c.recorder is not None)
         deadlines += [c.preemptor.deadline(), c.overlaps.deadline(), rings]
+        if c.detectors.timers:
+            deadlines.append(c.detectors.deadline(r.phase for r in c.rings if r.interval is GREEN))
         ahead = min((d for d in deadlines if d is not None), default=None)
         self.next_real = math.inf if ahead is None else c.tick + ahead
         self._ahead = self.next_real, tuple(c.tick + d for d in logged)

@@ -3,8 +3,8 @@
 :meth:`Controller.advance` skips the ticks that :meth:`Controller.quiet_ticks` proves change nothing
 but counters. Here one controller steps every tick and its twin advances over the same stretches,
 for random configs (every phase option, start-up flash, backup time, the controller's delays) and
-random inputs (every control object, Max2, detectors, push buttons, retimed phases, backup time, patterns,
-preempts, power cycles):
+random inputs (every control object, Max2, detectors with delays, extensions and carryovers, push buttons,
+retimed phases, backup time, patterns, preempts, power cycles):
 after every stretch the two must agree on everything a read can see and on their whole working
 memory, and their interval timelines must be the same, tick for tick.
 """
@@ -20,7 +20,7 @@ from hypothesis import strategies as st
 from emulator.model.controller import Change, Controller
 from emulator.model.delays import STATUS_ATTRIBUTES, DelayedController
 from hils.protocol import config as config_mod
-from hils.protocol.config import EmulatorParams, IntersectionConfig, Recall
+from hils.protocol.config import DetectorTiming, EmulatorParams, IntersectionConfig, Recall
 from hils.protocol.ntcip import ControlColumn
 from hils.sim.network import data_path
 from tests.emulator.model.test_controller_properties import ALL_PHASES, configs, phase_sets
@@ -31,14 +31,16 @@ TIMING_FIELDS = ("min_green", "max1", "max2", "passage", "walk", "ped_clear", "y
 
 @st.composite
 def units(draw: st.DrawFn, free: bool = False) -> IntersectionConfig:
-    """A random config with a start-up flash, a backup time and the controller's delays drawn too, half the
+    """A random config with a start-up flash, a backup time, detector timers and the controller's delays drawn, half the
     time a coordination plan (patterns, modes, maybe a time-of-day change), half the time overlaps and half the
     time preempts; ``free``: never a plan or overlaps (where :meth:`Controller._settles` proves quiet time
     starting right after a change)."""
     cfg = draw(configs(coordinated=not free and draw(st.booleans()), overlapped=not free and draw(st.booleans()),
                        preempted=draw(st.booleans())))
+    timers = st.builds(DetectorTiming, *[st.sampled_from([0.0, 0.0, 0.1, 0.5, 2.0, 3.0])] * 3)
     return dataclasses.replace(
         cfg, startup_flash=draw(st.sampled_from([0, 0, 1, 3])),
+        detector_timing=draw(st.dictionaries(st.sampled_from(sorted(ALL_PHASES)), timers, max_size=4)),
         middleware=dataclasses.replace(cfg.middleware, backup_time=draw(st.sampled_from([0, 2, 5, 30]))),
         emulator=EmulatorParams(call_processing_ticks=draw(st.integers(0, 3)),
                                 status_update_ticks=draw(st.integers(0, 3))))
@@ -108,6 +110,7 @@ def memory(c: Controller) -> dict[str, object]:
             "coordination": (co.clock, co.command, co.local, co.running, co.timer, co.budget, co.free_status,
                              co.replan),
             "overlaps": (dict(c.overlaps.shown), dict(c.overlaps.ticks)),
+            "detectors": (c.detectors.recognized, dict(c.detectors.waited), dict(c.detectors.held)),
             "preempts": (c.preemptor.discrete(), dict(c.preemptor.presence), dict(c.preemptor.waited),
                          dict(c.preemptor.since_entry), dict(c.preemptor.stage))}
 

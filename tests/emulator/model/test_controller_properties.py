@@ -128,11 +128,12 @@ def preempt_tables(draw: st.DrawFn, compatible: list[list[int]], least: int = 0)
 
 @st.composite
 def overlap_tables(draw: st.DrawFn, compatible: list[list[int]], least: int = 0) -> dict:
-    """Up to three overlaps: normal or minus-green-yellow ones with random parents (and maybe a trailing green),
-    flashing yellow arrows with a protected phase and permissive phases that conflict with it."""
+    """Up to three overlaps: normal, minus-green-yellow or transit ones with random parents (maybe a delayed green;
+    all but a transit bar maybe a trailing green), flashing yellow arrows with a protected phase and permissive
+    phases that conflict with it."""
     out = {}
     for letter in "ABC"[:draw(st.integers(least, 3))]:
-        kind = draw(st.sampled_from(["normal", "minus_green_yellow", "fya"]))
+        kind = draw(st.sampled_from(["normal", "minus_green_yellow", "fya", "transit"]))
         if kind == "fya":
             p = draw(st.sampled_from(sorted(ALL_PHASES)))
             conflicting = [q for q in sorted(ALL_PHASES) if q != p and sorted((p, q)) not in compatible
@@ -150,7 +151,9 @@ def overlap_tables(draw: st.DrawFn, compatible: list[list[int]], least: int = 0)
         if kind == "minus_green_yellow":
             entry["modifiers"] = draw(st.lists(st.sampled_from(sorted(ALL_PHASES - set(included))), min_size=1,
                                                max_size=2, unique=True))
-        if draw(st.booleans()):
+        if draw(st.integers(0, 3)) == 0:
+            entry["delay_green"] = draw(st.integers(1, 40)) / 10
+        if kind != "transit" and draw(st.booleans()):
             entry |= {"trail_green": draw(st.integers(1, 5)), "trail_yellow": draw(st.integers(30, 50)) / 10,
                       "trail_red": draw(st.integers(0, 20)) / 10}
         out[letter] = entry
@@ -363,7 +366,8 @@ class Monitor:
         """An overlap goes green, yellow, red, as a phase does: never from green (or a flashing yellow arrow's
         flashing) to red without a steady yellow, and that yellow at least the shortest the config may time;
         never from red to a steady yellow, never from yellow to green (a flashing yellow arrow's flashing, on
-        its yellow bit, starts from red and may give way to the green arrow)."""
+        its yellow bit, starts from red and may give way to the green arrow). A transit bar is never yellow, and
+        goes from green to red when its included phases have ended their yellow."""
         c, now = self.c, self._overlap_display()
         for o, before in self.overlaps.items():
             after, ov = now[o], c.config.overlaps[o]
@@ -371,6 +375,11 @@ class Monitor:
                 self.changed = True
             step = f"overlap {ov.letter} ({ov.kind.value}) from {before} to {after} at tick {c.tick}"
             was_flashing, flashing = o in self.flashing, o in c.overlaps.flashing
+            if ov.kind is OverlapKind.TRANSIT:
+                # A transit bar has no yellow lamp: it goes to red once no included phase shows green or yellow.
+                assert after != "Y", step
+                assert (before, after) != ("G", "r") or not (c.greens | c.yellows) & set(ov.included), step
+                continue
             assert (before, after) != ("r", "Y") or flashing, step
             assert (before, after) != ("Y", "G") or was_flashing, step
             assert (before, after) != ("G", "r"), step

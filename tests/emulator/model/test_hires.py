@@ -268,8 +268,9 @@ def test_a_pedestrian_detector_table_is_checked() -> None:
     assert config_with("[pedestrian_detectors]\n1 = 4\n").ped_detectors == {1: 4}
     with pytest.raises(ConfigError, match=r"pedestrian_detectors\.1.*allowed: the configured phases"):
         config_with("[pedestrian_detectors]\n1 = 9\n")
-    with pytest.raises(ConfigError, match=r"pedestrian_detectors\.70.*1-64"):
-        config_with("[pedestrian_detectors]\n70 = 4\n")
+    assert config_with("[pedestrian_detectors]\n255 = 4\n").ped_detectors == {255: 4}  # maxPedestrianDetectors
+    with pytest.raises(ConfigError, match=r"pedestrian_detectors\.256.*1-255"):
+        config_with("[pedestrian_detectors]\n256 = 4\n")
 
 
 # --- the ATSPM layout and MaxTime's XML ----------------------------------------------------------------------

@@ -298,7 +298,7 @@ def test_a_gap_is_counted_only_from_an_off_during_the_green() -> None:
 
     rows = [at(0, 82, 2), at(1, 81, 2), at(5, 1, 2), at(10, 4, 2), at(20, 1, 2), at(21, 82, 2), at(22, 81, 2),
             at(24.9, 4, 2)]
-    assert field_log._gaps(rows, 2, [2]) == [(4.9, 3.0)]
+    assert field_log._gaps(rows, 2, [2], {}) == [(4.9, 3.0)]
 
 
 def test_gap_reduction_is_read_from_gaps_that_fall_with_the_greens_time() -> None:
@@ -317,10 +317,9 @@ def test_gap_reduction_is_read_from_gaps_that_fall_with_the_greens_time() -> Non
     assert field_log._reduction([(t, 2.4 - (t % 3) * 0.5) for t in range(4, 20)]) is None  # gaps that do not fall
 
 
-def test_a_constant_gap_from_actuation_to_call_is_said_as_a_detector_delay_not_applied() -> None:
-    """Detector 9 calls nothing on its tick; phase 3's call registers 3.0 s after each of its twelve actuations (the
-    issue's Econolite): a detector delay, which the config cannot hold, so it is said and the detector calls
-    nothing."""
+def test_a_constant_gap_from_actuation_to_call_is_applied_as_a_detector_delay() -> None:
+    """Detector 9 calls nothing on its tick; phase 3's call registers 3.0 s after each of its twelve actuations,
+    which last 4 s, off 3's green (the issue's Econolite): detector 9 calls 3 with a delay of 3 s, printed."""
     t0 = datetime(2024, 5, 1, 7)
 
     def at(s: float, code: int, p: int) -> Row:
@@ -329,16 +328,17 @@ def test_a_constant_gap_from_actuation_to_call_is_said_as_a_detector_delay_not_a
     rows = [at(0, 1, 2), at(0, 1, 6)]
     for k in range(12):
         base = 60 * k
-        rows += [at(base + 10, 82, 9), at(base + 11, 81, 9), at(base + 13, 43, 3), at(base + 20, 8, 2),
+        rows += [at(base + 10, 82, 9), at(base + 14, 81, 9), at(base + 13, 43, 3), at(base + 20, 8, 2),
                  at(base + 20, 8, 6), at(base + 25, 1, 3), at(base + 25, 1, 7), at(base + 40, 8, 3),
                  at(base + 40, 8, 7), at(base + 45, 43, 2), at(base + 45, 43, 6), at(base + 50, 1, 2),
                  at(base + 50, 1, 6)]
     rows.sort(key=lambda r: (r.time, r.code, r.parameter))
     inferred = field_log.infer(rows)
     said = [g for g in inferred.guessed if g.startswith("detector 9:")]
-    assert said == ["detector 9: calls phase 3 3 s after its actuation (12 of 12): a detector delay, not applied (the "
-                    "config has no detector delay), so it calls nothing"]
-    assert inferred.config().detectors.get(9, 0) == 0
+    assert said == ["detector 9: calls phase 3 3 s after its actuation, off that phase's green (12 of the 12 "
+                    "actuations that lasted so long): detector delay 3 s"]
+    cfg = inferred.config()
+    assert cfg.detectors[9] == 3 and cfg.detector_timing[9] == config_mod.DetectorTiming(delay=3.0)
 
 
 def test_a_coordinated_phases_yield_point_is_the_first_place_its_greens_end_again_and_again() -> None:
@@ -353,3 +353,45 @@ def test_a_coordinated_phases_yield_point_is_the_first_place_its_greens_end_agai
     assert field_log._yield_point(ends(69.5, 69.5, 7.7, 13.5, 13.5, 69.5, 13.5, 10.2), 2, day0, 75) == 69.5
     assert field_log._yield_point(ends(69.5, 7.7, 13.5, 13.5, 69.5, 13.5, 10.2), 2, day0, 75) == 13.5
     assert field_log._yield_point(ends(69.5, 7.7, 10.2), 2, day0, 75) is None
+
+
+def test_a_call_held_after_its_detector_goes_is_an_extension_on_green_and_a_carryover_off_it() -> None:
+    """The emulator's own log under detector 4 extending 1.5 s on its green and detector 8 carrying over 1.0 s:
+    both read back from the call drops (44) that follow the detectors' offs."""
+    drawn = round_trip.random_config(random.Random(0), recalls=(), dual_entry=False, lag=False, coordination=False,
+                                     detector_timers=False)
+    text = drawn.toml + "[detectors]\n" + "\n".join(f"{p} = {p}" for p in (1, 2, 3, 5, 6, 7))
+    text += "\n4 = { phase = 4, extend = 1.5 }\n8 = { phase = 8, carryover = 1.0 }\n"
+    cfg = config_mod.parse(text, "held.toml")
+    got = field_log.infer(round_trip.emulator_log(cfg, 900, seed=3)).config()
+    assert got.detector_timing == {4: config_mod.DetectorTiming(extend=1.5),
+                                   8: config_mod.DetectorTiming(carryover=1.0)}
+
+
+def test_an_overlap_that_never_shows_a_yellow_is_a_transit_bar() -> None:
+    """MaxTime 1015's overlaps A and B begin green with phase 2 or 6 (some a tick later) and go to red with no yellow
+    (61 then 64, never 63): transit bars of 2 and 6; C begins green with 2 (and so often with 5 or 6 beside it)."""
+    inferred = field_log.infer(hires_file.load(LOGS / "maxtime_1015_2024_07_22_1333_excerpt.xml"))
+    overlaps = inferred.config().overlaps
+    assert {n: (o.kind.value, o.included) for n, o in overlaps.items() if n <= 3} == {
+        1: ("transit", (2, 6)), 2: ("transit", (2, 6)), 3: ("normal", (2,))}
+    assert any("a transit bar of them (transit-2)" in line for line in inferred.read)
+
+
+def test_detectors_past_64_go_into_the_config() -> None:
+    """Detectors 65 and 66 (the issue's coordinated MaxTime logs had them) call their phases in the config written
+    from the log, as detector 128 would; before, past 64 they were left out."""
+    drawn = round_trip.random_config(random.Random(0), recalls=(), dual_entry=False, lag=False, coordination=False,
+                                     detector_timers=False)
+    text = drawn.toml + "[detectors]\n" + "\n".join(f"{p} = {p}" for p in range(1, 9)) + "\n65 = 4\n66 = 8\n"
+    got = field_log.infer(round_trip.emulator_log(config_mod.parse(text, "many.toml"), 600, seed=4)).config()
+    assert {d: got.detectors.get(d) for d in (65, 66)} == {65: 4, 66: 8}
+
+
+def test_an_overlap_that_begins_green_a_constant_time_after_its_phase_has_a_delayed_green() -> None:
+    """MaxTime 1015's overlap G begins green 3.0 s after phase 4 does, every time: a normal overlap of 4 with its
+    green delayed 3 s (the config's delay_green)."""
+    inferred = field_log.infer(hires_file.load(LOGS / "maxtime_1015_2024_07_22_1333_excerpt.xml"))
+    g = inferred.config().overlaps[7]
+    assert (g.kind.value, g.included, g.delay_green) == ("normal", (4,), 3.0)
+    assert any(line.startswith("overlap G (7): begins green 3 s after phase(s) [4]") for line in inferred.read)
