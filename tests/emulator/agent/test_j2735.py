@@ -1,7 +1,8 @@
 """The J2735 SPaT (:mod:`emulator.agent.j2735`), decoded by a second, independent decoder: asn1tools (its own UPER
 codec) compiling the ASN.1 text of ISO TS 19091's SPAT and of ETSI's DSRC MessageFrame, written back from the types
 pycrate compiled (tests/emulator/agent/asn1_text.py); the hand-written MessageFrame header is checked against
-pycrate's own MessageFrame too. Received over real UDP from `hils emulator serve --j2735`, and in virtual time."""
+pycrate's own MessageFrame too. Then judged as USDOT's jpo-geojsonconverter judges CTI 4501 conformance
+(:mod:`harness.reference.cti4501`), and received over real UDP from `hils emulator serve --j2735`."""
 
 from __future__ import annotations
 
@@ -22,6 +23,7 @@ from emulator.agent import j2735
 from emulator.model.controller import Controller
 from emulator.model.spat import Indication
 from harness.bench.processes import start_emulator, tool
+from harness.reference import cti4501
 from hils.envs import ENV_ID
 from hils.envs.intersection import EnvOptionError, IntersectionEnv
 from hils.protocol.config import load
@@ -102,6 +104,42 @@ def test_each_message_decoded_independently_is_what_the_controller_announces() -
             assert timing["nextTime"] == 36001
             finite_max += timing["maxEndTime"] != 36001
     assert finite_max > 600  # the latest is announced, not only the earliest
+
+
+def test_a_yellow_reads_its_exact_end_and_its_start_through_the_converter() -> None:
+    """The converter's processed SPaT (jpo-geojsonconverter's own schema checks it) puts phase 2's yellow, once it
+    shows, between its start and its end 3 s later, the min and max end equal; the message is CTI 4501
+    conformant as the converter computes it."""
+    for _, c in run_city(400):
+        spat = {(s.kind, s.number): s for s in c.spat()}
+        if spat["phase", 2].indication is Indication.YELLOW and spat["phase", 2].started == 0:
+            break
+    else:
+        pytest.fail("2 never turned yellow")
+    now = clock(c)
+    judgement = cti4501.judge(decode(j2735.encode(c, 1)), now)
+    assert judgement.conformant, judgement.messages
+    assert judgement.processed["cti4501Conformant"] is True
+    two = next(m for m in judgement.processed["states"] if m["signalGroup"] == 2)["stateTimeSpeed"][0]
+    assert two["eventState"] == "PROTECTED_CLEARANCE"
+    instant = {k: datetime.fromisoformat(v) for k, v in two["timing"].items()}
+    assert instant["startTime"] == now
+    assert instant["minEndTime"] == instant["maxEndTime"] == instant["likelyTime"] == now + timedelta(seconds=3)
+    assert instant["nextTime"] == datetime(1970, 1, 1, tzinfo=UTC)  # unknown: the converter's epoch
+
+
+def test_a_message_without_a_max_end_time_is_not_conformant() -> None:
+    """The judge can fail: a SPaT leaving maxEndTime out (J2735 allows it; CTI 4501 does not) is refused, the
+    converter's message naming the field."""
+    value = {"timeStamp": 1000, "intersections": [{
+        "id": {"region": 0, "id": 1}, "revision": 0, "status": (0, 16), "moy": 1000, "timeStamp": 0,
+        "states": [{"signalGroup": 2, "state-time-speed": [{"eventState": "protected-Movement-Allowed", "timing": {
+            "startTime": 10, "minEndTime": 40, "nextTime": 36001}}]}]}]}
+    ITS_IS.DSRC.SPAT.set_val(value)
+    message = j2735.frame(19, ITS_IS.DSRC.SPAT.to_uper())
+    judgement = cti4501.judge(decode(message), datetime(2026, 1, 1, tzinfo=UTC))
+    assert not judgement.conformant and judgement.processed["cti4501Conformant"] is False
+    assert any("maxEndTime" in m for m in judgement.messages), judgement.messages
 
 
 def test_a_long_message_takes_a_two_octet_length() -> None:
