@@ -261,7 +261,11 @@ class _Bounds:
         that stops fitting falls on a later phase of the group)."""
         seq, q = self.c.sequencer, self.wish.get(r.number)
         if self.plan is None:
-            return q is not None and not seq._beyond(q)
+            if q is None or seq._beyond(q):
+                return False
+            # a backing waits while a ring wishes across: "crossing goes before backing" (Sequencer.decide)
+            backing = r.order.index(q) < r.order.index(r.phase)
+            return not backing or not any(w is not None and seq._beyond(w) for w in self.wish.values())
         coord = self.plan.coord[r.number]
         if coord in self.inputs.omits:
             return False  # not demand then: the ring's wish may fall across the barrier
@@ -327,11 +331,13 @@ class _Bounds:
                    for o in c.rings):
                 return None  # a ring of the other group still green: the crossing is not yet committed
         elif r.interval is GREEN and self.plan is None and self.wish.get(r.number) == p:
-            end = self.ends.get(r.number)
-            if end is None or (len(c.config.barriers) != 2 and c.sequencer._beyond(p)):
+            seq, end = c.sequencer, self.ends.get(r.number)
+            crossing = seq._beyond(p)
+            # crossing, the rings go to the other group of two: p is the ring's target there only if it lies there (a
+            # backing refused while demand waits across is served at the group's next visit)
+            if end is None or (crossing and (len(c.config.barriers) != 2 or seq.barrier_of(p) == seq.group)):
                 return None
             # at the crossing every ring ends its green together; within the group only this one
-            crossing = c.sequencer._beyond(p)
             clear = [end + o.clearance_left(timing[o.phase]) for o in c.rings
                      if o is r or (crossing and o.interval is GREEN)]
         else:
