@@ -32,8 +32,8 @@ offset bytes field
 What each field carries here:
 
 - Min time to change is the announced earliest change, max the latest; 0 where the model has none (V2X Hub
-  sends no maxEndTime for 0, as J2735 leaves it out when unknown): a green's latest end, a red phase's latest
-  start, an overlap's latest change, and every time of a controller in a monitor's flash.
+  sends no maxEndTime for 0, as J2735 leaves it out when unknown): a green resting or held, a red phase whose next
+  service is not known, and every time of a controller in a monitor's flash (:mod:`emulator.model.spat` says which).
 - The pedestrian min and max are 0: the model announces no pedestrian timing (:mod:`emulator.model.spat`).
 - In flash every phase and overlap shows red and its flashing-output bit is set. The intersection status, time
   base action, discontinuous-change flag and pedestrian detections are 0: the model has no field to fill them.
