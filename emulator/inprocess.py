@@ -15,6 +15,7 @@ from collections.abc import Callable, Sequence
 
 import simpy
 
+from emulator.agent import j2735
 from emulator.agent.mib import MibView
 from emulator.model.controller import TICK, Controller
 from emulator.model.datalogger import DataLogger
@@ -62,6 +63,7 @@ class VirtualTarget:
         self._ticks = Grid(env.now + self.tick_phase, TICK)  # the controller's tick count k is reached at at(k)
         self.clock: EventClock | None = None
         self._ticking: simpy.Process | None = None
+        self._j2735_sent = 0
         if fast_path:
             self.clock = EventClock(env, self.unit, self.tick_phase)
             self.surface: MibView | ClockedSurface = ClockedSurface(self.mib, self.clock)
@@ -86,6 +88,15 @@ class VirtualTarget:
 
         return tuple(MovementTiming(s.kind, s.number, s.indication.value, at(s.earliest), at(s.latest), at(s.likely))
                      for s in self.controller.spat())
+
+    def j2735(self, intersection: int = 1) -> bytes:
+        """The controller's SPaT now as a J2735 message (UPER MessageFrame: :func:`emulator.agent.j2735.encode`),
+        numbered ``intersection``; its revision counts the messages asked for."""
+        if self.clock is not None:
+            self.clock.catch_up()
+        message = j2735.encode(self.controller, self._j2735_sent, intersection=intersection)
+        self._j2735_sent += 1
+        return message
 
     def hires_to(self, sink: Callable[[Sequence[Event]], None]) -> None:
         """Hand ``sink`` the hi-res log so far, then each tick's events as they are logged (the other optional

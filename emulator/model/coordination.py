@@ -385,13 +385,14 @@ class Coordinator:
         plan = self.plan
         if plan is not None and self.lag:
             return 1
-        ahead = self._until_schedule() if self.config.coordination.schedule else None
+        ahead = self.until_schedule() if self.config.coordination.schedule else None
         if plan is not None:
             mark = min((m - self.timer - 1) % plan.cycle + 1 for m in plan.marks())
             ahead = mark if ahead is None else min(ahead, mark)
         return ahead
 
-    def _until_schedule(self) -> int:
+    def until_schedule(self) -> int:
+        """Ticks until the next time-of-day change of the local plan (a schedule configured)."""
         now = self.clock % DAY
         return min((e.start * 10 - now - 1) % DAY + 1 for e in self.config.coordination.schedule)
 

@@ -31,7 +31,7 @@ from harness import published
 from harness.bench import corridor as bench_corridor
 from harness.bench import floods, machine
 from harness.bench import seeds as bench_seeds
-from harness.bench.processes import snmpd, start_emulator
+from harness.bench.processes import in_fresh_process, snmpd, start_emulator
 from harness.bench.seeds import Spread, seeds_text
 from harness.bench.serve import resident_mb
 from hils.control.actions import PAPER_ACTION_TYPES, ActionType
@@ -174,9 +174,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                                            "actuated operation, the city's coordinated pattern and the max-pressure "
                                            "agent: the share of phase and overlap indication changes that came "
                                            "within the earliest and latest the controller's SPaT announced for them "
-                                           "(goal 100 %). Virtual time, every tick stepped.")
+                                           "(goal 100 %), and the share that had a finite latest announced (so that "
+                                           "the first is not hollow), per operation over several seeds. Virtual "
+                                           "time, every tick stepped, each run in a fresh process.")
     spat.add_argument("--seconds", type=float, default=3600.0, metavar="S", help="simulated seconds per run (3600)")
-    spat.add_argument("--seed", type=int, default=1)
+    bench_seeds.seeds_option(spat, "0-2")
     spat.add_argument("--operation", action="append", choices=["actuated", "coordinated", "max-pressure"],
                       help="run only this operation (repeatable; default: all three)")
     published.options(spat, "bench-spat", "bench")
@@ -255,9 +257,10 @@ def _spat_command(args: argparse.Namespace) -> int:
     info = machine.describe()
     print(machine.header(info))
     shares = []
-    for operation in args.operation or list(spat.OPERATIONS):
-        print(f"{operation}: {args.seconds:g} s ...", flush=True)
-        shares.append(spat.measure(operation, args.seconds, args.seed))
+    for seed in args.seeds:
+        for operation in args.operation or list(spat.OPERATIONS):
+            print(f"{operation}, seed {seed}: {args.seconds:g} s ...", flush=True)
+            shares.append(in_fresh_process(spat.measure, operation, args.seconds, seed))
     text, figures = spat.report(shares)
     print(text)
     _write_figures(folder / "spat.json", {"machine": info, **figures})

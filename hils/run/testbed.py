@@ -356,6 +356,16 @@ class Testbed(_OneIntersection):
         return {name: i.target.spat() for name, i in self.intersections.items()
                 if callable(getattr(i.target, "spat", None))}
 
+    def j2735(self) -> dict[str, bytes]:
+        """Each controller's SPaT now as SAE J2735 sends it, where the run can read it (the in-process emulator's):
+        a UPER MessageFrame (messageId 19) with startTime, minEndTime, maxEndTime and likelyTime per signal group
+        (phase p is group p, overlap n group 16 + n), the intersections numbered 1, 2, ... in the run's order
+        (docs/spat.md). Needs pycrate (``pip install 'hils[j2735]'``)."""
+        self._started()
+        readers = [(name, i.target) for name, i in self.intersections.items()
+                   if callable(getattr(i.target, "j2735", None))]
+        return {name: target.j2735(intersection=k + 1) for k, (name, target) in enumerate(readers)}
+
     @property
     def driver(self) -> Any:
         """Wall-clock runs: the :class:`hils.shell.clock.WallClockDriver` (its ``loop`` is the run's asyncio loop,
