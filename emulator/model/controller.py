@@ -51,10 +51,10 @@ and the controller goes to flash (all red) and stops timing. Overlaps follow the
 phases at the end of each tick.
 
 Quiet time (:mod:`emulator.model.quiet`). Most ticks change nothing but counters: every unit says when it next
-acts (the backup timer, the coordinator, the preemptor, the overlaps and, through the sequencer, the ring
-timers), and :meth:`Controller.advance` skips the ticks before the least of those deadlines at once
-(:meth:`Controller.skip`). Any input (a SET, a detector, a retiming) makes the next step a real one:
-:meth:`Controller.touch`.
+acts (the backup timer, the coordinator, the pedestrian calls, the preemptor and its part in the rings, the
+overlaps and, through the sequencer, the ring timers and every decision the sequencer takes), and
+:meth:`Controller.advance` skips the ticks before the least of those deadlines at once (:meth:`Controller.skip`).
+Any input (a SET, a detector, a retiming) makes the next step a real one: :meth:`Controller.touch`.
 """
 
 from __future__ import annotations
@@ -113,6 +113,9 @@ class Recorder(Protocol):
 
     def powered_up(self) -> None:
         """The unit powered up again (:meth:`Controller.reset` after the first)."""
+
+    def deadline(self) -> int | None:
+        """Ticks until the next step it logs at though nothing else changes there (None: none ahead)."""
 
 
 class Controller:
@@ -363,11 +366,10 @@ class Controller:
     def step(self) -> None:
         """Advance one tick (0.1 s)."""
         if self.quiet.proven():
-            self.skip(1)  # a tick quiet time proved quiet, stepped for the recorder (a green's minimum to log)
-        else:
-            before = self.quiet.before()
-            self._step()
-            self.quiet.stepped(before)
+            self.skip(1)  # a tick quiet time proved quiet: counted
+            return
+        self._step()
+        self.quiet.stepped()
         if self.recorder is not None:
             self.recorder.stepped()
 

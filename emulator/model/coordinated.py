@@ -152,12 +152,9 @@ class Coordinated:
         plan = self.coordinator.plan
         return plan is None or plan.fits(phase, self.coordinator.timer, 0, walk=True)
 
-    # --- quiet time (see emulator/model/controller.py) -------------------------------------------------
+    # --- quiet time (see emulator/model/quiet.py) -------------------------------------------------
 
     def thresholds(self, r: Ring) -> list[int]:
         """Ticks from now to the floating limit of ``r``'s green, if it has one still ahead."""
         limit = self.limit[r.number]
         return [limit - r.ticks] if r.interval is GREEN and r.ticks < limit else []
-
-    def discrete(self) -> tuple:
-        return tuple(self.forced.values()), tuple(self.yielded.values())

@@ -401,10 +401,6 @@ class Coordinator:
         if self.plan is not None:
             self.timer = (self.timer + n) % self.plan.cycle
 
-    def discrete(self) -> tuple:
-        """What a step may change here besides the counters (the controller's quiet-time check)."""
-        return self.running, self.free_status, self.local, self.replan, self.budget, self.passed
-
     # --- what the rings ask --------------------------------------------------------------------------
 
     def recalled(self) -> frozenset[int]:

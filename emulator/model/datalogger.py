@@ -256,6 +256,13 @@ class DataLogger:
     def powered_up(self) -> None:
         self._power_up(first=False)
 
+    def deadline(self) -> int | None:
+        """Ticks until the next step the logger logs at though nothing else may change there: a green's minimum
+        (None: none ahead)."""
+        clock = self._clock
+        return min((g.start + g.minimum - clock for g in self._greens.values()
+                    if not g.min_logged and g.start + g.minimum > clock), default=None)
+
     # --- internals -----------------------------------------------------------------------------------------------
 
     @property

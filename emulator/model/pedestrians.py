@@ -46,6 +46,11 @@ class PedCalls:
             self.calls = calls
         return reading.demand(inputs, self.calls)
 
+    def deadline(self, greens: Iterable[int], inputs: Inputs) -> int | None:
+        """1 when the next tick latches a call (``greens``: the phases showing green then), else None: the calls
+        change only with the inputs and the greens."""
+        return 1 if reading.latched(self.calls, greens, inputs) != self.calls else None
+
     def serve(self, phase: int) -> bool:
         """A green of ``phase`` starts: True when it serves a walk; the call is answered (cleared) unless it waits
         for a walk that did not fit."""

@@ -59,14 +59,13 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping, MutableMapping, Sequence
 from typing import TYPE_CHECKING
 
-from emulator.model import inputs as reading
 from emulator.model.coordinated import Coordinated
 from emulator.model.inputs import Inputs
 from emulator.model.overlaps import Overlaps, Phases
 from emulator.model.preemption import Preemptor
 from emulator.model.ring import DWELL, END, GREEN, RED_CLEAR, START, TIMED, Ring, Termination, Timing
 from hils.protocol.config import IntersectionConfig, NextPhaseLock
-from hils.protocol.ntcip import ControlColumn, PreemptState
+from hils.protocol.ntcip import ControlColumn
 
 if TYPE_CHECKING:
     from emulator.model.preempted import Preempted
@@ -95,8 +94,7 @@ class Sequencer:
         self._barrier = {p: config.barrier_of(p) for p in config.phases}
         self._order = {p: ring.index(p) for ring in config.rings for p in ring}
         self._ring_of = {p: config.ring_of(p) for p in config.phases}
-        # settles' proof holds without overlaps and with the next phase locked at the end of green
-        self._provable = not config.overlaps and config.next_phase_lock is NextPhaseLock.GREEN_END
+        self._red_end = config.next_phase_lock is NextPhaseLock.RED_END
         self._gap_disable = frozenset(p for p, ph in config.phases.items() if ph.simultaneous_gap_disable)
         self.reset()
 
@@ -136,14 +134,18 @@ class Sequencer:
         """``red_end`` lock: a ring in its clearance takes the nearest phase with demand after its own on the
         committed phase's side of the barrier (SUMO's ``NEMAPhase::trySwitch`` lets a later call override the
         decision "only if the new transition is on the same side of a barrier"); without one it keeps it."""
+        r.target = self._redirected(r, demand, inputs)
+
+    def _redirected(self, r: Ring, demand: frozenset[int], inputs: Inputs) -> int:
+        """The phase :meth:`redirect` commits ``r`` to."""
         side = self._barrier[r.target]
         n, i = len(r.order), self._order[r.phase]
         for k in range(1, n):
             q = r.order[(i + k) % n]
             if (self._barrier[q] == side and self.serviceable(r, q, demand, inputs)
                     and (side != self.group or not self._beyond(q))):
-                r.target = q
-                return
+                return q
+        return r.target
 
     def time(self, r: Ring, demand: frozenset[int], inputs: Inputs, tick: int) -> None:
         """One tick of a ring's timers (a green's with the demand conflicting with it); a clearance that has run its
@@ -228,12 +230,23 @@ class Sequencer:
     def decide(self, demand: frozenset[int], inputs: Inputs) -> None:
         """Commit the next phase of every ready ring that may go: within the group at once, across the barrier
         when every ring is ready for it."""
+        commits, across = self._choices(demand, inputs)
+        for r, q in commits:
+            self.commit(r, q, inputs)
+        if across:
+            self._cross(across, demand, inputs)
+
+    def _choices(self, demand: frozenset[int], inputs: Inputs) -> tuple[list[tuple[Ring, int]], dict[int, int]]:
+        """What :meth:`decide` does: the commits within the group, or else the wishes beyond it when every ring may
+        cross (empty: the ring wishing across waits at the barrier). A commit within the group keeps its ring from
+        crossing, so the two never come together."""
         ready = {r.number: self.ready(r, inputs) for r in self.rings}
         if not any(ready.values()):
-            return  # most ticks: every ring is timing
+            return [], {}  # most ticks: every ring is timing
         wish = {r.number: self.wish(r, demand, inputs) for r in self.rings if ready[r.number]}
         across = {n: q for n, q in wish.items() if q is not None and self._beyond(q)}
         all_ready = all(ready.values())
+        commits = []
         for r in self.rings:
             q = wish.get(r.number)
             if q is None or r.number in across:
@@ -241,10 +254,14 @@ class Sequencer:
             if r.interval is GREEN and self._order[q] < self._order[r.phase] and all_ready and across:
                 wish[r.number] = None  # both rings could cross: crossing goes before backing
                 continue
-            self.commit(r, q, inputs)
-        if not across or not all(ready[r.number] and (wish[r.number] is None or r.number in across)
-                                 for r in self.rings):
-            return  # the ring wishing across waits at the barrier
+            commits.append((r, q))
+        if commits or not across or not all(ready[r.number] and (wish[r.number] is None or r.number in across)
+                                            for r in self.rings):
+            return commits, {}
+        return [], across
+
+    def _cross(self, across: dict[int, int], demand: frozenset[int], inputs: Inputs) -> None:
+        """Every ring clears into the next barrier group a wish lies in."""
         # Cross to the nearest group (cyclically) that a wish lies in; restart the group only when every
         # wish beyond it is a backing that backup_prevent forbids (crossing serves those on the way back).
         groups = {self._barrier[q] for q in across.values()}
@@ -272,82 +289,66 @@ class Sequencer:
 
     def start(self, r: Ring, tick: int) -> None:
         """A ring resting in red starts its committed phase when it may."""
-        if r.interval is not DWELL or r.target is None:
+        if r.interval is not DWELL or r.target is None or not self._starts(r, tick):
             return
         t = r.target
         if t in self.control[PHASE_OMIT] and self.preemptor.serving is None:
             r.target = None  # omitted during the clearance: not serviced, choose again (a preempt overrides omits)
             return
-        others_elsewhere = any(o is not r and o.interval is not DWELL
-                               and self._barrier[o.phase] != self._barrier[t] for o in self.rings)
-        if others_elsewhere or r.reverting(t, tick, self.timing[t]):
-            return
-        if self.config.overlaps and self.overlaps.blocks(t, Phases.of(self.rings)):
-            return  # an overlap it waits for still shows (or clears) after this tick
         r.phase, r.target = t, None
         self.move(r, START)
 
-    # --- quiet time (see emulator/model/controller.py) -------------------------------------------------
+    def _starts(self, r: Ring, tick: int, phases: Phases | None = None) -> bool:
+        """``r``, resting in red with a committed phase, starts it at ``tick`` (or drops it, omitted): its
+        clearance is over, no other ring still shows a phase of another barrier group (both rings enter a new
+        group together), its red revert has passed and no overlap it waits for still shows after this tick
+        (``phases``: what the phases show as the overlaps step; by default, what they show now)."""
+        t = r.target
+        if t in self.control[PHASE_OMIT] and self.preemptor.serving is None:
+            return True
+        if r.reverting(t, tick, self.timing[t]) or any(
+                o is not r and o.interval is not DWELL and self._barrier[o.phase] != self._barrier[t]
+                for o in self.rings):
+            return False
+        # an overlap it waits for still shows (or clears) after this tick
+        return not (self.config.overlaps and self.overlaps.blocks(t, Phases.of(self.rings) if phases is None
+                                                                  else phases))
 
-    def deadline(self, tick: int, preempted: Preempted, *, logging: bool) -> tuple[int | None, list[int]]:
-        """Ticks to the next threshold of the rings' timers in quiet time (None: none ahead), as the pattern and a
-        preempt being served set them too; and, with ``logging``, to each tick a recorder logs though nothing
-        changes there. A green's minimum matters only with conflicting demand (registered by the last step, and
-        constant in quiet time): without any, the ready green has nowhere to go and no ring waits across the
-        barrier for it. While a pattern runs or a preempt is served it may be what ends it; the data logger
-        logs it in any case."""
-        minimums = self.coordinated.running or self.preemptor.serving is not None
+    # --- quiet time (see emulator/model/quiet.py) -------------------------------------------------
+
+    def deadline(self, tick: int, demand: frozenset[int], inputs: Inputs, phases: Phases | None,
+                 preempted: Preempted) -> int | None:
+        """Ticks to the next step at which the sequencer or a ring acts, inputs and ``demand`` staying as they are
+        (None: none ahead); ``phases``: what the phases show at the next tick if no ring moves (None: no overlaps
+        to ask).
+
+        1 when the next step decides something: a green's timers start or stop running or the conflicting demand it
+        registered changes, a ``red_end`` call redirects a clearing ring, a ready ring commits its wish or the
+        rings cross the barrier (:meth:`_choices`), or a committed phase starts (:meth:`_starts`). Each question
+        is the step's own, asked now: until a counter reaches a threshold (the rest of the answer) it answers the
+        same at every tick. The thresholds: each ring's timers as the pattern and a preempt being served set them
+        too. A green's minimum matters only with conflicting demand (registered by the last step, and constant in
+        quiet time): without any, the ready green has nowhere to go and no ring waits across the barrier for it.
+        While a pattern runs or a preempt is served it may be what ends it."""
+        serving = self.preemptor.serving is not None
+        minimums = self.coordinated.running or serving
+        redirecting = self._red_end and not serving
+        self.prepare(demand, inputs)  # what the next step reads first, as it will read it
         ahead: list[int] = []
-        logged: list[int] = []
         for r in self.rings:
-            ahead += r.thresholds(tick, self.timing, minimum=minimums or r.conflict)
-            if r.interval is GREEN:
-                if logging and not (minimums or r.conflict) and r.ticks < r.minimum:
-                    logged.append(r.minimum - r.ticks)
-                ahead += self.coordinated.thresholds(r) + preempted.thresholds(r)
-        return min(ahead, default=None), logged
-
-    def settles(self, ped_calls: frozenset[int], inputs: Inputs) -> bool:
-        """After a step that changed something: the next step changes nothing but counters, as a step that changed
-        nothing would show (the controller's "Quiet time"). Proven here only where it is short: free, no preempt,
-        no overlap, the next phase locked at the end of green, the controller not flashing.
-
-        Nothing is proven for a next step that the controller's quiet time makes real anyway (a counter reaches a
-        threshold), so every comparison of a counter with a threshold is the same at the next tick as now: the
-        predicates below are the step's own, read now. What the next step does, part by part: the backup timer,
-        start-up flash and time-of-day plan act only at thresholds; the coordinator retries a pattern that this
-        step could not start and fails alike; no preempt is called or active; the pedestrian calls latch as
-        checked; a clearance only counts; a green's conflicting demand is what this step registered and its gap
-        and max-out counters run as the ring's ``skip`` runs them (max recall runs the latter without conflicting
-        demand), as checked, so its gap latch is decided as this step decided it; no ring is both ready and
-        wishing, so nothing is committed and no green ends; a ring resting in red with a phase to start stays
-        blocked (by another ring's green or clearance, which stays, or its red revert, a threshold); the status
-        image, its walk thresholds unpassed, stays."""
-        if self.coordinated.running or not self._provable:
-            return False
-        pe = self.preemptor
-        if pe.control or any(s is not PreemptState.NOT_ACTIVE for s in pe.states.values()):
-            return False
-        greens = {r.phase for r in self.rings if r.interval is GREEN}
-        if reading.latched(ped_calls, greens, inputs) != ped_calls:
-            return False
-        return self.settled(reading.demand(inputs, ped_calls), inputs)
-
-    def settled(self, demand: frozenset[int], inputs: Inputs) -> bool:
-        """The next tick, with this demand, changes nothing here but counters: no ring's timer starts or stops (its
-        counters run as :meth:`emulator.model.ring.Ring.skip` runs them) and no ring is both ready and wishing, so
-        nothing is committed and no green ends (the predicates are the step's own, read now)."""
-        # What the next step computes before anything reads it: set now, so the predicates below read it.
-        self.waiting_across = self.waits_across(demand, inputs)
-        for r in self.rings:
-            if r.interval is GREEN:
+            interval = r.interval
+            if interval is GREEN:
                 max_recall = r.phase in inputs.extending
                 if not r.steady(extending=r.phase in inputs.calls or max_recall,
                                 conflict=self.conflicting(r, demand), max_recall=max_recall):
-                    return False  # a counter starts or stops, or the conflicting demand changes: not skip's work
-            if self.ready(r, inputs) and self.wish(r, demand, inputs) is not None:
-                return False
-        return True
-
-    def discrete(self) -> tuple:
-        return self.group, tuple((r.phase, r.interval, r.target, r.gapped) for r in self.rings)
+                    return 1
+                ahead += self.coordinated.thresholds(r) + preempted.thresholds(r)
+            elif interval is DWELL:
+                if r.target is not None and self._starts(r, tick + 1, phases):
+                    return 1
+            elif redirecting and r.target is not None and self._redirected(r, demand, inputs) != r.target:
+                return 1
+            ahead += r.thresholds(tick, self.timing, minimum=minimums or r.conflict)
+        if not serving and any(self._choices(demand, inputs)):
+            return 1
+        return min(ahead, default=None)
