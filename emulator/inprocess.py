@@ -70,8 +70,13 @@ class VirtualTarget:
             self._ticking = env.process(self.unit.process(env, self.tick_phase))
 
     def hires(self) -> list[Event]:
-        """The controller's hi-res event log so far (complete: only real steps log, and they run when due)."""
-        return self._logger().events()
+        """The controller's hi-res event log so far, the controller brought to the present first (on the fast path
+        quiet ticks are counted only when something reads or writes the controller, and a minimum timed in them is
+        logged then, at its tick)."""
+        log = self._logger()
+        if self.clock is not None:
+            self.clock.catch_up()
+        return log.events()
 
     def spat(self) -> tuple[MovementTiming, ...]:
         """Each phase's and overlap's indication and the times of its next change, in the run's seconds: the

@@ -114,9 +114,6 @@ class Recorder(Protocol):
     def powered_up(self) -> None:
         """The unit powered up again (:meth:`Controller.reset` after the first)."""
 
-    def deadline(self) -> int | None:
-        """Ticks until the next step it logs at though nothing else changes there (None: none ahead)."""
-
 
 class Controller:
     """The controller model: its units, its control objects and the tick."""

@@ -9,9 +9,11 @@ Rules of this file
 - An event's time is the controller's clock (the coordinator's: local time in ticks since midnight of the
   day the unit first powered up, counting on through power cycles) at the tick that made it. So the log is
   the same in virtual time and at the wall clock, and the same whether quiet ticks are stepped or skipped:
-  a skipped stretch changes nothing discrete, and every threshold the log reports (minimum green, walk,
-  pedestrian clearance, the coordinator's marks) is a step, a real one or, for a minimum that changes nothing
-  else, one for the logger alone (:meth:`emulator.model.controller.Controller.quiet_ticks`).
+  a skipped stretch changes nothing discrete, and every threshold the log reports (walk, pedestrian clearance,
+  the coordinator's marks) is a real step, but for a green's minimum that changes nothing else: the controller
+  takes no step for the logger, which logs such a minimum at its own tick when it next hears from the
+  controller or is read (:meth:`DataLogger._minimums`), so a reader of a controller skipping quiet ticks
+  brings it to the present first, as :meth:`emulator.inprocess.VirtualTarget.hires` does.
 - The events of one tick are kept in (code, parameter) order, as field logs list them; ticks in time order.
 - The list of events is never changed in place but by appending: dropping the oldest makes a new list. So a
   :class:`Snapshot` (the list and its length then) is taken in O(log n) and stays the log as it stood while
@@ -72,6 +74,7 @@ can write them through (:mod:`hils.shell.hiresjournal`) and keep them if it dies
 from __future__ import annotations
 
 import bisect
+import itertools
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime, timedelta
@@ -135,6 +138,7 @@ class Snapshot:
 class _Green:
     """What the logger remembers of the green a ring is timing (mutable: updated as it runs)."""
 
+    phase: int
     start: int  # clock tick it began
     minimum: int  # ticks of its minimum
     min_logged: bool = False
@@ -194,6 +198,7 @@ class DataLogger:
 
     def snapshot(self, since: datetime | None = None) -> Snapshot:
         """The log as it stands, from ``since`` on (inclusive) when given; O(log n), nothing copied."""
+        self._minimums(before=self._clock + 1)
         start = 0
         if since is not None:
             clock = -(-(since - self.day0) // timedelta(microseconds=100_000))  # the first tick at or after since
@@ -208,19 +213,20 @@ class DataLogger:
     # --- what the controller tells -------------------------------------------------------------------------
 
     def changed(self, change: Change) -> None:
+        self._minimums(before=self._clock)
         r, p = self.controller.rings[change.ring - 1], change.phase
         if change.interval is GREEN:
             group = self.controller.config.barrier_of(p)
             if self._group is not None and group != self._group:
                 self._add(E.BARRIER_TERMINATION, self._group + 1)
             self._group = group
-            self._greens[change.ring] = _Green(self._clock, r.minimum)
+            self._greens[change.ring] = _Green(p, self._clock, r.minimum)
             self._add(E.PHASE_ON, p)
             self._add(E.PHASE_BEGIN_GREEN, p)
         elif change.interval is YELLOW:
             green = self._greens.pop(change.ring, None)
             if green is not None:
-                self._min_complete(green, p)
+                self._min_complete(green)
                 if not green.checking:  # the conflicting call came on the tick that ends the green
                     self._add(E.PHASE_CHECK, p)
             if change.reason in _TERMINATIONS:
@@ -241,12 +247,12 @@ class DataLogger:
 
     def stepped(self) -> None:
         c = self.controller
+        self._minimums(before=self._clock)
         for number, green in self._greens.items():
-            ring = c.rings[number - 1]
-            self._min_complete(green, ring.phase)
-            checking = ring.conflict
+            self._min_complete(green)
+            checking = c.rings[number - 1].conflict
             if checking and not green.checking:
-                self._add(E.PHASE_CHECK, ring.phase)
+                self._add(E.PHASE_CHECK, green.phase)
             green.checking = checking
         if self._seen.flash == UnitFlashStatus.STARTUP and c.flash_status is UnitFlashStatus.NOT_FLASH:
             self._intervals()  # start-up flash over: the start-up intervals begin
@@ -254,14 +260,9 @@ class DataLogger:
         self._flush()
 
     def powered_up(self) -> None:
+        self._minimums(before=self._clock + 1)
         self._power_up(first=False)
 
-    def deadline(self) -> int | None:
-        """Ticks until the next step the logger logs at though nothing else may change there: a green's minimum
-        (None: none ahead)."""
-        clock = self._clock
-        return min((g.start + g.minimum - clock for g in self._greens.values()
-                    if not g.min_logged and g.start + g.minimum > clock), default=None)
 
     # --- internals -----------------------------------------------------------------------------------------------
 
@@ -272,10 +273,23 @@ class DataLogger:
     def _add(self, code: int, parameter: int) -> None:
         self._tick.append((int(code), parameter))
 
-    def _flush(self) -> None:
+    def _minimums(self, *, before: int) -> None:
+        """Each green's minimum timed at a clock tick before ``before`` and not logged yet, logged at its tick: the
+        controller skips quiet ticks without telling the logger, so a minimum that changed nothing else is logged
+        when the logger next hears from the controller or is read (at the latest)."""
+        due = sorted((g.start + g.minimum, g.phase, g) for g in self._greens.values()
+                     if not g.min_logged and g.start + g.minimum < before)
+        for clock, group in itertools.groupby(due, key=lambda d: d[0]):
+            for _, phase, green in group:
+                green.min_logged = True
+                self._add(E.PHASE_MIN_COMPLETE, phase)
+            self._flush(clock)
+
+    def _flush(self, clock: int | None = None) -> None:
+        """The events of the tick being stepped (or of ``clock``'s) go to the log."""
         if not self._tick:
             return  # most steps log nothing
-        clock = self._clock
+        clock = self._clock if clock is None else clock
         logged = sorted(set(self._tick))
         self._log.extend((clock, code, p) for code, p in logged)
         self._tick.clear()
@@ -314,10 +328,10 @@ class DataLogger:
         co = self.controller.coordinator
         return co.plan is not None and co.plan.force_off.get(phase) in co.passed
 
-    def _min_complete(self, green: _Green, phase: int) -> None:
+    def _min_complete(self, green: _Green) -> None:
         if not green.min_logged and self._clock >= green.start + green.minimum:
             green.min_logged = True
-            self._add(E.PHASE_MIN_COMPLETE, phase)
+            self._add(E.PHASE_MIN_COMPLETE, green.phase)
 
     def _read(self) -> None:
         """Events of what the controller shows now against what it showed after the last step."""

@@ -62,11 +62,13 @@ class QuietTime:
         """An input came (or the unit powered up): the next step is a real one."""
         self.fresh = True  # an input came since the last real step
         self.next_real: float | None = None  # the tick of the next real step, once asked (inf: none)
+        self.stale = False  # next_real is only a bound: the deadlines are to be asked anew
 
     def written(self) -> None:
-        """A write that changed no input a step reads (a repeated control SET): the deadlines are asked anew (the
-        backup timer restarted)."""
-        self.next_real = None
+        """A write that changed no input a step reads (a repeated control SET): the backup timer restarted, so its
+        deadline only moved later; the ticks before the next real step known stay quiet, and the deadlines are
+        asked anew."""
+        self.stale = True
 
     def stepped(self) -> None:
         """A real step ran: the deadlines are asked anew."""
@@ -83,9 +85,10 @@ class QuietTime:
         if self.fresh:
             return 1
         c = self.c
-        if self.next_real is None:
+        if self.next_real is None or self.stale:
             ahead = self._least()
             self.next_real = math.inf if ahead is None else c.tick + ahead
+            self.stale = False
         return None if self.next_real is math.inf else self.next_real - c.tick
 
     def _least(self) -> int | None:
@@ -100,8 +103,6 @@ class QuietTime:
 
     def _deadlines(self) -> Iterator[int | None]:
         c = self.c
-        if c.recorder is not None:
-            yield c.recorder.deadline()
         yield c.backup.deadline()
         yield c.coordinator.deadline()
         if c.flashing:
