@@ -259,6 +259,16 @@ class DataLogger:
         self._read()
         self._flush()
 
+    def pending(self) -> int | None:
+        """The clock tick of the next green's minimum the logger has yet to log (None: none): one timed in quiet
+        ticks is logged when the logger next hears from the controller or is read, or by :meth:`log_until`."""
+        return min((g.start + g.minimum for g in self._greens.values() if not g.min_logged), default=None)
+
+    def log_until(self, clock: int) -> None:
+        """The controller's clock has reached ``clock`` (though it counts the quiet ticks up to it only when next
+        read or written): the greens' minimums timed by then are logged, at their ticks."""
+        self._minimums(before=clock + 1)
+
     def powered_up(self) -> None:
         self._minimums(before=self._clock + 1)
         self._power_up(first=False)
