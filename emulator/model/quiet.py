@@ -40,10 +40,8 @@ stays where it was until the next real step or input.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
 from typing import TYPE_CHECKING
 
-from emulator.model import inputs as reading
 from emulator.model.overlaps import Phases
 from hils.protocol.ntcip import UnitFlashStatus
 
@@ -62,18 +60,18 @@ class QuietTime:
         """An input came (or the unit powered up): the next step is a real one."""
         self.fresh = True  # an input came since the last real step
         self.next_real: float | None = None  # the tick of the next real step, once asked (inf: none)
-        self.stale = False  # next_real is only a bound: the deadlines are to be asked anew
+        self.units: float | None = None  # the tick the units but the backup timer next act at, once asked (inf: never)
 
     def written(self) -> None:
         """A write that changed no input a step reads (a repeated control SET): the backup timer restarted, so its
-        deadline only moved later; the ticks before the next real step known stay quiet, and the deadlines are
-        asked anew."""
-        self.stale = True
+        deadline alone moved (later); the other units' stand."""
+        if self.units is not None:
+            self.next_real = self._with_backup(self.units)
 
     def stepped(self) -> None:
         """A real step ran: the deadlines are asked anew."""
         self.fresh = False
-        self.next_real = None
+        self.next_real = self.units = None
 
     def proven(self) -> bool:
         """The next tick is one :meth:`ticks` proved quiet."""
@@ -85,36 +83,41 @@ class QuietTime:
         if self.fresh:
             return 1
         c = self.c
-        if self.next_real is None or self.stale:
-            ahead = self._least()
-            self.next_real = math.inf if ahead is None else c.tick + ahead
-            self.stale = False
+        if self.next_real is None:
+            ahead = self._units()
+            self.units = math.inf if ahead is None else c.tick + ahead
+            self.next_real = self._with_backup(self.units)
         return None if self.next_real is math.inf else self.next_real - c.tick
 
-    def _least(self) -> int | None:
-        """The least of the units' deadlines (None: no unit will act)."""
-        least = None
-        for deadline in self._deadlines():
-            if deadline == 1:
-                return 1  # the next step: no need to ask the others
-            if deadline is not None and (least is None or deadline < least):
-                least = deadline
-        return least
+    def _with_backup(self, units: float) -> float:
+        backup = self.c.backup.deadline()
+        return units if backup is None else min(units, self.c.tick + backup)
 
-    def _deadlines(self) -> Iterator[int | None]:
+    def _units(self) -> int | None:
+        """The least deadline of the units but the backup timer (None: none will act). The sequencer, the costliest
+        to ask, is asked last, and not when another unit acts at the next step."""
         c = self.c
-        yield c.backup.deadline()
-        yield c.coordinator.deadline()
+        ahead = [c.coordinator.deadline()]
         if c.flashing:
             if c.flash_status is UnitFlashStatus.STARTUP and c.tick < c.startup_flash * 10:
-                yield c.startup_flash * 10 - c.tick
-            return
+                ahead.append(c.startup_flash * 10 - c.tick)
+            return _least(ahead)
         inputs = c.inputs
-        yield c.peds.deadline(c.greens, inputs)
+        ahead.append(c.peds.deadline(c.greens, inputs))
         phases = Phases.of(c.rings, later=True) if c.config.overlaps else None
         if c.config.preempts:
-            yield c.preemptor.deadline()
-            yield c.preempting.deadline(c.sequencer)
+            ahead += (c.preemptor.deadline(), c.preempting.deadline(c.sequencer))
         if phases is not None:
-            yield c.overlaps.deadline(phases)
-        yield c.sequencer.deadline(c.tick, reading.demand(inputs, c.ped_calls), inputs, phases, c.preempting)
+            ahead.append(c.overlaps.deadline(phases))
+        if 1 in ahead:
+            return 1
+        ahead.append(c.sequencer.deadline(c.tick, c.peds.demand(inputs), inputs, phases, c.preempting))
+        return _least(ahead)
+
+
+def _least(deadlines: list[int | None]) -> int | None:
+    least = None
+    for d in deadlines:
+        if d is not None and (least is None or d < least):
+            least = d
+    return least

@@ -72,6 +72,7 @@ if TYPE_CHECKING:
 
 # The control objects read every tick, bound once (as ring.py binds the intervals).
 FORCE_OFF, PHASE_OMIT = ControlColumn.FORCE_OFF, ControlColumn.PHASE_OMIT
+FORCED_OFF = Termination.FORCE_OFF
 
 #: How the sequencer moves a ring: the controller's move (the ring's table, and what the other units do then).
 Move = Callable[..., None]
@@ -94,6 +95,18 @@ class Sequencer:
         self._barrier = {p: config.barrier_of(p) for p in config.phases}
         self._order = {p: ring.index(p) for ring in config.rings for p in ring}
         self._ring_of = {p: config.ring_of(p) for p in config.phases}
+        # The phases of each barrier group and of each ring, as sets: the tick's questions about demand are set
+        # operations on them.
+        self._group_phases = [frozenset(p for p in config.phases if self._barrier[p] == g)
+                              for g in range(len(config.barriers))]
+        self._ring_phases = {n: frozenset(order) for n, order in enumerate(config.rings, start=1)}
+        # Where a ring looks for its next phase (:meth:`wish`): from its phase (None: the first of its order) on, in
+        # ring order, each phase with the one before it; resting in red, its own phase last.
+        self._ahead = {(p, dwell): tuple((order[(i + k - 1) % len(order)], order[(i + k) % len(order)])
+                                         for k in range(1, len(order) + dwell))
+                       for order in config.rings for i, p in enumerate(order) for dwell in (False, True)}
+        self._ahead |= {(None, n, dwell): self._ahead[order[0], dwell]
+                        for n, order in enumerate(config.rings, start=1) for dwell in (False, True)}
         self._red_end = config.next_phase_lock is NextPhaseLock.RED_END
         self._gap_disable = frozenset(p for p, ph in config.phases.items() if ph.simultaneous_gap_disable)
         self.reset()
@@ -110,14 +123,18 @@ class Sequencer:
 
     def prepare(self, demand: frozenset[int], inputs: Inputs) -> None:
         """What the tick's decisions read before the rings time: demand across the barrier, a group restart."""
+        if not self.coordinated.running:  # free: any demand across counts, and no group restarts for a pattern
+            self.waiting_across, self.restarting = not demand <= self._group_phases[self.group], False
+            return
         self.waiting_across = self.waits_across(demand, inputs)
-        self.restarting = self.coordinated.running and any(self._restarts(r, demand, inputs) for r in self.rings)
+        self.restarting = any(self._restarts(r, demand, inputs) for r in self.rings)
 
     def waits_across(self, demand: frozenset[int], inputs: Inputs) -> bool:
         """Demand waits across the barrier (which forbids backing); while a pattern runs only demand that can still
         be served in this cycle counts (a phase past its permissive period is skipped anyway), measured as its own
         ring measures it (:meth:`serviceable`)."""
-        return any(self._barrier[q] != self.group
+        group = self._group_phases[self.group]
+        return any(q not in group
                    and self.coordinated.fits(self.rings, self.rings[self._ring_of[q] - 1], q, demand, inputs)
                    for q in demand)
 
@@ -147,19 +164,19 @@ class Sequencer:
                 return q
         return r.target
 
-    def time(self, r: Ring, demand: frozenset[int], inputs: Inputs, tick: int) -> None:
-        """One tick of a ring's timers (a green's with the demand conflicting with it); a clearance that has run its
-        length moves on (a red clearance a preempt's entry cut to nothing ends on the tick it starts)."""
-        if r.interval is DWELL:
-            return
-        if r.interval is GREEN:
-            max_recall = r.phase in inputs.extending
-            r.time_green(extending=r.phase in inputs.calls or max_recall, conflict=self.conflicting(r, demand),
-                         max_recall=max_recall, gap_disable=r.phase in self._gap_disable)
-        elif r.time_clearance(tick):
-            self.move(r, TIMED)
-            if r.interval is RED_CLEAR and r.length == 0:
+    def time(self, demand: frozenset[int], inputs: Inputs, tick: int) -> None:
+        """One tick of the rings' timers (a green's with the demand conflicting with it); a clearance that has run
+        its length moves on (a red clearance a preempt's entry cut to nothing ends on the tick it starts)."""
+        for r in self.rings:
+            interval = r.interval
+            if interval is GREEN:
+                max_recall = r.phase in inputs.extending
+                r.time_green(extending=r.phase in inputs.calls or max_recall, conflict=self.conflicting(r, demand),
+                             max_recall=max_recall, gap_disable=r.phase in self._gap_disable)
+            elif interval is not DWELL and r.time_clearance(tick):
                 self.move(r, TIMED)
+                if r.interval is RED_CLEAR and r.length == 0:
+                    self.move(r, TIMED)
 
     # --- what a ring may do ------------------------------------------------------------------------------
 
@@ -190,33 +207,30 @@ class Sequencer:
 
     def conflicting(self, r: Ring, demand: frozenset[int]) -> bool:
         """Demand conflicts with ``r``'s green: in its own ring, or beyond this visit of the barrier group."""
-        return any(q != r.phase and (self._ring_of[q] == r.number or self._beyond(q)) for q in demand)
+        others = demand - {r.phase}
+        if not others.isdisjoint(self._ring_phases[r.number]) or not others <= self._group_phases[self.group]:
+            return True
+        # the rest is demand of another ring in this group: beyond this visit only where that ring may not back
+        return any(self._beyond(q) for q in others)
 
     def ending(self, r: Ring, inputs: Inputs) -> Termination | None:
         """Why the ring's green may end now (None: it may not); a force-off before a gap-out before a max-out."""
         if r.interval is not GREEN or r.ticks < r.minimum or r.phase in inputs.holds:
             return None
         if r.phase in self.control[FORCE_OFF]:
-            return Termination.FORCE_OFF
+            return FORCED_OFF
         return self.coordinated.ending(r)
-
-    def ready(self, r: Ring, inputs: Inputs) -> bool:
-        """A green that may end now, or a ring resting in red with nothing committed."""
-        if r.interval is DWELL:
-            return r.target is None
-        return self.ending(r, inputs) is not None
 
     def wish(self, r: Ring, demand: frozenset[int], inputs: Inputs) -> int | None:
         """The nearest phase with demand after the ring's own, in ring order (a ring resting in red may re-serve
         its own phase, last in the order); a ring showing its coordinated phase leaves it only in the next phase's
         permissive period (:meth:`emulator.model.coordinated.Coordinated.stays`)."""
-        n = len(r.order)
-        i = 0 if r.phase is None else self._order[r.phase]
-        stop = n + 1 if r.interval is DWELL else n
-        for k in range(1, stop):
-            q = r.order[(i + k) % n]
-            if self.serviceable(r, q, demand, inputs):
-                if self.coordinated.stays(r, r.order[(i + k - 1) % n]):
+        dwell = r.interval is DWELL
+        ahead = self._ahead[r.phase, dwell] if r.phase is not None else self._ahead[None, r.number, dwell]
+        running = self.coordinated.running
+        for prior, q in ahead:
+            if q in demand and (not running or self.coordinated.fits(self.rings, r, q, demand, inputs)):
+                if running and self.coordinated.stays(r, prior):
                     return None  # outside q's permissive period the coordinated phase stays
                 return q
         return None
@@ -240,7 +254,9 @@ class Sequencer:
         """What :meth:`decide` does: the commits within the group, or else the wishes beyond it when every ring may
         cross (empty: the ring wishing across waits at the barrier). A commit within the group keeps its ring from
         crossing, so the two never come together."""
-        ready = {r.number: self.ready(r, inputs) for r in self.rings}
+        ready = {}  # a green that may end now, or a ring resting in red with nothing committed
+        for r in self.rings:
+            ready[r.number] = r.target is None if r.interval is DWELL else self.ending(r, inputs) is not None
         if not any(ready.values()):
             return [], {}  # most ticks: every ring is timing
         wish = {r.number: self.wish(r, demand, inputs) for r in self.rings if ready[r.number]}
@@ -287,16 +303,17 @@ class Sequencer:
             self.control[FORCE_OFF] -= {r.phase}
             self.move(r, END, reason=reason)
 
-    def start(self, r: Ring, tick: int) -> None:
-        """A ring resting in red starts its committed phase when it may."""
-        if r.interval is not DWELL or r.target is None or not self._starts(r, tick):
-            return
-        t = r.target
-        if t in self.control[PHASE_OMIT] and self.preemptor.serving is None:
-            r.target = None  # omitted during the clearance: not serviced, choose again (a preempt overrides omits)
-            return
-        r.phase, r.target = t, None
-        self.move(r, START)
+    def start(self, tick: int) -> None:
+        """Each ring resting in red starts its committed phase when it may."""
+        for r in self.rings:
+            if r.interval is not DWELL or r.target is None or not self._starts(r, tick):
+                continue
+            t = r.target
+            if t in self.control[PHASE_OMIT] and self.preemptor.serving is None:
+                r.target = None  # omitted during the clearance: not serviced, choose again (a preempt overrides omits)
+                continue
+            r.phase, r.target = t, None
+            self.move(r, START)
 
     def _starts(self, r: Ring, tick: int, phases: Phases | None = None) -> bool:
         """``r``, resting in red with a committed phase, starts it at ``tick`` (or drops it, omitted): its
@@ -306,10 +323,12 @@ class Sequencer:
         t = r.target
         if t in self.control[PHASE_OMIT] and self.preemptor.serving is None:
             return True
-        if r.reverting(t, tick, self.timing[t]) or any(
-                o is not r and o.interval is not DWELL and self._barrier[o.phase] != self._barrier[t]
-                for o in self.rings):
+        if r.reverting(t, tick, self.timing[t]):
             return False
+        side = self._barrier[t]
+        for o in self.rings:
+            if o is not r and o.interval is not DWELL and self._barrier[o.phase] != side:
+                return False
         # an overlap it waits for still shows (or clears) after this tick
         return not (self.config.overlaps and self.overlaps.blocks(t, Phases.of(self.rings) if phases is None
                                                                   else phases))
@@ -332,9 +351,16 @@ class Sequencer:
         While a pattern runs or a preempt is served it may be what ends it."""
         serving = self.preemptor.serving is not None
         minimums = self.coordinated.running or serving
+        ahead: list[int] = []
+        for r in self.rings:
+            ahead += r.thresholds(tick, self.timing, minimum=minimums or r.conflict)
+            if minimums and r.interval is GREEN:
+                ahead += self.coordinated.thresholds(r) + preempted.thresholds(r)
+        least = min(ahead, default=None)
+        if least == 1:
+            return 1  # a real step anyway: no question needs asking
         redirecting = self._red_end and not serving
         self.prepare(demand, inputs)  # what the next step reads first, as it will read it
-        ahead: list[int] = []
         for r in self.rings:
             interval = r.interval
             if interval is GREEN:
@@ -342,13 +368,11 @@ class Sequencer:
                 if not r.steady(extending=r.phase in inputs.calls or max_recall,
                                 conflict=self.conflicting(r, demand), max_recall=max_recall):
                     return 1
-                ahead += self.coordinated.thresholds(r) + preempted.thresholds(r)
             elif interval is DWELL:
                 if r.target is not None and self._starts(r, tick + 1, phases):
                     return 1
             elif redirecting and r.target is not None and self._redirected(r, demand, inputs) != r.target:
                 return 1
-            ahead += r.thresholds(tick, self.timing, minimum=minimums or r.conflict)
         if not serving and any(self._choices(demand, inputs)):
             return 1
-        return min(ahead, default=None)
+        return least
