@@ -11,7 +11,8 @@ the transport, so this package needs nothing of the middleware.
 from __future__ import annotations
 
 import random
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Generator, Sequence
+from typing import Any
 
 import simpy
 
@@ -72,8 +73,13 @@ class VirtualTarget:
             self._ticking = env.process(self.unit.process(env, self.tick_phase))
 
     def hires(self) -> list[Event]:
-        """The controller's hi-res event log so far (complete: only real steps log, and they run when due)."""
-        return self._logger().events()
+        """The controller's hi-res event log so far, the controller brought to the present first (on the fast path
+        quiet ticks are counted only when something reads or writes the controller, and a minimum timed in them is
+        logged then, at its tick)."""
+        log = self._logger()
+        if self.clock is not None:
+            self.clock.catch_up()
+        return log.events()
 
     def spat(self) -> tuple[MovementTiming, ...]:
         """Each phase's and overlap's indication and the times of its next change, in the run's seconds: the
@@ -101,7 +107,26 @@ class VirtualTarget:
     def hires_to(self, sink: Callable[[Sequence[Event]], None]) -> None:
         """Hand ``sink`` the hi-res log so far, then each tick's events as they are logged (the other optional
         method of a target: a Testbed writes them through, :mod:`hils.shell.hiresjournal`)."""
-        self._logger().write_to(sink)
+        log = self._logger()
+        log.write_to(sink)
+        if self.clock is not None:
+            self.env.process(self._minimums(log, self.clock))
+
+    def _minimums(self, log: DataLogger, clock: EventClock) -> Generator[simpy.Event, Any, None]:
+        """On the fast path the controller takes no step where a green's minimum changes nothing else, and its logger
+        logs such a minimum when it next hears from it: for a sink written through (a journal, kept if the run dies)
+        each is logged at its own time all the same, the controller left untouched."""
+        c = self.controller
+        while True:
+            due = log.pending()
+            if due is None:
+                yield clock.changed()  # a green starts (or the unit powers up) only where what it answers changes
+                continue
+            # the logger's clock counts with the controller's ticks
+            reached = self.env.timeout(clock.delay(due - c.coordinator.clock))
+            yield reached | clock.changed()
+            if reached.processed:
+                log.log_until(due)
 
     def _logger(self) -> DataLogger:
         if self.log is None:

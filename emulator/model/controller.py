@@ -51,10 +51,10 @@ and the controller goes to flash (all red) and stops timing. Overlaps follow the
 phases at the end of each tick.
 
 Quiet time (:mod:`emulator.model.quiet`). Most ticks change nothing but counters: every unit says when it next
-acts (the backup timer, the coordinator, the preemptor, the overlaps and, through the sequencer, the ring
-timers), and :meth:`Controller.advance` skips the ticks before the least of those deadlines at once
-(:meth:`Controller.skip`). Any input (a SET, a detector, a retiming) makes the next step a real one:
-:meth:`Controller.touch`.
+acts (the backup timer, the coordinator, the pedestrian calls, the preemptor and its part in the rings, the
+overlaps and, through the sequencer, the ring timers and every decision the sequencer takes), and
+:meth:`Controller.advance` skips the ticks before the least of those deadlines at once (:meth:`Controller.skip`).
+Any input (a SET, a detector, a retiming) makes the next step a real one: :meth:`Controller.touch`.
 """
 
 from __future__ import annotations
@@ -102,12 +102,15 @@ log = logging.getLogger(__name__)
 
 TICK = 0.1  # seconds per controller tick
 
+# Bound once (Python 3.11's EnumType.__getattr__ makes every member lookup through the class slow): a SET reads it.
+SYSTEM_CONTROL = UnitControlStatus.SYSTEM_CONTROL
+
 
 class Recorder(Protocol):
     """What watches the controller as a controller's data logger does (:mod:`emulator.model.datalogger`)."""
 
-    def changed(self, change: Change) -> None:
-        """An interval change, as the tick makes it."""
+    def changed(self, ring: Ring, reason: Termination | None) -> None:
+        """``ring`` entered its interval at this tick (a yellow with ``reason``, why its green ended)."""
 
     def stepped(self) -> None:
         """A tick is done: what else it changed is there to read."""
@@ -195,7 +198,8 @@ class Controller:
             ring = self.rings[self._ring_of[p] - 1]
             ring.phase = p
             self._move(ring, STARTUP[self.config.phases[p].startup], notify=False)
-        self._step_overlaps()
+        if self.config.overlaps:  # they follow what the phases show
+            self.overlaps.step(Phases.of(self.rings))
 
     def process(self, env: simpy.Environment, phase: float = 0.0):
         """SimPy process ticking the controller every 0.1 s, without accumulating float error.
@@ -217,7 +221,7 @@ class Controller:
     def set_control(self, column: ControlColumn, phases: Iterable[int]) -> None:
         """A SET of one control object: replaces its phases and restarts the backup timer."""
         phases = frozenset(phases)
-        if phases == self.control[column] and self.control_status is UnitControlStatus.SYSTEM_CONTROL:
+        if phases == self.control[column] and self.control_status is SYSTEM_CONTROL:
             # The same phases again (a middleware repeats its calls): no input a step reads changed, so quiet time
             # goes on; the backup timer restarts (its threshold only moves later) and the status counts the write.
             self.backup.restart()
@@ -259,12 +263,11 @@ class Controller:
 
     def _system_set(self) -> None:
         self.backup.restart()
-        self.control_status = UnitControlStatus.SYSTEM_CONTROL
+        self.control_status = SYSTEM_CONTROL
         self.touch()
 
     def touch(self) -> None:
-        """An input changed (a SET, a detector, a retimed phase, the backup time): the next step is a real one,
-        and the status counts as changed (the calls it shows may have)."""
+        """An input changed (a SET, a detector, a retiming): the next step is a real one, the status counts a change."""
         self.quiet.touched()
         self._inputs = None
         self.status_version += 1
@@ -340,7 +343,7 @@ class Controller:
              self.phase_nexts, self.overlap_greens, self.overlap_yellows, self.overlap_reds) = status
         # preemptState is status too: a poll reads it beside the signals, and a preempt's entry may start before
         # any indication changes.
-        seen = (status, self.ped_calls, tuple(self.preemptor.states.values()))
+        seen = (status, self.peds.calls, tuple(self.preemptor.states.values()) if self.config.preempts else ())
         if seen != self._status_seen:
             self._status_seen = seen
             self.status_version += 1
@@ -366,17 +369,15 @@ class Controller:
             self.step()
             n -= quiet
 
-
     # --- the tick -------------------------------------------------------------------------
 
     def step(self) -> None:
         """Advance one tick (0.1 s)."""
         if self.quiet.proven():
-            self.skip(1)  # a tick quiet time proved quiet, stepped for the recorder (a green's minimum to log)
-        else:
-            before = self.quiet.before()
-            self._step()
-            self.quiet.stepped(before)
+            self.skip(1)  # a tick quiet time proved quiet: counted
+            return
+        self._step()
+        self.quiet.stepped()
         if self.recorder is not None:
             self.recorder.stepped()
 
@@ -394,38 +395,35 @@ class Controller:
             return
         if self.flashing:
             return
-        if self.detectors.timers and self.detectors.step(self.actuations, self._greens()):
+        if self.detectors.timers and self.detectors.step(self.actuations, self.greens):
             self._inputs = None  # the calls and extensions the detectors place changed: so may the status
             self.status_version += 1
         inputs = self.inputs
-        demand = self.peds.latch(self._greens(), inputs)
+        demand = self.peds.latch(self.greens, inputs)  # the status image: the greens as the last tick left them
         pe, seq = self.preemptor, self.sequencer
-        pe.step()
-        self.preempting.caps_now()
-        if pe.started:
-            self.preempting.entry(self.rings)
+        if self.config.preempts:
+            pe.step()
+            self.preempting.caps_now()
+            if pe.started:
+                self.preempting.entry(self.rings)
         seq.prepare(demand, inputs)
         if self._red_end_lock and pe.serving is None:
             # before timing: the tick that ends a red clearance still reads the calls of that clearance
             for r in self.rings:
                 if r.interval in CLEARANCE and r.target is not None:
                     seq.redirect(r, demand, inputs)
-        for r in self.rings:
-            seq.time(r, demand, inputs, self.tick)
+        seq.time(demand, inputs, self.tick)
         if pe.serving is None:
             seq.decide(demand, inputs)
         else:
             self.preempting.drive(seq, inputs)
-        for r in self.rings:
-            seq.start(r, self.tick)
+        seq.start(self.tick)
         if pe.serving is not None:
             self.preempting.progress(self.rings)
-        self._step_overlaps()
+        if self.config.overlaps:  # they follow what the phases show after this tick's timing
+            self.overlaps.step(Phases.of(self.rings))
         self._refresh_status()
         self._monitor()
-
-    def _greens(self) -> set[int]:
-        return {r.phase for r in self.rings if r.interval is GREEN}
 
     def _move(self, r: Ring, event: Event, *, reason: Termination | None = None, notify: bool = True) -> None:
         """Move ``r`` by ``event`` (its table) and tell the units that care: the coordinator's latches, a preempt's
@@ -435,17 +433,11 @@ class Controller:
         self.coordinated.entered(r)
         if interval is GREEN:
             self.preempting.cut[r.number] = 0
-        if notify and (self.on_change is not None or self.recorder is not None):
-            change = Change(self.tick, r.number, r.phase, interval, reason)
+        if notify:
             if self.on_change is not None:
-                self.on_change(change)
+                self.on_change(Change(self.tick, r.number, r.phase, interval, reason))
             if self.recorder is not None:
-                self.recorder.changed(change)
-
-    def _step_overlaps(self) -> None:
-        """The overlaps follow what the phases show after this tick's timing."""
-        if self.config.overlaps:
-            self.overlaps.step(Phases.of(self.rings))
+                self.recorder.changed(r, reason)
 
     def _monitor(self) -> None:
         if self._status is self._checked:

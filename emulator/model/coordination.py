@@ -310,7 +310,7 @@ class Coordinator:
 
     def step(self) -> None:
         """One tick: the clock, the time-of-day plan, the local timer and the points it passed."""
-        lag = self.lag  # before the clock moves: the timer moves with it when in step
+        lag = self.lag if self.plan is not None else 0  # before the clock moves: the timer moves with it when in step
         self.clock += 1
         for entry in self.config.coordination.schedule:
             if self.clock % DAY == entry.start * 10:
@@ -401,10 +401,6 @@ class Coordinator:
         self.clock += n
         if self.plan is not None:
             self.timer = (self.timer + n) % self.plan.cycle
-
-    def discrete(self) -> tuple:
-        """What a step may change here besides the counters (the controller's quiet-time check)."""
-        return self.running, self.free_status, self.local, self.replan, self.budget, self.passed
 
     # --- what the rings ask --------------------------------------------------------------------------
 

@@ -131,5 +131,3 @@ class Detectors:
         for d in self.held:
             self.held[d] += n
 
-    def discrete(self) -> frozenset[int]:
-        return self.recognized

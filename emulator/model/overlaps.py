@@ -153,12 +153,13 @@ class Phases:
     committed: frozenset[int]  # every ring's committed next phase (phaseStatusGroupPhaseNexts)
 
     @classmethod
-    def of(cls, rings: Sequence[Ring]) -> Phases:
-        """What ``rings`` show now."""
+    def of(cls, rings: Sequence[Ring], *, later: bool = False) -> Phases:
+        """What ``rings`` show now; ``later``: at a later tick if none of them moves (no yellow starts then)."""
         return cls(
             greens=frozenset(r.phase for r in rings if r.interval is GREEN),
             yellows=frozenset(r.phase for r in rings if r.interval is YELLOW),
-            starting=frozenset(r.phase for r in rings if r.interval is YELLOW and r.ticks == 0),
+            starting=frozenset() if later else frozenset(r.phase for r in rings
+                                                         if r.interval is YELLOW and r.ticks == 0),
             nexts={r.phase: r.target for r in rings if r.interval is not GREEN and r.phase is not None},
             committed=frozenset(r.target for r in rings if r.target is not None))
 
@@ -274,12 +275,18 @@ class Overlaps:
         return {Show.TRAIL_GREEN: tm.trail_green, Show.TRAIL_YELLOW: tm.trail_yellow, Show.TRAIL_RED: tm.trail_red,
                 Show.DELAYED: tm.delay_green}[s]
 
-    # --- quiet time (see emulator/model/controller.py) -------------------------------------------------
+    # --- quiet time (see emulator/model/quiet.py) -------------------------------------------------
 
-    def deadline(self) -> int | None:
-        """Steps until a trailing interval or a delay ends (None: no overlap is timing); at least the next step."""
-        ahead = [self._length(n, s) - self.ticks[n] for n, s in self.shown.items() if s in TIMED]
-        return max(1, min(ahead)) if ahead else None
+    def deadline(self, phases: Phases) -> int | None:
+        """Steps until an overlap's display changes, the phases showing ``phases`` (None: none will): 1 when one
+        follows them at the next step, else when a trailing interval ends."""
+        ahead = []
+        for n, s in self.shown.items():
+            if self._after(n, phases)[0] is not s:
+                return 1
+            if s in TIMED:
+                ahead.append(self._length(n, s) - self.ticks[n])
+        return min(ahead, default=None)
 
     def skip(self, n: int) -> None:
         for k, s in self.shown.items():

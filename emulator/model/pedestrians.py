@@ -19,7 +19,7 @@ PedOmit (and an omitted phase) stops new calls latching; a walk being timed comp
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Mapping
 
 from emulator.model import inputs as reading
 from emulator.model.coordinated import Coordinated
@@ -38,13 +38,37 @@ class PedCalls:
     def reset(self) -> None:
         """Power-up: no call latched."""
         self.calls: frozenset[int] = frozenset()
+        # The last answers of latched() and demand() and what they were asked with: the step and quiet time ask the
+        # same questions of the same (immutable) sets, mostly.
+        self._latched: tuple[tuple, frozenset[int]] = ((None, None, None), frozenset())
+        self._demand: tuple[tuple, frozenset[int]] = ((None, None), frozenset())
 
-    def latch(self, greens: Iterable[int], inputs: Inputs) -> frozenset[int]:
-        """This tick's calls latch; the demand they make with the inputs."""
-        calls = reading.latched(self.calls, greens, inputs)
+    def latch(self, greens: frozenset[int], inputs: Inputs) -> frozenset[int]:
+        """This tick's calls latch (``greens``: the phases showing green); the demand they make with the inputs."""
+        calls = self._latch(greens, inputs)
         if calls != self.calls:
             self.calls = calls
-        return reading.demand(inputs, self.calls)
+        return self.demand(inputs)
+
+    def demand(self, inputs: Inputs) -> frozenset[int]:
+        """The demand the latched calls make with the inputs (:func:`emulator.model.inputs.demand`)."""
+        asked, answer = self._demand
+        if asked[0] is not inputs or asked[1] is not self.calls:
+            answer = reading.demand(inputs, self.calls)
+            self._demand = (inputs, self.calls), answer
+        return answer
+
+    def deadline(self, greens: frozenset[int], inputs: Inputs) -> int | None:
+        """1 when the next tick latches a call (``greens``: the phases showing green then), else None: the calls
+        change only with the inputs and the greens."""
+        return 1 if self._latch(greens, inputs) != self.calls else None
+
+    def _latch(self, greens: frozenset[int], inputs: Inputs) -> frozenset[int]:
+        asked, answer = self._latched
+        if asked[0] is not self.calls or asked[1] is not greens or asked[2] is not inputs:
+            answer = reading.latched(self.calls, greens, inputs)
+            self._latched = (self.calls, greens, inputs), answer
+        return answer
 
     def serve(self, phase: int) -> bool:
         """A green of ``phase`` starts: True when it serves a walk; the call is answered (cleared) unless it waits

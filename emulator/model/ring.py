@@ -281,11 +281,11 @@ class Ring:
             return self.length - self.ticks
         return 0
 
-    # --- quiet time (see emulator/model/controller.py) -------------------------------------------------------
+    # --- quiet time (see emulator/model/quiet.py) -------------------------------------------------------
 
     def thresholds(self, tick: int, timing: dict[int, Timing], *, minimum: bool) -> list[int]:
         """Ticks from now to each next threshold of the ring's timers (those a step compares): a clearance's
-        length, the red revert of a committed phase waiting in red, and a green's walk, pedestrian clearance,
+        end, the red revert of a committed phase waiting in red, and a green's walk, pedestrian clearance,
         passage and maximum (a running timer only) and its minimum when ``minimum`` says it matters."""
         interval = self.interval
         if interval is GREEN:
@@ -302,7 +302,7 @@ class Ring:
             if revert is not None and tick < revert + timing[self.target].red_revert:
                 return [revert + timing[self.target].red_revert - tick]
             return []
-        return [self.length - self.ticks] if self.ticks < self.length else []
+        return [max(1, self.length - self.ticks)]  # a clearance a preempt's entry cut below its ticks ends at once
 
     def _gap_out_in(self) -> int:
         """Ticks until the running gap timer reaches the allowable gap (which the reduction may lower meanwhile)."""

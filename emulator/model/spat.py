@@ -55,7 +55,9 @@ to end, :meth:`~emulator.model.sequencer.Sequencer.decide` where it goes):
 - *An overlap* follows its parents (:mod:`emulator.model.overlaps`): a normal overlap's green ends once every green
   parent has ended and its trailing green has run, its yellow with its parents' yellows, and it turns green with
   its first parent; its latest is its one green parent's when its parents are all of one ring and that ring goes
-  to a phase it does not include. Its own trailing yellow ends after its length. A minus-green-yellow overlap's
+  to a phase it does not include. Its own trailing yellow ends after its length; a delayed green starts its delay
+  later and ends with it; a transit bar's green (flashing through its phase's yellow) has no latest end. A
+  minus-green-yellow overlap's
   modifiers and a flashing yellow arrow's permissive phase may change it at the next tick.
 
 The likely time is the latest where one is known: what the timers give when the demand stands (an actuated
@@ -420,8 +422,9 @@ class _Bounds:
                 green = [phases[q] for q in o.included if phases[q].indication is Indication.GREEN]
                 if green:
                     earliest = max(s.earliest for s in green) + trail.trail_green
-                if (len(green) == 1 and not trail.trail_green and self._apart(o.included, green[0].number)
-                        and self._leaves(o.included, green[0].number)):
+                # a transit bar's green goes on, flashing, through its phase's yellow: its end is not the phase's
+                if (len(green) == 1 and not trail.trail_green and o.kind is not OverlapKind.TRANSIT
+                        and self._apart(o.included, green[0].number) and self._leaves(o.included, green[0].number)):
                     latest = green[0].latest
             elif show is Show.FLASHING:
                 # a flashing arrow (yellow) shows while its permissive phase is green, and clears with its yellow
@@ -439,6 +442,9 @@ class _Bounds:
                     latest = yellow[0].latest
             elif show is Show.TRAIL_GREEN:
                 earliest = max(1, trail.trail_green - ticks)
+            elif show is Show.DELAYED:
+                # red while its green's delay runs: green once it has run (or red on, released by its phases)
+                earliest = latest = max(1, trail.delay_green - ticks)
             elif shown is Indication.RED:
                 # from its trailing red it turns green only the tick after that has run (``_NEXT``)
                 lit = trail.trail_red - ticks + 1 if show is Show.TRAIL_RED else 1
@@ -450,6 +456,10 @@ class _Bounds:
                     earliest = max(lit, min((s.earliest for s in red), default=lit))
                     starts = [s.latest for s in red if s.latest is not None]
                     latest = max(lit, min(starts)) if starts else None
+                if trail.delay_green:
+                    # an included phase's green starts its delay first; a flashing arrow's permissive phase does not
+                    earliest += 0 if o.kind is OverlapKind.FYA else trail.delay_green
+                    latest = None if latest is None else latest + trail.delay_green
         # only its own trailing intervals are timed: when a display it follows from its parents began is not kept
         return SignalTiming("overlap", n, shown, earliest, latest, latest, ticks if show in TRAILING else None)
 

@@ -565,6 +565,7 @@ class Testbed(_OneIntersection):
                 self.events.emit(Kind.RUN_ENDED, reason=reason, polls=self._poll_counts())
                 self.events.close()
             if self.journal is not None:
+                self.hires()  # reading each log brings it to the present: the journal gets every event up to the end
                 self.journal.close()
             self.wall_s = time.perf_counter() - self._wall_t0
             self._collect_traffic()
