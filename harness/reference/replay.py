@@ -230,7 +230,7 @@ def _command(args: argparse.Namespace) -> int:
     print(headline)
     print(replay_match.render_equivalences(equivalences))
     print(replay_match.render(table, green, equivalences))
-    replay_match.write_table(table, out / "match.csv")
+    replay_match.write_table(table, out / "match.csv", equivalences)
     outputs = ["inferred.toml"] if args.config is None else []
     outputs += ["match.csv", "signal_replay/" if args.bench == "signal-replay" else "bench.csv"]
     print(f"Outputs in {out}/: {', '.join(outputs)}")

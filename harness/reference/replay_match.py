@@ -236,7 +236,7 @@ def render(table: Sequence[MatchRow], green: Sequence[GreenRow], equivalences: S
     """The measures as text: the per-green table and the per-event table, a row that counts a field event declared
     equivalent (:data:`EQUIVALENCES`) saying which."""
     names = {int(c): c.name.lower().replace("_", " ") for c in E}
-    counted = {(q.counted_as, p): q.code for q in equivalences if q.counted_as is not None for p in q.parameters}
+    counted = _counted_from(equivalences)
     lines = [f"{'field green ended by':<22}{'greens':>8}{'anchored':>10}{'ended within':>14}{'same way':>10}"
              f"{'ended/anchored':>16}"]
     for g in green:
@@ -267,8 +267,16 @@ def render_equivalences(equivalences: Sequence[Equivalence]) -> str:
         for q in equivalences)
 
 
-def write_table(table: Sequence[MatchRow], path: Path) -> None:
+def _counted_from(equivalences: Sequence[Equivalence]) -> dict[tuple[int, int], int]:
+    """Per emulator event and parameter, the field event a row of ``equivalences`` counts as it."""
+    return {(q.counted_as, p): q.code for q in equivalences if q.counted_as is not None for p in q.parameters}
+
+
+def write_table(table: Sequence[MatchRow], path: Path, equivalences: Sequence[Equivalence] = ()) -> None:
+    """The per-event table as CSV; ``log_EventId`` is the field event counted as the row's (a declared variant)."""
+    counted = _counted_from(equivalences)
     with path.open("w", newline="", encoding="utf-8") as f:
         out = csv.writer(f)
-        out.writerow(["EventId", "Parameter", "log", "bench", "found", "share_percent"])
-        out.writerows((r.code, r.parameter, r.field, r.bench, r.matched, r.share) for r in table)
+        out.writerow(["EventId", "Parameter", "log", "bench", "found", "share_percent", "log_EventId"])
+        out.writerows((r.code, r.parameter, r.field, r.bench, r.matched, r.share,
+                       counted.get((r.code, r.parameter), r.code)) for r in table)

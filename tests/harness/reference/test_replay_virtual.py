@@ -98,7 +98,7 @@ def test_a_declared_variant_is_judged_where_it_says_and_nowhere_else() -> None:
                                equivalences=econolite)) == 0.0
 
 
-def test_an_overlaps_dark_counts_as_its_begin_green_only_for_the_overlaps_the_log_shows_it() -> None:
+def test_an_overlaps_dark_counts_as_its_begin_green_only_for_the_overlaps_the_log_shows_it(tmp_path: Path) -> None:
     """The field's overlap 5 logs dark (66) where the emulator's overlap of phase 5 logs its begin green (61): matched
     through the declared row bound to the overlaps the log was read to show it, for them only, and the per-event
     table says which row counts the log's 66."""
@@ -111,6 +111,8 @@ def test_an_overlaps_dark_counts_as_its_begin_green_only_for_the_overlaps_the_lo
     assert [(r.code, r.parameter, r.field, r.matched) for r in table] == [(61, 3, 0, 0), (61, 5, 1, 1), (66, 3, 1, 0)]
     assert "overlap begin green (log's 66)       5" in replay_match.render(table, [], bound)
     assert "field event 66 of 5 counted as 61" in replay_match.render_equivalences(bound)
+    replay_match.write_table(table, tmp_path / "match.csv", bound)
+    assert (tmp_path / "match.csv").read_text().splitlines()[2] == "61,5,1,1,1,100.0,66"
     assert replay_match.for_log(None, set()) == [] and replay_match.for_log("Econolite", set())[0].vendor == "Econolite"
 
 
