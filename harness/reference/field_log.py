@@ -1067,7 +1067,8 @@ def _overlaps(rows: Sequence[Row], phases: Sequence[int], out: Inferred) -> dict
             included = _cover(times, phases, lambda t, p, delay=delay: t - delay in began_at.get(p, ()))
             if included:
                 overlaps[o] = InferredOverlap(included, kind, lag)
-    for o, d in dark_at_green(rows).items():
+    darks = {o: d for o, d in dark_at_green(rows).items() if o <= OVERLAPS}
+    for o, d in darks.items():
         overlaps[o] = InferredOverlap(d.included, "normal")
         out.guessed.append(
             f"overlap {chr(64 + o)} ({o}): a normal overlap of phase(s) {d.included}, dark while they are green "
@@ -1078,7 +1079,7 @@ def _overlaps(rows: Sequence[Row], phases: Sequence[int], out: Inferred) -> dict
     for o in beyond:
         out.guessed.append(f"overlap {o}: left out (it begins green with phase(s) {overlaps.pop(o).included}, but "
                            f"the emulator's overlaps are A-P, 1-{OVERLAPS})")
-    for o, ov in overlaps.items():
+    for o, ov in ((o, ov) for o, ov in overlaps.items() if o not in darks):
         after = f"{ov.delay:g} s after" if ov.delay else "with"
         out.read.append(f"overlap {chr(64 + o)} ({o}): begins green {after} phase(s) {ov.included}: "
                         + ("a normal overlap of them" if ov.kind == "normal" else

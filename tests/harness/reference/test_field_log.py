@@ -408,6 +408,7 @@ def test_an_overlap_dark_while_its_phase_is_green_is_that_phases_overlap() -> No
     assert any(line.startswith("overlap E (5): a normal overlap of phase(s) [5], dark while they are green") and
                "dark (66) as they begin green (1) 91 of 91" in line and "yellow (63) with their yellow (8) 90 of 90"
                in line and "off (65) as their yellow ends (9) 91 of 91" in line for line in inferred.guessed)
+    assert not any(line.startswith("overlap E") for line in inferred.read)
 
 
 def test_an_overlap_is_read_dark_at_green_only_when_its_yellow_and_off_follow_its_phase() -> None:
