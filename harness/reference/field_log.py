@@ -47,7 +47,9 @@ the log's own events (Indiana enumerations) and says which values it had to gues
 - **overlaps**: an overlap that begins green (61) with phases (1, the same tick or the next: the fewest that together
   come with nine in ten of its greens, each with a tenth) includes them, or, failing that, one same time after them
   (a delayed green of that time); one that never logs a yellow (63) is a transit bar (NTCIP 1202 v03 transit-2),
-  else a normal overlap; overlaps past P (16) are said and left out;
+  else a normal overlap; one that never begins green but goes dark (66) as phases begin green and yellow (63) with
+  their yellow is a normal overlap of them, its green shown by their own outputs (:func:`dark_at_green`; replays
+  count its 66 as the emulator's 61, a declared logging variant); overlaps past P (16) are said and left out;
 - **recalls and dual entry** (:func:`_uncalled`, :func:`_extenders`, :func:`_dual_entries`): a phase served with no
   call the log registers (43), where the log registers calls of others or has no detector events (pretimed), or
   whose call registers as its own yellow begins (an Econolite's recall), is recalled: max recall when its greens end
@@ -1032,7 +1034,7 @@ def _overlaps(rows: Sequence[Row], phases: Sequence[int], out: Inferred) -> dict
     phases whose begin greens come one same time before its own, 0.2-25.5 s, nine in ten times: a delayed green of
     that time. One that ends its greens (64, 65) at least :data:`PASSAGE_SEEN` times and never logs a yellow (63) is
     a transit bar (NTCIP 1202 v03 transit-2: green, flashing green, red), else a normal overlap. An overlap that
-    never begins green is not inferred."""
+    never begins green is inferred only when it is dark while its phases are green (:func:`dark_at_green`)."""
     starts: dict[int, list[datetime]] = defaultdict(list)
     greens: dict[int, list[datetime]] = defaultdict(list)
     ended: Counter[int] = Counter()
@@ -1065,11 +1067,19 @@ def _overlaps(rows: Sequence[Row], phases: Sequence[int], out: Inferred) -> dict
             included = _cover(times, phases, lambda t, p, delay=delay: t - delay in began_at.get(p, ()))
             if included:
                 overlaps[o] = InferredOverlap(included, kind, lag)
+    darks = {o: d for o, d in dark_at_green(rows).items() if o <= OVERLAPS}
+    for o, d in darks.items():
+        overlaps[o] = InferredOverlap(d.included, "normal")
+        out.guessed.append(
+            f"overlap {chr(64 + o)} ({o}): a normal overlap of phase(s) {d.included}, dark while they are green "
+            f"(never a begin green, 61; {d.said()}): read as a flashing yellow arrow's head "
+            "whose green arrow is the phase's own output, its flashing (32) never logged; the field's 66 is counted "
+            "as its begin green, 61 (a declared logging variant)")
     beyond = sorted(o for o in overlaps if o > OVERLAPS)
     for o in beyond:
         out.guessed.append(f"overlap {o}: left out (it begins green with phase(s) {overlaps.pop(o).included}, but "
                            f"the emulator's overlaps are A-P, 1-{OVERLAPS})")
-    for o, ov in overlaps.items():
+    for o, ov in ((o, ov) for o, ov in overlaps.items() if o not in darks):
         after = f"{ov.delay:g} s after" if ov.delay else "with"
         out.read.append(f"overlap {chr(64 + o)} ({o}): begins green {after} phase(s) {ov.included}: "
                         + ("a normal overlap of them" if ov.kind == "normal" else
@@ -1082,6 +1092,53 @@ def _overlaps(rows: Sequence[Row], phases: Sequence[int], out: Inferred) -> dict
                            "after; its other events fit none of the types: normal, transit, minus green-yellow, "
                            "flashing yellow arrow)")
     return overlaps
+
+
+#: An overlap dark while its phases are green: each of its events, the phase event it comes with, and how to say so.
+_DARK_AT_GREEN = {E.OVERLAP_DARK: (E.PHASE_BEGIN_GREEN, "dark (66) as they begin green (1)"),
+                  E.OVERLAP_BEGIN_YELLOW: (E.PHASE_BEGIN_YELLOW, "yellow (63) with their yellow (8)"),
+                  E.OVERLAP_OFF: (E.PHASE_END_YELLOW, "off (65) as their yellow ends (9)")}
+_PHASE_CODES = [phase_code for phase_code, _ in _DARK_AT_GREEN.values()]
+
+
+@dataclass(frozen=True, slots=True)
+class DarkAtGreen:
+    """An overlap the log shows dark while its phases are green: its included phases and, per event of it (dark,
+    yellow, off: 66, 63, 65), how many it logged and how many came with its phases' (1, 8, 9)."""
+
+    included: list[int]
+    seen: dict[int, tuple[int, int]]
+
+    def said(self) -> str:
+        return ", ".join(f"{_DARK_AT_GREEN[code][1]} {n} of {of}" for code, (n, of) in self.seen.items())
+
+
+def dark_at_green(rows: Sequence[Row]) -> dict[int, DarkAtGreen]:
+    """The overlaps that never begin green (61) but go dark (66) as phases begin green (the same tick or the next,
+    the fewest phases that come with nine in ten of them, as :func:`_cover` reads), then turn yellow (63) as those
+    phases do (8) and off (65) as their yellow ends (9), nine in ten times each: the phases' own overlap, its green
+    shown by the phases' outputs ("Overlap Dark: set when overlap head is set dark (no active outputs)", the Indiana
+    enumerations). The atspm sample's overlap E does it every cycle with phase 5 (a MaxTime's flashing yellow arrow
+    head, read so, its flashing unused)."""
+    events: dict[int, dict[int, list[datetime]]] = defaultdict(lambda: defaultdict(list))
+    for r in rows:
+        if r.code in _PHASE_CODES or E.OVERLAP_BEGIN_GREEN <= r.code <= E.OVERLAP_DARK:
+            events[r.code][r.parameter].append(r.time)
+    at = {code: {p: set(times) for p, times in events[code].items()} for code in _PHASE_CODES}
+
+    def near(code: int, t: datetime, p: int) -> bool:
+        return t in at[code].get(p, ()) or t - TICK in at[code].get(p, ())
+
+    out: dict[int, DarkAtGreen] = {}
+    for o, darks in events[E.OVERLAP_DARK].items():
+        included = _cover(darks, sorted(at[E.PHASE_BEGIN_GREEN]), lambda t, p: near(E.PHASE_BEGIN_GREEN, t, p))
+        if o in events[E.OVERLAP_BEGIN_GREEN] or not included:
+            continue
+        seen = {code: (sum(any(near(phase_code, t, p) for p in included) for t in events[code].get(o, [])),
+                       len(events[code].get(o, []))) for code, (phase_code, _) in _DARK_AT_GREEN.items()}
+        if all(of and n >= 0.9 * of for n, of in seen.values()):
+            out[o] = DarkAtGreen(included, seen)
+    return out
 
 
 def _cover(times: Sequence[datetime], phases: Sequence[int], began: Callable[[datetime, int], bool]) -> list[int]:

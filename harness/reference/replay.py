@@ -35,7 +35,7 @@ from datetime import date, datetime, timedelta
 from pathlib import Path
 
 from harness.reference.hires_file import Row
-from harness.reference.replay_match import GreenRow, MatchRow, green_table, match_table, overall
+from harness.reference.replay_match import Equivalence, GreenRow, MatchRow, green_table, match_table, overall
 from hils.protocol import config as config_mod
 from hils.protocol.hires import Event, EventCode
 from hils.shell.asclog import collect
@@ -66,9 +66,10 @@ class Replayed:
 
 
 def replay(rows: Sequence[Row], config: Path, work: Path, *, device: str = "field", tolerance_s: float = 1.0,
-           settle_s: float = 2.0, warm_up_s: float = 0.0) -> Replayed:
+           settle_s: float = 2.0, warm_up_s: float = 0.0, equivalences: Sequence[Equivalence] = ()) -> Replayed:
     """Serve the emulator with ``config``, let it run ``warm_up_s`` (to rest in its start-up state, as the log's
-    controller did before its first input), let Signal-Replay replay ``rows`` into it and compare (see the header)."""
+    controller did before its first input), let Signal-Replay replay ``rows`` into it and compare (see the header),
+    through the declared logging variants ``equivalences``."""
     import pandas as pd
     import signal_replay as sr
 
@@ -103,7 +104,7 @@ def replay(rows: Sequence[Row], config: Path, work: Path, *, device: str = "fiel
     shift = input_shift(rows, bench)
     span = (bench[0].time - shift, bench[-1].time - shift) if bench else None
     return Replayed(matches[0] if matches else float("nan"), shift, list(rows), bench,
-                    match_table(rows, bench, shift, tolerance_s, span=span),
+                    match_table(rows, bench, shift, tolerance_s, span=span, equivalences=equivalences),
                     green_table(rows, bench, shift, tolerance_s))
 
 
@@ -168,7 +169,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "Signal-Replay replays the log into `hils emulator serve` in real time")
     p.add_argument("--vendor", choices=sorted(set(VENDOR_BY_SUFFIX.values())),
                    help="whose logging variants to count as equivalent (default: from the file: .dat Econolite, "
-                        ".xml MaxTime; an ATSPM file: none)")
+                        ".xml MaxTime; an ATSPM file: none); whatever the vendor, an overlap the log shows dark while "
+                        "its phases are green has its dark counted as its begin green")
     p.add_argument("--infer-only", action="store_true", help="write the config and stop")
     p.add_argument("--out", metavar="DIR", type=Path, help="output folder (default: a new temporary one)")
     p.set_defaults(func=_command)
@@ -203,11 +205,11 @@ def _command(args: argparse.Namespace) -> int:
                             f"({every[0].time} to {every[-1].time})")
     minutes = (rows[-1].time - rows[0].time).total_seconds() / 60
     vendor = args.vendor or VENDOR_BY_SUFFIX.get(Path(args.log).suffix.lower())
-    equivalences = [q for q in replay_match.EQUIVALENCES if q.vendor == vendor]
+    equivalences = replay_match.for_log(vendor, field_log.dark_at_green(rows))
     if args.bench == "signal-replay":
         print(f"Replaying {len(rows)} events ({minutes:.1f} minutes, in real time) into the emulator with "
               "Signal-Replay...", flush=True)
-        replayed = replay(rows, config, out)
+        replayed = replay(rows, config, out, equivalences=equivalences)
         table, green = replayed.table, replayed.green
         headline = (f"Signal-Replay's match (its DTW of phase and overlap events): "
                     f"{signal_replay_score(replayed.signal_replay_match)}\n"
@@ -227,8 +229,8 @@ def _command(args: argparse.Namespace) -> int:
             f"{e.time.isoformat(sep=' ', timespec='milliseconds')[:-2]},{e.code},{e.parameter}\n" for e in ran.events))
     print(headline)
     print(replay_match.render_equivalences(equivalences))
-    print(replay_match.render(table, green))
-    replay_match.write_table(table, out / "match.csv")
+    print(replay_match.render(table, green, equivalences))
+    replay_match.write_table(table, out / "match.csv", equivalences)
     outputs = ["inferred.toml"] if args.config is None else []
     outputs += ["match.csv", "signal_replay/" if args.bench == "signal-replay" else "bench.csv"]
     print(f"Outputs in {out}/: {', '.join(outputs)}")
