@@ -622,10 +622,15 @@ def _resco_command(args: argparse.Namespace) -> int:
     print(f"  the peer: {f['peer']}")
     for name, sc in f["scenarios"].items():
         print(f"resco:{name} ({sc['controllers']} lights, a decision every {sc['decision_s']:g} s):")
-        for line in bench_seeds.episode_table({"hils": sc["sides"]["hils"], "sumo-rl": sc["sides"]["sumo_rl"]},
-                                              per_controller=True):
+        sides = sc["sides"]
+        for line in bench_seeds.episode_table({"hils": sides["hils"], "hils, SUMO in process": sides["hils_in_process"],
+                                               "sumo-rl": sides["sumo_rl"]}, per_controller=True):
             print(line)
         print(bench_seeds.ratio_line("hils / sumo-rl", sc["hils_to_sumo_rl"]) + " (goal: wall <= 1)")
+        print(bench_seeds.ratio_line("hils, SUMO in process / sumo-rl", sc["hils_in_process_to_sumo_rl"]))
+        loads = [run["load"] for by_seed in sc["runs"].values() for run in by_seed.values()]
+        print(f"  machine load (1 min) at the episodes' ends: {min(loads):.1f}-{max(loads):.1f} on "
+              f"{info['cores']} cores")
     _write_figures(folder / "resco.json", {"machine": info, "resco": f})
     return 0
 

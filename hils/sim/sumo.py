@@ -210,9 +210,13 @@ class Light:
             text = self._state_strings[state] = self.phase_map.state_string(state)
         if text == self._applied:
             return False
+        self.show(text)
+        return True
+
+    def show(self, text: str) -> None:
+        """Show SUMO's per-link state string ``text`` on the traffic light."""
         libsumo.trafficlight.setRedYellowGreenState(self.tls_id, text)
         self._applied = text
-        return True
 
     def release(self) -> None:
         """Forget what was shown: SUMO's own program runs the light from now on."""
