@@ -27,7 +27,7 @@ from collections.abc import Sequence
 from functools import partial
 from typing import Any
 
-from harness.bench.seeds import alternate, compare_episodes, episode_figures, time_sumo_steps
+from harness.bench.seeds import alternate, compare_episodes, episode_figures, time_sumo_steps, worker_usage
 from harness.reference.sumo_rl_peer import HOW_IT_RUNS
 from harness.reference.sumo_rl_peer import episode as sumo_rl_episode
 
@@ -48,7 +48,7 @@ def hils_episode(seed: int, *, scenario: str, duration: float = EPISODE_S, sumo_
     started, cpu = time.perf_counter(), time.process_time()
     # the worker boots beside the environment's construction: what it took before the episode is not counted, as
     # this process's imports are not
-    worker_cpu, worker_sumo = worker.usage() if worker is not None else (0.0, 0.0)
+    worker_cpu, worker_sumo = worker_usage(worker)
     env.reset(seed=seed)
     for agent in env.possible_agents:
         env.action_space(agent).seed(seed)
@@ -57,11 +57,8 @@ def hils_episode(seed: int, *, scenario: str, duration: float = EPISODE_S, sumo_
         env.step({agent: env.action_space(agent).sample() for agent in env.agents})
         steps += 1
     wall, cpu = time.perf_counter() - started, time.process_time() - cpu
-    if worker is not None:
-        # the SUMO steps the worker took, and both processes' CPU
-        cpu_now, sumo_now = worker.usage()
-        cpu += cpu_now - worker_cpu
-        sumo_s[0] += sumo_now - worker_sumo
+    cpu_now, sumo_now = worker_usage(worker)
+    cpu, sumo_s[0] = cpu + cpu_now - worker_cpu, sumo_s[0] + sumo_now - worker_sumo
     traffic = env.testbed.traffic
     env.close()
     return {"steps": steps, "wall_s": wall, "cpu_s": cpu, "sumo_s": sumo_s[0], "inserted": traffic.departed,
