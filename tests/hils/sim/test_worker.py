@@ -127,3 +127,22 @@ def test_a_script_without_a_main_guard_runs_its_environment(tmp_path: Path) -> N
                           env={**os.environ, "PYTHONPATH": str(ROOT)}, check=False)
     assert done.returncode == 0, done.stderr
     assert done.stdout.startswith("worker True departed ")
+
+
+def test_episodes_one_after_another_run_in_one_worker_each_on_a_fresh_sumo() -> None:
+    env = hils.envs.parallel_env(scenario="resco:grid4x4", action_type="selection", episode_length=120.0)
+    try:
+        worker = env.testbed.sumo_process
+        episodes = []
+        for _ in range(2):
+            out = [env.reset(seed=5)]
+            for agent in env.possible_agents:
+                env.action_space(agent).seed(5)
+            while env.agents:
+                out.append(env.step({agent: env.action_space(agent).sample() for agent in env.agents}))
+            episodes.append(_plain(out))
+        assert env.testbed.sumo_process is worker and worker.alive
+        assert episodes[0] == episodes[1]
+    finally:
+        env.close()
+    assert not worker.alive
