@@ -594,14 +594,14 @@ def _env_command(args: argparse.Namespace) -> int:
     print(f"  sumo-rl counts its yellow and minimum green in SUMO steps: it is given the config's {c['yellow']:g} s "
           f"and {c['min_green']:g} s as {t['yellow']} and {t['min_green']} steps; 'unconverted' is the same numbers "
           f"as steps (a {c['yellow'] * f['sumo_step_s']:g} s yellow), as its own docs suggest writing them")
-    labels = {"hils": "hils", "hils_in_process": "hils, SUMO in process", "hils_no_all_red": "hils, no all-red",
+    labels = {"hils": "hils", "hils_worker": "hils, SUMO worker", "hils_no_all_red": "hils, no all-red",
               "sumo_rl": "sumo-rl", "sumo_rl_unconverted": "sumo-rl, unconverted"}
     for line in bench_seeds.episode_table({labels[side]: figures for side, figures in f["sides"].items()}):
         print(line)
     print(bench_seeds.ratio_line("hils / sumo-rl", f["hils_to_sumo_rl"])
           + " (goal: wall <= 1; hils' controller adds a 2 s all-red to every change and serves the config's pairs: "
             "other signals, other traffic, which SUMO steps at its own cost)")
-    print(bench_seeds.ratio_line("hils, SUMO in process / sumo-rl", f["hils_in_process_to_sumo_rl"]))
+    print(bench_seeds.ratio_line("hils, SUMO worker / sumo-rl", f["hils_worker_to_sumo_rl"]))
     print(bench_seeds.ratio_line("hils / sumo-rl unconverted", f["hils_to_sumo_rl_unconverted"])
           + " (shorter clearances, lighter traffic)")
     print(bench_seeds.ratio_line("hils, no all-red / sumo-rl", f["same_clearances"])
@@ -631,11 +631,11 @@ def _resco_command(args: argparse.Namespace) -> int:
     for name, sc in f["scenarios"].items():
         print(f"resco:{name} ({sc['controllers']} lights, a decision every {sc['decision_s']:g} s):")
         sides = sc["sides"]
-        for line in bench_seeds.episode_table({"hils": sides["hils"], "hils, SUMO in process": sides["hils_in_process"],
+        for line in bench_seeds.episode_table({"hils": sides["hils"], "hils, SUMO worker": sides["hils_worker"],
                                                "sumo-rl": sides["sumo_rl"]}, per_controller=True):
             print(line)
         print(bench_seeds.ratio_line("hils / sumo-rl", sc["hils_to_sumo_rl"]) + " (goal: wall <= 1)")
-        print(bench_seeds.ratio_line("hils, SUMO in process / sumo-rl", sc["hils_in_process_to_sumo_rl"]))
+        print(bench_seeds.ratio_line("hils, SUMO worker / sumo-rl", sc["hils_worker_to_sumo_rl"]))
         print(_loads(sc["runs"], info))
     _write_figures(folder / "resco.json", {"machine": info, "resco": f})
     return 0

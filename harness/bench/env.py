@@ -35,11 +35,11 @@ DECISION_S = 10.0
 TIMINGS = ("yellow", "min_green", "max_green")
 
 
-def hils_episode(seed: int, duration: float = EPISODE_S, all_red: bool = True, sumo_worker: bool = True
+def hils_episode(seed: int, duration: float = EPISODE_S, all_red: bool = True, sumo_worker: bool = False
                  ) -> dict[str, Any]:
     """One episode of `hils/Intersection-v1` (selection) with a random policy. ``all_red=False``: the shipped config
-    with no red clearance, the clearances sumo-rl gives (a yellow, no all-red). ``sumo_worker``: SUMO in its worker
-    process (the environment's default; both processes' CPU counted) or in the environment's."""
+    with no red clearance, the clearances sumo-rl gives (a yellow, no all-red). ``sumo_worker``: SUMO in a worker
+    process (both processes' CPU counted) instead of the environment's (its default)."""
     import gymnasium as gym
 
     import hils.envs  # noqa: F401  (registers the environment)
@@ -128,7 +128,7 @@ def measure_env(seeds: Sequence[int], duration: float = EPISODE_S, *, progress: 
     """One episode of each side per seed, alternately, each in a fresh process (:mod:`harness.bench.seeds`): every
     run, each side's figures over the seeds, and hils' per-seed ratios to each sumo-rl side."""
     runs = alternate(seeds, {"hils": partial(hils_episode, duration=duration),
-                             "hils_in_process": partial(hils_episode, duration=duration, sumo_worker=False),
+                             "hils_worker": partial(hils_episode, duration=duration, sumo_worker=True),
                              "hils_no_all_red": partial(hils_episode, duration=duration, all_red=False),
                              "sumo_rl": partial(sumo_rl_episode, duration=duration),
                              "sumo_rl_unconverted": partial(sumo_rl_episode, duration=duration, converted=False)},
@@ -139,6 +139,6 @@ def measure_env(seeds: Sequence[int], duration: float = EPISODE_S, *, progress: 
             "sumo_rl_timing_steps": dict(zip(TIMINGS, sumo_rl_timing(), strict=True)),
             "runs": runs, "sides": sides,
             "hils_to_sumo_rl": compare_episodes(sides["hils"], sides["sumo_rl"]),
-            "hils_in_process_to_sumo_rl": compare_episodes(sides["hils_in_process"], sides["sumo_rl"]),
+            "hils_worker_to_sumo_rl": compare_episodes(sides["hils_worker"], sides["sumo_rl"]),
             "same_clearances": compare_episodes(sides["hils_no_all_red"], sides["sumo_rl"]),
             "hils_to_sumo_rl_unconverted": compare_episodes(sides["hils"], sides["sumo_rl_unconverted"])}

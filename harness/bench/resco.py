@@ -3,10 +3,10 @@
 Per scenario and seed, one episode of each side, each in a fresh process, alternately (:mod:`harness.bench.seeds`):
 
 - hils: ``hils.envs.parallel_env(scenario="resco:NAME")``, every light an emulated NEMA controller derived from
-  its SUMO program, driven through the middleware (virtual time, ``measure`` off as for training), SUMO stepped in
-  its worker process (:mod:`hils.sim.worker`, the environment's default): its CPU time is both processes', its SUMO
-  part the worker's steps, its own work the rest of the wall time (what SUMO's steps did not hide);
-- hils in process: the same with ``sumo_worker=False``, SUMO stepped in the environment's own process;
+  its SUMO program, driven through the middleware (virtual time, ``measure`` off as for training);
+- hils with a SUMO worker: the same with ``sumo_worker=True``, SUMO stepped in a worker process
+  (:mod:`hils.sim.worker`): its CPU time is both processes', its SUMO part the worker's steps, its own work the rest
+  of the wall time (what SUMO's steps did not hide);
 - sumo-rl: its multi-agent ``SumoEnvironment`` on the same network and demand, matched to hils' decisions and
   timings, run as :mod:`harness.reference.sumo_rl_peer` says (its PettingZoo wrapper does not start with pettingzoo
   1.27).
@@ -35,10 +35,10 @@ EPISODE_S = 3600.0
 DEFAULT_SCENARIOS = ("grid4x4", "cologne8")
 
 
-def hils_episode(seed: int, *, scenario: str, duration: float = EPISODE_S, sumo_worker: bool = True
+def hils_episode(seed: int, *, scenario: str, duration: float = EPISODE_S, sumo_worker: bool = False
                  ) -> dict[str, Any]:
-    """One episode of hils' PettingZoo environment on RESCO's ``scenario`` with a seeded random policy, SUMO in its
-    worker process (the environment's default) or in this one."""
+    """One episode of hils' PettingZoo environment on RESCO's ``scenario`` with a seeded random policy, SUMO in this
+    process (the environment's default) or in a worker process."""
     import hils.envs
 
     sumo_s = time_sumo_steps()
@@ -80,14 +80,13 @@ def measure_resco(scenarios: Sequence[str], seeds: Sequence[int], duration: floa
     for name in scenarios:
         controllers = len(resco.load(name).intersections)
         runs = alternate(seeds, {"hils": partial(hils_episode, scenario=name, duration=duration),
-                                 "hils_in_process": partial(hils_episode, scenario=name, duration=duration,
-                                                            sumo_worker=False),
+                                 "hils_worker": partial(hils_episode, scenario=name, duration=duration,
+                                                        sumo_worker=True),
                                  "sumo_rl": partial(sumo_rl_side, scenario=name, duration=duration)},
                          progress=progress)
         sides = {side: episode_figures(by_seed, duration, controllers) for side, by_seed in runs.items()}
         out["scenarios"][name] = {"controllers": controllers, "decision_s": resco.MAPS[name].decision_interval,
                                   "runs": runs, "sides": sides,
                                   "hils_to_sumo_rl": compare_episodes(sides["hils"], sides["sumo_rl"]),
-                                  "hils_in_process_to_sumo_rl": compare_episodes(sides["hils_in_process"],
-                                                                                 sides["sumo_rl"])}
+                                  "hils_worker_to_sumo_rl": compare_episodes(sides["hils_worker"], sides["sumo_rl"])}
     return out

@@ -240,10 +240,9 @@ class IntersectionEnv(gymnasium.Env):
     logger in every controller, which training does not need: off by default; the episode is the same).
     ``spat``: True to add the controller's announced earliest and latest change of each phase to the observation
     (the in-process emulator, ``target="virtual"``, only: NTCIP 1202 has no per-phase timing object to poll).
-    ``sumo_worker``: SUMO steps in a worker process of its own beside the environment's work (:mod:`hils.sim.worker`:
-    the same episodes, on two cores); default: in virtual time, not at the wall clock (where it is refused). False
-    keeps SUMO in the environment's process: for one core per environment (many environments in parallel, each in
-    a process of its own), where a worker only adds the cost of its pipe.
+    ``sumo_worker``: True steps SUMO in a worker process of its own beside the environment's work
+    (:mod:`hils.sim.worker`: the same episodes, on two cores; virtual time only). Off by default: it gains only where
+    a core is free for it (on a busy machine, or with an environment per core, it adds the cost of its pipe).
     """
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": []}
@@ -254,7 +253,7 @@ class IntersectionEnv(gymnasium.Env):
                  sumo_step: float | None = None, control_interval: float | None = None,
                  episode_length: float = 3600.0, reward: str | Reward = "queue", recover_after: float = 5.0,
                  log_path: str | Path | None = None, measure: bool = False, spat: bool = False,
-                 sumo_worker: bool | None = None) -> None:
+                 sumo_worker: bool = False) -> None:
         self.action_type = action_type_of(action_type)
         if spat and target != VIRTUAL:
             raise EnvOptionError(f"spat=True with target={target!r}: allowed: spat=True with target={VIRTUAL!r} (the "
@@ -275,7 +274,7 @@ class IntersectionEnv(gymnasium.Env):
         self.testbed = Testbed(self.config, action_type=self.action_type, target=target, sumo=True,
                                duration=episode_length, recover_after=recover_after, log_path=log_path,
                                sumo_config=self.sumo_config, measure=measure,
-                               sumo_worker=target == VIRTUAL if sumo_worker is None else sumo_worker)
+                               sumo_worker=sumo_worker)
         self._last: Observation | None = None
 
     # --- gymnasium API ----------------------------------------------------------------------

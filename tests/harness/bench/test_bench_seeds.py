@@ -149,7 +149,7 @@ def test_the_environment_bench_also_runs_hils_with_sumo_rl_s_clearances() -> Non
 
 @pytest.mark.parametrize("module", ["resco", "env"])
 def test_a_sumo_worker_s_steps_and_cpu_count_in_the_environment_benches(module: str) -> None:
-    """With SUMO in its worker process (the environments' default), the SUMO part of an episode is the worker's steps
+    """With SUMO in a worker process (``sumo_worker=True``), the SUMO part of an episode is the worker's steps
     (this process steps none: without them SUMO's part reads 0 and the whole wall time passes for own work)."""
     import importlib
 
@@ -157,8 +157,8 @@ def test_a_sumo_worker_s_steps_and_cpu_count_in_the_environment_benches(module: 
 
     bench_module = importlib.import_module(f"harness.bench.{module}")
     options = {"scenario": "grid4x4"} if module == "resco" else {}
-    worker = in_fresh_process(functools.partial(bench_module.hils_episode, duration=300.0, **options), 0)
-    alone = in_fresh_process(functools.partial(bench_module.hils_episode, duration=300.0, sumo_worker=False,
-                                               **options), 0)
+    worker = in_fresh_process(functools.partial(bench_module.hils_episode, duration=300.0, sumo_worker=True,
+                                                **options), 0)
+    alone = in_fresh_process(functools.partial(bench_module.hils_episode, duration=300.0, **options), 0)
     assert (worker["inserted"], worker["arrived"]) == (alone["inserted"], alone["arrived"])  # the same episode
     assert worker["sumo_s"] > 0.2 * alone["sumo_s"] > 0

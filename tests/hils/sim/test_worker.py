@@ -82,7 +82,8 @@ def test_a_measured_run_is_the_same_with_sumo_in_a_worker(agent: str) -> None:
 
 
 def test_a_worker_that_dies_ends_the_run_with_a_sumo_error() -> None:
-    env = hils.envs.parallel_env(scenario="resco:grid4x4", action_type="selection", episode_length=300.0)
+    env = hils.envs.parallel_env(scenario="resco:grid4x4", action_type="selection", episode_length=300.0,
+                                 sumo_worker=True)
     try:
         env.reset(seed=0)
         os.kill(env.testbed.sumo_process._process.pid, signal.SIGKILL)
@@ -116,7 +117,7 @@ def test_a_script_without_a_main_guard_runs_its_environment(tmp_path: Path) -> N
     script = tmp_path / "train.py"
     script.write_text(textwrap.dedent("""
         import hils.envs
-        env = hils.envs.parallel_env(scenario="resco:grid4x4", episode_length=60.0)
+        env = hils.envs.parallel_env(scenario="resco:grid4x4", episode_length=60.0, sumo_worker=True)
         env.reset(seed=1)
         while env.agents:
             env.step({agent: env.action_space(agent).sample() for agent in env.agents})
@@ -130,7 +131,8 @@ def test_a_script_without_a_main_guard_runs_its_environment(tmp_path: Path) -> N
 
 
 def test_episodes_one_after_another_run_in_one_worker_each_on_a_fresh_sumo() -> None:
-    env = hils.envs.parallel_env(scenario="resco:grid4x4", action_type="selection", episode_length=120.0)
+    env = hils.envs.parallel_env(scenario="resco:grid4x4", action_type="selection", episode_length=120.0,
+                                 sumo_worker=True)
     try:
         worker = env.testbed.sumo_process
         episodes = []
