@@ -272,7 +272,7 @@ class _Served:
             self.sim.close()
         sim = self.sim = SumoSimulation(**options)
         sim.start()
-        self.lanes = tuple(dict.fromkeys(lane for light in sim.lights.values() for lane in light._lanes))
+        self.lanes = tuple(dict.fromkeys(lane for light in sim.lights.values() for lane in light.lanes))
         # the main process has the configs already, and its own readings
         return ({tls: {k: v for k, v in vars(light).items() if k not in ("_readings", "config")}
                  for tls, light in sim.lights.items()},
@@ -292,7 +292,7 @@ class _Served:
         return took
 
     def read(self) -> tuple[float, dict[str, Any], int, int]:
-        return self.sim.lights[next(iter(self.sim.lights))]._readings.read(self.lanes)
+        return self.sim.read_lanes(self.lanes)
 
     def light(self, tls: str, method: str, *args: Any) -> Any:
         return getattr(self.sim.lights[tls], method)(*args)
