@@ -22,14 +22,19 @@ Between two reads: while the controllers run the steps up to an agent's next dec
 sent; the read at the decision waits for the rest. The states shown are the controllers' (SUMO's traffic does not
 change them), so nothing hils does in between waits for SUMO, except with detector feeds (SUMO's presence SETs the
 controllers at every step: every step then waits for its read, and the worker gives no overlap, only its cost).
+What cannot overlap is the work from a decision's read to the first step after it: the observations, the agent, the
+actions submitted and the controllers' answers to them up to that step's time (the state it shows), which on
+RESCO's grid is close to half of the run's own work. The worker gains only where a core is free for it: it is off
+by default (``docs/speed.md`` gives the figures).
 
 What differs, and where the worker is not used
 ----------------------------------------------
 - An error of a call sent without an answer (a state string SUMO refuses) is raised by the next read.
-- The worker is spawned, not forked: a fork of a process that loaded libsumo is not a clean SUMO
-  (:mod:`hils.sweep.grid`). It lives as long as its :class:`SumoProcess`: an environment's episodes run one after
-  another in it, each a fresh SUMO, as they would in process. A worker that dies ends the run with a
-  :class:`~hils.sim.sumo.SumoError` naming its exit code.
+- The worker is a fresh interpreter (``python -m hils.sim.worker``): not a fork (a fork of a process that loaded
+  libsumo is not a clean SUMO, :mod:`hils.sweep.grid`), nor multiprocessing's spawn (which imports the caller's main
+  module again: a script without a ``__main__`` guard would run twice). It lives as long as its
+  :class:`SumoProcess`: an environment's episodes run one after another in it, each a fresh SUMO, as they would in
+  process. A worker that dies ends the run with a :class:`~hils.sim.sumo.SumoError` naming its exit code.
 - At the wall clock a step's cost is measured where SUMO steps: the worker is for virtual time
   (``Testbed(sumo_worker=True)`` refuses a wall-clock run).
 """
