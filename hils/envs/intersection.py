@@ -242,6 +242,9 @@ class IntersectionEnv(gymnasium.Env):
     (the in-process emulator, ``target="virtual"``, only: NTCIP 1202 has no per-phase timing object to poll).
     ``j2735``: True to hand, in ``info["j2735"]`` of every reset and step, the controller's SPaT as SAE J2735 sends
     it (UPER MessageFrame bytes, :meth:`hils.Testbed.j2735`; virtual target only, like ``spat``).
+    ``sumo_worker``: True steps SUMO in a worker process of its own beside the environment's work
+    (:mod:`hils.sim.worker`: the same episodes, on two cores; virtual time only). Off by default: it gains only where
+    a core is free for it (on a busy machine, or with an environment per core, it adds the cost of its pipe).
     """
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": []}
@@ -252,7 +255,7 @@ class IntersectionEnv(gymnasium.Env):
                  sumo_step: float | None = None, control_interval: float | None = None,
                  episode_length: float = 3600.0, reward: str | Reward = "queue", recover_after: float = 5.0,
                  log_path: str | Path | None = None, measure: bool = False, spat: bool = False,
-                 j2735: bool = False) -> None:
+                 j2735: bool = False, sumo_worker: bool = False) -> None:
         self.action_type = action_type_of(action_type)
         for option, on in (("spat", spat), ("j2735", j2735)):
             if on and target != VIRTUAL:
@@ -274,7 +277,8 @@ class IntersectionEnv(gymnasium.Env):
         self.observation_space = self.adapter.observation_space
         self.testbed = Testbed(self.config, action_type=self.action_type, target=target, sumo=True,
                                duration=episode_length, recover_after=recover_after, log_path=log_path,
-                               sumo_config=self.sumo_config, measure=measure)
+                               sumo_config=self.sumo_config, measure=measure,
+                               sumo_worker=sumo_worker)
         self._last: Observation | None = None
 
     # --- gymnasium API ----------------------------------------------------------------------
