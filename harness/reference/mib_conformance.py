@@ -129,11 +129,11 @@ class NetSnmp:
     port: int
     read_community: str
     write_community: str
-    timeout_s: float = 2.0
+    timeout_s: float = 3.0  # a 20-value SET on a loaded 2-core machine (the suite's two workers) may take seconds
 
     def _run(self, program: str, community: str, *args: str) -> subprocess.CompletedProcess[str]:
         return subprocess.run([tool(program), "-v2c", "-c", community, "-On", "-Ox", "-t", str(self.timeout_s),
-                               "-r", "1", f"{self.host}:{self.port}", *args], capture_output=True, text=True,
+                               "-r", "2", f"{self.host}:{self.port}", *args], capture_output=True, text=True,
                               timeout=600)
 
     def walk(self, root: Oid = ASC) -> list[Walked]:
