@@ -1,4 +1,5 @@
-"""The sequencer: which phase each ring serves next, the barrier, backing, dual entry, the committed next phase.
+"""The sequencer: which phase each ring serves next, the barrier, backing and conditional service, dual entry, the
+committed next phase.
 
 Rules of this file
 ------------------
@@ -19,10 +20,17 @@ pedestrian clearance if it served a walk), is not held, and has gapped out, maxe
 (:meth:`Sequencer.ending`). A green without anywhere to go rests in green, maxed out or not.
 
 A ready ring *wishes* for the nearest phase with demand in its ring order after its own (1, 2, 3, 4, 1, ...).
-Within the barrier group it goes there at once: forward, or backing into an earlier phase of the group while
-the other ring still times, but only when no demand waits across the barrier: a controller backs "into a
-protected left-turn phase when the cross street phases and the opposing left-turn are skipped" (Naztec
-TecNote 3013), not when they are called. A ring may not back from a phase with ``backup_prevent`` either. A
+Within the barrier group it goes there at once when that is forward. Backing into an earlier phase of the group
+while the other ring still times is an option, never the default: NTCIP 1202 gives it as phaseOptions bit 14,
+"Conditional Service Enable - in multi-ring configurations when set to 1 causes a gapped/maxed phase to
+conditionally service a preceding actuated vehicle phase when sufficient time remains before max time out of the
+phase(s) not prepared to terminate. Support is optional" (its default, like every phaseOptions bit's, is clear),
+and the field logs replayed for issue 35 never show a ring backing. So a ring backs from a phase with
+``conditional_service`` once its green is ready to end and every other ring's green not ready to end has time
+left before its maximum for the clearance and the earlier phase's minimum (:meth:`_conditional`). Naztec's
+controllers back by default, "into a protected left-turn phase when the cross street phases and the opposing
+left-turn are skipped" (Naztec TecNote 3013), unless their Backup Prevent is set: ``backup_prevent = false``
+gives that, backing only while no demand waits across the barrier; ``backup_prevent`` is true by default. A
 backing refused counts as a wish beyond the barrier (the phase waits for the group's next visit, or, with
 nothing across, both rings clear and restart the group for it); when both rings are ready and one wishes
 beyond, the other does not back either (crossing goes first). While a pattern runs, no ring backs while
@@ -130,7 +138,8 @@ class Sequencer:
                 r.interval is GREEN or (r.interval is DWELL and r.target is None)):
             return False
         q = self.wish(r, demand, inputs)
-        return q is not None and self._backing(r, q)
+        return (q is not None and self._backing(r, q)
+                and not (self.config.phases[r.phase].conditional_service and self._conditional(r, q)))
 
     def redirect(self, r: Ring, demand: frozenset[int], inputs: Inputs) -> None:
         """``red_end`` lock: a ring in its clearance takes the nearest phase with demand after its own on the
@@ -183,8 +192,29 @@ class Sequencer:
         if self._barrier[q] != self.group:
             return True
         r = self.rings[self._ring_of[q] - 1]
-        return self._backing(r, q) and (self.waiting_across or self.config.phases[r.phase].backup_prevent
-                                        or self.restarting)
+        if not self._backing(r, q):
+            return False
+        option = self.config.phases[r.phase]
+        if option.conditional_service and self._conditional(r, q):
+            return False
+        return self.waiting_across or option.backup_prevent or self.restarting
+
+    def _conditional(self, r: Ring, q: int) -> bool:
+        """``r`` may back into ``q`` as conditional service (NTCIP 1202 phaseOptions bit 14): its green has gapped
+        or maxed out, and every green of another ring "not prepared to terminate" has time left before its maximum
+        for ``r``'s clearance and ``q``'s minimum. With none of them (every other ring ready, or in its clearance) the
+        condition holds: nothing times out on the way. While a pattern runs the force-off points replace the
+        maximum, and :meth:`serviceable` has already asked that ``q`` fits before its own."""
+        if not self._prepared(r):
+            return False
+        timing = self.timing
+        needed = timing[r.phase].yellow + timing[r.phase].red_clear + timing[q].min_green
+        return self.coordinated.running or all(o.maximum - o.max_ticks >= needed for o in self.rings
+                                               if o is not r and o.interval is GREEN and not self._prepared(o))
+
+    def _prepared(self, r: Ring) -> bool:
+        """``r`` shows a green "prepared to terminate": past its minimum, gapped or maxed out (or forced off)."""
+        return r.interval is GREEN and r.ticks >= r.minimum and self.coordinated.ending(r) is not None
 
     def conflicting(self, r: Ring, demand: frozenset[int]) -> bool:
         """Demand conflicts with ``r``'s green: in its own ring, or beyond this visit of the barrier group."""
@@ -225,9 +255,10 @@ class Sequencer:
 
     # --- after the rings timed -----------------------------------------------------------------------------
 
-    def decide(self, demand: frozenset[int], inputs: Inputs) -> None:
+    def decide(self, demand: frozenset[int], inputs: Inputs, omitted: frozenset[int] = frozenset()) -> None:
         """Commit the next phase of every ready ring that may go: within the group at once, across the barrier
-        when every ring is ready for it."""
+        when every ring is ready for it (``omitted``: phases never entered, besides PhaseOmit's, as a preempt's dwell
+        omits those that may not cycle)."""
         ready = {r.number: self.ready(r, inputs) for r in self.rings}
         if not any(ready.values()):
             return  # most ticks: every ring is timing
@@ -257,7 +288,7 @@ class Sequencer:
                 target = next((q for q in r.order if self._barrier[q] == self.group
                                and self.serviceable(r, q, demand, inputs)), None)
             if target is None:
-                omit = self.control[PHASE_OMIT]
+                omit = self.control[PHASE_OMIT] | omitted
                 target = next((q for q in r.order if self._barrier[q] == self.group
                                and self.config.phases[q].dual_entry and q not in omit), None)
             self.commit(r, target, inputs)

@@ -54,13 +54,14 @@ def timings(draw: st.DrawFn) -> dict[str, object]:
         "red_revert": draw(st.integers(0, 60)) / 10,
         "dual_entry": draw(st.booleans()),
         "backup_prevent": draw(st.booleans()),
+        "conditional_service": draw(st.booleans()),
         "simultaneous_gap_disable": draw(st.booleans()),
     }
     if draw(st.booleans()):
         out["max2"] = draw(st.integers(min_green, 40))
     if max_green >= 2 and draw(st.booleans()):
         walk = draw(st.integers(1, max_green - 1))
-        out |= {"walk": walk, "ped_clear": draw(st.integers(1, max_green - walk))}
+        out |= {"walk": walk, "ped_clear": draw(st.integers(1, max_green - walk)), "ped_recycle": draw(st.booleans())}
         if draw(st.booleans()):
             out["recall"] = "ped"
     return out
@@ -93,6 +94,8 @@ def configs(draw: st.DrawFn, coordinated: bool = False, overlapped: bool = False
             "sequence": [[RING1[0], RING2[0]], [RING1[-1], RING2[-1]]],
             "pairs": compatible,
         },
+        # a push button per phase, numbered as it (pedestrian recycle acts on the calls they latch during a green)
+        "pedestrian_detectors": {str(p): p for p in ALL_PHASES},
     }
     if coordinated:
         raw["coordination"] = draw(coordinations(phases, barriers))
