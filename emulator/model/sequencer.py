@@ -27,9 +27,7 @@ conditionally service a preceding actuated vehicle phase when sufficient time re
 phase(s) not prepared to terminate. Support is optional" (its default, like every phaseOptions bit's, is clear),
 and the field logs replayed for issue 35 never show a ring backing. So a ring backs from a phase with
 ``conditional_service`` once its green is ready to end and every other ring's green not ready to end has time
-left before its maximum for the clearance and the earlier phase's minimum (:meth:`_conditional`), whether that
-phase is the next with demand in its order or a phase across the barrier is (it would wait at the barrier for the
-other ring anyway: :meth:`_conditionally`). Naztec's
+left before its maximum for the clearance and the earlier phase's minimum (:meth:`_conditional`). Naztec's
 controllers back by default, "into a protected left-turn phase when the cross street phases and the opposing
 left-turn are skipped" (Naztec TecNote 3013), unless their Backup Prevent is set: ``backup_prevent = false``
 gives that, backing only while no demand waits across the barrier; ``backup_prevent`` is true by default. A
@@ -214,18 +212,6 @@ class Sequencer:
         return self.coordinated.running or all(o.maximum - o.max_ticks >= needed for o in self.rings
                                                if o is not r and o.interval is GREEN and not self._prepared(o))
 
-    def _conditionally(self, r: Ring, demand: frozenset[int], inputs: Inputs) -> int | None:
-        """The earlier phase of its group that ``r``, wishing beyond the barrier, serves meanwhile as conditional
-        service: the first with demand in ring order, while a green of another ring not prepared to terminate keeps
-        the rings from crossing and has the time (:meth:`_conditional`)."""
-        p = r.phase
-        if r.interval is not GREEN or not self.config.phases[p].conditional_service or not any(
-                o is not r and o.interval is GREEN and not self._prepared(o) for o in self.rings):
-            return None
-        q = next((q for q in r.order if self._barrier[q] == self._barrier[p] and self._order[q] < self._order[p]
-                  and self.serviceable(r, q, demand, inputs)), None)
-        return q if q is not None and self._conditional(r, q) else None
-
     def _prepared(self, r: Ring) -> bool:
         """``r`` shows a green "prepared to terminate": past its minimum, gapped or maxed out (or forced off)."""
         return r.interval is GREEN and r.ticks >= r.minimum and self.coordinated.ending(r) is not None
@@ -281,9 +267,6 @@ class Sequencer:
         all_ready = all(ready.values())
         for r in self.rings:
             q = wish.get(r.number)
-            if r.number in across and (back := self._conditionally(r, demand, inputs)) is not None:
-                del across[r.number]
-                wish[r.number] = q = back
             if q is None or r.number in across:
                 continue
             if r.interval is GREEN and self._order[q] < self._order[r.phase] and all_ready and across:
