@@ -335,12 +335,12 @@ def _driven_log(cfg: config_mod.IntersectionConfig, detectors: dict[int, set[int
 
 
 @pytest.mark.parametrize(("option", "across", "read"), [
-    ("conditional_service = true", {4}, ("conditional_service", True)),
+    ("conditional_service = true", {8}, ("conditional_service", True)),
     ("backup_prevent = false", set(), ("backup_prevent", False)),
 ])
 def test_a_ring_that_backs_is_read_as_the_setting_that_lets_it(option: str, across: set[int],
                                                                read: tuple[str, object]) -> None:
-    """2+6 green, 6 held by its detector; 2's call goes and 1 is called (with 4 across, or nothing), three times:
+    """2+6 green, 6 held by its detector; 2's call goes and 1 is called (with 8 across, or nothing), three times:
     ring 1 backs 2 -> 1 while 6 times, under the option on 2 (between, twice, the ring serves 1 then 2 as its order
     says). The config read from the log sets it on 2 (conditional service where a call was on across the barrier,
     Naztec's backing otherwise); a log of the defaults, which restart the group instead, sets neither."""
