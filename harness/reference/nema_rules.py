@@ -376,16 +376,33 @@ class Rules:
                                                                     or self.gapped(e)):
             return False  # not gapped (or held gapped out, simultaneous gap disable) nor maxed out
         holding = [(o, green) for o, green in e.beside if not self.ready(o, green, e.yellow)]
-        if not holding:
-            return not (e.beside and self.backs_with_call_across(e))
-        needed = self.clearance(e.phase) + self.min[e.next]
-        return all(self.time_left(o, green, e.yellow) >= needed for o, green in holding)
+        if not holding:  # the other ring's greens cross with it, unless one goes on within the group
+            crossing = e.beside and not any(self.forward(o, e.yellow) for o, _ in e.beside)
+            return not (crossing and self.backs_with_call_across(e))
+        return self.time_for(e.phase, e.next, holding, e.yellow)
+
+    def time_for(self, p: int, q: int, holding: Sequence[tuple[int, int]], k: int) -> bool:
+        """At ``k`` each green of ``holding`` (phase, green onset) has time left before its maximum for ``p``'s
+        clearance and ``q``'s minimum."""
+        needed = self.clearance(p) + self.min[q]
+        return all(self.time_left(o, green, k) >= needed for o, green in holding)
+
+    def forward(self, o: int, k: int) -> bool:
+        """At ``k`` the ring of ``o`` has a called phase after ``o`` in its barrier group to go on to."""
+        return any(self.ring[x] == self.ring[o] and self.side[x] == self.side[o] and self.order[x] > self.order[o]
+                   and self.serviceable(x, k, self.clearance(o)) for x in self.config.phases)
 
     def backed_with_call_across(self, e: Ending) -> bool:
         return self.backs_with_call_across(e) and not self.conditional_service(e)
 
     def backed_conditionally(self, e: Ending) -> bool:
-        return self.backs_with_call_across(e) and self.conditional_service(e)
+        """A backing a setting gives: with a call across, as conditional service words it; with none, from a green
+        that gapped or maxed out, by a side that backs at all (conditional service, or Naztec's backing, which asks
+        no time of the other ring)."""
+        if self.backs_with_call_across(e):
+            return self.conditional_service(e)
+        return (self.backs(e) and self.settings[e.side].conditional_service
+                and self.ready(e.phase, e.green, e.yellow))
 
     def entered_past_force_off(self, e: Ending) -> bool:
         plan, q = self.plan, e.next
@@ -406,14 +423,20 @@ class Rules:
         gap = next((k for k in range(e.green + self.min[p] - 1, e.yellow + 1) if p not in self.calls(k)), None)
         return gap is not None and any(p in self.calls(k) for k in range(gap + 1, until + 1))
 
-    def goes_on(self, p: int, k: int, across: bool) -> bool:
+    def goes_on(self, p: int, k: int, across: bool, shown: Mapping[int, int] | None = None) -> bool:
         """At tick ``k`` the ring of ``p`` (in our config) has a called phase of its group to go to after ``p``: a
-        later one, or an earlier one while nothing waits ``across`` the barrier where ``p`` backs at all (conditional
-        service, or Naztec's backing with ``backup_prevent`` off)."""
+        later one, or an earlier one while nothing waits ``across`` the barrier where ``p`` backs: Naztec's backing
+        (``backup_prevent`` off), or conditional service with the time it asks of the other ring's greens
+        (``shown``: phase -> green onset) not ready to end."""
         ph = self.config.phases[p]
-        backs = not across and (ph.conditional_service or not ph.backup_prevent)
+        holding = [(o, green) for o, green in (shown or {}).items() if not self.ready(o, green, k, slack=0)]
+
+        def backs(q: int) -> bool:
+            return not across and (not ph.backup_prevent or (ph.conditional_service
+                                                             and self.time_for(p, q, holding, k)))
+
         return any(q != p and self.ring[q] == self.ring[p] and self.side[q] == self.side[p]
-                   and self.serviceable(q, k, self.clearance(p)) and (self.order[q] > self.order[p] or backs)
+                   and self.serviceable(q, k, self.clearance(p)) and (self.order[q] > self.order[p] or backs(q))
                    for q in self.ring)
 
     def could_leave(self, e: Ending, k: int, shown: Mapping[int, int]) -> bool:
@@ -422,7 +445,7 @@ class Rules:
         group either. With the other ring in its clearance it cannot tell, and says no."""
         p = e.phase
         across = any(self.side[x] != self.side[p] and self.serviceable(x, k, self.clearance(p)) for x in self.ring)
-        if self.goes_on(p, k, across):
+        if self.goes_on(p, k, across, shown):
             return True
         return across and bool(shown) and all(self.ready(o, green, k, slack=0) and not self.goes_on(o, k, across)
                                               for o, green in shown.items())
