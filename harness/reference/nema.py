@@ -214,10 +214,12 @@ def comparable_config(config: IntersectionConfig) -> IntersectionConfig:
 
 def sumo_options(config: IntersectionConfig) -> IntersectionConfig:
     """``config`` set as SUMO's NEMA controller is where NTCIP 1202 leaves the behaviour to a setting, so that the
-    figures compare the two controllers and not their settings: conditional service (phaseOptions bit 14) on every
-    phase, as ``PhaseTransitionLogic::fromBarrier`` backs a ring whenever its own ring has no call across the
-    barrier. The judge still tells a backing outside the setting's words (too little time left) from one within."""
-    phases = {p: dataclasses.replace(ph, conditional_service=True) for p, ph in config.phases.items()}
+    figures compare the two controllers and not their settings: ``PhaseTransitionLogic::fromBarrier`` backs a ring
+    whenever its own ring has no call across the barrier, so every phase backs: with a call across as conditional
+    service (phaseOptions bit 14), with none as Naztec's controllers do (``backup_prevent = false``). The judge still
+    tells a backing outside the setting's words (too little time left) from one within."""
+    phases = {p: dataclasses.replace(ph, conditional_service=True, backup_prevent=False)
+              for p, ph in config.phases.items()}
     return dataclasses.replace(config, phases=phases)
 
 
