@@ -108,6 +108,11 @@ def _register_serve(commands: argparse._SubParsersAction) -> None:
                             "broadcasts it, in the UDP layout V2X Hub's SpatPlugin and MMITSS parse (per phase the "
                             "min and max time to change, status bitmasks), to HOST:PORT, the next controllers to "
                             "PORT+1..; see docs/spat.md")
+    serve.add_argument("--j2735", type=_address, metavar="HOST:PORT",
+                       help="also send each controller's SPaT every tick (10 Hz) as SAE J2735 SPaT messages (UPER "
+                            "MessageFrame, messageId 19; startTime, minEndTime, maxEndTime and likelyTime per signal "
+                            "group: phase p is group p, overlap n group 16+n) to HOST:PORT, the next controllers to "
+                            "PORT+1..; needs pycrate (pip install 'hils[j2735]'); see docs/spat.md")
     serve.add_argument("--log-events", type=int, default=100_000, metavar="N",
                        help="hi-res events each controller keeps, its last ones, as a controller's ring buffer "
                             "(100000; an Intelight MaxTime keeps about 10000)")
@@ -115,7 +120,7 @@ def _register_serve(commands: argparse._SubParsersAction) -> None:
 
 
 def _address(text: str) -> tuple[str, int]:
-    """HOST:PORT of ``--spat``."""
+    """HOST:PORT of ``--spat`` and ``--j2735``."""
     host, _, port = text.rpartition(":")
     if not host or not port.isdigit() or not 0 < int(port) <= 65535:
         raise argparse.ArgumentTypeError(f"{text!r}: allowed: HOST:PORT with PORT 1..65535, e.g. 127.0.0.1:6053")
@@ -176,13 +181,20 @@ def _serve(args: argparse.Namespace) -> int:
                          "allowed: finite milliseconds >= 0")
     if args.log_events < 1:
         raise SystemExit(f"hils emulator serve: --log-events {args.log_events}: allowed: 1 or more")
+    if args.j2735 is not None:
+        from emulator.agent import j2735
+
+        try:
+            j2735.require()
+        except ImportError as exc:
+            raise SystemExit(f"hils emulator serve: --j2735 needs pycrate ({exc}): pip install 'hils[j2735]'") from exc
     v3_user = _v3_user(args)
     controllers = _controllers(args)
     http = args.port if args.http == SAME_PORTS else args.http
     options = ServeOptions(host=args.host, port=args.port, ro_community=args.ro_community,
                            rw_community=args.rw_community, latency=Latency(args.latency_ms / 1e3, args.jitter_ms / 1e3),
                            trace=args.trace, v3_user=v3_user, http=http, log_events=args.log_events,
-                           ntcip=Version(args.ntcip) if args.ntcip else None, spat=args.spat)
+                           ntcip=Version(args.ntcip) if args.ntcip else None, spat=args.spat, j2735=args.j2735)
 
     def ready(server: EmulatorServer, addresses: list[tuple[str, int]]) -> None:
         # Scripts and tests wait for these lines: they are printed only once requests are answered.
@@ -201,6 +213,9 @@ def _serve(args: argparse.Namespace) -> int:
         for (tls, cfg), sender in zip(controllers, server.spat, strict=False):
             label = f" [{tls}]" if tls is not None else ""
             print(f"SPaT of {cfg.name}{label} to udp:{sender.address[0]}:{sender.address[1]} (10 Hz)")
+        for (tls, cfg), sender in zip(controllers, server.j2735, strict=False):
+            label = f" [{tls}]" if tls is not None else ""
+            print(f"J2735 SPaT of {cfg.name}{label} to udp:{sender.address[0]}:{sender.address[1]} (10 Hz)")
         sys.stdout.flush()
 
     try:

@@ -11,10 +11,12 @@ the transport, so this package needs nothing of the middleware.
 from __future__ import annotations
 
 import random
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Generator, Sequence
+from typing import Any
 
 import simpy
 
+from emulator.agent import j2735
 from emulator.agent.mib import MibView
 from emulator.model.controller import TICK, Controller
 from emulator.model.datalogger import DataLogger
@@ -62,6 +64,7 @@ class VirtualTarget:
         self._ticks = Grid(env.now + self.tick_phase, TICK)  # the controller's tick count k is reached at at(k)
         self.clock: EventClock | None = None
         self._ticking: simpy.Process | None = None
+        self._j2735_sent = 0
         if fast_path:
             self.clock = EventClock(env, self.unit, self.tick_phase)
             self.surface: MibView | ClockedSurface = ClockedSurface(self.mib, self.clock)
@@ -70,8 +73,13 @@ class VirtualTarget:
             self._ticking = env.process(self.unit.process(env, self.tick_phase))
 
     def hires(self) -> list[Event]:
-        """The controller's hi-res event log so far (complete: only real steps log, and they run when due)."""
-        return self._logger().events()
+        """The controller's hi-res event log so far, the controller brought to the present first (on the fast path
+        quiet ticks are counted only when something reads or writes the controller, and a minimum timed in them is
+        logged then, at its tick)."""
+        log = self._logger()
+        if self.clock is not None:
+            self.clock.catch_up()
+        return log.events()
 
     def spat(self) -> tuple[MovementTiming, ...]:
         """Each phase's and overlap's indication and the times of its next change, in the run's seconds: the
@@ -87,10 +95,38 @@ class VirtualTarget:
         return tuple(MovementTiming(s.kind, s.number, s.indication.value, at(s.earliest), at(s.latest), at(s.likely))
                      for s in self.controller.spat())
 
+    def j2735(self, intersection: int = 1) -> bytes:
+        """The controller's SPaT now as a J2735 message (UPER MessageFrame: :func:`emulator.agent.j2735.encode`),
+        numbered ``intersection``; its revision counts the messages asked for."""
+        if self.clock is not None:
+            self.clock.catch_up()
+        message = j2735.encode(self.controller, self._j2735_sent, intersection=intersection)
+        self._j2735_sent += 1
+        return message
+
     def hires_to(self, sink: Callable[[Sequence[Event]], None]) -> None:
         """Hand ``sink`` the hi-res log so far, then each tick's events as they are logged (the other optional
         method of a target: a Testbed writes them through, :mod:`hils.shell.hiresjournal`)."""
-        self._logger().write_to(sink)
+        log = self._logger()
+        log.write_to(sink)
+        if self.clock is not None:
+            self.env.process(self._minimums(log, self.clock))
+
+    def _minimums(self, log: DataLogger, clock: EventClock) -> Generator[simpy.Event, Any, None]:
+        """On the fast path the controller takes no step where a green's minimum changes nothing else, and its logger
+        logs such a minimum when it next hears from it: for a sink written through (a journal, kept if the run dies)
+        each is logged at its own time all the same, the controller left untouched."""
+        c = self.controller
+        while True:
+            due = log.pending()
+            if due is None:
+                yield clock.changed()  # a green starts (or the unit powers up) only where what it answers changes
+                continue
+            # the logger's clock counts with the controller's ticks
+            reached = self.env.timeout(clock.delay(due - c.coordinator.clock))
+            yield reached | clock.changed()
+            if reached.processed:
+                log.log_until(due)
 
     def _logger(self) -> DataLogger:
         if self.log is None:

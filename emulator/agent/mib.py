@@ -123,6 +123,8 @@ from hils.protocol.ntcip import (
     UNIT_STARTUP_FLASH,
     VEHICLE_DETECTOR_CALL_PHASE,
     VEHICLE_DETECTOR_CONTROL_GROUP_NUMBER,
+    VEHICLE_DETECTOR_DELAY,
+    VEHICLE_DETECTOR_EXTEND,
     VEHICLE_DETECTOR_NUMBER,
     VEHICLE_DETECTOR_OPTIONS,
     VEHICLE_DETECTOR_STATUS_GROUP_NUMBER,
@@ -173,6 +175,9 @@ _TIMING_COLUMNS: dict[PhaseColumn, tuple[str, int]] = {
     PhaseColumn.YELLOW_CHANGE: ("yellow", 1),
     PhaseColumn.RED_CLEAR: ("red_clear", 1),
     PhaseColumn.RED_REVERT: ("red_revert", 1),
+    PhaseColumn.TIME_BEFORE_REDUCTION: ("time_before_reduction", 10),
+    PhaseColumn.TIME_TO_REDUCE: ("time_to_reduce", 10),
+    PhaseColumn.MINIMUM_GAP: ("min_gap", 1),
 }
 
 _FROM_CONFIG = "taken from the intersection config, which is validated whole before the controller starts"
@@ -391,7 +396,7 @@ class MibView:
                              _group_writer(lambda col=col: c.control[col],
                                            lambda phases, col=col: c.set_control(col, phases), g))
                     for col in ControlColumn]
-        out += _overlaps(c, st)
+        out += _overlaps(c, st, self.edition)
         out += _preempts(c)
         # One sequence (sequenceData 1.r): the rings' order the config gives.
         out += [Instance(MAX_RINGS.instance(), MAX_RINGS, _constant(len(cfg.rings))),
@@ -408,6 +413,8 @@ class MibView:
         out.extend(Instance(VEHICLE_DETECTOR_OPTIONS.instance(d), VEHICLE_DETECTOR_OPTIONS,
                             _constant(int(DETECTOR_OPTIONS if d in cfg.detectors else 0)))
                    for d in _rows(cfg.detectors))
+        out += [Instance(obj.instance(d), obj, *_detector_timer(c, d, name))
+                for d in _rows(cfg.detectors) for obj, name in _DETECTOR_TIMERS.items()]
         out += _detectors(cfg.ped_detectors, (MAX_PED_DETECTORS, PED_DETECTOR_NUMBER, PED_DETECTOR_CALL_PHASE),
                           (MAX_PED_DETECTOR_GROUPS,), (PED_DETECTOR_STATUS_GROUP_NUMBER, PED_DETECTOR_STATUS_ACTIVE),
                           (PED_DETECTOR_CONTROL_GROUP_NUMBER, PED_DETECTOR_ACTUATION),
@@ -574,7 +581,8 @@ def _coordination(c: Controller | DelayedController) -> list[Instance]:
 
 _OVERLAP_TYPES = {OverlapKind.NORMAL: OverlapType.NORMAL,
                   OverlapKind.MINUS_GREEN_YELLOW: OverlapType.MINUS_GREEN_YELLOW,
-                  OverlapKind.FYA: OverlapType.OTHER}
+                  OverlapKind.FYA: OverlapType.OTHER,
+                  OverlapKind.TRANSIT: OverlapType.TRANSIT_2}
 # Writable overlap columns: the OverlapTiming field each sets, and ticks per unit of the NTCIP value.
 _OVERLAP_TIMING: dict[OverlapColumn, tuple[str, int]] = {
     OverlapColumn.TRAIL_GREEN: ("trail_green", 10),
@@ -583,9 +591,11 @@ _OVERLAP_TIMING: dict[OverlapColumn, tuple[str, int]] = {
 }
 
 
-def _overlaps(c: Controller | DelayedController, st: Controller | DelayedController) -> list[Instance]:
+def _overlaps(c: Controller | DelayedController, st: Controller | DelayedController,
+              edition: Version) -> list[Instance]:
     """The overlap node: the overlap table (type and phases from the config, the trailing times writable, acting
-    from the next trailing interval on) and the overlap status by group of 8."""
+    from the next trailing interval on) and the overlap status by group of 8. A transit bar is v03's transit-2; v02
+    has no such type, other(1) there."""
     cfg = c.config
     numbers = _rows(cfg.overlaps)
     groups = group_count(numbers[-1])
@@ -594,7 +604,9 @@ def _overlaps(c: Controller | DelayedController, st: Controller | DelayedControl
     for n in numbers:
         o = cfg.overlaps.get(n) or Overlap(n, OverlapKind.NORMAL, ())  # unprogrammed: no included phase
         fixed: dict[OverlapColumn, Value] = {
-            OverlapColumn.NUMBER: n, OverlapColumn.TYPE: int(_OVERLAP_TYPES[o.kind]),
+            OverlapColumn.NUMBER: n,
+            OverlapColumn.TYPE: int(OverlapType.OTHER if o.kind is OverlapKind.TRANSIT and edition is Version.V02
+                                    else _OVERLAP_TYPES[o.kind]),
             OverlapColumn.INCLUDED_PHASES: bytes(o.included), OverlapColumn.MODIFIER_PHASES: bytes(o.modifiers)}
         out += [Instance(OVERLAP_TABLE[col].instance(n), OVERLAP_TABLE[col], lambda v=v: v) for col, v in fixed.items()]
         timing = c.overlaps.timing.get(n) or OverlapTiming.of(o)
@@ -701,6 +713,21 @@ def _field_access(c: Controller | DelayedController, row: Any, name: str, unit: 
         c.touch()
 
     return lambda: getattr(row, name) // unit, write
+
+
+#: Writable detector table columns (tenths, the model's ticks): the detector unit's timer each sets.
+_DETECTOR_TIMERS = {VEHICLE_DETECTOR_DELAY: "delay", VEHICLE_DETECTOR_EXTEND: "extend"}
+
+
+def _detector_timer(c: Controller | DelayedController, d: int, name: str
+                    ) -> tuple[Callable[[], int], Callable[[int], None]]:
+    """Read and write one timer of detector ``d`` (:mod:`emulator.model.detectors`), acting from the next tick."""
+
+    def write(v: int) -> None:
+        c.detectors.retime(d, name, v, c.actuations)
+        c.touch()
+
+    return lambda: c.detectors.timer(d, name), write
 
 
 def _constant(value: Value) -> Callable[[], Value]:

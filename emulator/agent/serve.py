@@ -24,7 +24,8 @@ alignment) finds the coordinated cycle where the time of day puts it. With
 ``http`` each controller also serves its log as an Intelight MaxTime does
 (:mod:`emulator.agent.asclog`), on consecutive TCP ports, on the same loop: a
 few events per turn of it, so that serving a log never holds a tick up. With ``spat`` each controller sends its
-10 Hz SPaT packet (:mod:`emulator.agent.spat_udp`) once its ticks due have run, to consecutive UDP ports.
+10 Hz SPaT packet (:mod:`emulator.agent.spat_udp`) once its ticks due have run, to consecutive UDP ports; with
+``j2735`` its J2735 SPaT (:mod:`emulator.agent.j2735`) likewise.
 """
 
 from __future__ import annotations
@@ -45,6 +46,7 @@ from enum import Enum
 from pathlib import Path
 from typing import TextIO
 
+from emulator.agent import j2735, spat_udp
 from emulator.agent.asclog import AsclogServer, Connections, HttpStats
 from emulator.agent.mib import MibView
 from emulator.agent.snmp import AgentStats, DropReason, ReportBudget, RequestKind, SnmpAgent, V3User
@@ -147,6 +149,7 @@ class ServeOptions:
     ntcip: Version | None = None  # the edition of NTCIP 1202 served; None: each config's [emulator] ntcip
     spat: tuple[str, int] | None = None  # where the first controller's 10 Hz SPaT packet goes, the others to the
     # next ports; None: not sent
+    j2735: tuple[str, int] | None = None  # likewise its J2735 SPaT (UPER MessageFrame)
 
 
 @dataclass(frozen=True, slots=True)
@@ -232,18 +235,26 @@ class EmulatorServer:
         connections = Connections()
         self.controllers = tuple(ServedController(config, self.options, self._trace, reports, start, connections)
                                  for config in configs)
-        self.spat: list[SpatSender] = []
-        if self.options.spat is not None:
-            host, first = self.options.spat
-            if first + len(configs) - 1 > MAX_PORT:
-                raise ServeError(f"--spat {host}:{first} for {len(configs)} controllers needs ports up to "
-                                 f"{first + len(configs) - 1}; allowed: PORT 1..{MAX_PORT - len(configs) + 1}")
-            self.spat = [SpatSender(served.controller, host, first + i,
-                                    lambda view=served.view: view.spat_options & 1 == 1)
-                         for i, served in enumerate(self.controllers)]
+        self.spat = self._senders("--spat", self.options.spat, lambda i: spat_udp.encode)
+        self.j2735 = self._senders("--j2735", self.options.j2735,
+                                   lambda i: lambda c, sent: j2735.encode(c, sent, intersection=i + 1))
         self.ticker = WallClockTicker(*(served.unit for served in self.controllers), origin=tenths / 10,
-                                      after=[sender.send for sender in self.spat])
+                                      after=[sender.send for sender in (*self.spat, *self.j2735)])
         self._ticking: asyncio.Task[None] | None = None
+
+    def _senders(self, option: str, address: tuple[str, int] | None,
+                 encoder: Callable[[int], Callable[[Controller, int], bytes]]) -> list[SpatSender]:
+        """One SPaT sender per controller, to consecutive ports from ``address`` (None: none), each encoding with
+        ``encoder(i)`` for the i-th controller; sent while spatOptions bit 0 ("Enabled SPAT") is set."""
+        if address is None:
+            return []
+        host, first = address
+        n = len(self.controllers)
+        if first + n - 1 > MAX_PORT:
+            raise ServeError(f"{option} {host}:{first} for {n} controllers needs ports up to {first + n - 1}; "
+                             f"allowed: PORT 1..{MAX_PORT - n + 1}")
+        return [SpatSender(served.controller, host, first + i, lambda view=served.view: view.spat_options & 1 == 1,
+                           encoder(i)) for i, served in enumerate(self.controllers)]
 
     async def start(self) -> list[tuple[str, int]]:
         """Bind every agent and start ticking; returns the bound addresses, in order."""
@@ -259,7 +270,7 @@ class EmulatorServer:
             except OSError as exc:
                 self._close()
                 raise BindError(self.options.host, port, exc, "tcp") from exc
-        for sender in self.spat:
+        for sender in (*self.spat, *self.j2735):
             try:
                 await sender.start()
             except OSError as exc:
@@ -278,7 +289,7 @@ class EmulatorServer:
         for served in self.controllers:
             served.agent.close()
             served.asclog.close()
-        for sender in self.spat:
+        for sender in (*self.spat, *self.j2735):
             sender.close()
         if self._trace is not None:
             self._trace.close()

@@ -32,8 +32,8 @@ offset bytes field
 What each field carries here:
 
 - Min time to change is the announced earliest change, max the latest; 0 where the model has none (V2X Hub
-  sends no maxEndTime for 0, as J2735 leaves it out when unknown): a green's latest end, a red phase's latest
-  start, an overlap's latest change, and every time of a controller in a monitor's flash.
+  sends no maxEndTime for 0, as J2735 leaves it out when unknown): a green resting or held, a red phase whose next
+  service is not known, and every time of a controller in a monitor's flash (:mod:`emulator.model.spat` says which).
 - The pedestrian min and max are 0: the model announces no pedestrian timing (:mod:`emulator.model.spat`).
 - In flash every phase and overlap shows red and its flashing-output bit is set. The intersection status, time
   base action, discontinuous-change flag and pedestrian detections are 0: the model has no field to fill them.
@@ -103,12 +103,16 @@ class _Quiet(asyncio.DatagramProtocol):
 
 
 class SpatSender:
-    """Sends one controller's packet to one UDP address, each time :meth:`send` is called (once per tick)."""
+    """Sends one controller's SPaT to one UDP address, each time :meth:`send` is called (once per tick): this
+    packet, or what ``encode`` makes of the controller and the message counter (a J2735 SPaT,
+    :func:`emulator.agent.j2735.encode`)."""
 
     def __init__(self, controller: Controller, host: str, port: int,
-                 enabled: Callable[[], bool] = lambda: True) -> None:
+                 enabled: Callable[[], bool] = lambda: True,
+                 encode: Callable[[Controller, int], bytes] = encode) -> None:
         self.controller = controller
         self.enabled = enabled  # spatOptions bit 0, "Enabled SPAT", as the controller's MIB holds it
+        self.encode = encode
         self.address = (host, port)
         self.sent = 0
         self._transport: asyncio.DatagramTransport | None = None
@@ -120,7 +124,7 @@ class SpatSender:
     def send(self) -> None:
         if self._transport is None or self._transport.is_closing() or not self.enabled():
             return
-        self._transport.sendto(encode(self.controller, self.sent))
+        self._transport.sendto(self.encode(self.controller, self.sent))
         self.sent += 1
 
     def close(self) -> None:

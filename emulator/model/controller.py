@@ -51,10 +51,10 @@ and the controller goes to flash (all red) and stops timing. Overlaps follow the
 phases at the end of each tick.
 
 Quiet time (:mod:`emulator.model.quiet`). Most ticks change nothing but counters: every unit says when it next
-acts (the backup timer, the coordinator, the preemptor, the overlaps and, through the sequencer, the ring
-timers), and :meth:`Controller.advance` skips the ticks before the least of those deadlines at once
-(:meth:`Controller.skip`). Any input (a SET, a detector, a retiming) makes the next step a real one:
-:meth:`Controller.touch`.
+acts (the backup timer, the coordinator, the pedestrian calls, the preemptor and its part in the rings, the
+overlaps and, through the sequencer, the ring timers and every decision the sequencer takes), and
+:meth:`Controller.advance` skips the ticks before the least of those deadlines at once (:meth:`Controller.skip`).
+Any input (a SET, a detector, a retiming) makes the next step a real one: :meth:`Controller.touch`.
 """
 
 from __future__ import annotations
@@ -69,6 +69,7 @@ import simpy
 from emulator.model.backup import BackupTimer
 from emulator.model.coordinated import Coordinated
 from emulator.model.coordination import Coordinator
+from emulator.model.detectors import Detectors
 from emulator.model.inputs import Inputs, Reader
 from emulator.model.monitor import Lamps, Monitor
 from emulator.model.overlaps import Overlaps, Phases
@@ -101,12 +102,15 @@ log = logging.getLogger(__name__)
 
 TICK = 0.1  # seconds per controller tick
 
+# Bound once (Python 3.11's EnumType.__getattr__ makes every member lookup through the class slow): a SET reads it.
+SYSTEM_CONTROL = UnitControlStatus.SYSTEM_CONTROL
+
 
 class Recorder(Protocol):
     """What watches the controller as a controller's data logger does (:mod:`emulator.model.datalogger`)."""
 
-    def changed(self, change: Change) -> None:
-        """An interval change, as the tick makes it."""
+    def changed(self, ring: Ring, reason: Termination | None) -> None:
+        """``ring`` entered its interval at this tick (a yellow with ``reason``, why its green ended)."""
 
     def stepped(self) -> None:
         """A tick is done: what else it changed is there to read."""
@@ -128,6 +132,7 @@ class Controller:
         self._ring_of = {p: config.ring_of(p) for p in config.phases}
         self._red_end_lock = config.next_phase_lock is NextPhaseLock.RED_END
         self._reader = Reader(config)
+        self.detectors = Detectors(config)
         self.backup = BackupTimer(config.middleware.backup_time)
         self.startup_flash = config.startup_flash
         # The controller's clock: local time, in ticks since midnight of the day it first powered up.
@@ -167,6 +172,7 @@ class Controller:
         self.peds.reset()
         self.actuations: frozenset[int] = frozenset()  # vehicle detectors actuated now
         self.ped_actuations: frozenset[int] = frozenset()  # pedestrian detectors actuated now
+        self.detectors.reset()
         self._inputs = None
         # The image the monitor last passed: a power cycle puts every lamp out, so the monitor starts afresh.
         self._checked: tuple[frozenset[int], ...] | None = None
@@ -193,7 +199,8 @@ class Controller:
             ring = self.rings[self._ring_of[p] - 1]
             ring.phase = p
             self._move(ring, STARTUP[self.config.phases[p].startup], notify=False)
-        self._step_overlaps()
+        if self.config.overlaps:  # they follow what the phases show
+            self.overlaps.step(Phases.of(self.rings))
 
     def process(self, env: simpy.Environment, phase: float = 0.0):
         """SimPy process ticking the controller every 0.1 s, without accumulating float error.
@@ -215,7 +222,7 @@ class Controller:
     def set_control(self, column: ControlColumn, phases: Iterable[int]) -> None:
         """A SET of one control object: replaces its phases and restarts the backup timer."""
         phases = frozenset(phases)
-        if phases == self.control[column] and self.control_status is UnitControlStatus.SYSTEM_CONTROL:
+        if phases == self.control[column] and self.control_status is SYSTEM_CONTROL:
             # The same phases again (a middleware repeats its calls): no input a step reads changed, so quiet time
             # goes on; the backup timer restarts (its threshold only moves later) and the status counts the write.
             self.backup.restart()
@@ -257,12 +264,11 @@ class Controller:
 
     def _system_set(self) -> None:
         self.backup.restart()
-        self.control_status = UnitControlStatus.SYSTEM_CONTROL
+        self.control_status = SYSTEM_CONTROL
         self.touch()
 
     def touch(self) -> None:
-        """An input changed (a SET, a detector, a retimed phase, the backup time): the next step is a real one,
-        and the status counts as changed (the calls it shows may have)."""
+        """An input changed (a SET, a detector, a retiming): the next step is a real one, the status counts a change."""
         self.quiet.touched()
         self._inputs = None
         self.status_version += 1
@@ -287,8 +293,14 @@ class Controller:
         """The inputs as phase sets; a write (:meth:`touch`) or a new pattern derives them anew."""
         plan = self.coordinator.plan
         if self._inputs is None or self._inputs.plan is not plan:
-            self._inputs = self._reader.read(self.coordinator, self.control, self.actuations, self.ped_actuations)
+            self._inputs = self._reader.read(self.coordinator, self.control, self.detected, self.ped_actuations)
         return self._inputs
+
+    @property
+    def detected(self) -> frozenset[int]:
+        """The vehicle detectors the controller acts on: the actuated ones, as their delay, extension and carryover
+        pass them (the detector unit's, :mod:`emulator.model.detectors`)."""
+        return self.detectors.recognized if self.detectors.timers else self.actuations
 
     @property
     def ped_calls(self) -> frozenset[int]:
@@ -332,7 +344,7 @@ class Controller:
              self.phase_nexts, self.overlap_greens, self.overlap_yellows, self.overlap_reds) = status
         # preemptState is status too: a poll reads it beside the signals, and a preempt's entry may start before
         # any indication changes.
-        seen = (status, self.ped_calls, tuple(self.preemptor.states.values()))
+        seen = (status, self.peds.calls, tuple(self.preemptor.states.values()) if self.config.preempts else ())
         if seen != self._status_seen:
             self._status_seen = seen
             self.status_version += 1
@@ -358,17 +370,15 @@ class Controller:
             self.step()
             n -= quiet
 
-
     # --- the tick -------------------------------------------------------------------------
 
     def step(self) -> None:
         """Advance one tick (0.1 s)."""
         if self.quiet.proven():
-            self.skip(1)  # a tick quiet time proved quiet, stepped for the recorder (a green's minimum to log)
-        else:
-            before = self.quiet.before()
-            self._step()
-            self.quiet.stepped(before)
+            self.skip(1)  # a tick quiet time proved quiet: counted
+            return
+        self._step()
+        self.quiet.stepped()
         if self.recorder is not None:
             self.recorder.stepped()
 
@@ -386,13 +396,17 @@ class Controller:
             return
         if self.flashing:
             return
+        if self.detectors.timers and self.detectors.step(self.actuations, self.greens):
+            self._inputs = None  # the calls and extensions the detectors place changed: so may the status
+            self.status_version += 1
         inputs = self.inputs
-        demand = self.peds.latch(self._greens(), inputs)
+        demand = self.peds.latch(self.greens, inputs)  # the status image: the greens as the last tick left them
         pe, seq = self.preemptor, self.sequencer
-        pe.step()
-        self.preempting.caps_now()
-        if pe.started:
-            self.preempting.entry(self.rings)
+        if self.config.preempts:
+            pe.step()
+            self.preempting.caps_now()
+            if pe.started:
+                self.preempting.entry(self.rings)
         cycling = self.preempting.cycling(demand) if pe.serving is not None else None
         if cycling is not None:
             demand, omitted = cycling
@@ -402,8 +416,7 @@ class Controller:
             for r in self.rings:
                 if r.interval in CLEARANCE and r.target is not None:
                     seq.redirect(r, demand, inputs)
-        for r in self.rings:
-            seq.time(r, demand, inputs, self.tick)
+        seq.time(demand, inputs, self.tick)
         if pe.serving is None:
             if self.peds.recycling:
                 self.peds.recycle(self.rings)
@@ -412,16 +425,13 @@ class Controller:
             seq.decide(demand, inputs, omitted)
         else:
             self.preempting.drive(seq, inputs)
-        for r in self.rings:
-            seq.start(r, self.tick)
+        seq.start(self.tick)
         if pe.serving is not None:
             self.preempting.progress(self.rings)
-        self._step_overlaps()
+        if self.config.overlaps:  # they follow what the phases show after this tick's timing
+            self.overlaps.step(Phases.of(self.rings))
         self._refresh_status()
         self._monitor()
-
-    def _greens(self) -> set[int]:
-        return {r.phase for r in self.rings if r.interval is GREEN}
 
     def _move(self, r: Ring, event: Event, *, reason: Termination | None = None, notify: bool = True) -> None:
         """Move ``r`` by ``event`` (its table) and tell the units that care: the coordinator's latches, a preempt's
@@ -431,17 +441,11 @@ class Controller:
         self.coordinated.entered(r)
         if interval is GREEN:
             self.preempting.cut[r.number] = 0
-        if notify and (self.on_change is not None or self.recorder is not None):
-            change = Change(self.tick, r.number, r.phase, interval, reason)
+        if notify:
             if self.on_change is not None:
-                self.on_change(change)
+                self.on_change(Change(self.tick, r.number, r.phase, interval, reason))
             if self.recorder is not None:
-                self.recorder.changed(change)
-
-    def _step_overlaps(self) -> None:
-        """The overlaps follow what the phases show after this tick's timing."""
-        if self.config.overlaps:
-            self.overlaps.step(Phases.of(self.rings))
+                self.recorder.changed(r, reason)
 
     def _monitor(self) -> None:
         if self._status is self._checked:
@@ -478,6 +482,8 @@ class Controller:
             return
         if self.config.overlaps:
             self.overlaps.skip(n)
+        if self.detectors.timers:
+            self.detectors.skip(n)
         if self.config.preempts:
             self.preemptor.skip(n)
         for r in self.rings:

@@ -44,6 +44,9 @@ from emulator.model.ring import DWELL, GREEN, YELLOW, Ring, Termination, Timing
 from hils.protocol.config import IntersectionConfig
 from hils.protocol.ntcip import CoordForceMode
 
+# Bound once, as ring.py binds the intervals: the sequencer asks why a green may end many times a tick.
+YIELD, GAP_OUT, FORCE_OFF, MAX_OUT = Termination.YIELD, Termination.GAP_OUT, Termination.FORCE_OFF, Termination.MAX_OUT
+
 
 class Coordinated:
     """The rings under the running pattern: each ring's latches, and the pattern's answers to the sequencer."""
@@ -115,13 +118,13 @@ class Coordinated:
         plan = self.coordinator.plan
         if plan is not None and r.phase == plan.coord[r.number]:
             # a coordinated phase ends only after its yield point, never gapped or maxed out
-            return Termination.YIELD if self.yielded[r.number] else None
+            return YIELD if self.yielded[r.number] else None
         if r.gapped_out:
-            return Termination.GAP_OUT
+            return GAP_OUT
         if plan is not None:  # coordination inhibits the maximum: the force-off points limit a green
             limit = self.limit[r.number]
-            return Termination.FORCE_OFF if self.forced[r.number] or (limit > 0 and r.ticks >= limit) else None
-        return Termination.MAX_OUT if r.maxed_out else None
+            return FORCE_OFF if self.forced[r.number] or (limit > 0 and r.ticks >= limit) else None
+        return MAX_OUT if r.maxed_out else None
 
     def stays(self, r: Ring, prior: int) -> bool:
         """``r`` shows its coordinated phase in green and may not leave it for the phase after ``prior``: that
@@ -152,12 +155,9 @@ class Coordinated:
         plan = self.coordinator.plan
         return plan is None or plan.fits(phase, self.coordinator.timer, 0, walk=True)
 
-    # --- quiet time (see emulator/model/controller.py) -------------------------------------------------
+    # --- quiet time (see emulator/model/quiet.py) -------------------------------------------------
 
     def thresholds(self, r: Ring) -> list[int]:
         """Ticks from now to the floating limit of ``r``'s green, if it has one still ahead."""
         limit = self.limit[r.number]
         return [limit - r.ticks] if r.interval is GREEN and r.ticks < limit else []
-
-    def discrete(self) -> tuple:
-        return tuple(self.forced.values()), tuple(self.yielded.values())

@@ -310,7 +310,7 @@ class Coordinator:
 
     def step(self) -> None:
         """One tick: the clock, the time-of-day plan, the local timer and the points it passed."""
-        lag = self.lag  # before the clock moves: the timer moves with it when in step
+        lag = self.lag if self.plan is not None else 0  # before the clock moves: the timer moves with it when in step
         self.clock += 1
         for entry in self.config.coordination.schedule:
             if self.clock % DAY == entry.start * 10:
@@ -385,13 +385,14 @@ class Coordinator:
         plan = self.plan
         if plan is not None and self.lag:
             return 1
-        ahead = self._until_schedule() if self.config.coordination.schedule else None
+        ahead = self.until_schedule() if self.config.coordination.schedule else None
         if plan is not None:
             mark = min((m - self.timer - 1) % plan.cycle + 1 for m in plan.marks())
             ahead = mark if ahead is None else min(ahead, mark)
         return ahead
 
-    def _until_schedule(self) -> int:
+    def until_schedule(self) -> int:
+        """Ticks until the next time-of-day change of the local plan (a schedule configured)."""
         now = self.clock % DAY
         return min((e.start * 10 - now - 1) % DAY + 1 for e in self.config.coordination.schedule)
 
@@ -400,10 +401,6 @@ class Coordinator:
         self.clock += n
         if self.plan is not None:
             self.timer = (self.timer + n) % self.plan.cycle
-
-    def discrete(self) -> tuple:
-        """What a step may change here besides the counters (the controller's quiet-time check)."""
-        return self.running, self.free_status, self.local, self.replan, self.budget, self.passed
 
     # --- what the rings ask --------------------------------------------------------------------------
 

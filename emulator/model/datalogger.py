@@ -9,9 +9,11 @@ Rules of this file
 - An event's time is the controller's clock (the coordinator's: local time in ticks since midnight of the
   day the unit first powered up, counting on through power cycles) at the tick that made it. So the log is
   the same in virtual time and at the wall clock, and the same whether quiet ticks are stepped or skipped:
-  a skipped stretch changes nothing discrete, and every threshold the log reports (minimum green, walk,
-  pedestrian clearance, the coordinator's marks) is a step, a real one or, for a minimum that changes nothing
-  else, one for the logger alone (:meth:`emulator.model.controller.Controller.quiet_ticks`).
+  a skipped stretch changes nothing discrete, and every threshold the log reports (walk, pedestrian clearance,
+  the coordinator's marks) is a real step, but for a green's minimum that changes nothing else: the controller
+  takes no step for the logger, which logs such a minimum at its own tick when it next hears from the
+  controller or is read (:meth:`DataLogger._minimums`), so a reader of a controller skipping quiet ticks
+  brings it to the present first, as :meth:`emulator.inprocess.VirtualTarget.hires` does.
 - The events of one tick are kept in (code, parameter) order, as field logs list them; ticks in time order.
 - The list of events is never changed in place but by appending: dropping the oldest makes a new list. So a
   :class:`Snapshot` (the list and its length then) is taken in O(log n) and stays the log as it stood while
@@ -72,15 +74,17 @@ can write them through (:mod:`hils.shell.hiresjournal`) and keep them if it dies
 from __future__ import annotations
 
 import bisect
+import itertools
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime, timedelta
 from types import SimpleNamespace
 
-from emulator.model.controller import Change, Controller, Inputs, Termination
+from emulator.model.controller import Controller, Inputs, Termination
 from emulator.model.coordination import Coordinator, Plan
 from emulator.model.overlaps import Show
-from emulator.model.ring import DWELL, GREEN, RED_CLEAR, YELLOW
+from emulator.model.ring import DWELL, GREEN, RED_CLEAR, YELLOW, Ring
 from hils.protocol.config import Recall
 from hils.protocol.hires import MAX_PARAMETER, CycleState, Event, EventCode, split_code
 from hils.protocol.ntcip import ControlColumn, CoordCorrectionMode, PreemptState, UnitFlashStatus
@@ -91,11 +95,18 @@ E = SimpleNamespace(**{code.name: int(code) for code in EventCode})
 
 _TERMINATIONS = {Termination.GAP_OUT: E.PHASE_GAP_OUT, Termination.MAX_OUT: E.PHASE_MAX_OUT,
                  Termination.FORCE_OFF: E.PHASE_FORCE_OFF}
+# Bound once, likewise: the logger reads them at every step or interval change.
+STARTUP_FLASH = int(UnitFlashStatus.STARTUP)
+YIELD = Termination.YIELD
+CYCLE_FREE, IN_STEP, DWELLING = CycleState.FREE, CycleState.IN_STEP, CycleState.TRANSITION_DWELL
+SUBTRACTING, ADDING = CycleState.TRANSITION_SUBTRACT, CycleState.TRANSITION_ADD
 # What an overlap logs as it enters a display (Show.GREEN from a trailing green: it stays green, nothing).
 _OVERLAP = {Show.GREEN: E.OVERLAP_BEGIN_GREEN, Show.TRAIL_GREEN: E.OVERLAP_BEGIN_TRAILING_GREEN,
             Show.YELLOW: E.OVERLAP_BEGIN_YELLOW, Show.TRAIL_YELLOW: E.OVERLAP_BEGIN_YELLOW,
             Show.TRAIL_RED: E.OVERLAP_BEGIN_RED_CLEARANCE, Show.RED: E.OVERLAP_OFF,
             Show.FLASHING: E.FYA_BEGIN_PERMISSIVE}
+_GREENS = (Show.TRAIL_GREEN, Show.FLASHING_GREEN)
+_SILENT = (Show.FLASHING_GREEN, Show.DELAYED)
 # What a preempt logs as its service enters a state (NTCIP preemptState).
 _PREEMPT = {PreemptState.ENTRY_STARTED: E.PREEMPT_ENTRY_STARTED,
             PreemptState.TRACK_SERVICE: E.PREEMPT_BEGIN_TRACK_CLEARANCE, PreemptState.DWELL: E.PREEMPT_BEGIN_DWELL,
@@ -135,6 +146,7 @@ class Snapshot:
 class _Green:
     """What the logger remembers of the green a ring is timing (mutable: updated as it runs)."""
 
+    phase: int
     start: int  # clock tick it began
     minimum: int  # ticks of its minimum
     min_logged: bool = False
@@ -173,7 +185,10 @@ class DataLogger:
         self._group: int | None = None  # barrier group of the last green started
         self._seen = _Seen()
         self._sink: Callable[[Sequence[Event]], None] | None = None
+        self._co = controller.coordinator  # its clock is the log's
+        self._next_minimum: float = math.inf  # the clock tick of the earliest minimum not logged yet
         cfg = controller.config
+        self._barrier = {p: cfg.barrier_of(p) for p in cfg.phases}
         self._no_call_events = frozenset(p for p, ph in cfg.phases.items() if ph.recall in (Recall.MIN, Recall.MAX))
         self._no_ped_events = frozenset(p for p, ph in cfg.phases.items() if ph.recall is Recall.PED)
         controller.recorder = self
@@ -194,6 +209,7 @@ class DataLogger:
 
     def snapshot(self, since: datetime | None = None) -> Snapshot:
         """The log as it stands, from ``since`` on (inclusive) when given; O(log n), nothing copied."""
+        self._minimums(before=self._clock + 1)
         start = 0
         if since is not None:
             clock = -(-(since - self.day0) // timedelta(microseconds=100_000))  # the first tick at or after since
@@ -207,70 +223,105 @@ class DataLogger:
 
     # --- what the controller tells -------------------------------------------------------------------------
 
-    def changed(self, change: Change) -> None:
-        r, p = self.controller.rings[change.ring - 1], change.phase
-        if change.interval is GREEN:
-            group = self.controller.config.barrier_of(p)
+    def changed(self, r: Ring, reason: Termination | None) -> None:
+        clock = self._co.clock
+        if self._next_minimum < clock:
+            self._minimums(before=clock)
+        p, interval = r.phase, r.interval
+        if interval is GREEN:
+            group = self._barrier[p]
             if self._group is not None and group != self._group:
-                self._add(E.BARRIER_TERMINATION, self._group + 1)
+                self._tick.append((E.BARRIER_TERMINATION, self._group + 1))
             self._group = group
-            self._greens[change.ring] = _Green(self._clock, r.minimum)
-            self._add(E.PHASE_ON, p)
-            self._add(E.PHASE_BEGIN_GREEN, p)
-        elif change.interval is YELLOW:
-            green = self._greens.pop(change.ring, None)
+            self._greens[r.number] = _Green(p, clock, r.minimum)
+            self._next_minimum = min(self._next_minimum, clock + r.minimum)
+            self._tick.append((E.PHASE_ON, p))
+            self._tick.append((E.PHASE_BEGIN_GREEN, p))
+        elif interval is YELLOW:
+            green = self._greens.pop(r.number, None)
             if green is not None:
-                self._min_complete(green, p)
+                self._min_complete(green, clock)
                 if not green.checking:  # the conflicting call came on the tick that ends the green
-                    self._add(E.PHASE_CHECK, p)
-            if change.reason in _TERMINATIONS:
-                self._add(_TERMINATIONS[change.reason], p)
-            elif change.reason is Termination.YIELD and self._at_force_off(p):
-                self._add(E.PHASE_FORCE_OFF, p)
-            self._add(E.PHASE_GREEN_TERMINATION, p)
-            self._add(E.PHASE_BEGIN_YELLOW, p)
-        elif change.interval is RED_CLEAR:
-            self._add(E.PHASE_END_YELLOW, p)
-            self._red_served[change.ring] = r.length > 0
+                    self._tick.append((E.PHASE_CHECK, p))
+            if reason in _TERMINATIONS:
+                self._tick.append((_TERMINATIONS[reason], p))
+            elif reason is YIELD and self._at_force_off(p):
+                self._tick.append((E.PHASE_FORCE_OFF, p))
+            self._tick.append((E.PHASE_GREEN_TERMINATION, p))
+            self._tick.append((E.PHASE_BEGIN_YELLOW, p))
+        elif interval is RED_CLEAR:
+            self._tick.append((E.PHASE_END_YELLOW, p))
+            self._red_served[r.number] = r.length > 0
             if r.length:
-                self._add(E.PHASE_BEGIN_RED_CLEARANCE, p)
+                self._tick.append((E.PHASE_BEGIN_RED_CLEARANCE, p))
         else:  # rests in red: its red clearance (if served) is over and the ring no longer times the phase
-            if self._red_served.pop(change.ring, False):
-                self._add(E.PHASE_END_RED_CLEARANCE, p)
-            self._add(E.PHASE_INACTIVE, p)
+            if self._red_served.pop(r.number, False):
+                self._tick.append((E.PHASE_END_RED_CLEARANCE, p))
+            self._tick.append((E.PHASE_INACTIVE, p))
 
     def stepped(self) -> None:
         c = self.controller
+        clock = self._co.clock
+        if self._next_minimum < clock:
+            self._minimums(before=clock)
         for number, green in self._greens.items():
-            ring = c.rings[number - 1]
-            self._min_complete(green, ring.phase)
-            checking = ring.conflict
+            if clock >= self._next_minimum:
+                self._min_complete(green, clock)
+            checking = c.rings[number - 1].conflict
             if checking and not green.checking:
-                self._add(E.PHASE_CHECK, ring.phase)
+                self._tick.append((E.PHASE_CHECK, green.phase))
             green.checking = checking
-        if self._seen.flash == UnitFlashStatus.STARTUP and c.flash_status is UnitFlashStatus.NOT_FLASH:
+        if self._seen.flash == STARTUP_FLASH and not c.flashing:
             self._intervals()  # start-up flash over: the start-up intervals begin
         self._read()
         self._flush()
 
+    def pending(self) -> int | None:
+        """The clock tick of the next green's minimum the logger has yet to log (None: none): one timed in quiet
+        ticks is logged when the logger next hears from the controller or is read, or by :meth:`log_until`."""
+        due = min((g.start + g.minimum for g in self._greens.values() if not g.min_logged), default=None)
+        self._next_minimum = math.inf if due is None else due
+        return due
+
+    def log_until(self, clock: int) -> None:
+        """The controller's clock has reached ``clock`` (though it counts the quiet ticks up to it only when next
+        read or written): the greens' minimums timed by then are logged, at their ticks."""
+        self._minimums(before=clock + 1)
+
     def powered_up(self) -> None:
+        self._minimums(before=self._co.clock + 1)
         self._power_up(first=False)
+
 
     # --- internals -----------------------------------------------------------------------------------------------
 
     @property
     def _clock(self) -> int:
-        return self.controller.coordinator.clock
+        return self._co.clock
 
-    def _add(self, code: int, parameter: int) -> None:
-        self._tick.append((int(code), parameter))
+    def _minimums(self, *, before: int) -> None:
+        """Each green's minimum timed at a clock tick before ``before`` and not logged yet, logged at its tick: the
+        controller skips quiet ticks without telling the logger, so a minimum that changed nothing else is logged
+        when the logger next hears from the controller or is read (at the latest)."""
+        if self._next_minimum >= before:
+            return
+        due = sorted((g.start + g.minimum, g.phase, g) for g in self._greens.values()
+                     if not g.min_logged and g.start + g.minimum < before)
+        for clock, group in itertools.groupby(due, key=lambda d: d[0]):
+            for _, phase, green in group:
+                green.min_logged = True
+                self._tick.append((E.PHASE_MIN_COMPLETE, phase))
+            self._flush(clock)
+        self._next_minimum = min((g.start + g.minimum for g in self._greens.values() if not g.min_logged),
+                                 default=math.inf)
 
-    def _flush(self) -> None:
+    def _flush(self, clock: int | None = None) -> None:
+        """The events of the tick being stepped (or of ``clock``'s) go to the log."""
         if not self._tick:
             return  # most steps log nothing
-        clock = self._clock
+        clock = self._clock if clock is None else clock
         logged = sorted(set(self._tick))
-        self._log.extend((clock, code, p) for code, p in logged)
+        self._log.extend([(clock, code, p) for code, p in logged])
         self._tick.clear()
         if self._sink is not None:
             at = self.time(clock)
@@ -280,8 +331,8 @@ class DataLogger:
 
     def _power_up(self, *, first: bool) -> None:
         if not first:
-            self._add(E.POWER_FAILURE, 1)
-        self._add(E.POWER_RESTORED, 1)
+            self._tick.append((E.POWER_FAILURE, 1))
+        self._tick.append((E.POWER_RESTORED, 1))
         self._greens.clear()
         self._red_served.clear()
         self._group = None
@@ -294,23 +345,25 @@ class DataLogger:
         """The intervals the rings start in (power-up and the end of start-up flash start them unannounced)."""
         for ring in self.controller.rings:
             if ring.interval is GREEN:
-                self.changed(Change(self.controller.tick, ring.number, ring.phase, ring.interval))
+                self.changed(ring, None)
             elif ring.interval is not DWELL:
                 if ring.interval is RED_CLEAR:
                     self._red_served[ring.number] = ring.length > 0
-                self._add(E.PHASE_ON, ring.phase)
-                self._add(E.PHASE_BEGIN_YELLOW if ring.interval is YELLOW else E.PHASE_BEGIN_RED_CLEARANCE,
-                          ring.phase)
+                self._tick.append((E.PHASE_ON, ring.phase))
+                self._tick.append((E.PHASE_BEGIN_YELLOW if ring.interval is YELLOW else E.PHASE_BEGIN_RED_CLEARANCE,
+                          ring.phase))
 
     def _at_force_off(self, phase: int) -> bool:
         """The coordinator's force-off point of ``phase`` passed this tick (a coordinated phase's yield point)."""
         co = self.controller.coordinator
         return co.plan is not None and co.plan.force_off.get(phase) in co.passed
 
-    def _min_complete(self, green: _Green, phase: int) -> None:
-        if not green.min_logged and self._clock >= green.start + green.minimum:
+    def _min_complete(self, green: _Green, clock: int) -> None:
+        if not green.min_logged and clock >= green.start + green.minimum:
             green.min_logged = True
-            self._add(E.PHASE_MIN_COMPLETE, phase)
+            self._tick.append((E.PHASE_MIN_COMPLETE, green.phase))
+            self._next_minimum = min((g.start + g.minimum for g in self._greens.values() if not g.min_logged),
+                                     default=math.inf)
 
     def _read(self) -> None:
         """Events of what the controller shows now against what it showed after the last step."""
@@ -332,23 +385,23 @@ class DataLogger:
                 if numbers != before:
                     on, off = _ON_OFF[name]
                     for n in numbers - before:
-                        self._add(on, n)
+                        self._tick.append((on, n))
                     for n in before - numbers:
-                        self._add(off, n)
+                        self._tick.append((off, n))
             seen.sets = now
         # The controller keeps each of these sets (and dicts) while it holds the same numbers: most steps
         # change none of them.
-        if c.ped_calls is not seen.ped_calls:
-            for p in c.ped_calls - seen.ped_calls - self._no_ped_events:
-                self._add(E.PED_CALL_REGISTERED, p)
-            seen.ped_calls = c.ped_calls
+        if c.peds.calls is not seen.ped_calls:
+            for p in c.peds.calls - seen.ped_calls - self._no_ped_events:
+                self._tick.append((E.PED_CALL_REGISTERED, p))
+            seen.ped_calls = c.peds.calls
         if c.walks is not seen.walks or c.ped_clears is not seen.clears:
             for p in c.walks - seen.walks:
-                self._add(E.PED_BEGIN_WALK, p)
+                self._tick.append((E.PED_BEGIN_WALK, p))
             for p in c.ped_clears - seen.clears:
-                self._add(E.PED_BEGIN_CLEARANCE, p)
+                self._tick.append((E.PED_BEGIN_CLEARANCE, p))
             for p in (seen.walks | seen.clears) - c.walks - c.ped_clears:
-                self._add(E.PED_BEGIN_SOLID_DONT_WALK, p)
+                self._tick.append((E.PED_BEGIN_SOLID_DONT_WALK, p))
             seen.walks, seen.clears = c.walks, c.ped_clears
         if c.overlaps.shown != seen.overlaps:
             for n, shown in c.overlaps.shown.items():
@@ -356,45 +409,50 @@ class DataLogger:
                 if shown is before:
                     continue
                 if before is Show.FLASHING:
-                    self._add(E.FYA_END_PERMISSIVE, n)
-                if not (shown is Show.GREEN and before is Show.TRAIL_GREEN):
-                    self._add(_OVERLAP[shown], n)
+                    self._tick.append((E.FYA_END_PERMISSIVE, n))
+                # A green that goes on (from a trailing green, a transit bar's flashing green) is no new green; a
+                # flashing green is its green lamp, a delayed green's red is red: no event of their own.
+                goes_on = shown is Show.GREEN and before in _GREENS
+                if not (shown in _SILENT or goes_on or (shown is Show.RED and before is Show.DELAYED)):
+                    self._tick.append((_OVERLAP[shown], n))
             seen.overlaps = dict(c.overlaps.shown)
         if c.preemptor.states != seen.preempts:
             for n, state in c.preemptor.states.items():
                 if state is not seen.preempts.get(n, PreemptState.NOT_ACTIVE) and state in _PREEMPT:
-                    self._add(_PREEMPT[state], n)
+                    self._tick.append((_PREEMPT[state], n))
             seen.preempts = dict(c.preemptor.states)
         if int(c.flash_status) != seen.flash:
             seen.flash = int(c.flash_status)
-            self._add(E.UNIT_FLASH_STATUS_CHANGE, seen.flash)
+            self._tick.append((E.UNIT_FLASH_STATUS_CHANGE, seen.flash))
         if int(c.control_status) != seen.control:
             seen.control = int(c.control_status)
-            self._add(E.UNIT_CONTROL_STATUS_CHANGE, seen.control)
+            self._tick.append((E.UNIT_CONTROL_STATUS_CHANGE, seen.control))
         self._coordination()
 
     def _coordination(self) -> None:
-        co, seen = self.controller.coordinator, self._seen
+        co, seen = self._co, self._seen
         plan = co.plan
+        if plan is None and seen.state is CYCLE_FREE:
+            return  # free, as it was
         if co.running != seen.pattern or plan is not seen.plan:
             seen.pattern, seen.plan = co.running, plan
-            self._add(E.COORD_PATTERN_CHANGE, co.running)
+            self._tick.append((E.COORD_PATTERN_CHANGE, co.running))
             if plan is not None:
-                self._add(E.CYCLE_LENGTH_CHANGE, min(plan.cycle // 10, MAX_PARAMETER))
-                self._add(E.OFFSET_LENGTH_CHANGE, min(plan.offset // 10, MAX_PARAMETER))
+                self._tick.append((E.CYCLE_LENGTH_CHANGE, min(plan.cycle // 10, MAX_PARAMETER)))
+                self._tick.append((E.OFFSET_LENGTH_CHANGE, min(plan.offset // 10, MAX_PARAMETER)))
                 for phase, split in plan.split.items():
-                    self._add(split_code(phase), min(split // 10, MAX_PARAMETER))
+                    self._tick.append((split_code(phase), min(split // 10, MAX_PARAMETER)))
         state = _cycle_state(co)
         if state is not seen.state:
             seen.state = state
-            self._add(E.COORD_CYCLE_STATE_CHANGE, state)
+            self._tick.append((E.COORD_CYCLE_STATE_CHANGE, state))
         if plan is None or not co.passed:
             return
         if 0 in co.passed:
-            self._add(E.COORD_CYCLE_STATE_CHANGE, CycleState.LOCAL_ZERO)
+            self._tick.append((E.COORD_CYCLE_STATE_CHANGE, CycleState.LOCAL_ZERO))
         for phase in plan.coord.values():
             if plan.force_off[phase] in co.passed:
-                self._add(E.COORD_YIELD_POINT, phase)
+                self._tick.append((E.COORD_YIELD_POINT, phase))
 
 
 def _local_time(day0: datetime, clock: int) -> datetime:
@@ -405,9 +463,9 @@ def _local_time(day0: datetime, clock: int) -> datetime:
 def _cycle_state(co: Coordinator) -> CycleState:
     """The coordinator's state as event 150 names it: free, in step, or the correction under way."""
     if co.plan is None:
-        return CycleState.FREE
+        return CYCLE_FREE
     if not co.lag:
-        return CycleState.IN_STEP
+        return IN_STEP
     if co.correction is CoordCorrectionMode.DWELL:
-        return CycleState.TRANSITION_DWELL
-    return CycleState.TRANSITION_SUBTRACT if co.subtracting else CycleState.TRANSITION_ADD
+        return DWELLING
+    return SUBTRACTING if co.subtracting else ADDING

@@ -143,6 +143,10 @@ class EventClock:
         """The tick count the unit has by now: every tick due at or before the present."""
         return max(0, self._grid.first_after(self.env.now) - 1)
 
+    def delay(self, ticks: int) -> float:
+        """Seconds from now until the unit's tick ``ticks`` ahead of its own count is due."""
+        return self._grid.delay(self.unit.tick + ticks, self.env.now)
+
     def _versions(self) -> tuple[int, int]:
         # The status as the agent answers it, and the controller's own: the control objects (a backup
         # time expiring, a force-off clearing) change with the latter, whatever the status image lags.

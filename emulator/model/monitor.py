@@ -23,24 +23,26 @@ conflict has lasted 300 ms) has no counterpart here: the monitor faults the firs
 
 Short yellow: "When a channel has a Green or Walk that turns off, a Yellow must follow it and it must stay on
 for at least 2.7 seconds" (Reno A&E MMU-1600G, 2.5.5 Short Yellow Monitoring). A channel, phase or overlap,
-whose green goes straight to red, or whose yellow lasts under :data:`SHORT_YELLOW`, faults. A yellow that
+whose green goes straight to red, or whose yellow lasts under :data:`SHORT_YELLOW`, faults, but a transit bar's
+(an overlap with no yellow lamp, whose channel's check an MMU disables with its "Minimum Yellow Change Disable"
+jumper). A yellow that
 ends in green (a flashing yellow arrow's yellow lamp going to its green arrow) is no clearance and is not
 timed.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from typing import NamedTuple
 
-from hils.protocol.config import IntersectionConfig
+from hils.protocol.config import IntersectionConfig, OverlapKind
 from hils.protocol.conflict import first_conflict
 
 SHORT_YELLOW = 27  # ticks: the least yellow a channel may show after its green (2.7 s)
 
 
-@dataclass(frozen=True, slots=True)
-class Lamps:
-    """What the monitor sees at one tick: the phases and the overlaps (1 = A) lit green or yellow."""
+class Lamps(NamedTuple):
+    """What the monitor sees at one tick: the phases and the overlaps (1 = A) lit green or yellow (a named tuple, not
+    a frozen dataclass: one is made at every tick that changes a lamp, and a tuple is made several times faster)."""
 
     greens: frozenset[int]
     yellows: frozenset[int]
@@ -56,6 +58,9 @@ class Monitor:
 
     def __init__(self, config: IntersectionConfig) -> None:
         self.permissives = config.permissives
+        #: Transit bars (two sections, no yellow lamp): their channels are jumpered "Minimum Yellow Change Disable"
+        #: (Reno A&E MMU2-1600GE operations manual), so a green going straight to red is no fault there.
+        self.bars = frozenset(n for n, o in config.overlaps.items() if o.kind is OverlapKind.TRANSIT)
         self._conflicts: dict[tuple[frozenset[int], frozenset[int]], str | None] = {}  # lamps lit -> their fault
         self.reset()
 
@@ -79,16 +84,25 @@ class Monitor:
         return self._conflicts[lit]
 
     def _short_yellow(self, lamps: Lamps, tick: int) -> str | None:
-        was, began = self._passed, self._yellow_began
-        for kind, greens, yellows, was_green, was_yellow in (
-                ("phase", lamps.greens, lamps.yellows, was.greens, was.yellows),
-                ("overlap", lamps.overlap_greens, lamps.overlap_yellows, was.overlap_greens, was.overlap_yellows)):
-            for n in was_green - greens - yellows:
-                return f"{kind} {n} from green to red without a yellow"
-            for n in yellows - was_yellow:
-                began[kind, n] = tick
-            for n in was_yellow - yellows:
-                since = began.pop((kind, n), None)
-                if n not in greens and since is not None and tick - since < SHORT_YELLOW:
-                    return f"{kind} {n} yellow for {(tick - since) / 10:g} s"
+        was = self._passed
+        return (self._channels("phase", lamps.greens, lamps.yellows, was.greens, was.yellows, tick)
+                or self._channels("overlap", lamps.overlap_greens, lamps.overlap_yellows, was.overlap_greens,
+                                  was.overlap_yellows, tick))
+
+    def _channels(self, kind: str, greens: frozenset[int], yellows: frozenset[int], was_green: frozenset[int],
+                  was_yellow: frozenset[int], tick: int) -> str | None:
+        """One kind of channel's fault: a green gone to red without its yellow, or a yellow too short."""
+        if greens is was_green and yellows is was_yellow:
+            return None  # the same lamps (the status images are kept, each built once)
+        for n in was_green - greens - yellows:
+            if kind == "overlap" and n in self.bars:
+                continue  # a transit bar has no yellow lamp: its channel's minimum yellow check is disabled
+            return f"{kind} {n} from green to red without a yellow"
+        began = self._yellow_began
+        for n in yellows - was_yellow:
+            began[kind, n] = tick
+        for n in was_yellow - yellows:
+            since = began.pop((kind, n), None)
+            if n not in greens and since is not None and tick - since < SHORT_YELLOW:
+                return f"{kind} {n} yellow for {(tick - since) / 10:g} s"
         return None

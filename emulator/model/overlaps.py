@@ -6,8 +6,8 @@ Rules of this file
   next display (the same one: it stays). :meth:`Overlaps.step` evaluates them once per controller tick, after
   the rings have timed, from what the phases show then.
 - Time is integer ticks, as in the controller; only the overlap's own trailing intervals count ticks.
-- An overlap turns green only from red, from its trailing green or (a flashing yellow arrow) from flashing:
-  never from a yellow.
+- An overlap turns green only from red, from its trailing green, (a flashing yellow arrow) from flashing or (a
+  transit bar) from its flashing green: never from a yellow.
 
 Theory of operation
 -------------------
@@ -49,6 +49,23 @@ controllers whose "Lock Inhibit" is off, which "insures that the overlap clearan
 next eligible phase is serviced" (Naztec overlap programming, MM 1-5-1). Without a trailing green the overlap
 clears with its parent's yellow and is red during its parent's red clearance.
 
+A transit bar (``transit``) is NTCIP 1202 v03's transit-2: "The overlap output drives a 2-section bar signal for
+transit vehicles using overlap green (vertical bar) and red (horizontal bar) outputs. The overlap output shall be
+green ... when an overlap included phase is green. The overlap output shall be flashing green when an overlap
+included phase is yellow and an overlap included phase is not next. The overlap output shall be red whenever an
+overlap included phase is red." It has no yellow lamp, so it goes from (flashing) green to red, the one overlap
+that does (a log shows it: MaxTime 1015's overlaps A and B log begin green, 61, then red, 64, never a yellow); its
+flashing green is its green output, flashing, and the monitor does not time a yellow on its channel (an MMU's
+"Minimum Yellow Change Disable" jumper for that channel, Reno A&E MMU2-1600GE operations manual). It has neither
+modifiers nor a trailing green.
+
+A delayed green (``delay_green``): the overlap stays red so long after an included phase's green starts, then turns
+green if an included phase still holds it (it goes back to red at once otherwise), as a controller holds a signal
+"gaining ROW ... at red ... for the delay period" (Siemens T400 facilities manual, 8.3 phase delays; Naztec's
+overlaps have their "FYA Delay Time"). MaxTime 1015's log shows one: its overlaps G and H begin green 3.0 s after
+phases 4 and 8, 17 times in 18. No NTCIP 1202 object carries it. While it delays, the overlap is red but not at
+rest: a phase that conflicts with it waits, as for a trailing overlap.
+
 The flashing yellow arrow (``fya``) is not in NTCIP 1202 v02 (a vendor's overlapType other(1) there); its
 v03 objects were found in no source we could read, so its status is served with the v02 objects: the arrow's
 yellow lamp sets the overlap's yellow bit, steady or flashing. It follows the practice the sources agree on:
@@ -76,18 +93,24 @@ class Show(StrEnum):
     GREEN = "green"
     YELLOW = "yellow"  # clearing with a parent's yellow
     FLASHING = "flashing"  # a flashing yellow arrow's permissive indication
+    FLASHING_GREEN = "flashing_green"  # a transit bar's green, flashing while its included phase clears
     TRAIL_GREEN = "trail_green"
     TRAIL_YELLOW = "trail_yellow"
     TRAIL_RED = "trail_red"
+    DELAYED = "delayed"  # red, timing the delay of its green (delay_green)
 
 
 class Cond(Enum):
     """What decides an overlap's next display (see ``_NEXT``)."""
 
     HELD = "its included phases hold it green (and no modifier of a minus-green-yellow overlap is green or next)"
+    DELAYS = "its included phases hold it green and it has a delayed green"
+    RELEASED = "its included phases no longer hold it green"
     FLASH = "a flashing yellow arrow's permissive (modifier) phase is green"
     MODIFIED = "a minus-green-yellow overlap's modifier phase is green or committed next"
-    TRAILS = "it has a trailing green"
+    TRAILS = "it has a trailing green (a transit bar has none)"
+    BAR_CLEARING = "it is a transit bar and one of its included phases is yellow"
+    BAR = "it is a transit bar (it has no yellow lamp)"
     CLEARS = "the yellow of a phase it follows starts now (and no modifier of a minus-green-yellow overlap is yellow)"
     CLEARING = "a phase it follows is yellow (and no modifier of a minus-green-yellow overlap is)"
     TIMED = "its trailing interval has run its length"
@@ -95,9 +118,13 @@ class Cond(Enum):
 
 
 _NEXT: dict[Show, tuple[tuple[Cond, Show], ...]] = {
-    Show.RED: ((Cond.HELD, Show.GREEN), (Cond.FLASH, Show.FLASHING), (Cond.ALWAYS, Show.RED)),
+    Show.RED: ((Cond.DELAYS, Show.DELAYED), (Cond.HELD, Show.GREEN), (Cond.FLASH, Show.FLASHING),
+               (Cond.ALWAYS, Show.RED)),
+    Show.DELAYED: ((Cond.RELEASED, Show.RED), (Cond.TIMED, Show.GREEN), (Cond.ALWAYS, Show.DELAYED)),
     Show.GREEN: ((Cond.HELD, Show.GREEN), (Cond.MODIFIED, Show.TRAIL_YELLOW), (Cond.TRAILS, Show.TRAIL_GREEN),
-                 (Cond.CLEARS, Show.YELLOW), (Cond.ALWAYS, Show.TRAIL_YELLOW)),
+                 (Cond.BAR_CLEARING, Show.FLASHING_GREEN), (Cond.BAR, Show.RED), (Cond.CLEARS, Show.YELLOW),
+                 (Cond.ALWAYS, Show.TRAIL_YELLOW)),
+    Show.FLASHING_GREEN: ((Cond.HELD, Show.GREEN), (Cond.CLEARING, Show.FLASHING_GREEN), (Cond.ALWAYS, Show.RED)),
     Show.FLASHING: ((Cond.HELD, Show.GREEN), (Cond.FLASH, Show.FLASHING), (Cond.CLEARING, Show.YELLOW),
                     (Cond.ALWAYS, Show.RED)),
     Show.YELLOW: ((Cond.CLEARING, Show.YELLOW), (Cond.ALWAYS, Show.RED)),
@@ -107,10 +134,12 @@ _NEXT: dict[Show, tuple[tuple[Cond, Show], ...]] = {
     Show.TRAIL_RED: ((Cond.TIMED, Show.RED), (Cond.ALWAYS, Show.TRAIL_RED)),
 }
 
-_GREEN = frozenset({Show.GREEN, Show.TRAIL_GREEN})
+_GREEN = frozenset({Show.GREEN, Show.TRAIL_GREEN, Show.FLASHING_GREEN})
 _YELLOW = frozenset({Show.YELLOW, Show.TRAIL_YELLOW, Show.FLASHING})
 #: Displays that outlast the overlap's parents: a phase conflicting with the overlap waits for them to end.
 TRAILING = frozenset({Show.TRAIL_GREEN, Show.TRAIL_YELLOW, Show.TRAIL_RED})
+#: Displays the overlap times with its own timer: the trailing ones and a delayed green's red.
+TIMED = TRAILING | {Show.DELAYED}
 
 
 @dataclass(frozen=True, slots=True)
@@ -124,12 +153,13 @@ class Phases:
     committed: frozenset[int]  # every ring's committed next phase (phaseStatusGroupPhaseNexts)
 
     @classmethod
-    def of(cls, rings: Sequence[Ring]) -> Phases:
-        """What ``rings`` show now."""
+    def of(cls, rings: Sequence[Ring], *, later: bool = False) -> Phases:
+        """What ``rings`` show now; ``later``: at a later tick if none of them moves (no yellow starts then)."""
         return cls(
             greens=frozenset(r.phase for r in rings if r.interval is GREEN),
             yellows=frozenset(r.phase for r in rings if r.interval is YELLOW),
-            starting=frozenset(r.phase for r in rings if r.interval is YELLOW and r.ticks == 0),
+            starting=frozenset() if later else frozenset(r.phase for r in rings
+                                                         if r.interval is YELLOW and r.ticks == 0),
             nexts={r.phase: r.target for r in rings if r.interval is not GREEN and r.phase is not None},
             committed=frozenset(r.target for r in rings if r.target is not None))
 
@@ -141,10 +171,11 @@ class OverlapTiming:
     trail_green: int
     trail_yellow: int
     trail_red: int
+    delay_green: int
 
     @classmethod
     def of(cls, o: Overlap) -> OverlapTiming:
-        return cls(o.trail_green * 10, round(o.trail_yellow * 10), round(o.trail_red * 10))
+        return cls(o.trail_green * 10, round(o.trail_yellow * 10), round(o.trail_red * 10), round(o.delay_green * 10))
 
 
 class Overlaps:
@@ -201,7 +232,7 @@ class Overlaps:
         """What overlap ``n`` shows once this tick's step has run, and the ticks its trailing interval then has
         timed (one more than now)."""
         s = self.shown[n]
-        ticks = self.ticks[n] + (s in TRAILING)
+        ticks = self.ticks[n] + (s in TIMED)
         to = next(to for cond, to in _NEXT[s] if self._holds(cond, n, phases, ticks))
         # A trailing red of no length is no interval at all: the overlap is red at once.
         return (Show.RED if to is Show.TRAIL_RED and self.timing[n].trail_red == 0 else to), ticks
@@ -216,12 +247,21 @@ class Overlaps:
             nexts = phases.nexts
             cycling = self.shown[n] in _GREEN and any(p in o.included and nexts.get(p) in o.included for p in nexts)
             return (cycling or not greens.isdisjoint(o.included)) and not self._holds(Cond.MODIFIED, n, phases, ticks)
+        if cond is Cond.DELAYS:
+            return self.timing[n].delay_green > 0 and self._holds(Cond.HELD, n, phases, ticks)
+        if cond is Cond.RELEASED:
+            return not self._holds(Cond.HELD, n, phases, ticks)
         if cond is Cond.FLASH:
             return o.kind is OverlapKind.FYA and not greens.isdisjoint(o.modifiers)
         if cond is Cond.MODIFIED:
             return minus and not (greens | phases.committed).isdisjoint(o.modifiers)
         if cond is Cond.TRAILS:
-            return self.timing[n].trail_green > 0
+            return self.timing[n].trail_green > 0 and o.kind is not OverlapKind.TRANSIT
+        if cond is Cond.BAR:
+            return o.kind is OverlapKind.TRANSIT
+        if cond is Cond.BAR_CLEARING:
+            # "flashing green when an overlap included phase is yellow and an overlap included phase is not next"
+            return o.kind is OverlapKind.TRANSIT and not phases.yellows.isdisjoint(o.included)
         if cond in (Cond.CLEARS, Cond.CLEARING):
             followed = o.included + o.modifiers if o.kind is OverlapKind.FYA else o.included
             clearing = phases.starting if cond is Cond.CLEARS else yellows
@@ -232,16 +272,23 @@ class Overlaps:
 
     def _length(self, n: int, s: Show) -> int:
         tm = self.timing[n]
-        return {Show.TRAIL_GREEN: tm.trail_green, Show.TRAIL_YELLOW: tm.trail_yellow, Show.TRAIL_RED: tm.trail_red}[s]
+        return {Show.TRAIL_GREEN: tm.trail_green, Show.TRAIL_YELLOW: tm.trail_yellow, Show.TRAIL_RED: tm.trail_red,
+                Show.DELAYED: tm.delay_green}[s]
 
-    # --- quiet time (see emulator/model/controller.py) -------------------------------------------------
+    # --- quiet time (see emulator/model/quiet.py) -------------------------------------------------
 
-    def deadline(self) -> int | None:
-        """Steps until a trailing interval ends (None: no overlap is timing); at least the next step."""
-        ahead = [self._length(n, s) - self.ticks[n] for n, s in self.shown.items() if s in TRAILING]
-        return max(1, min(ahead)) if ahead else None
+    def deadline(self, phases: Phases) -> int | None:
+        """Steps until an overlap's display changes, the phases showing ``phases`` (None: none will): 1 when one
+        follows them at the next step, else when a trailing interval ends."""
+        ahead = []
+        for n, s in self.shown.items():
+            if self._after(n, phases)[0] is not s:
+                return 1
+            if s in TIMED:
+                ahead.append(self._length(n, s) - self.ticks[n])
+        return min(ahead, default=None)
 
     def skip(self, n: int) -> None:
         for k, s in self.shown.items():
-            if s in TRAILING:
+            if s in TIMED:
                 self.ticks[k] += n

@@ -51,13 +51,46 @@ class PedCalls:
     def reset(self) -> None:
         """Power-up: no call latched."""
         self.calls: frozenset[int] = frozenset()
+        # The last answers of latched() and demand() and what they were asked with: the step and quiet time ask the
+        # same questions of the same (immutable) sets, mostly.
+        self._latched: tuple[tuple, frozenset[int]] = ((None, None, None), frozenset())
+        self._demand: tuple[tuple, frozenset[int]] = ((None, None), frozenset())
 
-    def latch(self, greens: Iterable[int], inputs: Inputs) -> frozenset[int]:
-        """This tick's calls latch; the demand they make with the inputs."""
-        calls = reading.latched(self.calls, greens, inputs)
+    def latch(self, greens: frozenset[int], inputs: Inputs) -> frozenset[int]:
+        """This tick's calls latch (``greens``: the phases showing green); the demand they make with the inputs."""
+        calls = self._latch(greens, inputs)
         if calls != self.calls:
             self.calls = calls
-        return reading.demand(inputs, self.calls)
+        return self.demand(inputs)
+
+    def demand(self, inputs: Inputs) -> frozenset[int]:
+        """The demand the latched calls make with the inputs (:func:`emulator.model.inputs.demand`)."""
+        asked, answer = self._demand
+        if asked[0] is not inputs or asked[1] is not self.calls:
+            answer = reading.demand(inputs, self.calls)
+            self._demand = (inputs, self.calls), answer
+        return answer
+
+    def deadline(self, greens: frozenset[int], inputs: Inputs, rings: Iterable[Ring]) -> int | None:
+        """1 when the next tick latches a call (``greens``: the phases showing green then) or may recycle a walk in
+        one of ``rings`` (:meth:`recycle`), else None: the calls change only with the inputs and the greens, and a
+        latched call waits to recycle only for its green's walk and pedestrian clearance to end, thresholds its ring
+        reports. While a pattern runs the answer is 1 whenever such a call waits: whether the walk fits by the
+        force-off point changes with the cycle timer."""
+        if self._latch(greens, inputs) != self.calls:
+            return 1
+        recycling = self.recycling & self.calls
+        if recycling and any(r.interval is GREEN and r.phase in recycling
+                             and (self.coordinated.running or self._recycles(r, ahead=1)) for r in rings):
+            return 1
+        return None
+
+    def _latch(self, greens: frozenset[int], inputs: Inputs) -> frozenset[int]:
+        asked, answer = self._latched
+        if asked[0] is not self.calls or asked[1] is not greens or asked[2] is not inputs:
+            answer = reading.latched(self.calls, greens, inputs)
+            self._latched = (self.calls, greens, inputs), answer
+        return answer
 
     def serve(self, phase: int) -> bool:
         """A green of ``phase`` starts: True when it serves a walk; the call is answered (cleared) unless it waits
@@ -79,11 +112,11 @@ class PedCalls:
                 r.recycle(self.timing[p])
                 self.calls -= {p}
 
-    def _recycles(self, r: Ring) -> bool:
-        """A walk may start now within ``r``'s green: none is timed, and it and its clearance end before the green's
-        maximum would (free) or by the phase's force-off point (a pattern running)."""
+    def _recycles(self, r: Ring, ahead: int = 0) -> bool:
+        """A walk may start ``ahead`` ticks from now within ``r``'s green: none is timed, and it and its clearance
+        end before the green's maximum would (free) or by the phase's force-off point (a pattern running)."""
         t = self.timing[r.phase]
-        if t.walk == 0 or r.ticks < r.walk + r.ped_clear:
+        if t.walk == 0 or r.ticks + ahead < r.walk + r.ped_clear:
             return False
         if self.coordinated.running:
             return self.coordinated.walk_fits(r.phase)

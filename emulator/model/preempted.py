@@ -165,13 +165,7 @@ class Preempted:
         n, state = pe.serving, pe.state
         targets = self._targets()
 
-        def there(r: Ring) -> bool:
-            t = targets.get(r.number)
-            if t is None:
-                return state is PreemptState.EXIT_STARTED or (r.interval is DWELL and r.target is None)
-            return r.interval is GREEN and r.phase == t
-
-        if not all(there(r) for r in rings):
+        if not all(self._there(r, targets, state) for r in rings):
             return
         if state is PreemptState.ENTRY_STARTED:
             track = pe.timing[n].track_green and self.config.preempts[n].track_phases
@@ -181,12 +175,50 @@ class Preempted:
         elif state is PreemptState.EXIT_STARTED:
             pe.event(n, Event.EXITED)
 
-    # --- quiet time (see emulator/model/controller.py) -------------------------------------------------
+    @staticmethod
+    def _there(r: Ring, targets: dict[int, int], state: PreemptState) -> bool:
+        """``r`` shows the phase the preempt wants of it (or, without one, rests in red)."""
+        t = targets.get(r.number)
+        if t is None:
+            return state is PreemptState.EXIT_STARTED or (r.interval is DWELL and r.target is None)
+        return r.interval is GREEN and r.phase == t
+
+    # --- quiet time (see emulator/model/quiet.py) -------------------------------------------------
 
     def thresholds(self, r: Ring) -> list[int]:
         """Ticks from now to the entry minimum of ``r``'s green, if still ahead."""
         cut = self.cut[r.number]
         return [cut - r.ticks] if r.interval is GREEN and r.ticks < cut else []
 
-    def discrete(self) -> tuple:
-        return tuple(self.cut.values())
+    def deadline(self, sequencer: Sequencer) -> int | None:
+        """1 when the next step's driving (:meth:`drive`) or progress (:meth:`progress`) acts on the rings or the
+        preemptor, no ring moving otherwise; else None (the thresholds they compare are the rings' and the
+        preemptor's)."""
+        pe = self.preemptor
+        if pe.serving is None:
+            return None
+        state, targets = pe.state, self._targets()
+        exit_group = next((sequencer.barrier_of(q) for q in targets.values()), None)
+        for r in sequencer.rings:
+            t = targets.get(r.number)
+            if t is None and state is PreemptState.EXIT_STARTED and (
+                    r.interval is not GREEN or exit_group in (None, sequencer.barrier_of(r.phase))):
+                continue
+            if r.interval is GREEN:
+                if r.phase == t:
+                    continue
+                limit = {PreemptState.ENTRY_STARTED: self.cut[r.number],
+                         PreemptState.TRACK_SERVICE: 0}.get(state, r.minimum)
+                if r.ticks + 1 >= limit:
+                    return 1  # the green ends
+            elif r.target != t:
+                return 1  # the preempt's phase committed next
+            if t is not None and sequencer.group != sequencer.barrier_of(t):
+                return 1
+        n = pe.serving
+        if not all(self._there(r, targets, state) for r in sequencer.rings):
+            return None
+        if state is PreemptState.TRACK_SERVICE and pe.stage[n] + 1 < pe.timing[n].track_green:
+            return None
+        return 1 if state in (PreemptState.ENTRY_STARTED, PreemptState.TRACK_SERVICE,
+                              PreemptState.EXIT_STARTED) else None

@@ -197,12 +197,16 @@ class Preemptor:
         return (self.stage[n] >= tm.dwell_green and self.since_entry[n] >= tm.min_duration
                 and n not in self.control)
 
-    # --- quiet time (see emulator/model/controller.py) -------------------------------------------------
+    # --- quiet time (see emulator/model/quiet.py) -------------------------------------------------
 
     def deadline(self) -> int | None:
-        """Steps until a delay, a maximum presence, a track green, a minimum dwell or duration runs out."""
+        """Steps until the next one at which a preempt's state changes, the inputs as they are (None: none will):
+        1 when the next step moves one (:meth:`_moves`), else when a delay, a maximum presence, a track green, a
+        minimum dwell or duration runs out."""
         if not self.preempts:
             return None
+        if self._moves():
+            return 1
         ahead = []
         for n, s in self.states.items():
             tm = self.timing[n]
@@ -217,6 +221,34 @@ class Preemptor:
         # A threshold already passed changes nothing by itself (the dwell waits for its call to go, a delay
         # that ran out for a lower-numbered preempt to end): inputs and the rings move those on.
         return min((a for a in ahead if a > 0), default=None)
+
+    def _moves(self) -> bool:
+        """The next :meth:`step` changes a preempt's state or the one served (its own questions, asked with the
+        timers as they will be then)."""
+        ready = []
+        for n, s in self.states.items():
+            on, tm = n in self.control, self.timing[n]
+            if s is S.MAX_PRESENCE or s is S.NOT_ACTIVE:
+                if on is (s is S.NOT_ACTIVE):
+                    return True  # called, or its input gone
+                continue
+            if on and tm.max_presence and self.presence[n] + 1 >= tm.max_presence and s is not S.EXIT_STARTED:
+                return True  # timed out
+            if s is S.NOT_ACTIVE_WITH_CALL:
+                if not on and self.preempts[n].non_locking and self.waited[n] + 1 < tm.delay:
+                    return True  # forgotten
+                if self.waited[n] + 1 >= tm.delay:
+                    ready.append(n)
+            else:
+                ready.append(n)
+        top = min(ready, default=None)
+        if top != self.serving or (top is not None and self.states[top] is S.NOT_ACTIVE_WITH_CALL):
+            return True  # another preempt served, or this one's entry starts
+        if top is None or self.states[top] is not S.DWELL:
+            return False
+        tm = self.timing[top]
+        return (self.stage[top] + 1 >= tm.dwell_green and self.since_entry[top] + 1 >= tm.min_duration
+                and top not in self.control)
 
     def skip(self, k: int) -> None:
         for n, s in self.states.items():

@@ -28,7 +28,14 @@ The timers of a green, set when it starts:
   (the walk and the pedestrian clearance are timed from the start of the green, or from the tick a recycled
   walk starts within it: :meth:`Ring.recycle`).
 - *Passage* (gap): ticks since the green's own vehicle call was last present (a call, or max recall,
-  restarts it every tick); it has gapped out when it reaches the phase's passage time.
+  restarts it every tick); it has gapped out when it reaches the *allowable gap*: the phase's passage time, or
+  with gap reduction (volume density) less: NTCIP 1202 phaseTimeBeforeReduction, "The Time Before Reduction
+  period shall begin when the phase is Green and there is a serviceable conflicting call. If the serviceable
+  conflicting call is removed before completion of this time (or time to reduce), the timer shall reset. Upon
+  completion of the TBR period ... the linear reduction of the allowable gap from the Passage Time shall
+  begin"; phaseTimeToReduce "shall control the rate of reduction of the allowable gap between the Passage Time
+  and Minimum Gap setting", and past phaseMinimumGap "the allowable gap shall remain fixed" (:meth:`Ring.allowed`;
+  phaseCarsBeforeReduction and phaseReduceBy are not modelled).
 - *Maximum 1 or 2*: Maximum2 when ringControlGroupMax2 selects it for the ring. It times while
   *conflicting demand* waits (demand in its own ring or across the barrier), and on max recall from the
   start of the green, as NTCIP 1202 phaseMaximum1's timer is "held reset unless Max Vehicle Recall is
@@ -146,12 +153,16 @@ class Timing:
     yellow: int
     red_clear: int
     red_revert: int
+    time_before_reduction: int = 0
+    time_to_reduce: int = 0
+    min_gap: int = 0  # the gap is reduced only to a minimum gap below the passage
 
     @classmethod
     def of(cls, ph: Phase) -> Timing:
         return cls(tenths(ph.min_green), tenths(ph.max_green), tenths(ph.maximum2), tenths(ph.passage),
                    tenths(ph.walk), tenths(ph.ped_clear), tenths(ph.yellow), tenths(ph.red_clear),
-                   tenths(ph.red_revert))
+                   tenths(ph.red_revert), tenths(ph.time_before_reduction), tenths(ph.time_to_reduce),
+                   tenths(ph.passage if ph.min_gap is None else ph.min_gap))
 
 
 def maximum_runs(conflict: bool, max_recall: bool) -> bool:
@@ -178,6 +189,8 @@ class Ring:
     minimum: int = 0  # ticks the current green lasts at least (minimum green, or walk + ped clear)
     maximum: int = 0  # max-out ticks of the current green (Maximum1 or Maximum2)
     passage: int = 0  # passage ticks of the current green
+    reduction: tuple[int, int, int] | None = None  # the green's time before reduction, time to reduce, minimum gap
+    reducing: int = 0  # ticks of serviceable conflicting demand in a row during this green (the TBR timer on)
     walk: int = 0  # the green's tick its walk ends (0: no walk); from its start, or a recycled walk's start
     ped_clear: int = 0
     walk_start: int = 0  # the green's tick its walk began (pedestrian recycle starts one within the green)
@@ -197,12 +210,15 @@ class Ring:
         if to is None:
             raise RingError(f"ring {self.number}: no transition from {self.interval} on {event.name} ({event})")
         self.interval, self.ticks, self.max_ticks, self.conflict, self.gap, self.gapped = to, 0, 0, False, 0, False
+        self.reducing = 0
         if to is GREEN:
             self.walk, self.ped_clear = (timing.walk, timing.ped_clear) if walk(self.phase) else (0, 0)
             self.walk_start = 0
             self.minimum = max(timing.min_green, self.walk + self.ped_clear)
             self.maximum = timing.max2 if max2 else timing.max1
             self.passage = timing.passage
+            self.reduction = None if timing.min_gap >= timing.passage else (
+                timing.time_before_reduction, timing.time_to_reduce, timing.min_gap)
         else:
             self.length = timing.yellow if to is YELLOW else timing.red_clear if to is RED_CLEAR else 0
             if caps is not None and to in CLEARANCE:
@@ -216,9 +232,10 @@ class Ring:
         self.gap = 0 if extending else self.gap + 1
         self.conflict = conflict
         self.max_ticks = self.max_ticks + 1 if maximum_runs(conflict, max_recall) else 0
+        self.reducing = self.reducing + 1 if conflict else 0
         if not conflict:
             self.gapped = False
-        elif self.ticks >= self.minimum and self.gap > 0 and self.gap >= self.passage and gap_disable:
+        elif self.ticks >= self.minimum and self.gap > 0 and self.gap >= self.allowed() and gap_disable:
             self.gapped = True
 
     def recycle(self, timing: Timing) -> None:
@@ -238,9 +255,22 @@ class Ring:
             self.yellow_end[self.phase] = tick
         return True
 
+    def allowed(self, later: int = 0) -> int:
+        """The allowable gap (ticks) ``later`` ticks from now if the conflicting demand stays: the passage, reduced
+        linearly to the minimum gap over the time to reduce once the time before reduction has run."""
+        if self.reduction is None:
+            return self.passage
+        before, to_reduce, least = self.reduction
+        into = self.reducing + later - before if self.reducing else 0
+        if into <= 0:
+            return self.passage
+        if into >= to_reduce:
+            return least
+        return max(least, self.passage - (self.passage - least) * into // to_reduce)
+
     @property
     def gapped_out(self) -> bool:
-        return self.gapped or (self.gap > 0 and self.gap >= self.passage)
+        return self.gapped or (self.gap > 0 and self.gap >= self.allowed())
 
     @property
     def maxed_out(self) -> bool:
@@ -261,19 +291,19 @@ class Ring:
             return self.length - self.ticks
         return 0
 
-    # --- quiet time (see emulator/model/controller.py) -------------------------------------------------------
+    # --- quiet time (see emulator/model/quiet.py) -------------------------------------------------------
 
     def thresholds(self, tick: int, timing: dict[int, Timing], *, minimum: bool) -> list[int]:
         """Ticks from now to each next threshold of the ring's timers (those a step compares): a clearance's
-        length, the red revert of a committed phase waiting in red, and a green's walk, pedestrian clearance,
+        end, the red revert of a committed phase waiting in red, and a green's walk, pedestrian clearance,
         passage and maximum (a running timer only) and its minimum when ``minimum`` says it matters."""
         interval = self.interval
         if interval is GREEN:
             ticks = self.ticks
             ahead = [threshold - ticks for threshold in (self.minimum if minimum else 0, self.walk,
                                                          self.walk + self.ped_clear) if ticks < threshold]
-            if self.gap and self.gap < self.passage:
-                ahead.append(self.passage - self.gap)
+            if self.gap and self.gap < self.allowed():
+                ahead.append(self._gap_out_in())
             if self.max_ticks and self.max_ticks < self.maximum:
                 ahead.append(self.maximum - self.max_ticks)
             return ahead
@@ -282,14 +312,22 @@ class Ring:
             if revert is not None and tick < revert + timing[self.target].red_revert:
                 return [revert + timing[self.target].red_revert - tick]
             return []
-        return [self.length - self.ticks] if self.ticks < self.length else []
+        return [max(1, self.length - self.ticks)]  # a clearance a preempt's entry cut below its ticks ends at once
+
+    def _gap_out_in(self) -> int:
+        """Ticks until the running gap timer reaches the allowable gap (which the reduction may lower meanwhile)."""
+        ahead = self.passage - self.gap
+        if self.reduction is None or not self.reducing:
+            return ahead
+        return next(k for k in range(1, ahead + 1) if self.gap + k >= self.allowed(k))
 
     def steady(self, *, extending: bool, conflict: bool, max_recall: bool) -> bool:
         """A green's timers run at the next tick as :meth:`skip` runs them, with these inputs: its passage timer
         keeps running or keeps being restarted, its maximum timer keeps running or held reset, and the conflicting
         demand it registered stays."""
         return ((self.gap == 0) == extending and self.conflict == conflict
-                and (self.max_ticks > 0) == maximum_runs(conflict, max_recall))
+                and (self.max_ticks > 0) == maximum_runs(conflict, max_recall)
+                and (self.reduction is None or (self.reducing > 0) == conflict))
 
     def skip(self, n: int) -> None:
         """``n`` quiet ticks: the interval and the green's running timers count (a running gap or maximum timer is
@@ -300,3 +338,5 @@ class Ring:
             self.gap += n
         if self.max_ticks:
             self.max_ticks += n
+        if self.reducing:
+            self.reducing += n

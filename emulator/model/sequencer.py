@@ -67,20 +67,20 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping, MutableMapping, Sequence
 from typing import TYPE_CHECKING
 
-from emulator.model import inputs as reading
 from emulator.model.coordinated import Coordinated
 from emulator.model.inputs import Inputs
 from emulator.model.overlaps import Overlaps, Phases
 from emulator.model.preemption import Preemptor
 from emulator.model.ring import DWELL, END, GREEN, RED_CLEAR, START, TIMED, Ring, Termination, Timing
 from hils.protocol.config import IntersectionConfig, NextPhaseLock
-from hils.protocol.ntcip import ControlColumn, PreemptState
+from hils.protocol.ntcip import ControlColumn
 
 if TYPE_CHECKING:
     from emulator.model.preempted import Preempted
 
 # The control objects read every tick, bound once (as ring.py binds the intervals).
 FORCE_OFF, PHASE_OMIT = ControlColumn.FORCE_OFF, ControlColumn.PHASE_OMIT
+FORCED_OFF = Termination.FORCE_OFF
 
 #: How the sequencer moves a ring: the controller's move (the ring's table, and what the other units do then).
 Move = Callable[..., None]
@@ -103,9 +103,25 @@ class Sequencer:
         self._barrier = {p: config.barrier_of(p) for p in config.phases}
         self._order = {p: ring.index(p) for ring in config.rings for p in ring}
         self._ring_of = {p: config.ring_of(p) for p in config.phases}
-        # settles' proof holds without overlaps and with the next phase locked at the end of green
-        self._provable = not config.overlaps and config.next_phase_lock is NextPhaseLock.GREEN_END
+        # The phases of each barrier group and of each ring, as sets: the tick's questions about demand are set
+        # operations on them.
+        self._group_phases = [frozenset(p for p in config.phases if self._barrier[p] == g)
+                              for g in range(len(config.barriers))]
+        self._ring_phases = {n: frozenset(order) for n, order in enumerate(config.rings, start=1)}
+        # Where a ring looks for its next phase (:meth:`wish`): from its phase (None: the first of its order) on, in
+        # ring order, each phase with the one before it; resting in red, its own phase last.
+        self._ahead = {(p, dwell): tuple((order[(i + k - 1) % len(order)], order[(i + k) % len(order)])
+                                         for k in range(1, len(order) + dwell))
+                       for order in config.rings for i, p in enumerate(order) for dwell in (False, True)}
+        self._ahead |= {(None, n, dwell): self._ahead[order[0], dwell]
+                        for n, order in enumerate(config.rings, start=1) for dwell in (False, True)}
+        self._red_end = config.next_phase_lock is NextPhaseLock.RED_END
         self._gap_disable = frozenset(p for p, ph in config.phases.items() if ph.simultaneous_gap_disable)
+        # The backings conditional service may allow (:meth:`_conditional`): from a phase with the option into an
+        # earlier phase of its ring and barrier group.
+        self._conditional_pairs = tuple((p, q) for order in config.rings for i, p in enumerate(order)
+                                        if config.phases[p].conditional_service
+                                        for q in order[:i] if self._barrier[q] == self._barrier[p])
         self.reset()
 
     def reset(self) -> None:
@@ -120,14 +136,18 @@ class Sequencer:
 
     def prepare(self, demand: frozenset[int], inputs: Inputs) -> None:
         """What the tick's decisions read before the rings time: demand across the barrier, a group restart."""
+        if not self.coordinated.running:  # free: any demand across counts, and no group restarts for a pattern
+            self.waiting_across, self.restarting = not demand <= self._group_phases[self.group], False
+            return
         self.waiting_across = self.waits_across(demand, inputs)
-        self.restarting = self.coordinated.running and any(self._restarts(r, demand, inputs) for r in self.rings)
+        self.restarting = any(self._restarts(r, demand, inputs) for r in self.rings)
 
     def waits_across(self, demand: frozenset[int], inputs: Inputs) -> bool:
         """Demand waits across the barrier (which forbids backing); while a pattern runs only demand that can still
         be served in this cycle counts (a phase past its permissive period is skipped anyway), measured as its own
         ring measures it (:meth:`serviceable`)."""
-        return any(self._barrier[q] != self.group
+        group = self._group_phases[self.group]
+        return any(q not in group
                    and self.coordinated.fits(self.rings, self.rings[self._ring_of[q] - 1], q, demand, inputs)
                    for q in demand)
 
@@ -145,28 +165,32 @@ class Sequencer:
         """``red_end`` lock: a ring in its clearance takes the nearest phase with demand after its own on the
         committed phase's side of the barrier (SUMO's ``NEMAPhase::trySwitch`` lets a later call override the
         decision "only if the new transition is on the same side of a barrier"); without one it keeps it."""
+        r.target = self._redirected(r, demand, inputs)
+
+    def _redirected(self, r: Ring, demand: frozenset[int], inputs: Inputs) -> int:
+        """The phase :meth:`redirect` commits ``r`` to."""
         side = self._barrier[r.target]
         n, i = len(r.order), self._order[r.phase]
         for k in range(1, n):
             q = r.order[(i + k) % n]
             if (self._barrier[q] == side and self.serviceable(r, q, demand, inputs)
                     and (side != self.group or not self._beyond(q))):
-                r.target = q
-                return
+                return q
+        return r.target
 
-    def time(self, r: Ring, demand: frozenset[int], inputs: Inputs, tick: int) -> None:
-        """One tick of a ring's timers (a green's with the demand conflicting with it); a clearance that has run its
-        length moves on (a red clearance a preempt's entry cut to nothing ends on the tick it starts)."""
-        if r.interval is DWELL:
-            return
-        if r.interval is GREEN:
-            max_recall = r.phase in inputs.extending
-            r.time_green(extending=r.phase in inputs.calls or max_recall, conflict=self.conflicting(r, demand),
-                         max_recall=max_recall, gap_disable=r.phase in self._gap_disable)
-        elif r.time_clearance(tick):
-            self.move(r, TIMED)
-            if r.interval is RED_CLEAR and r.length == 0:
+    def time(self, demand: frozenset[int], inputs: Inputs, tick: int) -> None:
+        """One tick of the rings' timers (a green's with the demand conflicting with it); a clearance that has run
+        its length moves on (a red clearance a preempt's entry cut to nothing ends on the tick it starts)."""
+        for r in self.rings:
+            interval = r.interval
+            if interval is GREEN:
+                max_recall = r.phase in inputs.extending
+                r.time_green(extending=r.phase in inputs.calls or max_recall, conflict=self.conflicting(r, demand),
+                             max_recall=max_recall, gap_disable=r.phase in self._gap_disable)
+            elif interval is not DWELL and r.time_clearance(tick):
                 self.move(r, TIMED)
+                if r.interval is RED_CLEAR and r.length == 0:
+                    self.move(r, TIMED)
 
     # --- what a ring may do ------------------------------------------------------------------------------
 
@@ -218,33 +242,30 @@ class Sequencer:
 
     def conflicting(self, r: Ring, demand: frozenset[int]) -> bool:
         """Demand conflicts with ``r``'s green: in its own ring, or beyond this visit of the barrier group."""
-        return any(q != r.phase and (self._ring_of[q] == r.number or self._beyond(q)) for q in demand)
+        others = demand - {r.phase}
+        if not others.isdisjoint(self._ring_phases[r.number]) or not others <= self._group_phases[self.group]:
+            return True
+        # the rest is demand of another ring in this group: beyond this visit only where that ring may not back
+        return any(self._beyond(q) for q in others)
 
     def ending(self, r: Ring, inputs: Inputs) -> Termination | None:
         """Why the ring's green may end now (None: it may not); a force-off before a gap-out before a max-out."""
         if r.interval is not GREEN or r.ticks < r.minimum or r.phase in inputs.holds:
             return None
         if r.phase in self.control[FORCE_OFF]:
-            return Termination.FORCE_OFF
+            return FORCED_OFF
         return self.coordinated.ending(r)
-
-    def ready(self, r: Ring, inputs: Inputs) -> bool:
-        """A green that may end now, or a ring resting in red with nothing committed."""
-        if r.interval is DWELL:
-            return r.target is None
-        return self.ending(r, inputs) is not None
 
     def wish(self, r: Ring, demand: frozenset[int], inputs: Inputs) -> int | None:
         """The nearest phase with demand after the ring's own, in ring order (a ring resting in red may re-serve
         its own phase, last in the order); a ring showing its coordinated phase leaves it only in the next phase's
         permissive period (:meth:`emulator.model.coordinated.Coordinated.stays`)."""
-        n = len(r.order)
-        i = 0 if r.phase is None else self._order[r.phase]
-        stop = n + 1 if r.interval is DWELL else n
-        for k in range(1, stop):
-            q = r.order[(i + k) % n]
-            if self.serviceable(r, q, demand, inputs):
-                if self.coordinated.stays(r, r.order[(i + k - 1) % n]):
+        dwell = r.interval is DWELL
+        ahead = self._ahead[r.phase, dwell] if r.phase is not None else self._ahead[None, r.number, dwell]
+        running = self.coordinated.running
+        for prior, q in ahead:
+            if q in demand and (not running or self.coordinated.fits(self.rings, r, q, demand, inputs)):
+                if running and self.coordinated.stays(r, prior):
                     return None  # outside q's permissive period the coordinated phase stays
                 return q
         return None
@@ -259,12 +280,25 @@ class Sequencer:
         """Commit the next phase of every ready ring that may go: within the group at once, across the barrier
         when every ring is ready for it (``omitted``: phases never entered, besides PhaseOmit's, as a preempt's dwell
         omits those that may not cycle)."""
-        ready = {r.number: self.ready(r, inputs) for r in self.rings}
+        commits, across = self._choices(demand, inputs)
+        for r, q in commits:
+            self.commit(r, q, inputs)
+        if across:
+            self._cross(across, demand, inputs, omitted)
+
+    def _choices(self, demand: frozenset[int], inputs: Inputs) -> tuple[list[tuple[Ring, int]], dict[int, int]]:
+        """What :meth:`decide` does: the commits within the group, or else the wishes beyond it when every ring may
+        cross (empty: the ring wishing across waits at the barrier). A commit within the group keeps its ring from
+        crossing, so the two never come together."""
+        ready = {}  # a green that may end now, or a ring resting in red with nothing committed
+        for r in self.rings:
+            ready[r.number] = r.target is None if r.interval is DWELL else self.ending(r, inputs) is not None
         if not any(ready.values()):
-            return  # most ticks: every ring is timing
+            return [], {}  # most ticks: every ring is timing
         wish = {r.number: self.wish(r, demand, inputs) for r in self.rings if ready[r.number]}
         across = {n: q for n, q in wish.items() if q is not None and self._beyond(q)}
         all_ready = all(ready.values())
+        commits = []
         for r in self.rings:
             q = wish.get(r.number)
             if q is None or r.number in across:
@@ -272,10 +306,14 @@ class Sequencer:
             if r.interval is GREEN and self._order[q] < self._order[r.phase] and all_ready and across:
                 wish[r.number] = None  # both rings could cross: crossing goes before backing
                 continue
-            self.commit(r, q, inputs)
-        if not across or not all(ready[r.number] and (wish[r.number] is None or r.number in across)
-                                 for r in self.rings):
-            return  # the ring wishing across waits at the barrier
+            commits.append((r, q))
+        if commits or not across or not all(ready[r.number] and (wish[r.number] is None or r.number in across)
+                                            for r in self.rings):
+            return commits, {}
+        return [], across
+
+    def _cross(self, across: dict[int, int], demand: frozenset[int], inputs: Inputs, omitted: frozenset[int]) -> None:
+        """Every ring clears into the next barrier group a wish lies in (``omitted``: as :meth:`decide` says)."""
         # Cross to the nearest group (cyclically) that a wish lies in; restart the group only when every
         # wish beyond it is a backing that backup_prevent forbids (crossing serves those on the way back).
         groups = {self._barrier[q] for q in across.values()}
@@ -301,84 +339,92 @@ class Sequencer:
             self.control[FORCE_OFF] -= {r.phase}
             self.move(r, END, reason=reason)
 
-    def start(self, r: Ring, tick: int) -> None:
-        """A ring resting in red starts its committed phase when it may."""
-        if r.interval is not DWELL or r.target is None:
-            return
+    def start(self, tick: int) -> None:
+        """Each ring resting in red starts its committed phase when it may."""
+        for r in self.rings:
+            if r.interval is not DWELL or r.target is None or not self._starts(r, tick):
+                continue
+            t = r.target
+            if t in self.control[PHASE_OMIT] and self.preemptor.serving is None:
+                r.target = None  # omitted during the clearance: not serviced, choose again (a preempt overrides omits)
+                continue
+            r.phase, r.target = t, None
+            self.move(r, START)
+
+    def _starts(self, r: Ring, tick: int, phases: Phases | None = None) -> bool:
+        """``r``, resting in red with a committed phase, starts it at ``tick`` (or drops it, omitted): its
+        clearance is over, no other ring still shows a phase of another barrier group (both rings enter a new
+        group together), its red revert has passed and no overlap it waits for still shows after this tick
+        (``phases``: what the phases show as the overlaps step; by default, what they show now)."""
         t = r.target
         if t in self.control[PHASE_OMIT] and self.preemptor.serving is None:
-            r.target = None  # omitted during the clearance: not serviced, choose again (a preempt overrides omits)
-            return
-        others_elsewhere = any(o is not r and o.interval is not DWELL
-                               and self._barrier[o.phase] != self._barrier[t] for o in self.rings)
-        if others_elsewhere or r.reverting(t, tick, self.timing[t]):
-            return
-        if self.config.overlaps and self.overlaps.blocks(t, Phases.of(self.rings)):
-            return  # an overlap it waits for still shows (or clears) after this tick
-        r.phase, r.target = t, None
-        self.move(r, START)
+            return True
+        if r.reverting(t, tick, self.timing[t]):
+            return False
+        side = self._barrier[t]
+        for o in self.rings:
+            if o is not r and o.interval is not DWELL and self._barrier[o.phase] != side:
+                return False
+        # an overlap it waits for still shows (or clears) after this tick
+        return not (self.config.overlaps and self.overlaps.blocks(t, Phases.of(self.rings) if phases is None
+                                                                  else phases))
 
-    # --- quiet time (see emulator/model/controller.py) -------------------------------------------------
+    # --- quiet time (see emulator/model/quiet.py) -------------------------------------------------
 
-    def deadline(self, tick: int, preempted: Preempted, *, logging: bool) -> tuple[int | None, list[int]]:
-        """Ticks to the next threshold of the rings' timers in quiet time (None: none ahead), as the pattern and a
-        preempt being served set them too; and, with ``logging``, to each tick a recorder logs though nothing
-        changes there. A green's minimum matters only with conflicting demand (registered by the last step, and
-        constant in quiet time): without any, the ready green has nowhere to go and no ring waits across the
-        barrier for it. While a pattern runs or a preempt is served it may be what ends it; the data logger
-        logs it in any case."""
-        minimums = self.coordinated.running or self.preemptor.serving is not None
-        ahead: list[int] = []
-        logged: list[int] = []
+    def deadline(self, tick: int, demand: frozenset[int], inputs: Inputs, phases: Phases | None,
+                 preempted: Preempted) -> int | None:
+        """Ticks to the next step at which the sequencer or a ring acts, inputs and ``demand`` staying as they are
+        (None: none ahead); ``phases``: what the phases show at the next tick if no ring moves (None: no overlaps
+        to ask).
+
+        1 when the next step decides something: a green's timers start or stop running or the conflicting demand it
+        registered changes, a ``red_end`` call redirects a clearing ring, a ready ring commits its wish or the
+        rings cross the barrier (:meth:`_choices`; in a preempt's dwell with cycling phases too, on their demand),
+        or a committed phase starts (:meth:`_starts`). Each question is the step's own, asked now: until a counter
+        reaches a threshold (the rest of the answer) it answers the same at every tick. The thresholds: each ring's
+        timers as the pattern and a preempt being served set them too, and what conditional service compares
+        (:meth:`_conditional_thresholds`). A green's minimum matters only with conflicting demand (registered by the
+        last step, and constant in quiet time): without any, the ready green has nowhere to go and no ring waits
+        across the barrier for it. While a pattern runs or a preempt is served it may be what ends it, and with
+        conditional service it makes a green "prepared to terminate"."""
+        serving = self.preemptor.serving is not None
+        cycling = preempted.cycling(demand) if serving else None
+        if cycling is not None:
+            demand = cycling[0]  # a preempt's dwell with cycling phases: the rings cycle as the sequencer runs them
+        minimums = self.coordinated.running or serving or bool(self._conditional_pairs)
+        ahead: list[int] = self._conditional_thresholds()
         for r in self.rings:
             ahead += r.thresholds(tick, self.timing, minimum=minimums or r.conflict)
-            if r.interval is GREEN:
-                if logging and not (minimums or r.conflict) and r.ticks < r.minimum:
-                    logged.append(r.minimum - r.ticks)
+            if minimums and r.interval is GREEN:
                 ahead += self.coordinated.thresholds(r) + preempted.thresholds(r)
-        return min(ahead, default=None), logged
-
-    def settles(self, ped_calls: frozenset[int], inputs: Inputs) -> bool:
-        """After a step that changed something: the next step changes nothing but counters, as a step that changed
-        nothing would show (the controller's "Quiet time"). Proven here only where it is short: free, no preempt,
-        no overlap, the next phase locked at the end of green, the controller not flashing.
-
-        Nothing is proven for a next step that the controller's quiet time makes real anyway (a counter reaches a
-        threshold), so every comparison of a counter with a threshold is the same at the next tick as now: the
-        predicates below are the step's own, read now. What the next step does, part by part: the backup timer,
-        start-up flash and time-of-day plan act only at thresholds; the coordinator retries a pattern that this
-        step could not start and fails alike; no preempt is called or active; the pedestrian calls latch as
-        checked; a clearance only counts; a green's conflicting demand is what this step registered and its gap
-        and max-out counters run as the ring's ``skip`` runs them (max recall runs the latter without conflicting
-        demand), as checked, so its gap latch is decided as this step decided it; no ring is both ready and
-        wishing, so nothing is committed and no green ends; a ring resting in red with a phase to start stays
-        blocked (by another ring's green or clearance, which stays, or its red revert, a threshold); the status
-        image, its walk thresholds unpassed, stays."""
-        if self.coordinated.running or not self._provable:
-            return False
-        pe = self.preemptor
-        if pe.control or any(s is not PreemptState.NOT_ACTIVE for s in pe.states.values()):
-            return False
-        greens = {r.phase for r in self.rings if r.interval is GREEN}
-        if reading.latched(ped_calls, greens, inputs) != ped_calls:
-            return False
-        return self.settled(reading.demand(inputs, ped_calls), inputs)
-
-    def settled(self, demand: frozenset[int], inputs: Inputs) -> bool:
-        """The next tick, with this demand, changes nothing here but counters: no ring's timer starts or stops (its
-        counters run as :meth:`emulator.model.ring.Ring.skip` runs them) and no ring is both ready and wishing, so
-        nothing is committed and no green ends (the predicates are the step's own, read now)."""
-        # What the next step computes before anything reads it: set now, so the predicates below read it.
-        self.waiting_across = self.waits_across(demand, inputs)
+        least = min(ahead, default=None)
+        if least == 1:
+            return 1  # a real step anyway: no question needs asking
+        redirecting = self._red_end and not serving
+        self.prepare(demand, inputs)  # what the next step reads first, as it will read it
         for r in self.rings:
-            if r.interval is GREEN:
+            interval = r.interval
+            if interval is GREEN:
                 max_recall = r.phase in inputs.extending
                 if not r.steady(extending=r.phase in inputs.calls or max_recall,
                                 conflict=self.conflicting(r, demand), max_recall=max_recall):
-                    return False  # a counter starts or stops, or the conflicting demand changes: not skip's work
-            if self.ready(r, inputs) and self.wish(r, demand, inputs) is not None:
-                return False
-        return True
+                    return 1
+            elif interval is DWELL:
+                if r.target is not None and self._starts(r, tick + 1, phases):
+                    return 1
+            elif redirecting and r.target is not None and self._redirected(r, demand, inputs) != r.target:
+                return 1
+        if (not serving or cycling is not None) and any(self._choices(demand, inputs)):
+            return 1
+        return least
 
-    def discrete(self) -> tuple:
-        return self.group, tuple((r.phase, r.interval, r.target, r.gapped) for r in self.rings)
+    def _conditional_thresholds(self) -> list[int]:
+        """Ticks from now to each reading of a running maximum timer at which its green stops leaving the time a
+        conditional service asks (:meth:`_conditional`: a clearance and the earlier phase's minimum); a green's
+        minimum, which makes it "prepared to terminate", is a threshold too while any phase has the option."""
+        if not self._conditional_pairs:
+            return []
+        timing = self.timing
+        needs = {timing[p].yellow + timing[p].red_clear + timing[q].min_green for p, q in self._conditional_pairs}
+        return [o.maximum - n + 1 - o.max_ticks for o in self.rings if o.interval is GREEN and o.max_ticks
+                for n in needs if o.max_ticks <= o.maximum - n]

@@ -35,10 +35,10 @@ class Images:
 
     def of(self, rings: Sequence[Ring], overlaps: Overlaps, flashing: bool) -> tuple[frozenset[int], ...]:
         """The image of what ``rings`` and ``overlaps`` show now (all red when ``flashing``)."""
-        key = None if flashing else (tuple(
+        key = None if flashing else (tuple([
             (r.interval, r.phase, r.target,
              r.interval is GREEN and (r.ticks < r.walk) + (r.ticks < r.walk + r.ped_clear))
-            for r in rings), overlaps.discrete())
+            for r in rings]), overlaps.discrete() if self._overlaps else ())
         image = self._images.get(key)
         if image is None:
             image = self._images[key] = self._build(rings, overlaps, flashing)

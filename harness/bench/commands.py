@@ -31,7 +31,7 @@ from harness import published
 from harness.bench import corridor as bench_corridor
 from harness.bench import floods, machine
 from harness.bench import seeds as bench_seeds
-from harness.bench.processes import snmpd, start_emulator
+from harness.bench.processes import in_fresh_process, snmpd, start_emulator
 from harness.bench.seeds import Spread, seeds_text
 from harness.bench.serve import resident_mb
 from hils.control.actions import PAPER_ACTION_TYPES, ActionType
@@ -174,9 +174,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                                            "actuated operation, the city's coordinated pattern and the max-pressure "
                                            "agent: the share of phase and overlap indication changes that came "
                                            "within the earliest and latest the controller's SPaT announced for them "
-                                           "(goal 100 %). Virtual time, every tick stepped.")
+                                           "(goal 100 %), and the share that had a finite latest announced (so that "
+                                           "the first is not hollow), per operation over several seeds. Virtual "
+                                           "time, every tick stepped, each run in a fresh process.")
     spat.add_argument("--seconds", type=float, default=3600.0, metavar="S", help="simulated seconds per run (3600)")
-    spat.add_argument("--seed", type=int, default=1)
+    bench_seeds.seeds_option(spat, "0-2")
     spat.add_argument("--operation", action="append", choices=["actuated", "coordinated", "max-pressure"],
                       help="run only this operation (repeatable; default: all three)")
     published.options(spat, "bench-spat", "bench")
@@ -255,9 +257,10 @@ def _spat_command(args: argparse.Namespace) -> int:
     info = machine.describe()
     print(machine.header(info))
     shares = []
-    for operation in args.operation or list(spat.OPERATIONS):
-        print(f"{operation}: {args.seconds:g} s ...", flush=True)
-        shares.append(spat.measure(operation, args.seconds, args.seed))
+    for seed in args.seeds:
+        for operation in args.operation or list(spat.OPERATIONS):
+            print(f"{operation}, seed {seed}: {args.seconds:g} s ...", flush=True)
+            shares.append(in_fresh_process(spat.measure, operation, args.seconds, seed))
     text, figures = spat.report(shares)
     print(text)
     _write_figures(folder / "spat.json", {"machine": info, **figures})
@@ -594,19 +597,27 @@ def _env_command(args: argparse.Namespace) -> int:
     print(f"  sumo-rl counts its yellow and minimum green in SUMO steps: it is given the config's {c['yellow']:g} s "
           f"and {c['min_green']:g} s as {t['yellow']} and {t['min_green']} steps; 'unconverted' is the same numbers "
           f"as steps (a {c['yellow'] * f['sumo_step_s']:g} s yellow), as its own docs suggest writing them")
-    labels = {"hils": "hils", "hils_no_all_red": "hils, no all-red", "sumo_rl": "sumo-rl",
-              "sumo_rl_unconverted": "sumo-rl, unconverted"}
+    labels = {"hils": "hils", "hils_worker": "hils, SUMO worker", "hils_no_all_red": "hils, no all-red",
+              "sumo_rl": "sumo-rl", "sumo_rl_unconverted": "sumo-rl, unconverted"}
     for line in bench_seeds.episode_table({labels[side]: figures for side, figures in f["sides"].items()}):
         print(line)
     print(bench_seeds.ratio_line("hils / sumo-rl", f["hils_to_sumo_rl"])
           + " (goal: wall <= 1; hils' controller adds a 2 s all-red to every change and serves the config's pairs: "
             "other signals, other traffic, which SUMO steps at its own cost)")
+    print(bench_seeds.ratio_line("hils, SUMO worker / sumo-rl", f["hils_worker_to_sumo_rl"]))
     print(bench_seeds.ratio_line("hils / sumo-rl unconverted", f["hils_to_sumo_rl_unconverted"])
           + " (shorter clearances, lighter traffic)")
     print(bench_seeds.ratio_line("hils, no all-red / sumo-rl", f["same_clearances"])
           + " (the same clearances: the config's red clearance set to 0 s, as sumo-rl has none; goal: wall <= 1)")
+    print(_loads(f["runs"], info))
     _write_figures(folder / "env.json", {"machine": info, "env": f})
     return 0
+
+
+def _loads(runs: dict[str, dict[int, dict[str, Any]]], info: dict[str, Any]) -> str:
+    """The machine's load at the ends of the episodes: a busy machine moves wall time much more than CPU time."""
+    loads = [run["load"] for by_seed in runs.values() for run in by_seed.values()]
+    return f"  machine load (1 min) at the episodes' ends: {min(loads):.1f}-{max(loads):.1f} on {info['cores']} cores"
 
 
 def _resco_command(args: argparse.Namespace) -> int:
@@ -622,10 +633,13 @@ def _resco_command(args: argparse.Namespace) -> int:
     print(f"  the peer: {f['peer']}")
     for name, sc in f["scenarios"].items():
         print(f"resco:{name} ({sc['controllers']} lights, a decision every {sc['decision_s']:g} s):")
-        for line in bench_seeds.episode_table({"hils": sc["sides"]["hils"], "sumo-rl": sc["sides"]["sumo_rl"]},
-                                              per_controller=True):
+        sides = sc["sides"]
+        for line in bench_seeds.episode_table({"hils": sides["hils"], "hils, SUMO worker": sides["hils_worker"],
+                                               "sumo-rl": sides["sumo_rl"]}, per_controller=True):
             print(line)
         print(bench_seeds.ratio_line("hils / sumo-rl", sc["hils_to_sumo_rl"]) + " (goal: wall <= 1)")
+        print(bench_seeds.ratio_line("hils, SUMO worker / sumo-rl", sc["hils_worker_to_sumo_rl"]))
+        print(_loads(sc["runs"], info))
     _write_figures(folder / "resco.json", {"machine": info, "resco": f})
     return 0
 

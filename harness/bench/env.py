@@ -20,13 +20,14 @@ sumo-rl is the `bench` extra (`pip install 'hils[bench]'`).
 
 from __future__ import annotations
 
+import os
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from functools import partial
 from importlib import resources
 from typing import Any
 
-from harness.bench.seeds import alternate, compare_episodes, episode_figures, time_sumo_steps
+from harness.bench.seeds import alternate, compare_episodes, episode_figures, time_sumo_steps, worker_usage
 
 EPISODE_S = 3600.0
 SUMO_STEP = 0.25
@@ -34,22 +35,25 @@ DECISION_S = 10.0
 TIMINGS = ("yellow", "min_green", "max_green")
 
 
-def hils_episode(seed: int, duration: float = EPISODE_S, all_red: bool = True) -> dict[str, Any]:
+def hils_episode(seed: int, duration: float = EPISODE_S, all_red: bool = True, sumo_worker: bool = False
+                 ) -> dict[str, Any]:
     """One episode of `hils/Intersection-v1` (selection) with a random policy. ``all_red=False``: the shipped config
-    with no red clearance, the clearances sumo-rl gives (a yellow, no all-red)."""
+    with no red clearance, the clearances sumo-rl gives (a yellow, no all-red). ``sumo_worker``: SUMO in a worker
+    process (both processes' CPU counted) instead of the environment's (its default)."""
     import gymnasium as gym
 
     import hils.envs  # noqa: F401  (registers the environment)
 
     sumo_s = time_sumo_steps()
     env = gym.make("hils/Intersection-v1", action_type="selection", sumo_step=SUMO_STEP,
-                   control_interval=DECISION_S, episode_length=duration,
+                   control_interval=DECISION_S, episode_length=duration, sumo_worker=sumo_worker,
                    **({} if all_red else {"config": without_red_clearance()}))
-    steps, wall, cpu = _random_episode(env, seed)
+    worker = env.unwrapped.testbed.sumo_process
+    steps, wall, cpu, (worker_cpu, worker_sumo) = _random_episode(env, seed, lambda: worker_usage(worker))
     traffic = env.unwrapped.testbed.traffic
     env.close()
-    return {"steps": steps, "wall_s": wall, "cpu_s": cpu, "sumo_s": sumo_s[0], "inserted": traffic.departed,
-            "arrived": traffic.arrived}
+    return {"steps": steps, "wall_s": wall, "cpu_s": cpu + worker_cpu, "sumo_s": sumo_s[0] + worker_sumo,
+            "inserted": traffic.departed, "arrived": traffic.arrived, "load": os.getloadavg()[0]}
 
 
 def sumo_rl_episode(seed: int, duration: float = EPISODE_S, converted: bool = True) -> dict[str, Any]:
@@ -69,13 +73,13 @@ def sumo_rl_episode(seed: int, duration: float = EPISODE_S, converted: bool = Tr
                                   additional_sumo_cmd=f"--step-length {SUMO_STEP}")
     # Set after construction: its constructor compares the yellow, in steps, with delta_time, in seconds.
     env.yellow_time, env.min_green, env.max_green = sumo_rl_timing() if converted else _config_timing()
-    steps, wall, cpu = _random_episode(env, seed)
+    steps, wall, cpu, _ = _random_episode(env, seed)
     stats = env.sumo.simulation
     inserted = int(stats.getParameter("", "stats.vehicles.inserted"))
     running = int(stats.getParameter("", "stats.vehicles.running"))
     env.close()
     return {"steps": steps, "wall_s": wall, "cpu_s": cpu, "sumo_s": sumo_s[0], "inserted": inserted,
-            "arrived": inserted - running}
+            "arrived": inserted - running, "load": os.getloadavg()[0]}
 
 
 def without_red_clearance() -> Any:
@@ -104,22 +108,27 @@ def _config_timing() -> tuple[float, float, float]:
     return phase.yellow, phase.min_green, phase.max_green
 
 
-def _random_episode(env: Any, seed: int) -> tuple[int, float, float]:
+def _random_episode(env: Any, seed: int, worker: Callable[[], tuple[float, float]] = lambda: (0.0, 0.0)
+                    ) -> tuple[int, float, float, tuple[float, float]]:
     """Reset with ``seed`` and step a seeded random policy to the episode's end: (steps, wall seconds, CPU seconds of
-    the process)."""
+    the process, and what ``worker()`` moved by meanwhile: a SUMO worker's CPU and steps, :func:`worker_usage`)."""
     env.reset(seed=seed)
     env.action_space.seed(seed)
     steps, done, started, cpu = 0, False, time.perf_counter(), time.process_time()
+    before = worker()
     while not done:
         _, _, terminated, truncated, _ = env.step(env.action_space.sample())
         steps, done = steps + 1, terminated or truncated
-    return steps, time.perf_counter() - started, time.process_time() - cpu
+    after = worker()
+    return (steps, time.perf_counter() - started, time.process_time() - cpu,
+            (after[0] - before[0], after[1] - before[1]))
 
 
 def measure_env(seeds: Sequence[int], duration: float = EPISODE_S, *, progress: bool = True) -> dict[str, Any]:
     """One episode of each side per seed, alternately, each in a fresh process (:mod:`harness.bench.seeds`): every
     run, each side's figures over the seeds, and hils' per-seed ratios to each sumo-rl side."""
     runs = alternate(seeds, {"hils": partial(hils_episode, duration=duration),
+                             "hils_worker": partial(hils_episode, duration=duration, sumo_worker=True),
                              "hils_no_all_red": partial(hils_episode, duration=duration, all_red=False),
                              "sumo_rl": partial(sumo_rl_episode, duration=duration),
                              "sumo_rl_unconverted": partial(sumo_rl_episode, duration=duration, converted=False)},
@@ -130,5 +139,6 @@ def measure_env(seeds: Sequence[int], duration: float = EPISODE_S, *, progress: 
             "sumo_rl_timing_steps": dict(zip(TIMINGS, sumo_rl_timing(), strict=True)),
             "runs": runs, "sides": sides,
             "hils_to_sumo_rl": compare_episodes(sides["hils"], sides["sumo_rl"]),
+            "hils_worker_to_sumo_rl": compare_episodes(sides["hils_worker"], sides["sumo_rl"]),
             "same_clearances": compare_episodes(sides["hils_no_all_red"], sides["sumo_rl"]),
             "hils_to_sumo_rl_unconverted": compare_episodes(sides["hils"], sides["sumo_rl_unconverted"])}

@@ -2,12 +2,13 @@
 
 A run's controllers are driven by their inputs (control SETs, detectors) and by the clock (steps, quiet time
 skipped). ``record`` runs RESCO grid4x4 (max-pressure, SUMO, seed 0) and writes every call the run made on each
-controller, in order; ``count`` replays them on fresh controllers (with their data loggers, as the run had them),
-in a process of its own under ``valgrind --tool=callgrind`` twice, once making the calls and once only reading
-them, so that the difference is the model's own work: start-up, SUMO and the middleware counted out. Instructions,
-unlike seconds, do not change with what else the machine is doing. The recording is the tree's own (a faster
-model may be asked fewer times), the traffic the same: a run whose outputs are identical
-(:mod:`harness.bench.model_outputs`).
+controller from outside, in order (a call the controller makes on itself inside another, a step's own skip of a
+quiet tick, the replay makes again by making the outer one); ``count`` replays them on fresh controllers (with
+their data loggers, as the run had them), in a process of its own under ``valgrind --tool=callgrind`` twice, once
+making the calls and once only reading them, so that the difference is the model's own work: start-up, SUMO and
+the middleware counted out. Instructions, unlike seconds, do not change with what else the machine is doing. The
+recording is the tree's own (a faster model may be asked fewer times), the traffic the same: a run whose outputs
+are identical (:mod:`harness.bench.model_outputs`).
 
 Usage (``PYTHONHASHSEED=0``; ``PYTHONPATH`` picks the tree measured)::
 
@@ -47,13 +48,20 @@ def record(out: Path, duration: float, scenario: str) -> None:
         made_units.append(self)
         made(self, config, **kw)
 
+    inside: set[int] = set()  # the controllers in one of these calls now: what it calls itself is not recorded
+
     def wrap(name: str):
         method = getattr(Controller, name)
 
         def recorded(self, *args):
-            if id(self) in units:
-                calls.append((units[id(self)], name, args))
-            return method(self, *args)
+            if id(self) not in units or id(self) in inside:
+                return method(self, *args)  # a call the replay makes again by making the outer one
+            calls.append((units[id(self)], name, args))
+            inside.add(id(self))
+            try:
+                return method(self, *args)
+            finally:
+                inside.discard(id(self))
         return recorded
 
     Controller.__init__ = init

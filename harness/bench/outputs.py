@@ -6,7 +6,8 @@ fresh process, and writes their outputs under DIR with ``manifest.json``: every 
 the wall clock stamps (an event record's ``wall_ns``; the summary's wall time and internal latencies,
 :mod:`tests.hils.run.same_seed`'s rule; a fault report's wall seconds; SUMO's date in its outputs' header) and
 where the tree and the outputs lie. ``python harness/bench/outputs.py compare A B``
-says how many outputs the two manifests hold and names every one that differs or is missing from either.
+says how many outputs the two manifests hold and names every one that differs or is missing from either (the paths of
+the Python environment it runs in taken out too: both sides are written by one).
 
 It is run by path, not as a module, so that it runs the code of a tree that does not hold it.
 
@@ -129,7 +130,9 @@ def write(out: Path, tree: Path) -> int:
 def digests(out: Path) -> dict[str, str]:
     """Every output's SHA-256 (by its path under ``out``), written to ``out/manifest.json`` too."""
     tree = (out / TREE_FILE).read_text(encoding="utf-8")
-    manifest = {str(p.relative_to(out)): _digest(p, {tree: "TREE", str(out): "OUT"}) for p in sorted(out.rglob("*"))
+    # the environment's packages (RESCO's networks among them) first: it may lie inside a tree, and both sides ran it
+    places = {sys.prefix: "PYTHON", tree: "TREE", str(out): "OUT"}
+    manifest = {str(p.relative_to(out)): _digest(p, places) for p in sorted(out.rglob("*"))
                 if p.is_file() and p.name not in ("manifest.json", TREE_FILE)}
     (out / "manifest.json").write_text(json.dumps(manifest, indent=1, sort_keys=True), encoding="utf-8")
     return manifest

@@ -141,6 +141,13 @@ def time_sumo_steps() -> list[float]:
     return total
 
 
+def worker_usage(worker: Any) -> tuple[float, float]:
+    """A hils environment's SUMO worker (:class:`hils.sim.worker.SumoProcess`, or None when SUMO steps in the
+    environment's process): its CPU seconds so far and the seconds its SUMO steps took. An episode's CPU time is both
+    processes', its SUMO part the worker's steps (:func:`time_sumo_steps` times those of this process)."""
+    return worker.usage() if worker is not None else (0.0, 0.0)
+
+
 #: What :func:`compare_episodes` compares, and the figure of :func:`episode_figures` each is the ratio of (the CPU
 #: time where both sides measured it).
 COMPARED = {"wall": "wall_per_sim_hour_s", "cpu": "cpu_per_sim_hour_s", "sumo": "sumo_per_sim_hour_s",

@@ -39,9 +39,17 @@ the log's own events (Indiana enumerations) and says which values it had to gues
 - **detectors**: a detector calls the phase whose call registrations (43) its actuations (82) bring most often, at
   the same tick or the next, when they do for at least a tenth of them; the others are logged but call nothing
   (phase 0, as a count station). Push buttons likewise with pedestrian calls (90 with 45). Numbers past the
-  emulator's 64 are said and left out;
-- **overlaps**: an overlap that begins green (61) with phases (1, the same tick, nine times in ten) includes them
-  (a normal overlap); overlaps past P (16) are said and left out;
+  emulator's (vehicle detectors 1-128, push buttons 1-255) are said and left out. A detector that calls nothing on
+  its tick but whose actuations are followed by one phase's call the same time later has that detector delay
+  (:func:`_delays`); one whose going off (81) is followed by its phase's call dropping (44) the same time later, that
+  phase's last detector to go, holds its call that long: an extension when seen on the phase's green, a carryover when
+  seen off it (:func:`_holds`);
+- **overlaps**: an overlap that begins green (61) with phases (1, the same tick or the next: the fewest that together
+  come with nine in ten of its greens, each with a tenth) includes them, or, failing that, one same time after them
+  (a delayed green of that time); one that never logs a yellow (63) is a transit bar (NTCIP 1202 v03 transit-2),
+  else a normal overlap; one that never begins green but goes dark (66) as phases begin green and yellow (63) with
+  their yellow is a normal overlap of them, its green shown by their own outputs (:func:`dark_at_green`; replays
+  count its 66 as the emulator's 61, a declared logging variant); overlaps past P (16) are said and left out;
 - **recalls and dual entry** (:func:`_uncalled`, :func:`_extenders`, :func:`_dual_entries`): a phase served with no
   call the log registers (43), where the log registers calls of others or has no detector events (pretimed), or
   whose call registers as its own yellow begins (an Econolite's recall), is recalled: max recall when its greens end
@@ -69,7 +77,7 @@ service, no phase number left for a ring's group. Reading the file is :mod:`harn
 
 What the log does not show is guessed and said: a value a phase never showed (its event never logged; the
 intersection's minimum and maximum for a phase that shows none), the offset reference when no split end is placed,
-detector delay and extension (the config has no detector delay), max 2, red revert, overlaps and dynamic omits.
+the timers of detectors the log shows too few of, max 2, red revert, overlaps and dynamic omits.
 """
 
 from __future__ import annotations
@@ -79,7 +87,7 @@ import itertools
 import json
 import math
 from collections import Counter, defaultdict
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime, timedelta
 from typing import Any
@@ -94,15 +102,20 @@ TICK = timedelta(milliseconds=100)
 CALL_SHARE = 0.10  # a detector calls a phase when at least this share of its actuations registers the call
 LOCAL_ZERO = 5  # event 150's parameter at the local zero
 PASSAGE_SEEN = 3  # a phase's own most frequent gap counts as its passage when seen this often
+_INPUTS = frozenset({E.DETECTOR_ON, E.DETECTOR_OFF, E.PED_DETECTOR_ON, E.PED_DETECTOR_OFF})
 DELAY_SHARE = 0.3  # a detector's actuations followed by one phase's call the same time later this often: a delay
 #: The longest detector delay looked for (NTCIP 1202 vehicleDetectorDelay holds 0-255.0 s, "the period a detector
 #: actuation ... shall be delayed when the phase is not Green"; the longer, the likelier a chance coincidence).
 MAX_DELAY = timedelta(seconds=25.5)
 RECALL_SHARE = 0.9  # a phase whose call registers as its yellow begins this often is recalled
+REDUCTION_SEEN = 5  # gaps between the minimum gap and the passage, on one line, that show gap reduction
+REDUCTION_FIT = 0.3  # s a gap of the reduction may lie off its line
+YIELD_SEEN = 3  # a coordinated phase's greens ending at one place this often: its yield point (the first such)
 FORCE_OFF_SHARE = 0.2  # a phase's force-offs mark where its split ends when they end at least this share of its greens
-#: What the emulator's config holds (:mod:`hils.protocol.config`): phases 1-255, detectors and push buttons 1-64,
-#: overlaps A-P (1-16), cycles 30-255 s.
+#: What the emulator's config holds (:mod:`hils.protocol.config`): phases 1-255, vehicle detectors 1-128, push
+#: buttons 1-255, overlaps A-P (1-16), cycles 30-255 s.
 PHASES, DETECTORS = config_mod.PHASE_NUMBERS[-1], config_mod.DETECTOR_NUMBERS[-1]
+PUSH_BUTTONS = config_mod.PED_DETECTOR_NUMBERS[-1]
 OVERLAPS, CYCLES = config_mod.OVERLAP_NUMBERS[-1], (config_mod.CYCLE_SECONDS[0], config_mod.CYCLE_SECONDS[-1])
 #: The events whose parameter names what the config is written from, and what they name.
 NAMED = {E.PHASE_BEGIN_GREEN: "a phase", E.PHASE_BEGIN_YELLOW: "a phase",
@@ -226,25 +239,39 @@ def infer(rows: Sequence[Row], name: str = "field controller") -> Inferred:
     """The config of the controller whose log ``rows`` are (see the module's header for how)."""
     _check_numbers(rows)
     out = Inferred("")
-    greens = _greens(rows)
+    # What the controller did, without the inputs (detector and push-button events, most of a busy log): what reads
+    # only that scans it, a day's log in a fraction of the time.
+    events = [r for r in rows if r.code not in _INPUTS]
+    greens = _greens(events)
     phases = sorted(greens)
     if len(phases) < 2:
         raise FieldLogError(f"the log shows {len(phases)} phase(s) served (begin green, event 1, then begin yellow, "
                             "event 8); a config needs at least two")
     out.read.append(f"phases served: {', '.join(map(str, phases))}")
-    structure = _structure(phases, greens, _spans(rows, greens), out, _unbarred(rows))
-    shared_min = _mode(m for p in phases for m in _minimums(rows, p))
-    timing = {p: _timing(rows, p, greens[p], out, shared_min) for p in phases}
-    detectors = _in_config(_detector_phases(rows, E.DETECTOR_ON, E.PHASE_CALL_REGISTERED, phases), "detector", out)
-    pushes = _in_config(_detector_phases(rows, E.PED_DETECTOR_ON, E.PED_CALL_REGISTERED, phases), "push button", out)
+    structure = _structure(phases, greens, _spans(events, greens), out, _unbarred(events))
+    shared_min = _mode(m for p in phases for m in _minimums(events, p))
+    timing = {p: _timing(events, p, greens[p], out, shared_min) for p in phases}
+    detectors = _in_config(_detector_phases(rows, E.DETECTOR_ON, E.PHASE_CALL_REGISTERED, phases), "detector",
+                           DETECTORS, out)
+    pushes = _in_config(_detector_phases(rows, E.PED_DETECTOR_ON, E.PED_CALL_REGISTERED, phases), "push button",
+                        PUSH_BUTTONS, out)
     recalled = _uncalled(rows, phases, structure)
     _extenders(rows, detectors, recalled, out)
-    _delays(rows, detectors, phases, out)
-    gaps = {p: _gaps(rows, p, [d for d, q in detectors.items() if q == p]) for p in phases}
+    timers = _delays(rows, detectors, greens, out)
+    for d, held in _holds(rows, detectors, greens, out).items():
+        timers.setdefault(d, {}).update(held)
+    held = {d: timedelta(seconds=max(t.get("extend", 0.0), t.get("carryover", 0.0))) for d, t in timers.items()}
+    samples = {p: _gaps(rows, p, [d for d, q in detectors.items() if q == p], held) for p in phases}
+    gaps = {p: [g for _, g in mine] for p, mine in samples.items()}
     shared = _mode(g for values in gaps.values() for g in values)
     for p in phases:
         counts = Counter(gaps[p])
-        if counts and counts.most_common(1)[0][1] >= PASSAGE_SEEN:
+        if (reduced := _reduction(samples[p])) is not None:
+            timing[p] |= reduced
+            out.read.append(f"phase {p}: gap reduction, passage {reduced['passage']:g} s reduced after "
+                            f"{reduced['time_before_reduction']} s over {reduced['time_to_reduce']} s to "
+                            f"{reduced['min_gap']:g} s (its gap-outs' gaps fall with the green's time)")
+        elif counts and counts.most_common(1)[0][1] >= PASSAGE_SEEN:
             timing[p]["passage"] = _mode(gaps[p])
         else:
             timing[p]["passage"] = shared if shared is not None else 2.0
@@ -252,6 +279,8 @@ def infer(rows: Sequence[Row], name: str = "field controller") -> Inferred:
                                f"no gap of its own seen {PASSAGE_SEEN} times)")
         low, high = config_mod.phase_time_range("passage")
         timing[p]["passage"] = _within(p, "passage", timing[p]["passage"], low, min(high, timing[p]["max_green"]), out)
+        if "min_gap" in timing[p]:
+            timing[p]["min_gap"] = min(timing[p]["min_gap"], timing[p]["passage"])
     maxima = [t["maxed"] for t in timing.values() if "maxed" in t]
     if maxima:  # a phase that never maxed out has the intersection's maximum, if its longest green is shorter
         shared_max = math.ceil(max(maxima, key=maxima.count) - 1e-9)
@@ -267,27 +296,28 @@ def infer(rows: Sequence[Row], name: str = "field controller") -> Inferred:
                     + (f"; logged only: {', '.join(map(str, logged))}" if logged else ""))
     if any(pushes.values()):
         out.read.append("push buttons: " + ", ".join(f"{d}->{q}" for d, q in sorted(pushes.items()) if q))
-    out.guessed.append("every calling detector also extends its phase's green (detector delay and extension are not "
-                       "in the log: its detector events come after them)")
-    coordination = _coordination(rows, structure, timing, greens, out)
+    out.guessed.append("every calling detector also extends its phase's green; no detector delay, extension or "
+                       "carryover but as said")
+    day0 = datetime.combine(rows[0].time.date(), datetime.min.time())
+    coordination = _coordination(events, day0, structure, timing, greens, out)
     coordinated = set(coordination["coord"]) if coordination else set()
     for p in recalled - coordinated:
-        _recall(rows, p, timing[p], out)
-    _backings(rows, greens, structure, timing, out)
-    _recycles(rows, greens, timing, out)
-    duals = _dual_entries(rows, structure, recalled)
+        _recall(events, p, timing[p], out)
+    _backings(events, greens, structure, timing, out)
+    _recycles(events, greens, timing, out)
+    duals = _dual_entries(events, structure, recalled)
     for p in duals:
         timing[p]["dual_entry"] = True
     if duals:
         out.read.append(f"dual entry: phase(s) {', '.join(map(str, duals))} (began green uncalled beside the other "
                         "ring's phase as the rings crossed a barrier, at least twice)")
-    overlaps = _overlaps(rows, phases, out)
+    overlaps = _overlaps(events, phases, out)
     out.guessed.append("recalls and dual entry only as said, no red revert or max 2 (the log shows the service, not "
                        "the settings); "
                        "dynamic omits (46-49 logged by the field controller's own logic) are not modelled")
     start = rows[0].time.replace(microsecond=rows[0].time.microsecond // 100_000 * 100_000)
-    startup = _startup(rows, greens, structure, out)
-    out.toml = _toml(name, structure, timing, detectors, pushes, coordination, overlaps, startup, start)
+    startup = _startup(events, greens, structure, out)
+    out.toml = _toml(name, structure, timing, detectors, timers, pushes, coordination, overlaps, startup, start)
     return out
 
 
@@ -332,32 +362,101 @@ def _extenders(rows: Sequence[Row], detectors: dict[int, int], recalled: set[int
                                f"{best[0]} gaps out the same time after it goes off {best[1]} times)")
 
 
-def _delays(rows: Sequence[Row], detectors: Mapping[int, int], phases: Sequence[int], out: Inferred) -> None:
-    """A detector that calls nothing on its tick but whose actuations are followed by a phase's call registration
-    (43) the same time later, for at least :data:`DELAY_SHARE` of them and :data:`PASSAGE_SEEN` times, has a
-    detector delay. The config has none (:mod:`hils.protocol.config`), so it is said and not applied: the detector
-    is left calling nothing."""
+def _delays(rows: Sequence[Row], detectors: dict[int, int], greens: Mapping[int, list[tuple[datetime, datetime]]],
+            out: Inferred) -> dict[int, dict[str, float]]:
+    """A detector whose actuations off its phase's green that call nothing on their tick or the next are followed,
+    while they last, by that phase's call registration (43) the same time later, for at least :data:`PASSAGE_SEEN`
+    of them, for :data:`DELAY_SHARE` of those that lasted that long (a shorter one calls nothing) and twice as often
+    as any other time, calls that phase with that detector delay (NTCIP 1202 vehicleDetectorDelay, "the period a
+    detector actuation ... shall be delayed when the phase is not Green"). The phase is the detector's own, or for
+    one calling nothing on its tick the phase the delay fits best. Returns detector -> ``{"delay": s}``."""
     calls: dict[int, list[datetime]] = defaultdict(list)
+    actuations: dict[int, list[tuple[datetime, timedelta]]] = defaultdict(list)
+    began: dict[int, datetime] = {}
     for r in rows:
         if r.code == E.PHASE_CALL_REGISTERED:
             calls[r.parameter].append(r.time)
-    for d in sorted(d for d, q in detectors.items() if q == 0):
-        ons = [r.time for r in rows if r.code == E.DETECTOR_ON and r.parameter == d]
-        best: tuple[int, float, int] | None = None
-        for p in phases:
+        elif r.code == E.DETECTOR_ON and r.parameter in detectors:
+            began[r.parameter] = r.time
+        elif r.code == E.DETECTOR_OFF and r.parameter in began:
+            t = began.pop(r.parameter)
+            actuations[r.parameter].append((t, r.time - t))
+    found: dict[int, dict[str, float]] = {}
+    for d in sorted(actuations):
+        best: tuple[int, float, int, int] | None = None
+        for p in [detectors[d]] if detectors[d] else list(calls):
+            # Actuations off the phase's green that called nothing on their tick or the next.
+            red = [(t, held) for t, held in actuations[d] if not _green_at(greens.get(p, ()), t)
+                   and bisect.bisect_right(calls[p], t + TICK) == bisect.bisect_left(calls[p], t)]
             lags: Counter[float] = Counter()
-            for t in ons:
+            for t, held in red:
                 k = bisect.bisect_right(calls[p], t + TICK)
-                if k < len(calls[p]) and calls[p][k] - t <= MAX_DELAY:
+                if k < len(calls[p]) and calls[p][k] - t <= min(held + TICK, MAX_DELAY):  # while the vehicle is there
                     lags[round((calls[p][k] - t).total_seconds(), 1)] += 1
-            if lags:
-                lag, n = lags.most_common(1)[0]
-                if n >= max(PASSAGE_SEEN, DELAY_SHARE * len(ons)) and (best is None or n > best[2]):
-                    best = (p, lag, n)
+            if not lags:
+                continue
+            (lag, n), *others = lags.most_common(2)
+            lasted = sum(1 for _, held in red if held.total_seconds() >= lag - 0.05)
+            clear = not others or n >= 2 * others[0][1]  # one lag, not a spread of them (a chance of other calls)
+            if clear and n >= max(PASSAGE_SEEN, DELAY_SHARE * lasted) and (best is None or n > best[2]):
+                best = (p, lag, n, lasted)
         if best is not None:
-            p, lag, n = best
-            out.guessed.append(f"detector {d}: calls phase {p} {lag:g} s after its actuation ({n} of {len(ons)}): a "
-                               "detector delay, not applied (the config has no detector delay), so it calls nothing")
+            p, lag, n, lasted = best
+            detectors[d] = p
+            found[d] = {"delay": lag}
+            out.guessed.append(f"detector {d}: calls phase {p} {lag:g} s after its actuation, off that phase's green "
+                               f"({n} of the {lasted} actuations that lasted so long): detector delay {lag:g} s")
+    return found
+
+
+def _green_at(greens: Sequence[tuple[datetime, datetime]], t: datetime) -> bool:
+    """``t`` falls in one of a phase's ``greens`` (sorted)."""
+    k = bisect.bisect_right(greens, (t, datetime.max)) - 1
+    return k >= 0 and greens[k][0] <= t < greens[k][1]
+
+
+def _holds(rows: Sequence[Row], detectors: Mapping[int, int], greens: Mapping[int, list[tuple[datetime, datetime]]],
+           out: Inferred) -> dict[int, dict[str, float]]:
+    """Each calling detector whose going off (81), the last of its phase's detectors on, is followed by its phase's
+    call dropping (44) the same time later (0.2 s or more: a call dropped on the tick or the next is the actuation's
+    own), at least :data:`PASSAGE_SEEN` times and for :data:`DELAY_SHARE` of such offs: on the phase's green an
+    extension (vehicleDetectorExtend, "extended from the point of termination, when the phase is Green"), off it a
+    carryover; one time seen both ways is a carryover. Returns detector -> its timers."""
+    mine: dict[int, set[int]] = defaultdict(set)
+    for d, p in detectors.items():
+        if p:
+            mine[p].add(d)
+    lags: dict[tuple[int, bool], Counter[float]] = defaultdict(Counter)
+    offs: Counter[tuple[int, bool]] = Counter()
+    on: set[int] = set()
+    pending: dict[int, tuple[int, datetime, bool]] = {}  # phase -> its last detector off, when, whether on green
+    for r in rows:
+        if r.code in (E.DETECTOR_ON, E.DETECTOR_OFF) and detectors.get(r.parameter):
+            p = detectors[r.parameter]
+            (on.add if r.code == E.DETECTOR_ON else on.discard)(r.parameter)
+            pending.pop(p, None)
+            if r.code == E.DETECTOR_OFF and not on & mine[p]:
+                green = _green_at(greens.get(p, ()), r.time)
+                pending[p] = (r.parameter, r.time, green)
+                offs[(r.parameter, green)] += 1
+        elif r.code == E.PHASE_CALL_DROPPED and r.parameter in pending:
+            d, t, green = pending.pop(r.parameter)
+            if r.time - t <= MAX_DELAY:
+                lags[(d, green)][round((r.time - t).total_seconds(), 1)] += 1
+    found: dict[int, dict[str, float]] = {}
+    for (d, green), counts in sorted(lags.items()):
+        lag, n = counts.most_common(1)[0]
+        if lag < 0.2 or n < max(PASSAGE_SEEN, DELAY_SHARE * offs[(d, green)]):
+            continue
+        timer = "extend" if green else "carryover"
+        found.setdefault(d, {})[timer] = lag
+        out.guessed.append(f"detector {d}: its phase {detectors[d]}'s call drops {lag:g} s after it goes off "
+                           f"{'on' if green else 'off'} that phase's green ({n} of {offs[(d, green)]}): {timer} "
+                           f"{lag:g} s")
+    for timers in found.values():
+        if timers.get("extend") == timers.get("carryover"):
+            del timers["extend"]  # the call is held as long whatever the phase shows: a carryover alone
+    return found
 
 
 def _backings(rows: Sequence[Row], greens: Mapping[int, list[tuple[datetime, datetime]]], structure: Structure,
@@ -519,27 +618,30 @@ def _structure(phases: Sequence[int], greens: Mapping[int, list[tuple[datetime, 
     order = {r: [_service_order([p for p in group if ring_of[p] == r], _successions(starts, r, ring_of, group_of))
                  for group in ordered] for r in (1, 2)}
     structure = Structure(ordered, order)
-    used = set(phases)
     for r in (1, 2):
         for g, mine in enumerate(order[r]):
-            if mine:
-                continue
-            twin = order[3 - r][g][0]
-            base = 0 if r == 1 else 4
-            # NEMA's numbering first: in ring 1 the second barrier group's through is 4, its left 3, and so on
-            free = next((n for n in (base + 2 * g + 2, base + 2 * g + 1, *range(1, PHASES + 1))
-                         if n not in used and n <= PHASES), None)
-            if free is None:
-                raise FieldLogError(f"the log's phases use every phase number 1-{PHASES}: none is left for ring {r} "
-                                    f"beside phase {twin}, where NTCIP's split table needs one; allowed: a log of "
-                                    "fewer phases")
-            used.add(free)
-            mine.append(free)
-            structure.phantom[free] = twin
-            out.guessed.append(f"phase {free}: not in the log; added to ring {r} beside {twin} (NTCIP's split table "
-                               "needs a phase of each ring in each barrier group; nothing calls it, so it is skipped)")
+            if not mine:
+                free = _phantom(structure, r, g, order[3 - r][g][0])
+                out.guessed.append(f"phase {free}: not in the log; added to ring {r} beside {structure.phantom[free]} "
+                                   "(NTCIP's split table needs a phase of each ring in each barrier group; nothing "
+                                   "calls it, so it is skipped)")
     out.read.append(f"rings: {structure.ring(1)} and {structure.ring(2)}; barrier groups: {structure.barriers}")
     return structure
+
+
+def _phantom(structure: Structure, r: int, g: int, twin: int) -> int:
+    """Add to ring ``r``'s barrier group ``g`` (last) a phase the log never shows, timed as ``twin``: its number."""
+    used = set(structure.ring(1) + structure.ring(2))
+    base = 0 if r == 1 else 4
+    # NEMA's numbering first: in ring 1 the second barrier group's through is 4, its left 3, and so on
+    free = next((n for n in (base + 2 * g + 2, base + 2 * g + 1, *range(1, PHASES + 1))
+                 if n not in used and n <= PHASES), None)
+    if free is None:
+        raise FieldLogError(f"the log's phases use every phase number 1-{PHASES}: none is left for ring {r} beside "
+                            f"phase {twin}, where NTCIP's split table needs one; allowed: a log of fewer phases")
+    structure.order[r][g].append(free)
+    structure.phantom[free] = twin
+    return free
 
 
 def _concurrent(spans: Mapping[int, Sequence[tuple[datetime, datetime]]]) -> set[frozenset[int]]:
@@ -682,18 +784,21 @@ def _detector_phases(rows: Sequence[Row], on: int, call: int, phases: Sequence[i
     return out
 
 
-def _in_config(detectors: Mapping[int, int], kind: str, out: Inferred) -> dict[int, int]:
-    """The detectors (or push buttons) the emulator's config holds; the others are said."""
-    beyond = sorted(d for d in detectors if d > DETECTORS)
+def _in_config(detectors: Mapping[int, int], kind: str, top: int, out: Inferred) -> dict[int, int]:
+    """The detectors (or push buttons) the emulator's config holds (numbered 1-``top``); the others are said."""
+    beyond = sorted(d for d in detectors if d > top)
     if beyond:
         out.guessed.append(f"{kind}s {', '.join(map(str, beyond))}: left out (the emulator's are numbered "
-                           f"1-{DETECTORS}); their inputs are not replayed")
-    return {d: q for d, q in detectors.items() if d <= DETECTORS}
+                           f"1-{top}); their inputs are not replayed")
+    return {d: q for d, q in detectors.items() if d <= top}
 
 
-def _gaps(rows: Sequence[Row], p: int, detectors: Sequence[int]) -> list[float]:
-    """Each time from the last of the phase's detectors going off, during the green, to its gap-out (a gap-out logged
-    when the green ends may come later than the gap: at a barrier, the green waits for the other ring)."""
+def _gaps(rows: Sequence[Row], p: int, detectors: Sequence[int],
+          held: Mapping[int, timedelta]) -> list[tuple[float, float]]:
+    """Each gap-out's time into its green and its gap: the time from the last of the phase's detectors going off,
+    during the green, to the gap-out (a gap-out logged when the green ends may come later than the gap: at a barrier,
+    the green waits for the other ring); a detector whose call is ``held`` after it goes off (its extension or
+    carryover) goes off that much later."""
     if not detectors:
         return []
     mine, on, gaps = set(detectors), set(), []
@@ -703,17 +808,43 @@ def _gaps(rows: Sequence[Row], p: int, detectors: Sequence[int]) -> list[float]:
         if r.parameter in mine and r.code in (E.DETECTOR_ON, E.DETECTOR_OFF):
             (on.add if r.code == E.DETECTOR_ON else on.discard)(r.parameter)
             if r.code == E.DETECTOR_OFF and not on:
-                last_off = r.time
+                last_off = r.time + held.get(r.parameter, timedelta())
         elif r.code == E.PHASE_BEGIN_GREEN and r.parameter == p:
             began = r.time
         elif (r.code == E.PHASE_GAP_OUT and r.parameter == p and not on and last_off is not None
               and began is not None and last_off > began):  # an off before the green extended nothing
             # the off event is the first tick without the call; passage counts from the last tick with it
-            gaps.append(round((r.time - last_off + TICK).total_seconds(), 1))
+            gaps.append(((r.time - began).total_seconds(), round((r.time - last_off + TICK).total_seconds(), 1)))
     return gaps
 
 
-def _coordination(rows: Sequence[Row], structure: Structure, timing: Mapping[int, dict[str, Any]],
+def _reduction(samples: Sequence[tuple[float, float]]) -> dict[str, float] | None:
+    """Gap reduction (NTCIP 1202 phaseTimeBeforeReduction, phaseTimeToReduce, phaseMinimumGap) from a phase's gap-outs
+    (time into the green, gap), when their gaps fall with the green's time: the minimum gap is the most frequent gap,
+    the passage the largest seen :data:`PASSAGE_SEEN` times, and the gaps between them lie on one line (least squares,
+    at least :data:`REDUCTION_SEEN` of them, none more than :data:`REDUCTION_FIT` s off it) that reaches the passage
+    at the time before reduction (counted from the green's start: a conflicting call waits from then on in these
+    logs) and the minimum gap a time to reduce later. None when they do not."""
+    counts = Counter(g for _, g in samples)
+    least = _mode(counts.elements())
+    seen = [g for g, n in counts.items() if n >= PASSAGE_SEEN and g > least]
+    if least is None or not seen:
+        return None
+    passage = max(seen)
+    ramp = [(t, g) for t, g in samples if least < g < passage]
+    if len(ramp) < REDUCTION_SEEN:
+        return None
+    mean_t, mean_g = sum(t for t, _ in ramp) / len(ramp), sum(g for _, g in ramp) / len(ramp)
+    spread = sum((t - mean_t) ** 2 for t, _ in ramp)
+    slope = sum((t - mean_t) * (g - mean_g) for t, g in ramp) / spread if spread else 0.0
+    if slope >= 0 or any(abs(mean_g + slope * (t - mean_t) - g) > REDUCTION_FIT for t, g in ramp):
+        return None
+    before = mean_t + (passage - mean_g) / slope
+    return {"passage": passage, "time_before_reduction": min(255, max(0, round(before))),
+            "time_to_reduce": min(255, max(1, round((least - passage) / slope))), "min_gap": least}
+
+
+def _coordination(rows: Sequence[Row], day0: datetime, structure: Structure, timing: Mapping[int, dict[str, Any]],
                   greens: Mapping[int, list[tuple[datetime, datetime]]], out: Inferred) -> dict[str, Any] | None:
     zeros = sorted({r.time for r in rows if r.code == E.COORD_CYCLE_STATE_CHANGE and r.parameter == LOCAL_ZERO})
     if len(zeros) < 2:
@@ -726,7 +857,6 @@ def _coordination(rows: Sequence[Row], structure: Structure, timing: Mapping[int
         raise FieldLogError(f"local zeros (event 150, parameter 5) at {_when(a)} and {_when(b)}: {s:g} s apart, as "
                             f"most are, a cycle of {cycle} s; allowed: {CYCLES[0]}-{CYCLES[1]} s (NTCIP 1202 "
                             "patternCycleTime)")
-    day0 = datetime.combine(rows[0].time.date(), datetime.min.time())
     zero = _mode(round(_since_midnight(t, day0) % cycle, 1) for t in zeros)
     ringed = set(structure.ring(1) + structure.ring(2))
     yields = Counter(r.parameter for r in rows if r.code == E.COORD_YIELD_POINT and r.parameter in ringed)
@@ -751,6 +881,7 @@ def _coordination(rows: Sequence[Row], structure: Structure, timing: Mapping[int
                       if row.code == E.PHASE_FORCE_OFF and row.parameter == p]
         if p in greens and force_offs and len(force_offs) >= FORCE_OFF_SHARE * len(greens[p]):  # not a stray one
             at_end[p] = (_mode(force_offs) + timing[p]["yellow"] + timing[p]["red_clear"]) % cycle
+    _own_yield_points(rows, structure, coord, at_end, timing, day0, cycle, out)
     logged = {p: s for p, s in _logged_splits(rows, zeros).items() if p in greens}
     orders = {r: structure.ring(r) for r in (1, 2)}
     begin = _barrier_start(orders, logged, at_end, cycle)
@@ -772,6 +903,54 @@ def _coordination(rows: Sequence[Row], structure: Structure, timing: Mapping[int
                     f"{coord[1]}+{coord[2]}, splits " + ", ".join(f"{p}: {s}" for p, s in splits.items())
                     + (f" (as logged, events 134-149, for {', '.join(map(str, logged))})" if logged else ""))
     return {"cycle": cycle, "offset": offset, "coord": [coord[1], coord[2]], "splits": splits}
+
+
+def _own_yield_points(rows: Sequence[Row], structure: Structure, coord: Mapping[int, int], at_end: dict[int, float],
+                      timing: dict[int, dict[str, Any]], day0: datetime, cycle: int, out: Inferred) -> None:
+    """Each ring's coordinated phase ends its split at its own yield point: NTCIP 1202 splitTime is "the time in
+    seconds the splitPhase is allowed to receive (i.e. before a Force Off is applied)", the coordinated phase's as
+    any other's, ring by ring. A coordinated phase last of its ring in its barrier group, whose split end no force-off
+    places, would otherwise get the group's end; but where its greens end (begin yellow, 8) at one place of the cycle
+    again and again (:data:`YIELD_SEEN` times) before the group's end, which the other ring's last phase there puts
+    (the atspm sample: 2 ends with 6 at 6's force-off whenever 5 is not served, and with 5 otherwise), that is its
+    yield point (it never ends before it), and the rest of the group is a phase of its ring the log never shows
+    served. So the split table gets that phase, timed as the other ring's phase after its coordinated one, and
+    ``at_end`` the coordinated phase's end (its yield point plus its clearance)."""
+    for r in (1, 2):
+        c = coord[r]
+        g = structure.group_of(c)
+        other = structure.order[3 - r][g]
+        if c in at_end or structure.order[r][g][-1] != c or other[-1] not in at_end:
+            continue
+        point = _yield_point(rows, c, day0, cycle)
+        if point is None:
+            continue
+        end = (point + timing[c]["yellow"] + timing[c]["red_clear"]) % cycle
+        short = (at_end[other[-1]] - end) % cycle
+        if not 1 < short < cycle / 2:
+            continue
+        twin = other[other.index(coord[3 - r]) + 1] if coord[3 - r] in other[:-1] else other[-1]
+        free = _phantom(structure, r, g, twin)
+        timing[free] = {k: v for k, v in timing[twin].items() if k not in ("walk", "ped_clear")}
+        at_end[c] = end
+        out.read.append(f"coordinated phase {c}: its yield point at {point:g} s of the day modulo the cycle, where its "
+                        f"greens end when nothing holds them, {short:g} s before its barrier group's end; phase "
+                        f"{free} (not in the log, timed as {twin}) fills its ring's split there: ring {r} "
+                        f"{structure.ring(r)}, barrier groups {structure.barriers}")
+
+
+def _yield_point(rows: Sequence[Row], phase: int, day0: datetime, cycle: int) -> float | None:
+    """The first place of the cycle (seconds of the day modulo the cycle) where the phase's greens end at least
+    :data:`YIELD_SEEN` times, its greens' ends read as one arc of the cycle (from past the widest stretch without
+    one); None when no place repeats."""
+    ends = Counter(round(_since_midnight(r.time, day0) % cycle, 1) for r in rows
+                   if r.code == E.PHASE_BEGIN_YELLOW and r.parameter == phase)
+    places = sorted(ends)
+    if not places:
+        return None
+    widest = max(range(len(places)), key=lambda k: (places[k] - places[k - 1]) % cycle)
+    arc = places[widest:] + places[:widest]
+    return next((x for x in arc if ends[x] >= YIELD_SEEN), None)
 
 
 def _barrier_start(orders: Mapping[int, Sequence[int]], logged: Mapping[int, int], at_end: Mapping[int, float],
@@ -900,36 +1079,141 @@ def _fit(splits: dict[int, int], structure: Structure, cyclic: Mapping[int, Sequ
     return splits
 
 
-def _overlaps(rows: Sequence[Row], phases: Sequence[int], out: Inferred) -> dict[int, list[int]]:
-    """Normal overlaps: an overlap whose begin greens (61) come with the begin greens of phases (1, the same tick,
-    at least nine times in ten) includes those phases. An overlap that never begins green is not inferred."""
-    begins = defaultdict(list)
+@dataclass(frozen=True, slots=True)
+class InferredOverlap:
+    """An overlap as the log shows it: its included phases, its type and the delay of its green (s)."""
+
+    included: list[int]
+    kind: str
+    delay: float = 0.0
+
+
+def _overlaps(rows: Sequence[Row], phases: Sequence[int], out: Inferred) -> dict[int, InferredOverlap]:
+    """Overlaps and their type: an overlap includes the phases whose begin greens (1) its own (61) come with, on the
+    same tick or the next (a MaxTime logs some a tick later): the fewest that together come with nine in ten of
+    them, each with a tenth (an overlap of 2 and 6 begins green with whichever starts first). Failing that, the
+    phases whose begin greens come one same time before its own, 0.2-25.5 s, nine in ten times: a delayed green of
+    that time. One that ends its greens (64, 65) at least :data:`PASSAGE_SEEN` times and never logs a yellow (63) is
+    a transit bar (NTCIP 1202 v03 transit-2: green, flashing green, red), else a normal overlap. An overlap that
+    never begins green is inferred only when it is dark while its phases are green (:func:`dark_at_green`)."""
+    starts: dict[int, list[datetime]] = defaultdict(list)
+    greens: dict[int, list[datetime]] = defaultdict(list)
+    ended: Counter[int] = Counter()
+    yellowed: set[int] = set()
     for r in rows:
-        if r.code in (E.OVERLAP_BEGIN_GREEN, E.PHASE_BEGIN_GREEN):
-            begins[r.time].append(r)
-    starts: Counter[int] = Counter()
-    with_phase: Counter[tuple[int, int]] = Counter()
-    for same in begins.values():
-        for r in same:
-            if r.code == E.OVERLAP_BEGIN_GREEN:
-                starts[r.parameter] += 1
-                for q in same:
-                    if q.code == E.PHASE_BEGIN_GREEN:
-                        with_phase[(r.parameter, q.parameter)] += 1
-    overlaps = {o: [p for p in phases if with_phase[(o, p)] >= 0.9 * n] for o, n in starts.items()}
-    overlaps = {o: included for o, included in overlaps.items() if included}
+        if r.code == E.OVERLAP_BEGIN_GREEN:
+            starts[r.parameter].append(r.time)
+        elif r.code == E.PHASE_BEGIN_GREEN:
+            greens[r.parameter].append(r.time)
+        elif r.code in (E.OVERLAP_BEGIN_RED_CLEARANCE, E.OVERLAP_OFF):
+            ended[r.parameter] += 1
+        elif r.code == E.OVERLAP_BEGIN_YELLOW:
+            yellowed.add(r.parameter)
+    began_at = {p: set(times) for p, times in greens.items()}
+    overlaps: dict[int, InferredOverlap] = {}
+    for o, times in starts.items():
+        kind = "transit" if o not in yellowed and ended[o] >= PASSAGE_SEEN else "normal"
+        included = _cover(times, phases, lambda t, p: t in began_at.get(p, ()) or t - TICK in began_at.get(p, ()))
+        if included:
+            overlaps[o] = InferredOverlap(included, kind)
+            continue
+        lags: Counter[float] = Counter()  # the time from each phase's last begin green to the overlap's
+        for t in times:
+            for p in phases:
+                k = bisect.bisect_right(greens.get(p, []), t) - 1
+                if k >= 0 and TICK < t - greens[p][k] <= MAX_DELAY:
+                    lags[round((t - greens[p][k]).total_seconds(), 1)] += 1
+        for lag, _ in lags.most_common(1):
+            delay = timedelta(seconds=lag)
+            included = _cover(times, phases, lambda t, p, delay=delay: t - delay in began_at.get(p, ()))
+            if included:
+                overlaps[o] = InferredOverlap(included, kind, lag)
+    darks = {o: d for o, d in dark_at_green(rows).items() if o <= OVERLAPS}
+    for o, d in darks.items():
+        overlaps[o] = InferredOverlap(d.included, "normal")
+        out.guessed.append(
+            f"overlap {chr(64 + o)} ({o}): a normal overlap of phase(s) {d.included}, dark while they are green "
+            f"(never a begin green, 61; {d.said()}): read as a flashing yellow arrow's head "
+            "whose green arrow is the phase's own output, its flashing (32) never logged; the field's 66 is counted "
+            "as its begin green, 61 (a declared logging variant)")
     beyond = sorted(o for o in overlaps if o > OVERLAPS)
     for o in beyond:
-        out.guessed.append(f"overlap {o}: left out (it begins green with phase(s) {overlaps.pop(o)}, but the "
-                           f"emulator's overlaps are A-P, 1-{OVERLAPS})")
-    for o, included in overlaps.items():
-        out.read.append(f"overlap {chr(64 + o)} ({o}): begins green with phase(s) {included}: a normal overlap of them")
+        out.guessed.append(f"overlap {o}: left out (it begins green with phase(s) {overlaps.pop(o).included}, but "
+                           f"the emulator's overlaps are A-P, 1-{OVERLAPS})")
+    for o, ov in ((o, ov) for o, ov in overlaps.items() if o not in darks):
+        after = f"{ov.delay:g} s after" if ov.delay else "with"
+        out.read.append(f"overlap {chr(64 + o)} ({o}): begins green {after} phase(s) {ov.included}: "
+                        + ("a normal overlap of them" if ov.kind == "normal" else
+                           f"never yellow ({ended[o]} greens end in red): a transit bar of them (transit-2)")
+                        + (f", its green delayed {ov.delay:g} s" if ov.delay else ""))
     seen = {r.parameter for r in rows if E.OVERLAP_BEGIN_GREEN <= r.code <= E.OVERLAP_DARK}
     for o in sorted(seen - set(overlaps) - set(beyond)):
         letter = f"{chr(64 + o)} ({o})" if o <= OVERLAPS else str(o)
-        out.guessed.append(f"overlap {letter}: not modelled (it never begins green in the log; its "
-                           "other events fit none of the types: normal, minus green-yellow, flashing yellow arrow)")
+        out.guessed.append(f"overlap {letter}: not modelled (its begin greens come with no phase's, nor one time "
+                           "after; its other events fit none of the types: normal, transit, minus green-yellow, "
+                           "flashing yellow arrow)")
     return overlaps
+
+
+#: An overlap dark while its phases are green: each of its events, the phase event it comes with, and how to say so.
+_DARK_AT_GREEN = {E.OVERLAP_DARK: (E.PHASE_BEGIN_GREEN, "dark (66) as they begin green (1)"),
+                  E.OVERLAP_BEGIN_YELLOW: (E.PHASE_BEGIN_YELLOW, "yellow (63) with their yellow (8)"),
+                  E.OVERLAP_OFF: (E.PHASE_END_YELLOW, "off (65) as their yellow ends (9)")}
+_PHASE_CODES = [phase_code for phase_code, _ in _DARK_AT_GREEN.values()]
+
+
+@dataclass(frozen=True, slots=True)
+class DarkAtGreen:
+    """An overlap the log shows dark while its phases are green: its included phases and, per event of it (dark,
+    yellow, off: 66, 63, 65), how many it logged and how many came with its phases' (1, 8, 9)."""
+
+    included: list[int]
+    seen: dict[int, tuple[int, int]]
+
+    def said(self) -> str:
+        return ", ".join(f"{_DARK_AT_GREEN[code][1]} {n} of {of}" for code, (n, of) in self.seen.items())
+
+
+def dark_at_green(rows: Sequence[Row]) -> dict[int, DarkAtGreen]:
+    """The overlaps that never begin green (61) but go dark (66) as phases begin green (the same tick or the next,
+    the fewest phases that come with nine in ten of them, as :func:`_cover` reads), then turn yellow (63) as those
+    phases do (8) and off (65) as their yellow ends (9), nine in ten times each: the phases' own overlap, its green
+    shown by the phases' outputs ("Overlap Dark: set when overlap head is set dark (no active outputs)", the Indiana
+    enumerations). The atspm sample's overlap E does it every cycle with phase 5 (a MaxTime's flashing yellow arrow
+    head, read so, its flashing unused)."""
+    events: dict[int, dict[int, list[datetime]]] = defaultdict(lambda: defaultdict(list))
+    for r in rows:
+        if r.code in _PHASE_CODES or E.OVERLAP_BEGIN_GREEN <= r.code <= E.OVERLAP_DARK:
+            events[r.code][r.parameter].append(r.time)
+    at = {code: {p: set(times) for p, times in events[code].items()} for code in _PHASE_CODES}
+
+    def near(code: int, t: datetime, p: int) -> bool:
+        return t in at[code].get(p, ()) or t - TICK in at[code].get(p, ())
+
+    out: dict[int, DarkAtGreen] = {}
+    for o, darks in events[E.OVERLAP_DARK].items():
+        included = _cover(darks, sorted(at[E.PHASE_BEGIN_GREEN]), lambda t, p: near(E.PHASE_BEGIN_GREEN, t, p))
+        if o in events[E.OVERLAP_BEGIN_GREEN] or not included:
+            continue
+        seen = {code: (sum(any(near(phase_code, t, p) for p in included) for t in events[code].get(o, [])),
+                       len(events[code].get(o, []))) for code, (phase_code, _) in _DARK_AT_GREEN.items()}
+        if all(of and n >= 0.9 * of for n, of in seen.values()):
+            out[o] = DarkAtGreen(included, seen)
+    return out
+
+
+def _cover(times: Sequence[datetime], phases: Sequence[int], began: Callable[[datetime, int], bool]) -> list[int]:
+    """The fewest phases whose begin greens come with nine in ten of ``times``, each with a tenth (greedy: the phase
+    that comes with most, then the one that comes with most of those left), sorted; none if no such set."""
+    included: list[int] = []
+    left = list(times)
+    while left:
+        p = max(phases, key=lambda p: sum(began(t, p) for t in left))
+        if sum(began(t, p) for t in left) < 0.1 * len(times):
+            break
+        included.append(p)
+        left = [t for t in left if not began(t, p)]
+    return sorted(included) if included and len(left) <= 0.1 * len(times) else []
 
 
 def _startup(rows: Sequence[Row], greens: Mapping[int, list[tuple[datetime, datetime]]], structure: Structure,
@@ -956,15 +1240,17 @@ def _startup(rows: Sequence[Row], greens: Mapping[int, list[tuple[datetime, date
 
 
 def _toml(name: str, structure: Structure, timing: Mapping[int, dict[str, Any]], detectors: Mapping[int, int],
-          pushes: Mapping[int, int], coordination: Mapping[str, Any] | None, overlaps: Mapping[int, list[int]],
-          startup: Sequence[int], start: datetime) -> str:
+          timers: Mapping[int, Mapping[str, float]], pushes: Mapping[int, int],
+          coordination: Mapping[str, Any] | None, overlaps: Mapping[int, InferredOverlap], startup: Sequence[int],
+          start: datetime) -> str:
     def value(v: Any) -> str:
         return f"{v:g}" if isinstance(v, float) else str(v)
 
     lines = ["# Written by harness.reference.field_log from a controller's hi-res log: what it read and guessed is "
              "printed with it.", f"name = {json.dumps(name)}", "", "[phases]"]
     for p in sorted(timing):
-        fields = {k: timing[p][k] for k in ("min_green", "max_green", "yellow", "red_clear", "passage", "walk",
+        fields = {k: timing[p][k] for k in ("min_green", "max_green", "yellow", "red_clear", "passage",
+                                            "time_before_reduction", "time_to_reduce", "min_gap", "walk",
                                             "ped_clear") if k in timing[p]}
         for option in ("dual_entry", "conditional_service", "ped_recycle"):
             if timing[p].get(option):
@@ -982,12 +1268,16 @@ def _toml(name: str, structure: Structure, timing: Mapping[int, dict[str, Any]],
     lines += ["", "[structure]", f"rings = [{structure.ring(1)}, {structure.ring(2)}]", f"barriers = {barriers}",
               f"sequence = {pairs}", f"pairs = {pairs}", "", "[emulator]",
               f"start = {start.isoformat(timespec='milliseconds')[:-2]}", "", "[detectors]"]
-    lines += [f"{d} = {q}" for d, q in sorted(detectors.items())]
+    lines += [f"{d} = {{ phase = {q}, " + ", ".join(f"{k} = {v:g}" for k, v in timers[d].items()) + " }"
+              if timers.get(d) else f"{d} = {q}" for d, q in sorted(detectors.items())]
     if pushes:
         lines += ["", "[pedestrian_detectors]", *(f"{d} = {q}" for d, q in sorted(pushes.items()) if q)]
     if overlaps:
-        lines += ["", "[overlaps]", *(f"{chr(64 + o)} = {{ included = {included} }}"
-                                      for o, included in sorted(overlaps.items()))]
+        lines += ["", "[overlaps]"]
+        for o, ov in sorted(overlaps.items()):
+            typed = "" if ov.kind == "normal" else f'type = "{ov.kind}", '
+            delayed = f", delay_green = {ov.delay:g}" if ov.delay else ""
+            lines.append(f"{chr(64 + o)} = {{ {typed}included = {ov.included}{delayed} }}")
     if coordination is not None:
         c = coordination
         lines += ["", "[coordination]", "pattern = 1", 'force_off = "fixed"', 'offset_reference = "lead_green"',

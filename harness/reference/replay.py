@@ -11,11 +11,14 @@ module serves the emulator for it (:func:`harness.bench.processes.start_emulator
 table of its own: per event type and phase, how many of the log's events the bench logged within a tolerance
 (:func:`match_table`), so a difference can be read where it is.
 
-Times: the served controllers keep the host's clock, and Signal-Replay starts a coordinated replay at the cycle
-position the log started at (``cycle_length``), so the bench's cycle is where the log's was as long as whole
-days are whole cycles (86,400 s a multiple of the cycle). A free log is aligned to the second
-(``cycle_length=1``): the inputs land on the tenth of a second they were logged at. The SET of an input is sent
-:data:`LATENCY_S` before it is due (Signal-Replay's ``replay_latency_offset_seconds``): the emulator answers at
+Times: the served controllers keep the host's clock (their cycles counted from the host's midnight), and Signal-Replay
+starts a coordinated replay when the time since the log's start is a whole number of cycles past its ``cycle_offset``
+(signal_replay 1.0.1, ``_wait_until_next_cycle``). Where whole days are not whole cycles (86,400 s not a multiple of the
+cycle, 75 s for instance) the days between the config's day (its ``[emulator] start``: the log's first day for a written
+config, whose cycle positions count from its midnight on) and the bench's are not whole cycles either: that remainder is
+given as the ``cycle_offset`` (:func:`day_shift`), so the bench's cycle is where the log's was. A free log is aligned to
+the second (``cycle_length=1``): the inputs land on the tenth of a second they were logged at. The SET of an input is
+sent :data:`LATENCY_S` before it is due (Signal-Replay's ``replay_latency_offset_seconds``): the emulator answers at
 once and reads its inputs at the next tick.
 """
 
@@ -28,11 +31,11 @@ import time
 from collections import Counter, defaultdict
 from collections.abc import Sequence
 from dataclasses import dataclass
-from datetime import datetime, timedelta
+from datetime import date, datetime, timedelta
 from pathlib import Path
 
 from harness.reference.hires_file import Row
-from harness.reference.replay_match import GreenRow, MatchRow, green_table, match_table, overall
+from harness.reference.replay_match import Equivalence, GreenRow, MatchRow, green_table, match_table, overall
 from hils.protocol import config as config_mod
 from hils.protocol.hires import Event, EventCode
 from hils.shell.asclog import collect
@@ -63,9 +66,10 @@ class Replayed:
 
 
 def replay(rows: Sequence[Row], config: Path, work: Path, *, device: str = "field", tolerance_s: float = 1.0,
-           settle_s: float = 2.0, warm_up_s: float = 0.0) -> Replayed:
+           settle_s: float = 2.0, warm_up_s: float = 0.0, equivalences: Sequence[Equivalence] = ()) -> Replayed:
     """Serve the emulator with ``config``, let it run ``warm_up_s`` (to rest in its start-up state, as the log's
-    controller did before its first input), let Signal-Replay replay ``rows`` into it and compare (see the header)."""
+    controller did before its first input), let Signal-Replay replay ``rows`` into it and compare (see the header),
+    through the declared logging variants ``equivalences``."""
     import pandas as pd
     import signal_replay as sr
 
@@ -75,19 +79,20 @@ def replay(rows: Sequence[Row], config: Path, work: Path, *, device: str = "fiel
     plan = cfg.coordination.patterns.get(cfg.coordination.pattern) if isinstance(cfg.coordination.pattern, int) \
         else None
     cycle = plan.cycle if plan is not None else 1
-    if plan is not None and 86_400 % cycle:
-        log.warning("cycle %d s does not divide a day: the bench's cycle position is off by the days between the "
-                    "log and today modulo the cycle", cycle)
     frame = pd.DataFrame({"TimeStamp": [r.time for r in rows], "DeviceId": device, "EventId": [r.code for r in rows],
                           "Parameter": [r.parameter for r in rows]})
     work.mkdir(parents=True, exist_ok=True)
     served = start_emulator(work / "serve.log", "--config", str(config), http=True)
     try:
         since = datetime.now()
+        offset = day_shift(cfg.emulator.start.date(), since.date(), cycle)
+        if offset:
+            log.info("cycle %d s does not divide a day: Signal-Replay starts %d s into the cycle (the %d days since "
+                     "the config's day)", cycle, offset, (since.date() - cfg.emulator.start.date()).days)
         time.sleep(warm_up_s)
         sim = sr.ATCSimulation(
             signals=[sr.SignalConfig(device, "127.0.0.1", udp_port=served.port, http_port=served.http_ports[0],
-                                     cycle_length=cycle, replay_latency_offset_seconds=LATENCY_S,
+                                     cycle_length=cycle, cycle_offset=offset, replay_latency_offset_seconds=LATENCY_S,
                                      snmp_community="private")],
             events=frame, replays=1, post_replay_settle_seconds=settle_s, final_collection_poll_seconds=1,
             final_collection_timeout_seconds=60, work_dir=work / "signal_replay", stop_on_conflict=False)
@@ -99,8 +104,15 @@ def replay(rows: Sequence[Row], config: Path, work: Path, *, device: str = "fiel
     shift = input_shift(rows, bench)
     span = (bench[0].time - shift, bench[-1].time - shift) if bench else None
     return Replayed(matches[0] if matches else float("nan"), shift, list(rows), bench,
-                    match_table(rows, bench, shift, tolerance_s, span=span),
+                    match_table(rows, bench, shift, tolerance_s, span=span, equivalences=equivalences),
                     green_table(rows, bench, shift, tolerance_s))
+
+
+def day_shift(log_day: date, bench_day: date, cycle: int) -> int:
+    """Seconds past a whole number of cycles Signal-Replay waits from the log's start (its ``cycle_offset``) so that
+    the bench, counting its cycles from ``bench_day``'s midnight, is where the log's controller was, counting from
+    ``log_day``'s: the days between them modulo the cycle (0 when the cycle divides a day)."""
+    return (bench_day - log_day).days * 86_400 % cycle
 
 
 def input_shift(rows: Sequence[Row], bench: Sequence[Event]) -> timedelta:
@@ -157,7 +169,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "Signal-Replay replays the log into `hils emulator serve` in real time")
     p.add_argument("--vendor", choices=sorted(set(VENDOR_BY_SUFFIX.values())),
                    help="whose logging variants to count as equivalent (default: from the file: .dat Econolite, "
-                        ".xml MaxTime; an ATSPM file: none)")
+                        ".xml MaxTime; an ATSPM file: none); whatever the vendor, an overlap the log shows dark while "
+                        "its phases are green has its dark counted as its begin green")
     p.add_argument("--infer-only", action="store_true", help="write the config and stop")
     p.add_argument("--out", metavar="DIR", type=Path, help="output folder (default: a new temporary one)")
     p.set_defaults(func=_command)
@@ -192,11 +205,11 @@ def _command(args: argparse.Namespace) -> int:
                             f"({every[0].time} to {every[-1].time})")
     minutes = (rows[-1].time - rows[0].time).total_seconds() / 60
     vendor = args.vendor or VENDOR_BY_SUFFIX.get(Path(args.log).suffix.lower())
-    equivalences = [q for q in replay_match.EQUIVALENCES if q.vendor == vendor]
+    equivalences = replay_match.for_log(vendor, field_log.dark_at_green(rows))
     if args.bench == "signal-replay":
         print(f"Replaying {len(rows)} events ({minutes:.1f} minutes, in real time) into the emulator with "
               "Signal-Replay...", flush=True)
-        replayed = replay(rows, config, out)
+        replayed = replay(rows, config, out, equivalences=equivalences)
         table, green = replayed.table, replayed.green
         headline = (f"Signal-Replay's match (its DTW of phase and overlap events): "
                     f"{signal_replay_score(replayed.signal_replay_match)}\n"
@@ -216,8 +229,8 @@ def _command(args: argparse.Namespace) -> int:
             f"{e.time.isoformat(sep=' ', timespec='milliseconds')[:-2]},{e.code},{e.parameter}\n" for e in ran.events))
     print(headline)
     print(replay_match.render_equivalences(equivalences))
-    print(replay_match.render(table, green))
-    replay_match.write_table(table, out / "match.csv")
+    print(replay_match.render(table, green, equivalences))
+    replay_match.write_table(table, out / "match.csv", equivalences)
     outputs = ["inferred.toml"] if args.config is None else []
     outputs += ["match.csv", "signal_replay/" if args.bench == "signal-replay" else "bench.csv"]
     print(f"Outputs in {out}/: {', '.join(outputs)}")

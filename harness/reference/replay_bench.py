@@ -1,4 +1,4 @@
-"""What `hils replay --infer-only` costs and what a broken log does to it: two benchmarks that print figures.
+"""What `hils replay` costs and what a broken log does to it: benchmarks that print figures.
 
 - ``orders``: the seconds :func:`harness.reference.field_log.infer` takes on a synthetic log whose rings each
   serve N phases in one barrier group (every phase of a ring follows the one before it, ring 2 half a phase behind
@@ -9,6 +9,9 @@
   a refusal of the log (exit 2, one line), a refusal of the inferred config (exit 2, one line naming
   ``inferred.toml``), a crash (a traceback or another exit) or a hang (no answer within the timeout).
 
+- ``day``: what a day of a busy coordinated log costs `hils replay` in virtual time, stage by stage (reading the
+  file, inferring the config, replaying the inputs into the model, matching): the ``atspm`` package's two hours
+  (controller 1136) laid end to end twelve times, from midnight (445,824 events), in a process of its own.
 - ``compare LOG...``: each log's config inferred by the tree in ``--tree`` and by this one, and the lines of the
   two ``inferred.toml`` that differ.
 
@@ -85,6 +88,45 @@ t = time.perf_counter()
 field_log.infer(rows, "synthetic")
 print(time.perf_counter() - t)
 """
+
+
+# Each stage of `hils replay` on one log, timed (a tree of before the replay in virtual time has no such stages).
+_STAGES = """
+import json, sys, time
+from harness.reference import field_log, hires_file, replay_match, replay_virtual
+seconds = {}
+t = time.perf_counter()
+rows = hires_file.load(sys.argv[1]); seconds["read"] = time.perf_counter() - t; t = time.perf_counter()
+config = field_log.infer(rows).config(); seconds["infer"] = time.perf_counter() - t; t = time.perf_counter()
+ran = replay_virtual.run(rows, config); seconds["replay"] = time.perf_counter() - t; t = time.perf_counter()
+table = replay_match.match_table(rows, ran.events)
+replay_match.green_table(rows, ran.events); seconds["match"] = time.perf_counter() - t
+print(json.dumps({"seconds": seconds, "events": len(rows), "match": replay_match.overall(table)}))
+"""
+
+
+def day_log(path: Path) -> Path:
+    """A day of the atspm package's field log: its two hours laid end to end twelve times from midnight."""
+    import atspm
+
+    sample = pd.read_parquet(Path(atspm.__file__).parent / "data" / "sample_raw_data.parquet")
+    first = sample.TimeStamp.min()
+    parts = [sample.assign(TimeStamp=sample.TimeStamp - first + first.normalize() + pd.Timedelta(hours=2 * k))
+             for k in range(12)]
+    pd.concat(parts, ignore_index=True).to_parquet(path)
+    return path
+
+
+def day(out: Path, tree: Path | None, timeout: float) -> list[dict[str, object]]:
+    """Seconds per stage of a replay of a day of log (see the module's header)."""
+    log = day_log(out / "day.parquet")
+    done = subprocess.run([sys.executable, "-c", _STAGES, str(log)], env=_env(tree), capture_output=True, text=True,
+                          timeout=timeout, check=True)
+    result = json.loads(done.stdout.splitlines()[-1])
+    total = sum(result["seconds"].values())
+    print(f"a day of log ({result['events']:,} events; whole-log match {result['match']} %): "
+          + ", ".join(f"{k} {v:.1f} s" for k, v in result["seconds"].items()) + f"; total {total:.1f} s", flush=True)
+    return [result | {"total": total}]
 
 
 def orders(phases: Sequence[int], out: Path, tree: Path | None, timeout: float) -> list[dict[str, object]]:
@@ -353,7 +395,7 @@ def compare(logs: Sequence[Path], out: Path, tree: Path | None, timeout: float) 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m harness.reference.replay_bench", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("what", choices=("orders", "mutations", "compare"))
+    parser.add_argument("what", choices=("orders", "mutations", "compare", "day"))
     parser.add_argument("logs", nargs="*", type=Path, metavar="LOG", help="for compare: the logs to infer configs of")
     parser.add_argument("--tree", type=Path, metavar="DIR", help="run the hils source tree in DIR (default: this one)")
     parser.add_argument("--out", type=Path, metavar="DIR", help="where logs and results go (default: a new folder)")
@@ -368,6 +410,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         results = orders(range(int(lo), int(hi or lo) + 1), out, args.tree, args.timeout)
     elif args.what == "mutations":
         results = mutations(out, args.tree, args.timeout)
+    elif args.what == "day":
+        results = day(out, args.tree, max(args.timeout, 1200.0))
     else:
         results = compare(args.logs, out, args.tree, args.timeout)
     (out / f"{args.what}.json").write_text(json.dumps({"tree": str(args.tree or "this"), "results": results},

@@ -19,8 +19,8 @@ from __future__ import annotations
 import csv
 from bisect import bisect_left, bisect_right
 from collections import defaultdict
-from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
+from collections.abc import Collection, Iterable, Sequence
+from dataclasses import dataclass, replace
 from datetime import datetime, timedelta
 from enum import StrEnum
 from pathlib import Path
@@ -47,18 +47,35 @@ class Logged(Protocol):
 
 @dataclass(frozen=True, slots=True)
 class Equivalence:
-    """A field event a vendor logs later than the emulator, for the same thing: the field's ``code`` is judged at the
-    time of the field's last ``judged_at`` event of the same parameter before it (where the emulator logs it)."""
+    """A field event a vendor logs otherwise than the emulator, for the same thing: the field's ``code`` is judged at
+    the time of the field's last ``judged_at`` event of the same parameter before it (where the emulator logs it), or
+    judged as the emulator's ``counted_as`` event, for the ``parameters`` the log was read to show it (none until a
+    log's reading binds them: see :func:`for_log`)."""
 
     vendor: str
     code: int
-    judged_at: int
+    judged_at: int | None
     says: str
     source: str
+    counted_as: int | None = None
+    parameters: frozenset[int] = frozenset()
 
+
+#: An overlap dark (66) while its phases are green (:func:`harness.reference.field_log.dark_at_green`).
+DARK_AT_GREEN = Equivalence(
+    "an overlap dark while its phases are green (seen from an Intelight MaxTime)", E.OVERLAP_DARK, None,
+    "the overlap's green is shown by its phase's own output, the overlap's outputs off: the field logs its dark (66) "
+    "as the phase begins green where the emulator's overlap of the phase logs its begin green (61); its yellow (63) "
+    "and off (65) are logged as the emulator's are",
+    "log sample_raw_data.parquet of the atspm package (controller 1136, Intelight MaxTime): overlap E logs 66 as "
+    "phase 5 begins green, 63 with 5's yellow and 65 as it ends, 91 of 91 cycles, never a 61; the Indiana "
+    "enumerations (utahudot/udot-atspm, Atspm/Data/Enums/IndianaEnumerations.cs): \"Overlap Dark ... Set when overlap "
+    "head is set dark (no active outputs)\"",
+    counted_as=E.OVERLAP_BEGIN_GREEN)
 
 #: The declared logging variants (see the header). Each row is matched only as it says.
 EQUIVALENCES: tuple[Equivalence, ...] = (
+    DARK_AT_GREEN,
     Equivalence(
         "Econolite", E.OVERLAP_OFF, E.OVERLAP_BEGIN_RED_CLEARANCE,
         "Econolite logs an overlap's off (65) at the end of its red clearance, after its 64; the emulator's overlap "
@@ -66,6 +83,13 @@ EQUIVALENCES: tuple[Equivalence, ...] = (
         "log ECON_10.205.17.215_2024_02_21_1115.dat (utahudot/udot-atspm, Atspm/InfrastructureTests/"
         "EventLogDecoderTests/TestData): overlap C logs 63, then 64 3.9 s later (its yellow), then 65 1.8 s later"),
 )
+
+
+def for_log(vendor: str | None, dark_at_green: Collection[int]) -> list[Equivalence]:
+    """The rows a log is matched through: its vendor's, and :data:`DARK_AT_GREEN` bound to the overlaps the log was
+    read to show dark while their phases are green, whoever the vendor (an ATSPM file names none)."""
+    rows = [q for q in EQUIVALENCES if q.vendor == vendor]
+    return rows + ([replace(DARK_AT_GREEN, parameters=frozenset(dark_at_green))] if dark_at_green else [])
 
 
 @dataclass(frozen=True, slots=True)
@@ -98,8 +122,9 @@ def match_table(rows: Iterable[Logged], bench: Iterable[Logged], shift: timedelt
     """Per event type and parameter: the log's events (within ``span`` of log time when given, else all), the
     bench's (its times minus ``shift``), and how many of the log's have a bench event of the same type and parameter
     within ``tolerance_s`` (each bench event matched once), a field event that ``equivalences`` declare judged at the
-    time of the field event it names."""
-    at = {q.code: q.judged_at for q in equivalences}
+    time of the field event it names, or as the event they count it as."""
+    at = {q.code: q.judged_at for q in equivalences if q.judged_at is not None}
+    counted = {(q.code, p): q.counted_as for q in equivalences if q.counted_as is not None for p in q.parameters}
     last: dict[tuple[int, int], datetime] = {}
     mine: dict[tuple[int, int], list[datetime]] = defaultdict(list)
     theirs: dict[tuple[int, int], list[datetime]] = defaultdict(list)
@@ -108,7 +133,7 @@ def match_table(rows: Iterable[Logged], bench: Iterable[Logged], shift: timedelt
             last[(r.code, r.parameter)] = r.time
         if r.code in codes and (span is None or span[0] <= r.time <= span[1]):
             anchor = last.get((at[r.code], r.parameter)) if r.code in at else None
-            mine[(r.code, r.parameter)].append(anchor or r.time)
+            mine[(counted.get((r.code, r.parameter), r.code), r.parameter)].append(anchor or r.time)
     for e in bench:
         if e.code in codes:
             theirs[(e.code, e.parameter)].append(e.time - shift)
@@ -207,9 +232,11 @@ def _pct(n: int, d: int) -> str:
     return "-" if not d else f"{100 * n / d:.1f} %"
 
 
-def render(table: Sequence[MatchRow], green: Sequence[GreenRow], tolerance_s: float = 1.0) -> str:
-    """The measures as text: the headline, the per-green table, the per-event table and the variants counted."""
+def render(table: Sequence[MatchRow], green: Sequence[GreenRow], equivalences: Sequence[Equivalence] = ()) -> str:
+    """The measures as text: the per-green table and the per-event table, a row that counts a field event declared
+    equivalent (:data:`EQUIVALENCES`) saying which."""
     names = {int(c): c.name.lower().replace("_", " ") for c in E}
+    counted = _counted_from(equivalences)
     lines = [f"{'field green ended by':<22}{'greens':>8}{'anchored':>10}{'ended within':>14}{'same way':>10}"
              f"{'ended/anchored':>16}"]
     for g in green:
@@ -221,7 +248,10 @@ def render(table: Sequence[MatchRow], green: Sequence[GreenRow], tolerance_s: fl
               f"{'event':<34}{'no.':>4}{'log':>7}{'bench':>7}{'found':>7}{'share':>8}"]
     for r in table:
         share = "-" if r.share is None else f"{r.share:.1f} %"
-        lines.append(f"{names.get(r.code, str(r.code)):<34}{r.parameter:>4}{r.field:>7}{r.bench:>7}{r.matched:>7}"
+        name = names.get(r.code, str(r.code))
+        if (r.code, r.parameter) in counted:
+            name += f" (log's {counted[(r.code, r.parameter)]})"
+        lines.append(f"{name:<34}{r.parameter:>4}{r.field:>7}{r.bench:>7}{r.matched:>7}"
                      f"{share:>8}")
     return "\n".join(lines)
 
@@ -230,13 +260,23 @@ def render_equivalences(equivalences: Sequence[Equivalence]) -> str:
     if not equivalences:
         return "logging variants counted as equivalent: none"
     return "logging variants counted as equivalent:\n" + "\n".join(
-        f"  {q.vendor}: field event {q.code} judged at the field's {q.judged_at} before it ({q.says}; source: "
-        f"{q.source})"
+        f"  {q.vendor}: field event {q.code} "
+        + (f"judged at the field's {q.judged_at} before it" if q.counted_as is None else
+           f"of {', '.join(map(str, sorted(q.parameters)))} counted as {q.counted_as}")
+        + f" ({q.says}; source: {q.source})"
         for q in equivalences)
 
 
-def write_table(table: Sequence[MatchRow], path: Path) -> None:
+def _counted_from(equivalences: Sequence[Equivalence]) -> dict[tuple[int, int], int]:
+    """Per emulator event and parameter, the field event a row of ``equivalences`` counts as it."""
+    return {(q.counted_as, p): q.code for q in equivalences if q.counted_as is not None for p in q.parameters}
+
+
+def write_table(table: Sequence[MatchRow], path: Path, equivalences: Sequence[Equivalence] = ()) -> None:
+    """The per-event table as CSV; ``log_EventId`` is the field event counted as the row's (a declared variant)."""
+    counted = _counted_from(equivalences)
     with path.open("w", newline="", encoding="utf-8") as f:
         out = csv.writer(f)
-        out.writerow(["EventId", "Parameter", "log", "bench", "found", "share_percent"])
-        out.writerows((r.code, r.parameter, r.field, r.bench, r.matched, r.share) for r in table)
+        out.writerow(["EventId", "Parameter", "log", "bench", "found", "share_percent", "log_EventId"])
+        out.writerows((r.code, r.parameter, r.field, r.bench, r.matched, r.share,
+                       counted.get((r.code, r.parameter), r.code)) for r in table)

@@ -4,10 +4,11 @@ time; a benchmark that prints the share of configs replayed at >= 99 % (and writ
 A config is the shipped four-leg (:file:`hils/data/four_leg.toml`: 8 phases, 2 rings, 2 barriers, a detector and a
 push button per phase) with walks on its throughs and, drawn from a seed (:func:`random_config`), what the
 controller model has today and a log shows the effects of: the passage time, max or min recall on some phases,
-dual entry on some throughs, conditional service or Naztec's backing (``backup_prevent = false``) on some phases,
-pedestrian recycle on some throughs, the leading left of ring 1 lagging (ring order 2, 1, 3, 4), and coordination on the
-shipped plan (70 s) at any offset (an offset not at the lead green: the local zero anywhere in the cycle). The log
-(:func:`emulator_log`) is the model's own under random detector and push-button inputs, then a minute without.
+a detector delay, extension or carryover on some detectors, dual entry on some throughs, conditional service or
+Naztec's backing (``backup_prevent = false``) on some phases, pedestrian recycle on some throughs, the leading left of
+ring 1 lagging (ring order 2, 1, 3, 4), and coordination on the shipped plan (70 s) at any offset (an offset not at the
+lead green: the local zero anywhere in the cycle). The log (:func:`emulator_log`) is the model's own under random
+detector and push-button inputs, then a minute without.
 :func:`round_trip` infers a config from the log (:func:`harness.reference.field_log.infer`), replays the log's
 inputs into the model under it (:mod:`harness.reference.replay_virtual`) and gives the whole-log match
 (:mod:`harness.reference.replay_match`).
@@ -53,6 +54,10 @@ splits = {{ 1 = 14, 2 = 28, 3 = 12, 4 = 16, 5 = 12, 6 = 30, 7 = 13, 8 = 15 }}
 """
 
 
+#: Detector timers drawn (s): delays short enough that the round trip's actuations (0.7 s on average) often last them.
+TIMERS = {"delay": (0.3, 0.5, 1.0), "extend": (0.5, 1.0, 2.0), "carryover": (0.5, 1.0)}
+
+
 @dataclass(frozen=True, slots=True)
 class Drawn:
     """A random config's text and the features drawn into it."""
@@ -62,10 +67,11 @@ class Drawn:
 
 
 def random_config(rng: random.Random, *, recalls: Sequence[str] = ("min", "max"), dual_entry: bool = True,
-                  lag: bool = True, coordination: bool = True, sequencing: bool = True) -> Drawn:
+                  lag: bool = True, coordination: bool = True, sequencing: bool = True,
+                  detector_timers: bool = True) -> Drawn:
     """The four-leg with walks on its throughs and features drawn from ``rng`` (see the header); ``recalls``,
-    ``dual_entry``, ``lag``, ``coordination`` and ``sequencing`` (backing options, pedestrian recycle) say which may
-    be drawn."""
+    ``dual_entry``, ``lag``, ``coordination``, ``sequencing`` (backing options, pedestrian recycle) and
+    ``detector_timers`` say which may be drawn."""
     text = BASE.read_text()
     features = []
     passage = rng.choice((1.0, 1.5, 2.0, 3.0))
@@ -94,6 +100,13 @@ def random_config(rng: random.Random, *, recalls: Sequence[str] = ("min", "max")
         text = text.replace("rings = [[1, 2, 3, 4], [5, 6, 7, 8]]", "rings = [[2, 1, 3, 4], [5, 6, 7, 8]]")
         features.append("1 lags 2")
     text = text[:text.index("[coordination]")]
+    if detector_timers:
+        table = []
+        for p in range(1, 9):
+            timers = {name: rng.choice(values) for name, values in TIMERS.items() if rng.random() < 0.15}
+            table.append(f"{p} = {{ phase = {p}" + "".join(f", {k} = {v:g}" for k, v in timers.items()) + " }")
+            features += [f"{k} {v:g} s on {p}" for k, v in timers.items()]
+        text += "[detectors]\n" + "\n".join(table) + "\n\n"
     if coordination and rng.random() < 0.5:
         offset = rng.randrange(70)
         text += PLAN.format(offset=offset)

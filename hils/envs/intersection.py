@@ -240,6 +240,11 @@ class IntersectionEnv(gymnasium.Env):
     logger in every controller, which training does not need: off by default; the episode is the same).
     ``spat``: True to add the controller's announced earliest and latest change of each phase to the observation
     (the in-process emulator, ``target="virtual"``, only: NTCIP 1202 has no per-phase timing object to poll).
+    ``j2735``: True to hand, in ``info["j2735"]`` of every reset and step, the controller's SPaT as SAE J2735 sends
+    it (UPER MessageFrame bytes, :meth:`hils.Testbed.j2735`; virtual target only, like ``spat``).
+    ``sumo_worker``: True steps SUMO in a worker process of its own beside the environment's work
+    (:mod:`hils.sim.worker`: the same episodes, on two cores; virtual time only). Off by default: it gains only where
+    a core is free for it (on a busy machine, or with an environment per core, it adds the cost of its pipe).
     """
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": []}
@@ -249,12 +254,15 @@ class IntersectionEnv(gymnasium.Env):
                  routes: str | Path | None = None, sumocfg: str | Path | None = None, target: str = VIRTUAL,
                  sumo_step: float | None = None, control_interval: float | None = None,
                  episode_length: float = 3600.0, reward: str | Reward = "queue", recover_after: float = 5.0,
-                 log_path: str | Path | None = None, measure: bool = False, spat: bool = False) -> None:
+                 log_path: str | Path | None = None, measure: bool = False, spat: bool = False,
+                 j2735: bool = False, sumo_worker: bool = False) -> None:
         self.action_type = action_type_of(action_type)
-        if spat and target != VIRTUAL:
-            raise EnvOptionError(f"spat=True with target={target!r}: allowed: spat=True with target={VIRTUAL!r} (the "
-                                 "in-process emulator announces its timing; NTCIP 1202 has no per-phase timing object "
-                                 "to poll a controller for)")
+        for option, on in (("spat", spat), ("j2735", j2735)):
+            if on and target != VIRTUAL:
+                raise EnvOptionError(f"{option}=True with target={target!r}: allowed: {option}=True with "
+                                     f"target={VIRTUAL!r} (the in-process emulator announces its timing; NTCIP 1202 "
+                                     "has no per-phase timing object to poll a controller for)")
+        self.j2735 = j2735
         cfg = config if isinstance(config, IntersectionConfig) else config_mod.load(config)
         self.config = with_timing(cfg, sumo_step, control_interval)
         self.reward_fn = reward_of(reward)
@@ -269,7 +277,8 @@ class IntersectionEnv(gymnasium.Env):
         self.observation_space = self.adapter.observation_space
         self.testbed = Testbed(self.config, action_type=self.action_type, target=target, sumo=True,
                                duration=episode_length, recover_after=recover_after, log_path=log_path,
-                               sumo_config=self.sumo_config, measure=measure)
+                               sumo_config=self.sumo_config, measure=measure,
+                               sumo_worker=sumo_worker)
         self._last: Observation | None = None
 
     # --- gymnasium API ----------------------------------------------------------------------
@@ -281,7 +290,7 @@ class IntersectionEnv(gymnasium.Env):
         obs = self.testbed.reset(seed=run_seed)
         self.adapter.start(self.testbed.middleware.cache, obs)
         self._last = obs
-        return self.adapter.vector(obs, self._spat()), reset_info(obs, run_seed)
+        return self.adapter.vector(obs, self._spat()), self._with_j2735(reset_info(obs, run_seed))
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         tb = self.testbed
@@ -293,12 +302,18 @@ class IntersectionEnv(gymnasium.Env):
         reward = float(self.reward_fn(self._last, obs))
         self._last = obs
         truncated = tb.done
+        info = self._with_j2735(info)
         if truncated:
             tb.finish()
         return self.adapter.vector(obs, self._spat()), reward, False, truncated, info
 
     def _spat(self) -> tuple[MovementTiming, ...]:
         return next(iter(self.testbed.spat().values())) if self.adapter.spat else ()
+
+    def _with_j2735(self, info: dict[str, Any]) -> dict[str, Any]:
+        if self.j2735:
+            info["j2735"] = next(iter(self.testbed.j2735().values()))
+        return info
 
     def close(self) -> None:
         self.testbed.close()

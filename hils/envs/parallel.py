@@ -70,6 +70,7 @@ class IntersectionsEnv(ParallelEnv[str, np.ndarray, Any]):
     ``(previous, current) -> float``, applied to each agent's own observations. ``recover_after``: seconds
     in TIMEOUT before the Testbed recovers that controller. ``log_path``: the event log of each episode
     (overwritten; every record names its intersection). ``measure``: as the single environment's (off).
+    ``sumo_worker``: as the single environment's (True: SUMO steps in a worker process; off by default).
     """
 
     metadata: ClassVar[dict[str, Any]] = {"name": "hils_intersections_v1", "render_modes": [],
@@ -80,7 +81,7 @@ class IntersectionsEnv(ParallelEnv[str, np.ndarray, Any]):
                  action_type: ActionType | str = ActionType.SELECTION, *, target: Targets = VIRTUAL,
                  sumo_step: float | None = None, control_interval: float | None = None,
                  episode_length: float = 3600.0, reward: str | Reward = "queue", recover_after: float = 5.0,
-                 log_path: str | Path | None = None, measure: bool = False) -> None:
+                 log_path: str | Path | None = None, measure: bool = False, sumo_worker: bool = False) -> None:
         self.action_type = action_type_of(action_type)
         self.reward_fn = reward_of(reward)
         loaded = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
@@ -88,7 +89,7 @@ class IntersectionsEnv(ParallelEnv[str, np.ndarray, Any]):
         self.scenario = dataclasses.replace(loaded, intersections=MappingProxyType(configs))
         self.testbed = Testbed(scenario=self.scenario, action_type=self.action_type, target=target, sumo=True,
                                duration=episode_length, recover_after=recover_after, log_path=log_path,
-                               measure=measure)
+                               measure=measure, sumo_worker=sumo_worker)
         self.adapters = {tls: IntersectionAdapter(cfg, self.action_type) for tls, cfg in configs.items()}
         self.possible_agents: list[str] = list(configs)
         self.agents: list[str] = []

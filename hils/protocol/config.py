@@ -32,6 +32,8 @@ from hils.protocol.ntcip import (
     PREEMPT_TABLE,
     UNIT_BACKUP_TIME,
     UNIT_STARTUP_FLASH,
+    VEHICLE_DETECTOR_DELAY,
+    VEHICLE_DETECTOR_EXTEND,
     ObjectDef,
     OverlapColumn,
     PhaseColumn,
@@ -85,10 +87,12 @@ class NextPhaseLock(StrEnum):
     RED_END = "red_end"      # a call during the clearance may still redirect it on the same side of the barrier
 
 
-#: What a config numbers: phases (NTCIP 1202 maxPhases, 1-255), the emulator's vehicle detectors and push buttons
-#: (1-64), overlaps (A-P, NTCIP's 1-16), and a pattern's cycle (patternCycleTime: "NEMA TS 2 range: 30-255").
+#: What a config numbers: phases (NTCIP 1202 maxPhases, 1-255), vehicle detectors (1-128: the emulator's
+#: maxVehicleDetectors, which NTCIP lets be 1-255), push buttons (maxPedestrianDetectors: 1-255), overlaps (A-P, NTCIP's
+#: 1-16), and a pattern's cycle (patternCycleTime: "NEMA TS 2 range: 30-255").
 PHASE_NUMBERS = range(1, 256)
-DETECTOR_NUMBERS = range(1, 65)
+DETECTOR_NUMBERS = range(1, 129)
+PED_DETECTOR_NUMBERS = range(1, 256)
 OVERLAP_NUMBERS = range(1, 17)
 CYCLE_SECONDS = range(30, 256)
 
@@ -103,11 +107,14 @@ _PHASE_OBJECTS: dict[str, Carrier] = {
     "yellow": (PHASE_TABLE[PhaseColumn.YELLOW_CHANGE], 10),
     "red_clear": (PHASE_TABLE[PhaseColumn.RED_CLEAR], 10),
     "red_revert": (PHASE_TABLE[PhaseColumn.RED_REVERT], 10),
+    "time_before_reduction": (PHASE_TABLE[PhaseColumn.TIME_BEFORE_REDUCTION], 1),
+    "time_to_reduce": (PHASE_TABLE[PhaseColumn.TIME_TO_REDUCE], 1),
+    "min_gap": (PHASE_TABLE[PhaseColumn.MINIMUM_GAP], 10),
 }
 # Per-phase timings and options a phase may set itself or inherit from [timing].
 _PHASE_OPTIONS = ("min_green", "max_green", "max2", "passage", "walk", "ped_clear", "yellow", "red_clear",
-                  "red_revert", "recall", "dual_entry", "backup_prevent", "conditional_service",
-                  "simultaneous_gap_disable", "ped_recycle")
+                  "red_revert", "time_before_reduction", "time_to_reduce", "min_gap", "recall", "dual_entry",
+                  "backup_prevent", "conditional_service", "simultaneous_gap_disable", "ped_recycle")
 TURNS = ("left", "through")
 FREE = 254  # NTCIP's pattern number of free operation (systemPatternControl, coordPatternStatus)
 
@@ -193,9 +200,26 @@ class OverlapKind(StrEnum):
     MINUS_GREEN_YELLOW = "minus_green_yellow"  # as normal, but not while a modifier phase is green
     FYA = "fya"  # a flashing yellow arrow: green arrow with its protected (included) phases, flashing yellow while a
     # modifier (the opposing through, the movement it yields to) is green
+    TRANSIT = "transit"  # NTCIP 1202 v03 transit-2: a 2-section bar, green, flashing green, red: never yellow
 
 
 OVERLAP_TURNS = ("left", "right")
+
+
+@dataclass(frozen=True, slots=True)
+class DetectorTiming:
+    """A vehicle detector's timers, in seconds (all 0: the actuation is the call, as it comes and goes).
+
+    NTCIP 1202 vehicleDetectorDelay: "The period a detector actuation (input recognition) shall be delayed when the
+    phase is not Green"; vehicleDetectorExtend: "The period a vehicle detector actuation (input duration) shall be
+    extended from the point of termination, when the phase is Green". Carryover has no NTCIP object: it is the
+    detector unit's own output extension, "the time following the loss of detection before the Detect Output is
+    dropped" whatever the phase shows (RAE H2 loop detector manual, "Detect Output Extension"); a controller's
+    detector table carries it beside delay and extend."""
+
+    delay: float = 0.0
+    extend: float = 0.0
+    carryover: float = 0.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -214,6 +238,7 @@ class Overlap:
     trail_red: float = 0.0     # s of the overlap's own red clearance after a trailing green
     approach: str | None = None
     turn: str | None = None
+    delay_green: float = 0.0   # s the overlap stays red after an included phase's green starts (a delayed green)
 
     @property
     def letter(self) -> str:
@@ -298,6 +323,12 @@ class Phase:
     # Turns of the same approach that run permissive (yielding) while this phase is green,
     # e.g. the lefts of a four-phase plan without protected lefts.
     permissive: tuple[str, ...] = ()
+    # Gap reduction (volume density, NTCIP 1202 phaseTimeBeforeReduction, phaseTimeToReduce, phaseMinimumGap): after
+    # time_before_reduction s of serviceable conflicting demand the allowable gap falls linearly from the passage to
+    # min_gap over time_to_reduce s. None: no reduction (the allowable gap stays the passage).
+    time_before_reduction: float = 0.0
+    time_to_reduce: float = 0.0
+    min_gap: float | None = None
 
     @property
     def maximum2(self) -> float:
@@ -365,6 +396,7 @@ class IntersectionConfig:
     emulator: EmulatorParams = field(default_factory=EmulatorParams)
     detector_phases: Mapping[int, int] = field(default_factory=dict)  # the [detectors] table, if any
     detector_lanes: Mapping[int, str] = field(default_factory=dict)  # the SUMO lane of a detector given one
+    detector_timing: Mapping[int, DetectorTiming] = field(default_factory=dict)  # a detector given any timer
     ped_detector_phases: Mapping[int, int] = field(default_factory=dict)  # the [pedestrian_detectors] table, if any
     overlaps: Mapping[int, Overlap] = field(default_factory=dict)  # by overlap number (1 = A)
     preempts: Mapping[int, Preempt] = field(default_factory=dict)  # by preempt number
@@ -614,6 +646,14 @@ def _phase(number: int, raw: Any, defaults: Mapping[str, Any], ring: int, source
     walk = timing("walk", 0, integer=True)
     ped_clear = timing("ped_clear", 0, integer=True)
     red_revert = timing("red_revert", 0, step=0.1)
+    before_reduction = timing("time_before_reduction", 0, integer=True)
+    to_reduce = timing("time_to_reduce", 0, integer=True)
+    min_gap = merged.get("min_gap")
+    if min_gap is not None:
+        min_gap = timing("min_gap", step=0.1)
+        if min_gap > passage:
+            raise ConfigError(source, f"{where('min_gap')}min_gap", f"is {min_gap} s, beyond passage {passage} s; "
+                              "allowed: min_gap <= passage (the allowable gap is reduced from the passage to it)")
     max2 = merged.get("max2")
     if max2 is not None:
         max2 = timing("max2", integer=True, low=min_green)
@@ -656,7 +696,8 @@ def _phase(number: int, raw: Any, defaults: Mapping[str, Any], ring: int, source
                  _STARTUP_NAMES[startup], approach, turn, float(passage), None if max2 is None else float(max2),
                  float(walk), float(ped_clear), float(red_revert), Recall(recall), flags["dual_entry"],
                  flags["backup_prevent"], flags["conditional_service"], flags["simultaneous_gap_disable"],
-                 flags["ped_recycle"], tuple(permissive))
+                 flags["ped_recycle"], tuple(permissive),
+                 float(before_reduction), float(to_reduce), None if min_gap is None else float(min_gap))
 
 
 def _pairs(raw: Any, name: str, phases: Mapping[int, Phase], permissives: Permissives,
@@ -835,15 +876,16 @@ def from_dict(raw: Mapping[str, Any], source: str = "<memory>") -> IntersectionC
 
 
 def _ped_detectors(raw: Any, phases: Mapping[int, Phase], source: str) -> dict[int, int]:
-    """``[pedestrian_detectors]``: push button number (1-64) = the phase whose pedestrian call it places."""
+    """``[pedestrian_detectors]``: push button number (1-255) = the phase whose pedestrian call it places."""
     if not isinstance(raw, dict):
         raise ConfigError(source, "pedestrian_detectors", "must be a table: push button number = phase it calls, "
                                                           "e.g. 1 = 2")
     out: dict[int, int] = {}
     for key, phase in raw.items():
         where = f"pedestrian_detectors.{key}"
-        if not (key.isdigit() and int(key) in DETECTOR_NUMBERS):
-            raise ConfigError(source, where, "unknown pedestrian detector; allowed: numbers 1-64")
+        if not (key.isdigit() and int(key) in PED_DETECTOR_NUMBERS):
+            raise ConfigError(source, where,
+                              f"unknown pedestrian detector; allowed: numbers 1-{PED_DETECTOR_NUMBERS[-1]}")
         if isinstance(phase, bool) or phase not in phases:
             raise ConfigError(source, where, f"calls phase {phase!r}; allowed: the configured phases "
                                              f"{', '.join(map(str, phases))}")
@@ -852,32 +894,49 @@ def _ped_detectors(raw: Any, phases: Mapping[int, Phase], source: str) -> dict[i
 
 
 def _detectors(raw: Any, phases: Mapping[int, Phase], source: str) -> dict[str, dict[int, Any]]:
-    """``[detectors]``: vehicle detector number (1-64) = the phase it calls, or ``{ phase = P, lane = "ID" }``
-    for a loop on one SUMO lane (without a lane, the detector sees every approach lane of its phase). Phase 0 is
-    NTCIP's vehicleDetectorCallPhase 0: the controller logs the detector and places no call (a count station)."""
+    """``[detectors]``: vehicle detector number (1-128) = the phase it calls, or a table ``{ phase = P, lane = "ID",
+    delay = s, extend = s, carryover = s }``: a loop on one SUMO lane (without a lane, the detector sees every
+    approach lane of its phase) and its timers (:class:`DetectorTiming`). Phase 0 is NTCIP's vehicleDetectorCallPhase
+    0: the controller logs the detector and places no call (a count station)."""
     if not isinstance(raw, dict):
         raise ConfigError(source, "detectors", "must be a table: detector number = phase it calls, e.g. 1 = 2, or "
-                                               "1 = { phase = 2, lane = \"E2C_0\" }")
+                                               "1 = { phase = 2, lane = \"E2C_0\", delay = 3.0 }")
     out: dict[int, int] = {}
     lanes: dict[int, str] = {}
+    timing: dict[int, DetectorTiming] = {}
     for key, value in raw.items():
         where = f"detectors.{key}"
         if not (key.isdigit() and int(key) in DETECTOR_NUMBERS):
-            raise ConfigError(source, where, "unknown detector; allowed: detector numbers 1-64")
+            raise ConfigError(source, where, f"unknown detector; allowed: detector numbers 1-{DETECTOR_NUMBERS[-1]}")
         if isinstance(value, dict):
-            _unknown(value, ("phase", "lane"), f"{where}.", source)
+            _unknown(value, ("phase", "lane", *_DETECTOR_TIMERS), f"{where}.", source)
             phase, lane = value.get("phase"), value.get("lane")
             if lane is not None and not (isinstance(lane, str) and lane):
                 raise ConfigError(source, f"{where}.lane", "must be a SUMO lane id, e.g. \"E2C_0\"")
             if lane is not None:
                 lanes[int(key)] = lane
+            timers = {name: float(_number(value, name, f"{where}.", source, 0.0, low=0, high=high, step=0.1,
+                                          ntcip=carrier))
+                      for name, (carrier, high) in _DETECTOR_TIMERS.items()}
+            if any(timers.values()):
+                timing[int(key)] = DetectorTiming(**timers)
         else:
             phase = value
         if isinstance(phase, bool) or not isinstance(phase, int) or (phase not in phases and phase != 0):
             raise ConfigError(source, where, f"calls phase {phase!r}; allowed: the configured phases "
                                              f"{', '.join(map(str, phases))}, or 0 (logged, calls no phase)")
         out[int(key)] = phase
-    return {"detector_phases": out, "detector_lanes": lanes}
+    return {"detector_phases": out, "detector_lanes": lanes, "detector_timing": timing}
+
+
+#: Each detector timer of the config, the object that carries it (None: no NTCIP object) and its highest value in
+#: seconds: vehicleDetectorDelay "0-255.0 sec", vehicleDetectorExtend "0-25.5 sec"; carryover, carried by no object,
+#: as long as an extension.
+_DETECTOR_TIMERS: dict[str, tuple[Carrier | None, float]] = {
+    "delay": ((VEHICLE_DETECTOR_DELAY, 10), 255.0),
+    "extend": ((VEHICLE_DETECTOR_EXTEND, 10), 25.5),
+    "carryover": (None, 25.5),
+}
 
 
 # --- [coordination] ----------------------------------------------------------------------------
@@ -1031,9 +1090,9 @@ def _overlap(number: int, raw: Any, w: str, phases: Mapping[int, Phase], compati
              source: str) -> Overlap:
     if not isinstance(raw, dict):
         raise ConfigError(source, w[:-1], "must be a table: included, modifiers, type, trail_green, trail_yellow, "
-                                          "trail_red, approach, turn")
-    _unknown(raw, ("type", "included", "modifiers", "trail_green", "trail_yellow", "trail_red", "approach", "turn"),
-             w, source)
+                                          "trail_red, delay_green, approach, turn")
+    _unknown(raw, ("type", "included", "modifiers", "trail_green", "trail_yellow", "trail_red", "delay_green",
+                   "approach", "turn"), w, source)
     kind = raw.get("type", OverlapKind.NORMAL.value)
     if kind not in tuple(OverlapKind):
         raise ConfigError(source, f"{w}type", f"is {kind!r}; allowed: {', '.join(k.value for k in OverlapKind)}")
@@ -1057,7 +1116,10 @@ def _overlap(number: int, raw: Any, w: str, phases: Mapping[int, Phase], compati
     if kind is OverlapKind.NORMAL and modifiers:
         raise ConfigError(source, f"{w}modifiers", "is given for a normal overlap; allowed: none (modifiers make a "
                                                    "minus_green_yellow or fya overlap)")
-    if kind is not OverlapKind.NORMAL and not modifiers:
+    if kind is OverlapKind.TRANSIT and modifiers:
+        raise ConfigError(source, f"{w}modifiers", "is given for a transit overlap; allowed: none (NTCIP 1202 v03 "
+                                                   "transit-2 is controlled by its included phases alone)")
+    if kind not in (OverlapKind.NORMAL, OverlapKind.TRANSIT) and not modifiers:
         raise ConfigError(source, f"{w}modifiers", f"is required for type {kind.value!r}: "
                                                    + ("the phases whose green holds the overlap red"
                                                       if kind is OverlapKind.MINUS_GREEN_YELLOW else
@@ -1072,9 +1134,11 @@ def _overlap(number: int, raw: Any, w: str, phases: Mapping[int, Phase], compati
                                                        "permissive phases that conflict with every included phase")
     trail_green = _number(raw, "trail_green", w, source, 0, integer=True,
                           ntcip=(OVERLAP_TABLE[OverlapColumn.TRAIL_GREEN], 1))
-    if trail_green and kind is OverlapKind.FYA:
-        raise ConfigError(source, f"{w}trail_green", "is given for an fya overlap; allowed: 0 (a flashing yellow "
-                                                     "arrow clears with its phases)")
+    if trail_green and kind in (OverlapKind.FYA, OverlapKind.TRANSIT):
+        raise ConfigError(source, f"{w}trail_green", "is given for " + (
+            "an fya overlap; allowed: 0 (a flashing yellow arrow clears with its phases)" if kind is OverlapKind.FYA
+            else "a transit overlap; allowed: 0 (a transit bar flashes its green through its phases' yellow and has "
+                 "no yellow of its own)"))
     trail_yellow = _number(raw, "trail_yellow", w, source, 3.0, step=0.1,
                            ntcip=(OVERLAP_TABLE[OverlapColumn.TRAIL_YELLOW], 10))
     trail_red = _number(raw, "trail_red", w, source, 0.0, step=0.1, ntcip=(OVERLAP_TABLE[OverlapColumn.TRAIL_RED], 10))
@@ -1089,8 +1153,13 @@ def _overlap(number: int, raw: Any, w: str, phases: Mapping[int, Phase], compati
         raise ConfigError(source, f"{w}turn", f"is {turn!r}; allowed: {', '.join(allowed_turns)}"
                                               + (" (a flashing yellow arrow shows a left turn)"
                                                  if kind is OverlapKind.FYA else ""))
+    # No NTCIP object carries it: tenths up to 25.5 s, as the overlap's own trailing yellow and red.
+    delay_green = _number(raw, "delay_green", w, source, 0.0, low=0, high=25.5, step=0.1)
+    if delay_green and kind is OverlapKind.FYA:
+        raise ConfigError(source, f"{w}delay_green", "is given for an fya overlap; allowed: 0 (a flashing yellow arrow "
+                                                     "follows its protected and permissive phases at once)")
     return Overlap(number, kind, included, modifiers, trail_green, float(trail_yellow), float(trail_red), approach,
-                   turn)
+                   turn, float(delay_green))
 
 
 # --- [preempts] -----------------------------------------------------------------------------------

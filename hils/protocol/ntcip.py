@@ -128,6 +128,9 @@ class PhaseColumn(IntEnum):
     YELLOW_CHANGE = 8
     RED_CLEAR = 9
     RED_REVERT = 10
+    TIME_BEFORE_REDUCTION = 13
+    TIME_TO_REDUCE = 15
+    MINIMUM_GAP = 17
     STARTUP = 20
     OPTIONS = 21
     RING = 22
@@ -375,6 +378,9 @@ _PHASE_NAMES: dict[PhaseColumn, tuple[str, Syntax, Access, int, int]] = {
     PhaseColumn.YELLOW_CHANGE: ("phaseYellowChange", Syntax.INTEGER, _RW, 30, 255),
     PhaseColumn.RED_CLEAR: ("phaseRedClear", Syntax.INTEGER, _RW, 0, 255),
     PhaseColumn.RED_REVERT: ("phaseRedRevert", Syntax.INTEGER, _RW, 0, 255),
+    PhaseColumn.TIME_BEFORE_REDUCTION: ("phaseTimeBeforeReduction", Syntax.INTEGER, _RW, 0, 255),
+    PhaseColumn.TIME_TO_REDUCE: ("phaseTimeToReduce", Syntax.INTEGER, _RW, 0, 255),
+    PhaseColumn.MINIMUM_GAP: ("phaseMinimumGap", Syntax.INTEGER, _RW, 0, 255),
     PhaseColumn.STARTUP: ("phaseStartup", Syntax.INTEGER, _RW, 1, 6),
     PhaseColumn.OPTIONS: ("phaseOptions", Syntax.INTEGER, _RW, 0, 65535),
     PhaseColumn.RING: ("phaseRing", Syntax.INTEGER, _RW, 0, 255),
@@ -416,11 +422,12 @@ def overlap_letter(number: int) -> str:
 
 class OverlapType(IntEnum):
     """overlapType (A.9.2.1.2). NTCIP 1202 v02 knows normal and minusGreenYellow; a flashing yellow arrow is a
-    vendor's type there, other(1)."""
+    vendor's type there, other(1). v03 adds transit-2 (9), a 2-section transit bar."""
 
     OTHER = 1
     NORMAL = 2
     MINUS_GREEN_YELLOW = 3
+    TRANSIT_2 = 9
 
 
 class OverlapColumn(IntEnum):
@@ -448,7 +455,8 @@ class OverlapStatusColumn(IntEnum):
 # range: 3.0-25.5 sec", as the phase table's yellow change).
 OVERLAP_TABLE: dict[OverlapColumn, ObjectDef] = {
     OverlapColumn.NUMBER: _o("overlapNumber", (9, 2, 1, 1), low=1),
-    OverlapColumn.TYPE: _o("overlapType", (9, 2, 1, 2), access=Access.READ_WRITE, low=1, high=3),
+    # 1-3 as v02 has them, and v03's transit-2 (9), the one type v03 added that the emulator serves.
+    OverlapColumn.TYPE: _o("overlapType", (9, 2, 1, 2), access=Access.READ_WRITE, low=1, high=9),
     OverlapColumn.INCLUDED_PHASES: _o("overlapIncludedPhases", (9, 2, 1, 3), Syntax.OCTET_STRING,
                                       access=Access.READ_WRITE),
     OverlapColumn.MODIFIER_PHASES: _o("overlapModifierPhases", (9, 2, 1, 4), Syntax.OCTET_STRING,
@@ -586,6 +594,11 @@ class DetectorOption(IntFlag):
 MAX_VEHICLE_DETECTORS = _o("maxVehicleDetectors", (2, 1), low=1)
 VEHICLE_DETECTOR_OPTIONS = _o("vehicleDetectorOptions", (2, 2, 1, 2), access=Access.READ_WRITE)
 VEHICLE_DETECTOR_CALL_PHASE = _o("vehicleDetectorCallPhase", (2, 2, 1, 4), access=Access.READ_WRITE)
+# vehicleDetectorDelay (tenths, "0-255.0 sec"; "If a management station attempts to set a value between 2551 and
+# 65535, inclusive, the parameter is undefined": such a SET is refused) and vehicleDetectorExtend (tenths, "0-25.5
+# sec").
+VEHICLE_DETECTOR_DELAY = _o("vehicleDetectorDelay", (2, 2, 1, 6), access=Access.READ_WRITE, high=2550)
+VEHICLE_DETECTOR_EXTEND = _o("vehicleDetectorExtend", (2, 2, 1, 7), access=Access.READ_WRITE)
 MAX_VEHICLE_DETECTOR_STATUS_GROUPS = _o("maxVehicleDetectorStatusGroups", (2, 3), low=1)
 DETECTOR_STATUS_ACTIVE = _o("vehicleDetectorStatusGroupActive", (2, 4, 1, 2))
 MAX_VEHICLE_DETECTOR_CONTROL_GROUPS = _o("maxVehicleDetectorControlGroups", (2, 11), low=1, version=Version.V03)
@@ -662,7 +675,8 @@ ALL_OBJECTS: tuple[ObjectDef, ...] = (
     SYSTEM_PATTERN_CONTROL, COORD_CORRECTION_MODE, COORD_FORCE_MODE, MAX_PATTERNS, PATTERN_TABLE_TYPE, MAX_SPLITS,
     COORD_PATTERN_STATUS, LOCAL_FREE_STATUS, COORD_CYCLE_STATUS, COORD_SYNC_STATUS, *PATTERN_TABLE.values(),
     *SPLIT_TABLE.values(), SEQUENCE_DATA, MAX_RING_CONTROL_GROUPS, RING_CONTROL_MAX2, MAX_VEHICLE_DETECTORS,
-    VEHICLE_DETECTOR_OPTIONS, VEHICLE_DETECTOR_CALL_PHASE, MAX_VEHICLE_DETECTOR_STATUS_GROUPS, DETECTOR_STATUS_ACTIVE,
+    VEHICLE_DETECTOR_OPTIONS, VEHICLE_DETECTOR_CALL_PHASE, VEHICLE_DETECTOR_DELAY, VEHICLE_DETECTOR_EXTEND,
+    MAX_VEHICLE_DETECTOR_STATUS_GROUPS, DETECTOR_STATUS_ACTIVE,
     MAX_VEHICLE_DETECTOR_CONTROL_GROUPS, DETECTOR_ACTUATION, MAX_PED_DETECTORS,
     PED_DETECTOR_CALL_PHASE, MAX_PED_DETECTOR_GROUPS, PED_DETECTOR_STATUS_ACTIVE, PED_DETECTOR_ACTUATION,
     *PHASE_TABLE.values(), *STATUS_TABLE.values(), *CONTROL_TABLE.values(), MAX_CHANNEL_STATUS_GROUPS,

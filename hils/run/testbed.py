@@ -46,7 +46,7 @@ import time
 from collections.abc import Callable, Generator, Mapping
 from pathlib import Path
 from types import TracebackType
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import simpy
 
@@ -73,6 +73,9 @@ from hils.shell.preflight import ControllerCheckFailed
 from hils.shell.targets import VIRTUAL, TargetFactory, check_target, connect, target_specs
 from hils.shell.transport import Transport
 from hils.sim.network import TLS_ID
+
+if TYPE_CHECKING:
+    from hils.sim.worker import SumoProcess
 
 __all__ = [
     "BLIND_AGENTS", "DEFAULT_AGENTS", "AgentFailed", "NotStarted", "RunInterrupted", "RunResult", "RunSpec",
@@ -230,7 +233,9 @@ class Testbed(_OneIntersection):
     of the run stays the same. ``fast_path``: leave out in virtual time what cannot change a result
     (:mod:`hils.shell.fastpath`); False runs the reference (every controller tick, every poll, every SUMO step).
     ``take_over``: drive a controller on which someone else's calls are found without first watching them for
-    another manager (a run that finds them changing refuses to start); their calls are cleared.
+    another manager (a run that finds them changing refuses to start); their calls are cleared. ``sumo_worker``: SUMO
+    steps in a worker process of its own (:mod:`hils.sim.worker`), beside this one's work, in virtual time: the same
+    run on two cores; the process lives until :meth:`close`, each reset a fresh SUMO in it.
 
     The general API takes and gives one value per intersection, by name: :meth:`reset_all`, :meth:`step_all`,
     :meth:`observe_all`, :attr:`intersections`. A run of one intersection also has the single view of it:
@@ -249,7 +254,7 @@ class Testbed(_OneIntersection):
                  on_reset: Callable[[Testbed], None] | None = None,
                  sumo_config: str | Path | None = None, detectors: bool | None = None,
                  scenario: str | Path | Scenario | None = None, measure: bool = True, fast_path: bool = True,
-                 take_over: bool = False) -> None:
+                 take_over: bool = False, sumo_worker: bool = False) -> None:
         if scenario is not None and config is not None:
             raise ValueError("give a config (one intersection) or a scenario (its intersections), not both")
         self.scenario = _scenario(scenario)
@@ -305,6 +310,15 @@ class Testbed(_OneIntersection):
         self._driver: Any = None
         self._owns_sumo = False
         self._wall_t0 = 0.0
+        if sumo_worker and self._wall_targets:
+            raise ValueError("sumo_worker: SUMO steps in a worker process in virtual time only; at the wall clock a "
+                             "step's cost is measured where SUMO steps")
+        self.sumo_process: SumoProcess | None = None
+        if sumo_worker and sumo is True:
+            from hils.sim.worker import SumoProcess
+
+            # spawned now, so that it boots while the run is assembled; its SUMO starts at each reset
+            self.sumo_process = SumoProcess()
 
     # --- properties ---------------------------------------------------------------------------
 
@@ -356,6 +370,16 @@ class Testbed(_OneIntersection):
         return {name: i.target.spat() for name, i in self.intersections.items()
                 if callable(getattr(i.target, "spat", None))}
 
+    def j2735(self) -> dict[str, bytes]:
+        """Each controller's SPaT now as SAE J2735 sends it, where the run can read it (the in-process emulator's):
+        a UPER MessageFrame (messageId 19) with startTime, minEndTime, maxEndTime and likelyTime per signal group
+        (phase p is group p, overlap n group 16 + n), the intersections numbered 1, 2, ... in the run's order
+        (docs/spat.md). Needs pycrate (``pip install 'hils[j2735]'``)."""
+        self._started()
+        readers = [(name, i.target) for name, i in self.intersections.items()
+                   if callable(getattr(i.target, "j2735", None))]
+        return {name: target.j2735(intersection=k + 1) for k, (name, target) in enumerate(readers)}
+
     @property
     def driver(self) -> Any:
         """Wall-clock runs: the :class:`hils.shell.clock.WallClockDriver` (its ``loop`` is the run's asyncio loop,
@@ -372,7 +396,7 @@ class Testbed(_OneIntersection):
     def reset_all(self, seed: int | None = None) -> dict[str, Observation]:
         """Start (or restart, with a new seed) the run; returns the first observation of each intersection."""
         if self.env is not None:
-            self.close()
+            self._close_run()
         if seed is not None:
             self.seed = seed
             self.spec = dataclasses.replace(self.spec, seed=seed)
@@ -460,12 +484,14 @@ class Testbed(_OneIntersection):
         self._owns_sumo = False
         if sumo is True:
             from hils.sim.sumo import SumoSimulation
+            from hils.sim.worker import SumoWorker
 
             # SUMO's tripinfo (RESCO's figures) goes beside the event log
             tripinfo = self.log_path.with_name("tripinfo.xml") if self.log_path is not None else None
-            sim = SumoSimulation(seed=self.seed, end=self.duration, sumo_config=self.sumo_config, lights=self.configs,
-                                 measure=self.measure, links=self.scenario.links if self.scenario else None,
-                                 tripinfo=tripinfo)
+            options = dict(seed=self.seed, end=self.duration, sumo_config=self.sumo_config, lights=self.configs,
+                           measure=self.measure, links=self.scenario.links if self.scenario else None,
+                           tripinfo=tripinfo)
+            sim = SumoSimulation(**options) if self.sumo_process is None else SumoWorker(self.sumo_process, **options)
             sim.start()  # a SUMO that fails to start (e.g. a network the config does not fit) closes itself
             self.simulation = sim
             self._owns_sumo = True
@@ -555,6 +581,7 @@ class Testbed(_OneIntersection):
                 self.events.emit(Kind.RUN_ENDED, reason=reason, polls=self._poll_counts())
                 self.events.close()
             if self.journal is not None:
+                self.hires()  # reading each log brings it to the present: the journal gets every event up to the end
                 self.journal.close()
             self.wall_s = time.perf_counter() - self._wall_t0
             self._collect_traffic()
@@ -566,7 +593,14 @@ class Testbed(_OneIntersection):
             self.traffic = self.simulation.finish() if self._owns_sumo else summary()
 
     def close(self) -> None:
-        """Finish the run if it is still going, then release the transports, the clock and SUMO."""
+        """Finish the run if it is still going, then release the transports, the clock, SUMO and its worker."""
+        try:
+            self._close_run()
+        finally:
+            if self.sumo_process is not None:
+                self.sumo_process.close()
+
+    def _close_run(self) -> None:
         if self.env is None:
             return
         try:

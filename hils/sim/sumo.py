@@ -210,9 +210,13 @@ class Light:
             text = self._state_strings[state] = self.phase_map.state_string(state)
         if text == self._applied:
             return False
+        self.show(text)
+        return True
+
+    def show(self, text: str) -> None:
+        """Show SUMO's per-link state string ``text`` on the traffic light."""
         libsumo.trafficlight.setRedYellowGreenState(self.tls_id, text)
         self._applied = text
-        return True
 
     def release(self) -> None:
         """Forget what was shown: SUMO's own program runs the light from now on."""
@@ -246,6 +250,11 @@ class Light:
         """Halting vehicles on the incoming lanes of each phase's movement (``upstream_queue`` of the traffic
         state, read alone: the queue plot samples it every few seconds)."""
         return {p: sum(map(_lane_halting, inc)) for p, inc, _ in self._movement_lanes}
+
+    @property
+    def lanes(self) -> tuple[str, ...]:
+        """The lanes of the light's links, incoming and outgoing: those its traffic state reads."""
+        return self._lanes
 
     def traffic_state(self) -> TrafficState:
         now, read, departed, arrived = self._readings.read(self._lanes)
@@ -340,6 +349,7 @@ class SumoSimulation:
         self._seen: dict[str, tuple[str, float]] = {}
         self._time_loss: dict[str, float] = {}
         self._finished: dict[str, list[float]] = {}
+        self._readings = _Readings()
 
     # --- life cycle ----------------------------------------------------------------------
 
@@ -388,7 +398,7 @@ class SumoSimulation:
                             f"{', '.join(map(repr, present)) or 'none'}")
         net = read_net(libsumo.simulation.getOption("net-file"))
         named = labels(list(self.configs))
-        readings = _Readings()
+        readings = self._readings = _Readings()
         self.lights = {tls: Light(tls, cfg, derive_phase_map(cfg, net, libsumo.trafficlight.getControlledLinks(tls),
                                                              tls, self.links.get(tls)), label=named[tls],
                                   readings=readings)
@@ -466,6 +476,11 @@ class SumoSimulation:
     @property
     def time(self) -> float:
         return libsumo.simulation.getTime()
+
+    def read_lanes(self, names: Sequence[str]) -> tuple[float, dict[str, LaneState], int, int]:
+        """What the lights' traffic states are made of, read as they read it (once per simulated time): the time, the
+        states of at least the lanes ``names``, and the vehicles departed and arrived."""
+        return self._readings.read(names)
 
     def step(self) -> float:
         """Advance one SUMO step; returns the wall seconds it took."""

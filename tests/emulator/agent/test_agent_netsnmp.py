@@ -231,12 +231,16 @@ def test_walk_of_the_phase_table_gives_every_column_and_the_options(server: Serv
     assert done.returncode == 0, done.stderr
     got = values(done.stdout)
     columns = sorted({int(oid.split(".")[-2]) for oid in got})
-    assert columns == [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 20, 21, 22, 23]  # phaseNumber, the index, first
-    assert len(got) == 14 * 8
+    # phaseNumber, the index, first; 13, 15 and 17 the gap reduction's time before reduction, time to reduce and
+    # minimum gap
+    assert columns == [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 13, 15, 17, 20, 21, 22, 23]
+    assert len(got) == 17 * 8
     options = int(PhaseOption.ENABLED | PhaseOption.SIMULTANEOUS_GAP_DISABLE)
     assert {got[oid_str(phase_oid(PhaseColumn.OPTIONS, p))] for p in range(1, 9)} == {f"INTEGER: {options}"}
     assert got[oid_str(phase_oid(PhaseColumn.PASSAGE, 4))] == "INTEGER: 0"
     assert got[oid_str(phase_oid(PhaseColumn.WALK, 4))] == "INTEGER: 0"
+    # no gap reduction configured: the minimum gap is the passage
+    assert got[oid_str(phase_oid(PhaseColumn.MINIMUM_GAP, 4))] == got[oid_str(phase_oid(PhaseColumn.PASSAGE, 4))]
 
 
 def test_the_coordination_objects_walk_and_set_within_ntcip_ranges(tmp_path: Path) -> None:

@@ -874,3 +874,35 @@ def test_the_demo_shows_pedestrian_intervals_and_phase_next(paper_config: Inters
     assert any(r.yellows == {2, 6} and r.nexts == {3, 7} for r in rows)
     text = demo.render(rows, config)
     assert " W " in text and " P " in text and "[3,7]" in text
+
+
+def test_gap_reduction_lowers_the_allowable_gap_while_conflicting_demand_waits(paper_toml: str) -> None:
+    """NTCIP 1202 phaseTimeBeforeReduction: the TBR period "shall begin when the phase is Green and there is a
+    serviceable conflicting call", then "the linear reduction of the allowable gap from the Passage Time shall
+    begin"; phaseTimeToReduce sets its rate and past phaseMinimumGap "the allowable gap shall remain fixed". 2 on
+    passage 3 s, reduced after 5 s of the call on 4 over 10 s to 1 s: its call drops at 10 s, 5 s into the
+    reduction, where the allowable gap is 2 s (3 - 2 * 5 / 10) and falls on while the gap times: 2 gaps out 1.7 s
+    later (the first tick the gap reaches it), not 3 s; a call dropping after 15 s+ leaves the minimum gap, 1 s."""
+    reduced = "passage = 3, time_before_reduction = 5, time_to_reduce = 10, min_gap = 1"
+    c = with_options(paper_toml, {2: reduced})
+    seen = onsets(c, 400, {0: {2, 4}, 100: {4}})
+    assert seen[(2, "Y")] == 100 + 17
+    late = with_options(paper_toml, {2: reduced.replace("passage = 3", "passage = 3, max_green = 40")})
+    seen = onsets(late, 600, {0: {2, 4}, 200: {4}})
+    assert seen[(2, "Y")] == 200 + 10
+    plain = with_options(paper_toml, {2: "passage = 3"})
+    seen = onsets(plain, 400, {0: {2, 4}, 100: {4}})
+    assert seen[(2, "Y")] == 100 + 30
+
+
+def test_quiet_time_stops_where_the_reduced_gap_runs_out(paper_toml: str) -> None:
+    """The same green advanced over (quiet ticks skipped at once) ends where stepping it does: the gap timer meets
+    the falling allowable gap 1.7 s after the call drops, not after the passage."""
+    c = with_options(paper_toml, {2: "passage = 3, time_before_reduction = 5, time_to_reduce = 10, min_gap = 1"})
+    c.set_control(CALL, {2, 4})
+    c.advance(100)
+    c.set_control(CALL, {4})
+    c.advance(16)
+    assert 2 in c.greens
+    c.advance(1)
+    assert 2 in c.yellows

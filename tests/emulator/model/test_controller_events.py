@@ -3,8 +3,8 @@
 :meth:`Controller.advance` skips the ticks that :meth:`Controller.quiet_ticks` proves change nothing
 but counters. Here one controller steps every tick and its twin advances over the same stretches,
 for random configs (every phase option, start-up flash, backup time, the controller's delays) and
-random inputs (every control object, Max2, detectors, push buttons, retimed phases, backup time, patterns,
-preempts, power cycles):
+random inputs (every control object, Max2, detectors with delays, extensions and carryovers, push buttons,
+retimed phases, backup time, patterns, preempts, power cycles):
 after every stretch the two must agree on everything a read can see and on their whole working
 memory, and their interval timelines must be the same, tick for tick.
 """
@@ -20,8 +20,8 @@ from hypothesis import strategies as st
 from emulator.model.controller import Change, Controller
 from emulator.model.delays import STATUS_ATTRIBUTES, DelayedController
 from hils.protocol import config as config_mod
-from hils.protocol.config import EmulatorParams, IntersectionConfig, Recall
-from hils.protocol.ntcip import ControlColumn
+from hils.protocol.config import DetectorTiming, EmulatorParams, IntersectionConfig, Recall
+from hils.protocol.ntcip import ControlColumn, PhaseStartup
 from hils.sim.network import data_path
 from tests.emulator.model.test_controller_properties import ALL_PHASES, configs, phase_sets
 
@@ -31,14 +31,15 @@ TIMING_FIELDS = ("min_green", "max1", "max2", "passage", "walk", "ped_clear", "y
 
 @st.composite
 def units(draw: st.DrawFn, free: bool = False) -> IntersectionConfig:
-    """A random config with a start-up flash, a backup time and the controller's delays drawn too, half the
+    """A random config with a start-up flash, a backup time, detector timers and the controller's delays drawn, half the
     time a coordination plan (patterns, modes, maybe a time-of-day change), half the time overlaps and half the
-    time preempts; ``free``: never a plan or overlaps (where :meth:`Controller._settles` proves quiet time
-    starting right after a change)."""
+    time preempts; ``free``: never a plan or overlaps (the units that rest most often)."""
     cfg = draw(configs(coordinated=not free and draw(st.booleans()), overlapped=not free and draw(st.booleans()),
                        preempted=draw(st.booleans())))
+    timers = st.builds(DetectorTiming, *[st.sampled_from([0.0, 0.0, 0.1, 0.5, 2.0, 3.0])] * 3)
     return dataclasses.replace(
         cfg, startup_flash=draw(st.sampled_from([0, 0, 1, 3])),
+        detector_timing=draw(st.dictionaries(st.sampled_from(sorted(ALL_PHASES)), timers, max_size=4)),
         middleware=dataclasses.replace(cfg.middleware, backup_time=draw(st.sampled_from([0, 2, 5, 30]))),
         emulator=EmulatorParams(call_processing_ticks=draw(st.integers(0, 3)),
                                 status_update_ticks=draw(st.integers(0, 3))))
@@ -108,6 +109,7 @@ def memory(c: Controller) -> dict[str, object]:
             "coordination": (co.clock, co.command, co.local, co.running, co.timer, co.budget, co.free_status,
                              co.replan),
             "overlaps": (dict(c.overlaps.shown), dict(c.overlaps.ticks)),
+            "detectors": (c.detectors.recognized, dict(c.detectors.waited), dict(c.detectors.held)),
             "preempts": (c.preemptor.discrete(), dict(c.preemptor.presence), dict(c.preemptor.waited),
                          dict(c.preemptor.since_entry), dict(c.preemptor.stage))}
 
@@ -141,7 +143,7 @@ def test_advance_is_stepping_every_tick(config: IntersectionConfig, ops: list[tu
 @SETTINGS
 @given(config=units(free=True), ops=st.lists(inputs, max_size=25))
 def test_advance_is_stepping_every_tick_free(config: IntersectionConfig, ops: list[tuple[str, object]]) -> None:
-    """Free, without overlaps: quiet time often starts right after a step that changed something, unconfirmed."""
+    """Free, without overlaps: quiet time often starts right after a step that changed something."""
     check_equal(config, ops, delayed=False)
 
 
@@ -162,10 +164,25 @@ def test_a_preempt_called_in_the_start_up_flash_is_read_after_it() -> None:
                 delayed=False)
 
 
+def test_a_delaying_detector_actuated_in_the_start_up_flash_starts_its_delay_after_it() -> None:
+    """Detector 1 (delay 0.1 s), or 2 (no timer), comes on during the start-up flash, which reads no input, no phase
+    starting after it: the step after the flash starts its delay or recognizes it, and quiet time may not skip it
+    (the detector unit's deadline; before, it had only delays already running, and the skipping twin never called
+    the phase)."""
+    config = config_mod.load()
+    config = dataclasses.replace(
+        config, startup_flash=1, detector_timing={1: DetectorTiming(delay=0.1)},
+        phases={p: dataclasses.replace(ph, startup=PhaseStartup.PHASE_NOT_ON) for p, ph in config.phases.items()},
+    ).with_middleware(backup_time=0)
+    check_equal(config, [("detectors", frozenset({1})), ("ticks", 11), ("ticks", 40)], delayed=False)
+    # detector 2, without a timer of its own, is read after the flash as well
+    check_equal(config, [("ticks", 9), ("detectors", frozenset({2})), ("ticks", 2), ("ticks", 40)], delayed=False)
+
+
 @pytest.mark.parametrize("delayed", [False, True])
 def test_a_max_recalled_green_times_its_maximum_in_quiet_time(delayed: bool) -> None:
     """4+8 on max recall start green with nothing else called: their maximum timers run from the green's first tick
-    on, through quiet time that starts right after the green does (:meth:`Controller._settles`); they rest maxed
+    on, through quiet time that starts right after the green does (the units' deadlines); they rest maxed
     out until a call on 2 ends them. The twins agree throughout (a proof that took the timer to run only with
     conflicting demand left the skipping twin's timer at zero)."""
     config = config_mod.load().with_middleware(backup_time=0)
@@ -223,3 +240,19 @@ def test_quiet_time_is_skipped() -> None:
     # change only to see that the next one changes nothing, none where 4 and 8 time their minimum with nothing
     # else called.
     assert c.steps <= 3
+
+
+def test_quiet_time_is_skipped_under_a_pattern_with_overlaps() -> None:
+    """The city four-leg (overlaps, a preempt configured) under its pattern, every phase called: the units' deadlines
+    (the coordinator's marks, the rings' thresholds, the overlaps following their phases) leave most ticks quiet, as
+    they do free; a twin stepping every tick agrees. (Quiet time that started only after a step that changed
+    nothing never started under a pattern: the points the local timer passes change at every tick.)"""
+    config = config_mod.load(data_path("four_leg_city.toml")).with_middleware(backup_time=0)
+    ops = [(ControlColumn.VEH_CALL, frozenset({2, 4, 6, 8})), ("pattern", 1), ("ticks", 100), ("ticks", 3000)]
+    check_equal(config, ops, delayed=False)
+    c = CountingController(config)
+    for op, value in ops[:-1]:
+        apply(c, op, value, ticked=False)
+    c.steps = 0
+    c.advance(3000)
+    assert c.coordinator.plan is not None and c.steps < 3000 // 5

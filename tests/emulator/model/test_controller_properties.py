@@ -1,6 +1,6 @@
 """Safety and liveness of the controller model over random configs and random control SETs.
 
-Configs draw every phase option (passage, recalls, Max2, pedestrians, red
+Configs draw every phase option (passage, gap reduction, recalls, Max2, pedestrians, red
 revert, dual entry, backup prevent, simultaneous gap disable), both
 next-phase locks, overlaps of every type and preempts; SETs draw calls,
 pedestrian calls, omits, holds, force-offs, Max2 selection and preempt
@@ -59,6 +59,9 @@ def timings(draw: st.DrawFn) -> dict[str, object]:
     }
     if draw(st.booleans()):
         out["max2"] = draw(st.integers(min_green, 40))
+    if out["passage"] > 0 and draw(st.booleans()):  # gap reduction (volume density)
+        out |= {"time_before_reduction": draw(st.integers(0, 10)), "time_to_reduce": draw(st.integers(0, 10)),
+                "min_gap": draw(st.integers(0, round(10 * out["passage"]))) / 10}
     if max_green >= 2 and draw(st.booleans()):
         walk = draw(st.integers(1, max_green - 1))
         out |= {"walk": walk, "ped_clear": draw(st.integers(1, max_green - walk)), "ped_recycle": draw(st.booleans())}
@@ -108,7 +111,8 @@ def configs(draw: st.DrawFn, coordinated: bool = False, overlapped: bool = False
 
 @st.composite
 def preempt_tables(draw: st.DrawFn, compatible: list[list[int]], least: int = 0) -> dict:
-    """Up to two preempts: dwell, track and exit phases that run together (or none), every time drawn."""
+    """Up to two preempts: dwell, track and exit phases that run together (or none), maybe phases cycling in the
+    dwell, every time drawn."""
     together = st.sampled_from([[], *[[p] for p in sorted(ALL_PHASES)], *compatible])
     out = {}
     for n in range(1, draw(st.integers(least, 2)) + 1):
@@ -118,6 +122,9 @@ def preempt_tables(draw: st.DrawFn, compatible: list[list[int]], least: int = 0)
                        "enter_yellow": draw(st.integers(30, 50)) / 10, "enter_red": draw(st.integers(0, 20)) / 10,
                        "dwell_green": draw(st.integers(1, 5)), "non_locking": draw(st.booleans()),
                        "max_presence": draw(st.sampled_from([0, 0, 15, 40]))}
+        if entry["dwell_phases"] and draw(st.booleans()):  # phases that cycle in the dwell (preemptCyclingPhase)
+            others = sorted(ALL_PHASES - set(entry["dwell_phases"]))
+            entry["cycling_phases"] = draw(st.lists(st.sampled_from(others), min_size=1, max_size=3, unique=True))
         if draw(st.booleans()):
             entry |= {"track_phases": [draw(st.sampled_from(sorted(ALL_PHASES)))],
                       "track_green": draw(st.integers(1, 8)), "track_yellow": draw(st.integers(30, 50)) / 10,
@@ -128,11 +135,12 @@ def preempt_tables(draw: st.DrawFn, compatible: list[list[int]], least: int = 0)
 
 @st.composite
 def overlap_tables(draw: st.DrawFn, compatible: list[list[int]], least: int = 0) -> dict:
-    """Up to three overlaps: normal or minus-green-yellow ones with random parents (and maybe a trailing green),
-    flashing yellow arrows with a protected phase and permissive phases that conflict with it."""
+    """Up to three overlaps: normal, minus-green-yellow or transit ones with random parents (maybe a delayed green;
+    all but a transit bar maybe a trailing green), flashing yellow arrows with a protected phase and permissive
+    phases that conflict with it."""
     out = {}
     for letter in "ABC"[:draw(st.integers(least, 3))]:
-        kind = draw(st.sampled_from(["normal", "minus_green_yellow", "fya"]))
+        kind = draw(st.sampled_from(["normal", "minus_green_yellow", "fya", "transit"]))
         if kind == "fya":
             p = draw(st.sampled_from(sorted(ALL_PHASES)))
             conflicting = [q for q in sorted(ALL_PHASES) if q != p and sorted((p, q)) not in compatible
@@ -150,7 +158,9 @@ def overlap_tables(draw: st.DrawFn, compatible: list[list[int]], least: int = 0)
         if kind == "minus_green_yellow":
             entry["modifiers"] = draw(st.lists(st.sampled_from(sorted(ALL_PHASES - set(included))), min_size=1,
                                                max_size=2, unique=True))
-        if draw(st.booleans()):
+        if draw(st.integers(0, 3)) == 0:
+            entry["delay_green"] = draw(st.integers(1, 40)) / 10
+        if kind != "transit" and draw(st.booleans()):
             entry |= {"trail_green": draw(st.integers(1, 5)), "trail_yellow": draw(st.integers(30, 50)) / 10,
                       "trail_red": draw(st.integers(0, 20)) / 10}
         out[letter] = entry
@@ -363,7 +373,8 @@ class Monitor:
         """An overlap goes green, yellow, red, as a phase does: never from green (or a flashing yellow arrow's
         flashing) to red without a steady yellow, and that yellow at least the shortest the config may time;
         never from red to a steady yellow, never from yellow to green (a flashing yellow arrow's flashing, on
-        its yellow bit, starts from red and may give way to the green arrow)."""
+        its yellow bit, starts from red and may give way to the green arrow). A transit bar is never yellow, and
+        goes from green to red when its included phases have ended their yellow."""
         c, now = self.c, self._overlap_display()
         for o, before in self.overlaps.items():
             after, ov = now[o], c.config.overlaps[o]
@@ -371,6 +382,11 @@ class Monitor:
                 self.changed = True
             step = f"overlap {ov.letter} ({ov.kind.value}) from {before} to {after} at tick {c.tick}"
             was_flashing, flashing = o in self.flashing, o in c.overlaps.flashing
+            if ov.kind is OverlapKind.TRANSIT:
+                # A transit bar has no yellow lamp: it goes to red once no included phase shows green or yellow.
+                assert after != "Y", step
+                assert (before, after) != ("G", "r") or not (c.greens | c.yellows) & set(ov.included), step
+                continue
             assert (before, after) != ("r", "Y") or flashing, step
             assert (before, after) != ("Y", "G") or was_flashing, step
             assert (before, after) != ("G", "r"), step

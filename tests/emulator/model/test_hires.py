@@ -97,9 +97,9 @@ def test_the_log_says_every_interval_change_at_its_tick_skipped_or_stepped(
 
 @pytest.mark.parametrize("power_failure", [False, True])
 def test_a_minimum_timed_in_quiet_time_is_logged_at_its_tick(power_failure: bool) -> None:
-    """4 and 8 called and served, nothing else: their minimum changes nothing, but the controller skipping quiet
-    ticks still steps there for its logger, which logs it at its tick, as the controller stepped every tick does
-    (and before the power failure that comes next, if one does)."""
+    """4 and 8 called and served, nothing else: their minimum changes nothing, and the controller skipping quiet
+    ticks does not step there, but its logger logs it at its tick all the same, as the controller stepped every
+    tick does (and before the power failure that comes next, if one does)."""
     logs = []
     for ticked in (True, False):
         c = Controller(config_mod.load())
@@ -119,8 +119,8 @@ def test_a_minimum_timed_in_quiet_time_is_logged_at_its_tick(power_failure: bool
 
 def test_two_minimums_timed_in_one_quiet_stretch_are_each_logged_at_their_tick() -> None:
     """4 and 8 start green together with minimums of 8 s and 15 s, nothing else called: quiet time asks the units
-    once for the stretch, and the skipping controller still steps for its logger at each minimum (4's, then 8's,
-    the one after the first step for the logger), as the controller stepped every tick logs them."""
+    once for the stretch, and the logger of the skipping controller logs each minimum at its own tick (4's, then
+    8's), as the controller stepped every tick logs them."""
     logs = []
     for ticked in (True, False):
         c = Controller(config_mod.load().with_middleware(backup_time=0))
@@ -133,6 +133,30 @@ def test_two_minimums_timed_in_one_quiet_stretch_are_each_logged_at_their_tick()
     assert logs[1] == logs[0]
     minimums = {e.parameter: e.time for e in logs[0] if e.code == E.PHASE_MIN_COMPLETE and e.parameter in (4, 8)}
     assert minimums[8] - minimums[4] == timedelta(seconds=7)
+
+
+def test_the_logger_takes_no_step_of_its_own() -> None:
+    """Minimums that change nothing else (4 and 8, then 2 and 6, nothing conflicting called while they time): the
+    controller with a logger takes exactly the steps of its twin without one, and its log says each minimum at its
+    tick, read between the steps or at the end."""
+    class Counting(Controller):
+        steps = 0
+
+        def step(self) -> None:
+            self.steps += 1
+            super().step()
+
+    twins = [Counting(config_mod.load().with_middleware(backup_time=0)) for _ in range(3)]
+    log = DataLogger(twins[0])
+    ticked_log = DataLogger(twins[2])
+    for calls in ({4, 8}, {2, 6}):
+        for c in twins:
+            apply(c, ControlColumn.VEH_CALL, frozenset(calls), ticked=c is twins[2])
+            apply(c, "ticks", 400, ticked=c is twins[2])
+        assert log.events() == ticked_log.events()
+    assert twins[0].steps == twins[1].steps < 20
+    minimums = [e.parameter for e in log.events() if e.code == E.PHASE_MIN_COMPLETE]
+    assert sorted(minimums[-4:]) == [2, 4, 6, 8]
 
 
 def config_text(text: str = "", timing: str = "") -> str:
@@ -268,8 +292,9 @@ def test_a_pedestrian_detector_table_is_checked() -> None:
     assert config_with("[pedestrian_detectors]\n1 = 4\n").ped_detectors == {1: 4}
     with pytest.raises(ConfigError, match=r"pedestrian_detectors\.1.*allowed: the configured phases"):
         config_with("[pedestrian_detectors]\n1 = 9\n")
-    with pytest.raises(ConfigError, match=r"pedestrian_detectors\.70.*1-64"):
-        config_with("[pedestrian_detectors]\n70 = 4\n")
+    assert config_with("[pedestrian_detectors]\n255 = 4\n").ped_detectors == {255: 4}  # maxPedestrianDetectors
+    with pytest.raises(ConfigError, match=r"pedestrian_detectors\.256.*1-255"):
+        config_with("[pedestrian_detectors]\n256 = 4\n")
 
 
 # --- the ATSPM layout and MaxTime's XML ----------------------------------------------------------------------

@@ -15,9 +15,13 @@ import pytest
 
 from emulator.agent.mib import MibView
 from emulator.model.controller import Controller
+from emulator.model.datalogger import DataLogger
+from emulator.model.monitor import Lamps, Monitor
 from emulator.model.overlaps import Show
 from hils.dashboard.board import Board
 from hils.protocol.config import ConfigError, IntersectionConfig, load, parse
+from hils.protocol.conflict import first_conflict
+from hils.protocol.hires import EventCode
 from hils.protocol.ntcip import (
     MAX_OVERLAP_STATUS_GROUPS,
     MAX_OVERLAPS,
@@ -32,6 +36,7 @@ from hils.protocol.ntcip import (
     SignalState,
     SnmpError,
     UnitFlashStatus,
+    Version,
     signal_oids,
 )
 from hils.sim.network import data_path, derive_phase_map, read_net
@@ -307,6 +312,12 @@ def test_the_dashboard_board_shows_the_overlaps_from_the_cabinet_read() -> None:
     ('A = { included = [2, 7], approach = "east", turn = "right" }\nB = { included = [2], approach = "east", '
      'turn = "right" }', "overlaps.B.turn", "overlap A already shows the right turn of the east approach"),
     ('A = { included = [2], kind = "normal" }', "overlaps.A.kind", "unknown field"),
+    ('A = { type = "transit", included = [2], modifiers = [1] }', "overlaps.A.modifiers",
+     "is given for a transit overlap"),
+    ('A = { type = "transit", included = [2], trail_green = 2 }', "overlaps.A.trail_green", "allowed: 0"),
+    ('A = { included = [2], delay_green = 30 }', "overlaps.A.delay_green", "allowed: >= 0 and <= 25.5"),
+    ('A = { type = "fya", included = [1], modifiers = [2], delay_green = 2 }', "overlaps.A.delay_green",
+     "allowed: 0"),
 ])
 def test_bad_overlaps_are_refused_naming_the_field(table: str, field: str, message: str) -> None:
     with pytest.raises(ConfigError) as info:
@@ -318,3 +329,65 @@ def test_the_shipped_four_leg_has_no_overlaps() -> None:
     """The paper's intersection stays as the paper ran it: overlaps live in the city variant."""
     assert load().overlaps == {} and load().overlap_groups == 0
     assert city().overlap_groups == 1 and city().overlaps[E].letter == "E"
+
+
+def test_a_transit_bar_flashes_its_green_through_its_phases_yellow_and_goes_to_red_without_a_yellow() -> None:
+    """NTCIP 1202 v03 transit-2: green with an included phase's green, flashing green while it is yellow with no
+    included phase next, red with it; its channel has no yellow, and the monitor does not fault it."""
+    c = Controller(city('A = { type = "transit", included = [2] }\n'))
+    log = DataLogger(c)
+    seen = watch(c, 300, {0: {4, 8}, 150: {2, 6}})
+    assert seen["2"][:4] == [(1, "G"), (30, "Y"), (60, "r"), (201, "G")]
+    assert seen["A"][:4] == [(1, "green"), (30, "flashing_green"), (60, "red"), (201, "green")]
+    c.set_control(CALL, {4, 8})
+    for tick in range(400):
+        c.step()
+        assert A in c.overlap_greens or A in c.overlap_reds, tick  # never yellow
+        assert A not in c.overlap_yellows
+    # Logged as the field's bars are: begin green, then red (no begin yellow, 63), and green again.
+    codes = [e.code for e in log.events() if e.code in range(61, 67) and e.parameter == A]
+    assert codes[:3] == [EventCode.OVERLAP_BEGIN_GREEN, EventCode.OVERLAP_OFF, EventCode.OVERLAP_BEGIN_GREEN]
+    assert EventCode.OVERLAP_BEGIN_YELLOW not in codes
+
+
+def test_the_conflict_check_sees_a_transit_bar() -> None:
+    config = city('A = { type = "transit", included = [2] }\n')
+    assert first_conflict(config.permissives, frozenset({2, 5}), frozenset({A})) is None
+    assert first_conflict(config.permissives, frozenset({4}), frozenset({A})) is not None
+
+
+@pytest.mark.parametrize(("kind", "fault"),
+                         [("transit", None), ("normal", "overlap 1 from green to red without a yellow")])
+def test_the_monitor_times_no_yellow_on_a_transit_bar_alone(kind: str, fault: str | None) -> None:
+    monitor = Monitor(city(f'A = {{ type = "{kind}", included = [2] }}\n'))
+    assert monitor.check(Lamps(frozenset({2}), frozenset(), frozenset({A}), frozenset()), 1) is None
+    assert monitor.check(Lamps(frozenset(), frozenset({2}), frozenset(), frozenset()), 2) == fault
+
+
+@pytest.mark.parametrize(("edition", "served"),
+                         [(Version.V03, OverlapType.TRANSIT_2), (Version.V02, OverlapType.OTHER)])
+def test_a_transit_bar_is_served_as_v03s_transit_2(edition: Version, served: OverlapType) -> None:
+    mib = MibView(Controller(city('A = { type = "transit", included = [2] }\n')), edition)
+    assert mib.get(OVERLAP_TABLE[OverlapColumn.TYPE].instance(A)) == served
+
+
+def test_a_delayed_green_overlap_turns_green_its_delay_after_its_phase_and_clears_with_it() -> None:
+    """delay_green 3.0 s: red for 30 ticks after its phase's green starts (logged: nothing), then green (61), then its
+    yellow with the phase's; a phase that conflicts with it waits while it delays, as for a trailing overlap."""
+    c = Controller(city('A = { included = [8], delay_green = 3.0 }\n'))
+    log = DataLogger(c)
+    seen = watch(c, 300, {0: {4, 8}, 150: {2, 6}})
+    assert seen["8"][:3] == [(1, "r"), (80, "G"), (151, "Y")]
+    assert seen["A"][:5] == [(1, "red"), (80, "delayed"), (110, "green"), (151, "yellow"), (181, "red")]
+    assert A not in c.overlap_greens or c.tick > 110
+    begins = [e for e in log.events() if e.code == EventCode.OVERLAP_BEGIN_GREEN and e.parameter == A]
+    eights = [e for e in log.events() if e.code == EventCode.PHASE_BEGIN_GREEN and e.parameter == 8]
+    assert (begins[0].time - eights[0].time).total_seconds() == pytest.approx(3.0)
+
+
+def test_a_delayed_green_whose_phase_ends_first_never_shows_green() -> None:
+    c = Controller(city('A = { included = [8], delay_green = 25.5 }\n'))
+    log = DataLogger(c)
+    seen = watch(c, 400, {0: {4, 8}, 90: {2, 6}})  # 8 gaps out at its minimum, long before 25.5 s
+    assert [v for _, v in seen["A"]] == ["red", "delayed", "red"]
+    assert not [e for e in log.events() if e.parameter == A and e.code in range(61, 66)]

@@ -4,6 +4,7 @@ spread, and ratios seed by seed; every benchmark that runs traffic measures five
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import os
 import subprocess
@@ -144,3 +145,20 @@ def test_the_environment_bench_also_runs_hils_with_sumo_rl_s_clearances() -> Non
     assert all(p.red_clear > 0 for p in shipped.phases.values())
     assert all(p.red_clear == 0 and p.yellow == shipped.phases[n].yellow for n, p in same.phases.items())
     assert replace(same, phases=shipped.phases) == shipped
+
+
+@pytest.mark.parametrize("module", ["resco", "env"])
+def test_a_sumo_worker_s_steps_and_cpu_count_in_the_environment_benches(module: str) -> None:
+    """With SUMO in a worker process (``sumo_worker=True``), the SUMO part of an episode is the worker's steps
+    (this process steps none: without them SUMO's part reads 0 and the whole wall time passes for own work)."""
+    import importlib
+
+    from harness.bench.processes import in_fresh_process
+
+    bench_module = importlib.import_module(f"harness.bench.{module}")
+    options = {"scenario": "grid4x4"} if module == "resco" else {}
+    worker = in_fresh_process(functools.partial(bench_module.hils_episode, duration=300.0, sumo_worker=True,
+                                                **options), 0)
+    alone = in_fresh_process(functools.partial(bench_module.hils_episode, duration=300.0, **options), 0)
+    assert (worker["inserted"], worker["arrived"]) == (alone["inserted"], alone["arrived"])  # the same episode
+    assert worker["sumo_s"] > 0.2 * alone["sumo_s"] > 0

@@ -58,21 +58,24 @@ def test_the_emulators_own_log_gives_back_its_config() -> None:
 def test_the_field_logs_plan_is_read_from_its_events() -> None:
     inferred = field_log.infer(hires_file.load(SAMPLE), "atspm sample 1136")
     cfg = inferred.config()
-    assert cfg.rings == ((2, 4), (6, 5, 8))  # 5 lags 6; ring 1 has no phase of its own beside 8
+    # 5 lags 6; ring 1 has no phase of its own beside 8, nor after 2 beside 5 (below)
+    assert cfg.rings == ((2, 1, 4), (6, 5, 8))
     plan = cfg.coordination.patterns[1]
     # The local zeros (150/5) are 75 s apart at 45 s of the time of day modulo 75; 6 and 5 are forced off 24.5 s
-    # and 43.5 s after it and 8 ends with the cycle, each split ending its clearance (4 s + 1.5 s) later.
+    # and 43.5 s after it and 8 ends with the cycle, each split ending its clearance (4 s + 1.5 s) later. 2, the
+    # coordinated phase of ring 1, ends with 6 at 6's force-off whenever 5 is not served: its own yield point is
+    # there, and the rest of its ring's group is a phase the log never shows (1, timed as 5).
     assert (plan.cycle, plan.offset, tuple(plan.coord_phases)) == (75, 45, (2, 6))
-    assert dict(plan.splits) == {2: 49, 4: 26, 5: 19, 6: 30, 8: 26}
+    assert dict(plan.splits) == {1: 19, 2: 30, 4: 26, 5: 19, 6: 30, 8: 26}
     assert all((ph.yellow, ph.red_clear) == (4.0, 1.5) for ph in cfg.phases.values())
     assert {p: cfg.phases[p].min_green for p in (2, 5, 6, 8)} == {2: 10, 5: 4, 6: 10, 8: 6}
     assert (cfg.phases[6].walk, cfg.phases[6].ped_clear) == (8, 26)
     calls = {d: p for d, p in cfg.detectors.items() if p}
     assert calls == {2: 2, 8: 8, 9: 8, 15: 5, 16: 6, 17: 6, 18: 6, 22: 8, 23: 8, 24: 8, 25: 8, 26: 8, 27: 5}
     assert cfg.ped_detectors == {6: 6}
-    assert [o.included for o in cfg.overlaps.values()] == [(6,)]
+    assert [o.included for o in cfg.overlaps.values()] == [(5,), (6,)]
     said = " ".join(inferred.guessed)
-    assert "phase 4: not in the log" in said and "overlap E (5): not modelled" in said
+    assert "phase 4: not in the log" in said and "overlap E (5): not modelled" not in said
 
 
 def test_a_log_that_cannot_make_a_config_is_refused(tmp_path: Path) -> None:
@@ -296,13 +299,28 @@ def test_a_gap_is_counted_only_from_an_off_during_the_green() -> None:
 
     rows = [at(0, 82, 2), at(1, 81, 2), at(5, 1, 2), at(10, 4, 2), at(20, 1, 2), at(21, 82, 2), at(22, 81, 2),
             at(24.9, 4, 2)]
-    assert field_log._gaps(rows, 2, [2]) == [3.0]
+    assert field_log._gaps(rows, 2, [2], {}) == [(4.9, 3.0)]
 
 
-def test_a_constant_gap_from_actuation_to_call_is_said_as_a_detector_delay_not_applied() -> None:
-    """Detector 9 calls nothing on its tick; phase 3's call registers 3.0 s after each of its twelve actuations (the
-    issue's Econolite): a detector delay, which the config cannot hold, so it is said and the detector calls
-    nothing."""
+def test_gap_reduction_is_read_from_gaps_that_fall_with_the_greens_time() -> None:
+    """The atspm sample's phases 5 and 8 gap out 2.3 s after their detectors' last off early in their greens, then
+    ever sooner, and from about 11 s on 0.5 s after (NTCIP 1202 phaseTimeBeforeReduction, phaseTimeToReduce,
+    phaseMinimumGap; the passage counts from the last tick with the call, 0.1 s more): the config reduces their
+    passage, which a single passage cannot; 2 and 6 show no gap-out to read one from."""
+    cfg = field_log.infer(hires_file.load(SAMPLE)).config()
+    got = {p: (ph.passage, ph.time_before_reduction, ph.time_to_reduce, ph.min_gap) for p, ph in cfg.phases.items()}
+    assert got[5] == got[8] == (2.4, 8.0, 3.0, 0.6)
+    assert got[2][3] is None and got[6][3] is None
+    samples = [(t, 2.4) for t in (5.0, 6.0, 7.0)] + [(8.0 + k / 2, round(2.4 - 0.3 * k, 1)) for k in range(1, 6)] \
+        + [(12.0 + t, 0.6) for t in range(4)]
+    assert field_log._reduction(samples) == {"passage": 2.4, "time_before_reduction": 8, "time_to_reduce": 3,
+                                             "min_gap": 0.6}
+    assert field_log._reduction([(t, 2.4 - (t % 3) * 0.5) for t in range(4, 20)]) is None  # gaps that do not fall
+
+
+def test_a_constant_gap_from_actuation_to_call_is_applied_as_a_detector_delay() -> None:
+    """Detector 9 calls nothing on its tick; phase 3's call registers 3.0 s after each of its twelve actuations,
+    which last 4 s, off 3's green (the issue's Econolite): detector 9 calls 3 with a delay of 3 s, printed."""
     t0 = datetime(2024, 5, 1, 7)
 
     def at(s: float, code: int, p: int) -> Row:
@@ -311,16 +329,106 @@ def test_a_constant_gap_from_actuation_to_call_is_said_as_a_detector_delay_not_a
     rows = [at(0, 1, 2), at(0, 1, 6)]
     for k in range(12):
         base = 60 * k
-        rows += [at(base + 10, 82, 9), at(base + 11, 81, 9), at(base + 13, 43, 3), at(base + 20, 8, 2),
+        rows += [at(base + 10, 82, 9), at(base + 14, 81, 9), at(base + 13, 43, 3), at(base + 20, 8, 2),
                  at(base + 20, 8, 6), at(base + 25, 1, 3), at(base + 25, 1, 7), at(base + 40, 8, 3),
                  at(base + 40, 8, 7), at(base + 45, 43, 2), at(base + 45, 43, 6), at(base + 50, 1, 2),
                  at(base + 50, 1, 6)]
     rows.sort(key=lambda r: (r.time, r.code, r.parameter))
     inferred = field_log.infer(rows)
     said = [g for g in inferred.guessed if g.startswith("detector 9:")]
-    assert said == ["detector 9: calls phase 3 3 s after its actuation (12 of 12): a detector delay, not applied (the "
-                    "config has no detector delay), so it calls nothing"]
-    assert inferred.config().detectors.get(9, 0) == 0
+    assert said == ["detector 9: calls phase 3 3 s after its actuation, off that phase's green (12 of the 12 "
+                    "actuations that lasted so long): detector delay 3 s"]
+    cfg = inferred.config()
+    assert cfg.detectors[9] == 3 and cfg.detector_timing[9] == config_mod.DetectorTiming(delay=3.0)
+
+
+def test_a_coordinated_phases_yield_point_is_the_first_place_its_greens_end_again_and_again() -> None:
+    """Its greens' ends read as one arc of the cycle, from past the widest stretch without one: ends at 69.5 s (3
+    times) then from 7.7 s to 13.5 s (with the other ring's phase) give 69.5 s, though 7.7 s is smaller; a place seen
+    fewer than 3 times is no yield point."""
+    day0 = datetime(2024, 4, 15)
+
+    def ends(*seconds: float) -> list[Row]:
+        return [Row(day0 + timedelta(seconds=75 * k + s), 8, 2) for k, s in enumerate(seconds)]
+
+    assert field_log._yield_point(ends(69.5, 69.5, 7.7, 13.5, 13.5, 69.5, 13.5, 10.2), 2, day0, 75) == 69.5
+    assert field_log._yield_point(ends(69.5, 7.7, 13.5, 13.5, 69.5, 13.5, 10.2), 2, day0, 75) == 13.5
+    assert field_log._yield_point(ends(69.5, 7.7, 10.2), 2, day0, 75) is None
+
+
+def test_a_call_held_after_its_detector_goes_is_an_extension_on_green_and_a_carryover_off_it() -> None:
+    """The emulator's own log under detector 4 extending 1.5 s on its green and detector 8 carrying over 1.0 s:
+    both read back from the call drops (44) that follow the detectors' offs."""
+    drawn = round_trip.random_config(random.Random(0), recalls=(), dual_entry=False, lag=False, coordination=False,
+                                     sequencing=False, detector_timers=False)
+    text = drawn.toml + "[detectors]\n" + "\n".join(f"{p} = {p}" for p in (1, 2, 3, 5, 6, 7))
+    text += "\n4 = { phase = 4, extend = 1.5 }\n8 = { phase = 8, carryover = 1.0 }\n"
+    cfg = config_mod.parse(text, "held.toml")
+    got = field_log.infer(round_trip.emulator_log(cfg, 900, seed=3)).config()
+    assert got.detector_timing == {4: config_mod.DetectorTiming(extend=1.5),
+                                   8: config_mod.DetectorTiming(carryover=1.0)}
+
+
+def test_an_overlap_that_never_shows_a_yellow_is_a_transit_bar() -> None:
+    """MaxTime 1015's overlaps A and B begin green with phase 2 or 6 (some a tick later) and go to red with no yellow
+    (61 then 64, never 63): transit bars of 2 and 6; C begins green with 2 (and so often with 5 or 6 beside it)."""
+    inferred = field_log.infer(hires_file.load(LOGS / "maxtime_1015_2024_07_22_1333_excerpt.xml"))
+    overlaps = inferred.config().overlaps
+    assert {n: (o.kind.value, o.included) for n, o in overlaps.items() if n <= 3} == {
+        1: ("transit", (2, 6)), 2: ("transit", (2, 6)), 3: ("normal", (2,))}
+    assert any("a transit bar of them (transit-2)" in line for line in inferred.read)
+
+
+def test_detectors_past_64_go_into_the_config() -> None:
+    """Detectors 65 and 66 (the issue's coordinated MaxTime logs had them) call their phases in the config written
+    from the log, as detector 128 would; before, past 64 they were left out."""
+    drawn = round_trip.random_config(random.Random(0), recalls=(), dual_entry=False, lag=False, coordination=False,
+                                     sequencing=False, detector_timers=False)
+    text = drawn.toml + "[detectors]\n" + "\n".join(f"{p} = {p}" for p in range(1, 9)) + "\n65 = 4\n66 = 8\n"
+    got = field_log.infer(round_trip.emulator_log(config_mod.parse(text, "many.toml"), 600, seed=4)).config()
+    assert {d: got.detectors.get(d) for d in (65, 66)} == {65: 4, 66: 8}
+
+
+def test_an_overlap_that_begins_green_a_constant_time_after_its_phase_has_a_delayed_green() -> None:
+    """MaxTime 1015's overlap G begins green 3.0 s after phase 4 does, every time: a normal overlap of 4 with its
+    green delayed 3 s (the config's delay_green)."""
+    inferred = field_log.infer(hires_file.load(LOGS / "maxtime_1015_2024_07_22_1333_excerpt.xml"))
+    g = inferred.config().overlaps[7]
+    assert (g.kind.value, g.included, g.delay_green) == ("normal", (4,), 3.0)
+    assert any(line.startswith("overlap G (7): begins green 3 s after phase(s) [4]") for line in inferred.read)
+
+
+def test_an_overlap_dark_while_its_phase_is_green_is_that_phases_overlap() -> None:
+    """The atspm sample's overlap E never begins green (61): it goes dark (66) as phase 5 begins green, yellow (63)
+    with 5's yellow and off (65) as that yellow ends, every cycle. It is phase 5's overlap, written as a normal one
+    (the emulator's shows green where the field's head shows phase 5's own green arrow), said as a guess with its
+    counts; before, it was left out as "not modelled"."""
+    inferred = field_log.infer(hires_file.load(SAMPLE))
+    e = inferred.config().overlaps[5]
+    assert (e.kind.value, e.included, e.delay_green) == ("normal", (5,), 0.0)
+    assert any(line.startswith("overlap E (5): a normal overlap of phase(s) [5], dark while they are green") and
+               "dark (66) as they begin green (1) 91 of 91" in line and "yellow (63) with their yellow (8) 90 of 90"
+               in line and "off (65) as their yellow ends (9) 91 of 91" in line for line in inferred.guessed)
+    assert not any(line.startswith("overlap E") for line in inferred.read)
+
+
+def test_an_overlap_is_read_dark_at_green_only_when_its_yellow_and_off_follow_its_phase() -> None:
+    """Dark (66) on phase 2's begin greens makes overlap 3 phase 2's only if its yellow (63) and off (65) come with 2's
+    yellow (8) and its end (9), and it never begins green (61) itself."""
+    t0, s = datetime(2024, 5, 1, 7), timedelta(seconds=1)
+
+    def cycles(yellow_at: float, green: bool = False) -> list[Row]:
+        rows = []
+        for k in range(10):
+            t = t0 + 60 * k * s
+            rows += [Row(t, 1, 2), Row(t, 66, 3), Row(t + 20 * s, 8, 2), Row(t + yellow_at * s, 63, 3),
+                     Row(t + 24 * s, 9, 2), Row(t + 24 * s, 65, 3)] + ([Row(t + 30 * s, 61, 3)] if green else [])
+        return sorted(rows, key=lambda r: r.time)
+
+    got = field_log.dark_at_green(cycles(20))
+    assert list(got) == [3] and got[3].included == [2]
+    assert field_log.dark_at_green(cycles(22)) == {}
+    assert field_log.dark_at_green(cycles(20, green=True)) == {}
 
 
 def _driven_log(cfg: config_mod.IntersectionConfig, detectors: dict[int, set[int]], ticks: int) -> list[Row]:
@@ -345,7 +453,7 @@ def test_a_ring_that_backs_is_read_as_the_setting_that_lets_it(option: str, acro
     says). The config read from the log sets it on 2 (conditional service where a call was on across the barrier,
     Naztec's backing otherwise); a log of the defaults, which restart the group instead, sets neither."""
     drawn = round_trip.random_config(random.Random(0), recalls=(), dual_entry=False, lag=False, coordination=False,
-                                     sequencing=False)
+                                     sequencing=False, detector_timers=False)
     detectors = {}
     for k in range(3):  # a backing (2 -> 1), then two cycles in the ring's order (1 -> 2)
         base = 2100 * k
@@ -359,7 +467,7 @@ def test_a_ring_that_backs_is_read_as_the_setting_that_lets_it(option: str, acro
 
 def test_a_walk_begun_within_a_running_green_is_read_as_pedestrian_recycle() -> None:
     drawn = round_trip.random_config(random.Random(0), recalls=(), dual_entry=False, lag=False, coordination=False,
-                                     sequencing=False)
+                                     sequencing=False, detector_timers=False)
     cfg = config_mod.parse(drawn.toml.replace("\n2 = { ", "\n2 = { ped_recycle = true, ", 1), "recycle.toml")
     got = field_log.infer(round_trip.emulator_log(cfg, 900, seed=3)).config()
     assert got.phases[2].ped_recycle and not any(ph.ped_recycle for p, ph in got.phases.items() if p != 2)

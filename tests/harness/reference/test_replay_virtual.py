@@ -13,6 +13,7 @@ import atspm
 
 from harness.reference import field_log, hires_file, replay_match, replay_virtual
 from harness.reference.hires_file import Row
+from harness.reference.replay import day_shift
 from harness.reference.replay_match import Ending, Equivalence, green_table, match_table, overall
 from harness.reference.round_trip import emulator_log
 from hils.protocol.hires import EventCode
@@ -97,6 +98,24 @@ def test_a_declared_variant_is_judged_where_it_says_and_nowhere_else() -> None:
                                equivalences=econolite)) == 0.0
 
 
+def test_an_overlaps_dark_counts_as_its_begin_green_only_for_the_overlaps_the_log_shows_it(tmp_path: Path) -> None:
+    """The field's overlap 5 logs dark (66) where the emulator's overlap of phase 5 logs its begin green (61): matched
+    through the declared row bound to the overlaps the log was read to show it, for them only, and the per-event
+    table says which row counts the log's 66."""
+    t0 = datetime(2024, 5, 1, 7)
+    field = [Row(t0, E.OVERLAP_DARK, 5), Row(t0, E.OVERLAP_DARK, 3)]
+    bench = [Row(t0, E.OVERLAP_BEGIN_GREEN, 5), Row(t0, E.OVERLAP_BEGIN_GREEN, 3)]
+    assert overall(match_table(field, bench)) == 0.0
+    bound = replay_match.for_log(None, {5})
+    table = match_table(field, bench, equivalences=bound)
+    assert [(r.code, r.parameter, r.field, r.matched) for r in table] == [(61, 3, 0, 0), (61, 5, 1, 1), (66, 3, 1, 0)]
+    assert "overlap begin green (log's 66)       5" in replay_match.render(table, [], bound)
+    assert "field event 66 of 5 counted as 61" in replay_match.render_equivalences(bound)
+    replay_match.write_table(table, tmp_path / "match.csv", bound)
+    assert (tmp_path / "match.csv").read_text().splitlines()[2] == "61,5,1,1,1,100.0,66"
+    assert replay_match.for_log(None, set()) == [] and replay_match.for_log("Econolite", set())[0].vendor == "Econolite"
+
+
 def test_every_declared_variant_cites_its_source() -> None:
     for q in replay_match.EQUIVALENCES:
         assert isinstance(q, Equivalence) and q.vendor and q.says
@@ -118,3 +137,35 @@ def test_signal_replays_zero_is_said_as_thrown_out() -> None:
 
     assert signal_replay_score(0.0) == f"0.0 % ({THROWN_OUT})" and "phase-call similarity check" in THROWN_OUT
     assert signal_replay_score(59.9) == "59.9 %"
+
+
+def test_the_atspm_sample_replays_whole_at_its_floor() -> None:
+    """Issue 35's proof on the atspm package's sample (controller 1136, 2 h): the config written from the log, the
+    log's inputs replayed whole, through the declared logging variants the log shows. The floor is today's figure
+    (92.9 %; 83.1 % before overlap E was read as phase 5's overlap, its dark counted as its begin green; 62.3 % before
+    gap reduction and ring 1's own yield point), what is left being mostly the coordinated phase 6's permissive
+    period and minimum, which the field shortens and lengthens (docs/replay.md)."""
+    rows = hires_file.load(SAMPLE)
+    ran = replay_virtual.run(rows, field_log.infer(rows).config())
+    table = match_table(rows, ran.events, equivalences=replay_match.for_log(None, field_log.dark_at_green(rows)))
+    assert overall(table) >= 92.5
+    green = green_table(rows, ran.events)
+    assert sum(g.ended for g in green) >= 0.95 * sum(g.anchored for g in green)
+
+
+def test_signal_replay_starts_where_the_logs_cycle_was_on_any_day() -> None:
+    """A 130 s cycle does not divide a day: 2 years later the bench, counting its cycles from its own midnight, would
+    be days * 86,400 s mod 75 off the log's. Signal-Replay starts the replay when the time since the log's start is a
+    whole number of cycles past its cycle_offset (signal_replay 1.0.1 ``_wait_until_next_cycle``); given the day
+    shift there, the bench's cycle position at the start is the log's."""
+    cycle, offset = 130, 45
+    log_start = datetime(2024, 4, 15, 12, 0, 3)
+    bench_day = datetime(2026, 11, 27)
+    shift = day_shift(log_start.date(), bench_day.date(), cycle)
+    assert shift == (bench_day - datetime(2024, 4, 15)).days * 86_400 % cycle != 0
+    # the first second of the bench's day on which Signal-Replay's wait ends
+    now = next(bench_day + timedelta(seconds=k) for k in range(cycle)
+               if ((bench_day + timedelta(seconds=k)) - log_start).total_seconds() % cycle == shift)
+    seconds_of_day = (now - bench_day).total_seconds()
+    assert (seconds_of_day - offset) % cycle == ((log_start - datetime(2024, 4, 15)).total_seconds() - offset) % cycle
+    assert day_shift(log_start.date(), bench_day.date(), 80) == 0  # 80 s divides a day

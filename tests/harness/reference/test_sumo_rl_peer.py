@@ -134,10 +134,10 @@ def test_the_resco_bench_compares_both_sides_seed_by_seed(tmp_path: Path) -> Non
     f = doc["resco"]
     assert f["seeds"] == [0, 1] and doc["machine"]["cpu"] and "single_agent=False" in f["peer"]
     sc = f["scenarios"]["cologne1"]
-    assert sc["controllers"] == 1 and set(sc["runs"]) == {"hils", "sumo_rl"}
+    assert sc["controllers"] == 1 and set(sc["runs"]) == {"hils", "hils_worker", "sumo_rl"}
     per_seed = {s: sc["runs"]["hils"][s]["wall_s"] / sc["runs"]["sumo_rl"][s]["wall_s"] for s in ("0", "1")}
     assert sc["hils_to_sumo_rl"]["wall"]["min"] == pytest.approx(min(per_seed.values()))
-    for side in ("hils", "sumo_rl"):
+    for side in ("hils", "hils_worker", "sumo_rl"):
         for run in sc["runs"][side].values():
             assert run["steps"] == 12 and 0 < run["sumo_s"] < run["wall_s"] and run["inserted"] >= run["arrived"]
     # the same demand on both sides

@@ -17,8 +17,11 @@ from hils.protocol.config import ConfigError, IntersectionConfig, parse
 from hils.protocol.ntcip import (
     DETECTOR_ACTUATION,
     DETECTOR_STATUS_ACTIVE,
+    MAX_VEHICLE_DETECTOR_STATUS_GROUPS,
     MAX_VEHICLE_DETECTORS,
     VEHICLE_DETECTOR_CALL_PHASE,
+    VEHICLE_DETECTOR_DELAY,
+    VEHICLE_DETECTOR_EXTEND,
     StatusColumn,
     oid_str,
     status_oid,
@@ -46,6 +49,19 @@ def test_an_actuated_detector_calls_its_phase_and_holds_its_green(paper_config: 
     assert c.calls == frozenset()  # non-locking: the call goes with the vehicle
 
 
+def test_128_detectors_are_served_in_16_status_groups(paper_toml: str) -> None:
+    config = parse(paper_toml + "\n[detectors]\n4 = 4\n66 = 2\n128 = 6\n", "det.toml")
+    c = Controller(config)
+    mib = MibView(c)
+    assert mib.get_many([MAX_VEHICLE_DETECTORS.instance(), MAX_VEHICLE_DETECTOR_STATUS_GROUPS.instance(),
+                         VEHICLE_DETECTOR_CALL_PHASE.instance(128)]) == (128, 16, 6)
+    mib.set_many([(DETECTOR_ACTUATION.instance(16), 0b1000_0000), (DETECTOR_ACTUATION.instance(9), 0b10)])
+    assert c.actuations == frozenset({128, 66})
+    assert mib.get_many([DETECTOR_STATUS_ACTIVE.instance(16), DETECTOR_STATUS_ACTIVE.instance(9)]) == (0b1000_0000, 2)
+    c.step()
+    assert c.calls == frozenset({2, 6})
+
+
 def test_detector_objects_through_net_snmp(tmp_path: Path) -> None:
     served = start_emulator(tmp_path / "serve.log")
     try:
@@ -54,6 +70,22 @@ def test_detector_objects_through_net_snmp(tmp_path: Path) -> None:
         assert snmp("snmpget", served.port, active).strip().endswith("INTEGER: 4")
         table = snmp("snmpwalk", served.port, oid_str(VEHICLE_DETECTOR_CALL_PHASE.prefix))
         assert [line.rsplit(" ", 1)[-1] for line in table.strip().splitlines()] == [str(p) for p in range(1, 9)]
+    finally:
+        served.stop()
+
+
+def test_detector_delay_and_extend_through_net_snmp(tmp_path: Path, paper_toml: str) -> None:
+    config = tmp_path / "timed.toml"
+    config.write_text(paper_toml + "\n[detectors]\n4 = { phase = 4, delay = 3.0, extend = 1.5 }\n")
+    served = start_emulator(tmp_path / "serve.log", "--config", str(config))
+    try:
+        delay, extend = oid_str(VEHICLE_DETECTOR_DELAY.instance(4)), oid_str(VEHICLE_DETECTOR_EXTEND.instance(4))
+        got = snmp("snmpget", served.port, delay, extend).strip().splitlines()
+        assert [line.rsplit(" ", 1)[-1] for line in got] == ["30", "15"]  # tenths of a second
+        snmp("snmpset", served.port, delay, "i", "55")
+        assert snmp("snmpget", served.port, delay).strip().endswith("INTEGER: 55")
+        table = snmp("snmpwalk", served.port, oid_str(VEHICLE_DETECTOR_EXTEND.prefix))
+        assert [line.rsplit(" ", 1)[-1] for line in table.strip().splitlines()] == ["0", "0", "0", "15"]
     finally:
         served.stop()
 
@@ -102,7 +134,7 @@ def test_the_detectors_table_maps_detectors_to_phases_and_is_read_over_ntcip(pap
 
 
 @pytest.mark.parametrize(("table", "field", "allowed"), [
-    ("[detectors]\n70 = 2", "detectors.70", "allowed: detector numbers 1-64"),
+    ("[detectors]\n129 = 2", "detectors.129", "allowed: detector numbers 1-128"),
     ("[detectors]\n3 = 12", "detectors.3", "allowed: the configured phases 1, 2, 3, 4, 5, 6, 7, 8"),
     ("detectors = 3", "detectors", "must be a table"),
 ])
