@@ -204,6 +204,7 @@ NOT_WRITABLE_HERE: dict[str, str] = {
     "preemptDwellPhase": f"a preempt's options and phases: {_FROM_CONFIG}",
     "preemptDwellPed": f"a preempt's options and phases: {_FROM_CONFIG}",
     "preemptExitPhase": f"a preempt's options and phases: {_FROM_CONFIG}",
+    "preemptCyclingPhase": f"a preempt's options and phases: {_FROM_CONFIG}",
     "channelControlSource": "the channel map: the emulator's load switches follow its phases one to one (channel i is "
                             "phase i), as the status of its channels does",
     "channelControlType": "the channel map: the emulator's load switches follow its phases one to one (channel i is "
@@ -225,13 +226,16 @@ _RECALL_BITS = {
 
 
 def phase_options(ph: Phase) -> PhaseOption:
-    """phaseOptions of a configured phase: enabled, its recall, dual entry and simultaneous gap disable (a
-    gapped-out green does not re-extend while it waits at the barrier: see emulator/model/controller.py)."""
+    """phaseOptions of a configured phase: enabled, its recall, dual entry, simultaneous gap disable (a
+    gapped-out green does not re-extend while it waits at the barrier: see emulator/model/ring.py) and conditional
+    service (see emulator/model/sequencer.py)."""
     bits = PhaseOption.ENABLED | _RECALL_BITS[ph.recall]
     if ph.dual_entry:
         bits |= PhaseOption.DUAL_ENTRY
     if ph.simultaneous_gap_disable:
         bits |= PhaseOption.SIMULTANEOUS_GAP_DISABLE
+    if ph.conditional_service:
+        bits |= PhaseOption.CONDITIONAL_SERVICE
     return bits
 
 
@@ -663,7 +667,8 @@ def _preempts(c: Controller | DelayedController) -> list[Instance]:
         fixed: dict[PreemptColumn, Value] = {
             PreemptColumn.NUMBER: n, PreemptColumn.CONTROL: int(p.non_locking), PreemptColumn.LINK: 0,
             PreemptColumn.TRACK_PHASE: bytes(p.track_phases), PreemptColumn.DWELL_PHASE: bytes(p.dwell_phases),
-            PreemptColumn.DWELL_PED: b"", PreemptColumn.EXIT_PHASE: bytes(p.exit_phases)}
+            PreemptColumn.DWELL_PED: b"", PreemptColumn.EXIT_PHASE: bytes(p.exit_phases),
+            PreemptColumn.CYCLING_PHASE: bytes(p.cycling_phases)}
         out += [Instance(PREEMPT_TABLE[col].instance(n), PREEMPT_TABLE[col], lambda v=v: v) for col, v in fixed.items()]
         timing = pe.timing.get(n) or PreemptTiming.of(p)
         out += [Instance(PREEMPT_TABLE[col].instance(n), PREEMPT_TABLE[col], *_field_access(c, timing, name, unit))

@@ -146,7 +146,8 @@ class Controller:
         self.preemptor = Preemptor(config)
         self.preempting = Preempted(config, self.preemptor, self.timing)
         self.monitor = Monitor(config)
-        self.peds = PedCalls(self.timing, self.coordinated)
+        self.peds = PedCalls(self.timing, self.coordinated,
+                             frozenset(p for p, ph in config.phases.items() if ph.ped_recycle))
         self.sequencer = Sequencer(config, self.rings, self.timing, self.control, self.coordinated, self.preemptor,
                                    self.overlaps, self._move)
         # Counts changes of the status objects (what a poll reads), across power cycles too.
@@ -406,6 +407,9 @@ class Controller:
             self.preempting.caps_now()
             if pe.started:
                 self.preempting.entry(self.rings)
+        cycling = self.preempting.cycling(demand) if pe.serving is not None else None
+        if cycling is not None:
+            demand, omitted = cycling
         seq.prepare(demand, inputs)
         if self._red_end_lock and pe.serving is None:
             # before timing: the tick that ends a red clearance still reads the calls of that clearance
@@ -414,7 +418,11 @@ class Controller:
                     seq.redirect(r, demand, inputs)
         seq.time(demand, inputs, self.tick)
         if pe.serving is None:
+            if self.peds.recycling:
+                self.peds.recycle(self.rings)
             seq.decide(demand, inputs)
+        elif cycling is not None:
+            seq.decide(demand, inputs, omitted)
         else:
             self.preempting.drive(seq, inputs)
         seq.start(self.tick)

@@ -117,10 +117,13 @@ class Detectors:
 
     # --- quiet time (see emulator/model/quiet.py) -------------------------------------------------
 
-    def deadline(self, greens: Iterable[int]) -> int | None:
+    def deadline(self, actuated: frozenset[int], greens: Iterable[int]) -> int | None:
         """Steps until a timer changes what is recognized (None: no timer runs); at least the next step. A delaying
-        detector whose phase shows green is recognized at the next step."""
+        detector whose phase shows green is recognized at the next step; an input no step has read yet (``actuated``
+        changed during the start-up flash, which reads no input) is read by the next step."""
         greens = frozenset(greens)
+        if (actuated ^ self.recognized) - self.waited.keys() - self.held.keys():
+            return 1
         ahead = [1 if self.phase[d] in greens else self.timers[d].delay - w for d, w in self.waited.items()]
         ahead += [self.timers[d].hold(self.phase[d] in greens) - h for d, h in self.held.items()]
         return max(1, min(ahead)) if ahead else None

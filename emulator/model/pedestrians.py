@@ -15,24 +15,37 @@ latches on a phase not showing green and stays until a green of its phase serves
 it starts with the call latched, the phase has a walk time and, while a pattern runs, the walk and the pedestrian
 clearance end by the phase's force-off point; a call the green does not serve stays latched for the next cycle.
 PedOmit (and an omitted phase) stops new calls latching; a walk being timed completes.
+
+*Pedestrian recycle* (``ped_recycle``, per phase; off by default). NTCIP 1202 words the pedestrian service of a
+phase's own green as recyclable: Ped Recall "shall function in the same manner as an external pedestrian call
+except that it shall not recycle the pedestrian service until a conflicting phase is serviced" (phaseOptions bit
+8), so an external call may recycle it; controllers give it as an option (Intelight MaxTime's field log of issue
+35 shows 7 of 27 walks starting within a green already running, 0.2 s after the push). Where the phase has it, a
+call latched while its green runs and times no walk or pedestrian clearance (a push button latches then,
+:func:`emulator.model.inputs.latched`) starts a walk within that green at once (:meth:`PedCalls.recycle`), the green
+lasting to the end of its pedestrian clearance, when that end comes before the green's maximum would (free: its
+maximum timer, running or not, has the walk and clearance left) or, while a pattern runs, by the phase's force-off
+point. Otherwise the call stays latched for the next green, as without the option. A preempt being served recycles
+nothing (its entry ends walks).
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 
 from emulator.model import inputs as reading
 from emulator.model.coordinated import Coordinated
 from emulator.model.inputs import Inputs
-from emulator.model.ring import Timing
+from emulator.model.ring import GREEN, Ring, Timing
 
 
 class PedCalls:
     """One controller's latched pedestrian calls."""
 
-    def __init__(self, timing: Mapping[int, Timing], coordinated: Coordinated) -> None:
+    def __init__(self, timing: Mapping[int, Timing], coordinated: Coordinated, recycling: frozenset[int]) -> None:
         self.timing = timing
         self.coordinated = coordinated
+        self.recycling = recycling  # the phases with pedestrian recycle
         self.reset()
 
     def reset(self) -> None:
@@ -58,10 +71,19 @@ class PedCalls:
             self._demand = (inputs, self.calls), answer
         return answer
 
-    def deadline(self, greens: frozenset[int], inputs: Inputs) -> int | None:
-        """1 when the next tick latches a call (``greens``: the phases showing green then), else None: the calls
-        change only with the inputs and the greens."""
-        return 1 if self._latch(greens, inputs) != self.calls else None
+    def deadline(self, greens: frozenset[int], inputs: Inputs, rings: Iterable[Ring]) -> int | None:
+        """1 when the next tick latches a call (``greens``: the phases showing green then) or may recycle a walk in
+        one of ``rings`` (:meth:`recycle`), else None: the calls change only with the inputs and the greens, and a
+        latched call waits to recycle only for its green's walk and pedestrian clearance to end, thresholds its ring
+        reports. While a pattern runs the answer is 1 whenever such a call waits: whether the walk fits by the
+        force-off point changes with the cycle timer."""
+        if self._latch(greens, inputs) != self.calls:
+            return 1
+        recycling = self.recycling & self.calls
+        if recycling and any(r.interval is GREEN and r.phase in recycling
+                             and (self.coordinated.running or self._recycles(r, ahead=1)) for r in rings):
+            return 1
+        return None
 
     def _latch(self, greens: frozenset[int], inputs: Inputs) -> frozenset[int]:
         asked, answer = self._latched
@@ -80,3 +102,22 @@ class PedCalls:
         if served or not called:
             self.calls -= {phase}
         return served
+
+    def recycle(self, rings: Iterable[Ring]) -> None:
+        """Pedestrian recycle: a call latched on a phase with ``ped_recycle`` whose green runs, timing no walk or
+        pedestrian clearance, starts a walk within that green when it fits; the call is answered."""
+        for r in rings:
+            p = r.phase
+            if r.interval is GREEN and p in self.calls and p in self.recycling and self._recycles(r):
+                r.recycle(self.timing[p])
+                self.calls -= {p}
+
+    def _recycles(self, r: Ring, ahead: int = 0) -> bool:
+        """A walk may start ``ahead`` ticks from now within ``r``'s green: none is timed, and it and its clearance
+        end before the green's maximum would (free) or by the phase's force-off point (a pattern running)."""
+        t = self.timing[r.phase]
+        if t.walk == 0 or r.ticks + ahead < r.walk + r.ped_clear:
+            return False
+        if self.coordinated.running:
+            return self.coordinated.walk_fits(r.phase)
+        return r.maximum - r.max_ticks >= t.walk + t.ped_clear

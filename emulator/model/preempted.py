@@ -22,7 +22,11 @@ NTCIP 1202 v02's preempt node (A.6), as it acts on the rings:
   minimum green and the preempt's, its walk and pedestrian clearance likewise.
 - Track clearance (trackService). preemptTrackPhase are green for preemptTrackGreen, then clear with "the
   lesser of the phase's Yellow Change time or" preemptTrackYellowChange (and Red Clear).
-- Dwell. preemptDwellPhase are green.
+- Dwell. preemptDwellPhase are green. With preemptCyclingPhase, phases "allowed to cycle during the Preempt Dwell
+  interval" ("The phase(s) defined in preemptCyclingPhase shall occur after those defined herein", says
+  preemptDwellPhase): once the dwell phases show, the rings run as the sequencer runs them, on the demand of the
+  cycling phases, the dwell phases recalled (the ring returns to them) and every other phase omitted
+  (:meth:`Preempted.cycling`). The preemptor ends the dwell as without them; the exit then drives the rings.
 - Exit (exitStarted). preemptExitPhase: the phases "that shall be active following Preempt"; once they show
   green the controller returns to its own operation. A ring without an exit phase keeps what it shows, unless
   that is a green across the barrier from the exit phases: it clears to red.
@@ -56,6 +60,7 @@ class Preempted:
         self.preemptor = preemptor
         self.timing = timing
         self._ring_of = {p: config.ring_of(p) for p in config.phases}
+        self._phases = frozenset(config.phases)
         self._numbers = range(1, len(config.rings) + 1)
         self.reset()
 
@@ -87,6 +92,18 @@ class Preempted:
             phases = p.exit_phases
         return {self._ring_of[q]: q for q in phases}
 
+    def cycling(self, demand: frozenset[int]) -> tuple[frozenset[int], frozenset[int]] | None:
+        """In the dwell of a preempt with cycling phases: the demand the rings cycle on (the cycling phases' own, the
+        dwell phases always) and the phases omitted (all others); None when the preempt drives the rings."""
+        pe = self.preemptor
+        if pe.serving is None or pe.state is not PreemptState.DWELL:
+            return None
+        p = self.config.preempts[pe.serving]
+        if not p.cycling_phases:
+            return None
+        dwell, cycling = frozenset(p.dwell_phases), frozenset(p.cycling_phases)
+        return (demand & cycling) | dwell, self._phases - dwell - cycling
+
     def caps_now(self) -> None:
         """The yellow and red clearance a preempt-initiated transition may shorten to now (entry, track), or None."""
         pe = self.preemptor
@@ -111,7 +128,7 @@ class Preempted:
             elif r.interval is GREEN:
                 walked = r.walk > 0  # this green serves a walk (its walk may be cut to nothing below)
                 if walked and r.ticks < r.walk:
-                    r.walk = max(r.ticks, min(r.walk, tm.min_walk))
+                    r.walk = max(r.ticks, min(r.walk, r.walk_start + tm.min_walk))
                 if walked and r.ticks < r.walk + r.ped_clear:
                     r.ped_clear = max(r.ticks - r.walk, min(r.ped_clear, tm.enter_ped_clear))
                 self.cut[r.number] = max(min(self.timing[r.phase].min_green, tm.min_green), r.walk + r.ped_clear)

@@ -104,10 +104,10 @@ class QuietTime:
                 ahead.append(c.startup_flash * 10 - c.tick)
             return _least(ahead)
         inputs = c.inputs
-        ahead.append(c.peds.deadline(c.greens, inputs))
+        ahead.append(c.peds.deadline(c.greens, inputs, c.rings))
         phases = Phases.of(c.rings, later=True) if c.config.overlaps else None
         if c.detectors.timers:
-            ahead.append(c.detectors.deadline(r.phase for r in c.rings if r.interval is GREEN))
+            ahead.append(c.detectors.deadline(c.actuations, (r.phase for r in c.rings if r.interval is GREEN)))
         if c.config.preempts:
             ahead += (c.preemptor.deadline(), c.preempting.deadline(c.sequencer))
         if phases is not None:

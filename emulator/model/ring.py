@@ -25,7 +25,8 @@ phase with a start-up interval (NTCIP 1202 phaseStartup) starts in it from red.
 The timers of a green, set when it starts:
 
 - *Minimum*: the phase's minimum green, or its Walk plus pedestrian clearance when the green serves a walk
-  (the walk and the pedestrian clearance are timed from the start of the green).
+  (the walk and the pedestrian clearance are timed from the start of the green, or from the tick a recycled
+  walk starts within it: :meth:`Ring.recycle`).
 - *Passage* (gap): ticks since the green's own vehicle call was last present (a call, or max recall,
   restarts it every tick); it has gapped out when it reaches the *allowable gap*: the phase's passage time, or
   with gap reduction (volume density) less: NTCIP 1202 phaseTimeBeforeReduction, "The Time Before Reduction
@@ -190,8 +191,9 @@ class Ring:
     passage: int = 0  # passage ticks of the current green
     reduction: tuple[int, int, int] | None = None  # the green's time before reduction, time to reduce, minimum gap
     reducing: int = 0  # ticks of serviceable conflicting demand in a row during this green (the TBR timer on)
-    walk: int = 0  # walk ticks served in the current green (0: no walk)
+    walk: int = 0  # the green's tick its walk ends (0: no walk); from its start, or a recycled walk's start
     ped_clear: int = 0
+    walk_start: int = 0  # the green's tick its walk began (pedestrian recycle starts one within the green)
     max_ticks: int = 0  # the maximum timer: ticks of conflicting demand (or of max recall) during this green
     conflict: bool = False  # conflicting demand registered at the green's last tick (the max timer may run without)
     gap: int = 0  # ticks since the green's own vehicle call was last present
@@ -211,6 +213,7 @@ class Ring:
         self.reducing = 0
         if to is GREEN:
             self.walk, self.ped_clear = (timing.walk, timing.ped_clear) if walk(self.phase) else (0, 0)
+            self.walk_start = 0
             self.minimum = max(timing.min_green, self.walk + self.ped_clear)
             self.maximum = timing.max2 if max2 else timing.max1
             self.passage = timing.passage
@@ -234,6 +237,13 @@ class Ring:
             self.gapped = False
         elif self.ticks >= self.minimum and self.gap > 0 and self.gap >= self.allowed() and gap_disable:
             self.gapped = True
+
+    def recycle(self, timing: Timing) -> None:
+        """A walk starts within the running green (pedestrian recycle, :mod:`emulator.model.pedestrians`): it and
+        its pedestrian clearance are timed from this tick, and the green lasts at least to their end."""
+        self.walk_start = self.ticks
+        self.walk, self.ped_clear = self.ticks + timing.walk, timing.ped_clear
+        self.minimum = max(self.minimum, self.walk + self.ped_clear)
 
     def time_clearance(self, tick: int) -> bool:
         """One tick of a yellow or red clearance: True when it has run its length (a yellow's end is kept for the

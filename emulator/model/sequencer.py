@@ -1,4 +1,5 @@
-"""The sequencer: which phase each ring serves next, the barrier, backing, dual entry, the committed next phase.
+"""The sequencer: which phase each ring serves next, the barrier, backing and conditional service, dual entry, the
+committed next phase.
 
 Rules of this file
 ------------------
@@ -19,10 +20,17 @@ pedestrian clearance if it served a walk), is not held, and has gapped out, maxe
 (:meth:`Sequencer.ending`). A green without anywhere to go rests in green, maxed out or not.
 
 A ready ring *wishes* for the nearest phase with demand in its ring order after its own (1, 2, 3, 4, 1, ...).
-Within the barrier group it goes there at once: forward, or backing into an earlier phase of the group while
-the other ring still times, but only when no demand waits across the barrier: a controller backs "into a
-protected left-turn phase when the cross street phases and the opposing left-turn are skipped" (Naztec
-TecNote 3013), not when they are called. A ring may not back from a phase with ``backup_prevent`` either. A
+Within the barrier group it goes there at once when that is forward. Backing into an earlier phase of the group
+while the other ring still times is an option, never the default: NTCIP 1202 gives it as phaseOptions bit 14,
+"Conditional Service Enable - in multi-ring configurations when set to 1 causes a gapped/maxed phase to
+conditionally service a preceding actuated vehicle phase when sufficient time remains before max time out of the
+phase(s) not prepared to terminate. Support is optional" (its default, like every phaseOptions bit's, is clear),
+and the field logs replayed for issue 35 never show a ring backing. So a ring backs from a phase with
+``conditional_service`` once its green is ready to end and every other ring's green not ready to end has time
+left before its maximum for the clearance and the earlier phase's minimum (:meth:`_conditional`). Naztec's
+controllers back by default, "into a protected left-turn phase when the cross street phases and the opposing
+left-turn are skipped" (Naztec TecNote 3013), unless their Backup Prevent is set: ``backup_prevent = false``
+gives that, backing only while no demand waits across the barrier; ``backup_prevent`` is true by default. A
 backing refused counts as a wish beyond the barrier (the phase waits for the group's next visit, or, with
 nothing across, both rings clear and restart the group for it); when both rings are ready and one wishes
 beyond, the other does not back either (crossing goes first). While a pattern runs, no ring backs while
@@ -109,6 +117,11 @@ class Sequencer:
                         for n, order in enumerate(config.rings, start=1) for dwell in (False, True)}
         self._red_end = config.next_phase_lock is NextPhaseLock.RED_END
         self._gap_disable = frozenset(p for p, ph in config.phases.items() if ph.simultaneous_gap_disable)
+        # The backings conditional service may allow (:meth:`_conditional`): from a phase with the option into an
+        # earlier phase of its ring and barrier group.
+        self._conditional_pairs = tuple((p, q) for order in config.rings for i, p in enumerate(order)
+                                        if config.phases[p].conditional_service
+                                        for q in order[:i] if self._barrier[q] == self._barrier[p])
         self.reset()
 
     def reset(self) -> None:
@@ -145,7 +158,8 @@ class Sequencer:
                 r.interval is GREEN or (r.interval is DWELL and r.target is None)):
             return False
         q = self.wish(r, demand, inputs)
-        return q is not None and self._backing(r, q)
+        return (q is not None and self._backing(r, q)
+                and not (self.config.phases[r.phase].conditional_service and self._conditional(r, q)))
 
     def redirect(self, r: Ring, demand: frozenset[int], inputs: Inputs) -> None:
         """``red_end`` lock: a ring in its clearance takes the nearest phase with demand after its own on the
@@ -202,8 +216,29 @@ class Sequencer:
         if self._barrier[q] != self.group:
             return True
         r = self.rings[self._ring_of[q] - 1]
-        return self._backing(r, q) and (self.waiting_across or self.config.phases[r.phase].backup_prevent
-                                        or self.restarting)
+        if not self._backing(r, q):
+            return False
+        option = self.config.phases[r.phase]
+        if option.conditional_service and self._conditional(r, q):
+            return False
+        return self.waiting_across or option.backup_prevent or self.restarting
+
+    def _conditional(self, r: Ring, q: int) -> bool:
+        """``r`` may back into ``q`` as conditional service (NTCIP 1202 phaseOptions bit 14): its green has gapped
+        or maxed out, and every green of another ring "not prepared to terminate" has time left before its maximum
+        for ``r``'s clearance and ``q``'s minimum. With none of them (every other ring ready, or in its clearance) the
+        condition holds: nothing times out on the way. While a pattern runs the force-off points replace the
+        maximum, and :meth:`serviceable` has already asked that ``q`` fits before its own."""
+        if not self._prepared(r):
+            return False
+        timing = self.timing
+        needed = timing[r.phase].yellow + timing[r.phase].red_clear + timing[q].min_green
+        return self.coordinated.running or all(o.maximum - o.max_ticks >= needed for o in self.rings
+                                               if o is not r and o.interval is GREEN and not self._prepared(o))
+
+    def _prepared(self, r: Ring) -> bool:
+        """``r`` shows a green "prepared to terminate": past its minimum, gapped or maxed out (or forced off)."""
+        return r.interval is GREEN and r.ticks >= r.minimum and self.coordinated.ending(r) is not None
 
     def conflicting(self, r: Ring, demand: frozenset[int]) -> bool:
         """Demand conflicts with ``r``'s green: in its own ring, or beyond this visit of the barrier group."""
@@ -241,14 +276,15 @@ class Sequencer:
 
     # --- after the rings timed -----------------------------------------------------------------------------
 
-    def decide(self, demand: frozenset[int], inputs: Inputs) -> None:
+    def decide(self, demand: frozenset[int], inputs: Inputs, omitted: frozenset[int] = frozenset()) -> None:
         """Commit the next phase of every ready ring that may go: within the group at once, across the barrier
-        when every ring is ready for it."""
+        when every ring is ready for it (``omitted``: phases never entered, besides PhaseOmit's, as a preempt's dwell
+        omits those that may not cycle)."""
         commits, across = self._choices(demand, inputs)
         for r, q in commits:
             self.commit(r, q, inputs)
         if across:
-            self._cross(across, demand, inputs)
+            self._cross(across, demand, inputs, omitted)
 
     def _choices(self, demand: frozenset[int], inputs: Inputs) -> tuple[list[tuple[Ring, int]], dict[int, int]]:
         """What :meth:`decide` does: the commits within the group, or else the wishes beyond it when every ring may
@@ -276,8 +312,8 @@ class Sequencer:
             return commits, {}
         return [], across
 
-    def _cross(self, across: dict[int, int], demand: frozenset[int], inputs: Inputs) -> None:
-        """Every ring clears into the next barrier group a wish lies in."""
+    def _cross(self, across: dict[int, int], demand: frozenset[int], inputs: Inputs, omitted: frozenset[int]) -> None:
+        """Every ring clears into the next barrier group a wish lies in (``omitted``: as :meth:`decide` says)."""
         # Cross to the nearest group (cyclically) that a wish lies in; restart the group only when every
         # wish beyond it is a backing that backup_prevent forbids (crossing serves those on the way back).
         groups = {self._barrier[q] for q in across.values()}
@@ -290,7 +326,7 @@ class Sequencer:
                 target = next((q for q in r.order if self._barrier[q] == self.group
                                and self.serviceable(r, q, demand, inputs)), None)
             if target is None:
-                omit = self.control[PHASE_OMIT]
+                omit = self.control[PHASE_OMIT] | omitted
                 target = next((q for q in r.order if self._barrier[q] == self.group
                                and self.config.phases[q].dual_entry and q not in omit), None)
             self.commit(r, target, inputs)
@@ -343,15 +379,20 @@ class Sequencer:
 
         1 when the next step decides something: a green's timers start or stop running or the conflicting demand it
         registered changes, a ``red_end`` call redirects a clearing ring, a ready ring commits its wish or the
-        rings cross the barrier (:meth:`_choices`), or a committed phase starts (:meth:`_starts`). Each question
-        is the step's own, asked now: until a counter reaches a threshold (the rest of the answer) it answers the
-        same at every tick. The thresholds: each ring's timers as the pattern and a preempt being served set them
-        too. A green's minimum matters only with conflicting demand (registered by the last step, and constant in
-        quiet time): without any, the ready green has nowhere to go and no ring waits across the barrier for it.
-        While a pattern runs or a preempt is served it may be what ends it."""
+        rings cross the barrier (:meth:`_choices`; in a preempt's dwell with cycling phases too, on their demand),
+        or a committed phase starts (:meth:`_starts`). Each question is the step's own, asked now: until a counter
+        reaches a threshold (the rest of the answer) it answers the same at every tick. The thresholds: each ring's
+        timers as the pattern and a preempt being served set them too, and what conditional service compares
+        (:meth:`_conditional_thresholds`). A green's minimum matters only with conflicting demand (registered by the
+        last step, and constant in quiet time): without any, the ready green has nowhere to go and no ring waits
+        across the barrier for it. While a pattern runs or a preempt is served it may be what ends it, and with
+        conditional service it makes a green "prepared to terminate"."""
         serving = self.preemptor.serving is not None
-        minimums = self.coordinated.running or serving
-        ahead: list[int] = []
+        cycling = preempted.cycling(demand) if serving else None
+        if cycling is not None:
+            demand = cycling[0]  # a preempt's dwell with cycling phases: the rings cycle as the sequencer runs them
+        minimums = self.coordinated.running or serving or bool(self._conditional_pairs)
+        ahead: list[int] = self._conditional_thresholds()
         for r in self.rings:
             ahead += r.thresholds(tick, self.timing, minimum=minimums or r.conflict)
             if minimums and r.interval is GREEN:
@@ -373,6 +414,17 @@ class Sequencer:
                     return 1
             elif redirecting and r.target is not None and self._redirected(r, demand, inputs) != r.target:
                 return 1
-        if not serving and any(self._choices(demand, inputs)):
+        if (not serving or cycling is not None) and any(self._choices(demand, inputs)):
             return 1
         return least
+
+    def _conditional_thresholds(self) -> list[int]:
+        """Ticks from now to each reading of a running maximum timer at which its green stops leaving the time a
+        conditional service asks (:meth:`_conditional`: a clearance and the earlier phase's minimum); a green's
+        minimum, which makes it "prepared to terminate", is a threshold too while any phase has the option."""
+        if not self._conditional_pairs:
+            return []
+        timing = self.timing
+        needs = {timing[p].yellow + timing[p].red_clear + timing[q].min_green for p, q in self._conditional_pairs}
+        return [o.maximum - n + 1 - o.max_ticks for o in self.rings if o.interval is GREEN and o.max_ticks
+                for n in needs if o.max_ticks <= o.maximum - n]

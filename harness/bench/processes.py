@@ -55,7 +55,15 @@ class Served:
     def stop(self, sig: signal.Signals = signal.SIGTERM) -> tuple[int, str]:
         """Signal the server; its exit code and the rest of its stdout."""
         self.proc.send_signal(sig)
-        out, _ = self.proc.communicate(timeout=10)
+        # Read through the text stream, not communicate(timeout=...): that reads the pipe itself and loses what the
+        # ready lines' readline() already buffered (a line printed with them, such as the SPaT sender's).
+        watchdog = threading.Timer(10, self.proc.kill)
+        watchdog.start()
+        try:
+            out = self.proc.stdout.read()
+            self.proc.wait()
+        finally:
+            watchdog.cancel()
         return self.proc.returncode, out
 
 

@@ -303,6 +303,8 @@ def infer(rows: Sequence[Row], name: str = "field controller") -> Inferred:
     coordinated = set(coordination["coord"]) if coordination else set()
     for p in recalled - coordinated:
         _recall(events, p, timing[p], out)
+    _backings(events, greens, structure, timing, out)
+    _recycles(events, greens, timing, out)
     duals = _dual_entries(events, structure, recalled)
     for p in duals:
         timing[p]["dual_entry"] = True
@@ -455,6 +457,65 @@ def _holds(rows: Sequence[Row], detectors: Mapping[int, int], greens: Mapping[in
         if timers.get("extend") == timers.get("carryover"):
             del timers["extend"]  # the call is held as long whatever the phase shows: a carryover alone
     return found
+
+
+def _backings(rows: Sequence[Row], greens: Mapping[int, list[tuple[datetime, datetime]]], structure: Structure,
+              timing: Mapping[int, dict[str, Any]], out: Inferred) -> None:
+    """A ring that ended a green and next began an earlier phase of its barrier group's order while a phase of the
+    other ring stayed green all along backed into it: conditional service (NTCIP 1202 phaseOptions bit 14) on the
+    phase it backed from when a call across the barrier was on as its green ended (registered, 43, and not dropped,
+    44), Naztec's backing (``backup_prevent = false``) otherwise. The emulator backs only where set so."""
+    ring_of = {p: r for r in (1, 2) for p in structure.ring(r)}
+    order = {p: i for r in (1, 2) for i, p in enumerate(structure.ring(r))}
+    group_of = {p: structure.group_of(p) for p in ring_of}
+    starts = sorted((a, b, p) for p, mine in greens.items() for a, b in mine if p in ring_of)
+    by_ring = {r: [(a, b) for a, b, p in starts if ring_of[p] == r] for r in (1, 2)}
+    calls: dict[int, list[tuple[datetime, bool]]] = defaultdict(list)  # each phase's call registered (43), dropped (44)
+    for r in rows:
+        if r.code in (E.PHASE_CALL_REGISTERED, E.PHASE_CALL_DROPPED) and r.parameter in ring_of:
+            calls[r.parameter].append((r.time, r.code == E.PHASE_CALL_REGISTERED))
+    seen: dict[int, Counter[str]] = defaultdict(Counter)
+    previous: dict[int, tuple[datetime, int]] = {}  # ring -> the end of its last green, its phase
+    for begin, end, q in starts:
+        r = ring_of[q]
+        if r in previous:
+            ended, p = previous[r]
+            other = by_ring[3 - r]
+            k = bisect.bisect_left(other, (ended,)) - 1  # the other ring's last green begun before the yellow
+            if group_of[p] == group_of[q] and order[q] < order[p] and k >= 0 and other[k][1] > begin:
+                waiting = any(group_of[x] != group_of[p] and _called_at(calls[x], ended) for x in calls)
+                seen[p]["conditional service" if waiting else "backing"] += 1
+        previous[r] = (end, q)
+    for p, kinds in sorted(seen.items()):
+        if kinds["conditional service"]:
+            timing[p]["conditional_service"] = True
+        if kinds["backing"]:
+            timing[p]["backup_prevent"] = False
+        out.read.append(f"phase {p}: its ring backed into an earlier phase of its group "
+                        + ", ".join(f"{n} time(s) as {kind}" for kind, n in sorted(kinds.items()))
+                        + " (conditional service: a call was on across the barrier; backing: none was)")
+
+
+def _called_at(changes: Sequence[tuple[datetime, bool]], t: datetime) -> bool:
+    """The phase's call is on at ``t``: its last change by then (registered, 43, or dropped, 44; time-sorted) is on."""
+    k = bisect.bisect_right(changes, (t, True)) - 1
+    return k >= 0 and changes[k][1]
+
+
+def _recycles(rows: Sequence[Row], greens: Mapping[int, list[tuple[datetime, datetime]]],
+              timing: Mapping[int, dict[str, Any]], out: Inferred) -> None:
+    """A walk (21) that began within a green of its phase already running (a tick or more after the begin green):
+    pedestrian recycle on that phase."""
+    seen: Counter[int] = Counter()
+    for r in rows:
+        if r.code == E.PED_BEGIN_WALK and r.parameter in timing and "walk" in timing[r.parameter]:
+            mine = greens.get(r.parameter, [])
+            k = bisect.bisect_left(mine, (r.time,)) - 1  # the phase's last green begun before the walk
+            if k >= 0 and mine[k][1] >= r.time:
+                seen[r.parameter] += 1
+    for p, n in sorted(seen.items()):
+        timing[p]["ped_recycle"] = True
+        out.read.append(f"phase {p}: pedestrian recycle ({n} walk(s) began within a green already running)")
 
 
 def _dual_entries(rows: Sequence[Row], structure: Structure, recalled: set[int]) -> list[int]:
@@ -1191,8 +1252,11 @@ def _toml(name: str, structure: Structure, timing: Mapping[int, dict[str, Any]],
         fields = {k: timing[p][k] for k in ("min_green", "max_green", "yellow", "red_clear", "passage",
                                             "time_before_reduction", "time_to_reduce", "min_gap", "walk",
                                             "ped_clear") if k in timing[p]}
-        if timing[p].get("dual_entry"):
-            fields["dual_entry"] = "true"
+        for option in ("dual_entry", "conditional_service", "ped_recycle"):
+            if timing[p].get(option):
+                fields[option] = "true"
+        if timing[p].get("backup_prevent") is False:
+            fields["backup_prevent"] = "false"
         if "recall" in timing[p]:
             fields["recall"] = f'"{timing[p]["recall"]}"'
         if p in startup:

@@ -212,6 +212,17 @@ def comparable_config(config: IntersectionConfig) -> IntersectionConfig:
         backup_time=0)
 
 
+def sumo_options(config: IntersectionConfig) -> IntersectionConfig:
+    """``config`` set as SUMO's NEMA controller is where NTCIP 1202 leaves the behaviour to a setting, so that the
+    figures compare the two controllers and not their settings: ``PhaseTransitionLogic::fromBarrier`` backs a ring
+    whenever its own ring has no call across the barrier, so every phase backs: with a call across as conditional
+    service (phaseOptions bit 14), with none as Naztec's controllers do (``backup_prevent = false``). The judge still
+    tells a backing outside the setting's words (too little time left) from one within."""
+    phases = {p: dataclasses.replace(ph, conditional_service=True, backup_prevent=False)
+              for p, ph in config.phases.items()}
+    return dataclasses.replace(config, phases=phases)
+
+
 def _ring_slots(config: IntersectionConfig) -> list[list[int]]:
     """Per ring, two slots per barrier group (0 for an empty slot), as SUMO's ring strings."""
     where = f"{config.source}: structure"
@@ -680,7 +691,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         modes = [Mode[m.upper()] for m in args.mode] if args.mode else [
             m for m in Mode if m is Mode.FREE or config.coordination.patterns]
         for mode in modes:
-            cfg = in_mode(config, mode)
+            cfg = sumo_options(in_mode(config, mode))
             print(f"== {mode.value}")
             if mode is Mode.FREE:
                 targeted = [differential(cfg, calls, t) for calls, t in SCENARIOS.values()]

@@ -170,9 +170,10 @@ BACKED_WITH_CALL_ACROSS = DifferenceClass(
     Right.KEEPER, (BACK_INTO, CONDITIONAL_SERVICE_BIT))
 CONDITIONAL_SERVICE = DifferenceClass(
     "conditional service: backed into an earlier phase with a call across the barrier",
-    "a ring whose green ended backs into an earlier phase of its barrier group while a phase across the barrier is "
-    "called, on a side set to give conditional service, with the clearance and the earlier phase's minimum ending "
-    "before the maximum of the other ring's green that is not ready to end", Right.SETTING,
+    "a ring whose green gapped or maxed out backs into an earlier phase of its barrier group while a phase across the "
+    "barrier is called, on a side set to give conditional service, with the clearance and the earlier phase's "
+    "minimum ending before the maximum of every green of the other ring that is not ready to end (not beside "
+    "greens all ready to end: they cross first)", Right.SETTING,
     (CONDITIONAL_SERVICE_BIT,))
 PULLED_ACROSS = DifferenceClass(
     "clearing ring pulled across the barrier",
@@ -217,11 +218,13 @@ class Settings:
     conditional_service: bool  # NTCIP 1202 phaseOptions bit 14
 
 
-#: Ours has no conditional service (the model offers no phaseOptions bit 14: a ring backs only while nothing is
-#: called across the barrier); SUMO's ``PhaseTransitionLogic::fromBarrier`` checks only its own ring's calls across
-#: the barrier before backing, which is conditional service always on.
-SETTINGS: Mapping[Side, Settings] = {Side.OURS: Settings(conditional_service=False),
-                                     Side.SUMO: Settings(conditional_service=True)}
+def settings_of(config: IntersectionConfig) -> Mapping[Side, Settings]:
+    """What each side is set to do: ours as ``config`` sets its phases (``conditional_service``: phaseOptions bit 14;
+    the differential sets it as SUMO has it, :func:`harness.reference.nema.sumo_options`); SUMO's
+    ``PhaseTransitionLogic::fromBarrier`` checks only its own ring's calls across the barrier before backing, which is
+    conditional service always on."""
+    return {Side.OURS: Settings(conditional_service=any(ph.conditional_service for ph in config.phases.values())),
+            Side.SUMO: Settings(conditional_service=True)}
 
 
 @dataclass(frozen=True, slots=True)
@@ -263,11 +266,11 @@ class Rules:
     """The rules on one config and one sequence of calls (``called[k]``: the calls the step ending at ``k`` read)."""
 
     def __init__(self, config: IntersectionConfig, called: Sequence[frozenset[int]], plan: Plan | None = None,
-                 settings: Mapping[Side, Settings] = SETTINGS) -> None:
+                 settings: Mapping[Side, Settings] | None = None) -> None:
         self.config = config
         self.called = called
         self.plan = plan
-        self.settings = settings
+        self.settings = settings_of(config) if settings is None else settings
         self.ring = {p: config.ring_of(p) for p in config.phases}
         self.side = {p: config.barrier_of(p) for p in config.phases}
         self.order = {p: ring.index(p) for ring in config.rings for p in ring}
@@ -353,27 +356,53 @@ class Rules:
                 and any(self.ring[x] == self.ring[p] and self.side[x] == self.side[p] and self.order[x] > self.order[p]
                         and self.serviceable(x, e.yellow, self.clearance(p)) for x in self.config.phases))
 
+    def backs(self, e: Ending) -> bool:
+        """The ring of ``e`` went on to an earlier phase of its barrier group."""
+        p = e.phase
+        return e.next is not None and self.side[e.next] == self.side[p] and self.order[e.next] < self.order[p]
+
     def backs_with_call_across(self, e: Ending) -> bool:
         p = e.phase
-        return (e.next is not None and self.side[e.next] == self.side[p] and self.order[e.next] < self.order[p]
-                and any(self.side[x] != self.side[p] and self.serviceable(x, e.yellow, self.clearance(p))
-                        for x in self.config.phases))
+        return self.backs(e) and any(self.side[x] != self.side[p] and self.serviceable(x, e.yellow, self.clearance(p))
+                                     for x in self.config.phases)
 
     def conditional_service(self, e: Ending) -> bool:
         """The backing of ``e`` is conditional service as phaseOptions bit 14 words it: its side is set to give it,
-        its green had gapped or maxed out, and a green of the other ring not prepared to terminate has time left
-        before its maximum for ``e``'s clearance and the earlier phase's minimum."""
-        if not self.settings[e.side].conditional_service or not self.ready(e.phase, e.green, e.yellow):
-            return False
+        its green had gapped or maxed out, and every green of the other ring not prepared to terminate has time left
+        before its maximum for ``e``'s clearance and the earlier phase's minimum. With no such green nothing times
+        out on the way, but with a call across the barrier two greens ready to end cross it instead (a ring already
+        clearing toward a phase of the group does not)."""
+        if not self.settings[e.side].conditional_service or not (self.ready(e.phase, e.green, e.yellow)
+                                                                    or self.gapped(e)):
+            return False  # not gapped (or held gapped out, simultaneous gap disable) nor maxed out
         holding = [(o, green) for o, green in e.beside if not self.ready(o, green, e.yellow)]
-        needed = self.clearance(e.phase) + self.min[e.next]
-        return bool(holding) and all(self.time_left(o, green, e.yellow) >= needed for o, green in holding)
+        if not holding:  # the other ring's greens cross with it, unless one goes on within the group
+            crossing = e.beside and not any(self.forward(o, e.yellow) for o, _ in e.beside)
+            return not (crossing and self.backs_with_call_across(e))
+        return self.time_for(e.phase, e.next, holding, e.yellow)
+
+    def time_for(self, p: int, q: int, holding: Sequence[tuple[int, int]], k: int) -> bool:
+        """At ``k`` each green of ``holding`` (phase, green onset) has time left before its maximum for ``p``'s
+        clearance and ``q``'s minimum."""
+        needed = self.clearance(p) + self.min[q]
+        return all(self.time_left(o, green, k) >= needed for o, green in holding)
+
+    def forward(self, o: int, k: int) -> bool:
+        """At ``k`` the ring of ``o`` has a called phase after ``o`` in its barrier group to go on to."""
+        return any(self.ring[x] == self.ring[o] and self.side[x] == self.side[o] and self.order[x] > self.order[o]
+                   and self.serviceable(x, k, self.clearance(o)) for x in self.config.phases)
 
     def backed_with_call_across(self, e: Ending) -> bool:
         return self.backs_with_call_across(e) and not self.conditional_service(e)
 
     def backed_conditionally(self, e: Ending) -> bool:
-        return self.backs_with_call_across(e) and self.conditional_service(e)
+        """A backing a setting gives: with a call across, as conditional service words it; with none, from a green
+        that gapped or maxed out, by a side that backs at all (conditional service, or Naztec's backing, which asks
+        no time of the other ring)."""
+        if self.backs_with_call_across(e):
+            return self.conditional_service(e)
+        return (self.backs(e) and self.settings[e.side].conditional_service
+                and self.ready(e.phase, e.green, e.yellow))
 
     def entered_past_force_off(self, e: Ending) -> bool:
         plan, q = self.plan, e.next
@@ -394,11 +423,20 @@ class Rules:
         gap = next((k for k in range(e.green + self.min[p] - 1, e.yellow + 1) if p not in self.calls(k)), None)
         return gap is not None and any(p in self.calls(k) for k in range(gap + 1, until + 1))
 
-    def goes_on(self, p: int, k: int, across: bool) -> bool:
-        """At tick ``k`` the ring of ``p`` has a called phase of its group to go to after ``p``: a later one, or an
-        earlier one while nothing waits ``across`` the barrier."""
+    def goes_on(self, p: int, k: int, across: bool, shown: Mapping[int, int] | None = None) -> bool:
+        """At tick ``k`` the ring of ``p`` (in our config) has a called phase of its group to go to after ``p``: a
+        later one, or an earlier one while nothing waits ``across`` the barrier where ``p`` backs: Naztec's backing
+        (``backup_prevent`` off), or conditional service with the time it asks of the other ring's greens
+        (``shown``: phase -> green onset) not ready to end."""
+        ph = self.config.phases[p]
+        holding = [(o, green) for o, green in (shown or {}).items() if not self.ready(o, green, k, slack=0)]
+
+        def backs(q: int) -> bool:
+            return not across and (not ph.backup_prevent or (ph.conditional_service
+                                                             and self.time_for(p, q, holding, k)))
+
         return any(q != p and self.ring[q] == self.ring[p] and self.side[q] == self.side[p]
-                   and self.serviceable(q, k, self.clearance(p)) and (self.order[q] > self.order[p] or not across)
+                   and self.serviceable(q, k, self.clearance(p)) and (self.order[q] > self.order[p] or backs(q))
                    for q in self.ring)
 
     def could_leave(self, e: Ending, k: int, shown: Mapping[int, int]) -> bool:
@@ -407,7 +445,7 @@ class Rules:
         group either. With the other ring in its clearance it cannot tell, and says no."""
         p = e.phase
         across = any(self.side[x] != self.side[p] and self.serviceable(x, k, self.clearance(p)) for x in self.ring)
-        if self.goes_on(p, k, across):
+        if self.goes_on(p, k, across, shown):
             return True
         return across and bool(shown) and all(self.ready(o, green, k, slack=0) and not self.goes_on(o, k, across)
                                               for o, green in shown.items())
@@ -471,7 +509,7 @@ def endings(config: IntersectionConfig, timeline: Timeline, side: Side) -> list[
 
 def classify(config: IntersectionConfig, called: Sequence[frozenset[int]], ours: Timeline, reference: Timeline,
              tick: int, tolerance: int = 1, plan: Plan | None = None,
-             settings: Mapping[Side, Settings] = SETTINGS) -> Judgement:
+             settings: Mapping[Side, Settings] | None = None) -> Judgement:
     """The class of the divergence starting at ``tick`` between ``ours`` and SUMO's ``reference``; ``plan``: the
     pattern both run (its force-off points, which SUMO lays out the same way: a sequence with every phase
     called agrees change for change)."""
@@ -501,7 +539,7 @@ def classify(config: IntersectionConfig, called: Sequence[frozenset[int]], ours:
 
 
 def audit(config: IntersectionConfig, called: Sequence[frozenset[int]], ours: Timeline, tolerance: int = 1,
-          plan: Plan | None = None, settings: Mapping[Side, Settings] = SETTINGS) -> tuple[Judgement, ...]:
+          plan: Plan | None = None, settings: Mapping[Side, Settings] | None = None) -> tuple[Judgement, ...]:
     """Every green ``ours`` ends, checked on its own against the rules a side keeps (those of the classes before
     the settings, and a green held past its maximum): the model's faults, whatever SUMO did there."""
     rules = Rules(config, called, plan, settings)

@@ -4,8 +4,9 @@ time; a benchmark that prints the share of configs replayed at >= 99 % (and writ
 A config is the shipped four-leg (:file:`hils/data/four_leg.toml`: 8 phases, 2 rings, 2 barriers, a detector and a
 push button per phase) with walks on its throughs and, drawn from a seed (:func:`random_config`), what the
 controller model has today and a log shows the effects of: the passage time, max or min recall on some phases,
-a detector delay, extension or carryover on some detectors, dual entry on some throughs, the leading left of ring 1
-lagging (ring order 2, 1, 3, 4), and coordination on the shipped plan (70 s) at any offset (an offset not at the
+a detector delay, extension or carryover on some detectors, dual entry on some throughs, conditional service or
+Naztec's backing (``backup_prevent = false``) on some phases, pedestrian recycle on some throughs, the leading left of
+ring 1 lagging (ring order 2, 1, 3, 4), and coordination on the shipped plan (70 s) at any offset (an offset not at the
 lead green: the local zero anywhere in the cycle). The log (:func:`emulator_log`) is the model's own under random
 detector and push-button inputs, then a minute without.
 :func:`round_trip` infers a config from the log (:func:`harness.reference.field_log.infer`), replays the log's
@@ -66,9 +67,11 @@ class Drawn:
 
 
 def random_config(rng: random.Random, *, recalls: Sequence[str] = ("min", "max"), dual_entry: bool = True,
-                  lag: bool = True, coordination: bool = True, detector_timers: bool = True) -> Drawn:
+                  lag: bool = True, coordination: bool = True, sequencing: bool = True,
+                  detector_timers: bool = True) -> Drawn:
     """The four-leg with walks on its throughs and features drawn from ``rng`` (see the header); ``recalls``,
-    ``dual_entry``, ``lag``, ``coordination`` and ``detector_timers`` say which may be drawn."""
+    ``dual_entry``, ``lag``, ``coordination``, ``sequencing`` (backing options, pedestrian recycle) and
+    ``detector_timers`` say which may be drawn."""
     text = BASE.read_text()
     features = []
     passage = rng.choice((1.0, 1.5, 2.0, 3.0))
@@ -84,6 +87,13 @@ def random_config(rng: random.Random, *, recalls: Sequence[str] = ("min", "max")
         if dual_entry and p % 2 == 0 and rng.random() < 0.1:
             options.append("dual_entry = true")
             features.append(f"dual entry {p}")
+        if sequencing and rng.random() < 0.1:
+            option = rng.choice(("conditional_service = true", "backup_prevent = false"))
+            options.append(option)
+            features.append(f"{'conditional service' if option.startswith('conditional') else 'backing'} {p}")
+        if sequencing and p % 2 == 0 and rng.random() < 0.15:
+            options.append("ped_recycle = true")
+            features.append(f"ped recycle {p}")
         if options:
             text = text.replace(f"\n{p} = {{ approach", f"\n{p} = {{ {', '.join(options)}, approach", 1)
     if lag and rng.random() < 0.5:

@@ -114,7 +114,7 @@ _PHASE_OBJECTS: dict[str, Carrier] = {
 # Per-phase timings and options a phase may set itself or inherit from [timing].
 _PHASE_OPTIONS = ("min_green", "max_green", "max2", "passage", "walk", "ped_clear", "yellow", "red_clear",
                   "red_revert", "time_before_reduction", "time_to_reduce", "min_gap", "recall", "dual_entry",
-                  "backup_prevent", "simultaneous_gap_disable")
+                  "backup_prevent", "conditional_service", "simultaneous_gap_disable", "ped_recycle")
 TURNS = ("left", "through")
 FREE = 254  # NTCIP's pattern number of free operation (systemPatternControl, coordPatternStatus)
 
@@ -258,6 +258,8 @@ class Preempt:
     dwell_phases: tuple[int, ...] = ()
     track_phases: tuple[int, ...] = ()
     exit_phases: tuple[int, ...] = ()
+    # preemptCyclingPhase: phases "allowed to cycle during the Preempt Dwell interval", after the dwell phases
+    cycling_phases: tuple[int, ...] = ()
     delay: int = 0
     min_duration: int = 0
     min_green: int = 255
@@ -308,9 +310,16 @@ class Phase:
     red_revert: float = 0.0       # s of red at least between this phase's yellow and its next green
     recall: Recall = Recall.NONE
     dual_entry: bool = False      # served with the other ring's entry into its barrier group
-    backup_prevent: bool = False  # its ring may not back from it into an earlier phase of its group
+    # its ring may not back from it into an earlier phase of its group while nothing is called across the barrier
+    # (false: Naztec's default, TecNote 3013); conditional service may still back it (see emulator/model/sequencer.py)
+    backup_prevent: bool = True
+    # NTCIP 1202 phaseOptions bit 14: once gapped or maxed out it may back into an earlier phase of its group while
+    # the other ring's green has time left before its maximum for the clearance and that phase's minimum
+    conditional_service: bool = False
     # gapped out and waiting (at the barrier, for the other ring), a call coming back does not extend it again
     simultaneous_gap_disable: bool = True
+    # a pedestrian call during its green starts a walk within that green (pedestrian recycle)
+    ped_recycle: bool = False
     # Turns of the same approach that run permissive (yielding) while this phase is green,
     # e.g. the lefts of a four-phase plan without protected lefts.
     permissive: tuple[str, ...] = ()
@@ -666,10 +675,14 @@ def _phase(number: int, raw: Any, defaults: Mapping[str, Any], ring: int, source
         raise ConfigError(source, f"{where('recall')}recall", "is 'ped' on a phase without walk; allowed: a walk > 0 "
                           "for ped recall")
     flags = {}
-    for key, default in (("dual_entry", False), ("backup_prevent", False), ("simultaneous_gap_disable", True)):
+    for key, default in (("dual_entry", False), ("backup_prevent", True), ("conditional_service", False),
+                         ("simultaneous_gap_disable", True), ("ped_recycle", False)):
         flags[key] = merged.get(key, default)
         if not isinstance(flags[key], bool):
             raise ConfigError(source, f"{where(key)}{key}", f"is {flags[key]!r}; allowed: true, false")
+    if raw.get("ped_recycle") and walk == 0:  # set in [timing], it acts on the phases with a walk
+        raise ConfigError(source, f"{w}ped_recycle", "is true on a phase without walk; allowed: a walk > 0 for "
+                          "pedestrian recycle")
     approach, turn = raw.get("approach"), raw.get("turn")
     if approach is not None and approach not in APPROACHES:
         raise ConfigError(source, f"{w}approach", f"is {approach!r}; allowed: {', '.join(APPROACHES)}")
@@ -682,7 +695,8 @@ def _phase(number: int, raw: Any, defaults: Mapping[str, Any], ring: int, source
     return Phase(number, ring, float(min_green), float(max_green), float(yellow), float(red_clear),
                  _STARTUP_NAMES[startup], approach, turn, float(passage), None if max2 is None else float(max2),
                  float(walk), float(ped_clear), float(red_revert), Recall(recall), flags["dual_entry"],
-                 flags["backup_prevent"], flags["simultaneous_gap_disable"], tuple(permissive),
+                 flags["backup_prevent"], flags["conditional_service"], flags["simultaneous_gap_disable"],
+                 flags["ped_recycle"], tuple(permissive),
                  float(before_reduction), float(to_reduce), None if min_gap is None else float(min_gap))
 
 
@@ -1186,8 +1200,12 @@ def _preempt(number: int, raw: Any, w: str, phases: Mapping[int, Phase], permiss
     if not isinstance(raw, dict):
         raise ConfigError(source, w[:-1], "must be a table of preempt settings")
     lists = ("track_phases", "dwell_phases", "exit_phases")
-    _unknown(raw, (*lists, *_PREEMPT_TIMES, "non_locking", "vehicles", "approach", "zone"), w, source)
+    _unknown(raw, (*lists, "cycling_phases", *_PREEMPT_TIMES, "non_locking", "vehicles", "approach", "zone"), w,
+             source)
     got: dict[str, Any] = {}
+    cycling = _int_list(raw.get("cycling_phases", []), f"{w}cycling_phases", source)
+    if any(p not in phases for p in cycling) or len(set(cycling)) != len(cycling):
+        raise ConfigError(source, f"{w}cycling_phases", f"is {cycling}; allowed: configured phases, each once")
     for key in lists:
         value = _int_list(raw.get(key, []), f"{w}{key}", source)
         # NTCIP 1202 Annex B's consistency checks: the phases of one list run together, one per ring.
@@ -1203,6 +1221,8 @@ def _preempt(number: int, raw: Any, w: str, phases: Mapping[int, Phase], permiss
         value = _number(raw, key, w, source, default, integer=integer, step=None if integer else 0.1,
                         ntcip=(obj, per_second))
         got[key] = value if integer else float(value)
+    if cycling and not got["dwell_phases"]:
+        raise ConfigError(source, f"{w}dwell_phases", "is required with cycling_phases: the phases they cycle after")
     if got["track_green"] and not got["track_phases"]:
         raise ConfigError(source, f"{w}track_phases", "is required with track_green: the phases that clear the track")
     non_locking = raw.get("non_locking", False)
@@ -1218,6 +1238,6 @@ def _preempt(number: int, raw: Any, w: str, phases: Mapping[int, Phase], permiss
     if approach is not None and approach not in APPROACHES:
         raise ConfigError(source, f"{w}approach", f"is {approach!r}; allowed: {', '.join(APPROACHES)}")
     zone = _number(raw, "zone", w, source, Preempt.__dataclass_fields__["zone"].default, low=1, high=2000)
-    return Preempt(number, got["dwell_phases"], got["track_phases"], got["exit_phases"],
+    return Preempt(number, got["dwell_phases"], got["track_phases"], got["exit_phases"], tuple(cycling),
                    **{k: got[k] for k in _PREEMPT_TIMES}, non_locking=non_locking, vehicles=tuple(vehicles),
                    approach=approach, zone=float(zone))

@@ -154,6 +154,7 @@ class PhaseOption(IntFlag):
     SIMULTANEOUS_GAP_DISABLE = 1 << 11
     GUARANTEED_PASSAGE = 1 << 12
     ACTUATED_REST_IN_WALK = 1 << 13
+    CONDITIONAL_SERVICE = 1 << 14
 
 
 class StatusColumn(IntEnum):
@@ -531,6 +532,7 @@ class PreemptColumn(IntEnum):
     DWELL_PED = 14
     EXIT_PHASE = 15
     STATE = 16
+    CYCLING_PHASE = 19
     ENTER_YELLOW_CHANGE = 22
     ENTER_RED_CLEAR = 23
     TRACK_YELLOW_CHANGE = 24
@@ -556,6 +558,7 @@ _PREEMPT_NAMES: dict[PreemptColumn, tuple[str, Syntax, Access, int, int]] = {
     PreemptColumn.DWELL_PED: ("preemptDwellPed", Syntax.OCTET_STRING, _RW, 0, 255),
     PreemptColumn.EXIT_PHASE: ("preemptExitPhase", Syntax.OCTET_STRING, _RW, 0, 255),
     PreemptColumn.STATE: ("preemptState", Syntax.INTEGER, Access.READ_ONLY, 1, 9),
+    PreemptColumn.CYCLING_PHASE: ("preemptCyclingPhase", Syntax.OCTET_STRING, _RW, 0, 255),
     PreemptColumn.ENTER_YELLOW_CHANGE: ("preemptEnterYellowChange", Syntax.INTEGER, _RW, 30, 255),
     PreemptColumn.ENTER_RED_CLEAR: ("preemptEnterRedClear", Syntax.INTEGER, _RW, 0, 255),
     PreemptColumn.TRACK_YELLOW_CHANGE: ("preemptTrackYellowChange", Syntax.INTEGER, _RW, 30, 255),

@@ -562,7 +562,10 @@ def _table(light: _Light, phases: list[_Phase], resco: RescoMap, structure: str,
         yellow, red_clear = _clearance(light, p, resco)
         low, high = _green_limits(light, p)
         given = {"min_green": timing.min_green, "max_green": timing.max_green, "yellow": timing.yellow}
-        entry: dict[str, Any] = {"min_green": low, "max_green": high, "yellow": yellow, "red_clear": red_clear} | {
+        # An agent selects any stage of the program, as sumo-rl's do, so a ring may have to go back to an earlier
+        # phase of its group while the other ring times: Naztec's backing (TecNote 3013), not the NTCIP default.
+        entry: dict[str, Any] = {"min_green": low, "max_green": high, "yellow": yellow, "red_clear": red_clear,
+                                 "backup_prevent": False} | {
             key: value for key, value in given.items() if value is not None}
         if p.number in stage_pairs[0]:
             entry["startup"] = "green"
@@ -696,8 +699,9 @@ def to_toml(config: IntersectionConfig) -> str:
     lines = [f'name = "{config.name}"', "", "[phases]"]
     for number, p in sorted(config.phases.items()):
         startup = ', startup = "green"' if p.startup.name != "PHASE_NOT_ON" else ""
+        backing = "" if p.backup_prevent else ", backup_prevent = false"
         lines.append(f"{number} = {{ min_green = {p.min_green:g}, max_green = {p.max_green:g}, yellow = {p.yellow:g}, "
-                     f"red_clear = {p.red_clear:g}{startup} }}")
+                     f"red_clear = {p.red_clear:g}{backing}{startup} }}")
     pairs = ", ".join(f"[{a}, {b}]" for a, b in config.pairs)
     sequence = ", ".join(f"[{a}, {b}]" for a, b in config.sequence)
     lines += ["", "[structure]", f"rings = {[list(r) for r in config.rings]}",

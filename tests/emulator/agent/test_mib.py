@@ -290,20 +290,19 @@ def test_next_oid_walks_every_instance_in_increasing_order(mib: MibView) -> None
     assert walked == mib.oids
     assert len(set(walked)) == len(walked)
     assert all(object_for(o) is not None for o in walked)
-    # 8 unit scalars (shortAlarmStatus too) and 9 of coordination, one pattern row of 5 columns and its split
-    # table (5 columns x 8 phases), 16 phase columns x 8 phases, maxChannelStatusGroups, 10 status + 3 channel + 6
-    # control columns x 1 group, 2 rings, maxRingControlGroups, ringControlGroupMax2 of group 1; maxOverlaps,
-    # maxOverlapStatusGroups, the unprogrammed overlap 1 (7 columns) and its status group (4 columns);
-    # maxPreempts, the unprogrammed preempt 1 (20 columns) and its preemptControl row (2 columns); maxVehicleDetectors,
+    # 8 unit scalars (shortAlarmStatus too) and 9 of coordination, one pattern row of 5 columns and its split table (5
+    # columns x 8 phases), 16 phase columns x 8 phases, maxChannelStatusGroups, 10 status + 3 channel + 6 control
+    # columns x 1 group, 2 rings, maxRingControlGroups, ringControlGroupMax2 of group 1; maxOverlaps,
+    # maxOverlapStatusGroups, the unprogrammed overlap 1 (7 columns) and its status group (4 columns); maxPreempts, the
+    # unprogrammed preempt 1 (21 columns) and its preemptControl row (2 columns); maxVehicleDetectors,
     # maxVehicleDetectorStatusGroups and ControlGroups, 4 detector columns x 8 detectors (call phase, options, delay,
-    # extend), detector status and
-    # actuation of group 1; maxPedestrianDetectors, maxPedestrianDetectorGroups, the call phase of 8 push buttons,
-    # their status and actuation of group 1. The index columns: phaseNumber x 8, the phase status, control and
-    # channel status group numbers, ringControlGroupNumber, sequenceNumber and sequenceRingNumber x 2 rings, the
-    # detectors' and push buttons' numbers x 8 and their status and control group numbers; maxRings, maxSequences;
-    # maxChannels and 3 channel columns x 8 channels; the time base (its sync, max, status, one action of 2
-    # columns); unitRedRevert and coordOperationalMode. Under v02 nothing of v03's preempt status.
-    assert len(walked) == (8 + 9 + 5 + 5 * 8 + 16 * 8 + 1 + 19 + 2 + 1 + 1 + 2 + 7 + 4 + 1 + 20 + 2 + 3 + 4 * 8 + 2
+    # extend), detector status and actuation of group 1; maxPedestrianDetectors, maxPedestrianDetectorGroups, the call
+    # phase of 8 push buttons, their status and actuation of group 1. The index columns: phaseNumber x 8, the phase
+    # status, control and channel status group numbers, ringControlGroupNumber, sequenceNumber and sequenceRingNumber x
+    # 2 rings, the detectors' and push buttons' numbers x 8 and their status and control group numbers; maxRings,
+    # maxSequences; maxChannels and 3 channel columns x 8 channels; the time base (its sync, max, status, one action of
+    # 2 columns); unitRedRevert and coordOperationalMode. Under v02 nothing of v03's preempt status.
+    assert len(walked) == (8 + 9 + 5 + 5 * 8 + 16 * 8 + 1 + 19 + 2 + 1 + 1 + 2 + 7 + 4 + 1 + 21 + 2 + 3 + 4 * 8 + 2
                            + 2 + 8 + 2
                            + 8 + 3 + 1 + 2 * 2 + 2 * 8 + 2 * 2 + 2 + 1 + 3 * 8 + 5 + 2)
 

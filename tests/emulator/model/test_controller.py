@@ -14,7 +14,15 @@ import simpy
 from emulator.agent.mib import MibView
 from emulator.model.controller import Change, Controller, Interval, Termination
 from hils.protocol.config import IntersectionConfig, parse
-from hils.protocol.ntcip import UNIT_BACKUP_TIME, ControlColumn, UnitControlStatus, UnitFlashStatus
+from hils.protocol.ntcip import (
+    PHASE_TABLE,
+    UNIT_BACKUP_TIME,
+    ControlColumn,
+    PhaseColumn,
+    PhaseOption,
+    UnitControlStatus,
+    UnitFlashStatus,
+)
 
 CALL, HOLD, OMIT = ControlColumn.VEH_CALL, ControlColumn.HOLD, ControlColumn.PHASE_OMIT
 FORCE_OFF = ControlColumn.FORCE_OFF
@@ -196,27 +204,27 @@ def test_one_ring_changes_alone_inside_a_barrier_group(controller: Controller) -
     assert runs(trace, 8) == [("r", YELLOW + RED), ("G", 1000 - YELLOW - RED)]
 
 
-def test_a_ring_backs_into_an_earlier_phase_while_the_other_times(controller: Controller) -> None:
-    controller.backup_time = 0
-    serve(controller, {3, 8})
+def test_a_ring_backs_into_an_earlier_phase_while_the_other_times_where_backup_prevent_is_off(
+        paper_toml: str) -> None:
+    """Naztec's default (TecNote 3013: a controller backs "into a protected left-turn phase when the cross street
+    phases and the opposing left-turn are skipped"), reached with ``backup_prevent = false``."""
+    c = with_options(paper_toml, {8: "backup_prevent = false"})
+    serve(c, {3, 8})
     # 7 precedes 8 in ring 2: ring 2 backs into it while 3 stays green (no trip round the cycle).
-    controller.set_control(CALL, {3, 7})
-    trace = record(controller, MAX + 2 * (YELLOW + RED))
+    c.set_control(CALL, {3, 7})
+    trace = record(c, MAX + 2 * (YELLOW + RED))
     assert runs(trace, 8) == [("Y", YELLOW), ("r", MAX + 2 * RED + YELLOW)]
     assert runs(trace, 7) == [("r", YELLOW + RED), ("G", MAX + RED + YELLOW)]
     assert runs(trace, 3) == [("G", MAX + 2 * (YELLOW + RED))]
 
 
-def test_backup_prevent_keeps_the_ring_from_backing(paper_toml: str) -> None:
-    config = variant(paper_toml, replace={'8 = { approach = "south", turn = "through" }':
-                                          '8 = { approach = "south", turn = "through", backup_prevent = true }'})
-    c = Controller(config)
-    c.backup_time = 0
-    serve(c, {3, 8})
-    c.set_control(CALL, {3, 7})
-    # 8 may not back into 7, so 7 needs the group to start over: 3 (with its call) maxes out, timed from the
-    # call on 7, and both rings clear together and restart the group.
-    trace = record(c, MAX + YELLOW + RED)
+def test_a_ring_does_not_back_into_an_earlier_phase_by_default(controller: Controller) -> None:
+    """No phaseOptions bit is set by default, conditional service (bit 14) neither, and the field logs of issue 35
+    never show a backing: 8 may not back into 7, so 7 needs the group to start over: 3 (with its call) maxes out,
+    timed from the call on 7, and both rings clear together and restart the group."""
+    serve(controller, {3, 8})
+    controller.set_control(CALL, {3, 7})
+    trace = record(controller, MAX + YELLOW + RED)
     assert runs(trace, 8) == [("G", MAX - 1), ("Y", YELLOW), ("r", RED + 1)]
     assert runs(trace, 3) == [("G", MAX - 1), ("Y", YELLOW), ("r", RED), ("G", 1)]
     assert runs(trace, 7) == [("r", MAX - 1 + YELLOW + RED), ("G", 1)]
@@ -474,12 +482,12 @@ def test_the_monitor_flashes_on_a_yellow_shorter_than_an_mmu_takes(controller: C
     c.backup_time = 0
     c.set_timing(2, "yellow", yellow)
     serve(c, {2, 6})
-    c.set_control(CALL, {1, 6})
+    c.set_control(CALL, {3, 7})
     record(c, 100)
     if yellow < 27:
         assert c.flash_status is UnitFlashStatus.MMU and c.reds == ALL_PHASES
     else:
-        assert not c.flashing and 1 in c.greens
+        assert not c.flashing and 3 in c.greens
 
 
 def test_status_sets_are_frozen(controller: Controller) -> None:
@@ -602,28 +610,73 @@ def test_a_committed_phase_omitted_during_clearance_is_dropped(controller: Contr
     assert (4, "G") not in seen and seen[(8, "G")] == MIN + YELLOW + RED
 
 
-def test_a_ring_backs_into_its_earlier_phase_while_the_other_rests(controller: Controller) -> None:
-    controller.backup_time = 0
-    seen = onsets(controller, 200, {0: {2, 6}, 140: {2, 5}})
+@pytest.mark.parametrize("option", ["backup_prevent = false", "conditional_service = true"])
+def test_a_ring_backs_into_its_earlier_phase_while_the_other_rests(paper_toml: str, option: str) -> None:
+    """Nothing waits across the barrier: with Naztec's backing or with conditional service (2's maximum held reset,
+    its whole 20 s left) 6 backs into 5 while 2 stays green."""
+    c = with_options(paper_toml, {6: option})
+    seen = onsets(c, 200, {0: {2, 6}, 140: {2, 5}})
     assert seen[(6, "Y")] == 141 and seen[(5, "G")] == 141 + YELLOW + RED
     assert (2, "Y") not in seen  # 2 stays green all along
 
 
-def test_no_backing_while_a_call_waits_across_the_barrier(controller: Controller) -> None:
-    """Issue 24's sequence: 2 held, 6's call drops, calls on 5 and 4 at 15 s. A controller backs into a phase
-    only "when the cross street phases and the opposing left-turn are skipped" (Naztec TecNote 3013): 6 waits
-    at the barrier, 2 maxes out 20 s after the call on 4 and both cross at 35 s (backing into 5 made it 40 s)."""
-    controller.backup_time = 0
-    seen = onsets(controller, 700, {0: {2, 6}, 150: {2, 4, 5}})
+def test_without_an_option_the_group_restarts_for_an_earlier_phase(controller: Controller) -> None:
+    """The same calls by default: 5 is served by a restart of the group, once 2 has maxed out (timed from the call
+    on 5, which 2's ring cannot reach before the group restarts)."""
+    seen = onsets(controller, 500, {0: {2, 6}, 140: {2, 5}})
+    assert seen[(2, "Y")] == seen[(6, "Y")] == 140 + MAX
+    assert seen[(5, "G")] == 140 + MAX + YELLOW + RED
+
+
+@pytest.mark.parametrize("option", ["", "backup_prevent = false"])
+def test_no_backing_while_a_call_waits_across_the_barrier(paper_toml: str, option: str) -> None:
+    """Issue 24's sequence: 2 held, 6's call drops, calls on 5 and 4 at 15 s. Neither by default nor as Naztec backs
+    (only "when the cross street phases and the opposing left-turn are skipped", Naztec TecNote 3013): 6 waits at
+    the barrier, 2 maxes out 20 s after the call on 4 and both cross at 35 s (backing into 5 made it 40 s)."""
+    c = with_options(paper_toml, {6: option} if option else {})
+    seen = onsets(c, 700, {0: {2, 6}, 150: {2, 4, 5}})
     assert seen[(2, "Y")] == seen[(6, "Y")] == 150 + MAX
     assert seen[(4, "G")] == 150 + MAX + YELLOW + RED
     assert seen[(5, "G")] > seen[(4, "G")]  # 5 waits for the group's next visit
 
 
-def test_backing_resumes_once_nothing_waits_across(controller: Controller) -> None:
-    controller.backup_time = 0
-    seen = onsets(controller, 400, {0: {2, 6}, 150: {2, 4, 5}, 200: {2, 5}})
-    assert seen[(6, "Y")] == 201 and seen[(5, "G")] == 201 + YELLOW + RED and (2, "Y") not in seen
+def test_conditional_service_backs_with_a_call_across_when_the_other_green_has_time(paper_toml: str) -> None:
+    """NTCIP 1202 phaseOptions bit 14: "causes a gapped/maxed phase to conditionally service a preceding actuated
+    vehicle phase when sufficient time remains before max time out of the phase(s) not prepared to terminate".
+    The sequence above with the bit on 6: 2 (its maximum timing from the call on 4 at 15 s) has 20 s left, more
+    than 6's clearance and 5's minimum (8 s): 6 backs into 5 at once."""
+    c = with_options(paper_toml, {6: "conditional_service = true"})
+    seen = onsets(c, 700, {0: {2, 6}, 150: {2, 4, 5}})
+    assert seen[(6, "Y")] == 151 and seen[(5, "G")] == 151 + YELLOW + RED
+    # 5 then extends on its call to its own maximum (timed from the call on 4), and 2 waits for it at the barrier
+    assert seen[(2, "Y")] == seen[(5, "Y")] == 151 + YELLOW + RED + MAX
+    assert seen[(4, "G")] == 151 + YELLOW + RED + MAX + YELLOW + RED
+
+
+def test_conditional_service_waits_when_the_other_green_has_too_little_time(paper_toml: str) -> None:
+    """The bit on 6, but 2's maximum has timed 15 s of its 20 (4 called from the start) when 6 gaps out with 5
+    called: 5 s left, less than 6's clearance and 5's minimum, so 6 waits at the barrier and both cross at 20 s."""
+    c = with_options(paper_toml, {6: "conditional_service = true"})
+    seen = onsets(c, 400, {0: {2, 4, 6}, 150: {2, 4, 5}})
+    assert seen[(2, "Y")] == seen[(6, "Y")] == MAX
+    assert (5, "G") not in seen or seen[(5, "G")] > seen[(4, "G")]
+
+
+def test_conditional_service_is_served_in_phase_options(paper_toml: str) -> None:
+    """phaseOptions bit 14 (Conditional Service Enable) set where the phase has it, clear elsewhere."""
+    c = with_options(paper_toml, {6: "conditional_service = true"})
+    view = MibView(c)
+    options = {p: PhaseOption(view.get(PHASE_TABLE[PhaseColumn.OPTIONS].instance(p))) for p in (2, 6)}
+    assert PhaseOption.CONDITIONAL_SERVICE == 1 << 14
+    assert PhaseOption.CONDITIONAL_SERVICE in options[6] and PhaseOption.CONDITIONAL_SERVICE not in options[2]
+
+
+@pytest.mark.parametrize("option", ["backup_prevent = false", "conditional_service = true"])
+def test_backing_resumes_once_nothing_waits_across(paper_toml: str, option: str) -> None:
+    c = with_options(paper_toml, {6: option})
+    seen = onsets(c, 400, {0: {2, 6}, 150: {2, 4, 5}, 200: {2, 5}})
+    backed = 201 if option.startswith("backup") else 151
+    assert seen[(6, "Y")] == backed and seen[(5, "G")] == backed + YELLOW + RED and (2, "Y") not in seen
 
 
 def test_red_end_lock_lets_a_call_in_the_clearance_redirect_on_the_same_side(paper_toml: str) -> None:
@@ -640,7 +693,8 @@ def test_red_end_lock_lets_a_call_in_the_clearance_redirect_on_the_same_side(pap
 
 
 def test_red_end_lock_never_redirects_across_the_barrier(paper_toml: str) -> None:
-    c = Controller(variant(paper_toml, replace={"[timing]": '[timing]\nnext_phase_lock = "red_end"'}))
+    c = Controller(variant(paper_toml, replace={"[timing]": '[timing]\nnext_phase_lock = "red_end"\n'
+                                                            'backup_prevent = false'}))
     c.backup_time = 0
     serve(c, {2, 6})
     c.set_control(CALL, {1, 6})  # ring 1 backs from 2 into 1 (nothing waits across)
@@ -757,6 +811,45 @@ def test_ped_omit_keeps_the_walk_from_being_served(paper_toml: str) -> None:
     c.set_control(PED_OMIT, {4})
     seen = onsets(c, 300)
     assert (4, "G") not in seen and c.ped_calls == set()
+
+
+def _pushed_during_green(paper_toml: str, options: str, calls: set[int], push: int = 100) -> tuple[Controller, list]:
+    """2+6 resting on ``calls``; push button 1 (phase 2) pressed for one tick at ``push``; each tick's walk, pedestrian
+    clearance and green of phase 2 for 40 s."""
+    text = paper_toml.replace("\n2 = { ", f"\n2 = {{ {options}, ", 1) + "\n[pedestrian_detectors]\n1 = 2\n"
+    c = Controller(parse(text, "recycle.toml"))
+    c.backup_time = 0
+    c.set_control(CALL, calls)
+    seen = []
+    for _ in range(400):
+        c.set_ped_actuations({1} if c.tick == push else ())
+        c.step()
+        seen.append((2 in c.walks, 2 in c.ped_clears, 2 in c.greens))
+    return c, seen
+
+
+def test_pedestrian_recycle_starts_a_walk_within_the_running_green(paper_toml: str) -> None:
+    """``ped_recycle``: the push at 10 s, in the middle of 2's green (resting, nothing conflicting), starts its walk
+    at once: 7 s of walk, 9 s of clearance, the green kept all along; the call is answered."""
+    c, seen = _pushed_during_green(paper_toml, "walk = 7, ped_clear = 9, ped_recycle = true", {2, 6})
+    walks = [w for w, _, _ in seen]
+    start = walks.index(True)
+    assert start == 100 and sum(walks) == 70 and sum(cl for _, cl, _ in seen) == 90
+    assert all(g for _, _, g in seen) and c.ped_calls == frozenset()
+
+
+def test_without_pedestrian_recycle_the_walk_waits_for_the_next_green(paper_toml: str) -> None:
+    c, seen = _pushed_during_green(paper_toml, "walk = 7, ped_clear = 9", {2, 6})
+    assert not any(w or cl for w, cl, _ in seen) and c.ped_calls == {2}
+
+
+def test_no_recycle_where_the_walk_would_outlast_the_maximum(paper_toml: str) -> None:
+    """4 called from the start: 2's maximum (20 s) times from 0 and has 10 s left at the push, less than the walk and
+    its clearance (16 s): no walk in this green, 2 maxes out at 20 s and the call waits for the next one."""
+    c, seen = _pushed_during_green(paper_toml, "walk = 7, ped_clear = 9, ped_recycle = true", {2, 4, 6})
+    greens = [g for _, _, g in seen]
+    assert not any(w or cl for w, cl, _ in seen[:greens.index(False)]) and greens.index(False) == MAX - 1
+    assert 2 in c.ped_calls or any(w for w, _, _ in seen[greens.index(False):])
 
 
 def test_red_revert_delays_the_return_of_a_phase(paper_toml: str) -> None:

@@ -21,7 +21,7 @@ from emulator.model.controller import Change, Controller
 from emulator.model.delays import STATUS_ATTRIBUTES, DelayedController
 from hils.protocol import config as config_mod
 from hils.protocol.config import DetectorTiming, EmulatorParams, IntersectionConfig, Recall
-from hils.protocol.ntcip import ControlColumn
+from hils.protocol.ntcip import ControlColumn, PhaseStartup
 from hils.sim.network import data_path
 from tests.emulator.model.test_controller_properties import ALL_PHASES, configs, phase_sets
 
@@ -162,6 +162,21 @@ def test_a_preempt_called_in_the_start_up_flash_is_read_after_it() -> None:
     assert config.preempts
     check_equal(config, [("preempt", frozenset({1})), (ControlColumn.VEH_CALL, frozenset({2, 6})), ("ticks", 60)],
                 delayed=False)
+
+
+def test_a_delaying_detector_actuated_in_the_start_up_flash_starts_its_delay_after_it() -> None:
+    """Detector 1 (delay 0.1 s), or 2 (no timer), comes on during the start-up flash, which reads no input, no phase
+    starting after it: the step after the flash starts its delay or recognizes it, and quiet time may not skip it
+    (the detector unit's deadline; before, it had only delays already running, and the skipping twin never called
+    the phase)."""
+    config = config_mod.load()
+    config = dataclasses.replace(
+        config, startup_flash=1, detector_timing={1: DetectorTiming(delay=0.1)},
+        phases={p: dataclasses.replace(ph, startup=PhaseStartup.PHASE_NOT_ON) for p, ph in config.phases.items()},
+    ).with_middleware(backup_time=0)
+    check_equal(config, [("detectors", frozenset({1})), ("ticks", 11), ("ticks", 40)], delayed=False)
+    # detector 2, without a timer of its own, is read after the flash as well
+    check_equal(config, [("ticks", 9), ("detectors", frozenset({2})), ("ticks", 2), ("ticks", 40)], delayed=False)
 
 
 @pytest.mark.parametrize("delayed", [False, True])

@@ -54,6 +54,7 @@ def timings(draw: st.DrawFn) -> dict[str, object]:
         "red_revert": draw(st.integers(0, 60)) / 10,
         "dual_entry": draw(st.booleans()),
         "backup_prevent": draw(st.booleans()),
+        "conditional_service": draw(st.booleans()),
         "simultaneous_gap_disable": draw(st.booleans()),
     }
     if draw(st.booleans()):
@@ -63,7 +64,7 @@ def timings(draw: st.DrawFn) -> dict[str, object]:
                 "min_gap": draw(st.integers(0, round(10 * out["passage"]))) / 10}
     if max_green >= 2 and draw(st.booleans()):
         walk = draw(st.integers(1, max_green - 1))
-        out |= {"walk": walk, "ped_clear": draw(st.integers(1, max_green - walk))}
+        out |= {"walk": walk, "ped_clear": draw(st.integers(1, max_green - walk)), "ped_recycle": draw(st.booleans())}
         if draw(st.booleans()):
             out["recall"] = "ped"
     return out
@@ -96,6 +97,8 @@ def configs(draw: st.DrawFn, coordinated: bool = False, overlapped: bool = False
             "sequence": [[RING1[0], RING2[0]], [RING1[-1], RING2[-1]]],
             "pairs": compatible,
         },
+        # a push button per phase, numbered as it (pedestrian recycle acts on the calls they latch during a green)
+        "pedestrian_detectors": {str(p): p for p in ALL_PHASES},
     }
     if coordinated:
         raw["coordination"] = draw(coordinations(phases, barriers))
@@ -108,7 +111,8 @@ def configs(draw: st.DrawFn, coordinated: bool = False, overlapped: bool = False
 
 @st.composite
 def preempt_tables(draw: st.DrawFn, compatible: list[list[int]], least: int = 0) -> dict:
-    """Up to two preempts: dwell, track and exit phases that run together (or none), every time drawn."""
+    """Up to two preempts: dwell, track and exit phases that run together (or none), maybe phases cycling in the
+    dwell, every time drawn."""
     together = st.sampled_from([[], *[[p] for p in sorted(ALL_PHASES)], *compatible])
     out = {}
     for n in range(1, draw(st.integers(least, 2)) + 1):
@@ -118,6 +122,9 @@ def preempt_tables(draw: st.DrawFn, compatible: list[list[int]], least: int = 0)
                        "enter_yellow": draw(st.integers(30, 50)) / 10, "enter_red": draw(st.integers(0, 20)) / 10,
                        "dwell_green": draw(st.integers(1, 5)), "non_locking": draw(st.booleans()),
                        "max_presence": draw(st.sampled_from([0, 0, 15, 40]))}
+        if entry["dwell_phases"] and draw(st.booleans()):  # phases that cycle in the dwell (preemptCyclingPhase)
+            others = sorted(ALL_PHASES - set(entry["dwell_phases"]))
+            entry["cycling_phases"] = draw(st.lists(st.sampled_from(others), min_size=1, max_size=3, unique=True))
         if draw(st.booleans()):
             entry |= {"track_phases": [draw(st.sampled_from(sorted(ALL_PHASES)))],
                       "track_green": draw(st.integers(1, 8)), "track_yellow": draw(st.integers(30, 50)) / 10,

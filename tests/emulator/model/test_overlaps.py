@@ -45,11 +45,13 @@ CALL = ControlColumn.VEH_CALL
 A, B, C, D, E, F, G, H = range(1, 9)
 
 
-def city(extra: str = "") -> IntersectionConfig:
-    """The shipped city four-leg, its overlap table replaced by ``extra`` when given."""
+def city(extra: str = "", timing: str = "") -> IntersectionConfig:
+    """The shipped city four-leg, its overlap table replaced by ``extra`` when given, ``timing`` added to [timing]."""
     text = data_path("four_leg_city.toml").read_text()
     if extra:
         text = text[:text.index("[overlaps]")] + "[overlaps]\n" + extra
+    if timing:
+        text = text.replace("[timing]", f"[timing]\n{timing}", 1)
     return parse(text, "city.toml")
 
 
@@ -120,8 +122,9 @@ def test_a_phase_that_runs_beside_the_trailing_overlap_does_not_wait() -> None:
 
 
 def test_minus_green_yellow_clears_before_its_modifier_starts_and_is_red_while_it_shows() -> None:
-    c = Controller(city('A = { type = "minus_green_yellow", included = [2], modifiers = [5] }\n'))
-    # 2+6; 5 called with 2: ring 2 backs from 6 into 5 (nothing across the barrier) while 2 rests.
+    c = Controller(city('A = { type = "minus_green_yellow", included = [2], modifiers = [5] }\n',
+                        "backup_prevent = false"))
+    # 2+6; 5 called with 2: ring 2 backs from 6 into 5 (nothing across the barrier, Naztec's backing) while 2 rests.
     seen = watch(c, 300, {0: {2, 5}})
     assert seen["2"] == [(1, "G")] and seen["5"][1] == (80, "G")
     # Green with 2 while 5 is not green; 5 committed at 6's yellow (tick 30): A times its own yellow (3 s) and
@@ -133,7 +136,7 @@ def test_minus_green_yellow_clears_before_its_modifier_starts_and_is_red_while_i
 
 def test_a_modifier_that_would_start_at_once_waits_for_the_minus_green_yellow_overlap_to_clear() -> None:
     c = Controller(city('A = { type = "minus_green_yellow", included = [2], modifiers = [5], trail_yellow = 4.0,'
-                        ' trail_red = 1.0 }\n'))
+                        ' trail_red = 1.0 }\n', "backup_prevent = false"))
     # 5 called with 2 and omitted during 6's clearance: ring 2 rests in red with nothing committed, and A is
     # green with 2 again. When the omit goes, ring 2 commits 5 at once: it would start the next tick beside A.
     c.set_control(CALL, {2, 5})

@@ -341,3 +341,27 @@ def test_the_shipped_four_leg_has_no_preempts() -> None:
     """The paper's intersection stays as the paper ran it: the preempt lives in the city variant."""
     assert load().preempts == {}
     assert city().preempts[1].vehicles == ("emergency", "ambulance") and city().preempts[1].approach == "east"
+
+
+def test_phases_cycle_in_the_dwell_where_the_preempt_allows_it() -> None:
+    """preemptCyclingPhase: phases "allowed to cycle during the Preempt Dwell interval", after the dwell phases. Dwell
+    2+6 with 4 and 8 allowed to cycle; 3 and 4 called during the dwell: 4 is served in the dwell (the rings cross
+    and come back to the dwell phases), 3 (not allowed) only after the preempt has ended."""
+    c = Controller(city('1 = { dwell_phases = [2, 6], exit_phases = [2, 6], cycling_phases = [4, 8], '
+                        'dwell_green = 40 }\n'))
+    c.backup_time = 0
+    seen = watch(c, 1200, {100: {1}, 700: set()}, {150: {3, 4}})
+    dwell = next(t for t, s in seen["P1"] if s == "DWELL")
+    done = next(t for t, s in seen["P1"] if s == "NOT_ACTIVE" and t > dwell)
+    greens4 = [t for t, s in seen["4"] if s == "G"]
+    assert greens4 and dwell < greens4[0] < done
+    assert any(t > greens4[0] and s == "G" for t, s in seen["2"] if t < done)  # back to the dwell phases
+    assert all(t > done for t, s in seen["3"] if s == "G") and any(s == "G" for _, s in seen["3"])
+
+
+def test_cycling_phases_are_served_in_the_preempt_table() -> None:
+    c = Controller(city('1 = { dwell_phases = [2, 6], cycling_phases = [4, 8] }\n'))
+    view = MibView(c)
+    assert view.get(PREEMPT_TABLE[PreemptColumn.CYCLING_PHASE].instance(1)) == bytes([4, 8])
+    with pytest.raises(ConfigError, match=r"preempts\.1\.dwell_phases.*required with cycling_phases"):
+        city('1 = { cycling_phases = [4, 8] }\n')

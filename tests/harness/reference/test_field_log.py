@@ -256,11 +256,12 @@ def test_a_phase_entered_uncalled_beside_the_other_ring_at_a_barrier_is_dual_ent
 @given(seed=st.integers(0, 2**16))
 def test_the_emulators_log_round_trips_at_99_percent(seed: int) -> None:
     """Logs the emulator makes under random configs (passage, pedestrians, a lagging left, coordination at any
-    offset) are inferred and replayed in virtual time at >= 99 % of their events within 1 s. Recalls and dual entry
-    are drawn by `python -m harness.reference.round_trip`, which counts them (docs/replay.md): a recalled phase's
-    calls are not logged, so which detector extends it shows only in its gap-outs, and a dual entry only when the
-    log crosses a barrier with nothing called in the ring."""
-    drawn = round_trip.random_config(random.Random(seed), recalls=(), dual_entry=False)
+    offset) are inferred and replayed in virtual time at >= 99 % of their events within 1 s. Recalls, dual entry,
+    backing options and pedestrian recycle are drawn by `python -m harness.reference.round_trip`, which counts them
+    (docs/replay.md): a recalled phase's calls are not logged, so which detector extends it shows only in its
+    gap-outs, a dual entry only when the log crosses a barrier with nothing called in the ring, and a recycled walk
+    keeps a green long enough to mislead the maximum read from it."""
+    drawn = round_trip.random_config(random.Random(seed), recalls=(), dual_entry=False, sequencing=False)
     share = round_trip.round_trip(drawn, 900, seed)
     assert share is not None and share >= 99, drawn.features
 
@@ -359,7 +360,7 @@ def test_a_call_held_after_its_detector_goes_is_an_extension_on_green_and_a_carr
     """The emulator's own log under detector 4 extending 1.5 s on its green and detector 8 carrying over 1.0 s:
     both read back from the call drops (44) that follow the detectors' offs."""
     drawn = round_trip.random_config(random.Random(0), recalls=(), dual_entry=False, lag=False, coordination=False,
-                                     detector_timers=False)
+                                     sequencing=False, detector_timers=False)
     text = drawn.toml + "[detectors]\n" + "\n".join(f"{p} = {p}" for p in (1, 2, 3, 5, 6, 7))
     text += "\n4 = { phase = 4, extend = 1.5 }\n8 = { phase = 8, carryover = 1.0 }\n"
     cfg = config_mod.parse(text, "held.toml")
@@ -382,7 +383,7 @@ def test_detectors_past_64_go_into_the_config() -> None:
     """Detectors 65 and 66 (the issue's coordinated MaxTime logs had them) call their phases in the config written
     from the log, as detector 128 would; before, past 64 they were left out."""
     drawn = round_trip.random_config(random.Random(0), recalls=(), dual_entry=False, lag=False, coordination=False,
-                                     detector_timers=False)
+                                     sequencing=False, detector_timers=False)
     text = drawn.toml + "[detectors]\n" + "\n".join(f"{p} = {p}" for p in range(1, 9)) + "\n65 = 4\n66 = 8\n"
     got = field_log.infer(round_trip.emulator_log(config_mod.parse(text, "many.toml"), 600, seed=4)).config()
     assert {d: got.detectors.get(d) for d in (65, 66)} == {65: 4, 66: 8}
@@ -428,3 +429,45 @@ def test_an_overlap_is_read_dark_at_green_only_when_its_yellow_and_off_follow_it
     assert list(got) == [3] and got[3].included == [2]
     assert field_log.dark_at_green(cycles(22)) == {}
     assert field_log.dark_at_green(cycles(20, green=True)) == {}
+
+
+def _driven_log(cfg: config_mod.IntersectionConfig, detectors: dict[int, set[int]], ticks: int) -> list[Row]:
+    """The emulator's log under ``cfg`` with its vehicle detectors on as ``detectors`` says from each tick on."""
+    c = Controller(cfg, start=datetime(2024, 5, 1, 7))
+    log = DataLogger(c)
+    for k in range(ticks):
+        if k in detectors:
+            c.set_actuations(detectors[k])
+        c.step()
+    return [Row(e.time, e.code, e.parameter) for e in log.events()]
+
+
+@pytest.mark.parametrize(("option", "across", "read"), [
+    ("conditional_service = true", {8}, ("conditional_service", True)),
+    ("backup_prevent = false", set(), ("backup_prevent", False)),
+])
+def test_a_ring_that_backs_is_read_as_the_setting_that_lets_it(option: str, across: set[int],
+                                                               read: tuple[str, object]) -> None:
+    """2+6 green, 6 held by its detector; 2's call goes and 1 is called (with 8 across, or nothing), three times:
+    ring 1 backs 2 -> 1 while 6 times, under the option on 2 (between, twice, the ring serves 1 then 2 as its order
+    says). The config read from the log sets it on 2 (conditional service where a call was on across the barrier,
+    Naztec's backing otherwise); a log of the defaults, which restart the group instead, sets neither."""
+    drawn = round_trip.random_config(random.Random(0), recalls=(), dual_entry=False, lag=False, coordination=False,
+                                     sequencing=False, detector_timers=False)
+    detectors = {}
+    for k in range(3):  # a backing (2 -> 1), then two cycles in the ring's order (1 -> 2)
+        base = 2100 * k
+        detectors |= {base: {2, 6}, base + 100: {1, 6} | across, base + 400: {2, 6}, base + 600: {4, 8},
+                      base + 900: {1, 2, 5, 6}, base + 1200: {4, 8}, base + 1500: {1, 2, 5, 6}, base + 1800: {2, 6}}
+    for text, expected in ((drawn.toml.replace("\n2 = { ", f"\n2 = {{ {option}, ", 1), read[1]),
+                           (drawn.toml, not read[1] if read[0] == "conditional_service" else True)):
+        got = field_log.infer(_driven_log(config_mod.parse(text, "backs.toml"), detectors, 6300)).config()
+        assert getattr(got.phases[2], read[0]) == expected
+
+
+def test_a_walk_begun_within_a_running_green_is_read_as_pedestrian_recycle() -> None:
+    drawn = round_trip.random_config(random.Random(0), recalls=(), dual_entry=False, lag=False, coordination=False,
+                                     sequencing=False, detector_timers=False)
+    cfg = config_mod.parse(drawn.toml.replace("\n2 = { ", "\n2 = { ped_recycle = true, ", 1), "recycle.toml")
+    got = field_log.infer(round_trip.emulator_log(cfg, 900, seed=3)).config()
+    assert got.phases[2].ped_recycle and not any(ph.ped_recycle for p, ph in got.phases.items() if p != 2)

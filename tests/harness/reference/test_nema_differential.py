@@ -13,6 +13,7 @@ tests run sequentially in this process.
 
 from __future__ import annotations
 
+import dataclasses
 import random
 
 import pytest
@@ -39,6 +40,7 @@ from harness.reference.nema import (
     run_ours,
     run_reference,
     seconds,
+    sumo_options,
     sumo_program,
     traffic_differential,
 )
@@ -64,6 +66,13 @@ from hils.sim.network import derive_phase_map, read_net
 def onset(timeline: tuple[ColorChange, ...], phase: int, color: Color, after: int = 0) -> int | None:
     """Tick of the first onset of ``color`` on ``phase`` after tick ``after``."""
     return next((c.tick for c in timeline if c.phase == phase and c.color is color and c.tick > after), None)
+
+
+@pytest.fixture(scope="module")
+def sumo_set(paper_config: IntersectionConfig) -> IntersectionConfig:
+    """The paper's intersection set as SUMO's NEMA controller is where NTCIP 1202 leaves a setting (conditional
+    service on every phase): what the figures compare."""
+    return sumo_options(paper_config)
 
 
 def test_program_names_the_rings_barriers_and_switches_recalls_off(paper_config: IntersectionConfig) -> None:
@@ -124,21 +133,21 @@ def test_reference_enters_with_the_dual_entry_phase(paper_config: IntersectionCo
     assert onset(ref, 4, Color.GREEN) == onset(ref, 8, Color.GREEN) == 80
 
 
-def test_reference_redirects_a_ring_during_clearance(paper_config: IntersectionConfig) -> None:
+def test_reference_redirects_a_ring_during_clearance(sumo_set: IntersectionConfig) -> None:
     """SUMO lets a call during the clearance change the phase chosen at yellow on the same side (3 for 4): the
     red_end lock, which the comparable config gives our controller too."""
     calls, ticks = seconds((0, [2, 6]), (12, [4]), (13, [3, 4]), (40, [])), 500
-    ref = run_reference(paper_config, calls, ticks)
+    ref = run_reference(sumo_set, calls, ticks)
     assert onset(ref, 3, Color.GREEN) == 171 and onset(ref, 4, Color.GREEN) == 421
-    assert comparable_config(paper_config).next_phase_lock is NextPhaseLock.RED_END
-    assert differential(paper_config, calls, ticks).comparison.agreement == 1.0
+    assert comparable_config(sumo_set).next_phase_lock is NextPhaseLock.RED_END
+    assert differential(sumo_set, calls, ticks).comparison.agreement == 1.0
 
 
 @pytest.mark.parametrize("name", sorted(SCENARIOS))
-def test_targeted_scenarios_agree_change_for_change(paper_config: IntersectionConfig, name: str) -> None:
+def test_targeted_scenarios_agree_change_for_change(sumo_set: IntersectionConfig, name: str) -> None:
     """The paper's intersection under issue 9's call patterns: 100 % of the changes, nothing to judge."""
     calls, ticks = SCENARIOS[name]
-    result = differential(paper_config, calls, ticks)
+    result = differential(sumo_set, calls, ticks)
     assert result.first is None, f"{name}: {result.first}\n{result.comparison.report(calls)}"
     assert result.comparison.agreement == 1.0 and not result.audited
 
@@ -154,9 +163,13 @@ def test_barrier_crossing_example_of_the_issue(paper_config: IntersectionConfig)
 @pytest.mark.parametrize("kind", list(EXAMPLES), ids=str)
 def test_each_class_is_recognised_on_its_minimal_example(paper_config: IntersectionConfig,
                                                          kind: DifferenceClass) -> None:
-    """The examples of docs/nema_differences.md: SUMO makes the difference and the class's rule names it."""
+    """The examples of docs/nema_differences.md: SUMO makes the difference and the class's rule names it. Ours backs
+    as Naztec's controllers do (``backup_prevent = false``: only while nothing is called across the barrier), where
+    SUMO backs too, and not as conditional service, which SUMO gives where the examples show it."""
     mode, calls, ticks = EXAMPLES[kind]
-    first = differential(in_mode(paper_config, mode), calls, ticks).first
+    naztec = dataclasses.replace(paper_config, phases={p: dataclasses.replace(ph, backup_prevent=False)
+                                                       for p, ph in paper_config.phases.items()})
+    first = differential(in_mode(naztec, mode), calls, ticks).first
     assert first is not None and first.kind is kind, first
     assert first.breaker is (None if kind.right is Right.SETTING else Side.SUMO)
     assert first.verdict is (Verdict.SETTING if kind.right is Right.SETTING else Verdict.REFERENCE)
@@ -253,11 +266,11 @@ TRAFFIC_FLOOR = 0.713  # 10 runs of 300 s of detector-driven traffic, SUMO seeds
 
 @pytest.mark.slow
 @pytest.mark.parametrize("seed", sorted(RANDOM_FLOORS))
-def test_fifty_random_sequences_keep_the_floor_with_no_model_fault(paper_config: IntersectionConfig,
+def test_fifty_random_sequences_keep_the_floor_with_no_model_fault(sumo_set: IntersectionConfig,
                                                                    seed: int) -> None:
     """The figures of python -m harness.reference.nema --seed N: whole five-minute sequences, no cut-off."""
     rng = random.Random(seed)
-    results = [differential(paper_config, random_calls(rng, 3000, sorted(paper_config.phases)), 3000)
+    results = [differential(sumo_set, random_calls(rng, 3000, sorted(sumo_set.phases)), 3000)
                for _ in range(50)]
     _no_model_fault(results)
     matched, total = pooled([d.comparison for d in results])
@@ -265,9 +278,9 @@ def test_fifty_random_sequences_keep_the_floor_with_no_model_fault(paper_config:
     assert sum(len(d.judgements) for d in results) > 50  # the sequences exercise both sides
 
 
-def test_detector_driven_traffic_keeps_the_floor_with_no_model_fault(paper_config: IntersectionConfig) -> None:
+def test_detector_driven_traffic_keeps_the_floor_with_no_model_fault(sumo_set: IntersectionConfig) -> None:
     """SUMO serving the shipped demand on its own detectors; ours given the calls those detectors placed."""
-    results = [traffic_differential(paper_config, 3000, seed) for seed in range(10)]
+    results = [traffic_differential(sumo_set, 3000, seed) for seed in range(10)]
     assert all(len(d.calls) > 20 for d in results)  # vehicles did call phases
     _no_model_fault(results)
     matched, total = pooled([d.comparison for d in results])
@@ -275,12 +288,12 @@ def test_detector_driven_traffic_keeps_the_floor_with_no_model_fault(paper_confi
 
 
 
-def test_a_gap_out_held_when_its_call_comes_back_is_no_fault_however_late(paper_config: IntersectionConfig) -> None:
+def test_a_gap_out_held_when_its_call_comes_back_is_no_fault_however_late(sumo_set: IntersectionConfig) -> None:
     """Pattern 1, the sixth random sequence of seed 1 to 200 s: 4 gaps out at 180.8 s with nothing called, its call
     comes back at 181.8 s with calls on 5 and 6 across, and both controllers hold the gap-out: 4 ends with 8 at
     186.7 s, its call on (simultaneous gap disable). The rule excused that only when the call came back within
     0.2 s of the end, or a conflicting call had waited since the gap-out; the bit's words set no such limit."""
-    config, rng = in_mode(paper_config, Mode.TS2), random.Random(1)
+    config, rng = in_mode(sumo_set, Mode.TS2), random.Random(1)
     for _ in range(6):
         calls = random_calls(rng, 3000, sorted(config.phases))
     calls = tuple((k, ps) for k, ps in calls if k < 2000)
@@ -294,10 +307,10 @@ def test_a_gap_out_held_when_its_call_comes_back_is_no_fault_however_late(paper_
 
 
 @pytest.mark.parametrize("mode", [Mode.TS2, Mode.TS2_FLOATING])
-def test_the_plan_with_every_phase_called_agrees_change_for_change(paper_config: IntersectionConfig,
+def test_the_plan_with_every_phase_called_agrees_change_for_change(sumo_set: IntersectionConfig,
                                                                    mode: Mode) -> None:
     """Both lay pattern 1 out the same way: every force-off point on the same tick, for three cycles."""
-    result = differential(in_mode(paper_config, mode), seconds((0, range(1, 9))), 2100)
+    result = differential(in_mode(sumo_set, mode), seconds((0, range(1, 9))), 2100)
     assert result.first is None and len(result.comparison.matched) > 60, result.first
 
 
@@ -321,9 +334,9 @@ def test_the_sumo_program_runs_the_plan(paper_config: IntersectionConfig) -> Non
 
 @pytest.mark.slow
 def test_coordinated_random_sequences_agree_with_no_model_fault(
-        paper_config: IntersectionConfig) -> None:
+        sumo_set: IntersectionConfig) -> None:
     """Issue 24's goal for coordinated operation: at least 95 % of the changes over whole sequences."""
-    config = in_mode(paper_config, Mode.TS2)
+    config = in_mode(sumo_set, Mode.TS2)
     rng = random.Random(1)
     results = [differential(config, random_calls(rng, 3000, sorted(config.phases)), 3000) for _ in range(50)]
     _no_model_fault(results)
@@ -331,8 +344,8 @@ def test_coordinated_random_sequences_agree_with_no_model_fault(
     assert total > 2000 and matched >= 0.95 * total, f"{matched} of {total}"
 
 
-def test_coordinated_traffic_has_no_model_fault(paper_config: IntersectionConfig) -> None:
-    results = [traffic_differential(in_mode(paper_config, Mode.TS2), 3000, seed) for seed in range(3)]
+def test_coordinated_traffic_has_no_model_fault(sumo_set: IntersectionConfig) -> None:
+    results = [traffic_differential(in_mode(sumo_set, Mode.TS2), 3000, seed) for seed in range(3)]
     _no_model_fault(results)
 
 
@@ -350,6 +363,6 @@ def call_sequences(draw: st.DrawFn) -> tuple[CallSequence, int]:
 
 @settings(max_examples=40, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
 @given(case=call_sequences())
-def test_random_call_sequences_have_no_model_fault(paper_config: IntersectionConfig,
+def test_random_call_sequences_have_no_model_fault(sumo_set: IntersectionConfig,
                                                                  case: tuple[CallSequence, int]) -> None:
-    _no_model_fault([differential(paper_config, *case)])
+    _no_model_fault([differential(sumo_set, *case)])

@@ -482,8 +482,9 @@ def test_the_paper_config_keeps_the_paper_behaviour(paper_config) -> None:
     from hils.protocol.config import Recall
 
     for ph in paper_config.phases.values():
-        assert (ph.passage, ph.recall, ph.walk, ph.ped_clear, ph.dual_entry, ph.backup_prevent, ph.red_revert,
-                ph.simultaneous_gap_disable) == (0, Recall.NONE, 0, 0, False, False, 0, True)
+        got = (ph.passage, ph.recall, ph.walk, ph.ped_clear, ph.dual_entry, ph.backup_prevent, ph.conditional_service,
+               ph.red_revert, ph.simultaneous_gap_disable, ph.ped_recycle)
+        assert got == (0, Recall.NONE, 0, 0, False, True, False, 0, True, False)
     assert paper_config.startup_flash == 0
     assert paper_config.next_phase_lock == "green_end"
 

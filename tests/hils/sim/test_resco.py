@@ -58,14 +58,14 @@ GRID_A0 = """\
 name = "A0, dual-ring from its SUMO program"
 
 [phases]
-1 = { min_green = 5, max_green = 50, yellow = 3, red_clear = 0.1 }
-2 = { min_green = 5, max_green = 50, yellow = 3, red_clear = 0.1, startup = "green" }
-3 = { min_green = 5, max_green = 50, yellow = 3, red_clear = 0.1 }
-4 = { min_green = 5, max_green = 50, yellow = 3, red_clear = 0.1 }
-5 = { min_green = 5, max_green = 50, yellow = 3, red_clear = 0.1 }
-6 = { min_green = 5, max_green = 50, yellow = 3, red_clear = 0.1, startup = "green" }
-7 = { min_green = 5, max_green = 50, yellow = 3, red_clear = 0.1 }
-8 = { min_green = 5, max_green = 50, yellow = 3, red_clear = 0.1 }
+1 = { min_green = 5, max_green = 50, yellow = 3, red_clear = 0.1, backup_prevent = false }
+2 = { min_green = 5, max_green = 50, yellow = 3, red_clear = 0.1, backup_prevent = false, startup = "green" }
+3 = { min_green = 5, max_green = 50, yellow = 3, red_clear = 0.1, backup_prevent = false }
+4 = { min_green = 5, max_green = 50, yellow = 3, red_clear = 0.1, backup_prevent = false }
+5 = { min_green = 5, max_green = 50, yellow = 3, red_clear = 0.1, backup_prevent = false }
+6 = { min_green = 5, max_green = 50, yellow = 3, red_clear = 0.1, backup_prevent = false, startup = "green" }
+7 = { min_green = 5, max_green = 50, yellow = 3, red_clear = 0.1, backup_prevent = false }
+8 = { min_green = 5, max_green = 50, yellow = 3, red_clear = 0.1, backup_prevent = false }
 
 [structure]
 rings = [[2, 1, 4, 3], [6, 5, 8, 7]]
@@ -94,14 +94,14 @@ COLOGNE1 = """\
 name = "GS_cluster_357187_359543, dual-ring from its SUMO program"
 
 [phases]
-1 = { min_green = 5, max_green = 50, yellow = 5, red_clear = 0.1 }
-2 = { min_green = 5, max_green = 50, yellow = 5, red_clear = 0.1, startup = "green" }
-3 = { min_green = 5, max_green = 50, yellow = 5, red_clear = 0.1 }
-4 = { min_green = 5, max_green = 50, yellow = 5, red_clear = 0.1 }
-5 = { min_green = 5, max_green = 50, yellow = 5, red_clear = 0.1 }
-6 = { min_green = 5, max_green = 50, yellow = 5, red_clear = 0.1, startup = "green" }
-7 = { min_green = 5, max_green = 50, yellow = 5, red_clear = 0.1 }
-8 = { min_green = 5, max_green = 50, yellow = 5, red_clear = 0.1 }
+1 = { min_green = 5, max_green = 50, yellow = 5, red_clear = 0.1, backup_prevent = false }
+2 = { min_green = 5, max_green = 50, yellow = 5, red_clear = 0.1, backup_prevent = false, startup = "green" }
+3 = { min_green = 5, max_green = 50, yellow = 5, red_clear = 0.1, backup_prevent = false }
+4 = { min_green = 5, max_green = 50, yellow = 5, red_clear = 0.1, backup_prevent = false }
+5 = { min_green = 5, max_green = 50, yellow = 5, red_clear = 0.1, backup_prevent = false }
+6 = { min_green = 5, max_green = 50, yellow = 5, red_clear = 0.1, backup_prevent = false, startup = "green" }
+7 = { min_green = 5, max_green = 50, yellow = 5, red_clear = 0.1, backup_prevent = false }
+8 = { min_green = 5, max_green = 50, yellow = 5, red_clear = 0.1, backup_prevent = false }
 
 [structure]
 rings = [[2, 1, 4, 3], [6, 5, 8, 7]]
