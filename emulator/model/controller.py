@@ -174,9 +174,7 @@ class Controller:
         self.ped_actuations: frozenset[int] = frozenset()  # pedestrian detectors actuated now
         self.detectors.reset()
         self._inputs = None
-        # The image the monitor last passed: a power cycle puts every lamp out, so the monitor starts afresh.
-        self._checked: tuple[frozenset[int], ...] | None = None
-        self.monitor.reset()
+        self.monitor.reset()  # a power cycle puts every lamp out: the monitor starts afresh
         self.backup.reset()
         self.rings[:] = [Ring(i + 1, order) for i, order in enumerate(self.config.rings)]
         self.coordinator.reset()
@@ -448,13 +446,9 @@ class Controller:
                 self.recorder.changed(r, reason)
 
     def _monitor(self) -> None:
-        if self._status is self._checked:
-            return  # what it sees is all in the status image, and this one passed
-        lamps = Lamps(self.greens, self.yellows, self.overlap_greens, self.overlap_yellows)
-        fault = self.monitor.check(lamps, self.tick)
-        if fault is None:
-            self._checked = self._status
-        else:
+        fault = self.monitor.watch(self._status, lambda: Lamps(self.greens, self.yellows, self.overlap_greens,
+                                                                self.overlap_yellows), self.tick)
+        if fault is not None:
             log.error("conflict monitor: %s at tick %d: flash", fault, self.tick)
             self.flash_status = UnitFlashStatus.MMU
             self._refresh_status()
@@ -473,18 +467,4 @@ class Controller:
 
     def skip(self, n: int) -> None:
         """Advance ``n`` quiet ticks at once; ``n`` must be below :meth:`quiet_ticks` (or any, when None)."""
-        if n <= 0:
-            return
-        self.tick += n
-        self.coordinator.skip(n)
-        self.backup.skip(n)
-        if self.flashing:
-            return
-        if self.config.overlaps:
-            self.overlaps.skip(n)
-        if self.detectors.timers:
-            self.detectors.skip(n)
-        if self.config.preempts:
-            self.preemptor.skip(n)
-        for r in self.rings:
-            r.skip(n)
+        self.quiet.skip(n)

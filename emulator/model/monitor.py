@@ -32,6 +32,7 @@ timed.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import NamedTuple
 
 from hils.protocol.config import IntersectionConfig, OverlapKind
@@ -67,7 +68,18 @@ class Monitor:
     def reset(self) -> None:
         """Power-up: every lamp out."""
         self._passed = _NONE  # the lamps of the last check that found no fault
+        self._watched: object = None  # the last status image watched that showed no fault
         self._yellow_began: dict[tuple[str, int], int] = {}  # (channel kind, number) -> the tick its yellow began
+
+    def watch(self, image: object, lamps: Callable[[], Lamps], tick: int) -> str | None:
+        """The fault the controller's status ``image`` shows at ``tick`` (its ``lamps``), or None: an image is judged
+        once, what it lights being all the monitor sees."""
+        if image is self._watched:
+            return None
+        fault = self.check(lamps(), tick)
+        if fault is None:
+            self._watched = image
+        return fault
 
     def check(self, lamps: Lamps, tick: int) -> str | None:
         """The fault these lamps show at ``tick`` (after the ones last passed), or None."""

@@ -94,6 +94,25 @@ class QuietTime:
         backup = self.c.backup.deadline()
         return units if backup is None else min(units, self.c.tick + backup)
 
+    def skip(self, n: int) -> None:
+        """Advance ``n`` quiet ticks at once: every unit that times counts them, nothing else moves."""
+        if n <= 0:
+            return
+        c = self.c
+        c.tick += n
+        c.coordinator.skip(n)
+        c.backup.skip(n)
+        if c.flashing:
+            return
+        if c.config.overlaps:
+            c.overlaps.skip(n)
+        if c.detectors.timers:
+            c.detectors.skip(n)
+        if c.config.preempts:
+            c.preemptor.skip(n)
+        for r in c.rings:
+            r.skip(n)
+
     def _units(self) -> int | None:
         """The least deadline of the units but the backup timer (None: none will act). The sequencer, the costliest
         to ask, is asked last, and not when another unit acts at the next step."""
