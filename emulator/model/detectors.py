@@ -31,7 +31,6 @@ to its phase a tick after that phase's green ends, as a real controller's detect
 
 from __future__ import annotations
 
-from collections.abc import Iterable
 from dataclasses import astuple, dataclass
 
 from hils.protocol.config import IntersectionConfig
@@ -83,10 +82,9 @@ class Detectors:
             self.waited.pop(d, None)
             self.held.pop(d, None)
 
-    def step(self, actuated: frozenset[int], greens: Iterable[int]) -> bool:
+    def step(self, actuated: frozenset[int], greens: frozenset[int]) -> bool:
         """One tick: what is recognized, from the inputs actuated now and the phases green (the tick before).
         True when that changed."""
-        greens = frozenset(greens)
         timers = self.timers
         recognized = set(actuated - timers.keys())
         waited, held = self.waited, self.held
@@ -117,11 +115,10 @@ class Detectors:
 
     # --- quiet time (see emulator/model/quiet.py) -------------------------------------------------
 
-    def deadline(self, actuated: frozenset[int], greens: Iterable[int]) -> int | None:
+    def deadline(self, actuated: frozenset[int], greens: frozenset[int]) -> int | None:
         """Steps until a timer changes what is recognized (None: no timer runs); at least the next step. A delaying
         detector whose phase shows green is recognized at the next step; an input no step has read yet (``actuated``
         changed during the start-up flash, which reads no input) is read by the next step."""
-        greens = frozenset(greens)
         if (actuated ^ self.recognized) - self.waited.keys() - self.held.keys():
             return 1
         ahead = [1 if self.phase[d] in greens else self.timers[d].delay - w for d, w in self.waited.items()]

@@ -43,7 +43,6 @@ import math
 from typing import TYPE_CHECKING
 
 from emulator.model.overlaps import Phases
-from emulator.model.ring import GREEN
 from hils.protocol.ntcip import UnitFlashStatus
 
 if TYPE_CHECKING:
@@ -126,7 +125,7 @@ class QuietTime:
         ahead.append(c.peds.deadline(c.greens, inputs, c.rings))
         phases = Phases.of(c.rings, later=True) if c.config.overlaps else None
         if c.detectors.timers:
-            ahead.append(c.detectors.deadline(c.actuations, (r.phase for r in c.rings if r.interval is GREEN)))
+            ahead.append(c.detectors.deadline(c.actuations, c.greens))
         if c.config.preempts:
             ahead += (c.preemptor.deadline(), c.preempting.deadline(c.sequencer))
         if phases is not None:
