@@ -317,7 +317,8 @@ def infer(rows: Sequence[Row], name: str = "field controller") -> Inferred:
                        "dynamic omits (46-49 logged by the field controller's own logic) are not modelled")
     start = rows[0].time.replace(microsecond=rows[0].time.microsecond // 100_000 * 100_000)
     startup = _startup(events, greens, structure, out)
-    out.toml = _toml(name, structure, timing, detectors, timers, pushes, coordination, overlaps, startup, start)
+    powered = _powered(events, startup, timing, start, out)
+    out.toml = _toml(name, structure, timing, detectors, timers, pushes, coordination, overlaps, startup, powered)
     return out
 
 
@@ -1237,6 +1238,32 @@ def _startup(rows: Sequence[Row], greens: Mapping[int, list[tuple[datetime, date
     g = structure.group_of(first)
     return [min(structure.order[r][g], key=lambda p: greens[p][0][0] if p in greens else datetime.max)
             for r in (1, 2)]
+
+
+def _powered(rows: Sequence[Row], startup: Sequence[int], timing: Mapping[int, Mapping[str, Any]], start: datetime,
+             out: Inferred) -> datetime:
+    """When the controller powers up (``[emulator] start``): a start-up phase green when the log begins whose green
+    ends (8) before its minimum could have run from the log's first tenth began that much earlier (a green ends no
+    sooner than its minimum: the log began in the middle of a green that had timed it), so the model powers up
+    that long before the log (its greens resting past their minimum, as the field's were), but not before midnight
+    of the log's first day (the emulator's coordination clock counts from midnight of its power-up's day)."""
+    seen: dict[int, dict[int, datetime]] = defaultdict(dict)  # phase -> its first begin green and begin yellow
+    for r in rows:
+        if r.parameter in startup and r.code in (E.PHASE_BEGIN_GREEN, E.PHASE_BEGIN_YELLOW):
+            seen[r.parameter].setdefault(r.code, r.time)
+    ends = {p: t[E.PHASE_BEGIN_YELLOW] for p, t in seen.items()
+            if t.get(E.PHASE_BEGIN_YELLOW, datetime.max) < t.get(E.PHASE_BEGIN_GREEN, datetime.max)}
+    early = {p: round(timing[p]["min_green"] - (t - start).total_seconds(), 1) for p, t in ends.items()}
+    early = {p: s for p, s in early.items() if s > 0}
+    midnight = datetime.combine(start.date(), datetime.min.time())
+    lead = min(max(early.values(), default=0.0), (start - midnight).total_seconds())
+    if lead <= 0:
+        return start
+    out.read.append(f"start-up: powered up {lead:g} s before the log begins: " + ", ".join(
+        f"phase {p}'s green ends {(ends[p] - start).total_seconds():g} s into the log, its minimum is "
+        f"{timing[p]['min_green']:g} s" for p in sorted(early))
+        + " (a green runs its minimum: it began before the log)")
+    return start - timedelta(seconds=lead)
 
 
 def _toml(name: str, structure: Structure, timing: Mapping[int, dict[str, Any]], detectors: Mapping[int, int],

@@ -8,9 +8,11 @@ replay is given, as `hils emulator serve` would, without a wire or a clock to wa
 Times
 -----
 The model's clock is the log's: it powers up at the log's first tenth of a second (``Controller(start=...)``), so
-a logged event's time and the model's are the same clock and nothing has to be shifted afterwards. An input logged
-at tick ``t`` was read by the field controller at that tick, as the data logger logs a detector change on the
-tick that reads it: the model is advanced to tick ``t - 1`` (quiet stretches skipped at once,
+a logged event's time and the model's are the same clock and nothing has to be shifted afterwards. A config whose
+``[emulator] start`` is earlier on the log's first day powers up there and runs without inputs until the log begins
+(:func:`power_up`): the inference writes so for a log that begins in the middle of a green whose minimum has run.
+An input logged at tick ``t`` was read by the field controller at that tick, as the data logger logs a detector
+change on the tick that reads it: the model is advanced to tick ``t - 1`` (quiet stretches skipped at once,
 :meth:`Controller.advance`), given the input, and stepped once. So every input lands on the tick it was logged
 at, whatever the log's length, and the run is the same every time (the model is deterministic; nothing here
 draws a random number). After the last input the model runs to the log's last event, so the bench's log spans the
@@ -68,12 +70,18 @@ def run(rows: Sequence[_Logged], config: IntersectionConfig) -> Run:
     if not rows:
         raise ValueError("an empty log has no inputs to replay")
     start, end = floor_tick(rows[0].time), floor_tick(rows[-1].time)
-    controller = Controller(config, start=start)
+    powered = power_up(config, start)
+    controller = Controller(config, start=powered)
+    clock = controller.coordinator  # its clock counts ticks since midnight of the power-up's day
+    zero = clock.clock + _ticks(start - powered)
     on = _on_at_start(r for r in rows if r.code in INPUTS)
-    _apply(controller, on)
-    logger = DataLogger(controller)  # after: it logs the inputs on at the start with the power-up
-    clock = controller.coordinator  # its clock counts ticks since midnight of the start's day
-    zero = clock.clock
+    if powered < start:  # running with no input until the log begins, then the inputs on at its start
+        logger = DataLogger(controller)
+        controller.advance(zero - clock.clock)
+        _apply(controller, on)
+    else:
+        _apply(controller, on)
+        logger = DataLogger(controller)  # after: it logs the inputs on at the start with the power-up
     replayed = 0
     for tick, same in groupby((r for r in rows if r.code in INPUTS), key=lambda r: _ticks(r.time - start)):
         controller.advance(zero + tick - 1 - clock.clock)
@@ -85,6 +93,14 @@ def run(rows: Sequence[_Logged], config: IntersectionConfig) -> Run:
         controller.step()
     controller.advance(zero + _ticks(end - start) - clock.clock)
     return Run(logger.events(), start, end, replayed)
+
+
+def power_up(config: IntersectionConfig, start: datetime) -> datetime:
+    """When the model powers up for a log beginning at ``start``: the config's ``[emulator] start`` when it falls
+    earlier on the log's first day (a config written from a log that began in the middle of a green: the controller
+    was running before the log), else the log's first tenth."""
+    at = config.emulator.start
+    return at if at.date() == start.date() and at < start else start
 
 
 def _ticks(span: timedelta) -> int:

@@ -68,6 +68,34 @@ def test_a_detector_whose_first_event_is_off_starts_actuated() -> None:
     assert any(e.code == E.PHASE_BEGIN_GREEN and e.parameter == 4 for e in ran.events)  # its call was served
 
 
+def test_a_log_begun_in_the_middle_of_a_green_powers_up_before_it() -> None:
+    """The 1210 Econolite log begins as phases 2 and 6 gap out (their minimum is 30 s): their greens had run before
+    the log did. Powered up at the log's start, the model timed a fresh 30 s minimum and ended them 32.6 s late,
+    and every green after was out of step (19.6 % of the log's events). Powered up 30 s before, as the config now
+    says, they end where the field's did, and so does what follows."""
+    rows = hires_file.load(LOGS / "1210_ECON_10.204.7.239_2021_08_09_1841.datZ")
+    cfg = field_log.infer(rows).config()
+    start = replay_virtual.floor_tick(rows[0].time)
+    assert cfg.emulator.start == start - timedelta(seconds=30)
+    assert replay_virtual.power_up(cfg, start) == cfg.emulator.start
+    ran = replay_virtual.run(rows, cfg)
+
+    def first(events: list, code: int, p: int) -> datetime:
+        return next(e.time for e in events if e.code == code and e.parameter == p and e.time >= start)
+
+    for code, p in [(E.PHASE_GAP_OUT, 2), (E.PHASE_GAP_OUT, 6), (E.PHASE_BEGIN_GREEN, 4), (E.PHASE_BEGIN_GREEN, 8)]:
+        assert abs(first(ran.events, code, p) - first(rows, code, p)) <= timedelta(seconds=1), (code, p)
+    assert overall(match_table(rows, ran.events, equivalences=replay_match.for_log("Econolite", {}))) >= 80
+
+
+def test_a_config_of_another_day_powers_up_with_the_log() -> None:
+    """A config's start on another day than the log's (a hand-written config's default) is not a power-up before
+    the log: the model powers up at the log's first tenth."""
+    cfg = config_with()
+    start = datetime(2024, 5, 1, 7)
+    assert cfg.emulator.start < start and replay_virtual.power_up(cfg, start) == start
+
+
 def test_the_per_green_measure_reanchors_at_each_field_green() -> None:
     t0 = datetime(2024, 5, 1, 7)
 
