@@ -304,6 +304,7 @@ def infer(rows: Sequence[Row], name: str = "field controller") -> Inferred:
     for p in recalled - coordinated:
         _recall(events, p, timing[p], out)
     _backings(events, greens, structure, timing, out)
+    _reextensions(events, greens, structure, timing, out)
     _recycles(events, greens, timing, out)
     duals = _dual_entries(events, structure, recalled)
     for p in duals:
@@ -495,6 +496,80 @@ def _backings(rows: Sequence[Row], greens: Mapping[int, list[tuple[datetime, dat
         out.read.append(f"phase {p}: its ring backed into an earlier phase of its group "
                         + ", ".join(f"{n} time(s) as {kind}" for kind, n in sorted(kinds.items()))
                         + " (conditional service: a call was on across the barrier; backing: none was)")
+
+
+def _reextensions(rows: Sequence[Row], greens: Mapping[int, list[tuple[datetime, datetime]]], structure: Structure,
+                  timing: Mapping[int, dict[str, Any]], out: Inferred) -> None:
+    """Greens of the two rings that end together (8 on one tick) as the rings cross a barrier, each having gapped out
+    (its call off, 44, a passage since it dropped, past its minimum) before: when they end more than a second past
+    where both had, the one that gapped out first went back to extending when its call came back (43), waiting at
+    the barrier for the other ring, which only a phase without simultaneous gap disable does (NTCIP 1202
+    phaseOptions bit 11, "in multi-ring configurations when set to 1 disables a gapped out phase from reverting to
+    the extensible portion"); when they end where the later gapped out although the first's call came back, that
+    one has it. A phase seen going back :data:`PASSAGE_SEEN` times and more often than not has
+    ``simultaneous_gap_disable = false``, and so has a phase seen fewer times either way beside which such a phase
+    of the other ring waits at the barriers of their group. Logs without call events (43/44) show neither."""
+    ring_of = {p: r for r in (1, 2) for p in structure.ring(r) if p not in structure.phantom}
+    calls: dict[int, list[tuple[datetime, bool]]] = defaultdict(list)
+    dont_walks: dict[int, list[datetime]] = defaultdict(list)  # the end of each pedestrian clearance (23)
+    for r in rows:
+        if r.code in (E.PHASE_CALL_REGISTERED, E.PHASE_CALL_DROPPED) and r.parameter in ring_of:
+            calls[r.parameter].append((r.time, r.code == E.PHASE_CALL_REGISTERED))
+        elif r.code == E.PED_BEGIN_SOLID_DONT_WALK:
+            dont_walks[r.parameter].append(r.time)
+    ending: dict[datetime, list[tuple[int, datetime]]] = defaultdict(list)  # begin yellow -> (phase, begin green)
+    for p, mine in greens.items():
+        for begin, end in mine:
+            if p in ring_of:
+                ending[end].append((p, begin))
+    starts = sorted((begin, p) for p, mine in greens.items() for begin, _ in mine if p in ring_of)
+    went_back: Counter[int] = Counter()
+    stayed: Counter[int] = Counter()
+    for end, pair in ending.items():
+        k = bisect.bisect_right(starts, (end, PHASES + 1))
+        if len(pair) != 2 or {ring_of[p] for p, _ in pair} != {1, 2} or k == len(starts) \
+                or structure.group_of(starts[k][1]) == structure.group_of(pair[0][0]):
+            continue
+        gapped = {p: _gapped(calls[p], begin, end, timing[p], dont_walks[p]) for p, begin in pair}
+        if not calls or None in gapped.values():
+            continue
+        first = min(gapped, key=gapped.__getitem__)
+        if end - max(gapped.values()) > timedelta(seconds=1):
+            went_back[first] += 1
+        elif any(gapped[first] < t < end and on for t, on in calls[first]):
+            stayed[first] += 1
+    own = {p for p in ring_of if went_back[p] >= PASSAGE_SEEN and went_back[p] > stayed[p]}
+    decided = {p for p in ring_of if went_back[p] + stayed[p] >= PASSAGE_SEEN}
+    partners = {p for p in ring_of.keys() - decided
+                if any(ring_of[q] != ring_of[p] and structure.group_of(q) == structure.group_of(p) for q in own)}
+    for p in own | partners:
+        timing[p]["simultaneous_gap_disable"] = False
+    if own:
+        out.read.append("no simultaneous gap disable (NTCIP 1202 phaseOptions bit 11 clear): " + ", ".join(
+            f"phase {p} went back to extending at the barrier after it had gapped out {went_back[p]} time(s), "
+            f"stayed gapped out {stayed[p]}" for p in sorted(own)))
+    if partners:
+        out.guessed.append(f"phase(s) {', '.join(map(str, sorted(partners)))}: no simultaneous gap disable, as the "
+                           "other ring's phase(s) of their barrier group (seen fewer than "
+                           f"{PASSAGE_SEEN} times either way on them)")
+
+
+def _gapped(changes: Sequence[tuple[datetime, bool]], begin: datetime, end: datetime, timing: Mapping[str, Any],
+            dont_walks: Sequence[datetime]) -> datetime | None:
+    """When a green from ``begin`` to ``end`` first gapped out: the first time past its minimum and the end of a
+    pedestrian clearance it served (23, ``dont_walks``) its call (43/44, ``changes`` time-sorted) was off a passage
+    since it dropped (None: not before ``end``)."""
+    k = bisect.bisect_right(changes, (begin, True))
+    on, since = _called_at(changes, begin), begin
+    served = [t for t in dont_walks if begin < t <= end]
+    earliest = max([begin + timedelta(seconds=timing["min_green"]), *served])
+    for t, registered in [*changes[k:], (end, None)]:
+        if not on and (out := max(since + timedelta(seconds=timing["passage"]), earliest)) < min(t, end):
+            return out
+        if registered is None or t >= end:
+            return None
+        on, since = registered, t if not registered else since
+    return None
 
 
 def _called_at(changes: Sequence[tuple[datetime, bool]], t: datetime) -> bool:
@@ -1282,8 +1357,9 @@ def _toml(name: str, structure: Structure, timing: Mapping[int, dict[str, Any]],
         for option in ("dual_entry", "conditional_service", "ped_recycle"):
             if timing[p].get(option):
                 fields[option] = "true"
-        if timing[p].get("backup_prevent") is False:
-            fields["backup_prevent"] = "false"
+        for option in ("backup_prevent", "simultaneous_gap_disable"):
+            if timing[p].get(option) is False:
+                fields[option] = "false"
         if "recall" in timing[p]:
             fields["recall"] = f'"{timing[p]["recall"]}"'
         if p in startup:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import itertools
 import random
+import re
 import subprocess
 import sys
 from collections import Counter
@@ -463,6 +464,26 @@ def test_a_ring_that_backs_is_read_as_the_setting_that_lets_it(option: str, acro
                            (drawn.toml, not read[1] if read[0] == "conditional_service" else True)):
         got = field_log.infer(_driven_log(config_mod.parse(text, "backs.toml"), detectors, 6300)).config()
         assert getattr(got.phases[2], read[0]) == expected
+
+
+def test_a_green_that_goes_back_to_extending_at_the_barrier_is_read_as_no_simultaneous_gap_disable() -> None:
+    """2+6 green, 8 called: 2's detector goes and 2 gaps out while 6's holds; 2's comes back before 6's goes and
+    holds 10 s past it, three times. Under ``simultaneous_gap_disable = false`` on 2 (NTCIP 1202 phaseOptions bit
+    11 clear) 2 goes back to extending and the rings cross 10 s later than under the default, which keeps 2 gapped
+    out: the config read from the first log clears it on 2, from the second on no phase."""
+    drawn = round_trip.random_config(random.Random(0), recalls=(), dual_entry=False, lag=False, coordination=False,
+                                     sequencing=False, detector_timers=False)
+    text = re.sub(r"max_green = \d+", "max_green = 60", drawn.toml)
+    detectors: dict[int, set[int]] = {}
+    for k in range(3):
+        base = 700 * k
+        detectors |= {base: {2, 6}, base + 100: {6, 8}, base + 180: {2, 6, 8}, base + 250: {2, 8}, base + 350: {8},
+                      base + 450: {2, 6}}
+    cleared = config_mod.parse(text.replace("\n2 = { ", "\n2 = { simultaneous_gap_disable = false, ", 1), "sgd.toml")
+    got = field_log.infer(_driven_log(cleared, detectors, 2100)).config()
+    assert not got.phases[2].simultaneous_gap_disable
+    got = field_log.infer(_driven_log(config_mod.parse(text, "default.toml"), detectors, 2100)).config()
+    assert all(ph.simultaneous_gap_disable for ph in got.phases.values())
 
 
 def test_a_walk_begun_within_a_running_green_is_read_as_pedestrian_recycle() -> None:

@@ -181,6 +181,19 @@ def test_the_atspm_sample_replays_whole_at_its_floor() -> None:
     assert sum(g.ended for g in green) >= 0.95 * sum(g.anchored for g in green)
 
 
+def test_the_free_econolite_logs_replay_whole_at_their_floors() -> None:
+    """The free Econolite logs, whole, through `hils replay`'s config and variants: today's figures are the floors
+    (4895 80.1 %, 77.3 % before its phase 6 went back to extending at the barrier; .215 97.1 %, 75.0 % before its
+    phase 2 did; 1210 82.6 %, 19.6 % before the model powered up before the log's first green end)."""
+    for name, floor in (("4895_ECON_10.210.8.179_2024_02_21_1115.dat", 80.0),
+                        ("ECON_10.205.17.215_2024_02_21_1115.dat", 97.0),
+                        ("1210_ECON_10.204.7.239_2021_08_09_1841.datZ", 82.5)):
+        rows = hires_file.load(LOGS / name)
+        ran = replay_virtual.run(rows, field_log.infer(rows).config())
+        variants = replay_match.for_log("Econolite", field_log.dark_at_green(rows))
+        assert overall(match_table(rows, ran.events, equivalences=variants)) >= floor, name
+
+
 def test_signal_replay_starts_where_the_logs_cycle_was_on_any_day() -> None:
     """A 130 s cycle does not divide a day: 2 years later the bench, counting its cycles from its own midnight, would
     be days * 86,400 s mod 75 off the log's. Signal-Replay starts the replay when the time since the log's start is a
