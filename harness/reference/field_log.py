@@ -500,8 +500,9 @@ def _backings(rows: Sequence[Row], greens: Mapping[int, list[tuple[datetime, dat
 
 def _reextensions(rows: Sequence[Row], greens: Mapping[int, list[tuple[datetime, datetime]]], structure: Structure,
                   timing: Mapping[int, dict[str, Any]], out: Inferred) -> None:
-    """Greens of the two rings that end together (8 on one tick) as the rings cross a barrier, each having gapped out
-    (its call off, 44, a passage since it dropped, past its minimum) before: when they end more than a second past
+    """Greens of the two rings that end together by gap-out or max-out (4 or 5, and 8, on one tick) as the rings cross
+    a barrier, each having gapped out (its call off, 44, a passage since it dropped, past its minimum) before (not
+    forced off by a plan; a green on max recall never gaps out): when they end more than a second past
     where both had, the one that gapped out first went back to extending when its call came back (43), waiting at
     the barrier for the other ring, which only a phase without simultaneous gap disable does (NTCIP 1202
     phaseOptions bit 11, "in multi-ring configurations when set to 1 disables a gapped out phase from reverting to
@@ -517,6 +518,7 @@ def _reextensions(rows: Sequence[Row], greens: Mapping[int, list[tuple[datetime,
             calls[r.parameter].append((r.time, r.code == E.PHASE_CALL_REGISTERED))
         elif r.code == E.PED_BEGIN_SOLID_DONT_WALK:
             dont_walks[r.parameter].append(r.time)
+    unforced = {(r.time, r.parameter) for r in rows if r.code in (E.PHASE_GAP_OUT, E.PHASE_MAX_OUT)}
     ending: dict[datetime, list[tuple[int, datetime]]] = defaultdict(list)  # begin yellow -> (phase, begin green)
     for p, mine in greens.items():
         for begin, end in mine:
@@ -528,7 +530,8 @@ def _reextensions(rows: Sequence[Row], greens: Mapping[int, list[tuple[datetime,
     for end, pair in ending.items():
         k = bisect.bisect_right(starts, (end, PHASES + 1))
         if len(pair) != 2 or {ring_of[p] for p, _ in pair} != {1, 2} or k == len(starts) \
-                or structure.group_of(starts[k][1]) == structure.group_of(pair[0][0]):
+                or structure.group_of(starts[k][1]) == structure.group_of(pair[0][0]) \
+                or any((end, p) not in unforced for p, _ in pair):
             continue
         gapped = {p: _gapped(calls[p], begin, end, timing[p], dont_walks[p]) for p, begin in pair}
         if not calls or None in gapped.values():
@@ -558,8 +561,11 @@ def _gapped(changes: Sequence[tuple[datetime, bool]], begin: datetime, end: date
             dont_walks: Sequence[datetime]) -> datetime | None:
     """When a green from ``begin`` to ``end`` first gapped out: the first time past its minimum and the end of a
     pedestrian clearance it served (23, ``dont_walks``) its call (43/44, ``changes`` time-sorted) was off a passage
-    since it dropped (None: not before ``end``)."""
+    since it dropped (None: not before ``end``, or not to be told: a green on max recall, or one the log shows no
+    call change in, as for a recalled phase whose calls a controller does not log)."""
     k = bisect.bisect_right(changes, (begin, True))
+    if timing.get("recall") == "max" or k == len(changes) or changes[k][0] >= end:
+        return None
     on, since = _called_at(changes, begin), begin
     served = [t for t in dont_walks if begin < t <= end]
     earliest = max([begin + timedelta(seconds=timing["min_green"]), *served])

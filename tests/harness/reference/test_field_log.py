@@ -486,6 +486,17 @@ def test_a_green_that_goes_back_to_extending_at_the_barrier_is_read_as_no_simult
     assert all(ph.simultaneous_gap_disable for ph in got.phases.values())
 
 
+def test_greens_the_log_cannot_show_gapping_out_are_not_read_as_going_back_to_extending() -> None:
+    """Round trip draw 16 (seed 1): phase 7 on max recall, held to its maximum whatever its calls, and phases whose
+    calls the emulator does not log (recalled): read as going back to extending, their configs replayed at 22.6 %
+    where the defaults give 100 %. A green on max recall, or one the log shows no call change in, is not judged."""
+    rng = random.Random(1)
+    drawn = [round_trip.random_config(rng) for _ in range(16)][-1]
+    assert "max recall 7" in drawn.features
+    got = field_log.infer(round_trip.emulator_log(config_mod.parse(drawn.toml, "rt.toml"), 600, seed=15)).config()
+    assert all(ph.simultaneous_gap_disable for ph in got.phases.values())
+
+
 def test_a_walk_begun_within_a_running_green_is_read_as_pedestrian_recycle() -> None:
     drawn = round_trip.random_config(random.Random(0), recalls=(), dual_entry=False, lag=False, coordination=False,
                                      sequencing=False, detector_timers=False)
