@@ -242,6 +242,15 @@ def phase_options(ph: Phase) -> PhaseOption:
 #: What a configured vehicle detector does (vehicleDetectorOptions): it calls its phase ("Bit 7: Call") and, on its
 #: green, restarts the phase's passage timer ("Bit 4: Passage").
 DETECTOR_OPTIONS = DetectorOption.CALL | DetectorOption.PASSAGE
+def _detector_options(cfg: IntersectionConfig, d: int) -> DetectorOption:
+    """vehicleDetectorOptions of detector ``d``: call and passage when configured, and "Bit 2: Yellow Lock Call" when
+    it locks its calls."""
+    if d not in cfg.detectors:
+        return DetectorOption(0)
+    timing = cfg.detector_timing.get(d)
+    return DETECTOR_OPTIONS | (DetectorOption.YELLOW_LOCK_CALL if timing is not None and timing.lock else 0)
+
+
 #: The timings of an unprogrammed phase: none, but the yellow at NEMA's 3.0 s (the lowest phaseYellowChange).
 _UNPROGRAMMED_TIMING = {"min_green": 0, "max1": 0, "max2": 0, "passage": 0, "walk": 0, "ped_clear": 0, "yellow": 30,
                         "red_clear": 0, "red_revert": 0}
@@ -411,7 +420,7 @@ class MibView:
                           (VEHICLE_DETECTOR_CONTROL_GROUP_NUMBER, DETECTOR_ACTUATION),
                           lambda: c.actuations, c.set_actuations)
         out.extend(Instance(VEHICLE_DETECTOR_OPTIONS.instance(d), VEHICLE_DETECTOR_OPTIONS,
-                            _constant(int(DETECTOR_OPTIONS if d in cfg.detectors else 0)))
+                            _constant(int(_detector_options(cfg, d))))
                    for d in _rows(cfg.detectors))
         out += [Instance(obj.instance(d), obj, *_detector_timer(c, d, name))
                 for d in _rows(cfg.detectors) for obj, name in _DETECTOR_TIMERS.items()]

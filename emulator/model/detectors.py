@@ -25,6 +25,10 @@ Output is dropped"). A recognized detector whose input goes is held while either
 in that time keeps it recognized and restarts them when it goes ("a full extension time period follows the
 departure of the last detected vehicle").
 
+vehicleDetectorOptions bit 2, "Yellow Lock Call - if Enabled, the detector will lock a call to the assigned phase if
+an actuation occurs while the phase is not timing Green": a locking detector recognized while its phase is not green
+stays recognized, its input gone or not, until its phase shows green.
+
 What the phases show is read from the tick before (the unit steps before the rings time): a detector's call goes
 to its phase a tick after that phase's green ends, as a real controller's detector scan follows its outputs.
 """
@@ -43,10 +47,14 @@ class DetectorTimers:
     delay: int = 0
     extend: int = 0
     carryover: int = 0
+    lock: bool = False  # yellow lock call: recognized off the phase's green, held until it is green
 
     def hold(self, green: bool) -> int:
         """Ticks a recognized actuation is held after its input goes: carryover, or the extension while green."""
         return max(self.carryover, self.extend if green else 0)
+
+
+_NONE = DetectorTimers()
 
 
 class Detectors:
@@ -55,7 +63,7 @@ class Detectors:
     def __init__(self, config: IntersectionConfig) -> None:
         self.phase = config.detectors
         #: The detectors that have a timer (the others are their input).
-        self.timers = {d: DetectorTimers(round(t.delay * 10), round(t.extend * 10), round(t.carryover * 10))
+        self.timers = {d: DetectorTimers(round(t.delay * 10), round(t.extend * 10), round(t.carryover * 10), t.lock)
                        for d, t in config.detector_timing.items() if d in self.phase}
         self.reset()
 
@@ -64,6 +72,7 @@ class Detectors:
         self.recognized: frozenset[int] = frozenset()
         self.waited: dict[int, int] = {}  # a delaying detector: ticks its actuation has lasted
         self.held: dict[int, int] = {}  # a recognized detector whose input went: ticks since it did
+        self.locked: set[int] = set()  # a locking detector recognized off its phase's green, until it is green
 
     def timer(self, d: int, name: str) -> int:
         """One timer of detector ``d``, in ticks (0 for a detector that has none)."""
@@ -81,6 +90,7 @@ class Detectors:
             del self.timers[d]
             self.waited.pop(d, None)
             self.held.pop(d, None)
+            self.locked.discard(d)
 
     def step(self, actuated: frozenset[int], greens: frozenset[int]) -> bool:
         """One tick: what is recognized, from the inputs actuated now and the phases green (the tick before).
@@ -108,7 +118,10 @@ class Detectors:
                     recognized.add(d)
                 else:
                     del held[d]
-        recognized = frozenset(recognized)
+        for d in [d for d in self.locked if self.phase[d] in greens]:
+            self.locked.discard(d)
+        self.locked |= {d for d in recognized if timers.get(d, _NONE).lock and self.phase[d] not in greens}
+        recognized = frozenset(recognized | self.locked)
         changed = recognized != self.recognized
         self.recognized = recognized
         return changed
@@ -119,9 +132,10 @@ class Detectors:
         """Steps until a timer changes what is recognized (None: no timer runs); at least the next step. A delaying
         detector whose phase shows green is recognized at the next step; an input no step has read yet (``actuated``
         changed during the start-up flash, which reads no input) is read by the next step."""
-        if (actuated ^ self.recognized) - self.waited.keys() - self.held.keys():
+        if (actuated ^ self.recognized) - self.waited.keys() - self.held.keys() - self.locked:
             return 1
         ahead = [1 if self.phase[d] in greens else self.timers[d].delay - w for d, w in self.waited.items()]
+        ahead += [1 for d in self.locked if self.phase[d] in greens]
         ahead += [self.timers[d].hold(self.phase[d] in greens) - h for d, h in self.held.items()]
         return max(1, min(ahead)) if ahead else None
 

@@ -260,6 +260,8 @@ def infer(rows: Sequence[Row], name: str = "field controller") -> Inferred:
     timers = _delays(rows, detectors, greens, out)
     for d, held in _holds(rows, detectors, greens, out).items():
         timers.setdefault(d, {}).update(held)
+    for d in _locks(rows, detectors, greens, out):
+        timers.setdefault(d, {})["lock"] = True
     held = {d: timedelta(seconds=max(t.get("extend", 0.0), t.get("carryover", 0.0))) for d, t in timers.items()}
     samples = {p: _gaps(rows, p, [d for d, q in detectors.items() if q == p], held) for p in phases}
     gaps = {p: [g for _, g in mine] for p, mine in samples.items()}
@@ -459,6 +461,52 @@ def _holds(rows: Sequence[Row], detectors: Mapping[int, int], greens: Mapping[in
         if timers.get("extend") == timers.get("carryover"):
             del timers["extend"]  # the call is held as long whatever the phase shows: a carryover alone
     return found
+
+
+def _locks(rows: Sequence[Row], detectors: Mapping[int, int], greens: Mapping[int, list[tuple[datetime, datetime]]],
+           out: Inferred) -> list[int]:
+    """The calling detectors whose actuations off their phase's green register its call (43, on their tick or the
+    next) and hold it (no 44) after they go, no detector of the phase on, until the phase's next actuation or green,
+    at least :data:`PASSAGE_SEEN` times and nine times in ten, where the log shows the phase's calls dropping: yellow
+    lock call (NTCIP 1202 vehicleDetectorOptions bit 2,
+    "the detector will lock a call to the assigned phase if an actuation occurs while the phase is not timing
+    Green")."""
+    spans: dict[int, list[tuple[datetime, datetime]]] = defaultdict(list)
+    began: dict[int, datetime] = {}
+    registered: dict[int, set[datetime]] = defaultdict(set)
+    drops: dict[int, list[datetime]] = defaultdict(list)
+    for r in rows:
+        if r.code == E.DETECTOR_ON and detectors.get(r.parameter):
+            began[r.parameter] = r.time
+        elif r.code == E.DETECTOR_OFF and r.parameter in began:
+            spans[r.parameter].append((began.pop(r.parameter), r.time))
+        elif r.code == E.PHASE_CALL_REGISTERED:
+            registered[r.parameter].add(r.time)
+        elif r.code == E.PHASE_CALL_DROPPED:
+            drops[r.parameter].append(r.time)
+    seen: dict[int, Counter[bool]] = defaultdict(Counter)
+    for d, mine in spans.items():
+        p = detectors[d]
+        starts = [begin for begin, _ in greens.get(p, ())]
+        theirs = sorted(span for q, spans_q in spans.items() if detectors[q] == p for span in spans_q)
+        ons = [a for a, _ in theirs]
+        for on, off in mine:
+            k = bisect.bisect_right(starts, on)
+            if _green_at(greens.get(p, ()), on) or k == len(starts) or not drops[p] \
+                    or not registered[p] & {on, on + TICK} or any(a <= off < b for a, b in theirs if a != on):
+                continue
+            n = bisect.bisect_right(ons, off)
+            until = min(starts[k], ons[n]) if n < len(ons) else starts[k]  # its phase's next actuation or green
+            if off >= until:
+                continue  # the vehicle was still there
+            j = bisect.bisect_right(drops[p], on + TICK)
+            seen[d][not (j < len(drops[p]) and drops[p][j] < until)] += 1
+    locking = [d for d, n in sorted(seen.items()) if n[True] >= PASSAGE_SEEN and n[True] >= RECALL_SHARE * n.total()]
+    for d in locking:
+        out.read.append(f"detector {d}: locks its call off phase {detectors[d]}'s green (held after it goes, until "
+                        f"that phase's next actuation or green, {seen[d][True]} of {seen[d].total()} times): yellow "
+                        "lock call")
+    return locking
 
 
 def _backings(rows: Sequence[Row], greens: Mapping[int, list[tuple[datetime, datetime]]], structure: Structure,
@@ -1377,7 +1425,8 @@ def _toml(name: str, structure: Structure, timing: Mapping[int, dict[str, Any]],
     lines += ["", "[structure]", f"rings = [{structure.ring(1)}, {structure.ring(2)}]", f"barriers = {barriers}",
               f"sequence = {pairs}", f"pairs = {pairs}", "", "[emulator]",
               f"start = {start.isoformat(timespec='milliseconds')[:-2]}", "", "[detectors]"]
-    lines += [f"{d} = {{ phase = {q}, " + ", ".join(f"{k} = {v:g}" for k, v in timers[d].items()) + " }"
+    lines += [f"{d} = {{ phase = {q}, " + ", ".join(f"{k} = {str(v).lower() if v is True else f'{v:g}'}"
+                                                     for k, v in timers[d].items()) + " }"
               if timers.get(d) else f"{d} = {q}" for d, q in sorted(detectors.items())]
     if pushes:
         lines += ["", "[pedestrian_detectors]", *(f"{d} = {q}" for d, q in sorted(pushes.items()) if q)]

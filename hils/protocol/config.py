@@ -215,11 +215,14 @@ class DetectorTiming:
     extended from the point of termination, when the phase is Green". Carryover has no NTCIP object: it is the
     detector unit's own output extension, "the time following the loss of detection before the Detect Output is
     dropped" whatever the phase shows (RAE H2 loop detector manual, "Detect Output Extension"); a controller's
-    detector table carries it beside delay and extend."""
+    detector table carries it beside delay and extend. ``lock``: vehicleDetectorOptions bit 2, "Yellow Lock Call - if
+    Enabled, the detector will lock a call to the assigned phase if an actuation occurs while the phase is not timing
+    Green" (held until the phase is green)."""
 
     delay: float = 0.0
     extend: float = 0.0
     carryover: float = 0.0
+    lock: bool = False
 
 
 @dataclass(frozen=True, slots=True)
@@ -895,9 +898,9 @@ def _ped_detectors(raw: Any, phases: Mapping[int, Phase], source: str) -> dict[i
 
 def _detectors(raw: Any, phases: Mapping[int, Phase], source: str) -> dict[str, dict[int, Any]]:
     """``[detectors]``: vehicle detector number (1-128) = the phase it calls, or a table ``{ phase = P, lane = "ID",
-    delay = s, extend = s, carryover = s }``: a loop on one SUMO lane (without a lane, the detector sees every
-    approach lane of its phase) and its timers (:class:`DetectorTiming`). Phase 0 is NTCIP's vehicleDetectorCallPhase
-    0: the controller logs the detector and places no call (a count station)."""
+    delay = s, extend = s, carryover = s, lock = true }``: a loop on one SUMO lane (without a lane, the detector sees
+    every approach lane of its phase), its timers and its yellow lock (:class:`DetectorTiming`). Phase 0 is NTCIP's
+    vehicleDetectorCallPhase 0: the controller logs the detector and places no call (a count station)."""
     if not isinstance(raw, dict):
         raise ConfigError(source, "detectors", "must be a table: detector number = phase it calls, e.g. 1 = 2, or "
                                                "1 = { phase = 2, lane = \"E2C_0\", delay = 3.0 }")
@@ -909,7 +912,7 @@ def _detectors(raw: Any, phases: Mapping[int, Phase], source: str) -> dict[str, 
         if not (key.isdigit() and int(key) in DETECTOR_NUMBERS):
             raise ConfigError(source, where, f"unknown detector; allowed: detector numbers 1-{DETECTOR_NUMBERS[-1]}")
         if isinstance(value, dict):
-            _unknown(value, ("phase", "lane", *_DETECTOR_TIMERS), f"{where}.", source)
+            _unknown(value, ("phase", "lane", *_DETECTOR_TIMERS, "lock"), f"{where}.", source)
             phase, lane = value.get("phase"), value.get("lane")
             if lane is not None and not (isinstance(lane, str) and lane):
                 raise ConfigError(source, f"{where}.lane", "must be a SUMO lane id, e.g. \"E2C_0\"")
@@ -918,8 +921,12 @@ def _detectors(raw: Any, phases: Mapping[int, Phase], source: str) -> dict[str, 
             timers = {name: float(_number(value, name, f"{where}.", source, 0.0, low=0, high=high, step=0.1,
                                           ntcip=carrier))
                       for name, (carrier, high) in _DETECTOR_TIMERS.items()}
-            if any(timers.values()):
-                timing[int(key)] = DetectorTiming(**timers)
+            lock = value.get("lock", False)
+            if not isinstance(lock, bool):
+                raise ConfigError(source, f"{where}.lock", f"is {lock!r}; allowed: true (a call placed off the phase's "
+                                                           "green is held until it is green), false")
+            if any(timers.values()) or lock:
+                timing[int(key)] = DetectorTiming(**timers, lock=lock)
         else:
             phase = value
         if isinstance(phase, bool) or not isinstance(phase, int) or (phase not in phases and phase != 0):

@@ -10,7 +10,14 @@ from emulator.model.controller import Controller
 from emulator.model.datalogger import DataLogger
 from hils.protocol.config import ConfigError, DetectorTiming, IntersectionConfig, parse
 from hils.protocol.hires import EventCode as E
-from hils.protocol.ntcip import VEHICLE_DETECTOR_DELAY, VEHICLE_DETECTOR_EXTEND, ErrorStatus, SnmpError
+from hils.protocol.ntcip import (
+    VEHICLE_DETECTOR_DELAY,
+    VEHICLE_DETECTOR_EXTEND,
+    VEHICLE_DETECTOR_OPTIONS,
+    DetectorOption,
+    ErrorStatus,
+    SnmpError,
+)
 
 
 def with_detector(paper_toml: str, entry: str) -> IntersectionConfig:
@@ -102,6 +109,41 @@ def test_carryover_holds_the_call_whatever_the_phase_shows(paper_toml: str) -> N
     assert steps(c, 16) == [True] * 15 + [False]
 
 
+def test_a_locking_detector_holds_its_call_off_green_until_its_phase_is_green(paper_toml: str) -> None:
+    """vehicleDetectorOptions bit 2, "Yellow Lock Call - ... lock a call to the assigned phase if an actuation occurs
+    while the phase is not timing Green": a vehicle passing detector 9 while 4 is red leaves 4 called until 4 is
+    green, then the call goes (the 4895 Econolite's detector 17 and phase 3); unlocked, the call goes with it and 4
+    is never served. Stepped tick by tick or skipped through quiet time, the same."""
+    for locked in (True, False):
+        logs = []
+        for skipping in (False, True):
+            c = Controller(with_detector(paper_toml, f"lock = {str(locked).lower()}"))
+            logs.append(DataLogger(c))
+            assert 4 not in c.greens
+            c.set_actuations({9})
+            c.step()
+            c.set_actuations(set())
+            if skipping:
+                c.advance(600)
+                continue
+            seen = []
+            for _ in range(600):
+                c.step()
+                seen.append((4 in c.calls, 4 in c.greens))
+        assert logs[0].events() == logs[1].events()
+        if not locked:
+            assert not any(called or green for called, green in seen)
+            continue
+        green = next(k for k, (_, g) in enumerate(seen) if g)
+        assert all(called for called, _ in seen[:green + 1]) and not any(called for called, _ in seen[green + 1:])
+
+
+def test_the_detector_table_says_which_detector_locks(paper_toml: str) -> None:
+    mib = MibView(Controller(with_detector(paper_toml, "lock = true")))
+    options = mib.get_many([VEHICLE_DETECTOR_OPTIONS.instance(9), VEHICLE_DETECTOR_OPTIONS.instance(4)])
+    assert [bool(o & DetectorOption.YELLOW_LOCK_CALL) for o in options] == [True, False]
+
+
 def test_the_config_holds_each_detectors_timers(paper_toml: str) -> None:
     config = with_detector(paper_toml, "delay = 3.0, extend = 1.5, carryover = 0.5")
     assert config.detector_timing == {9: DetectorTiming(3.0, 1.5, 0.5)}
@@ -113,7 +155,8 @@ def test_the_config_holds_each_detectors_timers(paper_toml: str) -> None:
     ("extend = 30", "detectors.9.extend", "<= 25.5"),
     ("carryover = -1", "detectors.9.carryover", ">= 0"),
     ("delay = 1.25", "detectors.9.delay", "multiples of 0.1"),
-    ("stretch = 2", "detectors.9.stretch", "allowed: phase, lane, delay, extend, carryover"),
+    ("stretch = 2", "detectors.9.stretch", "allowed: phase, lane, delay, extend, carryover, lock"),
+    ("lock = 1", "detectors.9.lock", "allowed: true"),
 ])
 def test_a_bad_detector_timer_is_refused_naming_file_field_and_range(paper_toml: str, entry: str, field: str,
                                                                      allowed: str) -> None:

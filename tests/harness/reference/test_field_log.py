@@ -497,6 +497,23 @@ def test_greens_the_log_cannot_show_gapping_out_are_not_read_as_going_back_to_ex
     assert all(ph.simultaneous_gap_disable for ph in got.phases.values())
 
 
+def test_a_call_held_after_its_detector_goes_until_its_phase_is_served_is_read_as_a_yellow_lock() -> None:
+    """Detector 3 locking its call (NTCIP 1202 vehicleDetectorOptions bit 2): the emulator's log under it gives it
+    back, on detector 3 alone; a log of plain detectors gives none. The 4895 Econolite's detector 17 holds phase 3's
+    call from its actuations off 3's green until 3 is served, 4 times of 4: read so, and nothing else."""
+    drawn = round_trip.random_config(random.Random(0), recalls=(), dual_entry=False, lag=False, coordination=False,
+                                     sequencing=False)
+    head, rest = drawn.toml.split("[detectors]\n", 1)
+    rest = rest.split("\n\n", 1)[1]
+    for lock in (True, False):
+        table = "\n".join(f"{p} = {{ phase = {p}{', lock = true' if lock and p == 3 else ''} }}" for p in range(1, 9))
+        cfg = config_mod.parse(f"{head}[detectors]\n{table}\n\n{rest}", "lock.toml")
+        got = field_log.infer(round_trip.emulator_log(cfg, 900, seed=3)).config()
+        assert {d for d, t in got.detector_timing.items() if t.lock} == ({3} if lock else set())
+    got = field_log.infer(hires_file.load(LOGS / "4895_ECON_10.210.8.179_2024_02_21_1115.dat")).config()
+    assert {d for d, t in got.detector_timing.items() if t.lock} == {17} and got.detectors[17] == 3
+
+
 def test_a_walk_begun_within_a_running_green_is_read_as_pedestrian_recycle() -> None:
     drawn = round_trip.random_config(random.Random(0), recalls=(), dual_entry=False, lag=False, coordination=False,
                                      sequencing=False, detector_timers=False)
