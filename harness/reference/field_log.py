@@ -897,16 +897,23 @@ def _minimums(rows: Sequence[Row], p: int) -> list[float]:
 
 
 def _detector_phases(rows: Sequence[Row], on: int, call: int, phases: Sequence[int]) -> dict[int, int]:
-    """Detector -> the phase whose calls it registers (0: none), by coincidence of its on events with call events."""
-    calls = {(r.time, r.parameter) for r in rows if r.code == call}
+    """Detector -> the phase whose calls it registers (0: none), by coincidence of its on events with call events:
+    a call registered at a tick is the call of the detectors that went on the log's own lag before it (an Econolite
+    logs the call on its actuation's tick, a MaxTime on the next: the lag most of its calls show), else of those
+    that went on at the other, so a detector going on a tick before another that places the call is not given it."""
+    calls = {(r.time, r.parameter) for r in rows if r.code == call and r.parameter in phases}
     seen: Counter[int] = Counter()
-    hits: Counter[tuple[int, int]] = Counter()
+    ons: dict[datetime, set[int]] = defaultdict(set)
     for r in rows:
         if r.code == on:
             seen[r.parameter] += 1
-            for p in phases:
-                if (r.time, p) in calls or (r.time + TICK, p) in calls:
-                    hits[(r.parameter, p)] += 1
+            ons[r.time].add(r.parameter)
+    lags = Counter(lag for t, _ in calls for lag in (timedelta(0), TICK) if t - lag in ons)
+    first, then = sorted((timedelta(0), TICK), key=lambda lag: -lags[lag])
+    hits: Counter[tuple[int, int]] = Counter()
+    for t, p in calls:
+        for d in ons.get(t - first) or ons.get(t - then, ()):
+            hits[(d, p)] += 1
     out = {}
     for d, n in seen.items():
         best = max(phases, key=lambda p: hits[(d, p)])

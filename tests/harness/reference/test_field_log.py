@@ -514,6 +514,15 @@ def test_a_call_held_after_its_detector_goes_until_its_phase_is_served_is_read_a
     assert {d for d, t in got.detector_timing.items() if t.lock} == {17} and got.detectors[17] == 3
 
 
+def test_a_detector_going_on_a_tick_before_the_one_that_places_the_call_is_not_given_it() -> None:
+    """The 1210 Econolite: detector 18 goes on at 0.7 s, detector 17 at 0.8 s, and phase 4's call registers at 0.8 s,
+    on 17's tick, as this Econolite logs its calls; none of 18's seven other actuations off 4's green registers a
+    call. Counted as 18's too (one in eight, over the tenth a detector needs), 18 called 4 at 114.5 s and ended 2 and 6
+    4.8 s early; given to 17 alone, 18 is logged only, and the log replays whole."""
+    got = field_log.infer(hires_file.load(LOGS / "1210_ECON_10.204.7.239_2021_08_09_1841.datZ")).config()
+    assert got.detectors[17] == 4 and got.detectors[18] == 0
+
+
 def test_a_walk_begun_within_a_running_green_is_read_as_pedestrian_recycle() -> None:
     drawn = round_trip.random_config(random.Random(0), recalls=(), dual_entry=False, lag=False, coordination=False,
                                      sequencing=False, detector_timers=False)
