@@ -23,7 +23,7 @@ from harness.reference import field_log, hires_file, round_trip
 from harness.reference.hires_file import FieldLogError, Row
 from harness.reference.replay_bench import nema_numbers, synthetic
 from hils.protocol import config as config_mod
-from hils.protocol.ntcip import PhaseStartup
+from hils.protocol.ntcip import PhaseStartup, SplitMode
 from tests.emulator.model.test_hires import config_with
 
 SAMPLE = Path(atspm.__file__).parent / "data" / "sample_raw_data.parquet"
@@ -192,6 +192,10 @@ def test_a_pretimed_coordinated_log_without_detectors_gets_a_plan_that_runs() ->
     # the coordinated greens start at 13:32:33.0 in the log: 48,753 s after midnight, 9 s into the 72 s cycle
     assert plan.offset == 9
     assert {p: ph.recall.value for p, ph in cfg.phases.items()} == {2: "none", 4: "max", 6: "none", 8: "max"}
+    # every green walks, with no pedestrian call logged: pedestrian recall in the pattern; phase 4's 14.8 s walks end
+    # their 11 s clearance at the force-off, 25.8 s into its green: a walk of whole seconds that fits is 14 s
+    assert set(plan.modes.values()) == {SplitMode.PED_RECALL} and sorted(plan.modes) == [2, 4, 6, 8]
+    assert [(cfg.phases[p].walk, cfg.phases[p].ped_clear) for p in (2, 4)] == [(21, 13), (14, 11)]
 
 
 def test_the_emulators_plan_is_read_back_without_its_split_events() -> None:
