@@ -33,10 +33,10 @@ the log's own events (Indiana enumerations) and says which values it had to gues
 - **timings**: yellow (8 to 9) and red clearance (10 to 11), the minimum (1 to 3, the most frequent), walk (21 to 22)
   and pedestrian clearance (22 to 23; a walk of whole seconds cut to end its clearance within the greens that served it,
   as an Econolite under a plan ends its walks' clearance at the force-off), passage (a gap-out, 4, after the last of the
-  phase's calling detectors went off, 81: the most frequent gap, counted from the last tick with the call; the
-  intersection's when a phase shows too few), the maximum (the shortest green that maxed out, 5; else the longest green,
-  or the intersection's maximum when longer), each within what NTCIP's phase table holds (said when a value had to be
-  brought inside);
+  phase's calling detectors went off, 81, but not one logged as its minimum completes, 3, whose gap ran out during the
+  minimum: the most frequent gap, counted from the last tick with the call; the intersection's when a phase shows too
+  few), the maximum (the shortest green that maxed out, 5; else the longest green, or the intersection's maximum when
+  longer), each within what NTCIP's phase table holds (said when a value had to be brought inside);
 - **detectors**: a detector calls the phase whose call registrations (43) its actuations (82) bring most often, at
   the same tick or the next, when they do for at least a tenth of them; the others are logged but call nothing
   (phase 0, as a count station). Push buttons likewise with pedestrian calls (90 with 45). Numbers past the
@@ -765,7 +765,8 @@ def _timing(rows: Sequence[Row], p: int, greens: Sequence[tuple[datetime, dateti
         # an Econolite under a plan cuts its walks so that their clearance ends at the force-off (phase 4 of
         # ECON_10.204.9.227: 14.8 s walks, 11 s clearances, 25.8 s greens), and a pattern serves a walk only where
         # it fits by the force-off point.
-        served = [(b - a).total_seconds() for a, b in greens if a in _walk_starts(rows, p)]
+        walks = _walk_starts(rows, p)
+        served = [(b - a).total_seconds() for a, b in greens if a in walks]
         if served and t["walk"] + t["ped_clear"] > min(served) and min(served) - t["ped_clear"] >= 1:
             t["walk"] = math.floor(min(served) - t["ped_clear"])
     # The maximum: the shortest green that maxed out (max-out, 5, on its end: no green maxes out before its maximum,
@@ -841,12 +842,16 @@ def _gaps(rows: Sequence[Row], p: int, detectors: Sequence[int],
     """Each gap-out's time into its green and its gap: the time from the last of the phase's detectors going off,
     during the green, to the gap-out (a gap-out logged when the green ends may come later than the gap: at a barrier,
     the green waits for the other ring); a detector whose call is ``held`` after it goes off (its extension or
-    carryover) goes off that much later."""
+    carryover) goes off that much later. A gap-out logged as the minimum green completes (3, the same tick) is left
+    out: its gap ran out during the minimum, which no green ends before, so it says only that the passage is no
+    longer (the atspm sample's phase 8: gaps of 2.5-3.5 s logged 6.0 s into the green, its minimum, against a
+    passage of 2.4 s; counted, a day of that log, seeing each of them a dozen times, read the passage as 3.5 s)."""
     if not detectors:
         return []
     mine, on, gaps = set(detectors), set(), []
     last_off: datetime | None = None
     began: datetime | None = None
+    minimum: datetime | None = None
     for r in rows:
         if r.parameter in mine and r.code in (E.DETECTOR_ON, E.DETECTOR_OFF):
             (on.add if r.code == E.DETECTOR_ON else on.discard)(r.parameter)
@@ -854,7 +859,9 @@ def _gaps(rows: Sequence[Row], p: int, detectors: Sequence[int],
                 last_off = r.time + held.get(r.parameter, timedelta())
         elif r.code == E.PHASE_BEGIN_GREEN and r.parameter == p:
             began = r.time
-        elif (r.code == E.PHASE_GAP_OUT and r.parameter == p and not on and last_off is not None
+        elif r.code == E.PHASE_MIN_COMPLETE and r.parameter == p:
+            minimum = r.time
+        elif (r.code == E.PHASE_GAP_OUT and r.parameter == p and not on and last_off is not None and r.time != minimum
               and began is not None and last_off > began):  # an off before the green extended nothing
             # the off event is the first tick without the call; passage counts from the last tick with it
             gaps.append(((r.time - began).total_seconds(), round((r.time - last_off + TICK).total_seconds(), 1)))
