@@ -35,8 +35,9 @@ the log's own events (Indiana enumerations) and says which values it had to gues
   as an Econolite under a plan ends its walks' clearance at the force-off), passage (a gap-out, 4, after the last of the
   phase's calling detectors went off, 81, but not one logged as its minimum completes, 3, whose gap ran out during the
   minimum: the most frequent gap, counted from the last tick with the call; the intersection's when a phase shows too
-  few), the maximum (the shortest green that maxed out, 5; else the longest green, or the intersection's maximum when
-  longer), each within what NTCIP's phase table holds (said when a value had to be brought inside);
+  few), the maximum (the shortest green that maxed out, 5, timed from its phase check, 2, where the log has one within
+  it; else the longest green, or the intersection's maximum when longer), each within what NTCIP's phase table holds
+  (said when a value had to be brought inside);
 - **detectors**: a detector calls the phase whose call registrations (43) its actuations (82) bring most often, at
   the same tick or the next, when they do for at least a tenth of them; the others are logged but call nothing
   (phase 0, as a count station). Push buttons likewise with pedestrian calls (90 with 45). Numbers past the
@@ -770,8 +771,12 @@ def _timing(rows: Sequence[Row], p: int, greens: Sequence[tuple[datetime, dateti
         if served and t["walk"] + t["ped_clear"] > min(served) and min(served) - t["ped_clear"] >= 1:
             t["walk"] = math.floor(min(served) - t["ped_clear"])
     # The maximum: the shortest green that maxed out (max-out, 5, on its end: no green maxes out before its maximum,
-    # and one whose max timer started with it, by a call waiting or max recall, maxes out at it), else the longest.
-    maxed = _durations(rows, p, E.PHASE_BEGIN_GREEN, E.PHASE_MAX_OUT)
+    # and one whose max timer started with it, by a call waiting or max recall, maxes out at it), else the longest;
+    # timed from its phase check (2) where the log has one within the green: "Set when a conflicting call is
+    # registered against the active phase. (Marks beginning of MAX timing)" (the Indiana enumerations,
+    # utahudot/udot-atspm Atspm/Data/Enums/IndianaEnumerations.cs). The MaxTime of 638572533917628534.xml maxes 2 out
+    # 55.6 s into its green, 46.2 s after its phase check.
+    maxed = _max_timings(rows, p)
     longest = max(((b - a).total_seconds() for a, b in greens), default=0.0)
     if maxed:
         longest = t["maxed"] = min(maxed)
@@ -788,6 +793,25 @@ def _within(p: int, key: str, value: Any, low: float, high: float, out: Inferred
     out.guessed.append(f"phase {p}: {key} {inside:g} s (the log's {value:g} s is outside what the config holds, "
                        f"{low:g}-{high:g} s)")
     return inside
+
+
+def _max_timings(rows: Sequence[Row], p: int) -> list[float]:
+    """Seconds each green of ``p`` that maxed out (5) timed its maximum: from its phase check (2) within it, else from
+    its begin green (1)."""
+    out, since = [], None
+    for r in rows:
+        if r.parameter != p:
+            continue
+        if r.code == E.PHASE_BEGIN_GREEN:
+            since, checked = r.time, False
+        elif r.code == E.PHASE_CHECK and since is not None and not checked:
+            since, checked = r.time, True
+        elif r.code == E.PHASE_MAX_OUT and since is not None:
+            out.append(round((r.time - since).total_seconds(), 1))
+            since = None
+        elif r.code == E.PHASE_BEGIN_YELLOW:
+            since = None
+    return out
 
 
 def _walk_starts(rows: Sequence[Row], p: int) -> set[datetime]:

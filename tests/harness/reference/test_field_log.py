@@ -337,6 +337,17 @@ def test_the_same_controllers_longer_log_reads_the_same_gap_reduction() -> None:
             "passage": 2.4, "time_before_reduction": 8, "time_to_reduce": 3, "min_gap": 0.6}
 
 
+def test_a_maximum_is_timed_from_the_phase_check() -> None:
+    """The max timer starts at the phase check (2: "Set when a conflicting call is registered against the active
+    phase. (Marks beginning of MAX timing)", the Indiana enumerations): the MaxTime excerpt's phase 2 maxes out 55.6 s
+    into its green, 46.2 s after its phase check, so its maximum is 47 s, not 56 s; a log whose maxed-out greens show
+    no phase check within them (the Econolite's) times it from the green's start, as before."""
+    cfg = field_log.infer(hires_file.load(LOGS / "maxtime_1015_2024_07_22_1333_excerpt.xml")).config()
+    assert cfg.phases[2].max_green == 47
+    econolite = field_log.infer(hires_file.load(LOGS / "ECON_10.205.17.215_2024_02_21_1115.dat")).config()
+    assert econolite.phases[4].max_green == 25
+
+
 def test_a_constant_gap_from_actuation_to_call_is_applied_as_a_detector_delay() -> None:
     """Detector 9 calls nothing on its tick; phase 3's call registers 3.0 s after each of its twelve actuations,
     which last 4 s, off 3's green (the issue's Econolite): detector 9 calls 3 with a delay of 3 s, printed."""
