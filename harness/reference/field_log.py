@@ -797,14 +797,14 @@ def _within(p: int, key: str, value: Any, low: float, high: float, out: Inferred
 
 def _max_timings(rows: Sequence[Row], p: int) -> list[float]:
     """Seconds each green of ``p`` that maxed out (5) timed its maximum: from its phase check (2) within it, else from
-    its begin green (1)."""
-    out, since = [], None
+    its begin green (1); a green running as the log begins counts from its phase check."""
+    out, since, checked, began = [], None, False, False
     for r in rows:
         if r.parameter != p:
             continue
         if r.code == E.PHASE_BEGIN_GREEN:
-            since, checked = r.time, False
-        elif r.code == E.PHASE_CHECK and since is not None and not checked:
+            since, checked, began = r.time, False, True
+        elif r.code == E.PHASE_CHECK and (since is not None or not began) and not checked:
             since, checked = r.time, True
         elif r.code == E.PHASE_MAX_OUT and since is not None:
             out.append(round((r.time - since).total_seconds(), 1))

@@ -340,10 +340,11 @@ def test_the_same_controllers_longer_log_reads_the_same_gap_reduction() -> None:
 def test_a_maximum_is_timed_from_the_phase_check() -> None:
     """The max timer starts at the phase check (2: "Set when a conflicting call is registered against the active
     phase. (Marks beginning of MAX timing)", the Indiana enumerations): the MaxTime excerpt's phase 2 maxes out 55.6 s
-    into its green, 46.2 s after its phase check, so its maximum is 47 s, not 56 s; a log whose maxed-out greens show
-    no phase check within them (the Econolite's) times it from the green's start, as before."""
+    into its green, 46.2 s after its phase check, so its maximum is 47 s, not 56 s; phase 6, green as the log begins,
+    maxes out with it, 46.2 s after its own phase check (55 s before, its longest green); a log whose maxed-out greens
+    show no phase check within them (the Econolite's) times it from the green's start, as before."""
     cfg = field_log.infer(hires_file.load(LOGS / "maxtime_1015_2024_07_22_1333_excerpt.xml")).config()
-    assert cfg.phases[2].max_green == 47
+    assert cfg.phases[2].max_green == cfg.phases[6].max_green == 47
     econolite = field_log.infer(hires_file.load(LOGS / "ECON_10.205.17.215_2024_02_21_1115.dat")).config()
     assert econolite.phases[4].max_green == 25
 
