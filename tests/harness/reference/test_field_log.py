@@ -196,6 +196,11 @@ def test_a_pretimed_coordinated_log_without_detectors_gets_a_plan_that_runs() ->
     # their 11 s clearance at the force-off, 25.8 s into its green: a walk of whole seconds that fits is 14 s
     assert set(plan.modes.values()) == {SplitMode.PED_RECALL} and sorted(plan.modes) == [2, 4, 6, 8]
     assert [(cfg.phases[p].walk, cfg.phases[p].ped_clear) for p in (2, 4)] == [(21, 13), (14, 11)]
+    # read free (its local zeros taken out), the pedestrian recall is the phase's own recall, which a phase on
+    # vehicle recall cannot hold beside it: said, not written
+    free = field_log.infer([r for r in rows if r.code != 150])
+    assert "phase 4: no pedestrian recall written beside its max recall" in "\n".join(free.guessed)
+    assert free.config().coordination.patterns == {}
 
 
 def test_the_emulators_plan_is_read_back_without_its_split_events() -> None:
