@@ -147,7 +147,7 @@ class Controller:
         self.preempting = Preempted(config, self.preemptor, self.timing)
         self.monitor = Monitor(config)
         self.peds = PedCalls(self.timing, self.coordinated,
-                             frozenset(p for p, ph in config.phases.items() if ph.ped_recycle))
+                             frozenset(p for p, ph in config.phases.items() if ph.ped_recycle), self.rings)
         self.sequencer = Sequencer(config, self.rings, self.timing, self.control, self.coordinated, self.preemptor,
                                    self.overlaps, self._move)
         # Counts changes of the status objects (what a poll reads), across power cycles too.

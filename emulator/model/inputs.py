@@ -16,7 +16,11 @@ its omitted splits are omitted.
 
 A pedestrian call latches on a phase not showing green, from phaseControlGroupPedCall, pedestrian recall or
 the pattern's pedestrian recall; a push button (a pedestrian detector, pedestrianDetectorControlGroupActuation)
-latches its phase's call at once, during that phase's green too: the walk comes at the phase's next green.
+latches its phase's call at once, during that phase's green too: the walk comes at the phase's next green; but not
+while that phase times its walk, the walk serving the pedestrian who pushed: a button still held as the walk it
+brought begins places no second call (the MaxTime of issue 35's 638572533917628534.xml: four pushes held into the
+walk they brought, 0.1-0.7 s, no other push before the phase's next green, and no walk at that green, four of four),
+while one still held after the walk (a stuck button) calls the next.
 No call latches on an omitted or PedOmit phase. A call arriving later in the green waits for the next service
 (no recycling).
 """
@@ -76,9 +80,11 @@ class Reader:
             extending=recall[Recall.MAX] | co.max_recalled())
 
 
-def latched(ped_calls: frozenset[int], greens: Iterable[int], inputs: Inputs) -> frozenset[int]:
-    """The pedestrian calls latched this tick: those asked on phases not showing green, and push buttons."""
-    return (ped_calls | (inputs.peds - set(greens)) | inputs.pushed) - inputs.ped_omits
+def latched(ped_calls: frozenset[int], greens: Iterable[int], inputs: Inputs,
+            walking: frozenset[int] = frozenset()) -> frozenset[int]:
+    """The pedestrian calls latched this tick: those asked on phases not showing green, and push buttons but on the
+    phases ``walking`` (timing their walk)."""
+    return (ped_calls | (inputs.peds - set(greens)) | (inputs.pushed - walking)) - inputs.ped_omits
 
 
 def demand(inputs: Inputs, ped_calls: frozenset[int]) -> frozenset[int]:

@@ -14,7 +14,8 @@ A pedestrian call (phaseControlGroupPedCall, pedestrian recall, the pattern's pe
 latches on a phase not showing green and stays until a green of its phase serves a walk. A green serves one when
 it starts with the call latched, the phase has a walk time and, while a pattern runs, the walk and the pedestrian
 clearance end by the phase's force-off point; a call the green does not serve stays latched for the next cycle.
-PedOmit (and an omitted phase) stops new calls latching; a walk being timed completes.
+PedOmit (and an omitted phase) stops new calls latching; a walk being timed completes. A push button latches
+nothing on its phase while that phase times its walk (:func:`emulator.model.inputs.latched`).
 
 *Pedestrian recycle* (``ped_recycle``, per phase; off by default). NTCIP 1202 words the pedestrian service of a
 phase's own green as recyclable: Ped Recall "shall function in the same manner as an external pedestrian call
@@ -31,7 +32,7 @@ nothing (its entry ends walks).
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 
 from emulator.model import inputs as reading
 from emulator.model.coordinated import Coordinated
@@ -42,10 +43,12 @@ from emulator.model.ring import GREEN, Ring, Timing
 class PedCalls:
     """One controller's latched pedestrian calls."""
 
-    def __init__(self, timing: Mapping[int, Timing], coordinated: Coordinated, recycling: frozenset[int]) -> None:
+    def __init__(self, timing: Mapping[int, Timing], coordinated: Coordinated, recycling: frozenset[int],
+                 rings: Sequence[Ring]) -> None:
         self.timing = timing
         self.coordinated = coordinated
         self.recycling = recycling  # the phases with pedestrian recycle
+        self.rings = rings  # the controller's, to see which phases time their walk
         self.reset()
 
     def reset(self) -> None:
@@ -53,7 +56,7 @@ class PedCalls:
         self.calls: frozenset[int] = frozenset()
         # The last answers of latched() and demand() and what they were asked with: the step and quiet time ask the
         # same questions of the same (immutable) sets, mostly.
-        self._latched: tuple[tuple, frozenset[int]] = ((None, None, None), frozenset())
+        self._latched: tuple[tuple, frozenset[int]] = ((None, None, None, None), frozenset())
         self._demand: tuple[tuple, frozenset[int]] = ((None, None), frozenset())
 
     def latch(self, greens: frozenset[int], inputs: Inputs) -> frozenset[int]:
@@ -85,11 +88,16 @@ class PedCalls:
             return 1
         return None
 
+    def walking(self) -> frozenset[int]:
+        """The phases timing their walk now."""
+        return frozenset(r.phase for r in self.rings if r.interval is GREEN and r.ticks < r.walk)
+
     def _latch(self, greens: frozenset[int], inputs: Inputs) -> frozenset[int]:
         asked, answer = self._latched
-        if asked[0] is not self.calls or asked[1] is not greens or asked[2] is not inputs:
-            answer = reading.latched(self.calls, greens, inputs)
-            self._latched = (self.calls, greens, inputs), answer
+        walking = self.walking() if inputs.pushed else frozenset()
+        if asked[0] is not self.calls or asked[1] is not greens or asked[2] is not inputs or asked[3] != walking:
+            answer = reading.latched(self.calls, greens, inputs, walking)
+            self._latched = (self.calls, greens, inputs, walking), answer
         return answer
 
     def serve(self, phase: int) -> bool:

@@ -152,7 +152,7 @@ class _Bounds:
         inputs = c.inputs
         self.inputs = inputs
         greens = {r.phase for r in c.rings if r.interval is GREEN}
-        self.demand = reading.demand(inputs, reading.latched(c.ped_calls, greens, inputs))
+        self.demand = reading.demand(inputs, reading.latched(c.ped_calls, greens, inputs, c.peds.walking()))
         self.horizon = self._horizon()
         self.standing = self._standing()
         self.wish = {r.number: c.sequencer.wish(r, self.demand, inputs) for r in c.rings

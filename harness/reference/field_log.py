@@ -31,11 +31,13 @@ the log's own events (Indiana enumerations) and says which values it had to gues
   search it replaces (the order whose adjacent pairs were seen most) took 11 phases 56 s and grew as n!; it also
   preferred a skip it saw often to the sequence (1 3 2 for a log that mostly skips 2);
 - **timings**: yellow (8 to 9) and red clearance (10 to 11), the minimum (1 to 3, the most frequent), walk (21 to 22)
-  and pedestrian clearance (22 to 23), passage (a gap-out, 4, after the last of the phase's calling detectors
-  went off, 81: the most frequent gap, counted from the last tick with the call; the intersection's when a
-  phase shows too few), the maximum (the shortest green that maxed out, 5; else the longest green, or the
-  intersection's maximum when longer), each within what NTCIP's
-  phase table holds (said when a value had to be brought inside);
+  and pedestrian clearance (22 to 23; a walk of whole seconds cut to end its clearance within the greens that served it,
+  as an Econolite under a plan ends its walks' clearance at the force-off), passage (a gap-out, 4, after the last of the
+  phase's calling detectors went off, 81, but not one logged as its minimum completes, 3, whose gap ran out during the
+  minimum: the most frequent gap, counted from the last tick with the call; the intersection's when a phase shows too
+  few), the maximum (the shortest green that maxed out, 5, timed from its phase check, 2, where the log has one within
+  it; else the longest green, or the intersection's maximum when longer), each within what NTCIP's phase table holds
+  (said when a value had to be brought inside);
 - **detectors**: a detector calls the phase whose call registrations (43) its actuations (82) bring most often, at
   the same tick or the next, when they do for at least a tenth of them; the others are logged but call nothing
   (phase 0, as a count station). Push buttons likewise with pedestrian calls (90 with 45). Numbers past the
@@ -55,7 +57,9 @@ the log's own events (Indiana enumerations) and says which values it had to gues
   whose call registers as its own yellow begins (an Econolite's recall), is recalled: max recall when its greens end
   by force-off or max-out, else min; a detector that calls nothing may extend a recalled phase (its gap-outs come the
   same time after the detector's off); a phase that began green uncalled beside the other ring's phase at a barrier
-  crossing, twice, is dual entry;
+  crossing, twice, is dual entry; a phase with a walk whose every green began one, while the log registers no
+  pedestrian call of it (45) and no push button calls it, has pedestrian recall (:func:`_ped_recalls`: under a plan
+  the pattern's split mode, pedestrianRecall, beside its vehicle recall; free, the phase's recall if it has no other);
 - **start-up**: the phases green when the log begins (their first interval event is a begin yellow);
 - **coordination**: the cycle is the spacing of the local zeros (event 150, parameter 5; two at one time are one);
   the coordinated phases are the ones with the most yield point events (151) in the group that has them, else the
@@ -108,6 +112,7 @@ DELAY_SHARE = 0.3  # a detector's actuations followed by one phase's call the sa
 #: actuation ... shall be delayed when the phase is not Green"; the longer, the likelier a chance coincidence).
 MAX_DELAY = timedelta(seconds=25.5)
 RECALL_SHARE = 0.9  # a phase whose call registers as its yellow begins this often is recalled
+PED_RECALLED = 3  # a phase whose every green began a walk, at least this many, with no pedestrian call: ped recall
 REDUCTION_SEEN = 5  # gaps between the minimum gap and the passage, on one line, that show gap reduction
 REDUCTION_FIT = 0.3  # s a gap of the reduction may lie off its line
 YIELD_SEEN = 3  # a coordinated phase's greens ending at one place this often: its yield point (the first such)
@@ -305,6 +310,7 @@ def infer(rows: Sequence[Row], name: str = "field controller") -> Inferred:
     coordinated = set(coordination["coord"]) if coordination else set()
     for p in recalled - coordinated:
         _recall(events, p, timing[p], out)
+    _ped_recalls(events, greens, timing, pushes, coordination, out)
     _backings(events, greens, structure, timing, out)
     _reextensions(events, greens, structure, timing, out)
     _recycles(events, greens, timing, out)
@@ -686,6 +692,32 @@ def _recall(rows: Sequence[Row], p: int, timing: dict[str, Any], out: Inferred) 
                        f"{ends[E.PHASE_MAX_OUT] + ends[E.PHASE_FORCE_OFF]})")
 
 
+def _ped_recalls(rows: Sequence[Row], greens: Mapping[int, list[tuple[datetime, datetime]]],
+                 timing: Mapping[int, dict[str, Any]], pushes: Mapping[int, int],
+                 coordination: dict[str, Any] | None, out: Inferred) -> None:
+    """Pedestrian recall (NTCIP 1202 phaseOptions bit 8, "a recurring pedestrian demand"): a phase with a walk whose
+    every green began with one (21 on its begin green, at least :data:`PED_RECALLED` greens), while the log
+    registers no pedestrian call of it (45) and no push button calls it. Under a plan it goes into the pattern's
+    split modes (splitMode pedestrianRecall), beside the phase's own vehicle recall; free, it is the phase's recall
+    where it has none other (the config holds one recall a phase)."""
+    called = {r.parameter for r in rows if r.code == E.PED_CALL_REGISTERED} | set(pushes.values())
+    for p in sorted(timing):
+        starts = [a for a, _ in greens.get(p, [])]
+        if "walk" not in timing[p] or p in called or len(starts) < PED_RECALLED \
+                or not set(starts) <= _walk_starts(rows, p):
+            continue
+        why = f"every one of its {len(starts)} greens began a walk, and the log registers no pedestrian call of it"
+        if coordination is not None:
+            coordination.setdefault("modes", {})[p] = "ped_recall"
+            out.guessed.append(f"phase {p}: pedestrian recall in the pattern (splitMode pedestrianRecall: {why})")
+        elif "recall" not in timing[p]:
+            timing[p]["recall"] = "ped"
+            out.guessed.append(f"phase {p}: ped recall ({why})")
+        else:
+            out.guessed.append(f"phase {p}: no pedestrian recall written beside its {timing[p]['recall']} recall (the "
+                               f"config holds one recall a phase; {why})")
+
+
 def _check_numbers(rows: Iterable[Row]) -> None:
     """Refuse an event whose parameter cannot be what it names (phase 0, overlap 0...), naming the first."""
     for r in rows:
@@ -860,9 +892,21 @@ def _timing(rows: Sequence[Row], p: int, greens: Sequence[tuple[datetime, dateti
     if walk and ped_clear:
         t["walk"] = _within(p, "walk", math.ceil(walk), 1, top - 1, out)
         t["ped_clear"] = _within(p, "ped_clear", math.ceil(ped_clear), 1, top - t["walk"], out)
+        # A walk of whole seconds (phaseWalk's unit) still ends with its clearance within the greens that served it:
+        # an Econolite under a plan cuts its walks so that their clearance ends at the force-off (phase 4 of
+        # ECON_10.204.9.227: 14.8 s walks, 11 s clearances, 25.8 s greens), and a pattern serves a walk only where
+        # it fits by the force-off point.
+        walks = _walk_starts(rows, p)
+        served = [(b - a).total_seconds() for a, b in greens if a in walks]
+        if served and t["walk"] + t["ped_clear"] > min(served) and min(served) - t["ped_clear"] >= 1:
+            t["walk"] = math.floor(min(served) - t["ped_clear"])
     # The maximum: the shortest green that maxed out (max-out, 5, on its end: no green maxes out before its maximum,
-    # and one whose max timer started with it, by a call waiting or max recall, maxes out at it), else the longest.
-    maxed = _durations(rows, p, E.PHASE_BEGIN_GREEN, E.PHASE_MAX_OUT)
+    # and one whose max timer started with it, by a call waiting or max recall, maxes out at it), else the longest;
+    # timed from its phase check (2) where the log has one within the green: "Set when a conflicting call is
+    # registered against the active phase. (Marks beginning of MAX timing)" (the Indiana enumerations,
+    # utahudot/udot-atspm Atspm/Data/Enums/IndianaEnumerations.cs). The MaxTime of 638572533917628534.xml maxes 2 out
+    # 55.6 s into its green, 46.2 s after its phase check.
+    maxed = _max_timings(rows, p)
     longest = max(((b - a).total_seconds() for a, b in greens), default=0.0)
     if maxed:
         longest = t["maxed"] = min(maxed)
@@ -881,9 +925,33 @@ def _within(p: int, key: str, value: Any, low: float, high: float, out: Inferred
     return inside
 
 
+def _max_timings(rows: Sequence[Row], p: int) -> list[float]:
+    """Seconds each green of ``p`` that maxed out (5) timed its maximum: from its phase check (2) within it, else from
+    its begin green (1); a green running as the log begins counts from its phase check."""
+    out, since, checked, began = [], None, False, False
+    for r in rows:
+        if r.parameter != p:
+            continue
+        if r.code == E.PHASE_BEGIN_GREEN:
+            since, checked, began = r.time, False, True
+        elif r.code == E.PHASE_CHECK and (since is not None or not began) and not checked:
+            since, checked = r.time, True
+        elif r.code == E.PHASE_MAX_OUT and since is not None:
+            out.append(round((r.time - since).total_seconds(), 1))
+            since = None
+        elif r.code == E.PHASE_BEGIN_YELLOW:
+            since = None
+    return out
+
+
+def _walk_starts(rows: Sequence[Row], p: int) -> set[datetime]:
+    """When walks of ``p`` began (21)."""
+    return {r.time for r in rows if r.code == E.PED_BEGIN_WALK and r.parameter == p}
+
+
 def _minimums(rows: Sequence[Row], p: int) -> list[float]:
     """Begin green to min complete of the greens of ``p`` that served no walk (a walk's timing is its minimum)."""
-    walks = {r.time for r in rows if r.code == E.PED_BEGIN_WALK and r.parameter == p}
+    walks = _walk_starts(rows, p)
     out, since = [], None
     for r in rows:
         if r.parameter != p:
@@ -935,12 +1003,16 @@ def _gaps(rows: Sequence[Row], p: int, detectors: Sequence[int],
     """Each gap-out's time into its green and its gap: the time from the last of the phase's detectors going off,
     during the green, to the gap-out (a gap-out logged when the green ends may come later than the gap: at a barrier,
     the green waits for the other ring); a detector whose call is ``held`` after it goes off (its extension or
-    carryover) goes off that much later."""
+    carryover) goes off that much later. A gap-out logged as the minimum green completes (3, the same tick) is left
+    out: its gap ran out during the minimum, which no green ends before, so it says only that the passage is no
+    longer (the atspm sample's phase 8: gaps of 2.5-3.5 s logged 6.0 s into the green, its minimum, against a
+    passage of 2.4 s; counted, a day of that log, seeing each of them a dozen times, read the passage as 3.5 s)."""
     if not detectors:
         return []
     mine, on, gaps = set(detectors), set(), []
     last_off: datetime | None = None
     began: datetime | None = None
+    minimum: datetime | None = None
     for r in rows:
         if r.parameter in mine and r.code in (E.DETECTOR_ON, E.DETECTOR_OFF):
             (on.add if r.code == E.DETECTOR_ON else on.discard)(r.parameter)
@@ -948,7 +1020,9 @@ def _gaps(rows: Sequence[Row], p: int, detectors: Sequence[int],
                 last_off = r.time + held.get(r.parameter, timedelta())
         elif r.code == E.PHASE_BEGIN_GREEN and r.parameter == p:
             began = r.time
-        elif (r.code == E.PHASE_GAP_OUT and r.parameter == p and not on and last_off is not None
+        elif r.code == E.PHASE_MIN_COMPLETE and r.parameter == p:
+            minimum = r.time
+        elif (r.code == E.PHASE_GAP_OUT and r.parameter == p and not on and last_off is not None and r.time != minimum
               and began is not None and last_off > began):  # an off before the green extended nothing
             # the off event is the first tick without the call; passage counts from the last tick with it
             gaps.append(((r.time - began).total_seconds(), round((r.time - last_off + TICK).total_seconds(), 1)))
@@ -1449,4 +1523,6 @@ def _toml(name: str, structure: Structure, timing: Mapping[int, dict[str, Any]],
                   'correction = "shortway"', "", "[[coordination.patterns]]", "number = 1", f"cycle = {c['cycle']}",
                   f"offset = {c['offset']}", f"coord_phases = {c['coord']}",
                   "splits = { " + ", ".join(f"{p} = {s}" for p, s in c["splits"].items()) + " }"]
+        if c.get("modes"):
+            lines.append("modes = { " + ", ".join(f'{p} = "{m}"' for p, m in sorted(c["modes"].items())) + " }")
     return "\n".join(lines) + "\n"

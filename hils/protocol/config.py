@@ -1019,7 +1019,7 @@ def _time_of_day(value: Any, name: str, source: str) -> int:
 
 def _pattern(raw: Mapping[str, Any], w: str, phases: Mapping[int, Phase], rings: tuple[tuple[int, ...], ...],
              barriers: tuple[frozenset[int], ...], source: str) -> Pattern:
-    _unknown(raw, ("number", "cycle", "offset", "coord_phases", "splits"), w, source)
+    _unknown(raw, ("number", "cycle", "offset", "coord_phases", "splits", "modes"), w, source)
     number = _number(raw, "number", w, source, integer=True, low=1, high=253)
     # NTCIP 1202 patternCycleTime: "NEMA TS 2 range: 30-255"; an offset at or past the cycle "shall result in Free".
     cycle = _number(raw, "cycle", w, source, integer=True, low=CYCLE_SECONDS[0], high=CYCLE_SECONDS[-1])
@@ -1045,13 +1045,22 @@ def _pattern(raw: Mapping[str, Any], w: str, phases: Mapping[int, Phase], rings:
     if missing:
         raise ConfigError(source, f"{w}splits", f"has no split for phase(s) {missing}; allowed: a split for every "
                                                 f"phase ({', '.join(map(str, phases))})")
+    modes = _split_modes(raw.get("modes", {}), f"{w}modes", phases, coord, source)
     for p, split in splits.items():
         ph = phases[p]
         # NTCIP 1202 splitTime: "The split time shall be longer than the sum of the phase minimum service
-        # requirements"; a not-actuated (recalled) pedestrian adds its walk and clearance.
-        need = ph.min_green + (ph.walk + ph.ped_clear if ph.recall is Recall.PED else 0) + ph.yellow + ph.red_clear
+        # requirements"; those of "a phase with a not-actuated ped include Minimum Green, Walk, Pedestrian Clear,
+        # Yellow Clearance, and Red Clearance". The walk and its clearance time from the start of the green beside
+        # the minimum green, not after it (the ring's minimum is the greater of the two, as a pattern's fit counts
+        # it), so its service is the greater plus the clearances: a pedestrian's minimum is "walk + ped clearance +
+        # veh clearance" (Naztec's coordination manual, Stop-in-Walk), and an Econolite ran its 40 s splits with
+        # a walk every cycle of 21 s, 13 s of clearance, 4.1 s of yellow and 1.9 s of red, coordinated throughout
+        # (ECON_10.204.9.227_2024_07_22_1332.dat, utahudot/udot-atspm test data).
+        ped = ph.recall is Recall.PED or modes.get(p) in (SplitMode.PED_RECALL, SplitMode.MAX_AND_PED_RECALL)
+        need = max(ph.min_green, ph.walk + ph.ped_clear if ped else 0) + ph.yellow + ph.red_clear
         if split < need:
-            raise ConfigError(source, f"{w}splits.{p}", f"is {split} s, shorter than phase {p}'s minimum green, "
+            what = "minimum green or walk and pedestrian clearance" if ped else "minimum green"
+            raise ConfigError(source, f"{w}splits.{p}", f"is {split} s, shorter than phase {p}'s {what}, "
                                                         f"yellow and red clearance ({need:g} s); "
                                                         f"allowed: >= {need:g} s")
     for r, ring in enumerate(rings, start=1):
@@ -1064,7 +1073,34 @@ def _pattern(raw: Mapping[str, Any], w: str, phases: Mapping[int, Phase], rings:
         if len(set(sums.values())) > 1:
             raise ConfigError(source, f"{w}splits", f"the rings reach barrier {b} at different times (ring sums in its "
                                                     f"group: {sums}); allowed: equal sums in every barrier group")
-    return Pattern(number, cycle, offset, tuple(coord), splits)
+    return Pattern(number, cycle, offset, tuple(coord), splits, modes)
+
+
+# NTCIP 1202 splitMode by name in a pattern's ``modes`` (other(1), "not specified in this standard", left out).
+SPLIT_MODE_NAMES = {m.name.lower(): m for m in SplitMode if m is not SplitMode.OTHER}
+
+
+def _split_modes(raw: Any, w: str, phases: Mapping[int, Phase], coord: list[int],
+                 source: str) -> dict[int, SplitMode]:
+    """A pattern's ``modes = { 4 = "max_and_ped_recall" }``: each phase's splitMode while the pattern runs (none
+    where absent)."""
+    allowed = ", ".join(SPLIT_MODE_NAMES)
+    if not isinstance(raw, dict):
+        raise ConfigError(source, w, f"must be a table of split modes by phase, e.g. {{ 4 = \"ped_recall\" }}; "
+                                     f"allowed modes: {allowed}")
+    modes = {}
+    for key, value in raw.items():
+        if not key.isdigit() or int(key) not in phases:
+            raise ConfigError(source, f"{w}.{key}", f"unknown phase; allowed: {', '.join(map(str, phases))}")
+        if not isinstance(value, str) or value not in SPLIT_MODE_NAMES:
+            raise ConfigError(source, f"{w}.{key}", f"is {value!r}; allowed: {allowed}")
+        if value == "omitted" and int(key) in coord:
+            raise ConfigError(source, f"{w}.{key}", "omits a coordinated phase; allowed: a mode that serves it")
+        if value in ("ped_recall", "max_and_ped_recall") and phases[int(key)].walk == 0:
+            raise ConfigError(source, f"{w}.{key}", f"is {value!r} on a phase without walk; allowed: a walk > 0 for "
+                                                    "pedestrian recall")
+        modes[int(key)] = SPLIT_MODE_NAMES[value]
+    return modes
 
 
 # --- [overlaps] -----------------------------------------------------------------------------------

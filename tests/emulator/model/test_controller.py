@@ -813,16 +813,17 @@ def test_ped_omit_keeps_the_walk_from_being_served(paper_toml: str) -> None:
     assert (4, "G") not in seen and c.ped_calls == set()
 
 
-def _pushed_during_green(paper_toml: str, options: str, calls: set[int], push: int = 100) -> tuple[Controller, list]:
-    """2+6 resting on ``calls``; push button 1 (phase 2) pressed for one tick at ``push``; each tick's walk, pedestrian
-    clearance and green of phase 2 for 40 s."""
+def _pushed_during_green(paper_toml: str, options: str, calls: set[int], push: int = 100,
+                         held: int = 1) -> tuple[Controller, list]:
+    """2+6 resting on ``calls``; push button 1 (phase 2) pressed for ``held`` ticks from ``push``; each tick's walk,
+    pedestrian clearance and green of phase 2 for 40 s."""
     text = paper_toml.replace("\n2 = { ", f"\n2 = {{ {options}, ", 1) + "\n[pedestrian_detectors]\n1 = 2\n"
     c = Controller(parse(text, "recycle.toml"))
     c.backup_time = 0
     c.set_control(CALL, calls)
     seen = []
     for _ in range(400):
-        c.set_ped_actuations({1} if c.tick == push else ())
+        c.set_ped_actuations({1} if push <= c.tick < push + held else ())
         c.step()
         seen.append((2 in c.walks, 2 in c.ped_clears, 2 in c.greens))
     return c, seen
@@ -836,6 +837,17 @@ def test_pedestrian_recycle_starts_a_walk_within_the_running_green(paper_toml: s
     start = walks.index(True)
     assert start == 100 and sum(walks) == 70 and sum(cl for _, cl, _ in seen) == 90
     assert all(g for _, _, g in seen) and c.ped_calls == frozenset()
+
+
+def test_a_push_held_into_the_walk_it_brought_is_answered_by_that_walk(paper_toml: str) -> None:
+    """The MaxTime of issue 35's 638572533917628534.xml: four pushes held 0.1-0.7 s into the walk they brought, with no
+    other push before their phase's next green, and no walk at that green. Held 0.5 s here, the recycled walk answers
+    it: one walk, no call left. Held past the walk (a stuck button) it calls again: a second walk after the first's
+    clearance."""
+    c, seen = _pushed_during_green(paper_toml, "walk = 7, ped_clear = 9, ped_recycle = true", {2, 6}, held=5)
+    assert sum(w for w, _, _ in seen) == 70 and c.ped_calls == frozenset()
+    c, seen = _pushed_during_green(paper_toml, "walk = 7, ped_clear = 9, ped_recycle = true", {2, 6}, held=75)
+    assert sum(w for w, _, _ in seen) == 140
 
 
 def test_without_pedestrian_recycle_the_walk_waits_for_the_next_green(paper_toml: str) -> None:

@@ -24,7 +24,7 @@ from harness.reference import field_log, hires_file, round_trip
 from harness.reference.hires_file import FieldLogError, Row
 from harness.reference.replay_bench import nema_numbers, synthetic
 from hils.protocol import config as config_mod
-from hils.protocol.ntcip import PhaseStartup
+from hils.protocol.ntcip import PhaseStartup, SplitMode
 from tests.emulator.model.test_hires import config_with
 
 SAMPLE = Path(atspm.__file__).parent / "data" / "sample_raw_data.parquet"
@@ -193,6 +193,15 @@ def test_a_pretimed_coordinated_log_without_detectors_gets_a_plan_that_runs() ->
     # the coordinated greens start at 13:32:33.0 in the log: 48,753 s after midnight, 9 s into the 72 s cycle
     assert plan.offset == 9
     assert {p: ph.recall.value for p, ph in cfg.phases.items()} == {2: "none", 4: "max", 6: "none", 8: "max"}
+    # every green walks, with no pedestrian call logged: pedestrian recall in the pattern; phase 4's 14.8 s walks end
+    # their 11 s clearance at the force-off, 25.8 s into its green: a walk of whole seconds that fits is 14 s
+    assert set(plan.modes.values()) == {SplitMode.PED_RECALL} and sorted(plan.modes) == [2, 4, 6, 8]
+    assert [(cfg.phases[p].walk, cfg.phases[p].ped_clear) for p in (2, 4)] == [(21, 13), (14, 11)]
+    # read free (its local zeros taken out), the pedestrian recall is the phase's own recall, which a phase on
+    # vehicle recall cannot hold beside it: said, not written
+    free = field_log.infer([r for r in rows if r.code != 150])
+    assert "phase 4: no pedestrian recall written beside its max recall" in "\n".join(free.guessed)
+    assert free.config().coordination.patterns == {}
 
 
 def test_the_emulators_plan_is_read_back_without_its_split_events() -> None:
@@ -317,6 +326,33 @@ def test_gap_reduction_is_read_from_gaps_that_fall_with_the_greens_time() -> Non
     assert field_log._reduction(samples) == {"passage": 2.4, "time_before_reduction": 8, "time_to_reduce": 3,
                                              "min_gap": 0.6}
     assert field_log._reduction([(t, 2.4 - (t % 3) * 0.5) for t in range(4, 20)]) is None  # gaps that do not fall
+
+
+def test_the_same_controllers_longer_log_reads_the_same_gap_reduction() -> None:
+    """A gap-out logged as its minimum green completes says only that the passage is no longer: its gap ran out
+    during the minimum. The atspm sample's phase 8 logs four so, gaps of 2.5-3.5 s 6.0 s into its greens, each seen
+    at most twice in two hours; its two hours laid end to end three times (as replay_bench's day lays them twelve
+    times) saw each often enough to pass for the passage, the reduction was not read, and the day matched 87.2 %
+    where the two hours match 92.9 %."""
+    rows = hires_file.load(SAMPLE)
+    span = rows[-1].time - rows[0].time + timedelta(seconds=75)
+    thrice = [Row(r.time + k * span, r.code, r.parameter) for k in range(3) for r in rows]
+    detectors = [8, 9, 22, 23, 24, 25, 26]  # the ones calling phase 8, as the log is read
+    for log in (rows, thrice):
+        assert field_log._reduction(field_log._gaps(log, 8, detectors, {})) == {
+            "passage": 2.4, "time_before_reduction": 8, "time_to_reduce": 3, "min_gap": 0.6}
+
+
+def test_a_maximum_is_timed_from_the_phase_check() -> None:
+    """The max timer starts at the phase check (2: "Set when a conflicting call is registered against the active
+    phase. (Marks beginning of MAX timing)", the Indiana enumerations): the MaxTime excerpt's phase 2 maxes out 55.6 s
+    into its green, 46.2 s after its phase check, so its maximum is 47 s, not 56 s; phase 6, green as the log begins,
+    maxes out with it, 46.2 s after its own phase check (55 s before, its longest green); a log whose maxed-out greens
+    show no phase check within them (the Econolite's) times it from the green's start, as before."""
+    cfg = field_log.infer(hires_file.load(LOGS / "maxtime_1015_2024_07_22_1333_excerpt.xml")).config()
+    assert cfg.phases[2].max_green == cfg.phases[6].max_green == 47
+    econolite = field_log.infer(hires_file.load(LOGS / "ECON_10.205.17.215_2024_02_21_1115.dat")).config()
+    assert econolite.phases[4].max_green == 25
 
 
 def test_a_constant_gap_from_actuation_to_call_is_applied_as_a_detector_delay() -> None:

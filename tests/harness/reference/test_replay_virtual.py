@@ -195,6 +195,19 @@ def test_the_free_econolite_logs_replay_whole_at_their_floors() -> None:
         assert overall(match_table(rows, ran.events, equivalences=variants)) >= floor, name
 
 
+def test_the_pretimed_econolite_replays_with_its_walks() -> None:
+    """The coordinated pretimed Econolite walks every phase every cycle with no push button: read as pedestrian recall
+    in the pattern, its walks, clearances and minimums (logged at the clearance's end) come back (57.6 % of its 401
+    events before, every walk missed); what is left is the log's first seconds, phases 4 and 8 already in clearance
+    as it begins."""
+    rows = hires_file.load(LOGS / "ECON_10.204.9.227_2024_07_22_1332.dat")
+    ran = replay_virtual.run(rows, field_log.infer(rows).config())
+    table = match_table(rows, ran.events, equivalences=replay_match.for_log("Econolite", {}))
+    assert overall(table) >= 98.0
+    walks = [row for row in table if row.code == E.PED_BEGIN_WALK]
+    assert sum(row.matched for row in walks) == sum(row.field for row in walks) == 42
+
+
 def test_signal_replay_starts_where_the_logs_cycle_was_on_any_day() -> None:
     """A 130 s cycle does not divide a day: 2 years later the bench, counting its cycles from its own midnight, would
     be days * 86,400 s mod 75 off the log's. Signal-Replay starts the replay when the time since the log's start is a

@@ -577,6 +577,38 @@ def test_a_plan_that_cannot_run_is_refused(old: str, new: str, field: str, allow
     assert err.field == field and allowed in err.message, err
 
 
+WALKING = {4: '{ walk = 12, ped_clear = 8, recall = "ped" }', 8: "{ walk = 12, ped_clear = 8 }"}
+
+
+def test_a_recalled_walk_times_beside_the_minimum_green_within_its_split() -> None:
+    """Walk 12 s and clearance 8 s, beside a minimum green of 3 s, with 5 s of yellow and red fill a 25 s split (NTCIP
+    1202 splitTime; the Econolite of ECON_10.204.9.227 ran so), on phase recall or the pattern's split mode."""
+    from hils.protocol.ntcip import SplitMode
+
+    cfg = parse(toml(phases=WALKING) + "\n" + PLAN + 'modes = { 8 = "max_and_ped_recall", 3 = "min_recall" }\n',
+                SOURCE)
+    assert cfg.coordination.patterns[1].modes == {8: SplitMode.MAX_AND_PED_RECALL, 3: SplitMode.MIN_RECALL}
+    longer = {4: '{ walk = 13, ped_clear = 8, max_green = 25, recall = "ped" }'}
+    err = rejected(toml(phases=WALKING | longer) + "\n" + PLAN)
+    assert err.field == "coordination.patterns[0].splits.4" and "allowed: >= 26 s" in err.message, err
+    err = rejected(toml(phases=WALKING) + "\n" + PLAN.replace("1 = 15, 2 = 25", "1 = 16, 2 = 24")
+                   .replace("8 = 25", "8 = 24").replace("5 = 15", "5 = 16") + 'modes = { 8 = "ped_recall" }\n')
+    assert err.field == "coordination.patterns[0].splits.8" and "walk and pedestrian clearance" in err.message, err
+
+
+@pytest.mark.parametrize(("modes", "field", "allowed"), [
+    ('{ 4 = "walk" }', "coordination.patterns[0].modes.4", "allowed: none, min_recall, max_recall, ped_recall, "
+     "max_and_ped_recall, omitted"),
+    ('{ 9 = "min_recall" }', "coordination.patterns[0].modes.9", "unknown phase"),
+    ('{ 3 = "ped_recall" }', "coordination.patterns[0].modes.3", "a walk > 0"),
+    ('{ 2 = "omitted" }', "coordination.patterns[0].modes.2", "omits a coordinated phase"),
+    ('"ped_recall"', "coordination.patterns[0].modes", "a table of split modes by phase"),
+])
+def test_a_bad_split_mode_is_refused(modes: str, field: str, allowed: str) -> None:
+    err = rejected(toml(phases=WALKING) + "\n" + PLAN + f"modes = {modes}\n")
+    assert err.field == field and allowed in err.message, err
+
+
 @pytest.mark.parametrize(("entry", "field", "allowed"), [
     ('from = "25:00"\npattern = 1', "coordination.schedule[0].from", '"HH:MM" or "HH:MM:SS"'),
     ('from = "7:00"\npattern = 1', "coordination.schedule[0].from", '"HH:MM"'),
