@@ -256,8 +256,8 @@ def infer(rows: Sequence[Row], name: str = "field controller") -> Inferred:
     pushes = _in_config(_detector_phases(rows, E.PED_DETECTOR_ON, E.PED_CALL_REGISTERED, phases), "push button",
                         PUSH_BUTTONS, out)
     recalled = _uncalled(rows, phases, structure)
-    _extenders(rows, detectors, recalled, out)
     timers = _delays(rows, detectors, greens, out)
+    extended = _extenders(rows, detectors, recalled, structure, out)  # of the detectors a delay leaves calling nothing
     for d, held in _holds(rows, detectors, greens, out).items():
         timers.setdefault(d, {}).update(held)
     held = {d: timedelta(seconds=max(t.get("extend", 0.0), t.get("carryover", 0.0))) for d, t in timers.items()}
@@ -273,6 +273,8 @@ def infer(rows: Sequence[Row], name: str = "field controller") -> Inferred:
                             f"{reduced['min_gap']:g} s (its gap-outs' gaps fall with the green's time)")
         elif counts and counts.most_common(1)[0][1] >= PASSAGE_SEEN:
             timing[p]["passage"] = _mode(gaps[p])
+        elif p in extended:
+            timing[p]["passage"] = extended[p]
         else:
             timing[p]["passage"] = shared if shared is not None else 2.0
             out.guessed.append(f"phase {p}: passage {timing[p]['passage']:g} s (the intersection's most frequent: "
@@ -309,8 +311,8 @@ def infer(rows: Sequence[Row], name: str = "field controller") -> Inferred:
     for p in duals:
         timing[p]["dual_entry"] = True
     if duals:
-        out.read.append(f"dual entry: phase(s) {', '.join(map(str, duals))} (began green uncalled beside the other "
-                        "ring's phase as the rings crossed a barrier, at least twice)")
+        out.read.append(f"dual entry: phase(s) {', '.join(map(str, duals))} (entered as the rings crossed a barrier "
+                        "when no phase of its ring there had a call)")
     overlaps = _overlaps(events, phases, out)
     out.guessed.append("recalls and dual entry only as said, no red revert or max 2 (the log shows the service, not "
                        "the settings); "
@@ -339,27 +341,87 @@ def _uncalled(rows: Sequence[Row], phases: Sequence[int], structure: Structure) 
     return {p for p in phases if (p not in called or p in logged) and p not in structure.phantom}
 
 
-def _extenders(rows: Sequence[Row], detectors: dict[int, int], recalled: set[int], out: Inferred) -> None:
-    """A detector that calls nothing the log shows may extend a recalled phase (a recalled phase's calls are not
-    logged): the recalled phase whose gap-outs come the same time after its last off most often, at least
-    :data:`PASSAGE_SEEN` times and for a fifth of the phase's gap-outs."""
-    gap_outs = {p: [r.time for r in rows if r.code == E.PHASE_GAP_OUT and r.parameter == p] for p in recalled}
-    for d in [d for d, q in detectors.items() if q == 0]:
-        offs = [r.time for r in rows if r.code == E.DETECTOR_OFF and r.parameter == d]
-        best: tuple[int, int] | None = None
-        for p, times in gap_outs.items():
-            gaps = Counter()
-            for t in times:
-                k = bisect.bisect_right(offs, t) - 1
-                if k >= 0 and (t - offs[k]) <= timedelta(seconds=10):
-                    gaps[round((t - offs[k]).total_seconds(), 1)] += 1
-            n = max(gaps.values(), default=0)
-            if n >= PASSAGE_SEEN and n >= len(times) / 5 and (best is None or n > best[1]):
-                best = (p, n)
+def _extenders(rows: Sequence[Row], detectors: dict[int, int], recalled: set[int], structure: Structure,
+               out: Inferred) -> dict[int, float]:
+    """A detector that calls nothing the log shows may extend a recalled phase (the emulator logs no call of a
+    recalled phase, :mod:`emulator.model.datalogger`), read from the phase's gap-outs: the detector extends the phase
+    when its gap-outs past its minimum (3) come one same time after the detector's last off in the green (twice, or
+    once ending the green alone), and none that ends the green alone comes while the detector is on or sooner after
+    its off (a vehicle on it would have held the green). A gap-out ends the green alone when the phase its ring served
+    next was called the tick before (or recalled, or a plan runs) and no other phase's yellow begins on its tick;
+    else it is logged
+    later than the gap ran out and shows no such thing against the detector: a green with nowhere to go rests in
+    green and ends when a call comes, and one at a barrier may have gapped out before and waited for the other ring
+    (NTCIP 1202 phaseOptions bit 11, simultaneous gap disable, keeps it gapped out), the detector coming on
+    meanwhile. Returns
+    each such phase's passage as its gap-outs show it (that time, counted from the last tick with the call, the
+    detector's own extension included)."""
+    gap_outs: dict[int, list[tuple[datetime, datetime | None, datetime, bool]]] = defaultdict(list)  # green, min,
+    # gap-out, whether it ended the green alone
+    began: dict[int, datetime] = {}
+    minimum: dict[int, datetime] = {}
+    yellows = Counter(r.time for r in rows if r.code == E.PHASE_BEGIN_YELLOW)
+    ring_of = {p: r for r in (1, 2) for p in structure.ring(r)}
+    planned = any(r.code == E.COORD_CYCLE_STATE_CHANGE and r.parameter == LOCAL_ZERO for r in rows)
+    starts = {r: [(row.time, row.parameter) for row in rows if row.code == E.PHASE_BEGIN_GREEN
+                  and ring_of.get(row.parameter) == r] for r in (1, 2)}
+    wants: dict[int, list[tuple[datetime, bool]]] = defaultdict(list)  # each phase's call registered (43), dropped
+    for row in rows:
+        if row.code in (E.PHASE_CALL_REGISTERED, E.PHASE_CALL_DROPPED):
+            wants[row.parameter].append((row.time, row.code == E.PHASE_CALL_REGISTERED))
+
+    def _waited(p: int, t: datetime) -> bool:
+        """The phase the ring served next after ``p``'s green ending at ``t`` was called before ``t`` (or is
+        recalled): the green ended when its gap ran out, not when a call came to a green resting with nowhere to go."""
+        mine = starts.get(ring_of.get(p, 0), [])
+        k = bisect.bisect_right(mine, (t, PHASES + 1))
+        if planned:  # under a plan a green never rests: the coordinated phases always want service
+            return True
+        if k == len(mine):
+            return False
+        q = mine[k][1]
+        return q in recalled or _called_at(wants[q], t - TICK)
+
+    changes: dict[int, list[tuple[datetime, bool]]] = defaultdict(list)  # each detector's on (82) and off (81)
+    for r in rows:
+        if r.code in (E.DETECTOR_ON, E.DETECTOR_OFF) and detectors.get(r.parameter) == 0:
+            changes[r.parameter].append((r.time, r.code == E.DETECTOR_ON))
+        elif r.parameter not in recalled:
+            continue
+        elif r.code == E.PHASE_BEGIN_GREEN:
+            began[r.parameter] = r.time
+            minimum.pop(r.parameter, None)
+        elif r.code == E.PHASE_MIN_COMPLETE:
+            minimum[r.parameter] = r.time
+        elif r.code == E.PHASE_GAP_OUT and r.parameter in began:
+            alone = yellows[r.time] == 1 and _waited(r.parameter, r.time)
+            gap_outs[r.parameter].append((began[r.parameter], minimum.get(r.parameter), r.time, alone))
+    found: dict[int, float] = {}
+    for d, mine in sorted(changes.items()):
+        best: tuple[int, int, float] | None = None
+        for p, ends in gap_outs.items():
+            lags: list[tuple[float | None, bool, bool]] = []  # per gap-out: the time since the detector's last
+            for green, least, t, alone in ends:  # off in the green (None: none; -1: on), past the minimum, alone
+                k = bisect.bisect_left(mine, (t,)) - 1
+                off = mine[k][0] if k >= 0 and mine[k][0] > green else None
+                lag = -1.0 if k >= 0 and mine[k][1] else None if off is None else round((t - off).total_seconds(), 1)
+                lags.append((lag, least is not None and t > least, alone))
+            counts = Counter(lag for lag, past, _ in lags if past and lag is not None and 0 < lag <= 10)
+            if not counts:
+                continue
+            lag, n = counts.most_common(1)[0]
+            against = sum(1 for g, _, alone in lags if alone and g is not None and g < lag)
+            shown = n >= 2 or any(alone and past and g == lag for g, past, alone in lags)  # once at a barrier: chance
+            if shown and not against and (best is None or n > best[1]):
+                best = (p, n, lag)
         if best is not None:
-            detectors[d] = best[0]
-            out.guessed.append(f"detector {d}: extends recalled phase {best[0]} (it registers no call; phase "
-                               f"{best[0]} gaps out the same time after it goes off {best[1]} times)")
+            p, n, lag = best
+            detectors[d] = p
+            found[p] = round(lag + TICK.total_seconds(), 1)
+            out.guessed.append(f"detector {d}: extends recalled phase {p} (it registers no call; phase {p} gaps out "
+                               f"{lag:g} s after it goes off in the green {n} time(s) past its minimum, never while it "
+                               "is on or sooner after it)")
+    return found
 
 
 def _delays(rows: Sequence[Row], detectors: dict[int, int], greens: Mapping[int, list[tuple[datetime, datetime]]],
@@ -419,7 +481,8 @@ def _holds(rows: Sequence[Row], detectors: Mapping[int, int], greens: Mapping[in
            out: Inferred) -> dict[int, dict[str, float]]:
     """Each calling detector whose going off (81), the last of its phase's detectors on, is followed by its phase's
     call dropping (44) the same time later (0.2 s or more: a call dropped on the tick or the next is the actuation's
-    own), at least :data:`PASSAGE_SEEN` times and for :data:`DELAY_SHARE` of such offs: on the phase's green an
+    own), at least :data:`PASSAGE_SEEN` times and for :data:`DELAY_SHARE` of such offs, or every time, twice or more
+    (a phase served seldom shows its detector's extension seldom): on the phase's green an
     extension (vehicleDetectorExtend, "extended from the point of termination, when the phase is Green"), off it a
     carryover; one time seen both ways is a carryover. Returns detector -> its timers."""
     mine: dict[int, set[int]] = defaultdict(set)
@@ -446,7 +509,8 @@ def _holds(rows: Sequence[Row], detectors: Mapping[int, int], greens: Mapping[in
     found: dict[int, dict[str, float]] = {}
     for (d, green), counts in sorted(lags.items()):
         lag, n = counts.most_common(1)[0]
-        if lag < 0.2 or n < max(PASSAGE_SEEN, DELAY_SHARE * offs[(d, green)]):
+        alone = len(counts) == 1 and n >= 2  # every off seen so is followed by the drop that time later
+        if lag < 0.2 or (n < max(PASSAGE_SEEN, DELAY_SHARE * offs[(d, green)]) and not alone):
             continue
         timer = "extend" if green else "carryover"
         found.setdefault(d, {})[timer] = lag
@@ -519,29 +583,56 @@ def _recycles(rows: Sequence[Row], greens: Mapping[int, list[tuple[datetime, dat
 
 
 def _dual_entries(rows: Sequence[Row], structure: Structure, recalled: set[int]) -> list[int]:
-    """The phases that began green with no call since their last green, at a barrier crossing (31 on the tick)
-    beside a phase of the other ring, at least twice: dual entry (NTCIP 1202 v03 phaseOptions bit 10, "Dual Entry
-    Phase - in multi-ring configurations when set to 1 causes the phase to become active upon entry into a
-    concurrency group (crossing a barrier) when no calls exist in its ring within its concurrency group")."""
-    called: set[int] = set()
-    crossing: set[datetime] = {r.time for r in rows if r.code == E.BARRIER_TERMINATION}
-    begins: dict[datetime, list[int]] = defaultdict(list)
-    uncalled: dict[datetime, list[int]] = defaultdict(list)
-    for r in rows:
-        if r.code in (E.PHASE_CALL_REGISTERED, E.PED_CALL_REGISTERED):  # since its last green: a call dropped during
-            called.add(r.parameter)  # the clearance still has the phase served (committed at the green's end)
-        elif r.code == E.PHASE_BEGIN_GREEN:
-            begins[r.time].append(r.parameter)
-            if r.parameter not in called and r.parameter not in recalled and r.time in crossing:
-                uncalled[r.time].append(r.parameter)
-            called.discard(r.parameter)
-    seen: Counter[int] = Counter()
-    ring = {p: r for r in (1, 2) for p in structure.ring(r)}
-    for t, phases in uncalled.items():
-        for p in phases:
-            if any(ring.get(q) != ring.get(p) for q in begins[t]):
-                seen[p] += 1
-    return sorted(p for p, n in seen.items() if n >= 2)
+    """The phases a ring entered as the rings crossed a barrier though neither its demand then nor its demand as the
+    new group began made it go there: dual entry (NTCIP 1202 v03 phaseOptions bit 10, "Dual Entry Phase - in
+    multi-ring configurations when set to 1 causes the phase to become active upon entry into a concurrency group
+    (crossing a barrier) when no calls exist in its ring within its concurrency group"). The rings commit to the new
+    group as the last green of the old one ends (NTCIP 1202 PhaseNext, "determined at the end of the green interval
+    of the terminating phase"), the last begin yellow (8) before the group's first green: a ring with demand there
+    goes to it; one without takes its dual entry phase then, or else the nearest phase with demand in its order as
+    the group begins (the emulator's sequencer). So the entry shows a dual entry when the ring had no demand in the
+    group at the yellow and the phase it entered is not its nearest with demand the tick before the group's first
+    green. Demand: a vehicle call registered (43) and not dropped (44), a pedestrian call (45) not yet served by a
+    walk (21), a recall (a phase the log shows served without its calls). Read once seen: nothing else makes such
+    an entry. Only in a log that registers and drops calls: one without them shows no demand at all."""
+    codes = {r.code for r in rows}
+    if E.PHASE_CALL_REGISTERED not in codes or E.PHASE_CALL_DROPPED not in codes:
+        return []
+    ring_of = {p: r for r in (1, 2) for p in structure.ring(r)}
+    group_of = {p: structure.group_of(p) for p in ring_of}
+    calls: set[int] = set()
+    peds: set[int] = set()
+    committed: set[int] | None = None  # the phases with demand at the last begin yellow
+    last_group: dict[int, int] = {}  # ring -> the group of its last green
+    seen: set[int] = set()
+    for _, tick in itertools.groupby(rows, key=lambda r: r.time):
+        events = list(tick)
+        before = calls | peds | recalled
+        for r in events:
+            p = r.parameter
+            if r.code != E.PHASE_BEGIN_GREEN or p not in ring_of:
+                continue
+            ring = ring_of[p]
+            if committed is not None and last_group.get(ring, group_of[p]) != group_of[p]:
+                mine = [q for q in structure.ring(ring) if group_of[q] == group_of[p]]
+                nearest = next((q for q in mine if q in before), None)
+                if not (committed | recalled) & set(mine) and nearest != p:
+                    seen.add(p)
+            last_group[ring] = group_of[p]
+        for r in events:
+            if r.code == E.PHASE_CALL_REGISTERED:
+                calls.add(r.parameter)
+            elif r.code == E.PHASE_CALL_DROPPED:
+                calls.discard(r.parameter)
+            elif r.code == E.PED_CALL_REGISTERED:
+                peds.add(r.parameter)
+            elif r.code == E.PED_BEGIN_WALK:
+                peds.discard(r.parameter)
+        if any(r.code == E.PHASE_BEGIN_GREEN for r in events):
+            committed = None  # a ring entering the group later was called there
+        if any(r.code == E.PHASE_BEGIN_YELLOW for r in events):
+            committed = calls | peds
+    return sorted(seen)
 
 
 def _recall(rows: Sequence[Row], p: int, timing: dict[str, Any], out: Inferred) -> None:

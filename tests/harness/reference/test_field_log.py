@@ -231,25 +231,44 @@ def test_a_max_recall_is_read_from_the_service() -> None:
     assert not any(ph.dual_entry for ph in got.phases.values())
 
 
-def test_a_phase_entered_uncalled_beside_the_other_ring_at_a_barrier_is_dual_entry() -> None:
-    """Ring 1 enters 4 with no call of it, as ring 2 enters 8 (called) across the barrier, twice: 4 is dual entry;
-    a phase entered uncalled once, or called, is not."""
-    t0 = datetime(2024, 5, 1, 7)
+def _plain(options: dict[int, str], seconds: int, seed: int, detectors: str = ""
+           ) -> tuple[config_mod.IntersectionConfig, config_mod.IntersectionConfig]:
+    """The four-leg with walks on its throughs, passage 1 s, each phase given ``options`` (TOML), its detector n
+    calling phase n (or as the ``[detectors]`` table ``detectors`` says): the config and the one inferred from the
+    emulator's log under it."""
+    drawn = round_trip.random_config(random.Random(0), recalls=(), dual_entry=False, lag=False, coordination=False,
+                                     sequencing=False, detector_timers=False)
+    text = drawn.toml.replace("[timing]\npassage = ", "[timing]\npassage = 1.0 #")
+    for p, option in options.items():
+        text = text.replace(f"\n{p} = {{ ", f"\n{p} = {{ {option}, ", 1)
+    cfg = config_mod.parse(text + detectors, "options.toml")
+    return cfg, field_log.infer(round_trip.emulator_log(cfg, seconds, seed)).config()
 
-    def at(s: float, code: int, p: int) -> Row:
-        return Row(t0 + timedelta(seconds=s), code, p)
 
-    rows = [at(0, 1, 2), at(0, 1, 6)]
-    for k, (called, entered) in enumerate(((8, 4), (8, 4), (3, 3), (7, 3))):
-        base = 100 * k
-        rows += [at(base + 5, 43, called), at(base + 10, 31, 1), at(base + 10, 1, entered),
-                 at(base + 10, 1, called if called != entered else 7), at(base + 45, 43, 2), at(base + 45, 43, 6),
-                 at(base + 50, 31, 2), at(base + 50, 1, 2), at(base + 50, 1, 6)]
-    rows.sort(key=lambda r: (r.time, r.code))
-    greens = sorted({r.parameter for r in rows if r.code == 1})
-    structure = field_log.Structure([[2, 6], [3, 4, 7, 8]], {1: [[2], [3, 4]], 2: [[6], [7, 8]]})
-    assert greens == [2, 3, 4, 6, 7, 8]
-    assert field_log._dual_entries(rows, structure, set()) == [4]
+def test_a_phase_entered_at_a_barrier_with_no_demand_in_its_ring_is_dual_entry() -> None:
+    """Phase 8 dual entry: as the rings cross to 3/4 + 7/8 with nothing called in ring 2 there, ring 2 commits to 8
+    at the yellow and keeps it though 7 is called during the clearance (PhaseNext is fixed at the green's end); a
+    ring with nothing committed takes the phase called first. Read so, and no other phase (before: a phase entered
+    uncalled twice, which a call during the clearance hid)."""
+    _, got = _plain({8: "dual_entry = true"}, 600, 0)
+    assert {p for p, ph in got.phases.items() if ph.dual_entry} == {8}
+
+
+def test_a_detector_extending_a_recalled_phase_is_read_from_its_gap_outs() -> None:
+    """Phase 7 on min recall: the emulator logs no call of it, so detector 7 calls nothing the log shows; twice in
+    ten minutes 7 gaps out 0.9 s (passage 1 s, from the last tick with the call) after detector 7 goes off past its
+    minimum, never while it is on or sooner after: detector 7 extends 7."""
+    _, got = _plain({7: 'recall = "min"'}, 600, 0)
+    assert got.detectors[7] == 7 and got.phases[7].passage == 1.0 and got.phases[7].recall is config_mod.Recall.MIN
+
+
+def test_an_extension_seen_every_time_it_could_be_is_read_however_seldom() -> None:
+    """Detector 5 extends 2 s on its green (passage 1 s); a left turn called seldom shows it seldom, but every call
+    drop that follows the detector's off on its green comes 2 s later: an extension of 2 s (before: it needed three
+    such drops)."""
+    table = "[detectors]\n" + "".join(f"{p} = {p}\n" for p in (1, 2, 3, 4, 6, 7, 8)) + "5 = { phase = 5, extend = 2 }\n"
+    _, got = _plain({}, 600, 8, table)
+    assert got.detector_timing.get(5) == config_mod.DetectorTiming(extend=2.0)
 
 
 @settings(max_examples=5, deadline=None, derandomize=True)
