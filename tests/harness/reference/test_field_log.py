@@ -271,6 +271,21 @@ def test_an_extension_seen_every_time_it_could_be_is_read_however_seldom() -> No
     assert got.detector_timing.get(5) == config_mod.DetectorTiming(extend=2.0)
 
 
+def test_the_round_trip_names_the_first_event_its_replay_missed() -> None:
+    """A replay whose phase 4 gaps out 2 s early: the round trip's report names that gap-out, where the replay parts
+    from its log, and nothing for a replay that logged every event within 1 s."""
+    t0 = datetime(2024, 5, 1, 7)
+
+    def at(s: float, code: int, p: int) -> Row:
+        return Row(t0 + timedelta(seconds=s), code, p)
+
+    log = [at(0, 1, 2), at(10, 4, 2), at(10, 8, 2), at(20, 1, 4), at(30, 4, 4), at(30, 8, 4), at(40, 1, 2)]
+    bench = [at(0, 1, 2), at(10.5, 4, 2), at(10.5, 8, 2), at(20, 1, 4), at(28, 4, 4), at(28, 8, 4), at(40, 1, 2)]
+    assert round_trip.first_miss(log, bench) == ("first missed: event 4 (phase gap out) of 4 at 30.0 s (the replay's "
+                                                 "nearest: -2.0 s)")
+    assert round_trip.first_miss(log, log) == ""
+
+
 @settings(max_examples=5, deadline=None, derandomize=True)
 @given(seed=st.integers(0, 2**16))
 def test_the_emulators_log_round_trips_at_99_percent(seed: int) -> None:
@@ -281,8 +296,8 @@ def test_the_emulators_log_round_trips_at_99_percent(seed: int) -> None:
     gap-outs, a dual entry only when the log crosses a barrier with nothing called in the ring, and a recycled walk
     keeps a green long enough to mislead the maximum read from it."""
     drawn = round_trip.random_config(random.Random(seed), recalls=(), dual_entry=False, sequencing=False)
-    share = round_trip.round_trip(drawn, 900, seed)
-    assert share is not None and share >= 99, drawn.features
+    trip = round_trip.round_trip(drawn, 900, seed)
+    assert trip.share is not None and trip.share >= 99, (drawn.features, trip.first_miss)
 
 
 def test_barrier_groups_come_from_the_barrier_events() -> None:
