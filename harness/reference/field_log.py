@@ -257,12 +257,19 @@ def infer(rows: Sequence[Row], name: str = "field controller") -> Inferred:
                         PUSH_BUTTONS, out)
     recalled = _uncalled(rows, phases, structure)
     timers = _delays(rows, detectors, greens, out)
-    extended = _extenders(rows, detectors, recalled, structure, out)  # of the detectors a delay leaves calling nothing
     for d, held in _holds(rows, detectors, greens, out).items():
         timers.setdefault(d, {}).update(held)
     held = {d: timedelta(seconds=max(t.get("extend", 0.0), t.get("carryover", 0.0))) for d, t in timers.items()}
     samples = {p: _gaps(rows, p, [d for d, q in detectors.items() if q == p], held) for p in phases}
     gaps = {p: [g for _, g in mine] for p, mine in samples.items()}
+    everyone = Counter(g for values in gaps.values() for g in values)
+    shared = _mode(everyone.elements())
+    seen = shared if shared is not None and everyone[shared] >= PASSAGE_SEEN else None  # the intersection's passage
+    # Of the detectors a delay leaves calling nothing, those that extend a recalled phase (its gaps counted then).
+    extended = _extenders(rows, detectors, recalled, structure, seen, out)
+    for p, (d, _) in extended.items():
+        samples[p] = _gaps(rows, p, [d], held)
+        gaps[p] = [g for _, g in samples[p]]
     shared = _mode(g for values in gaps.values() for g in values)
     for p in phases:
         counts = Counter(gaps[p])
@@ -271,10 +278,16 @@ def infer(rows: Sequence[Row], name: str = "field controller") -> Inferred:
             out.read.append(f"phase {p}: gap reduction, passage {reduced['passage']:g} s reduced after "
                             f"{reduced['time_before_reduction']} s over {reduced['time_to_reduce']} s to "
                             f"{reduced['min_gap']:g} s (its gap-outs' gaps fall with the green's time)")
+        elif p in extended:  # what its gap-outs show, the intersection's passage and the rest its detector's
+            d, shown = extended[p]
+            timing[p]["passage"] = min(shown, seen) if seen is not None else shown
+            if shown - timing[p]["passage"] >= TICK.total_seconds():
+                timers.setdefault(d, {})["extend"] = round(shown - timing[p]["passage"], 1)
+                out.guessed.append(f"detector {d}: extends phase {p} {timers[d]['extend']:g} s (its gap-outs come "
+                                   f"{shown:g} s after the detector's last tick on; the intersection's passage "
+                                   f"{timing[p]['passage']:g} s, which its greens' starts time alone)")
         elif counts and counts.most_common(1)[0][1] >= PASSAGE_SEEN:
             timing[p]["passage"] = _mode(gaps[p])
-        elif p in extended:
-            timing[p]["passage"] = extended[p]
         else:
             timing[p]["passage"] = shared if shared is not None else 2.0
             out.guessed.append(f"phase {p}: passage {timing[p]['passage']:g} s (the intersection's most frequent: "
@@ -342,20 +355,19 @@ def _uncalled(rows: Sequence[Row], phases: Sequence[int], structure: Structure) 
 
 
 def _extenders(rows: Sequence[Row], detectors: dict[int, int], recalled: set[int], structure: Structure,
-               out: Inferred) -> dict[int, float]:
+               passage: float | None, out: Inferred) -> dict[int, tuple[int, float]]:
     """A detector that calls nothing the log shows may extend a recalled phase (the emulator logs no call of a
     recalled phase, :mod:`emulator.model.datalogger`), read from the phase's gap-outs: the detector extends the phase
     when its gap-outs past its minimum (3) come one same time after the detector's last off in the green (twice, or
-    once ending the green alone), and none that ends the green alone comes while the detector is on or sooner after
-    its off (a vehicle on it would have held the green). A gap-out ends the green alone when the phase its ring served
-    next was called the tick before (or recalled, or a plan runs) and no other phase's yellow begins on its tick;
-    else it is logged
-    later than the gap ran out and shows no such thing against the detector: a green with nowhere to go rests in
-    green and ends when a call comes, and one at a barrier may have gapped out before and waited for the other ring
-    (NTCIP 1202 phaseOptions bit 11, simultaneous gap disable, keeps it gapped out), the detector coming on
-    meanwhile. Returns
-    each such phase's passage as its gap-outs show it (that time, counted from the last tick with the call, the
-    detector's own extension included)."""
+    once ending the green alone, or once at the intersection's ``passage``), and none that ends the green alone comes
+    while the detector is on or sooner after its off (a vehicle on it would have held the green). A gap-out ends the
+    green alone when the phase its ring served next was called the tick before (or recalled, or a plan runs) and no
+    other phase's yellow begins on its tick; else it is logged later than the gap ran out and shows nothing against
+    the detector: a green with nowhere to go rests in green and ends when a call comes, and one at a barrier may have
+    gapped out before and waited for the other ring (NTCIP 1202 phaseOptions bit 11, simultaneous gap disable, keeps
+    it gapped out), the detector coming on meanwhile. Returns each such phase's detector and its gap-outs' time from
+    the last tick with the call: the phase's passage and the detector's extension together, which only the green's
+    start, timed by the passage alone, tells apart."""
     gap_outs: dict[int, list[tuple[datetime, datetime | None, datetime, bool]]] = defaultdict(list)  # green, min,
     # gap-out, whether it ended the green alone
     began: dict[int, datetime] = {}
@@ -396,7 +408,7 @@ def _extenders(rows: Sequence[Row], detectors: dict[int, int], recalled: set[int
         elif r.code == E.PHASE_GAP_OUT and r.parameter in began:
             alone = yellows[r.time] == 1 and _waited(r.parameter, r.time)
             gap_outs[r.parameter].append((began[r.parameter], minimum.get(r.parameter), r.time, alone))
-    found: dict[int, float] = {}
+    found: dict[int, tuple[int, float]] = {}
     for d, mine in sorted(changes.items()):
         best: tuple[int, int, float] | None = None
         for p, ends in gap_outs.items():
@@ -411,13 +423,14 @@ def _extenders(rows: Sequence[Row], detectors: dict[int, int], recalled: set[int
                 continue
             lag, n = counts.most_common(1)[0]
             against = sum(1 for g, _, alone in lags if alone and g is not None and g < lag)
-            shown = n >= 2 or any(alone and past and g == lag for g, past, alone in lags)  # once at a barrier: chance
+            shown = (n >= 2 or any(alone and past and g == lag for g, past, alone in lags)
+                     or round(lag + TICK.total_seconds(), 1) == passage)  # else once at a barrier: chance
             if shown and not against and (best is None or n > best[1]):
                 best = (p, n, lag)
         if best is not None:
             p, n, lag = best
             detectors[d] = p
-            found[p] = round(lag + TICK.total_seconds(), 1)
+            found[p] = (d, round(lag + TICK.total_seconds(), 1))
             out.guessed.append(f"detector {d}: extends recalled phase {p} (it registers no call; phase {p} gaps out "
                                f"{lag:g} s after it goes off in the green {n} time(s) past its minimum, never while it "
                                "is on or sooner after it)")

@@ -262,6 +262,17 @@ def test_a_detector_extending_a_recalled_phase_is_read_from_its_gap_outs() -> No
     assert got.detectors[7] == 7 and got.phases[7].passage == 1.0 and got.phases[7].recall is config_mod.Recall.MIN
 
 
+def test_a_recalled_phases_gap_outs_are_split_into_the_intersections_passage_and_its_detectors_extension() -> None:
+    """Phase 7 on min recall, detector 7 extending 2 s, passage 1 s everywhere: 7's gap-outs come 2.9 s after the
+    detector goes off, which a passage of 3 s would give too, but then the green's start, timed by the passage alone,
+    would hold 7 two seconds longer when no vehicle came. Read as the intersection's passage (1 s, seen on every
+    other phase) and an extension of 2 s on detector 7 (before: passage 3 s)."""
+    table = "[detectors]\n" + "".join(f"{p} = {p}\n" for p in (1, 2, 3, 4, 5, 6, 8)) + "7 = { phase = 7, extend = 2 }\n"
+    _, got = _plain({7: 'recall = "min"'}, 600, 0, table)
+    assert (got.detectors[7], got.detector_timing.get(7), got.phases[7].passage) == (
+        7, config_mod.DetectorTiming(extend=2.0), 1.0)
+
+
 def test_an_extension_seen_every_time_it_could_be_is_read_however_seldom() -> None:
     """Detector 5 extends 2 s on its green (passage 1 s); a left turn called seldom shows it seldom, but every call
     drop that follows the detector's off on its green comes 2 s later: an extension of 2 s (before: it needed three
