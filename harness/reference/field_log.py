@@ -604,15 +604,19 @@ def _dual_entries(rows: Sequence[Row], structure: Structure, recalled: set[int])
     of the terminating phase"), the last begin yellow (8) before the group's first green: a ring with demand there
     goes to it; one without takes its dual entry phase then, or else the nearest phase with demand in its order as
     the group begins (the emulator's sequencer). So the entry shows a dual entry when the ring had no demand in the
-    group at the yellow and the phase it entered is not its nearest with demand the tick before the group's first
-    green. Demand: a vehicle call registered (43) and not dropped (44), a pedestrian call (45) not yet served by a
-    walk (21), a recall (a phase the log shows served without its calls). Read once seen: nothing else makes such
-    an entry. Only in a log that registers and drops calls: one without them shows no demand at all."""
+    group at the yellow and the phase it entered, at the barrier termination (31), is not its nearest with demand
+    then. Demand: a vehicle call registered (43) and not dropped (44), a pedestrian call (45) not yet served (by a
+    walk, 21, or for a phase that never walks by its green, 1), a recall (a phase the log shows served without its
+    calls); for the nearest, the calls registered on the tick and the next too (the emulator logs a push's 45 on
+    the tick after the green it latched for began). Read once seen: nothing else makes such an entry. Only in a log
+    that registers and drops calls: one without them shows no demand at all."""
     codes = {r.code for r in rows}
     if E.PHASE_CALL_REGISTERED not in codes or E.PHASE_CALL_DROPPED not in codes:
         return []
     ring_of = {p: r for r in (1, 2) for p in structure.ring(r)}
     group_of = {p: structure.group_of(p) for p in ring_of}
+    walking = {r.parameter for r in rows if r.code == E.PED_BEGIN_WALK}
+    registered = {(r.time, r.parameter) for r in rows if r.code in (E.PHASE_CALL_REGISTERED, E.PED_CALL_REGISTERED)}
     calls: set[int] = set()
     peds: set[int] = set()
     committed: set[int] | None = None  # the phases with demand at the last begin yellow
@@ -620,26 +624,28 @@ def _dual_entries(rows: Sequence[Row], structure: Structure, recalled: set[int])
     seen: set[int] = set()
     for _, tick in itertools.groupby(rows, key=lambda r: r.time):
         events = list(tick)
-        before = calls | peds | recalled
-        for r in events:
-            p = r.parameter
-            if r.code != E.PHASE_BEGIN_GREEN or p not in ring_of:
-                continue
-            ring = ring_of[p]
-            if committed is not None and last_group.get(ring, group_of[p]) != group_of[p]:
-                mine = [q for q in structure.ring(ring) if group_of[q] == group_of[p]]
-                nearest = next((q for q in mine if q in before), None)
-                if not (committed | recalled) & set(mine) and nearest != p:
-                    seen.add(p)
-            last_group[ring] = group_of[p]
-        for r in events:
+        for r in events:  # the calls of the tick count for a green it starts (read before the rings move)
             if r.code == E.PHASE_CALL_REGISTERED:
                 calls.add(r.parameter)
             elif r.code == E.PHASE_CALL_DROPPED:
                 calls.discard(r.parameter)
             elif r.code == E.PED_CALL_REGISTERED:
                 peds.add(r.parameter)
-            elif r.code == E.PED_BEGIN_WALK:
+        crossing = committed is not None and any(r.code == E.BARRIER_TERMINATION for r in events)
+        for r in events:
+            p = r.parameter
+            if r.code != E.PHASE_BEGIN_GREEN or p not in ring_of:
+                continue
+            ring = ring_of[p]
+            if crossing and last_group.get(ring, group_of[p]) != group_of[p]:
+                mine = [q for q in structure.ring(ring) if group_of[q] == group_of[p]]
+                nearest = next((q for q in mine if q in calls | peds | recalled
+                                or (r.time + TICK, q) in registered), None)
+                if not (committed | recalled) & set(mine) and nearest != p:
+                    seen.add(p)
+            last_group[ring] = group_of[p]
+        for r in events:
+            if r.code == (E.PED_BEGIN_WALK if r.parameter in walking else E.PHASE_BEGIN_GREEN):
                 peds.discard(r.parameter)
         if any(r.code == E.PHASE_BEGIN_GREEN for r in events):
             committed = None  # a ring entering the group later was called there
