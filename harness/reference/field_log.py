@@ -320,7 +320,7 @@ def infer(rows: Sequence[Row], name: str = "field controller") -> Inferred:
         _recall(events, p, timing[p], out)
     _backings(events, greens, structure, timing, out)
     _recycles(events, greens, timing, out)
-    duals = _dual_entries(events, structure, recalled)
+    duals = [p for p in _dual_entries(events, structure, recalled) if p not in coordinated]  # the plan calls those
     for p in duals:
         timing[p]["dual_entry"] = True
     if duals:
@@ -494,9 +494,9 @@ def _holds(rows: Sequence[Row], detectors: Mapping[int, int], greens: Mapping[in
            out: Inferred) -> dict[int, dict[str, float]]:
     """Each calling detector whose going off (81), the last of its phase's detectors on, is followed by its phase's
     call dropping (44) the same time later (0.2 s or more: a call dropped on the tick or the next is the actuation's
-    own), at least :data:`PASSAGE_SEEN` times and for :data:`DELAY_SHARE` of such offs, or every time it is seen (a
-    phase served seldom shows its detector's extension seldom; a call the detector alone holds drops with its off):
-    on the phase's green an
+    own), at least :data:`PASSAGE_SEEN` times and for :data:`DELAY_SHARE` of such offs, or every time it is seen,
+    twice at least or on every such off (a phase served seldom shows its detector's extension seldom): on the
+    phase's green an
     extension (vehicleDetectorExtend, "extended from the point of termination, when the phase is Green"), off it a
     carryover; one time seen both ways is a carryover. Returns detector -> its timers."""
     mine: dict[int, set[int]] = defaultdict(set)
@@ -523,7 +523,8 @@ def _holds(rows: Sequence[Row], detectors: Mapping[int, int], greens: Mapping[in
     found: dict[int, dict[str, float]] = {}
     for (d, green), counts in sorted(lags.items()):
         lag, n = counts.most_common(1)[0]
-        alone = len(counts) == 1  # every off seen so is followed by the drop that time later
+        # every off seen so is followed by the drop that time later (twice at least, or every off of the detector)
+        alone = len(counts) == 1 and (n >= 2 or n == offs[(d, green)])
         if lag < 0.2 or (n < max(PASSAGE_SEEN, DELAY_SHARE * offs[(d, green)]) and not alone):
             continue
         timer = "extend" if green else "carryover"
