@@ -254,6 +254,16 @@ def test_a_phase_entered_at_a_barrier_with_no_demand_in_its_ring_is_dual_entry()
     assert {p for p, ph in got.phases.items() if ph.dual_entry} == {8}
 
 
+def test_a_coordinated_phase_entered_uncalled_is_no_dual_entry() -> None:
+    """Under the 70 s plan the coordinated phases 2 and 6 are served every cycle, called or not: the plan, not a dual
+    entry, takes the ring there (before: 2 was read as dual entry from such an entry)."""
+    drawn = round_trip.random_config(random.Random(0), recalls=(), dual_entry=False, lag=False, coordination=False,
+                                     sequencing=False, detector_timers=False)
+    cfg = config_mod.parse(drawn.toml + round_trip.PLAN.format(offset=20), "coordinated.toml")
+    got = field_log.infer(round_trip.emulator_log(cfg, 600, 4)).config()
+    assert not any(ph.dual_entry for ph in got.phases.values())
+
+
 def test_a_detector_extending_a_recalled_phase_is_read_from_its_gap_outs() -> None:
     """Phase 7 on min recall: the emulator logs no call of it, so detector 7 calls nothing the log shows; twice in
     ten minutes 7 gaps out 0.9 s (passage 1 s, from the last tick with the call) after detector 7 goes off past its
