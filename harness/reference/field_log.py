@@ -54,8 +54,10 @@ the log's own events (Indiana enumerations) and says which values it had to gues
   call the log registers (43), where the log registers calls of others or has no detector events (pretimed), or
   whose call registers as its own yellow begins (an Econolite's recall), is recalled: max recall when its greens end
   by force-off or max-out, else min; a detector that calls nothing may extend a recalled phase (its gap-outs come the
-  same time after the detector's off); a phase that began green uncalled beside the other ring's phase at a barrier
-  crossing, twice, is dual entry;
+  same time after the detector's off, never sooner nor while it is on; that time is the intersection's passage and
+  the rest the detector's extension); a phase a ring entered at a barrier termination when it had no demand in the
+  new group as the old one's last green ended, and that is not its nearest phase with demand as the group began, is
+  dual entry (once is enough: nothing else makes such an entry), a coordinated phase never (the plan calls it);
 - **start-up**: the phases green when the log begins (their first interval event is a begin yellow);
 - **coordination**: the cycle is the spacing of the local zeros (event 150, parameter 5; two at one time are one);
   the coordinated phases are the ones with the most yield point events (151) in the group that has them, else the

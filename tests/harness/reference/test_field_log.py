@@ -314,8 +314,7 @@ def test_the_emulators_log_round_trips_at_99_percent(seed: int) -> None:
     offset) are inferred and replayed in virtual time at >= 99 % of their events within 1 s. Recalls, dual entry,
     backing options and pedestrian recycle are drawn by `python -m harness.reference.round_trip`, which counts them
     (docs/replay.md): a recalled phase's calls are not logged, so which detector extends it shows only in its
-    gap-outs, a dual entry only when the log crosses a barrier with nothing called in the ring, and a recycled walk
-    keeps a green long enough to mislead the maximum read from it."""
+    gap-outs, which a phase ending at a barrier may show once or never."""
     drawn = round_trip.random_config(random.Random(seed), recalls=(), dual_entry=False, sequencing=False)
     trip = round_trip.round_trip(drawn, 900, seed)
     assert trip.share is not None and trip.share >= 99, (drawn.features, trip.first_miss)
