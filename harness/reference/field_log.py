@@ -306,6 +306,11 @@ def infer(rows: Sequence[Row], name: str = "field controller") -> Inferred:
                 timing[p]["max_green"] = shared_max
                 out.guessed.append(f"phase {p}: max green {shared_max} s (it never maxed out: the intersection's most "
                                    "frequent maximum, longer than its longest green)")
+    else:  # nothing maxed out: no maximum is shorter than a green, which may have waited at a barrier past its own
+        top = config_mod.phase_time_range("max_green")[1]
+        for p in phases:
+            longest = math.ceil(max((b - a).total_seconds() for a, b in greens[p]) - 1e-9)
+            timing[p]["max_green"] = max(timing[p]["max_green"], min(longest, top))
     for p, twin in structure.phantom.items():
         timing[p] = {k: v for k, v in timing[twin].items() if k not in ("walk", "ped_clear")}
     logged = sorted(d for d, q in detectors.items() if q == 0)
@@ -847,12 +852,30 @@ def _timing(rows: Sequence[Row], p: int, greens: Sequence[tuple[datetime, dateti
     # The maximum: the shortest green that maxed out (max-out, 5, on its end: no green maxes out before its maximum,
     # and one whose max timer started with it, by a call waiting or max recall, maxes out at it), else the longest.
     maxed = _durations(rows, p, E.PHASE_BEGIN_GREEN, E.PHASE_MAX_OUT)
-    longest = max(((b - a).total_seconds() for a, b in greens), default=0.0)
+    longest = _longest_timed(rows, p, greens)
     if maxed:
         longest = t["maxed"] = min(maxed)
     t["max_green"] = _within(p, "max_green", max(t["min_green"], t.get("walk", 0) + t.get("ped_clear", 0),
                                                  math.ceil(longest - 1e-9)), 1, top, out)
     return t
+
+
+def _longest_timed(rows: Sequence[Row], p: int, greens: Sequence[tuple[datetime, datetime]]) -> float:
+    """The longest time a green of ``p`` ran with its maximum timing and ended by itself: from the first conflicting
+    call registered against it (phase check, 2: "MAX timing begins") to its end (no other phase's yellow on the
+    tick), which no maximum is shorter than. A green with no conflicting call (resting, or stretched by a recycled
+    walk, which waits for no maximum then) bounds nothing, nor one that ends with the other ring's at a barrier: it
+    may have maxed out and waited there. In a log without phase checks, the longest green."""
+    checks = [r.time for r in rows if r.code == E.PHASE_CHECK and r.parameter == p]
+    if not checks:
+        return max(((b - a).total_seconds() for a, b in greens), default=0.0)
+    yellows = Counter(r.time for r in rows if r.code == E.PHASE_BEGIN_YELLOW)
+    longest = 0.0
+    for a, b in greens:
+        k = bisect.bisect_left(checks, a)
+        if k < len(checks) and checks[k] < b and yellows[b] == 1:
+            longest = max(longest, (b - checks[k]).total_seconds())
+    return longest
 
 
 def _within(p: int, key: str, value: Any, low: float, high: float, out: Inferred) -> Any:

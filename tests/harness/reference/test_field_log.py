@@ -254,6 +254,19 @@ def test_a_phase_entered_at_a_barrier_with_no_demand_in_its_ring_is_dual_entry()
     assert {p for p, ph in got.phases.items() if ph.dual_entry} == {8}
 
 
+def test_a_green_stretched_by_a_recycled_walk_or_waiting_at_a_barrier_does_not_lengthen_the_maximum() -> None:
+    """Seed 2's first round-trip draw: phase 6 recycles its walk and ends with ring 1's max-recalled phase at the
+    barrier, its greens up to 34 s long though its maximum is 20 s (it maxed out and waited, or timed no maximum
+    while its walk recycled). The maximum is bounded by greens timed from a conflicting call (phase check, 2) that end
+    by themselves, none of 6's: it gets the intersection's 20 s (before: 34 s, and the replay recycled a walk the field
+    could not)."""
+    drawn = round_trip.random_config(random.Random(2))
+    assert drawn.features[:3] == ("passage 1", "max recall 1", "ped recycle 6")
+    cfg = config_mod.parse(drawn.toml, "recycled.toml")
+    got = field_log.infer(round_trip.emulator_log(cfg, 600, 0)).config()
+    assert {p: got.phases[p].max_green for p in (4, 6)} == {4: 20, 6: 20}
+
+
 def test_a_coordinated_phase_entered_uncalled_is_no_dual_entry() -> None:
     """Under the 70 s plan the coordinated phases 2 and 6 are served every cycle, called or not: the plan, not a dual
     entry, takes the ring there (before: 2 was read as dual entry from such an entry)."""
