@@ -547,15 +547,17 @@ def _holds(rows: Sequence[Row], detectors: Mapping[int, int], greens: Mapping[in
 
 def _backings(rows: Sequence[Row], greens: Mapping[int, list[tuple[datetime, datetime]]], structure: Structure,
               timing: Mapping[int, dict[str, Any]], out: Inferred) -> None:
-    """A ring that ended a green and next began an earlier phase of its barrier group's order while a phase of the
-    other ring stayed green all along backed into it: conditional service (NTCIP 1202 phaseOptions bit 14) on the
-    phase it backed from when a call across the barrier was on as its green ended (registered, 43, and not dropped,
-    44), Naztec's backing (``backup_prevent = false``) otherwise. The emulator backs only where set so."""
+    """A ring that ended a green and next began an earlier phase of its barrier group's order while the other ring
+    timed in that group (a green of it on after the ring's green ended and begun before the earlier phase's, not with
+    it: both rings clearing and starting the group again together is no backing) backed into it: conditional service
+    (NTCIP 1202 phaseOptions bit 14) on the phase it backed from when a call across the barrier was on as its green
+    ended (registered, 43, and not dropped, 44), Naztec's backing (``backup_prevent = false``) otherwise. The emulator
+    backs only where set so."""
     ring_of = {p: r for r in (1, 2) for p in structure.ring(r)}
     order = {p: i for r in (1, 2) for i, p in enumerate(structure.ring(r))}
     group_of = {p: structure.group_of(p) for p in ring_of}
     starts = sorted((a, b, p) for p, mine in greens.items() for a, b in mine if p in ring_of)
-    by_ring = {r: [(a, b) for a, b, p in starts if ring_of[p] == r] for r in (1, 2)}
+    by_ring = {r: [(a, b, p) for a, b, p in starts if ring_of[p] == r] for r in (1, 2)}
     calls: dict[int, list[tuple[datetime, bool]]] = defaultdict(list)  # each phase's call registered (43), dropped (44)
     for r in rows:
         if r.code in (E.PHASE_CALL_REGISTERED, E.PHASE_CALL_DROPPED) and r.parameter in ring_of:
@@ -568,7 +570,9 @@ def _backings(rows: Sequence[Row], greens: Mapping[int, list[tuple[datetime, dat
             ended, p = previous[r]
             other = by_ring[3 - r]
             k = bisect.bisect_left(other, (ended,)) - 1  # the other ring's last green begun before the yellow
-            if group_of[p] == group_of[q] and order[q] < order[p] and k >= 0 and other[k][1] > begin:
+            timing_on = any(a < begin and b > ended and group_of[x] == group_of[p]
+                            for a, b, x in other[max(k, 0):bisect.bisect_left(other, (begin,))])
+            if group_of[p] == group_of[q] and order[q] < order[p] and timing_on:
                 waiting = any(group_of[x] != group_of[p] and _called_at(calls[x], ended) for x in calls)
                 seen[p]["conditional service" if waiting else "backing"] += 1
         previous[r] = (end, q)

@@ -267,6 +267,18 @@ def test_a_green_stretched_by_a_recycled_walk_or_waiting_at_a_barrier_does_not_l
     assert {p: got.phases[p].max_green for p in (4, 6)} == {4: 20, 6: 20}
 
 
+def test_a_ring_backing_while_the_other_ring_ends_its_green_is_read() -> None:
+    """Seed 2's eighth round-trip draw: phase 6 backs (Naztec's backing) into 5 while ring 1's 2, green as 6 ended,
+    ends before 5 begins: the other ring timed in the group all along, so a backing (before: only a backing beside a
+    green of the other ring lasting past the earlier phase's start was read, and the replay parted from the log 6.7 s
+    in)."""
+    rng = random.Random(2)
+    drawn = [round_trip.random_config(rng) for _ in range(8)][-1]
+    assert "backing 6" in drawn.features
+    got = field_log.infer(round_trip.emulator_log(config_mod.parse(drawn.toml, "backing.toml"), 600, 7)).config()
+    assert got.phases[6].backup_prevent is False
+
+
 def test_a_coordinated_phase_entered_uncalled_is_no_dual_entry() -> None:
     """Under the 70 s plan the coordinated phases 2 and 6 are served every cycle, called or not: the plan, not a dual
     entry, takes the ring there (before: 2 was read as dual entry from such an entry)."""
