@@ -268,7 +268,8 @@ def infer(rows: Sequence[Row], name: str = "field controller") -> Inferred:
     shared = _mode(everyone.elements())
     seen = shared if shared is not None and everyone[shared] >= PASSAGE_SEEN else None  # the intersection's passage
     # Of the detectors a delay leaves calling nothing, those that extend a recalled phase (its gaps counted then).
-    extended = _extenders(rows, detectors, recalled, structure, seen, out)
+    yielding = {r.parameter for r in events if r.code == E.COORD_YIELD_POINT}  # coordinated: the plan holds them
+    extended = _extenders(rows, detectors, recalled - yielding, structure, seen, out)
     for p, (d, _) in extended.items():
         samples[p] = _gaps(rows, p, [d], held)
         gaps[p] = [g for _, g in samples[p]]
@@ -366,8 +367,9 @@ def _extenders(rows: Sequence[Row], detectors: dict[int, int], recalled: set[int
     """A detector that calls nothing the log shows may extend a recalled phase (the emulator logs no call of a
     recalled phase, :mod:`emulator.model.datalogger`), read from the phase's gap-outs: the detector extends the phase
     when its gap-outs past its minimum (3) come one same time after the detector's last off in the green (twice, or
-    once ending the green alone, or once at the intersection's ``passage``), and none that ends the green alone comes
-    while the detector is on or sooner after its off (a vehicle on it would have held the green). A gap-out ends the
+    once ending the green alone, or once at the intersection's ``passage``; on a tie the time that passage gives),
+    and none that ends the green alone comes while the detector is on or sooner after its off (a vehicle on it would
+    have held the green); of several detectors so, the one that shows it most. A gap-out ends the
     green alone when the phase its ring served next was called the tick before (or recalled, or a plan runs) and no
     other phase's yellow begins on its tick; else it is logged later than the gap ran out and shows nothing against
     the detector: a green with nowhere to go rests in green and ends when a call comes, and one at a barrier may have
@@ -415,9 +417,9 @@ def _extenders(rows: Sequence[Row], detectors: dict[int, int], recalled: set[int
         elif r.code == E.PHASE_GAP_OUT and r.parameter in began:
             alone = yellows[r.time] == 1 and _waited(r.parameter, r.time)
             gap_outs[r.parameter].append((began[r.parameter], minimum.get(r.parameter), r.time, alone))
-    found: dict[int, tuple[int, float]] = {}
+    claims: dict[int, list[tuple[int, bool, int, float]]] = defaultdict(list)  # phase -> (times, fits, detector, lag)
     for d, mine in sorted(changes.items()):
-        best: tuple[int, int, float] | None = None
+        best: tuple[int, int, bool, float] | None = None
         for p, ends in gap_outs.items():
             lags: list[tuple[float | None, bool, bool]] = []  # per gap-out: the time since the detector's last
             for green, least, t, alone in ends:  # off in the green (None: none; -1: on), past the minimum, alone
@@ -428,19 +430,23 @@ def _extenders(rows: Sequence[Row], detectors: dict[int, int], recalled: set[int
             counts = Counter(lag for lag, past, _ in lags if past and lag is not None and 0 < lag <= 10)
             if not counts:
                 continue
-            lag, n = counts.most_common(1)[0]
+            # the most frequent time, on a tie the one the intersection's passage gives
+            lag = max(counts, key=lambda g: (counts[g], round(g + TICK.total_seconds(), 1) == passage, -g))
+            n, fits = counts[lag], round(lag + TICK.total_seconds(), 1) == passage
             against = sum(1 for g, _, alone in lags if alone and g is not None and g < lag)
-            shown = (n >= 2 or any(alone and past and g == lag for g, past, alone in lags)
-                     or round(lag + TICK.total_seconds(), 1) == passage)  # else once at a barrier: chance
-            if shown and not against and (best is None or n > best[1]):
-                best = (p, n, lag)
+            shown = n >= 2 or any(alone and past and g == lag for g, past, alone in lags) or fits  # else chance
+            if shown and not against and (best is None or (n, fits) > best[1:3]):
+                best = (p, n, fits, lag)
         if best is not None:
-            p, n, lag = best
-            detectors[d] = p
-            found[p] = (d, round(lag + TICK.total_seconds(), 1))
-            out.guessed.append(f"detector {d}: extends recalled phase {p} (it registers no call; phase {p} gaps out "
-                               f"{lag:g} s after it goes off in the green {n} time(s) past its minimum, never while it "
-                               "is on or sooner after it)")
+            claims[best[0]].append((best[1], best[2], d, best[3]))
+    found: dict[int, tuple[int, float]] = {}
+    for p, mine in sorted(claims.items()):  # the detector that shows it best (the others: chance coincidences)
+        n, _, d, lag = max(mine, key=lambda c: (c[0], c[1], -c[2]))
+        detectors[d] = p
+        found[p] = (d, round(lag + TICK.total_seconds(), 1))
+        out.guessed.append(f"detector {d}: extends recalled phase {p} (it registers no call; phase {p} gaps out "
+                           f"{lag:g} s after it goes off in the green {n} time(s) past its minimum, never while it "
+                           "is on or sooner after it)")
     return found
 
 
