@@ -56,10 +56,13 @@ the log's own events (Indiana enumerations) and says which values it had to gues
   call the log registers (43), where the log registers calls of others or has no detector events (pretimed), or
   whose call registers as its own yellow begins (an Econolite's recall), is recalled: max recall when its greens end
   by force-off or max-out, else min; a detector that calls nothing may extend a recalled phase (its gap-outs come the
-  same time after the detector's off); a phase that began green uncalled beside the other ring's phase at a barrier
-  crossing, twice, is dual entry; a phase with a walk whose every green began one, while the log registers no
-  pedestrian call of it (45) and no push button calls it, has pedestrian recall (:func:`_ped_recalls`: under a plan
-  the pattern's split mode, pedestrianRecall, beside its vehicle recall; free, the phase's recall if it has no other);
+  same time after the detector's off, never sooner nor while it is on; that time is the intersection's passage and
+  the rest the detector's extension); a phase a ring entered at a barrier termination when it had no demand in the
+  new group as the old one's last green ended, and that is not its nearest phase with demand as the group began, is
+  dual entry (once is enough: nothing else makes such an entry), a coordinated phase never (the plan calls it); a
+  phase with a walk whose every green began one, while the log registers no pedestrian call of it (45) and no push
+  button calls it, has pedestrian recall (:func:`_ped_recalls`: under a plan the pattern's split mode,
+  pedestrianRecall, beside its vehicle recall; free, the phase's recall if it has no other);
 - **start-up**: the phases green when the log begins (their first interval event is a begin yellow);
 - **coordination**: the cycle is the spacing of the local zeros (event 150, parameter 5; two at one time are one);
   the coordinated phases are the ones with the most yield point events (151) in the group that has them, else the
@@ -261,7 +264,6 @@ def infer(rows: Sequence[Row], name: str = "field controller") -> Inferred:
     pushes = _in_config(_detector_phases(rows, E.PED_DETECTOR_ON, E.PED_CALL_REGISTERED, phases), "push button",
                         PUSH_BUTTONS, out)
     recalled = _uncalled(rows, phases, structure)
-    _extenders(rows, detectors, recalled, out)
     timers = _delays(rows, detectors, greens, out)
     for d, held in _holds(rows, detectors, greens, out).items():
         timers.setdefault(d, {}).update(held)
@@ -270,6 +272,15 @@ def infer(rows: Sequence[Row], name: str = "field controller") -> Inferred:
     held = {d: timedelta(seconds=max(t.get("extend", 0.0), t.get("carryover", 0.0))) for d, t in timers.items()}
     samples = {p: _gaps(rows, p, [d for d, q in detectors.items() if q == p], held) for p in phases}
     gaps = {p: [g for _, g in mine] for p, mine in samples.items()}
+    everyone = Counter(g for values in gaps.values() for g in values)
+    shared = _mode(everyone.elements())
+    seen = shared if shared is not None and everyone[shared] >= PASSAGE_SEEN else None  # the intersection's passage
+    # Of the detectors a delay leaves calling nothing, those that extend a recalled phase (its gaps counted then).
+    yielding = {r.parameter for r in events if r.code == E.COORD_YIELD_POINT}  # coordinated: the plan holds them
+    extended = _extenders(rows, detectors, recalled - yielding, structure, seen, out)
+    for p, (d, _) in extended.items():
+        samples[p] = _gaps(rows, p, [d], held)
+        gaps[p] = [g for _, g in samples[p]]
     shared = _mode(g for values in gaps.values() for g in values)
     for p in phases:
         counts = Counter(gaps[p])
@@ -278,6 +289,14 @@ def infer(rows: Sequence[Row], name: str = "field controller") -> Inferred:
             out.read.append(f"phase {p}: gap reduction, passage {reduced['passage']:g} s reduced after "
                             f"{reduced['time_before_reduction']} s over {reduced['time_to_reduce']} s to "
                             f"{reduced['min_gap']:g} s (its gap-outs' gaps fall with the green's time)")
+        elif p in extended:  # what its gap-outs show, the intersection's passage and the rest its detector's
+            d, shown = extended[p]
+            timing[p]["passage"] = min(shown, seen) if seen is not None else shown
+            if shown - timing[p]["passage"] >= TICK.total_seconds():
+                timers.setdefault(d, {})["extend"] = round(shown - timing[p]["passage"], 1)
+                out.guessed.append(f"detector {d}: extends phase {p} {timers[d]['extend']:g} s (its gap-outs come "
+                                   f"{shown:g} s after the detector's last tick on; the intersection's passage "
+                                   f"{timing[p]['passage']:g} s, which its greens' starts time alone)")
         elif counts and counts.most_common(1)[0][1] >= PASSAGE_SEEN:
             timing[p]["passage"] = _mode(gaps[p])
         else:
@@ -296,6 +315,11 @@ def infer(rows: Sequence[Row], name: str = "field controller") -> Inferred:
                 timing[p]["max_green"] = shared_max
                 out.guessed.append(f"phase {p}: max green {shared_max} s (it never maxed out: the intersection's most "
                                    "frequent maximum, longer than its longest green)")
+    else:  # nothing maxed out: no maximum is shorter than a green, which may have waited at a barrier past its own
+        top = config_mod.phase_time_range("max_green")[1]
+        for p in phases:
+            longest = math.ceil(max((b - a).total_seconds() for a, b in greens[p]) - 1e-9)
+            timing[p]["max_green"] = max(timing[p]["max_green"], min(longest, top))
     for p, twin in structure.phantom.items():
         timing[p] = {k: v for k, v in timing[twin].items() if k not in ("walk", "ped_clear")}
     logged = sorted(d for d, q in detectors.items() if q == 0)
@@ -314,12 +338,12 @@ def infer(rows: Sequence[Row], name: str = "field controller") -> Inferred:
     _backings(events, greens, structure, timing, out)
     _reextensions(events, greens, structure, timing, out)
     _recycles(events, greens, timing, out)
-    duals = _dual_entries(events, structure, recalled)
+    duals = [p for p in _dual_entries(events, structure, recalled) if p not in coordinated]  # the plan calls those
     for p in duals:
         timing[p]["dual_entry"] = True
     if duals:
-        out.read.append(f"dual entry: phase(s) {', '.join(map(str, duals))} (began green uncalled beside the other "
-                        "ring's phase as the rings crossed a barrier, at least twice)")
+        out.read.append(f"dual entry: phase(s) {', '.join(map(str, duals))} (entered as the rings crossed a barrier "
+                        "when no phase of its ring there had a call)")
     overlaps = _overlaps(events, phases, out)
     out.guessed.append("recalls and dual entry only as said, no red revert or max 2 (the log shows the service, not "
                        "the settings); "
@@ -349,27 +373,92 @@ def _uncalled(rows: Sequence[Row], phases: Sequence[int], structure: Structure) 
     return {p for p in phases if (p not in called or p in logged) and p not in structure.phantom}
 
 
-def _extenders(rows: Sequence[Row], detectors: dict[int, int], recalled: set[int], out: Inferred) -> None:
-    """A detector that calls nothing the log shows may extend a recalled phase (a recalled phase's calls are not
-    logged): the recalled phase whose gap-outs come the same time after its last off most often, at least
-    :data:`PASSAGE_SEEN` times and for a fifth of the phase's gap-outs."""
-    gap_outs = {p: [r.time for r in rows if r.code == E.PHASE_GAP_OUT and r.parameter == p] for p in recalled}
-    for d in [d for d, q in detectors.items() if q == 0]:
-        offs = [r.time for r in rows if r.code == E.DETECTOR_OFF and r.parameter == d]
-        best: tuple[int, int] | None = None
-        for p, times in gap_outs.items():
-            gaps = Counter()
-            for t in times:
-                k = bisect.bisect_right(offs, t) - 1
-                if k >= 0 and (t - offs[k]) <= timedelta(seconds=10):
-                    gaps[round((t - offs[k]).total_seconds(), 1)] += 1
-            n = max(gaps.values(), default=0)
-            if n >= PASSAGE_SEEN and n >= len(times) / 5 and (best is None or n > best[1]):
-                best = (p, n)
+def _extenders(rows: Sequence[Row], detectors: dict[int, int], recalled: set[int], structure: Structure,
+               passage: float | None, out: Inferred) -> dict[int, tuple[int, float]]:
+    """A detector that calls nothing the log shows may extend a recalled phase (the emulator logs no call of a
+    recalled phase, :mod:`emulator.model.datalogger`), read from the phase's gap-outs: the detector extends the phase
+    when its gap-outs past its minimum (3) come one same time after the detector's last off in the green (twice, or
+    once ending the green alone, or once at the intersection's ``passage``; on a tie the time that passage gives),
+    and none that ends the green alone comes while the detector is on or sooner after its off (a vehicle on it would
+    have held the green); of several detectors so, the one that shows it most. A gap-out ends the
+    green alone when the phase its ring served next was called the tick before (or recalled, or a plan runs) and no
+    other phase's yellow begins on its tick; else it is logged later than the gap ran out and shows nothing against
+    the detector: a green with nowhere to go rests in green and ends when a call comes, and one at a barrier may have
+    gapped out before and waited for the other ring (NTCIP 1202 phaseOptions bit 11, simultaneous gap disable, keeps
+    it gapped out), the detector coming on meanwhile. Returns each such phase's detector and its gap-outs' time from
+    the last tick with the call: the phase's passage and the detector's extension together, which only the green's
+    start, timed by the passage alone, tells apart."""
+    gap_outs: dict[int, list[tuple[datetime, datetime | None, datetime, bool]]] = defaultdict(list)  # green, min,
+    # gap-out, whether it ended the green alone
+    began: dict[int, datetime] = {}
+    minimum: dict[int, datetime] = {}
+    yellows = Counter(r.time for r in rows if r.code == E.PHASE_BEGIN_YELLOW)
+    ring_of = {p: r for r in (1, 2) for p in structure.ring(r)}
+    planned = any(r.code == E.COORD_CYCLE_STATE_CHANGE and r.parameter == LOCAL_ZERO for r in rows)
+    starts = {r: [(row.time, row.parameter) for row in rows if row.code == E.PHASE_BEGIN_GREEN
+                  and ring_of.get(row.parameter) == r] for r in (1, 2)}
+    wants: dict[int, list[tuple[datetime, bool]]] = defaultdict(list)  # each phase's call registered (43), dropped
+    for row in rows:
+        if row.code in (E.PHASE_CALL_REGISTERED, E.PHASE_CALL_DROPPED):
+            wants[row.parameter].append((row.time, row.code == E.PHASE_CALL_REGISTERED))
+
+    def _waited(p: int, t: datetime) -> bool:
+        """The phase the ring served next after ``p``'s green ending at ``t`` was called before ``t`` (or is
+        recalled): the green ended when its gap ran out, not when a call came to a green resting with nowhere to go."""
+        mine = starts.get(ring_of.get(p, 0), [])
+        k = bisect.bisect_right(mine, (t, PHASES + 1))
+        if planned:  # under a plan a green never rests: the coordinated phases always want service
+            return True
+        if k == len(mine):
+            return False
+        q = mine[k][1]
+        return q in recalled or _called_at(wants[q], t - TICK)
+
+    changes: dict[int, list[tuple[datetime, bool]]] = defaultdict(list)  # each detector's on (82) and off (81)
+    for r in rows:
+        if r.code in (E.DETECTOR_ON, E.DETECTOR_OFF) and detectors.get(r.parameter) == 0:
+            changes[r.parameter].append((r.time, r.code == E.DETECTOR_ON))
+        elif r.parameter not in recalled:
+            continue
+        elif r.code == E.PHASE_BEGIN_GREEN:
+            began[r.parameter] = r.time
+            minimum.pop(r.parameter, None)
+        elif r.code == E.PHASE_MIN_COMPLETE:
+            minimum[r.parameter] = r.time
+        elif r.code == E.PHASE_GAP_OUT and r.parameter in began:
+            alone = yellows[r.time] == 1 and _waited(r.parameter, r.time)
+            gap_outs[r.parameter].append((began[r.parameter], minimum.get(r.parameter), r.time, alone))
+    claims: dict[int, list[tuple[int, bool, int, float]]] = defaultdict(list)  # phase -> (times, fits, detector, lag)
+    for d, mine in sorted(changes.items()):
+        best: tuple[int, int, bool, float] | None = None
+        for p, ends in gap_outs.items():
+            lags: list[tuple[float | None, bool, bool]] = []  # per gap-out: the time since the detector's last
+            for green, least, t, alone in ends:  # off in the green (None: none; -1: on), past the minimum, alone
+                k = bisect.bisect_left(mine, (t,)) - 1
+                off = mine[k][0] if k >= 0 and mine[k][0] > green else None
+                lag = -1.0 if k >= 0 and mine[k][1] else None if off is None else round((t - off).total_seconds(), 1)
+                lags.append((lag, least is not None and t > least, alone))
+            counts = Counter(lag for lag, past, _ in lags if past and lag is not None and 0 < lag <= 10)
+            if not counts:
+                continue
+            # the most frequent time, on a tie the one the intersection's passage gives
+            lag = max(counts, key=lambda g: (counts[g], round(g + TICK.total_seconds(), 1) == passage, -g))
+            n, fits = counts[lag], round(lag + TICK.total_seconds(), 1) == passage
+            against = sum(1 for g, _, alone in lags if alone and g is not None and g < lag)
+            shown = n >= 2 or any(alone and past and g == lag for g, past, alone in lags) or fits  # else chance
+            if shown and not against and (best is None or (n, fits) > best[1:3]):
+                best = (p, n, fits, lag)
         if best is not None:
-            detectors[d] = best[0]
-            out.guessed.append(f"detector {d}: extends recalled phase {best[0]} (it registers no call; phase "
-                               f"{best[0]} gaps out the same time after it goes off {best[1]} times)")
+            claims[best[0]].append((best[1], best[2], d, best[3]))
+    found: dict[int, tuple[int, float]] = {}
+    for p, mine in sorted(claims.items()):  # the detector that shows it best (the others: chance coincidences)
+        n, _, d, lag = max(mine, key=lambda c: (c[0], c[1], -c[2]))
+        detectors[d] = p
+        found[p] = (d, round(lag + TICK.total_seconds(), 1))
+        out.guessed.append(f"detector {d}: extends recalled phase {p} (it registers no call; phase {p} gaps out "
+                           f"{lag:g} s after it goes off in the green {n} time(s) past its minimum, never while it "
+                           "is on or sooner after it)")
+    return found
 
 
 def _delays(rows: Sequence[Row], detectors: dict[int, int], greens: Mapping[int, list[tuple[datetime, datetime]]],
@@ -429,7 +518,9 @@ def _holds(rows: Sequence[Row], detectors: Mapping[int, int], greens: Mapping[in
            out: Inferred) -> dict[int, dict[str, float]]:
     """Each calling detector whose going off (81), the last of its phase's detectors on, is followed by its phase's
     call dropping (44) the same time later (0.2 s or more: a call dropped on the tick or the next is the actuation's
-    own), at least :data:`PASSAGE_SEEN` times and for :data:`DELAY_SHARE` of such offs: on the phase's green an
+    own), at least :data:`PASSAGE_SEEN` times and for :data:`DELAY_SHARE` of such offs, or every time it is seen,
+    twice at least or on every such off (a phase served seldom shows its detector's extension seldom): on the
+    phase's green an
     extension (vehicleDetectorExtend, "extended from the point of termination, when the phase is Green"), off it a
     carryover; one time seen both ways is a carryover. Returns detector -> its timers."""
     mine: dict[int, set[int]] = defaultdict(set)
@@ -456,7 +547,9 @@ def _holds(rows: Sequence[Row], detectors: Mapping[int, int], greens: Mapping[in
     found: dict[int, dict[str, float]] = {}
     for (d, green), counts in sorted(lags.items()):
         lag, n = counts.most_common(1)[0]
-        if lag < 0.2 or n < max(PASSAGE_SEEN, DELAY_SHARE * offs[(d, green)]):
+        # every off seen so is followed by the drop that time later (twice at least, or every off of the detector)
+        alone = len(counts) == 1 and (n >= 2 or n == offs[(d, green)])
+        if lag < 0.2 or (n < max(PASSAGE_SEEN, DELAY_SHARE * offs[(d, green)]) and not alone):
             continue
         timer = "extend" if green else "carryover"
         found.setdefault(d, {})[timer] = lag
@@ -517,15 +610,17 @@ def _locks(rows: Sequence[Row], detectors: Mapping[int, int], greens: Mapping[in
 
 def _backings(rows: Sequence[Row], greens: Mapping[int, list[tuple[datetime, datetime]]], structure: Structure,
               timing: Mapping[int, dict[str, Any]], out: Inferred) -> None:
-    """A ring that ended a green and next began an earlier phase of its barrier group's order while a phase of the
-    other ring stayed green all along backed into it: conditional service (NTCIP 1202 phaseOptions bit 14) on the
-    phase it backed from when a call across the barrier was on as its green ended (registered, 43, and not dropped,
-    44), Naztec's backing (``backup_prevent = false``) otherwise. The emulator backs only where set so."""
+    """A ring that ended a green and next began an earlier phase of its barrier group's order while the other ring
+    timed in that group (a green of it on after the ring's green ended and begun before the earlier phase's, not with
+    it: both rings clearing and starting the group again together is no backing) backed into it: conditional service
+    (NTCIP 1202 phaseOptions bit 14) on the phase it backed from when a call across the barrier was on as its green
+    ended (registered, 43, and not dropped, 44), Naztec's backing (``backup_prevent = false``) otherwise. The emulator
+    backs only where set so."""
     ring_of = {p: r for r in (1, 2) for p in structure.ring(r)}
     order = {p: i for r in (1, 2) for i, p in enumerate(structure.ring(r))}
     group_of = {p: structure.group_of(p) for p in ring_of}
     starts = sorted((a, b, p) for p, mine in greens.items() for a, b in mine if p in ring_of)
-    by_ring = {r: [(a, b) for a, b, p in starts if ring_of[p] == r] for r in (1, 2)}
+    by_ring = {r: [(a, b, p) for a, b, p in starts if ring_of[p] == r] for r in (1, 2)}
     calls: dict[int, list[tuple[datetime, bool]]] = defaultdict(list)  # each phase's call registered (43), dropped (44)
     for r in rows:
         if r.code in (E.PHASE_CALL_REGISTERED, E.PHASE_CALL_DROPPED) and r.parameter in ring_of:
@@ -538,7 +633,9 @@ def _backings(rows: Sequence[Row], greens: Mapping[int, list[tuple[datetime, dat
             ended, p = previous[r]
             other = by_ring[3 - r]
             k = bisect.bisect_left(other, (ended,)) - 1  # the other ring's last green begun before the yellow
-            if group_of[p] == group_of[q] and order[q] < order[p] and k >= 0 and other[k][1] > begin:
+            timing_on = any(a < begin and b > ended and group_of[x] == group_of[p]
+                            for a, b, x in other[max(k, 0):bisect.bisect_left(other, (begin,))])
+            if group_of[p] == group_of[q] and order[q] < order[p] and timing_on:
                 waiting = any(group_of[x] != group_of[p] and _called_at(calls[x], ended) for x in calls)
                 seen[p]["conditional service" if waiting else "backing"] += 1
         previous[r] = (end, q)
@@ -655,29 +752,62 @@ def _recycles(rows: Sequence[Row], greens: Mapping[int, list[tuple[datetime, dat
 
 
 def _dual_entries(rows: Sequence[Row], structure: Structure, recalled: set[int]) -> list[int]:
-    """The phases that began green with no call since their last green, at a barrier crossing (31 on the tick)
-    beside a phase of the other ring, at least twice: dual entry (NTCIP 1202 v03 phaseOptions bit 10, "Dual Entry
-    Phase - in multi-ring configurations when set to 1 causes the phase to become active upon entry into a
-    concurrency group (crossing a barrier) when no calls exist in its ring within its concurrency group")."""
-    called: set[int] = set()
-    crossing: set[datetime] = {r.time for r in rows if r.code == E.BARRIER_TERMINATION}
-    begins: dict[datetime, list[int]] = defaultdict(list)
-    uncalled: dict[datetime, list[int]] = defaultdict(list)
-    for r in rows:
-        if r.code in (E.PHASE_CALL_REGISTERED, E.PED_CALL_REGISTERED):  # since its last green: a call dropped during
-            called.add(r.parameter)  # the clearance still has the phase served (committed at the green's end)
-        elif r.code == E.PHASE_BEGIN_GREEN:
-            begins[r.time].append(r.parameter)
-            if r.parameter not in called and r.parameter not in recalled and r.time in crossing:
-                uncalled[r.time].append(r.parameter)
-            called.discard(r.parameter)
-    seen: Counter[int] = Counter()
-    ring = {p: r for r in (1, 2) for p in structure.ring(r)}
-    for t, phases in uncalled.items():
-        for p in phases:
-            if any(ring.get(q) != ring.get(p) for q in begins[t]):
-                seen[p] += 1
-    return sorted(p for p, n in seen.items() if n >= 2)
+    """The phases a ring entered as the rings crossed a barrier though neither its demand then nor its demand as the
+    new group began made it go there: dual entry (NTCIP 1202 v03 phaseOptions bit 10, "Dual Entry Phase - in
+    multi-ring configurations when set to 1 causes the phase to become active upon entry into a concurrency group
+    (crossing a barrier) when no calls exist in its ring within its concurrency group"). The rings commit to the new
+    group as the last green of the old one ends (NTCIP 1202 PhaseNext, "determined at the end of the green interval
+    of the terminating phase"), the last begin yellow (8) before the group's first green: a ring with demand there
+    goes to it; one without takes its dual entry phase then, or else the nearest phase with demand in its order as
+    the group begins (the emulator's sequencer). So the entry shows a dual entry when the ring had no demand in the
+    group at the yellow and the phase it entered, at the barrier termination (31), is not its nearest with demand
+    then. Demand: a vehicle call registered (43) and not dropped (44), a pedestrian call (45) not yet served (by a
+    walk, 21, or for a phase that never walks by its green, 1), a recall (a phase the log shows served without its
+    calls); for the nearest, the calls registered on the tick and the next too (the emulator logs a push's 45 on
+    the tick after the green it latched for began). Read once seen: nothing else makes such an entry. Only in a log
+    that registers and drops calls: one without them shows no demand at all."""
+    codes = {r.code for r in rows}
+    if E.PHASE_CALL_REGISTERED not in codes or E.PHASE_CALL_DROPPED not in codes:
+        return []
+    ring_of = {p: r for r in (1, 2) for p in structure.ring(r)}
+    group_of = {p: structure.group_of(p) for p in ring_of}
+    walking = {r.parameter for r in rows if r.code == E.PED_BEGIN_WALK}
+    registered = {(r.time, r.parameter) for r in rows if r.code in (E.PHASE_CALL_REGISTERED, E.PED_CALL_REGISTERED)}
+    calls: set[int] = set()
+    peds: set[int] = set()
+    committed: set[int] | None = None  # the phases with demand at the last begin yellow
+    last_group: dict[int, int] = {}  # ring -> the group of its last green
+    seen: set[int] = set()
+    for _, tick in itertools.groupby(rows, key=lambda r: r.time):
+        events = list(tick)
+        for r in events:  # the calls of the tick count for a green it starts (read before the rings move)
+            if r.code == E.PHASE_CALL_REGISTERED:
+                calls.add(r.parameter)
+            elif r.code == E.PHASE_CALL_DROPPED:
+                calls.discard(r.parameter)
+            elif r.code == E.PED_CALL_REGISTERED:
+                peds.add(r.parameter)
+        crossing = committed is not None and any(r.code == E.BARRIER_TERMINATION for r in events)
+        for r in events:
+            p = r.parameter
+            if r.code != E.PHASE_BEGIN_GREEN or p not in ring_of:
+                continue
+            ring = ring_of[p]
+            if crossing and last_group.get(ring, group_of[p]) != group_of[p]:
+                mine = [q for q in structure.ring(ring) if group_of[q] == group_of[p]]
+                nearest = next((q for q in mine if q in calls | peds | recalled
+                                or (r.time + TICK, q) in registered), None)
+                if not (committed | recalled) & set(mine) and nearest != p:
+                    seen.add(p)
+            last_group[ring] = group_of[p]
+        for r in events:
+            if r.code == (E.PED_BEGIN_WALK if r.parameter in walking else E.PHASE_BEGIN_GREEN):
+                peds.discard(r.parameter)
+        if any(r.code == E.PHASE_BEGIN_GREEN for r in events):
+            committed = None  # a ring entering the group later was called there
+        if any(r.code == E.PHASE_BEGIN_YELLOW for r in events):
+            committed = calls | peds
+    return sorted(seen)
 
 
 def _recall(rows: Sequence[Row], p: int, timing: dict[str, Any], out: Inferred) -> None:
@@ -907,12 +1037,30 @@ def _timing(rows: Sequence[Row], p: int, greens: Sequence[tuple[datetime, dateti
     # utahudot/udot-atspm Atspm/Data/Enums/IndianaEnumerations.cs). The MaxTime of 638572533917628534.xml maxes 2 out
     # 55.6 s into its green, 46.2 s after its phase check.
     maxed = _max_timings(rows, p)
-    longest = max(((b - a).total_seconds() for a, b in greens), default=0.0)
+    longest = _longest_timed(rows, p, greens)
     if maxed:
         longest = t["maxed"] = min(maxed)
     t["max_green"] = _within(p, "max_green", max(t["min_green"], t.get("walk", 0) + t.get("ped_clear", 0),
                                                  math.ceil(longest - 1e-9)), 1, top, out)
     return t
+
+
+def _longest_timed(rows: Sequence[Row], p: int, greens: Sequence[tuple[datetime, datetime]]) -> float:
+    """The longest time a green of ``p`` ran with its maximum timing and ended by itself: from the first conflicting
+    call registered against it (phase check, 2: "MAX timing begins") to its end (no other phase's yellow on the
+    tick), which no maximum is shorter than. A green with no conflicting call (resting, or stretched by a recycled
+    walk, which waits for no maximum then) bounds nothing, nor one that ends with the other ring's at a barrier: it
+    may have maxed out and waited there. In a log without phase checks, the longest green."""
+    checks = [r.time for r in rows if r.code == E.PHASE_CHECK and r.parameter == p]
+    if not checks:
+        return max(((b - a).total_seconds() for a, b in greens), default=0.0)
+    yellows = Counter(r.time for r in rows if r.code == E.PHASE_BEGIN_YELLOW)
+    longest = 0.0
+    for a, b in greens:
+        k = bisect.bisect_left(checks, a)
+        if k < len(checks) and checks[k] < b and yellows[b] == 1:
+            longest = max(longest, (b - checks[k]).total_seconds())
+    return longest
 
 
 def _within(p: int, key: str, value: Any, low: float, high: float, out: Inferred) -> Any:

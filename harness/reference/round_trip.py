@@ -13,8 +13,9 @@ detector and push-button inputs, then a minute without.
 inputs into the model under it (:mod:`harness.reference.replay_virtual`) and gives the whole-log match
 (:mod:`harness.reference.replay_match`).
 
-``python -m harness.reference.round_trip --configs 50`` prints each config's match and features and the share at
->= 99 %, and writes ``reports/replay/round_trip.json``.
+``python -m harness.reference.round_trip --configs 50`` prints each config's match and features, for a config below
+99 % the first of its log's events the replay missed (:func:`first_miss`: where the replay parts from the log, where
+to look for what the inference got wrong), and the share at >= 99 %, and writes ``reports/replay/round_trip.json``.
 """
 
 from __future__ import annotations
@@ -26,16 +27,17 @@ import sys
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
-from datetime import datetime
+from datetime import datetime, timedelta
 from pathlib import Path
 
 from emulator.model.controller import Controller
 from emulator.model.datalogger import DataLogger
 from harness.reference import field_log, replay_virtual
 from harness.reference.hires_file import FieldLogError, Row
-from harness.reference.replay_match import match_table, overall
+from harness.reference.replay_match import JUDGED, Logged, match_table, overall
 from hils.protocol import config as config_mod
 from hils.protocol.config import IntersectionConfig
+from hils.protocol.hires import EventCode as E
 
 BASE = Path(config_mod.__file__).parents[1] / "data" / "four_leg.toml"
 PLAN = """
@@ -137,16 +139,46 @@ def emulator_log(cfg: IntersectionConfig, seconds: int, seed: int, start: dateti
     return [Row(e.time, e.code, e.parameter) for e in log.events()]
 
 
-def round_trip(drawn: Drawn, seconds: int, seed: int) -> float | None:
-    """The whole-log match of the emulator's log under ``drawn`` replayed into the config inferred from it (None:
-    the log was refused)."""
+@dataclass(frozen=True, slots=True)
+class Trip:
+    """A round trip's whole-log match (None: the log was refused) and, below 100 %, the first of the log's judged
+    events the replay missed, said as where to look."""
+
+    share: float | None
+    first_miss: str = ""
+
+
+def round_trip(drawn: Drawn, seconds: int, seed: int) -> Trip:
+    """The whole-log match of the emulator's log under ``drawn`` replayed into the config inferred from it."""
     rows = emulator_log(config_mod.parse(drawn.toml, "round_trip.toml"), seconds, seed)
     try:
         inferred = field_log.infer(rows).config()
-    except FieldLogError:
-        return None
+    except FieldLogError as e:
+        return Trip(None, str(e))
     ran = replay_virtual.run(rows, inferred)
-    return overall(match_table(rows, ran.events))
+    return Trip(overall(match_table(rows, ran.events)), first_miss(rows, ran.events))
+
+
+def first_miss(rows: Sequence[Row], bench: Sequence[Logged]) -> str:
+    """The earliest judged event of ``rows`` that ``bench`` did not log within 1 s (each bench event matched once,
+    nearest first, as :func:`harness.reference.replay_match.match_table` matches), with what the bench logged of that
+    type and parameter nearest to it; empty when there is none. A replay parts from its log there first."""
+    free: dict[tuple[int, int], list] = {}
+    for e in bench:
+        if e.code in JUDGED:
+            free.setdefault((e.code, e.parameter), []).append(e.time)
+    tolerance = timedelta(seconds=1)
+    for r in sorted((r for r in rows if r.code in JUDGED), key=lambda r: r.time):
+        pool = free.get((r.code, r.parameter), [])
+        near = [k for k, t in enumerate(pool) if abs(t - r.time) <= tolerance]
+        if near:
+            del pool[min(near, key=lambda k: abs(pool[k] - r.time))]
+            continue
+        nearest = min(pool, key=lambda t: abs(t - r.time), default=None)
+        said = "none" if nearest is None else f"{(nearest - r.time).total_seconds():+.1f} s"
+        return (f"first missed: event {r.code} ({E(r.code).name.lower().replace('_', ' ')}) of {r.parameter} at "
+                f"{(r.time - rows[0].time).total_seconds():.1f} s (the replay's nearest: {said})")
+    return ""
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -162,10 +194,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     wall = time.perf_counter()
     for k in range(args.configs):
         drawn = random_config(rng)
-        share = round_trip(drawn, args.seconds, seed=k)
-        results.append({"match_percent": share, "features": list(drawn.features)})
+        trip = round_trip(drawn, args.seconds, seed=k)
+        share = trip.share
+        results.append({"match_percent": share, "features": list(drawn.features), "first_miss": trip.first_miss})
         print(f"{k + 1:>4}/{args.configs}  {'refused' if share is None else f'{share:5.1f} %'}  "
-              f"{', '.join(drawn.features)}", flush=True)
+              f"{', '.join(drawn.features)}" + (f"\n{'':>12}{trip.first_miss}" if share is None or share < 99 else ""),
+              flush=True)
     good = sum(1 for r in results if r["match_percent"] is not None and r["match_percent"] >= 99)
     print(f"replayed at >= 99 %: {good} of {args.configs} configs ({100 * good / args.configs:.0f} %), "
           f"{time.perf_counter() - wall:.0f} s")
