@@ -298,7 +298,10 @@ class Middleware:
 
     def entering(self, state: State) -> simpy.Event:
         """An event that fires the next time the manager enters ``state`` (not if it is there now)."""
-        return self._entering.setdefault(state, self.env.event())
+        waiting = self._entering.get(state)
+        if waiting is None:  # made once per entry: a decision asks each intersection for it twice
+            waiting = self._entering[state] = self.env.event()
+        return waiting
 
     def wait_idle(self) -> simpy.Event:
         return self.wait_for(State.IDLE)
