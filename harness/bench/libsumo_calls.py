@@ -41,7 +41,9 @@ def calls(side: str, scenario: str, seed: int, duration: float = 3600.0) -> Coun
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m harness.bench.libsumo_calls", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--scenario", default="grid4x4", help="a RESCO scenario (grid4x4)")
+    from hils.protocol.resco import MAPS
+
+    parser.add_argument("--scenario", default="grid4x4", choices=list(MAPS), help="a RESCO scenario (grid4x4)")
     parser.add_argument("--seed", type=int, default=0, help="the episode's seed (0)")
     args = parser.parse_args(argv)
     counted = {side: calls(side, args.scenario, args.seed) for side in SIDES}
