@@ -17,7 +17,9 @@ Rules of this file
   anything. A (state, kind) pair not in the table is an error naming both. Handlers never choose the
   next state.
 - Timers are identified by a token. A timer that was superseded or belongs to an older command has
-  a stale token: its expiry is classified STALE_TIMER and changes nothing. Poll results carry the
+  a stale token: its expiry is classified STALE_TIMER and changes nothing (:meth:`Manager.stale` says so
+  before the shell makes the event: most timers go stale, a keepalive at every SET, a transition timer at
+  every verified command, and the shell need not feed an expiry that does nothing). Poll results carry the
   polling period they were sent in (``epoch``, one more at every halt): a result from before the last
   halt is STALE_POLL and changes nothing.
 
@@ -412,6 +414,17 @@ class Manager:
                               f"{self.preempted_since:.1f} s): nothing is commanded until it reports the preemption "
                               "over")
 
+    def stale(self, kind: TimerKind, token: int) -> bool:
+        """True when the expiry of timer ``token`` of ``kind`` would be STALE_TIMER now (it changes nothing, in
+        every state); looks, never changes."""
+        if kind is TimerKind.CONTROL:
+            return token != self._control_token or self.running is None
+        if kind is TimerKind.KEEPALIVE:
+            return token != self._keepalive_token
+        if kind is TimerKind.RECOVER:
+            return token != self._recover_token
+        return self.pending is None or token != self.pending.token
+
     def handle(self, event: Event) -> list[Effect]:
         kind = self._classify(event)
         entry = _TRANSITIONS.get((self.mode, kind))
@@ -459,19 +472,17 @@ class Manager:
                 return Ev.CALLS_LEFT if t - since >= self.watch else Ev.CALLS_WATCHED
             case ScheduleRequested(schedule=schedule):
                 return Ev.SCHEDULE if schedule.orders else Ev.SCHEDULE_CLEAR
-            case TimerExpired(kind=TimerKind.CONTROL, token=token):
-                if token != self._control_token or self.running is None:
-                    return Ev.STALE_TIMER
+            case TimerExpired(kind=kind, token=token) if self.stale(kind, token):
+                return Ev.STALE_TIMER
+            case TimerExpired(kind=TimerKind.CONTROL):
                 schedule = self.running.schedule
                 last = not schedule.open and self.running.next_instant == schedule.instants[-1]
                 return Ev.SCHEDULE_DONE if last else Ev.CONTROL_DUE
-            case TimerExpired(kind=kind, token=token):
+            case TimerExpired(kind=kind):
                 if kind is TimerKind.KEEPALIVE:
-                    return Ev.KEEPALIVE_DUE if token == self._keepalive_token else Ev.STALE_TIMER
+                    return Ev.KEEPALIVE_DUE
                 if kind is TimerKind.RECOVER:
-                    return Ev.RECOVERY_DUE if token == self._recover_token else Ev.STALE_TIMER
-                if self.pending is None or token != self.pending.token:
-                    return Ev.STALE_TIMER
+                    return Ev.RECOVERY_DUE
                 return Ev.TRANSITION_EXPIRED if kind is TimerKind.TRANSITION else Ev.DURATION_ELAPSED
             case StepTimed(step=step, took=took):
                 if took <= step:

@@ -74,6 +74,8 @@ __all__ = [
 
 Reward = Callable[[Observation, Observation], float]
 STATES = (State.IDLE, State.ON_HOLD, State.TIMEOUT, State.PREEMPTED)
+#: The integer scalars a selection takes as they are: Python's and numpy's (not bool, which the general path refuses).
+_INDICES = frozenset({int, np.int8, np.int16, np.int32, np.int64, np.uint8, np.uint16, np.uint32, np.uint64})
 
 
 class EnvOptionError(UserError, ValueError):
@@ -177,6 +179,10 @@ class IntersectionAdapter:
 
     def action(self, action: Any) -> Any:
         """What the Testbed takes: a pair for selection, 0/1 for switch, x in [0, 1] for duration."""
+        # What an action space's sample() gives (a numpy integer), taken without building an array
+        pairs = self.config.pairs
+        if self.action_type is ActionType.SELECTION and type(action) in _INDICES and 0 <= action < len(pairs):
+            return pairs[action]
         value = np.asarray(action)
         if self.action_type is ActionType.SELECTION:
             if value.size != 1 or not np.issubdtype(value.dtype, np.integer) \

@@ -76,6 +76,7 @@ from hils.control.manager_io import (
     TimeoutEntered,
     TimeoutReason,
     TimerExpired,
+    TimerKind,
     Verified,
     WatchCalls,
 )
@@ -298,7 +299,10 @@ class Middleware:
 
     def entering(self, state: State) -> simpy.Event:
         """An event that fires the next time the manager enters ``state`` (not if it is there now)."""
-        return self._entering.setdefault(state, self.env.event())
+        waiting = self._entering.get(state)
+        if waiting is None:  # made once per entry: a decision asks each intersection for it twice
+            waiting = self._entering[state] = self.env.event()
+        return waiting
 
     def wait_idle(self) -> simpy.Event:
         return self.wait_for(State.IDLE)
@@ -516,8 +520,7 @@ class Middleware:
                 log.warning("%s", detail)
                 self.log.emit(Kind.CONTROLS_RESET, detail=detail)
             case StartTimer(kind, delay, token):
-                self.env.timeout(delay).callbacks.append(
-                    lambda _ev, kind=kind, token=token: self._feed(TimerExpired(self.env.now, kind, token)))
+                self.env.timeout(delay).callbacks.append(lambda _ev, kind=kind, token=token: self._expired(kind, token))
             case Dropped(action_id, state):
                 self.log.emit(Kind.ACTION_DROPPED, action_id=action_id, state=state)
             case Refused():
@@ -580,6 +583,11 @@ class Middleware:
                     log.warning("could not clear the calls at the end of the run: %s", error)
                 if self._closed is not None:
                     self._closed.succeed()
+
+    def _expired(self, kind: TimerKind, token: int) -> None:
+        """A timer ran out: fed to the manager, unless it says the expiry changes nothing (most timers go stale)."""
+        if not self.manager.stale(kind, token):
+            self._feed(TimerExpired(self.env.now, kind, token))
 
     def _send(self, phases: frozenset[int], purpose: Purpose, command_id: int | None) -> None:
         """SET VehCall to ``phases``; logs the SET and its answer, and feeds the answer back."""

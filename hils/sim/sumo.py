@@ -260,9 +260,26 @@ class Light:
         now, read, departed, arrived = self._readings.read(self._lanes)
         states = [read[n] for n in self._lanes]
         halting = [state.halting for state in states].__getitem__
-        movements = {p: MovementState(p, sum(map(halting, inc)), sum(map(halting, out)))
+        movements = {p: _movement(p, sum(map(halting, inc)), sum(map(halting, out)))
                      for p, inc, out in self._movement_places}
         return TrafficState(now, dict(zip(self._lanes, states, strict=True)), movements, departed, arrived)
+
+
+#: Movement states made so far, by their fields: a grid's sixteen lights make a hundred and twenty-eight at every
+#: decision, mostly the same few small queues again, and a frozen dataclass costs several times a dict lookup to make.
+#: Values, so one object serves every light and decision that has it; cleared past a size no run of queues reaches.
+_MOVEMENTS: dict[tuple[int, int, int], MovementState] = {}
+_MOVEMENTS_KEPT = 1 << 16
+
+
+def _movement(phase: int, upstream: int, downstream: int) -> MovementState:
+    key = (phase, upstream, downstream)
+    made = _MOVEMENTS.get(key)
+    if made is None:
+        if len(_MOVEMENTS) >= _MOVEMENTS_KEPT:
+            _MOVEMENTS.clear()
+        made = _MOVEMENTS[key] = MovementState(phase, upstream, downstream)
+    return made
 
 
 #: What a lane without vehicles reads, known without asking SUMO twice more (most lanes of a network are empty at any

@@ -766,9 +766,11 @@ class ManagerMachine(RuleBasedStateMachine):
         else:
             live = m.pending is not None and m.pending.token == token
         mode = m.mode
+        stale = m.stale(kind, token)  # the shell feeds no expiry the manager calls stale: it must change nothing
+        assert stale or live, "the manager calls live a timer that is not"
         effects = self.feed(TimerExpired(self.t, kind, token))
         self.fired.add(token)
-        if not live:
+        if not live or stale:
             assert effects == [] and m.mode is mode, "a stale timer had an effect"
         if kind is TimerKind.RECOVER and live:
             assert effects == [RecoveryStarted(), ReadController()] and m.mode is Mode.RECOVERING
@@ -848,6 +850,7 @@ class ManagerMachine(RuleBasedStateMachine):
         else:
             kind = data.draw(st.sampled_from(TimerKind), label="kind")
             token = data.draw(st.integers(-3, 0), label="token")
+            assert self.manager.stale(kind, token)
             assert self.feed(TimerExpired(t, kind, token)) == []
             assert self.manager.mode is mode
 

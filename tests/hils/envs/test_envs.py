@@ -142,6 +142,32 @@ def test_numpy_and_plain_actions_are_accepted() -> None:
             env.close()
 
 
+def test_a_selection_taken_as_an_integer_scalar_is_the_one_its_array_gives() -> None:
+    """The adapter takes Python's and numpy's integer scalars without building an array: every value of every such
+    type gives the pair (or the refusal) that the same value as a 0-d array gives; bools stay refused."""
+    from hils.control.actions import ActionType
+    from hils.envs.intersection import IntersectionAdapter
+
+    adapter = IntersectionAdapter(load(data_path("four_leg.toml")), ActionType.SELECTION)
+    n = len(adapter.config.pairs)
+
+    def taken(action: object) -> object:
+        try:
+            return adapter.action(action)
+        except EnvOptionError as exc:
+            return str(exc).split(": ", 1)[1]  # what is allowed (the value itself is spelt as each type spells it)
+
+    kinds = (int, np.int8, np.int16, np.int32, np.int64, np.uint8, np.uint16, np.uint32, np.uint64)
+    for kind in kinds:
+        for value in (0, 1, n - 1, n, n + 7, *((-1, -n) if not np.issubdtype(kind, np.unsignedinteger) else ())):
+            assert taken(kind(value)) == taken(np.array(value, dtype=kind if kind is not int else np.int64)), \
+                (kind, value)
+    assert taken(0) == adapter.config.pairs[0] and taken(np.int64(n - 1)) == adapter.config.pairs[-1]
+    for refused in (True, np.bool_(False), n, -1, 2**70, 1.0):
+        with pytest.raises(EnvOptionError, match=r"selection action .*: allowed: an integer in \["):
+            adapter.action(refused)
+
+
 def test_rewards_named_and_callable() -> None:
     seen: list[tuple[float, float]] = []
 

@@ -353,3 +353,17 @@ def test_advancing_several_steps_at_once_is_stepping_them_one_by_one(config, mea
     assert stretched[1] == single[1] and len(single[1]) > 20
     assert stretched[2] == single[2]
     assert (single[2].mean_delay is not None) is measure
+
+
+def test_a_movement_state_is_made_once_per_value_and_the_store_of_them_stays_bounded(monkeypatch) -> None:
+    """Every light's traffic state at every decision takes its movement states from one store of values: the same
+    fields give the same object, equal to one made anew; the store empties once it holds its bound."""
+    from hils.sim import sumo as sumo_mod
+
+    first, again = sumo_mod._movement(2, 3, 1), sumo_mod._movement(2, 3, 1)
+    assert first is again and first == sumo_mod.MovementState(2, 3, 1) and first.pressure == 2
+    assert sumo_mod._movement(2, 1, 3) != first
+    monkeypatch.setattr(sumo_mod, "_MOVEMENTS_KEPT", len(sumo_mod._MOVEMENTS) + 1)
+    sumo_mod._movement(16, 999, 998)  # the last one the bound lets in
+    assert sumo_mod._movement(16, 999, 997) == sumo_mod.MovementState(16, 999, 997)
+    assert len(sumo_mod._MOVEMENTS) == 1
