@@ -71,7 +71,7 @@ from emulator.model.coordinated import Coordinated
 from emulator.model.coordination import Coordinator
 from emulator.model.detectors import Detectors
 from emulator.model.inputs import Inputs, Reader
-from emulator.model.monitor import Lamps, Monitor
+from emulator.model.monitor import Monitor
 from emulator.model.overlaps import Overlaps, Phases
 from emulator.model.pedestrians import PedCalls
 from emulator.model.preempted import Preempted
@@ -91,7 +91,7 @@ from emulator.model.ring import (
 )
 from emulator.model.sequencer import Sequencer
 from emulator.model.spat import SignalTiming, announce
-from emulator.model.status import Images
+from emulator.model.status import Image, Images
 from hils.protocol.config import IntersectionConfig, NextPhaseLock
 from hils.protocol.ntcip import ControlColumn, ShortAlarm, UnitControlStatus, UnitFlashStatus
 from hils.protocol.timegrid import Grid
@@ -157,7 +157,7 @@ class Controller:
         self._status_seen: tuple = ()
         self.images = Images(config)
         self.quiet = QuietTime(self)
-        self._status: tuple[frozenset[int], ...] | None = None  # the image shown now
+        self._status: Image | None = None  # the image shown now
         self.reset()
 
     # --- lifecycle -------------------------------------------------------------------
@@ -446,8 +446,7 @@ class Controller:
                 self.recorder.changed(r, reason)
 
     def _monitor(self) -> None:
-        fault = self.monitor.watch(self._status, lambda: Lamps(self.greens, self.yellows, self.overlap_greens,
-                                                                self.overlap_yellows), self.tick)
+        fault = self.monitor.watch(self._status, self.tick)
         if fault is not None:
             log.error("conflict monitor: %s at tick %d: flash", fault, self.tick)
             self.flash_status = UnitFlashStatus.MMU
