@@ -87,7 +87,7 @@ from emulator.model.overlaps import Show
 from emulator.model.ring import DWELL, GREEN, RED_CLEAR, YELLOW, Ring
 from hils.protocol.config import Recall
 from hils.protocol.hires import MAX_PARAMETER, CycleState, Event, EventCode, split_code
-from hils.protocol.ntcip import ControlColumn, CoordCorrectionMode, PreemptState, UnitFlashStatus
+from hils.protocol.ntcip import ControlColumn, CoordCorrectionMode, PreemptState, UnitControlStatus, UnitFlashStatus
 
 # The codes as plain ints: the logger names a few at every interval change, and Python 3.11's EnumType.__getattr__
 # makes each EventCode.X lookup about ten times a plain attribute's.
@@ -96,7 +96,7 @@ E = SimpleNamespace(**{code.name: int(code) for code in EventCode})
 _TERMINATIONS = {Termination.GAP_OUT: E.PHASE_GAP_OUT, Termination.MAX_OUT: E.PHASE_MAX_OUT,
                  Termination.FORCE_OFF: E.PHASE_FORCE_OFF}
 # Bound once, likewise: the logger reads them at every step or interval change.
-STARTUP_FLASH = int(UnitFlashStatus.STARTUP)
+STARTUP_FLASH = UnitFlashStatus.STARTUP
 YIELD = Termination.YIELD
 CYCLE_FREE, IN_STEP, DWELLING = CycleState.FREE, CycleState.IN_STEP, CycleState.TRANSITION_DWELL
 SUBTRACTING, ADDING = CycleState.TRANSITION_SUBTRACT, CycleState.TRANSITION_ADD
@@ -162,8 +162,8 @@ class _Seen:
     ped_calls: frozenset[int] = frozenset()
     walks: frozenset[int] = frozenset()
     clears: frozenset[int] = frozenset()
-    flash: int = 0
-    control: int = 0
+    flash: UnitFlashStatus | None = None
+    control: UnitControlStatus | None = None
     pattern: int | None = None
     plan: Plan | None = None
     state: CycleState | None = None
@@ -271,7 +271,7 @@ class DataLogger:
             if checking and not green.checking:
                 self._tick.append((E.PHASE_CHECK, green.phase))
             green.checking = checking
-        if self._seen.flash == STARTUP_FLASH and not c.flashing:
+        if self._seen.flash is STARTUP_FLASH and not c.flashing:
             self._intervals()  # start-up flash over: the start-up intervals begin
         self._read()
         self._flush()
@@ -421,12 +421,12 @@ class DataLogger:
                 if state is not seen.preempts.get(n, PreemptState.NOT_ACTIVE) and state in _PREEMPT:
                     self._tick.append((_PREEMPT[state], n))
             seen.preempts = dict(c.preemptor.states)
-        if int(c.flash_status) != seen.flash:
-            seen.flash = int(c.flash_status)
-            self._tick.append((E.UNIT_FLASH_STATUS_CHANGE, seen.flash))
-        if int(c.control_status) != seen.control:
-            seen.control = int(c.control_status)
-            self._tick.append((E.UNIT_CONTROL_STATUS_CHANGE, seen.control))
+        if c.flash_status is not seen.flash:
+            seen.flash = c.flash_status
+            self._tick.append((E.UNIT_FLASH_STATUS_CHANGE, int(seen.flash)))
+        if c.control_status is not seen.control:
+            seen.control = c.control_status
+            self._tick.append((E.UNIT_CONTROL_STATUS_CHANGE, int(seen.control)))
         self._coordination()
 
     def _coordination(self) -> None:
