@@ -158,7 +158,7 @@ class _Seen:
     """What the controller showed after the last step (mutable: the logger's memory of it)."""
 
     inputs: Inputs | None = None  # the controller's inputs the sets were read from
-    sets: dict[str, frozenset[int]] = field(default_factory=dict)
+    sets: dict[str, frozenset[int]] = field(default_factory=lambda: dict.fromkeys(_ON_OFF, frozenset()))
     ped_calls: frozenset[int] = frozenset()
     walks: frozenset[int] = frozenset()
     clears: frozenset[int] = frozenset()
@@ -378,7 +378,7 @@ class DataLogger:
                 "preempts": c.preemptor.control,
             }
             for name, numbers in now.items():
-                before = seen.sets.get(name, frozenset())
+                before = seen.sets[name]
                 if numbers != before:
                     on, off = _ON_OFF[name]
                     for n in numbers - before:
@@ -386,13 +386,13 @@ class DataLogger:
                     for n in before - numbers:
                         self._tick.append((clock, off, n))
             seen.sets = now
-        # The controller keeps each of these sets (and dicts) while it holds the same numbers: most steps
-        # change none of them.
+        # The controller keeps each of these sets (and dicts) while it holds the same numbers, but the walks and
+        # pedestrian clearances, which each status image holds anew: most steps change none of them.
         if c.peds.calls is not seen.ped_calls:
             for p in c.peds.calls - seen.ped_calls - self._no_ped_events:
                 self._tick.append((clock, E.PED_CALL_REGISTERED, p))
             seen.ped_calls = c.peds.calls
-        if c.walks is not seen.walks or c.ped_clears is not seen.clears:
+        if c.walks != seen.walks or c.ped_clears != seen.clears:
             for p in c.walks - seen.walks:
                 self._tick.append((clock, E.PED_BEGIN_WALK, p))
             for p in c.ped_clears - seen.clears:
