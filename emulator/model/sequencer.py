@@ -296,9 +296,13 @@ class Sequencer:
             ready[r.number] = r.target is None if r.interval is DWELL else self.ending(r, inputs) is not None
         if True not in ready.values():
             return [], {}  # most ticks: every ring is timing
-        wish = {r.number: self.wish(r, demand, inputs) for r in self.rings if ready[r.number]}
-        across = {n: q for n, q in wish.items() if q is not None and self._beyond(q)}
-        all_ready = all(ready.values())
+        wish, across = {}, {}
+        for r in self.rings:
+            if ready[r.number]:
+                q = wish[r.number] = self.wish(r, demand, inputs)
+                if q is not None and self._beyond(q):
+                    across[r.number] = q
+        all_ready = False not in ready.values()
         commits = []
         for r in self.rings:
             q = wish.get(r.number)
