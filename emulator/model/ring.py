@@ -299,9 +299,14 @@ class Ring:
         passage and maximum (a running timer only) and its minimum when ``minimum`` says it matters."""
         interval = self.interval
         if interval is GREEN:
-            ticks = self.ticks
-            ahead = [threshold - ticks for threshold in (self.minimum if minimum else 0, self.walk,
-                                                         self.walk + self.ped_clear) if ticks < threshold]
+            ticks, walked = self.ticks, self.walk + self.ped_clear
+            ahead = []  # appended one by one: a comprehension costs more than the two or three tests
+            if minimum and ticks < self.minimum:
+                ahead.append(self.minimum - ticks)
+            if ticks < self.walk:
+                ahead.append(self.walk - ticks)
+            if ticks < walked:
+                ahead.append(walked - ticks)
             if self.gap and self.gap < self.allowed():
                 ahead.append(self._gap_out_in())
             if self.max_ticks and self.max_ticks < self.maximum:
