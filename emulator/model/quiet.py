@@ -42,6 +42,7 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
+from emulator.model import ring
 from emulator.model.overlaps import Phases
 from hils.protocol.ntcip import UnitFlashStatus
 
@@ -109,8 +110,7 @@ class QuietTime:
             c.detectors.skip(n)
         if c.config.preempts:
             c.preemptor.skip(n)
-        for r in c.rings:
-            r.skip(n)
+        ring.skip(c.rings, n)
 
     def _units(self) -> int | None:
         """The least deadline of the units but the backup timer (None: none will act). The sequencer, the costliest

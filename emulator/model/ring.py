@@ -57,7 +57,7 @@ each of its timers reaches its next threshold, as the controller's quiet time as
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from enum import StrEnum
 
@@ -334,14 +334,17 @@ class Ring:
                 and (self.max_ticks > 0) == maximum_runs(conflict, max_recall)
                 and (self.reduction is None or (self.reducing > 0) == conflict))
 
-    def skip(self, n: int) -> None:
-        """``n`` quiet ticks: the interval and the green's running timers count (a running gap or maximum timer is
-        above zero in quiet time: an extending green resets its gap every tick, a maximum timer held reset is 0)."""
-        if self.interval is not DWELL:
-            self.ticks += n
-        if self.gap:
-            self.gap += n
-        if self.max_ticks:
-            self.max_ticks += n
-        if self.reducing:
-            self.reducing += n
+
+def skip(rings: Iterable[Ring], n: int) -> None:
+    """``n`` quiet ticks of ``rings``: each interval and each green's running timers count (a running gap or maximum
+    timer is above zero in quiet time: an extending green resets its gap every tick, a maximum timer held reset is
+    0). One call for the rings: quiet time skips at every read and write of the controller."""
+    for r in rings:
+        if r.interval is not DWELL:
+            r.ticks += n
+        if r.gap:
+            r.gap += n
+        if r.max_ticks:
+            r.max_ticks += n
+        if r.reducing:
+            r.reducing += n
