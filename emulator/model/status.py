@@ -53,10 +53,13 @@ class Images:
 
     def of(self, rings: Sequence[Ring], overlaps: Overlaps, flashing: bool) -> Image:
         """The image of what ``rings`` and ``overlaps`` show now (all red when ``flashing``)."""
-        key = None if flashing else (tuple([
-            (r.interval, r.phase, r.target,
-             r.interval is GREEN and (r.ticks < r.walk) + (r.ticks < r.walk + r.ped_clear))
-            for r in rings]), overlaps.discrete() if self._overlaps else ())
+        key: tuple | None = None
+        if not flashing:  # four items a ring (a loop, not a comprehension: this is asked at every real step)
+            shown: list = []
+            for r in rings:
+                shown += (r.interval, r.phase, r.target,
+                          r.interval is GREEN and (r.ticks < r.walk) + (r.ticks < r.walk + r.ped_clear))
+            key = (*shown, overlaps.discrete() if self._overlaps else ())
         image = self._images.get(key)
         if image is None:
             image = self._images[key] = self._build(rings, overlaps, flashing)
