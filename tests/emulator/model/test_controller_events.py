@@ -256,3 +256,24 @@ def test_quiet_time_is_skipped_under_a_pattern_with_overlaps() -> None:
     c.steps = 0
     c.advance(3000)
     assert c.coordinator.plan is not None and c.steps < 3000 // 5
+
+
+def test_conditional_service_stops_when_the_other_green_has_no_time_left() -> None:
+    """Phase 2 (conditional service) held past its gap-out with a call on 1, beside 6 on max recall: 2 may back into 1
+    while 6 has time left before its maximum (20 s) for 2's clearance and 1's minimum (8 s), so the call on 1 is no
+    conflicting demand against 6 until 6's maximum timer passes 12 s; then it is, and 6 registers it. Nothing else
+    reaches a threshold at that tick: quiet time must end there (the conditional-service thresholds), or a skipping
+    twin registers the call only when 6 maxes out."""
+    config = config_mod.load().with_middleware(backup_time=0)
+    config = dataclasses.replace(config, phases=config.phases | {
+        2: dataclasses.replace(config.phases[2], conditional_service=True),
+        6: dataclasses.replace(config.phases[6], recall=Recall.MAX)})
+    ops = [(ControlColumn.HOLD, frozenset({2})), (ControlColumn.VEH_CALL, frozenset({1})), ("ticks", 115),
+           ("ticks", 25), ("ticks", 460)]
+    check_equal(config, ops, delayed=False)
+    c = Controller(config)
+    for op, value in ops[:3]:
+        apply(c, op, value, ticked=True)
+    assert c.greens == {2, 6} and not c.rings[1].conflict  # 2 may still back into 1
+    apply(c, "ticks", 25, ticked=True)
+    assert c.greens == {2, 6} and c.rings[1].conflict  # no more: the call on 1 waits across 6's green
