@@ -277,3 +277,22 @@ def test_conditional_service_stops_when_the_other_green_has_no_time_left() -> No
     assert c.greens == {2, 6} and not c.rings[1].conflict  # 2 may still back into 1
     apply(c, "ticks", 25, ticked=True)
     assert c.greens == {2, 6} and c.rings[1].conflict  # no more: the call on 1 waits across 6's green
+
+
+def test_a_phase_cycling_in_a_preempts_dwell_registers_the_dwell_phase_waiting() -> None:
+    """The city four-leg's preempt 1 (dwell 2+5) with 6 cycling in its dwell, and a call on 6: in the dwell 5 gives
+    way to 6, whose green registers the dwell phase 5 (always demanded in the dwell) as conflicting demand at its
+    first tick. Quiet time must read the demand as the dwell cycles on it (the cycling dwell's deadline), or a
+    skipping twin leaves that demand unregistered and 6's maximum timer held."""
+    config = config_mod.load(data_path("four_leg_city.toml")).with_middleware(backup_time=0)
+    config = dataclasses.replace(config, preempts=config.preempts | {
+        1: dataclasses.replace(config.preempts[1], cycling_phases=(6,))})
+    ops = [(ControlColumn.VEH_CALL, frozenset({6})), ("ticks", 30), ("preempt", frozenset({1})), ("ticks", 131),
+           ("ticks", 1), ("ticks", 100)]
+    check_equal(config, ops, delayed=False)
+    c = Controller(config)
+    for op, value in ops[:4]:
+        apply(c, op, value, ticked=True)
+    assert c.greens == {2, 6} and c.preempted and not c.rings[1].conflict  # 6 starts in the dwell
+    apply(c, "ticks", 1, ticked=True)
+    assert c.greens == {2, 6} and c.rings[1].conflict  # 5, the dwell phase, waits for 6
