@@ -122,7 +122,7 @@ class QuietTime:
                 ahead.append(c.startup_flash * 10 - c.tick)
             return _least(ahead)
         inputs = c.inputs
-        ahead.append(c.peds.deadline(c.greens, inputs, c.rings))
+        ahead.append(c.peds.deadline(c.greens, inputs))
         phases = Phases.of(c.rings, later=True) if c.config.overlaps else None
         if c.detectors.timers:
             ahead.append(c.detectors.deadline(c.actuations, c.greens))
