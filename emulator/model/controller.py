@@ -71,7 +71,7 @@ from emulator.model.coordinated import Coordinated
 from emulator.model.coordination import Coordinator
 from emulator.model.detectors import Detectors
 from emulator.model.inputs import Inputs, Reader
-from emulator.model.monitor import Lamps, Monitor
+from emulator.model.monitor import Monitor
 from emulator.model.overlaps import Overlaps, Phases
 from emulator.model.pedestrians import PedCalls
 from emulator.model.preempted import Preempted
@@ -91,7 +91,7 @@ from emulator.model.ring import (
 )
 from emulator.model.sequencer import Sequencer
 from emulator.model.spat import SignalTiming, announce
-from emulator.model.status import Images
+from emulator.model.status import Image, Images
 from hils.protocol.config import IntersectionConfig, NextPhaseLock
 from hils.protocol.ntcip import ControlColumn, ShortAlarm, UnitControlStatus, UnitFlashStatus
 from hils.protocol.timegrid import Grid
@@ -157,7 +157,7 @@ class Controller:
         self._status_seen: tuple = ()
         self.images = Images(config)
         self.quiet = QuietTime(self)
-        self._status: tuple[frozenset[int], ...] | None = None  # the image shown now
+        self._status: Image | None = None  # the image shown now
         self.reset()
 
     # --- lifecycle -------------------------------------------------------------------
@@ -168,7 +168,7 @@ class Controller:
         self.control.update(dict.fromkeys(ControlColumn, frozenset()))
         self.max2_rings: frozenset[int] = frozenset()
         self.control_status = UnitControlStatus.OTHER
-        self.flash_status = UnitFlashStatus.STARTUP if self.startup_flash else UnitFlashStatus.NOT_FLASH
+        self._flash(UnitFlashStatus.STARTUP if self.startup_flash else UnitFlashStatus.NOT_FLASH)
         self.peds.reset()
         self.actuations: frozenset[int] = frozenset()  # vehicle detectors actuated now
         self.ped_actuations: frozenset[int] = frozenset()  # pedestrian detectors actuated now
@@ -313,14 +313,9 @@ class Controller:
 
     # --- status -------------------------------------------------------------------------
 
-    @property
-    def flash_status(self) -> UnitFlashStatus:
-        """unitFlashStatus; ``flashing`` follows it (read every tick, so kept, not derived)."""
-        return self._flash_status
-
-    @flash_status.setter
-    def flash_status(self, status: UnitFlashStatus) -> None:
-        self._flash_status = status
+    def _flash(self, status: UnitFlashStatus) -> None:
+        """unitFlashStatus becomes ``status``; ``flashing`` follows it (both read every tick, so kept, not derived)."""
+        self.flash_status = status
         self.flashing = status is not UnitFlashStatus.NOT_FLASH
 
     @property
@@ -388,7 +383,7 @@ class Controller:
         self.coordinator.step()
         self.coordinated.step(self.rings)
         if self.flashing and self.flash_status is UnitFlashStatus.STARTUP and self.tick >= self.startup_flash * 10:
-            self.flash_status = UnitFlashStatus.NOT_FLASH
+            self._flash(UnitFlashStatus.NOT_FLASH)
             self._power_up()
             self._refresh_status()
             return
@@ -446,11 +441,10 @@ class Controller:
                 self.recorder.changed(r, reason)
 
     def _monitor(self) -> None:
-        fault = self.monitor.watch(self._status, lambda: Lamps(self.greens, self.yellows, self.overlap_greens,
-                                                                self.overlap_yellows), self.tick)
+        fault = self.monitor.watch(self._status, self.tick)
         if fault is not None:
             log.error("conflict monitor: %s at tick %d: flash", fault, self.tick)
-            self.flash_status = UnitFlashStatus.MMU
+            self._flash(UnitFlashStatus.MMU)
             self._refresh_status()
 
     def spat(self) -> tuple[SignalTiming, ...]:

@@ -87,7 +87,7 @@ from emulator.model.overlaps import Show
 from emulator.model.ring import DWELL, GREEN, RED_CLEAR, YELLOW, Ring
 from hils.protocol.config import Recall
 from hils.protocol.hires import MAX_PARAMETER, CycleState, Event, EventCode, split_code
-from hils.protocol.ntcip import ControlColumn, CoordCorrectionMode, PreemptState, UnitFlashStatus
+from hils.protocol.ntcip import ControlColumn, CoordCorrectionMode, PreemptState, UnitControlStatus, UnitFlashStatus
 
 # The codes as plain ints: the logger names a few at every interval change, and Python 3.11's EnumType.__getattr__
 # makes each EventCode.X lookup about ten times a plain attribute's.
@@ -96,7 +96,7 @@ E = SimpleNamespace(**{code.name: int(code) for code in EventCode})
 _TERMINATIONS = {Termination.GAP_OUT: E.PHASE_GAP_OUT, Termination.MAX_OUT: E.PHASE_MAX_OUT,
                  Termination.FORCE_OFF: E.PHASE_FORCE_OFF}
 # Bound once, likewise: the logger reads them at every step or interval change.
-STARTUP_FLASH = int(UnitFlashStatus.STARTUP)
+STARTUP_FLASH = UnitFlashStatus.STARTUP
 YIELD = Termination.YIELD
 CYCLE_FREE, IN_STEP, DWELLING = CycleState.FREE, CycleState.IN_STEP, CycleState.TRANSITION_DWELL
 SUBTRACTING, ADDING = CycleState.TRANSITION_SUBTRACT, CycleState.TRANSITION_ADD
@@ -158,12 +158,12 @@ class _Seen:
     """What the controller showed after the last step (mutable: the logger's memory of it)."""
 
     inputs: Inputs | None = None  # the controller's inputs the sets were read from
-    sets: dict[str, frozenset[int]] = field(default_factory=dict)
+    sets: dict[str, frozenset[int]] = field(default_factory=lambda: dict.fromkeys(_ON_OFF, frozenset()))
     ped_calls: frozenset[int] = frozenset()
     walks: frozenset[int] = frozenset()
     clears: frozenset[int] = frozenset()
-    flash: int = 0
-    control: int = 0
+    flash: UnitFlashStatus | None = None
+    control: UnitControlStatus | None = None
     pattern: int | None = None
     plan: Plan | None = None
     state: CycleState | None = None
@@ -179,7 +179,7 @@ class DataLogger:
         self.capacity = capacity
         self.day0: datetime = controller.day0
         self._log: list[tuple[int, int, int]] = []  # (clock tick, code, parameter)
-        self._tick: list[tuple[int, int]] = []  # events of the tick being stepped
+        self._tick: list[tuple[int, int, int]] = []  # events of the tick being stepped, as the log keeps them
         self._greens: dict[int, _Green] = {}  # ring number -> its green
         self._red_served: dict[int, bool] = {}  # ring number -> its red clearance has a length
         self._group: int | None = None  # barrier group of the last green started
@@ -209,7 +209,7 @@ class DataLogger:
 
     def snapshot(self, since: datetime | None = None) -> Snapshot:
         """The log as it stands, from ``since`` on (inclusive) when given; O(log n), nothing copied."""
-        self._minimums(before=self._clock + 1)
+        self._minimums(before=self._co.clock + 1)
         start = 0
         if since is not None:
             clock = -(-(since - self.day0) // timedelta(microseconds=100_000))  # the first tick at or after since
@@ -231,33 +231,33 @@ class DataLogger:
         if interval is GREEN:
             group = self._barrier[p]
             if self._group is not None and group != self._group:
-                self._tick.append((E.BARRIER_TERMINATION, self._group + 1))
+                self._tick.append((clock, E.BARRIER_TERMINATION, self._group + 1))
             self._group = group
             self._greens[r.number] = _Green(p, clock, r.minimum)
             self._next_minimum = min(self._next_minimum, clock + r.minimum)
-            self._tick.append((E.PHASE_ON, p))
-            self._tick.append((E.PHASE_BEGIN_GREEN, p))
+            self._tick.append((clock, E.PHASE_ON, p))
+            self._tick.append((clock, E.PHASE_BEGIN_GREEN, p))
         elif interval is YELLOW:
             green = self._greens.pop(r.number, None)
             if green is not None:
                 self._min_complete(green, clock)
                 if not green.checking:  # the conflicting call came on the tick that ends the green
-                    self._tick.append((E.PHASE_CHECK, p))
+                    self._tick.append((clock, E.PHASE_CHECK, p))
             if reason in _TERMINATIONS:
-                self._tick.append((_TERMINATIONS[reason], p))
+                self._tick.append((clock, _TERMINATIONS[reason], p))
             elif reason is YIELD and self._at_force_off(p):
-                self._tick.append((E.PHASE_FORCE_OFF, p))
-            self._tick.append((E.PHASE_GREEN_TERMINATION, p))
-            self._tick.append((E.PHASE_BEGIN_YELLOW, p))
+                self._tick.append((clock, E.PHASE_FORCE_OFF, p))
+            self._tick.append((clock, E.PHASE_GREEN_TERMINATION, p))
+            self._tick.append((clock, E.PHASE_BEGIN_YELLOW, p))
         elif interval is RED_CLEAR:
-            self._tick.append((E.PHASE_END_YELLOW, p))
+            self._tick.append((clock, E.PHASE_END_YELLOW, p))
             self._red_served[r.number] = r.length > 0
             if r.length:
-                self._tick.append((E.PHASE_BEGIN_RED_CLEARANCE, p))
+                self._tick.append((clock, E.PHASE_BEGIN_RED_CLEARANCE, p))
         else:  # rests in red: its red clearance (if served) is over and the ring no longer times the phase
             if self._red_served.pop(r.number, False):
-                self._tick.append((E.PHASE_END_RED_CLEARANCE, p))
-            self._tick.append((E.PHASE_INACTIVE, p))
+                self._tick.append((clock, E.PHASE_END_RED_CLEARANCE, p))
+            self._tick.append((clock, E.PHASE_INACTIVE, p))
 
     def stepped(self) -> None:
         c = self.controller
@@ -269,9 +269,9 @@ class DataLogger:
                 self._min_complete(green, clock)
             checking = c.rings[number - 1].conflict
             if checking and not green.checking:
-                self._tick.append((E.PHASE_CHECK, green.phase))
+                self._tick.append((clock, E.PHASE_CHECK, green.phase))
             green.checking = checking
-        if self._seen.flash == STARTUP_FLASH and not c.flashing:
+        if self._seen.flash is STARTUP_FLASH and not c.flashing:
             self._intervals()  # start-up flash over: the start-up intervals begin
         self._read()
         self._flush()
@@ -295,10 +295,6 @@ class DataLogger:
 
     # --- internals -----------------------------------------------------------------------------------------------
 
-    @property
-    def _clock(self) -> int:
-        return self._co.clock
-
     def _minimums(self, *, before: int) -> None:
         """Each green's minimum timed at a clock tick before ``before`` and not logged yet, logged at its tick: the
         controller skips quiet ticks without telling the logger, so a minimum that changed nothing else is logged
@@ -310,29 +306,29 @@ class DataLogger:
         for clock, group in itertools.groupby(due, key=lambda d: d[0]):
             for _, phase, green in group:
                 green.min_logged = True
-                self._tick.append((E.PHASE_MIN_COMPLETE, phase))
-            self._flush(clock)
+                self._tick.append((clock, E.PHASE_MIN_COMPLETE, phase))
+            self._flush()
         self._next_minimum = min((g.start + g.minimum for g in self._greens.values() if not g.min_logged),
                                  default=math.inf)
 
-    def _flush(self, clock: int | None = None) -> None:
-        """The events of the tick being stepped (or of ``clock``'s) go to the log."""
+    def _flush(self) -> None:
+        """The events of the tick being stepped (or of a minimum's tick) go to the log."""
         if not self._tick:
             return  # most steps log nothing
-        clock = self._clock if clock is None else clock
         logged = sorted(set(self._tick))
-        self._log.extend([(clock, code, p) for code, p in logged])
+        self._log += logged
         self._tick.clear()
         if self._sink is not None:
-            at = self.time(clock)
-            self._sink([Event(at, code, p) for code, p in logged])
+            at = self.time(logged[0][0])
+            self._sink([Event(at, code, p) for _, code, p in logged])
         if self.capacity is not None and len(self._log) > self.capacity + self.capacity // 4:
             self._log = self._log[len(self._log) - self.capacity:]  # the oldest go, a quarter at a time
 
     def _power_up(self, *, first: bool) -> None:
+        clock = self._co.clock
         if not first:
-            self._tick.append((E.POWER_FAILURE, 1))
-        self._tick.append((E.POWER_RESTORED, 1))
+            self._tick.append((clock, E.POWER_FAILURE, 1))
+        self._tick.append((clock, E.POWER_RESTORED, 1))
         self._greens.clear()
         self._red_served.clear()
         self._group = None
@@ -343,15 +339,16 @@ class DataLogger:
 
     def _intervals(self) -> None:
         """The intervals the rings start in (power-up and the end of start-up flash start them unannounced)."""
+        clock = self._co.clock
         for ring in self.controller.rings:
             if ring.interval is GREEN:
                 self.changed(ring, None)
             elif ring.interval is not DWELL:
                 if ring.interval is RED_CLEAR:
                     self._red_served[ring.number] = ring.length > 0
-                self._tick.append((E.PHASE_ON, ring.phase))
-                self._tick.append((E.PHASE_BEGIN_YELLOW if ring.interval is YELLOW else E.PHASE_BEGIN_RED_CLEARANCE,
-                          ring.phase))
+                begins = E.PHASE_BEGIN_YELLOW if ring.interval is YELLOW else E.PHASE_BEGIN_RED_CLEARANCE
+                self._tick.append((clock, E.PHASE_ON, ring.phase))
+                self._tick.append((clock, begins, ring.phase))
 
     def _at_force_off(self, phase: int) -> bool:
         """The coordinator's force-off point of ``phase`` passed this tick (a coordinated phase's yield point)."""
@@ -361,13 +358,13 @@ class DataLogger:
     def _min_complete(self, green: _Green, clock: int) -> None:
         if not green.min_logged and clock >= green.start + green.minimum:
             green.min_logged = True
-            self._tick.append((E.PHASE_MIN_COMPLETE, green.phase))
+            self._tick.append((clock, E.PHASE_MIN_COMPLETE, green.phase))
             self._next_minimum = min((g.start + g.minimum for g in self._greens.values() if not g.min_logged),
                                      default=math.inf)
 
     def _read(self) -> None:
         """Events of what the controller shows now against what it showed after the last step."""
-        c, seen = self.controller, self._seen
+        c, seen, clock = self.controller, self._seen, self._co.clock
         inputs = c.inputs
         if inputs is not seen.inputs:  # these change only with the inputs: a write, a new pattern
             seen.inputs = inputs
@@ -381,27 +378,27 @@ class DataLogger:
                 "preempts": c.preemptor.control,
             }
             for name, numbers in now.items():
-                before = seen.sets.get(name, frozenset())
+                before = seen.sets[name]
                 if numbers != before:
                     on, off = _ON_OFF[name]
                     for n in numbers - before:
-                        self._tick.append((on, n))
+                        self._tick.append((clock, on, n))
                     for n in before - numbers:
-                        self._tick.append((off, n))
+                        self._tick.append((clock, off, n))
             seen.sets = now
-        # The controller keeps each of these sets (and dicts) while it holds the same numbers: most steps
-        # change none of them.
+        # The controller keeps each of these sets (and dicts) while it holds the same numbers, but the walks and
+        # pedestrian clearances, which each status image holds anew: most steps change none of them.
         if c.peds.calls is not seen.ped_calls:
             for p in c.peds.calls - seen.ped_calls - self._no_ped_events:
-                self._tick.append((E.PED_CALL_REGISTERED, p))
+                self._tick.append((clock, E.PED_CALL_REGISTERED, p))
             seen.ped_calls = c.peds.calls
-        if c.walks is not seen.walks or c.ped_clears is not seen.clears:
+        if c.walks != seen.walks or c.ped_clears != seen.clears:
             for p in c.walks - seen.walks:
-                self._tick.append((E.PED_BEGIN_WALK, p))
+                self._tick.append((clock, E.PED_BEGIN_WALK, p))
             for p in c.ped_clears - seen.clears:
-                self._tick.append((E.PED_BEGIN_CLEARANCE, p))
+                self._tick.append((clock, E.PED_BEGIN_CLEARANCE, p))
             for p in (seen.walks | seen.clears) - c.walks - c.ped_clears:
-                self._tick.append((E.PED_BEGIN_SOLID_DONT_WALK, p))
+                self._tick.append((clock, E.PED_BEGIN_SOLID_DONT_WALK, p))
             seen.walks, seen.clears = c.walks, c.ped_clears
         if c.overlaps.shown != seen.overlaps:
             for n, shown in c.overlaps.shown.items():
@@ -409,50 +406,51 @@ class DataLogger:
                 if shown is before:
                     continue
                 if before is Show.FLASHING:
-                    self._tick.append((E.FYA_END_PERMISSIVE, n))
+                    self._tick.append((clock, E.FYA_END_PERMISSIVE, n))
                 # A green that goes on (from a trailing green, a transit bar's flashing green) is no new green; a
                 # flashing green is its green lamp, a delayed green's red is red: no event of their own.
                 goes_on = shown is Show.GREEN and before in _GREENS
                 if not (shown in _SILENT or goes_on or (shown is Show.RED and before is Show.DELAYED)):
-                    self._tick.append((_OVERLAP[shown], n))
+                    self._tick.append((clock, _OVERLAP[shown], n))
             seen.overlaps = dict(c.overlaps.shown)
         if c.preemptor.states != seen.preempts:
             for n, state in c.preemptor.states.items():
                 if state is not seen.preempts.get(n, PreemptState.NOT_ACTIVE) and state in _PREEMPT:
-                    self._tick.append((_PREEMPT[state], n))
+                    self._tick.append((clock, _PREEMPT[state], n))
             seen.preempts = dict(c.preemptor.states)
-        if int(c.flash_status) != seen.flash:
-            seen.flash = int(c.flash_status)
-            self._tick.append((E.UNIT_FLASH_STATUS_CHANGE, seen.flash))
-        if int(c.control_status) != seen.control:
-            seen.control = int(c.control_status)
-            self._tick.append((E.UNIT_CONTROL_STATUS_CHANGE, seen.control))
+        if c.flash_status is not seen.flash:
+            seen.flash = c.flash_status
+            self._tick.append((clock, E.UNIT_FLASH_STATUS_CHANGE, int(seen.flash)))
+        if c.control_status is not seen.control:
+            seen.control = c.control_status
+            self._tick.append((clock, E.UNIT_CONTROL_STATUS_CHANGE, int(seen.control)))
         self._coordination()
 
     def _coordination(self) -> None:
         co, seen = self._co, self._seen
+        clock = co.clock
         plan = co.plan
         if plan is None and seen.state is CYCLE_FREE:
             return  # free, as it was
         if co.running != seen.pattern or plan is not seen.plan:
             seen.pattern, seen.plan = co.running, plan
-            self._tick.append((E.COORD_PATTERN_CHANGE, co.running))
+            self._tick.append((clock, E.COORD_PATTERN_CHANGE, co.running))
             if plan is not None:
-                self._tick.append((E.CYCLE_LENGTH_CHANGE, min(plan.cycle // 10, MAX_PARAMETER)))
-                self._tick.append((E.OFFSET_LENGTH_CHANGE, min(plan.offset // 10, MAX_PARAMETER)))
+                self._tick.append((clock, E.CYCLE_LENGTH_CHANGE, min(plan.cycle // 10, MAX_PARAMETER)))
+                self._tick.append((clock, E.OFFSET_LENGTH_CHANGE, min(plan.offset // 10, MAX_PARAMETER)))
                 for phase, split in plan.split.items():
-                    self._tick.append((split_code(phase), min(split // 10, MAX_PARAMETER)))
+                    self._tick.append((clock, split_code(phase), min(split // 10, MAX_PARAMETER)))
         state = _cycle_state(co)
         if state is not seen.state:
             seen.state = state
-            self._tick.append((E.COORD_CYCLE_STATE_CHANGE, state))
+            self._tick.append((clock, E.COORD_CYCLE_STATE_CHANGE, state))
         if plan is None or not co.passed:
             return
         if 0 in co.passed:
-            self._tick.append((E.COORD_CYCLE_STATE_CHANGE, CycleState.LOCAL_ZERO))
+            self._tick.append((clock, E.COORD_CYCLE_STATE_CHANGE, CycleState.LOCAL_ZERO))
         for phase in plan.coord.values():
             if plan.force_off[phase] in co.passed:
-                self._tick.append((E.COORD_YIELD_POINT, phase))
+                self._tick.append((clock, E.COORD_YIELD_POINT, phase))
 
 
 def _local_time(day0: datetime, clock: int) -> datetime:

@@ -32,8 +32,7 @@ timed.
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from typing import NamedTuple
+from typing import NamedTuple, Protocol
 
 from hils.protocol.config import IntersectionConfig, OverlapKind
 from hils.protocol.conflict import first_conflict
@@ -42,8 +41,8 @@ SHORT_YELLOW = 27  # ticks: the least yellow a channel may show after its green 
 
 
 class Lamps(NamedTuple):
-    """What the monitor sees at one tick: the phases and the overlaps (1 = A) lit green or yellow (a named tuple, not
-    a frozen dataclass: one is made at every tick that changes a lamp, and a tuple is made several times faster)."""
+    """The phases and the overlaps (1 = A) lit green or yellow, as a test shows them to the monitor (the controller
+    shows it its status image, which carries the same sets)."""
 
     greens: frozenset[int]
     yellows: frozenset[int]
@@ -52,6 +51,23 @@ class Lamps(NamedTuple):
 
 
 _NONE = Lamps(frozenset(), frozenset(), frozenset(), frozenset())
+
+
+class Shown(Protocol):
+    """What the monitor reads: :class:`Lamps`, or the controller's status image as it is
+    (:class:`emulator.model.status.Image`), which carries the same four sets."""
+
+    @property
+    def greens(self) -> frozenset[int]: ...
+
+    @property
+    def yellows(self) -> frozenset[int]: ...
+
+    @property
+    def overlap_greens(self) -> frozenset[int]: ...
+
+    @property
+    def overlap_yellows(self) -> frozenset[int]: ...
 
 
 class Monitor:
@@ -67,35 +83,31 @@ class Monitor:
 
     def reset(self) -> None:
         """Power-up: every lamp out."""
-        self._passed = _NONE  # the lamps of the last check that found no fault
-        self._watched: object = None  # the last status image watched that showed no fault
+        self._passed: Shown = _NONE  # the lamps of the last check that found no fault
         self._yellow_began: dict[tuple[str, int], int] = {}  # (channel kind, number) -> the tick its yellow began
 
-    def watch(self, image: object, lamps: Callable[[], Lamps], tick: int) -> str | None:
-        """The fault the controller's status ``image`` shows at ``tick`` (its ``lamps``), or None: an image is judged
-        once, what it lights being all the monitor sees."""
-        if image is self._watched:
+    def watch(self, image: Shown, tick: int) -> str | None:
+        """The fault the controller's status ``image`` shows at ``tick``, or None: an image is judged once, what it
+        lights being all the monitor sees."""
+        if image is self._passed:
             return None
-        fault = self.check(lamps(), tick)
-        if fault is None:
-            self._watched = image
-        return fault
+        return self.check(image, tick)
 
-    def check(self, lamps: Lamps, tick: int) -> str | None:
+    def check(self, lamps: Shown, tick: int) -> str | None:
         """The fault these lamps show at ``tick`` (after the ones last passed), or None."""
         fault = self._conflict(lamps) or self._short_yellow(lamps, tick)
         if fault is None:
             self._passed = lamps
         return fault
 
-    def _conflict(self, lamps: Lamps) -> str | None:
+    def _conflict(self, lamps: Shown) -> str | None:
         lit = lamps.greens | lamps.yellows, lamps.overlap_greens | lamps.overlap_yellows
         if lit not in self._conflicts:  # a controller shows few sets of lamps: each is judged once
             conflict = first_conflict(self.permissives, *lit)
             self._conflicts[lit] = None if conflict is None else f"{conflict} shown together"
         return self._conflicts[lit]
 
-    def _short_yellow(self, lamps: Lamps, tick: int) -> str | None:
+    def _short_yellow(self, lamps: Shown, tick: int) -> str | None:
         was = self._passed
         return (self._channels("phase", lamps.greens, lamps.yellows, was.greens, was.yellows, tick)
                 or self._channels("overlap", lamps.overlap_greens, lamps.overlap_yellows, was.overlap_greens,

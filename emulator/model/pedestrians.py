@@ -74,19 +74,17 @@ class PedCalls:
             self._demand = (inputs, self.calls), answer
         return answer
 
-    def deadline(self, greens: frozenset[int], inputs: Inputs, rings: Iterable[Ring]) -> int | None:
-        """1 when the next tick latches a call (``greens``: the phases showing green then) or may recycle a walk in
-        one of ``rings`` (:meth:`recycle`), else None: the calls change only with the inputs and the greens, and a
-        latched call waits to recycle only for its green's walk and pedestrian clearance to end, thresholds its ring
-        reports. While a pattern runs the answer is 1 whenever such a call waits: whether the walk fits by the
-        force-off point changes with the cycle timer."""
-        if self._latch(greens, inputs) != self.calls:
-            return 1
-        recycling = self.recycling & self.calls
-        if recycling and any(r.interval is GREEN and r.phase in recycling
-                             and (self.coordinated.running or self._recycles(r, ahead=1)) for r in rings):
-            return 1
-        return None
+    def deadline(self, greens: frozenset[int], inputs: Inputs) -> int | None:
+        """1 when the next tick latches a call (``greens``: the phases showing green then), else None: the calls
+        change only with the inputs and the greens.
+
+        Pedestrian recycle needs no deadline of its own: every real step checks it after the rings timed, and what it
+        waits for turns true only at a real step. A latched call waits for its green's walk and pedestrian clearance
+        to end (a threshold its ring reports) and for the walk to fit: free, by the green's maximum, which only
+        draws nearer (or starts again, at the step its conflicting demand goes); under a pattern, by the phase's
+        force-off point, which only draws nearer until its ring's yield point passes (one of the coordinator's
+        marks); during a preempt none recycles, and its end is the preemptor's step."""
+        return 1 if self._latch(greens, inputs) != self.calls else None
 
     def walking(self) -> frozenset[int]:
         """The phases timing their walk now."""
@@ -120,11 +118,11 @@ class PedCalls:
                 r.recycle(self.timing[p])
                 self.calls -= {p}
 
-    def _recycles(self, r: Ring, ahead: int = 0) -> bool:
-        """A walk may start ``ahead`` ticks from now within ``r``'s green: none is timed, and it and its clearance
-        end before the green's maximum would (free) or by the phase's force-off point (a pattern running)."""
+    def _recycles(self, r: Ring) -> bool:
+        """A walk may start now within ``r``'s green: none is timed, and it and its clearance end before the green's
+        maximum would (free) or by the phase's force-off point (a pattern running)."""
         t = self.timing[r.phase]
-        if t.walk == 0 or r.ticks + ahead < r.walk + r.ped_clear:
+        if t.walk == 0 or r.ticks < r.walk + r.ped_clear:
             return False
         if self.coordinated.running:
             return self.coordinated.walk_fits(r.phase)

@@ -42,6 +42,7 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
+from emulator.model import ring
 from emulator.model.overlaps import Phases
 from hils.protocol.ntcip import UnitFlashStatus
 
@@ -109,8 +110,7 @@ class QuietTime:
             c.detectors.skip(n)
         if c.config.preempts:
             c.preemptor.skip(n)
-        for r in c.rings:
-            r.skip(n)
+        ring.skip(c.rings, n)
 
     def _units(self) -> int | None:
         """The least deadline of the units but the backup timer (None: none will act). The sequencer, the costliest
@@ -122,7 +122,7 @@ class QuietTime:
                 ahead.append(c.startup_flash * 10 - c.tick)
             return _least(ahead)
         inputs = c.inputs
-        ahead.append(c.peds.deadline(c.greens, inputs, c.rings))
+        ahead.append(c.peds.deadline(c.greens, inputs))
         phases = Phases.of(c.rings, later=True) if c.config.overlaps else None
         if c.detectors.timers:
             ahead.append(c.detectors.deadline(c.actuations, c.greens))

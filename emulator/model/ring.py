@@ -57,7 +57,7 @@ each of its timers reaches its next threshold, as the controller's quiet time as
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from enum import StrEnum
 
@@ -299,9 +299,14 @@ class Ring:
         passage and maximum (a running timer only) and its minimum when ``minimum`` says it matters."""
         interval = self.interval
         if interval is GREEN:
-            ticks = self.ticks
-            ahead = [threshold - ticks for threshold in (self.minimum if minimum else 0, self.walk,
-                                                         self.walk + self.ped_clear) if ticks < threshold]
+            ticks, walked = self.ticks, self.walk + self.ped_clear
+            ahead = []  # appended one by one: a comprehension costs more than the two or three tests
+            if minimum and ticks < self.minimum:
+                ahead.append(self.minimum - ticks)
+            if ticks < self.walk:
+                ahead.append(self.walk - ticks)
+            if ticks < walked:
+                ahead.append(walked - ticks)
             if self.gap and self.gap < self.allowed():
                 ahead.append(self._gap_out_in())
             if self.max_ticks and self.max_ticks < self.maximum:
@@ -329,14 +334,17 @@ class Ring:
                 and (self.max_ticks > 0) == maximum_runs(conflict, max_recall)
                 and (self.reduction is None or (self.reducing > 0) == conflict))
 
-    def skip(self, n: int) -> None:
-        """``n`` quiet ticks: the interval and the green's running timers count (a running gap or maximum timer is
-        above zero in quiet time: an extending green resets its gap every tick, a maximum timer held reset is 0)."""
-        if self.interval is not DWELL:
-            self.ticks += n
-        if self.gap:
-            self.gap += n
-        if self.max_ticks:
-            self.max_ticks += n
-        if self.reducing:
-            self.reducing += n
+
+def skip(rings: Iterable[Ring], n: int) -> None:
+    """``n`` quiet ticks of ``rings``: each interval and each green's running timers count (a running gap or maximum
+    timer is above zero in quiet time: an extending green resets its gap every tick, a maximum timer held reset is
+    0). One call for the rings: quiet time skips at every read and write of the controller."""
+    for r in rings:
+        if r.interval is not DWELL:
+            r.ticks += n
+        if r.gap:
+            r.gap += n
+        if r.max_ticks:
+            r.max_ticks += n
+        if r.reducing:
+            r.reducing += n

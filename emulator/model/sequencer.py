@@ -242,11 +242,12 @@ class Sequencer:
 
     def conflicting(self, r: Ring, demand: frozenset[int]) -> bool:
         """Demand conflicts with ``r``'s green: in its own ring, or beyond this visit of the barrier group."""
-        others = demand - {r.phase}
-        if not others.isdisjoint(self._ring_phases[r.number]) or not others <= self._group_phases[self.group]:
-            return True
-        # the rest is demand of another ring in this group: beyond this visit only where that ring may not back
-        return any(self._beyond(q) for q in others)
+        p, ring, group = r.phase, self._ring_phases[r.number], self._group_phases[self.group]
+        for q in demand:  # noqa: SIM110 - asked of every green at every step: a loop costs less than any() of a generator
+            # demand of another ring in this group is beyond this visit only where that ring may not back
+            if q != p and (q in ring or q not in group or self._beyond(q)):
+                return True
+        return False
 
     def ending(self, r: Ring, inputs: Inputs) -> Termination | None:
         """Why the ring's green may end now (None: it may not); a force-off before a gap-out before a max-out."""
@@ -293,11 +294,15 @@ class Sequencer:
         ready = {}  # a green that may end now, or a ring resting in red with nothing committed
         for r in self.rings:
             ready[r.number] = r.target is None if r.interval is DWELL else self.ending(r, inputs) is not None
-        if not any(ready.values()):
+        if True not in ready.values():
             return [], {}  # most ticks: every ring is timing
-        wish = {r.number: self.wish(r, demand, inputs) for r in self.rings if ready[r.number]}
-        across = {n: q for n, q in wish.items() if q is not None and self._beyond(q)}
-        all_ready = all(ready.values())
+        wish, across = {}, {}
+        for r in self.rings:
+            if ready[r.number]:
+                q = wish[r.number] = self.wish(r, demand, inputs)
+                if q is not None and self._beyond(q):
+                    across[r.number] = q
+        all_ready = False not in ready.values()
         commits = []
         for r in self.rings:
             q = wish.get(r.number)

@@ -256,3 +256,43 @@ def test_quiet_time_is_skipped_under_a_pattern_with_overlaps() -> None:
     c.steps = 0
     c.advance(3000)
     assert c.coordinator.plan is not None and c.steps < 3000 // 5
+
+
+def test_conditional_service_stops_when_the_other_green_has_no_time_left() -> None:
+    """Phase 2 (conditional service) held past its gap-out with a call on 1, beside 6 on max recall: 2 may back into 1
+    while 6 has time left before its maximum (20 s) for 2's clearance and 1's minimum (8 s), so the call on 1 is no
+    conflicting demand against 6 until 6's maximum timer passes 12 s; then it is, and 6 registers it. Nothing else
+    reaches a threshold at that tick: quiet time must end there (the conditional-service thresholds), or a skipping
+    twin registers the call only when 6 maxes out."""
+    config = config_mod.load().with_middleware(backup_time=0)
+    config = dataclasses.replace(config, phases=config.phases | {
+        2: dataclasses.replace(config.phases[2], conditional_service=True),
+        6: dataclasses.replace(config.phases[6], recall=Recall.MAX)})
+    ops = [(ControlColumn.HOLD, frozenset({2})), (ControlColumn.VEH_CALL, frozenset({1})), ("ticks", 115),
+           ("ticks", 25), ("ticks", 460)]
+    check_equal(config, ops, delayed=False)
+    c = Controller(config)
+    for op, value in ops[:3]:
+        apply(c, op, value, ticked=True)
+    assert c.greens == {2, 6} and not c.rings[1].conflict  # 2 may still back into 1
+    apply(c, "ticks", 25, ticked=True)
+    assert c.greens == {2, 6} and c.rings[1].conflict  # no more: the call on 1 waits across 6's green
+
+
+def test_a_phase_cycling_in_a_preempts_dwell_registers_the_dwell_phase_waiting() -> None:
+    """The city four-leg's preempt 1 (dwell 2+5) with 6 cycling in its dwell, and a call on 6: in the dwell 5 gives
+    way to 6, whose green registers the dwell phase 5 (always demanded in the dwell) as conflicting demand at its
+    first tick. Quiet time must read the demand as the dwell cycles on it (the cycling dwell's deadline), or a
+    skipping twin leaves that demand unregistered and 6's maximum timer held."""
+    config = config_mod.load(data_path("four_leg_city.toml")).with_middleware(backup_time=0)
+    config = dataclasses.replace(config, preempts=config.preempts | {
+        1: dataclasses.replace(config.preempts[1], cycling_phases=(6,))})
+    ops = [(ControlColumn.VEH_CALL, frozenset({6})), ("ticks", 30), ("preempt", frozenset({1})), ("ticks", 131),
+           ("ticks", 1), ("ticks", 100)]
+    check_equal(config, ops, delayed=False)
+    c = Controller(config)
+    for op, value in ops[:4]:
+        apply(c, op, value, ticked=True)
+    assert c.greens == {2, 6} and c.preempted and not c.rings[1].conflict  # 6 starts in the dwell
+    apply(c, "ticks", 1, ticked=True)
+    assert c.greens == {2, 6} and c.rings[1].conflict  # 5, the dwell phase, waits for 6

@@ -10,7 +10,7 @@ from __future__ import annotations
 import pytest
 
 from emulator.model.controller import Controller
-from emulator.model.monitor import SHORT_YELLOW, Lamps, Monitor
+from emulator.model.monitor import SHORT_YELLOW, Lamps, Monitor, Shown
 from hils.protocol.config import IntersectionConfig
 from hils.protocol.ntcip import ControlColumn
 
@@ -81,8 +81,8 @@ def test_the_controller_shows_its_monitor_every_lamp_it_lights_overlaps_included
     shown: list[Lamps] = []
 
     class Watched(Monitor):
-        def check(self, seen: Lamps, tick: int) -> str | None:
-            shown.append(seen)
+        def check(self, seen: Shown, tick: int) -> str | None:
+            shown.append(lamps(seen.greens, seen.yellows, seen.overlap_greens, seen.overlap_yellows))
             return super().check(seen, tick)
 
     c.monitor = Watched(city_config)
