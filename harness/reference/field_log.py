@@ -54,7 +54,9 @@ the log's own events (Indiana enumerations) and says which values it had to gues
   count its 66 as the emulator's 61, a declared logging variant); overlaps past P (16) are said and left out;
 - **recalls and dual entry** (:func:`_uncalled`, :func:`_extenders`, :func:`_dual_entries`): a phase served with no
   call the log registers (43), where the log registers calls of others or has no detector events (pretimed), or
-  whose call registers as its own yellow begins (an Econolite's recall), is recalled: max recall when its greens end
+  whose call registers as its own yellow begins (an Econolite's recall), or that a ring went on to within its group
+  after a green that ended with nothing shown demanded and with no call of its own (:func:`_entered_undemanded`: a
+  green with nothing else to serve rests, so a recall ended it), is recalled: max recall when its greens end
   by force-off or max-out, else min; a detector that calls nothing may extend a recalled phase (its gap-outs come the
   same time after the detector's off, never sooner nor while it is on; that time is the intersection's passage and
   the rest the detector's extension); a phase a ring entered at a barrier termination when it had no demand in the
