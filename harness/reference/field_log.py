@@ -376,6 +376,17 @@ def _uncalled(rows: Sequence[Row], phases: Sequence[int], structure: Structure) 
     return {p for p in phases if (p not in called or p in logged) and p not in structure.phantom}
 
 
+def _take_calls(events: Iterable[Row], calls: set[int], peds: set[int]) -> None:
+    """Registers one tick's vehicle calls (43, dropped by 44) in ``calls`` and its pedestrian calls (45) in ``peds``."""
+    for r in events:
+        if r.code == E.PHASE_CALL_REGISTERED:
+            calls.add(r.parameter)
+        elif r.code == E.PHASE_CALL_DROPPED:
+            calls.discard(r.parameter)
+        elif r.code == E.PED_CALL_REGISTERED:
+            peds.add(r.parameter)
+
+
 def _entered_undemanded(rows: Sequence[Row], structure: Structure, recalled: set[int]) -> set[int]:
     """The phases a ring went on to within its barrier group (no barrier termination, 31, on the tick) after a green
     that ended with no demand the log shows on any phase not green (a green with nothing else to serve rests), and
@@ -401,13 +412,7 @@ def _entered_undemanded(rows: Sequence[Row], structure: Structure, recalled: set
     seen: set[int] = set()
     for _, tick in itertools.groupby(rows, key=lambda r: r.time):
         events = list(tick)
-        for r in events:  # the calls of the tick count for a green it starts
-            if r.code == E.PHASE_CALL_REGISTERED:
-                calls.add(r.parameter)
-            elif r.code == E.PHASE_CALL_DROPPED:
-                calls.discard(r.parameter)
-            elif r.code == E.PED_CALL_REGISTERED:
-                peds.add(r.parameter)
+        _take_calls(events, calls, peds)  # the calls of the tick count for a green it starts
         crossing = any(r.code == E.BARRIER_TERMINATION for r in events)
         for r in events:  # in code order: a walk (21) serves a push after the green (1) it comes with is read
             p = r.parameter
@@ -837,13 +842,7 @@ def _dual_entries(rows: Sequence[Row], structure: Structure, recalled: set[int])
     seen: set[int] = set()
     for _, tick in itertools.groupby(rows, key=lambda r: r.time):
         events = list(tick)
-        for r in events:  # the calls of the tick count for a green it starts (read before the rings move)
-            if r.code == E.PHASE_CALL_REGISTERED:
-                calls.add(r.parameter)
-            elif r.code == E.PHASE_CALL_DROPPED:
-                calls.discard(r.parameter)
-            elif r.code == E.PED_CALL_REGISTERED:
-                peds.add(r.parameter)
+        _take_calls(events, calls, peds)  # the tick's calls count for a green it starts (read before the rings move)
         crossing = committed is not None and any(r.code == E.BARRIER_TERMINATION for r in events)
         for r in events:
             p = r.parameter
