@@ -54,7 +54,9 @@ the log's own events (Indiana enumerations) and says which values it had to gues
   count its 66 as the emulator's 61, a declared logging variant); overlaps past P (16) are said and left out;
 - **recalls and dual entry** (:func:`_uncalled`, :func:`_extenders`, :func:`_dual_entries`): a phase served with no
   call the log registers (43), where the log registers calls of others or has no detector events (pretimed), or
-  whose call registers as its own yellow begins (an Econolite's recall), is recalled: max recall when its greens end
+  whose call registers as its own yellow begins (an Econolite's recall), or that a ring went on to within its group
+  after a green that ended with nothing shown demanded and with no call of its own (:func:`_entered_undemanded`: a
+  green with nothing else to serve rests, so a recall ended it), is recalled: max recall when its greens end
   by force-off or max-out, else min; a detector that calls nothing may extend a recalled phase (its gap-outs come the
   same time after the detector's off, never sooner nor while it is on; that time is the intersection's passage and
   the rest the detector's extension); a phase a ring entered at a barrier termination when it had no demand in the
@@ -264,6 +266,7 @@ def infer(rows: Sequence[Row], name: str = "field controller") -> Inferred:
     pushes = _in_config(_detector_phases(rows, E.PED_DETECTOR_ON, E.PED_CALL_REGISTERED, phases), "push button",
                         PUSH_BUTTONS, out)
     recalled = _uncalled(rows, phases, structure)
+    recalled |= _entered_undemanded(rows, structure, recalled)
     timers = _delays(rows, detectors, greens, out)
     for d, held in _holds(rows, detectors, greens, out).items():
         timers.setdefault(d, {}).update(held)
@@ -371,6 +374,65 @@ def _uncalled(rows: Sequence[Row], phases: Sequence[int], structure: Structure) 
                             and ((r.time, r.parameter) in calls or (r.time + TICK, r.parameter) in calls))
     logged = {p for p, n in recalled_call.items() if n >= 2 and n >= RECALL_SHARE * yellows[p]}
     return {p for p in phases if (p not in called or p in logged) and p not in structure.phantom}
+
+
+def _take_calls(events: Iterable[Row], calls: set[int], peds: set[int]) -> None:
+    """Registers one tick's vehicle calls (43, dropped by 44) in ``calls`` and its pedestrian calls (45) in ``peds``."""
+    for r in events:
+        if r.code == E.PHASE_CALL_REGISTERED:
+            calls.add(r.parameter)
+        elif r.code == E.PHASE_CALL_DROPPED:
+            calls.discard(r.parameter)
+        elif r.code == E.PED_CALL_REGISTERED:
+            peds.add(r.parameter)
+
+
+def _entered_undemanded(rows: Sequence[Row], structure: Structure, recalled: set[int]) -> set[int]:
+    """The phases a ring went on to within its barrier group (no barrier termination, 31, on the tick) after a green
+    that ended with no demand the log shows on any phase not green (a green with nothing else to serve rests), and
+    with none on the phase itself then or as it begins: demand is a vehicle call registered (43) and not dropped
+    (44), a pedestrian call (45) not yet served by a walk (21) or a green, a call on the next tick, a phase read as
+    recalled already. Only a recall places demand a log does not register (NTCIP 1202 phaseOptions bit 6, "Min.
+    Vehicle Recall - when set to 1 causes recurring demand for vehicle service on the phase when that phase is not in
+    its Green interval"; the Indiana enumerations' 44: "Call to service on a phase is cleared by either service of
+    the phase or removal of call"); a dual entry phase needs something else to end the green before it. Read once the
+    ring has ended a green in the log; not for a coordinated phase (one that logs yield points, 151: the plan serves
+    it); only in a log that registers and drops calls."""
+    codes = {r.code for r in rows}
+    if E.PHASE_CALL_REGISTERED not in codes or E.PHASE_CALL_DROPPED not in codes:
+        return set()
+    ring_of = {p: r for r in (1, 2) for p in structure.ring(r)}
+    registered = {(r.time, r.parameter) for r in rows if r.code in (E.PHASE_CALL_REGISTERED, E.PED_CALL_REGISTERED)}
+    yielding = {r.parameter for r in rows if r.code == E.COORD_YIELD_POINT}
+    calls: set[int] = set()
+    peds: set[int] = set()
+    green: set[int] = set()
+    unexplained: dict[int, bool] = {}  # ring -> its last green ended with no demand shown on any phase not green
+    last_group: dict[int, int] = {}  # ring -> the group of its last green
+    seen: set[int] = set()
+    for _, tick in itertools.groupby(rows, key=lambda r: r.time):
+        events = list(tick)
+        _take_calls(events, calls, peds)  # the calls of the tick count for a green it starts
+        crossing = any(r.code == E.BARRIER_TERMINATION for r in events)
+        for r in events:  # in code order: a walk (21) serves a push after the green (1) it comes with is read
+            p = r.parameter
+            if r.code == E.PHASE_BEGIN_YELLOW and p in ring_of:
+                green.discard(p)
+                unexplained[ring_of[p]] = not (calls | peds | recalled) - green - {p}
+            elif r.code == E.PED_BEGIN_WALK:
+                peds.discard(p)
+            if r.code != E.PHASE_BEGIN_GREEN or p not in ring_of:
+                continue
+            group = structure.group_of(p)
+            ring = ring_of[p]
+            if (not crossing and unexplained.get(ring) and last_group.get(ring) == group and p not in yielding
+                    and p not in calls | peds | recalled and (r.time + TICK, p) not in registered):
+                seen.add(p)
+            last_group[ring] = group
+            green.add(p)
+            calls.discard(p)
+            peds.discard(p)
+    return seen
 
 
 def _extenders(rows: Sequence[Row], detectors: dict[int, int], recalled: set[int], structure: Structure,
@@ -780,13 +842,7 @@ def _dual_entries(rows: Sequence[Row], structure: Structure, recalled: set[int])
     seen: set[int] = set()
     for _, tick in itertools.groupby(rows, key=lambda r: r.time):
         events = list(tick)
-        for r in events:  # the calls of the tick count for a green it starts (read before the rings move)
-            if r.code == E.PHASE_CALL_REGISTERED:
-                calls.add(r.parameter)
-            elif r.code == E.PHASE_CALL_DROPPED:
-                calls.discard(r.parameter)
-            elif r.code == E.PED_CALL_REGISTERED:
-                peds.add(r.parameter)
+        _take_calls(events, calls, peds)  # the tick's calls count for a green it starts (read before the rings move)
         crossing = committed is not None and any(r.code == E.BARRIER_TERMINATION for r in events)
         for r in events:
             p = r.parameter
@@ -817,8 +873,8 @@ def _recall(rows: Sequence[Row], p: int, timing: dict[str, Any], out: Inferred) 
     ends = Counter(r.code for r in rows if r.parameter == p and r.code in (E.PHASE_GAP_OUT, E.PHASE_MAX_OUT,
                                                                            E.PHASE_FORCE_OFF))
     timing["recall"] = "max" if ends[E.PHASE_GAP_OUT] < ends[E.PHASE_MAX_OUT] + ends[E.PHASE_FORCE_OFF] else "min"
-    out.guessed.append(f"phase {p}: {timing['recall']} recall (served, but the log registers no vehicle call of "
-                       f"it; its greens end by gap-out {ends[E.PHASE_GAP_OUT]} times, by max-out or force-off "
+    out.guessed.append(f"phase {p}: {timing['recall']} recall (served where the log shows no vehicle call of it "
+                       f"live; its greens end by gap-out {ends[E.PHASE_GAP_OUT]} times, by max-out or force-off "
                        f"{ends[E.PHASE_MAX_OUT] + ends[E.PHASE_FORCE_OFF]})")
 
 

@@ -889,7 +889,7 @@ def _ped_detectors(raw: Any, phases: Mapping[int, Phase], source: str) -> dict[i
         if not (key.isdigit() and int(key) in PED_DETECTOR_NUMBERS):
             raise ConfigError(source, where,
                               f"unknown pedestrian detector; allowed: numbers 1-{PED_DETECTOR_NUMBERS[-1]}")
-        if isinstance(phase, bool) or phase not in phases:
+        if not isinstance(phase, int) or isinstance(phase, bool) or phase not in phases:
             raise ConfigError(source, where, f"calls phase {phase!r}; allowed: the configured phases "
                                              f"{', '.join(map(str, phases))}")
         out[int(key)] = phase

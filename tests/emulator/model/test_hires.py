@@ -297,6 +297,14 @@ def test_a_pedestrian_detector_table_is_checked() -> None:
         config_with("[pedestrian_detectors]\n256 = 4\n")
 
 
+@pytest.mark.parametrize("value", ["{ phase = 4, lock = true }", "[4]"])
+def test_a_push_button_given_as_a_vehicle_detectors_table_is_refused_naming_the_field(value: str) -> None:
+    """A push button written as a vehicle detector's table (or a list) is a config error naming the field, not a
+    TypeError from the check of its phase (a table cannot be looked up among the phases)."""
+    with pytest.raises(ConfigError, match=r"pedestrian_detectors\.2.*allowed: the configured phases"):
+        config_with(f"[pedestrian_detectors]\n2 = {value}\n")
+
+
 # --- the ATSPM layout and MaxTime's XML ----------------------------------------------------------------------
 
 

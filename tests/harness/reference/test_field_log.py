@@ -644,3 +644,13 @@ def test_a_walk_begun_within_a_running_green_is_read_as_pedestrian_recycle() -> 
     cfg = config_mod.parse(drawn.toml.replace("\n2 = { ", "\n2 = { ped_recycle = true, ", 1), "recycle.toml")
     got = field_log.infer(round_trip.emulator_log(cfg, 900, seed=3)).config()
     assert got.phases[2].ped_recycle and not any(ph.ped_recycle for p, ph in got.phases.items() if p != 2)
+
+
+def test_a_phase_gone_on_to_in_its_group_with_no_live_call_is_recalled() -> None:
+    """The MaxTime excerpt: ring 2 goes on from 5 to 6 while 2 times (94.8 s in), with no call live anywhere as 5
+    ended (a green with nothing else to serve rests), 6's last call dropped (44) 12.5 s before and no pedestrian call
+    of it waiting; 6 is served in every cycle of the log. Only a recall places such demand (NTCIP 1202 Min. Vehicle
+    Recall): 6 on min recall, and no other phase (before: none, and the replay rested in 5)."""
+    cfg = field_log.infer(hires_file.load(LOGS / "maxtime_1015_2024_07_22_1333_excerpt.xml")).config()
+    assert {p: ph.recall for p, ph in cfg.phases.items() if ph.recall is not config_mod.Recall.NONE} == {
+        6: config_mod.Recall.MIN}
