@@ -307,6 +307,9 @@ def infer(rows: Sequence[Row], name: str = "field controller") -> Inferred:
         timing[p]["passage"] = _within(p, "passage", timing[p]["passage"], low, min(high, timing[p]["max_green"]), out)
         if "min_gap" in timing[p]:
             timing[p]["min_gap"] = min(timing[p]["min_gap"], timing[p]["passage"])
+    for p in recalled - yielding:
+        if _recall_kind(events, p)[0] == "max":
+            _max_recall_maximum(events, p, timing[p], out)
     maxima = [t["maxed"] for t in timing.values() if "maxed" in t]
     if maxima:  # a phase that never maxed out has the intersection's maximum, if its longest green is shorter
         shared_max = math.ceil(max(maxima, key=maxima.count) - 1e-9)
@@ -810,16 +813,35 @@ def _dual_entries(rows: Sequence[Row], structure: Structure, recalled: set[int])
     return sorted(seen)
 
 
-def _recall(rows: Sequence[Row], p: int, timing: dict[str, Any], out: Inferred) -> None:
-    """A phase served without a call the log registers is recalled (a pretimed plan's phases, a recall, or detectors
-    the log does not record): maximum recall when its greens end by force-off or max-out more often than by gap-out
-    (NTCIP 1202 phaseOptions: Max Vehicle Recall times the green to its maximum), else minimum recall."""
+def _recall_kind(rows: Sequence[Row], p: int) -> tuple[str, Counter[int]]:
+    """A recalled phase's recall, maximum when its greens end by force-off or max-out more often than by gap-out
+    (NTCIP 1202 phaseOptions: Max Vehicle Recall times the green to its maximum), else minimum; and how they end."""
     ends = Counter(r.code for r in rows if r.parameter == p and r.code in (E.PHASE_GAP_OUT, E.PHASE_MAX_OUT,
                                                                            E.PHASE_FORCE_OFF))
-    timing["recall"] = "max" if ends[E.PHASE_GAP_OUT] < ends[E.PHASE_MAX_OUT] + ends[E.PHASE_FORCE_OFF] else "min"
+    return "max" if ends[E.PHASE_GAP_OUT] < ends[E.PHASE_MAX_OUT] + ends[E.PHASE_FORCE_OFF] else "min", ends
+
+
+def _recall(rows: Sequence[Row], p: int, timing: dict[str, Any], out: Inferred) -> None:
+    """A phase served without a call the log registers is recalled (a pretimed plan's phases, a recall, or detectors
+    the log does not record): :func:`_recall_kind`."""
+    timing["recall"], ends = _recall_kind(rows, p)
     out.guessed.append(f"phase {p}: {timing['recall']} recall (served, but the log registers no vehicle call of "
                        f"it; its greens end by gap-out {ends[E.PHASE_GAP_OUT]} times, by max-out or force-off "
                        f"{ends[E.PHASE_MAX_OUT] + ends[E.PHASE_FORCE_OFF]})")
+
+
+def _max_recall_maximum(rows: Sequence[Row], p: int, timing: dict[str, Any], out: Inferred) -> None:
+    """A phase on max recall times its maximum from its begin green, not from its phase check: NTCIP 1202
+    phaseMaximum1's timer is "held reset unless Max Vehicle Recall is enabled for this phase" (or a serviceable
+    conflicting call waits), so the shortest of its greens that maxed out, timed from their start, is its maximum."""
+    maxed = _max_timings(rows, p, from_check=False)
+    if not maxed:
+        return
+    timing["maxed"] = min(maxed)
+    timing["max_green"] = _within(p, "max_green", max(timing["min_green"], math.ceil(min(maxed) - 1e-9)), 1,
+                                  config_mod.phase_time_range("max_green")[1], out)
+    out.read.append(f"phase {p}: max green {timing['max_green']:g} s (on max recall: its max-outs timed from their "
+                    "begin green)")
 
 
 def _ped_recalls(rows: Sequence[Row], greens: Mapping[int, list[tuple[datetime, datetime]]],
@@ -1073,16 +1095,17 @@ def _within(p: int, key: str, value: Any, low: float, high: float, out: Inferred
     return inside
 
 
-def _max_timings(rows: Sequence[Row], p: int) -> list[float]:
-    """Seconds each green of ``p`` that maxed out (5) timed its maximum: from its phase check (2) within it, else from
-    its begin green (1); a green running as the log begins counts from its phase check."""
+def _max_timings(rows: Sequence[Row], p: int, from_check: bool = True) -> list[float]:
+    """Seconds each green of ``p`` that maxed out (5) timed its maximum: from its phase check (2) within it when
+    ``from_check``, else from its begin green (1); a green running as the log begins counts from its phase check."""
     out, since, checked, began = [], None, False, False
     for r in rows:
         if r.parameter != p:
             continue
         if r.code == E.PHASE_BEGIN_GREEN:
             since, checked, began = r.time, False, True
-        elif r.code == E.PHASE_CHECK and (since is not None or not began) and not checked:
+        elif r.code == E.PHASE_CHECK and ((since is None and not began) or (from_check and since is not None)) \
+                and not checked:
             since, checked = r.time, True
         elif r.code == E.PHASE_MAX_OUT and since is not None:
             out.append(round((r.time - since).total_seconds(), 1))

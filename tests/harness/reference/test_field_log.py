@@ -644,3 +644,13 @@ def test_a_walk_begun_within_a_running_green_is_read_as_pedestrian_recycle() -> 
     cfg = config_mod.parse(drawn.toml.replace("\n2 = { ", "\n2 = { ped_recycle = true, ", 1), "recycle.toml")
     got = field_log.infer(round_trip.emulator_log(cfg, 900, seed=3)).config()
     assert got.phases[2].ped_recycle and not any(ph.ped_recycle for p, ph in got.phases.items() if p != 2)
+
+
+def test_a_max_recalled_phase_times_its_maximum_from_its_green_not_its_phase_check() -> None:
+    """Phase 5 on max recall maxes out 20 s into each green whenever a conflicting call came (phase check, 2) some
+    seconds in: NTCIP 1202 phaseMaximum1's timer is "held reset unless Max Vehicle Recall is enabled for this phase",
+    so its maximum is timed from the begin green; timed from the phase check it read 18 s and the replay ended 5's
+    greens 2 s early, and every phase that never maxed out got that shorter maximum as the intersection's."""
+    _, got = _plain({5: 'recall = "max"'}, 600, seed=37)
+    assert got.phases[5].recall is config_mod.Recall.MAX
+    assert {p: ph.max_green for p, ph in got.phases.items()} == {p: 20.0 for p in range(1, 9)}
