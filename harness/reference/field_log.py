@@ -766,8 +766,9 @@ def _dual_entries(rows: Sequence[Row], structure: Structure, recalled: set[int])
     group at the yellow and the phase it entered, at the barrier termination (31), is not its nearest with demand
     then. Demand: a vehicle call registered (43) and not dropped (44), a pedestrian call (45) not yet served (by a
     walk, 21, or for a phase that never walks by its green, 1), a recall (a phase the log shows served without its
-    calls); for the nearest, the calls registered on the tick and the next too (the emulator logs a push's 45 on
-    the tick after the green it latched for began). Read once seen: nothing else makes such an entry. Only in a log
+    calls); for the nearest, the calls registered on the tick, and a push's 45 on the next too (the emulator logs it
+    on the tick after the green it latched for began; a vehicle call, 43, on the next tick is a vehicle that came
+    after the green began, which did not choose it). Read once seen: nothing else makes such an entry. Only in a log
     that registers and drops calls: one without them shows no demand at all."""
     codes = {r.code for r in rows}
     if E.PHASE_CALL_REGISTERED not in codes or E.PHASE_CALL_DROPPED not in codes:
@@ -775,7 +776,7 @@ def _dual_entries(rows: Sequence[Row], structure: Structure, recalled: set[int])
     ring_of = {p: r for r in (1, 2) for p in structure.ring(r)}
     group_of = {p: structure.group_of(p) for p in ring_of}
     walking = {r.parameter for r in rows if r.code == E.PED_BEGIN_WALK}
-    registered = {(r.time, r.parameter) for r in rows if r.code in (E.PHASE_CALL_REGISTERED, E.PED_CALL_REGISTERED)}
+    pushed = {(r.time, r.parameter) for r in rows if r.code == E.PED_CALL_REGISTERED}
     calls: set[int] = set()
     peds: set[int] = set()
     committed: set[int] | None = None  # the phases with demand at the last begin yellow
@@ -799,7 +800,7 @@ def _dual_entries(rows: Sequence[Row], structure: Structure, recalled: set[int])
             if crossing and last_group.get(ring, group_of[p]) != group_of[p]:
                 mine = [q for q in structure.ring(ring) if group_of[q] == group_of[p]]
                 nearest = next((q for q in mine if q in calls | peds | recalled
-                                or (r.time + TICK, q) in registered), None)
+                                or (r.time + TICK, q) in pushed), None)
                 if not (committed | recalled) & set(mine) and nearest != p:
                     seen.add(p)
             last_group[ring] = group_of[p]

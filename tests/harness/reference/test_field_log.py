@@ -654,3 +654,15 @@ def test_a_max_recalled_phase_times_its_maximum_from_its_green_not_its_phase_che
     _, got = _plain({5: 'recall = "max"'}, 600, seed=37)
     assert got.phases[5].recall is config_mod.Recall.MAX
     assert {p: ph.max_green for p, ph in got.phases.items()} == {p: 20.0 for p in range(1, 9)}
+
+
+def test_a_vehicle_call_on_the_tick_after_a_barrier_entry_did_not_choose_it() -> None:
+    """Seed 1's twelfth round-trip config (dual entry on 8 only): ring 2 crosses to 5/6 with nothing called there as
+    4 and 8 end; a push of 6 during the clearance takes it to 6, and 5's detector comes on a tick after 6 began green
+    (43 on that tick, the emulator's own lag). Counted as demand at the entry, that call made 5 the ring's nearest
+    and 6 read as dual entry, which the replay then took where the field went to 5."""
+    rng = random.Random(1)
+    drawn = [round_trip.random_config(rng) for _ in range(12)][-1]
+    assert "dual entry 8" in drawn.features
+    got = field_log.infer(round_trip.emulator_log(config_mod.parse(drawn.toml, "rt12.toml"), 600, 11)).config()
+    assert {p for p, ph in got.phases.items() if ph.dual_entry} == {8}
