@@ -401,13 +401,17 @@ def _extenders(rows: Sequence[Row], detectors: dict[int, int], recalled: set[int
     starts = {r: [(row.time, row.parameter) for row in rows if row.code == E.PHASE_BEGIN_GREEN
                   and ring_of.get(row.parameter) == r] for r in (1, 2)}
     wants: dict[int, list[tuple[datetime, bool]]] = defaultdict(list)  # each phase's call registered (43), dropped
+    pushed: dict[int, list[tuple[datetime, bool]]] = defaultdict(list)  # its pedestrian call (45), served by a walk
     for row in rows:
         if row.code in (E.PHASE_CALL_REGISTERED, E.PHASE_CALL_DROPPED):
             wants[row.parameter].append((row.time, row.code == E.PHASE_CALL_REGISTERED))
+        elif row.code in (E.PED_CALL_REGISTERED, E.PED_BEGIN_WALK):
+            pushed[row.parameter].append((row.time, row.code == E.PED_CALL_REGISTERED))
 
     def _waited(p: int, t: datetime) -> bool:
-        """The phase the ring served next after ``p``'s green ending at ``t`` was called before ``t`` (or is
-        recalled): the green ended when its gap ran out, not when a call came to a green resting with nowhere to go."""
+        """The phase the ring served next after ``p``'s green ending at ``t`` was called before ``t`` (a vehicle call,
+        or a pedestrian call its walk had not yet served; or it is recalled): the green ended when its gap ran out,
+        not when a call came to a green resting with nowhere to go."""
         mine = starts.get(ring_of.get(p, 0), [])
         k = bisect.bisect_right(mine, (t, PHASES + 1))
         if planned:  # under a plan a green never rests: the coordinated phases always want service
@@ -415,7 +419,7 @@ def _extenders(rows: Sequence[Row], detectors: dict[int, int], recalled: set[int
         if k == len(mine):
             return False
         q = mine[k][1]
-        return q in recalled or _called_at(wants[q], t - TICK)
+        return q in recalled or _called_at(wants[q], t - TICK) or _called_at(pushed[q], t - TICK)
 
     changes: dict[int, list[tuple[datetime, bool]]] = defaultdict(list)  # each detector's on (82) and off (81)
     for r in rows:
