@@ -395,7 +395,11 @@ def _extenders(rows: Sequence[Row], detectors: dict[int, int], recalled: set[int
     # gap-out, whether it ended the green alone
     began: dict[int, datetime] = {}
     minimum: dict[int, datetime] = {}
-    yellows = Counter(r.time for r in rows if r.code == E.PHASE_BEGIN_YELLOW)
+    yellows: dict[datetime, list[int]] = defaultdict(list)  # the phases whose yellow begins on each tick
+    for r in rows:
+        if r.code == E.PHASE_BEGIN_YELLOW:
+            yellows[r.time].append(r.parameter)
+    timed = {(r.time, r.parameter) for r in rows if r.code in (E.PHASE_MIN_COMPLETE, E.PED_BEGIN_SOLID_DONT_WALK)}
     ring_of = {p: r for r in (1, 2) for p in structure.ring(r)}
     planned = any(r.code == E.COORD_CYCLE_STATE_CHANGE and r.parameter == LOCAL_ZERO for r in rows)
     starts = {r: [(row.time, row.parameter) for row in rows if row.code == E.PHASE_BEGIN_GREEN
@@ -421,6 +425,23 @@ def _extenders(rows: Sequence[Row], detectors: dict[int, int], recalled: set[int
         q = mine[k][1]
         return q in recalled or _called_at(wants[q], t - TICK) or _called_at(pushed[q], t - TICK)
 
+    def _waiting(q: int, t: datetime) -> bool:
+        """``q``, whose yellow begins with another ring's at ``t``, had gapped out before and waited at the barrier
+        (simultaneous gap disable, NTCIP 1202 phaseOptions bit 11, the default, keeps it out though a call comes
+        back): a phase of its own calls (not recalled) whose call dropped (44) in its green and stayed off longer
+        than the intersection's ``passage``, all before ``t``, its minimum and walk not ending on ``t``. The other
+        ring's gap-out then ended both greens alone."""
+        mine = [a for a, phase in starts.get(ring_of.get(q, 0), []) if phase == q and a < t]
+        if q in recalled or passage is None or not mine or (t, q) in timed:
+            return False
+        calls = wants[q]
+        k = bisect.bisect_right(calls, (t, True))
+        for j in range(bisect.bisect_left(calls, (mine[-1],)), k):
+            back = calls[j + 1][0] if j + 1 < len(calls) else datetime.max
+            if not calls[j][1] and (min(back, t) - calls[j][0]).total_seconds() > passage + TICK.total_seconds() / 2:
+                return True
+        return False
+
     changes: dict[int, list[tuple[datetime, bool]]] = defaultdict(list)  # each detector's on (82) and off (81)
     for r in rows:
         if r.code in (E.DETECTOR_ON, E.DETECTOR_OFF) and detectors.get(r.parameter) == 0:
@@ -433,7 +454,8 @@ def _extenders(rows: Sequence[Row], detectors: dict[int, int], recalled: set[int
         elif r.code == E.PHASE_MIN_COMPLETE:
             minimum[r.parameter] = r.time
         elif r.code == E.PHASE_GAP_OUT and r.parameter in began:
-            alone = yellows[r.time] == 1 and _waited(r.parameter, r.time)
+            alone = _waited(r.parameter, r.time) and all(_waiting(q, r.time) for q in yellows[r.time]
+                                                         if q != r.parameter)
             gap_outs[r.parameter].append((began[r.parameter], minimum.get(r.parameter), r.time, alone))
     claims: dict[int, list[tuple[int, bool, int, float]]] = defaultdict(list)  # phase -> (times, fits, detector, lag)
     for d, mine in sorted(changes.items()):
@@ -448,8 +470,10 @@ def _extenders(rows: Sequence[Row], detectors: dict[int, int], recalled: set[int
             counts = Counter(lag for lag, past, _ in lags if past and lag is not None and 0 < lag <= 10)
             if not counts:
                 continue
-            # the most frequent time, on a tie the one the intersection's passage gives
-            lag = max(counts, key=lambda g: (counts[g], round(g + TICK.total_seconds(), 1) == passage, -g))
+            # the most frequent time, on a tie one seen ending a green alone, then the one the intersection's passage
+            # gives
+            sole = {g for g, past, alone in lags if past and alone}
+            lag = max(counts, key=lambda g: (counts[g], g in sole, round(g + TICK.total_seconds(), 1) == passage, -g))
             n, fits = counts[lag], round(lag + TICK.total_seconds(), 1) == passage
             against = sum(1 for g, _, alone in lags if alone and g is not None and g < lag)
             shown = n >= 2 or any(alone and past and g == lag for g, past, alone in lags) or fits  # else chance

@@ -680,3 +680,16 @@ def test_a_recalled_phases_gap_out_is_its_own_when_a_push_waits_for_the_next_pha
     assert {"min recall 7", "carryover 1 s on 7"} <= set(drawn.features)
     got = field_log.infer(round_trip.emulator_log(config_mod.parse(drawn.toml, "rt40.toml"), 600, 39)).config()
     assert got.detectors[7] == 7 and got.detector_timing[7].extend == pytest.approx(1.0)
+
+
+def test_a_recalled_phases_gap_out_beside_a_green_that_gapped_out_before_it_is_its_own() -> None:
+    """Seed 1's twenty-fourth round-trip config: phase 8 on min recall, detector 8 with a carryover of 1 s (passage
+    2 s). 8 ends only at the barrier beside 4, so no gap-out of it ends its green alone; but once 4's call dropped
+    3 s before their common gap-out (4 had gapped out, and waited with simultaneous gap disable though its detector
+    came back), so that gap-out was 8's own, 2.9 s after detector 8 went off. Read, detector 8 extends 8 by 1 s;
+    not read, the replay ended 4 and 8 1.1 s early (92.9 %)."""
+    rng = random.Random(1)
+    drawn = [round_trip.random_config(rng) for _ in range(24)][-1]
+    assert {"min recall 8", "carryover 1 s on 8"} <= set(drawn.features)
+    got = field_log.infer(round_trip.emulator_log(config_mod.parse(drawn.toml, "rt24.toml"), 600, 23)).config()
+    assert got.detectors[8] == 8 and got.detector_timing[8].extend == pytest.approx(1.0)
