@@ -645,17 +645,26 @@ def _backings(rows: Sequence[Row], greens: Mapping[int, list[tuple[datetime, dat
     timed in that group (a green of it on after the ring's green ended and begun before the earlier phase's, not with
     it: both rings clearing and starting the group again together is no backing) backed into it: conditional service
     (NTCIP 1202 phaseOptions bit 14) on the phase it backed from when a call across the barrier was on as its green
-    ended (registered, 43, and not dropped, 44), Naztec's backing (``backup_prevent = false``) otherwise. The emulator
-    backs only where set so."""
+    ended (registered, 43, and not dropped, 44; or a pedestrian call, 45, its walk had not yet served, or for a phase
+    that never walks its green), Naztec's backing (``backup_prevent = false``) otherwise: Naztec's controllers back
+    "when the cross street phases ... are skipped" (TecNote 3013), which a waiting push is not. The emulator backs
+    only where set so."""
     ring_of = {p: r for r in (1, 2) for p in structure.ring(r)}
     order = {p: i for r in (1, 2) for i, p in enumerate(structure.ring(r))}
     group_of = {p: structure.group_of(p) for p in ring_of}
     starts = sorted((a, b, p) for p, mine in greens.items() for a, b in mine if p in ring_of)
     by_ring = {r: [(a, b, p) for a, b, p in starts if ring_of[p] == r] for r in (1, 2)}
     calls: dict[int, list[tuple[datetime, bool]]] = defaultdict(list)  # each phase's call registered (43), dropped (44)
+    pushed: dict[int, list[tuple[datetime, bool]]] = defaultdict(list)  # its pedestrian call (45) until served
+    walking = {r.parameter for r in rows if r.code == E.PED_BEGIN_WALK}
     for r in rows:
-        if r.code in (E.PHASE_CALL_REGISTERED, E.PHASE_CALL_DROPPED) and r.parameter in ring_of:
+        if r.parameter not in ring_of:
+            continue
+        if r.code in (E.PHASE_CALL_REGISTERED, E.PHASE_CALL_DROPPED):
             calls[r.parameter].append((r.time, r.code == E.PHASE_CALL_REGISTERED))
+        elif r.code == E.PED_CALL_REGISTERED or r.code == (E.PED_BEGIN_WALK if r.parameter in walking
+                                                           else E.PHASE_BEGIN_GREEN):
+            pushed[r.parameter].append((r.time, r.code == E.PED_CALL_REGISTERED))
     seen: dict[int, Counter[str]] = defaultdict(Counter)
     previous: dict[int, tuple[datetime, int]] = {}  # ring -> the end of its last green, its phase
     for begin, end, q in starts:
@@ -667,7 +676,8 @@ def _backings(rows: Sequence[Row], greens: Mapping[int, list[tuple[datetime, dat
             timing_on = any(a < begin and b > ended and group_of[x] == group_of[p]
                             for a, b, x in other[max(k, 0):bisect.bisect_left(other, (begin,))])
             if group_of[p] == group_of[q] and order[q] < order[p] and timing_on:
-                waiting = any(group_of[x] != group_of[p] and _called_at(calls[x], ended) for x in calls)
+                waiting = any(group_of[x] != group_of[p]
+                              and (_called_at(calls[x], ended) or _called_at(pushed[x], ended)) for x in ring_of)
                 seen[p]["conditional service" if waiting else "backing"] += 1
         previous[r] = (end, q)
     for p, kinds in sorted(seen.items()):

@@ -693,3 +693,15 @@ def test_a_recalled_phases_gap_out_beside_a_green_that_gapped_out_before_it_is_i
     assert {"min recall 8", "carryover 1 s on 8"} <= set(drawn.features)
     got = field_log.infer(round_trip.emulator_log(config_mod.parse(drawn.toml, "rt24.toml"), 600, 23)).config()
     assert got.detectors[8] == 8 and got.detector_timing[8].extend == pytest.approx(1.0)
+
+
+def test_a_ring_backing_while_a_push_waits_across_the_barrier_is_conditional_service() -> None:
+    """Seed 1's thirty-fifth round-trip config: phase 1 (lagging 2) has conditional service; each time it backs into
+    2 no vehicle call is on across the barrier, but pushes of 7 and 8 wait there (45, their walk or green to come).
+    Naztec's backing ("when the cross street phases ... are skipped", TecNote 3013) does not back then; read so, the
+    replay held 1 green 12 s past the log's gap-out (75.8 %)."""
+    rng = random.Random(1)
+    drawn = [round_trip.random_config(rng) for _ in range(35)][-1]
+    assert "conditional service 1" in drawn.features and "backing 1" not in drawn.features
+    got = field_log.infer(round_trip.emulator_log(config_mod.parse(drawn.toml, "rt35.toml"), 600, 34)).config()
+    assert got.phases[1].conditional_service and got.phases[1].backup_prevent
