@@ -381,41 +381,43 @@ def _extenders(rows: Sequence[Row], detectors: dict[int, int], recalled: set[int
     """A detector that calls nothing the log shows may extend a recalled phase (the emulator logs no call of a
     recalled phase, :mod:`emulator.model.datalogger`), read from the phase's gap-outs: the detector extends the phase
     when its gap-outs past its minimum (3) come one same time after the detector's last off in the green (twice, or
-    once ending the green alone, or once at the intersection's ``passage``; on a tie the time that passage gives),
-    and none that ends the green alone comes while the detector is on or sooner after its off (a vehicle on it would
-    have held the green); of several detectors so, the one that shows it most. A gap-out ends the
-    green alone when the phase its ring served next was called the tick before (or recalled, or a plan runs) and no
-    other phase's yellow begins on its tick; else it is logged later than the gap ran out and shows nothing against
-    the detector: a green with nowhere to go rests in green and ends when a call comes, and one at a barrier may have
-    gapped out before and waited for the other ring (NTCIP 1202 phaseOptions bit 11, simultaneous gap disable, keeps
-    it gapped out), the detector coming on meanwhile. Returns each such phase's detector and its gap-outs' time from
-    the last tick with the call: the phase's passage and the detector's extension together, which only the green's
-    start, timed by the passage alone, tells apart."""
+    once ending the green alone, or once at the intersection's ``passage``; on a tie one seen ending a green alone,
+    then the time that passage gives), and none past its minimum that ends the green alone comes while the detector
+    is on or sooner after its off (a vehicle on it would have held the green); of several detectors so, the one that
+    shows it most. A gap-out ends the green alone when the phase its ring served next was called the tick before (a
+    vehicle or a pedestrian call, or recalled, or a plan runs) and every other phase whose yellow begins on its tick
+    had gapped out before and waited (:func:`_waiting` within); else it is logged later than the gap ran out and shows
+    nothing against the detector: a green with nowhere to go rests in green and ends when a call comes, and one at a
+    barrier may have gapped out before and waited for the other ring (NTCIP 1202 phaseOptions bit 11, simultaneous gap
+    disable, keeps it gapped out), the detector coming on meanwhile. A gap-out on the tick the phase's minimum or
+    walk clearance ends (3, 23) is not past its minimum: its gap may have run out during it. Returns each such
+    phase's detector and its gap-outs' time from the last tick with the call: the phase's passage and the detector's
+    extension together, which only the green's start, timed by the passage alone, tells apart."""
     gap_outs: dict[int, list[tuple[datetime, datetime | None, datetime, bool]]] = defaultdict(list)  # green, min,
     # gap-out, whether it ended the green alone
     began: dict[int, datetime] = {}
-    minimum: dict[int, datetime] = {}
     yellows: dict[datetime, list[int]] = defaultdict(list)  # the phases whose yellow begins on each tick
     for r in rows:
         if r.code == E.PHASE_BEGIN_YELLOW:
             yellows[r.time].append(r.parameter)
-    timed = {(r.time, r.parameter) for r in rows if r.code in (E.PHASE_MIN_COMPLETE, E.PED_BEGIN_SOLID_DONT_WALK)}
+    timed: dict[int, list[datetime]] = defaultdict(list)  # each phase's minimums and walks timed (3, 23)
+    for r in rows:
+        if r.code in (E.PHASE_MIN_COMPLETE, E.PED_BEGIN_SOLID_DONT_WALK):
+            timed[r.parameter].append(r.time)
     ring_of = {p: r for r in (1, 2) for p in structure.ring(r)}
     planned = any(r.code == E.COORD_CYCLE_STATE_CHANGE and r.parameter == LOCAL_ZERO for r in rows)
     starts = {r: [(row.time, row.parameter) for row in rows if row.code == E.PHASE_BEGIN_GREEN
                   and ring_of.get(row.parameter) == r] for r in (1, 2)}
     wants: dict[int, list[tuple[datetime, bool]]] = defaultdict(list)  # each phase's call registered (43), dropped
-    pushed: dict[int, list[tuple[datetime, bool]]] = defaultdict(list)  # its pedestrian call (45), served by a walk
     for row in rows:
         if row.code in (E.PHASE_CALL_REGISTERED, E.PHASE_CALL_DROPPED):
             wants[row.parameter].append((row.time, row.code == E.PHASE_CALL_REGISTERED))
-        elif row.code in (E.PED_CALL_REGISTERED, E.PED_BEGIN_WALK):
-            pushed[row.parameter].append((row.time, row.code == E.PED_CALL_REGISTERED))
+    pushed = _pushes(rows)
 
     def _waited(p: int, t: datetime) -> bool:
         """The phase the ring served next after ``p``'s green ending at ``t`` was called before ``t`` (a vehicle call,
-        or a pedestrian call its walk had not yet served; or it is recalled): the green ended when its gap ran out,
-        not when a call came to a green resting with nowhere to go."""
+        or a pedestrian call not yet served, :func:`_pushes`; or it is recalled): the green ended when its gap ran
+        out, not when a call came to a green resting with nowhere to go."""
         mine = starts.get(ring_of.get(p, 0), [])
         k = bisect.bisect_right(mine, (t, PHASES + 1))
         if planned:  # under a plan a green never rests: the coordinated phases always want service
@@ -429,16 +431,19 @@ def _extenders(rows: Sequence[Row], detectors: dict[int, int], recalled: set[int
         """``q``, whose yellow begins with another ring's at ``t``, had gapped out before and waited at the barrier
         (simultaneous gap disable, NTCIP 1202 phaseOptions bit 11, the default, keeps it out though a call comes
         back): a phase of its own calls (not recalled) whose call dropped (44) in its green and stayed off longer
-        than the intersection's ``passage``, all before ``t``, its minimum and walk not ending on ``t``. The other
-        ring's gap-out then ended both greens alone."""
+        than the intersection's ``passage`` past its minimum and walk (3, 23), all before ``t``. The other ring's
+        gap-out then ended both greens alone."""
         mine = [a for a, phase in starts.get(ring_of.get(q, 0), []) if phase == q and a < t]
-        if q in recalled or passage is None or not mine or (t, q) in timed:
+        if q in recalled or passage is None or not mine:
+            return False
+        ready = [a for a in timed[q] if mine[-1] <= a <= t]
+        if not ready or ready[-1] == t:  # its minimum or walk ended the green
             return False
         calls = wants[q]
-        k = bisect.bisect_right(calls, (t, True))
-        for j in range(bisect.bisect_left(calls, (mine[-1],)), k):
-            back = calls[j + 1][0] if j + 1 < len(calls) else datetime.max
-            if not calls[j][1] and (min(back, t) - calls[j][0]).total_seconds() > passage + TICK.total_seconds() / 2:
+        for j in range(bisect.bisect_left(calls, (mine[-1],)), bisect.bisect_right(calls, (t, True))):
+            back = min(calls[j + 1][0] if j + 1 < len(calls) else t, t)
+            out = max(calls[j][0] + timedelta(seconds=passage), ready[-1])
+            if not calls[j][1] and (back - out).total_seconds() > TICK.total_seconds() / 2:
                 return True
         return False
 
@@ -450,13 +455,12 @@ def _extenders(rows: Sequence[Row], detectors: dict[int, int], recalled: set[int
             continue
         elif r.code == E.PHASE_BEGIN_GREEN:
             began[r.parameter] = r.time
-            minimum.pop(r.parameter, None)
-        elif r.code == E.PHASE_MIN_COMPLETE:
-            minimum[r.parameter] = r.time
         elif r.code == E.PHASE_GAP_OUT and r.parameter in began:
             alone = _waited(r.parameter, r.time) and all(_waiting(q, r.time) for q in yellows[r.time]
                                                          if q != r.parameter)
-            gap_outs[r.parameter].append((began[r.parameter], minimum.get(r.parameter), r.time, alone))
+            # its minimum, or a walk's clearance, timed last (3, 23; logged on the gap-out's tick after it)
+            least = max((a for a in timed[r.parameter] if began[r.parameter] <= a <= r.time), default=None)
+            gap_outs[r.parameter].append((began[r.parameter], least, r.time, alone))
     claims: dict[int, list[tuple[int, bool, int, float]]] = defaultdict(list)  # phase -> (times, fits, detector, lag)
     for d, mine in sorted(changes.items()):
         best: tuple[int, int, bool, float] | None = None
@@ -475,7 +479,7 @@ def _extenders(rows: Sequence[Row], detectors: dict[int, int], recalled: set[int
             sole = {g for g, past, alone in lags if past and alone}
             lag = max(counts, key=lambda g: (counts[g], g in sole, round(g + TICK.total_seconds(), 1) == passage, -g))
             n, fits = counts[lag], round(lag + TICK.total_seconds(), 1) == passage
-            against = sum(1 for g, _, alone in lags if alone and g is not None and g < lag)
+            against = sum(1 for g, past, alone in lags if past and alone and g is not None and g < lag)
             shown = n >= 2 or any(alone and past and g == lag for g, past, alone in lags) or fits  # else chance
             if shown and not against and (best is None or (n, fits) > best[1:3]):
                 best = (p, n, fits, lag)
@@ -645,26 +649,19 @@ def _backings(rows: Sequence[Row], greens: Mapping[int, list[tuple[datetime, dat
     timed in that group (a green of it on after the ring's green ended and begun before the earlier phase's, not with
     it: both rings clearing and starting the group again together is no backing) backed into it: conditional service
     (NTCIP 1202 phaseOptions bit 14) on the phase it backed from when a call across the barrier was on as its green
-    ended (registered, 43, and not dropped, 44; or a pedestrian call, 45, its walk had not yet served, or for a phase
-    that never walks its green), Naztec's backing (``backup_prevent = false``) otherwise: Naztec's controllers back
-    "when the cross street phases ... are skipped" (TecNote 3013), which a waiting push is not. The emulator backs
-    only where set so."""
+    ended (registered, 43, and not dropped, 44; or a pedestrian call, 45, not yet served, :func:`_pushes`), Naztec's
+    backing (``backup_prevent = false``) otherwise: Naztec's controllers back "when the cross street phases ... are
+    skipped" (TecNote 3013), which a waiting push is not. The emulator backs only where set so."""
     ring_of = {p: r for r in (1, 2) for p in structure.ring(r)}
     order = {p: i for r in (1, 2) for i, p in enumerate(structure.ring(r))}
     group_of = {p: structure.group_of(p) for p in ring_of}
     starts = sorted((a, b, p) for p, mine in greens.items() for a, b in mine if p in ring_of)
     by_ring = {r: [(a, b, p) for a, b, p in starts if ring_of[p] == r] for r in (1, 2)}
     calls: dict[int, list[tuple[datetime, bool]]] = defaultdict(list)  # each phase's call registered (43), dropped (44)
-    pushed: dict[int, list[tuple[datetime, bool]]] = defaultdict(list)  # its pedestrian call (45) until served
-    walking = {r.parameter for r in rows if r.code == E.PED_BEGIN_WALK}
     for r in rows:
-        if r.parameter not in ring_of:
-            continue
-        if r.code in (E.PHASE_CALL_REGISTERED, E.PHASE_CALL_DROPPED):
+        if r.code in (E.PHASE_CALL_REGISTERED, E.PHASE_CALL_DROPPED) and r.parameter in ring_of:
             calls[r.parameter].append((r.time, r.code == E.PHASE_CALL_REGISTERED))
-        elif r.code == E.PED_CALL_REGISTERED or r.code == (E.PED_BEGIN_WALK if r.parameter in walking
-                                                           else E.PHASE_BEGIN_GREEN):
-            pushed[r.parameter].append((r.time, r.code == E.PED_CALL_REGISTERED))
+    pushed = _pushes(rows)
     seen: dict[int, Counter[str]] = defaultdict(Counter)
     previous: dict[int, tuple[datetime, int]] = {}  # ring -> the end of its last green, its phase
     for begin, end, q in starts:
@@ -774,6 +771,22 @@ def _called_at(changes: Sequence[tuple[datetime, bool]], t: datetime) -> bool:
     """The phase's call is on at ``t``: its last change by then (registered, 43, or dropped, 44; time-sorted) is on."""
     k = bisect.bisect_right(changes, (t, True)) - 1
     return k >= 0 and changes[k][1]
+
+
+def _pushes(rows: Sequence[Row]) -> dict[int, list[tuple[datetime, bool]]]:
+    """Each phase's pedestrian call (45) on until served, as :func:`_called_at` reads it: by a walk (21), or for a
+    phase that never walks by its green (1). A 45 on the tick after the service is the push that service latched (the
+    emulator logs it a tick late), served already."""
+    walking = {r.parameter for r in rows if r.code == E.PED_BEGIN_WALK}
+    pushed: dict[int, list[tuple[datetime, bool]]] = defaultdict(list)
+    served: dict[int, datetime] = {}
+    for r in rows:
+        if r.code == (E.PED_BEGIN_WALK if r.parameter in walking else E.PHASE_BEGIN_GREEN):
+            served[r.parameter] = r.time
+            pushed[r.parameter].append((r.time, False))
+        elif r.code == E.PED_CALL_REGISTERED and served.get(r.parameter, datetime.min) < r.time - TICK:
+            pushed[r.parameter].append((r.time, True))
+    return pushed
 
 
 def _recycles(rows: Sequence[Row], greens: Mapping[int, list[tuple[datetime, datetime]]],
