@@ -706,3 +706,15 @@ def test_a_ring_backing_while_a_push_waits_across_the_barrier_is_conditional_ser
     assert "conditional service 1" in drawn.features and "backing 1" not in drawn.features
     got = field_log.infer(round_trip.emulator_log(config_mod.parse(drawn.toml, "rt35.toml"), 600, 34)).config()
     assert got.phases[1].conditional_service and got.phases[1].backup_prevent
+
+
+def test_a_gap_out_as_a_walk_ends_says_nothing_against_a_recalled_phases_detector() -> None:
+    """Seed 2's twentieth round-trip config: phase 6 on min recall with pedestrian recycle, detector 6 extending 0.5 s
+    (passage 2 s). Some of 6's greens end on the tick their walk's clearance ends (23), beside phase 1 or 2 whose own
+    minimum or walk ends there too; those gap-outs come sooner after detector 6's off than its extension, and counted
+    as ending the green alone they denied it (the replay then ended phase 1 2.3 s early, 82.7 %)."""
+    rng = random.Random(2)
+    drawn = [round_trip.random_config(rng) for _ in range(20)][-1]
+    assert {"min recall 6", "extend 0.5 s on 6"} <= set(drawn.features)
+    got = field_log.infer(round_trip.emulator_log(config_mod.parse(drawn.toml, "rt20.toml"), 600, 19)).config()
+    assert got.detectors[6] == 6 and got.detector_timing[6].extend == pytest.approx(0.5)
