@@ -648,6 +648,14 @@ def test_a_walk_begun_within_a_running_green_is_read_as_pedestrian_recycle() -> 
     assert got.phases[2].ped_recycle and not any(ph.ped_recycle for p, ph in got.phases.items() if p != 2)
 
 
+def _drawn_and_read(seed: int, k: int) -> tuple[round_trip.Drawn, config_mod.IntersectionConfig]:
+    """Seed ``seed``'s ``k``-th config of ``python -m harness.reference.round_trip`` and the config inferred from its
+    log (600 s, as the benchmark makes it)."""
+    rng = random.Random(seed)
+    drawn = [round_trip.random_config(rng) for _ in range(k)][-1]
+    return drawn, field_log.infer(round_trip.emulator_log(config_mod.parse(drawn.toml, "rt.toml"), 600, k - 1)).config()
+
+
 def test_a_max_recalled_phase_times_its_maximum_from_its_green_not_its_phase_check() -> None:
     """Phase 5 on max recall maxes out 20 s into each green whenever a conflicting call came (phase check, 2) some
     seconds in: NTCIP 1202 phaseMaximum1's timer is "held reset unless Max Vehicle Recall is enabled for this phase",
@@ -663,10 +671,8 @@ def test_a_vehicle_call_on_the_tick_after_a_barrier_entry_did_not_choose_it() ->
     4 and 8 end; a push of 6 during the clearance takes it to 6, and 5's detector comes on a tick after 6 began green
     (43 on that tick, the emulator's own lag). Counted as demand at the entry, that call made 5 the ring's nearest
     and 6 read as dual entry, which the replay then took where the field went to 5."""
-    rng = random.Random(1)
-    drawn = [round_trip.random_config(rng) for _ in range(12)][-1]
+    drawn, got = _drawn_and_read(1, 12)
     assert "dual entry 8" in drawn.features
-    got = field_log.infer(round_trip.emulator_log(config_mod.parse(drawn.toml, "rt12.toml"), 600, 11)).config()
     assert {p for p, ph in got.phases.items() if ph.dual_entry} == {8}
 
 
@@ -676,10 +682,8 @@ def test_a_recalled_phases_gap_out_is_its_own_when_a_push_waits_for_the_next_pha
     ring 2 serves next, has a push waiting (45, its walk not yet begun): the green could have ended sooner, so its gap
     ran out then and the detector held it. A waiting push counted for nothing, so the gap-out did not count alone,
     detector 7 was not read, and the replay ended 7 0.9 s early and never met the log again (69 %)."""
-    rng = random.Random(1)
-    drawn = [round_trip.random_config(rng) for _ in range(40)][-1]
+    drawn, got = _drawn_and_read(1, 40)
     assert {"min recall 7", "carryover 1 s on 7"} <= set(drawn.features)
-    got = field_log.infer(round_trip.emulator_log(config_mod.parse(drawn.toml, "rt40.toml"), 600, 39)).config()
     assert got.detectors[7] == 7 and got.detector_timing[7].extend == pytest.approx(1.0)
 
 
@@ -689,10 +693,8 @@ def test_a_recalled_phases_gap_out_beside_a_green_that_gapped_out_before_it_is_i
     3 s before their common gap-out (4 had gapped out, and waited with simultaneous gap disable though its detector
     came back), so that gap-out was 8's own, 2.9 s after detector 8 went off. Read, detector 8 extends 8 by 1 s;
     not read, the replay ended 4 and 8 1.1 s early (92.9 %)."""
-    rng = random.Random(1)
-    drawn = [round_trip.random_config(rng) for _ in range(24)][-1]
+    drawn, got = _drawn_and_read(1, 24)
     assert {"min recall 8", "carryover 1 s on 8"} <= set(drawn.features)
-    got = field_log.infer(round_trip.emulator_log(config_mod.parse(drawn.toml, "rt24.toml"), 600, 23)).config()
     assert got.detectors[8] == 8 and got.detector_timing[8].extend == pytest.approx(1.0)
 
 
@@ -701,10 +703,8 @@ def test_a_ring_backing_while_a_push_waits_across_the_barrier_is_conditional_ser
     2 no vehicle call is on across the barrier, but pushes of 7 and 8 wait there (45, their walk or green to come).
     Naztec's backing ("when the cross street phases ... are skipped", TecNote 3013) does not back then; read so, the
     replay held 1 green 12 s past the log's gap-out (75.8 %)."""
-    rng = random.Random(1)
-    drawn = [round_trip.random_config(rng) for _ in range(35)][-1]
+    drawn, got = _drawn_and_read(1, 35)
     assert "conditional service 1" in drawn.features and "backing 1" not in drawn.features
-    got = field_log.infer(round_trip.emulator_log(config_mod.parse(drawn.toml, "rt35.toml"), 600, 34)).config()
     assert got.phases[1].conditional_service and got.phases[1].backup_prevent
 
 
@@ -713,8 +713,6 @@ def test_a_gap_out_as_a_walk_ends_says_nothing_against_a_recalled_phases_detecto
     (passage 2 s). Some of 6's greens end on the tick their walk's clearance ends (23), beside phase 1 or 2 whose own
     minimum or walk ends there too; those gap-outs come sooner after detector 6's off than its extension, and counted
     as ending the green alone they denied it (the replay then ended phase 1 2.3 s early, 82.7 %)."""
-    rng = random.Random(2)
-    drawn = [round_trip.random_config(rng) for _ in range(20)][-1]
+    drawn, got = _drawn_and_read(2, 20)
     assert {"min recall 6", "extend 0.5 s on 6"} <= set(drawn.features)
-    got = field_log.infer(round_trip.emulator_log(config_mod.parse(drawn.toml, "rt20.toml"), 600, 19)).config()
     assert got.detectors[6] == 6 and got.detector_timing[6].extend == pytest.approx(0.5)
