@@ -385,7 +385,7 @@ def _extenders(rows: Sequence[Row], detectors: dict[int, int], recalled: set[int
     then the time that passage gives), and none past its minimum that ends the green alone comes while the detector
     is on or sooner after its off (a vehicle on it would have held the green); of several detectors so, the one that
     shows it most. A gap-out ends the green alone when the phase its ring served next was called the tick before (a
-    vehicle or a pedestrian call, or recalled, or a plan runs) and every other phase whose yellow begins on its tick
+    vehicle or a pedestrian call, or recalled or coordinated) and every other phase whose yellow begins on its tick
     had gapped out before and waited (:func:`_waiting` within); else it is logged later than the gap ran out and shows
     nothing against the detector: a green with nowhere to go rests in green and ends when a call comes, and one at a
     barrier may have gapped out before and waited for the other ring (NTCIP 1202 phaseOptions bit 11, simultaneous gap
@@ -405,7 +405,7 @@ def _extenders(rows: Sequence[Row], detectors: dict[int, int], recalled: set[int
         if r.code in (E.PHASE_MIN_COMPLETE, E.PED_BEGIN_SOLID_DONT_WALK):
             timed[r.parameter].append(r.time)
     ring_of = {p: r for r in (1, 2) for p in structure.ring(r)}
-    planned = any(r.code == E.COORD_CYCLE_STATE_CHANGE and r.parameter == LOCAL_ZERO for r in rows)
+    yielding = {r.parameter for r in rows if r.code == E.COORD_YIELD_POINT}  # coordinated: the plan calls them
     starts = {r: [(row.time, row.parameter) for row in rows if row.code == E.PHASE_BEGIN_GREEN
                   and ring_of.get(row.parameter) == r] for r in (1, 2)}
     wants: dict[int, list[tuple[datetime, bool]]] = defaultdict(list)  # each phase's call registered (43), dropped
@@ -416,16 +416,16 @@ def _extenders(rows: Sequence[Row], detectors: dict[int, int], recalled: set[int
 
     def _waited(p: int, t: datetime) -> bool:
         """The phase the ring served next after ``p``'s green ending at ``t`` was called before ``t`` (a vehicle call,
-        or a pedestrian call not yet served, :func:`_pushes`; or it is recalled): the green ended when its gap ran
-        out, not when a call came to a green resting with nowhere to go."""
+        or a pedestrian call not yet served, :func:`_pushes`; or it is recalled, or a coordinated phase, 151, which
+        the plan calls): the green ended when its gap ran out, not when a call came to a green resting with nowhere
+        to go (under a plan too: one waiting at the barrier for the other ring ends when a phase of its group is
+        called)."""
         mine = starts.get(ring_of.get(p, 0), [])
         k = bisect.bisect_right(mine, (t, PHASES + 1))
-        if planned:  # under a plan a green never rests: the coordinated phases always want service
-            return True
         if k == len(mine):
             return False
         q = mine[k][1]
-        return q in recalled or _called_at(wants[q], t - TICK) or _called_at(pushed[q], t - TICK)
+        return q in recalled | yielding or _called_at(wants[q], t - TICK) or _called_at(pushed[q], t - TICK)
 
     def _waiting(q: int, t: datetime) -> bool:
         """``q``, whose yellow begins with another ring's at ``t``, had gapped out before and waited at the barrier

@@ -716,3 +716,14 @@ def test_a_gap_out_as_a_walk_ends_says_nothing_against_a_recalled_phases_detecto
     drawn, got = _drawn_and_read(2, 20)
     assert {"min recall 6", "extend 0.5 s on 6"} <= set(drawn.features)
     assert got.detectors[6] == 6 and got.detector_timing[6].extend == pytest.approx(0.5)
+
+
+def test_under_a_plan_a_green_waiting_at_the_barrier_ends_when_a_phase_of_its_group_is_called() -> None:
+    """Seed 1's twenty-sixth round-trip config (coordinated): phase 3 on min recall, detector 3 with no timers
+    (passage 2 s), ring 1 lagging 1 behind 2. 3 gaps out, waits at the barrier while ring 2 times 8, and ends as 4 is
+    called on that tick: 1.1 s after detector 3's off, not its gap. Taken as ending the green alone (a plan was
+    running, so every green was thought to have somewhere to go), such gap-outs denied detector 3, and detector 5
+    (phase 5's, on max recall) was read as extending 3 from one coincidence (98.3 %)."""
+    drawn, got = _drawn_and_read(1, 26)
+    assert {"min recall 3", "max recall 5", "coordinated, offset 20"} <= set(drawn.features)
+    assert got.detectors[3] == 3 and got.detectors[5] != 3
