@@ -36,8 +36,8 @@ the log's own events (Indiana enumerations) and says which values it had to gues
   phase's calling detectors went off, 81, but not one logged as its minimum completes, 3, whose gap ran out during the
   minimum: the most frequent gap, counted from the last tick with the call; the intersection's when a phase shows too
   few), the maximum (the shortest green that maxed out, 5, timed from its phase check, 2, where the log has one within
-  it; else the longest green, or the intersection's maximum when longer), each within what NTCIP's phase table holds
-  (said when a value had to be brought inside);
+  it, from its begin green on max recall; else the longest green, or the intersection's maximum when longer), each
+  within what NTCIP's phase table holds (said when a value had to be brought inside);
 - **detectors**: a detector calls the phase whose call registrations (43) its actuations (82) bring most often, at
   the same tick or the next, when they do for at least a tenth of them; the others are logged but call nothing
   (phase 0, as a count station). Push buttons likewise with pedestrian calls (90 with 45). Numbers past the
