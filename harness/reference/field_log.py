@@ -36,8 +36,8 @@ the log's own events (Indiana enumerations) and says which values it had to gues
   phase's calling detectors went off, 81, but not one logged as its minimum completes, 3, whose gap ran out during the
   minimum: the most frequent gap, counted from the last tick with the call; the intersection's when a phase shows too
   few), the maximum (the shortest green that maxed out, 5, timed from its phase check, 2, where the log has one within
-  it; else the longest green, or the intersection's maximum when longer), each within what NTCIP's phase table holds
-  (said when a value had to be brought inside);
+  it, from its begin green on max recall; else the longest green, or the intersection's maximum when longer), each
+  within what NTCIP's phase table holds (said when a value had to be brought inside);
 - **detectors**: a detector calls the phase whose call registrations (43) its actuations (82) bring most often, at
   the same tick or the next, when they do for at least a tenth of them; the others are logged but call nothing
   (phase 0, as a count station). Push buttons likewise with pedestrian calls (90 with 45). Numbers past the
@@ -310,6 +310,9 @@ def infer(rows: Sequence[Row], name: str = "field controller") -> Inferred:
         timing[p]["passage"] = _within(p, "passage", timing[p]["passage"], low, min(high, timing[p]["max_green"]), out)
         if "min_gap" in timing[p]:
             timing[p]["min_gap"] = min(timing[p]["min_gap"], timing[p]["passage"])
+    for p in recalled - yielding:
+        if _recall_kind(events, p)[0] == "max":
+            _max_recall_maximum(events, p, timing[p], out)
     maxima = [t["maxed"] for t in timing.values() if "maxed" in t]
     if maxima:  # a phase that never maxed out has the intersection's maximum, if its longest green is shorter
         shared_max = math.ceil(max(maxima, key=maxima.count) - 1e-9)
@@ -440,41 +443,71 @@ def _extenders(rows: Sequence[Row], detectors: dict[int, int], recalled: set[int
     """A detector that calls nothing the log shows may extend a recalled phase (the emulator logs no call of a
     recalled phase, :mod:`emulator.model.datalogger`), read from the phase's gap-outs: the detector extends the phase
     when its gap-outs past its minimum (3) come one same time after the detector's last off in the green (twice, or
-    once ending the green alone, or once at the intersection's ``passage``; on a tie the time that passage gives),
-    and none that ends the green alone comes while the detector is on or sooner after its off (a vehicle on it would
-    have held the green); of several detectors so, the one that shows it most. A gap-out ends the
-    green alone when the phase its ring served next was called the tick before (or recalled, or a plan runs) and no
-    other phase's yellow begins on its tick; else it is logged later than the gap ran out and shows nothing against
-    the detector: a green with nowhere to go rests in green and ends when a call comes, and one at a barrier may have
-    gapped out before and waited for the other ring (NTCIP 1202 phaseOptions bit 11, simultaneous gap disable, keeps
-    it gapped out), the detector coming on meanwhile. Returns each such phase's detector and its gap-outs' time from
-    the last tick with the call: the phase's passage and the detector's extension together, which only the green's
-    start, timed by the passage alone, tells apart."""
+    once ending the green alone, or once at the intersection's ``passage``; on a tie one seen ending a green alone,
+    then the time that passage gives), and none past its minimum that ends the green alone comes while the detector
+    is on or sooner after its off (a vehicle on it would have held the green); of several detectors so, the one that
+    shows it most. A gap-out ends the green alone when the phase its ring served next was called the tick before (a
+    vehicle or a pedestrian call, or recalled or coordinated) and every other phase whose yellow begins on its tick
+    had gapped out before and waited (:func:`_waiting` within); else it is logged later than the gap ran out and shows
+    nothing against the detector: a green with nowhere to go rests in green and ends when a call comes, and one at a
+    barrier may have gapped out before and waited for the other ring (NTCIP 1202 phaseOptions bit 11, simultaneous gap
+    disable, keeps it gapped out), the detector coming on meanwhile. A gap-out on the tick the phase's minimum or
+    walk clearance ends (3, 23) is not past its minimum: its gap may have run out during it. Returns each such
+    phase's detector and its gap-outs' time from the last tick with the call: the phase's passage and the detector's
+    extension together, which only the green's start, timed by the passage alone, tells apart."""
     gap_outs: dict[int, list[tuple[datetime, datetime | None, datetime, bool]]] = defaultdict(list)  # green, min,
     # gap-out, whether it ended the green alone
     began: dict[int, datetime] = {}
-    minimum: dict[int, datetime] = {}
-    yellows = Counter(r.time for r in rows if r.code == E.PHASE_BEGIN_YELLOW)
+    yellows: dict[datetime, list[int]] = defaultdict(list)  # the phases whose yellow begins on each tick
+    for r in rows:
+        if r.code == E.PHASE_BEGIN_YELLOW:
+            yellows[r.time].append(r.parameter)
+    timed: dict[int, list[datetime]] = defaultdict(list)  # each phase's minimums and walks timed (3, 23)
+    for r in rows:
+        if r.code in (E.PHASE_MIN_COMPLETE, E.PED_BEGIN_SOLID_DONT_WALK):
+            timed[r.parameter].append(r.time)
     ring_of = {p: r for r in (1, 2) for p in structure.ring(r)}
-    planned = any(r.code == E.COORD_CYCLE_STATE_CHANGE and r.parameter == LOCAL_ZERO for r in rows)
+    yielding = {r.parameter for r in rows if r.code == E.COORD_YIELD_POINT}  # coordinated: the plan calls them
     starts = {r: [(row.time, row.parameter) for row in rows if row.code == E.PHASE_BEGIN_GREEN
                   and ring_of.get(row.parameter) == r] for r in (1, 2)}
     wants: dict[int, list[tuple[datetime, bool]]] = defaultdict(list)  # each phase's call registered (43), dropped
     for row in rows:
         if row.code in (E.PHASE_CALL_REGISTERED, E.PHASE_CALL_DROPPED):
             wants[row.parameter].append((row.time, row.code == E.PHASE_CALL_REGISTERED))
+    pushed = _pushes(rows)
 
     def _waited(p: int, t: datetime) -> bool:
-        """The phase the ring served next after ``p``'s green ending at ``t`` was called before ``t`` (or is
-        recalled): the green ended when its gap ran out, not when a call came to a green resting with nowhere to go."""
+        """The phase the ring served next after ``p``'s green ending at ``t`` was called before ``t`` (a vehicle call,
+        or a pedestrian call not yet served, :func:`_pushes`; or it is recalled, or a coordinated phase, 151, which
+        the plan calls): the green ended when its gap ran out, not when a call came to a green resting with nowhere
+        to go (under a plan too: one waiting at the barrier for the other ring ends when a phase of its group is
+        called)."""
         mine = starts.get(ring_of.get(p, 0), [])
         k = bisect.bisect_right(mine, (t, PHASES + 1))
-        if planned:  # under a plan a green never rests: the coordinated phases always want service
-            return True
         if k == len(mine):
             return False
         q = mine[k][1]
-        return q in recalled or _called_at(wants[q], t - TICK)
+        return q in recalled | yielding or _called_at(wants[q], t - TICK) or _called_at(pushed[q], t - TICK)
+
+    def _waiting(q: int, t: datetime) -> bool:
+        """``q``, whose yellow begins with another ring's at ``t``, had gapped out before and waited at the barrier
+        (simultaneous gap disable, NTCIP 1202 phaseOptions bit 11, the default, keeps it out though a call comes
+        back): a phase of its own calls (not recalled) whose call dropped (44) in its green and stayed off longer
+        than the intersection's ``passage`` past its minimum and walk (3, 23), all before ``t``. The other ring's
+        gap-out then ended both greens alone."""
+        mine = [a for a, phase in starts.get(ring_of.get(q, 0), []) if phase == q and a < t]
+        if q in recalled or passage is None or not mine:
+            return False
+        ready = [a for a in timed[q] if mine[-1] <= a <= t]
+        if not ready or ready[-1] == t:  # its minimum or walk ended the green
+            return False
+        calls = wants[q]
+        for j in range(bisect.bisect_left(calls, (mine[-1],)), bisect.bisect_right(calls, (t, True))):
+            back = min(calls[j + 1][0] if j + 1 < len(calls) else t, t)
+            out = max(calls[j][0] + timedelta(seconds=passage), ready[-1])
+            if not calls[j][1] and (back - out).total_seconds() > TICK.total_seconds() / 2:
+                return True
+        return False
 
     changes: dict[int, list[tuple[datetime, bool]]] = defaultdict(list)  # each detector's on (82) and off (81)
     for r in rows:
@@ -484,12 +517,12 @@ def _extenders(rows: Sequence[Row], detectors: dict[int, int], recalled: set[int
             continue
         elif r.code == E.PHASE_BEGIN_GREEN:
             began[r.parameter] = r.time
-            minimum.pop(r.parameter, None)
-        elif r.code == E.PHASE_MIN_COMPLETE:
-            minimum[r.parameter] = r.time
         elif r.code == E.PHASE_GAP_OUT and r.parameter in began:
-            alone = yellows[r.time] == 1 and _waited(r.parameter, r.time)
-            gap_outs[r.parameter].append((began[r.parameter], minimum.get(r.parameter), r.time, alone))
+            alone = _waited(r.parameter, r.time) and all(_waiting(q, r.time) for q in yellows[r.time]
+                                                         if q != r.parameter)
+            # its minimum, or a walk's clearance, timed last (3, 23; logged on the gap-out's tick after it)
+            least = max((a for a in timed[r.parameter] if began[r.parameter] <= a <= r.time), default=None)
+            gap_outs[r.parameter].append((began[r.parameter], least, r.time, alone))
     claims: dict[int, list[tuple[int, bool, int, float]]] = defaultdict(list)  # phase -> (times, fits, detector, lag)
     for d, mine in sorted(changes.items()):
         best: tuple[int, int, bool, float] | None = None
@@ -503,10 +536,12 @@ def _extenders(rows: Sequence[Row], detectors: dict[int, int], recalled: set[int
             counts = Counter(lag for lag, past, _ in lags if past and lag is not None and 0 < lag <= 10)
             if not counts:
                 continue
-            # the most frequent time, on a tie the one the intersection's passage gives
-            lag = max(counts, key=lambda g: (counts[g], round(g + TICK.total_seconds(), 1) == passage, -g))
+            # the most frequent time, on a tie one seen ending a green alone, then the one the intersection's passage
+            # gives
+            sole = {g for g, past, alone in lags if past and alone}
+            lag = max(counts, key=lambda g: (counts[g], g in sole, round(g + TICK.total_seconds(), 1) == passage, -g))
             n, fits = counts[lag], round(lag + TICK.total_seconds(), 1) == passage
-            against = sum(1 for g, _, alone in lags if alone and g is not None and g < lag)
+            against = sum(1 for g, past, alone in lags if past and alone and g is not None and g < lag)
             shown = n >= 2 or any(alone and past and g == lag for g, past, alone in lags) or fits  # else chance
             if shown and not against and (best is None or (n, fits) > best[1:3]):
                 best = (p, n, fits, lag)
@@ -676,8 +711,9 @@ def _backings(rows: Sequence[Row], greens: Mapping[int, list[tuple[datetime, dat
     timed in that group (a green of it on after the ring's green ended and begun before the earlier phase's, not with
     it: both rings clearing and starting the group again together is no backing) backed into it: conditional service
     (NTCIP 1202 phaseOptions bit 14) on the phase it backed from when a call across the barrier was on as its green
-    ended (registered, 43, and not dropped, 44), Naztec's backing (``backup_prevent = false``) otherwise. The emulator
-    backs only where set so."""
+    ended (registered, 43, and not dropped, 44; or a pedestrian call, 45, not yet served, :func:`_pushes`), Naztec's
+    backing (``backup_prevent = false``) otherwise: Naztec's controllers back "when the cross street phases ... are
+    skipped" (TecNote 3013), which a waiting push is not. The emulator backs only where set so."""
     ring_of = {p: r for r in (1, 2) for p in structure.ring(r)}
     order = {p: i for r in (1, 2) for i, p in enumerate(structure.ring(r))}
     group_of = {p: structure.group_of(p) for p in ring_of}
@@ -687,6 +723,7 @@ def _backings(rows: Sequence[Row], greens: Mapping[int, list[tuple[datetime, dat
     for r in rows:
         if r.code in (E.PHASE_CALL_REGISTERED, E.PHASE_CALL_DROPPED) and r.parameter in ring_of:
             calls[r.parameter].append((r.time, r.code == E.PHASE_CALL_REGISTERED))
+    pushed = _pushes(rows)
     seen: dict[int, Counter[str]] = defaultdict(Counter)
     previous: dict[int, tuple[datetime, int]] = {}  # ring -> the end of its last green, its phase
     for begin, end, q in starts:
@@ -698,7 +735,8 @@ def _backings(rows: Sequence[Row], greens: Mapping[int, list[tuple[datetime, dat
             timing_on = any(a < begin and b > ended and group_of[x] == group_of[p]
                             for a, b, x in other[max(k, 0):bisect.bisect_left(other, (begin,))])
             if group_of[p] == group_of[q] and order[q] < order[p] and timing_on:
-                waiting = any(group_of[x] != group_of[p] and _called_at(calls[x], ended) for x in calls)
+                waiting = any(group_of[x] != group_of[p]
+                              and (_called_at(calls[x], ended) or _called_at(pushed[x], ended)) for x in ring_of)
                 seen[p]["conditional service" if waiting else "backing"] += 1
         previous[r] = (end, q)
     for p, kinds in sorted(seen.items()):
@@ -797,6 +835,22 @@ def _called_at(changes: Sequence[tuple[datetime, bool]], t: datetime) -> bool:
     return k >= 0 and changes[k][1]
 
 
+def _pushes(rows: Sequence[Row]) -> dict[int, list[tuple[datetime, bool]]]:
+    """Each phase's pedestrian call (45) on until served, as :func:`_called_at` reads it: by a walk (21), or for a
+    phase that never walks by its green (1). A 45 on the tick after the service is the push that service latched (the
+    emulator logs it a tick late), served already."""
+    walking = {r.parameter for r in rows if r.code == E.PED_BEGIN_WALK}
+    pushed: dict[int, list[tuple[datetime, bool]]] = defaultdict(list)
+    served: dict[int, datetime] = {}
+    for r in rows:
+        if r.code == (E.PED_BEGIN_WALK if r.parameter in walking else E.PHASE_BEGIN_GREEN):
+            served[r.parameter] = r.time
+            pushed[r.parameter].append((r.time, False))
+        elif r.code == E.PED_CALL_REGISTERED and served.get(r.parameter, datetime.min) < r.time - TICK:
+            pushed[r.parameter].append((r.time, True))
+    return pushed
+
+
 def _recycles(rows: Sequence[Row], greens: Mapping[int, list[tuple[datetime, datetime]]],
               timing: Mapping[int, dict[str, Any]], out: Inferred) -> None:
     """A walk (21) that began within a green of its phase already running (a tick or more after the begin green):
@@ -825,8 +879,9 @@ def _dual_entries(rows: Sequence[Row], structure: Structure, recalled: set[int])
     group at the yellow and the phase it entered, at the barrier termination (31), is not its nearest with demand
     then. Demand: a vehicle call registered (43) and not dropped (44), a pedestrian call (45) not yet served (by a
     walk, 21, or for a phase that never walks by its green, 1), a recall (a phase the log shows served without its
-    calls); for the nearest, the calls registered on the tick and the next too (the emulator logs a push's 45 on
-    the tick after the green it latched for began). Read once seen: nothing else makes such an entry. Only in a log
+    calls); for the nearest, the calls registered on the tick, and a push's 45 on the next too (the emulator logs it
+    on the tick after the green it latched for began; a vehicle call, 43, on the next tick is a vehicle that came
+    after the green began, which did not choose it). Read once seen: nothing else makes such an entry. Only in a log
     that registers and drops calls: one without them shows no demand at all."""
     codes = {r.code for r in rows}
     if E.PHASE_CALL_REGISTERED not in codes or E.PHASE_CALL_DROPPED not in codes:
@@ -834,7 +889,7 @@ def _dual_entries(rows: Sequence[Row], structure: Structure, recalled: set[int])
     ring_of = {p: r for r in (1, 2) for p in structure.ring(r)}
     group_of = {p: structure.group_of(p) for p in ring_of}
     walking = {r.parameter for r in rows if r.code == E.PED_BEGIN_WALK}
-    registered = {(r.time, r.parameter) for r in rows if r.code in (E.PHASE_CALL_REGISTERED, E.PED_CALL_REGISTERED)}
+    pushed = {(r.time, r.parameter) for r in rows if r.code == E.PED_CALL_REGISTERED}
     calls: set[int] = set()
     peds: set[int] = set()
     committed: set[int] | None = None  # the phases with demand at the last begin yellow
@@ -852,7 +907,7 @@ def _dual_entries(rows: Sequence[Row], structure: Structure, recalled: set[int])
             if crossing and last_group.get(ring, group_of[p]) != group_of[p]:
                 mine = [q for q in structure.ring(ring) if group_of[q] == group_of[p]]
                 nearest = next((q for q in mine if q in calls | peds | recalled
-                                or (r.time + TICK, q) in registered), None)
+                                or (r.time + TICK, q) in pushed), None)
                 if not (committed | recalled) & set(mine) and nearest != p:
                     seen.add(p)
             last_group[ring] = group_of[p]
@@ -866,16 +921,35 @@ def _dual_entries(rows: Sequence[Row], structure: Structure, recalled: set[int])
     return sorted(seen)
 
 
-def _recall(rows: Sequence[Row], p: int, timing: dict[str, Any], out: Inferred) -> None:
-    """A phase served without a call the log registers is recalled (a pretimed plan's phases, a recall, or detectors
-    the log does not record): maximum recall when its greens end by force-off or max-out more often than by gap-out
-    (NTCIP 1202 phaseOptions: Max Vehicle Recall times the green to its maximum), else minimum recall."""
+def _recall_kind(rows: Sequence[Row], p: int) -> tuple[str, Counter[int]]:
+    """A recalled phase's recall, maximum when its greens end by force-off or max-out more often than by gap-out
+    (NTCIP 1202 phaseOptions: Max Vehicle Recall times the green to its maximum), else minimum; and how they end."""
     ends = Counter(r.code for r in rows if r.parameter == p and r.code in (E.PHASE_GAP_OUT, E.PHASE_MAX_OUT,
                                                                            E.PHASE_FORCE_OFF))
-    timing["recall"] = "max" if ends[E.PHASE_GAP_OUT] < ends[E.PHASE_MAX_OUT] + ends[E.PHASE_FORCE_OFF] else "min"
+    return "max" if ends[E.PHASE_GAP_OUT] < ends[E.PHASE_MAX_OUT] + ends[E.PHASE_FORCE_OFF] else "min", ends
+
+
+def _recall(rows: Sequence[Row], p: int, timing: dict[str, Any], out: Inferred) -> None:
+    """A phase served without a call the log registers is recalled (a pretimed plan's phases, a recall, or detectors
+    the log does not record): :func:`_recall_kind`."""
+    timing["recall"], ends = _recall_kind(rows, p)
     out.guessed.append(f"phase {p}: {timing['recall']} recall (served where the log shows no vehicle call of it "
                        f"live; its greens end by gap-out {ends[E.PHASE_GAP_OUT]} times, by max-out or force-off "
                        f"{ends[E.PHASE_MAX_OUT] + ends[E.PHASE_FORCE_OFF]})")
+
+
+def _max_recall_maximum(rows: Sequence[Row], p: int, timing: dict[str, Any], out: Inferred) -> None:
+    """A phase on max recall times its maximum from its begin green, not from its phase check: NTCIP 1202
+    phaseMaximum1's timer is "held reset unless Max Vehicle Recall is enabled for this phase" (or a serviceable
+    conflicting call waits), so the shortest of its greens that maxed out, timed from their start, is its maximum."""
+    maxed = _max_timings(rows, p, from_check=False)
+    if not maxed:
+        return
+    timing["maxed"] = min(maxed)
+    timing["max_green"] = _within(p, "max_green", max(timing["min_green"], math.ceil(min(maxed) - 1e-9)), 1,
+                                  config_mod.phase_time_range("max_green")[1], out)
+    out.read.append(f"phase {p}: max green {timing['max_green']:g} s (on max recall: its max-outs timed from their "
+                    "begin green)")
 
 
 def _ped_recalls(rows: Sequence[Row], greens: Mapping[int, list[tuple[datetime, datetime]]],
@@ -1129,16 +1203,17 @@ def _within(p: int, key: str, value: Any, low: float, high: float, out: Inferred
     return inside
 
 
-def _max_timings(rows: Sequence[Row], p: int) -> list[float]:
-    """Seconds each green of ``p`` that maxed out (5) timed its maximum: from its phase check (2) within it, else from
-    its begin green (1); a green running as the log begins counts from its phase check."""
+def _max_timings(rows: Sequence[Row], p: int, from_check: bool = True) -> list[float]:
+    """Seconds each green of ``p`` that maxed out (5) timed its maximum: from its phase check (2) within it when
+    ``from_check``, else from its begin green (1); a green running as the log begins counts from its phase check."""
     out, since, checked, began = [], None, False, False
     for r in rows:
         if r.parameter != p:
             continue
         if r.code == E.PHASE_BEGIN_GREEN:
             since, checked, began = r.time, False, True
-        elif r.code == E.PHASE_CHECK and (since is not None or not began) and not checked:
+        elif r.code == E.PHASE_CHECK and ((since is None and not began) or (from_check and since is not None)) \
+                and not checked:
             since, checked = r.time, True
         elif r.code == E.PHASE_MAX_OUT and since is not None:
             out.append(round((r.time - since).total_seconds(), 1))
