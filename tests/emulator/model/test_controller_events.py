@@ -256,3 +256,24 @@ def test_quiet_time_is_skipped_under_a_pattern_with_overlaps() -> None:
     c.steps = 0
     c.advance(3000)
     assert c.coordinator.plan is not None and c.steps < 3000 // 5
+
+
+def test_a_retimed_clearance_moves_where_a_phase_stops_fitting() -> None:
+    """3 and 5 coordinated (cycle 42 s), every phase called. 5's red clearance retimed to 0 in its green: 6 fits
+    until 5's clearance (now 3.0 s, not the plan's 3.5 s) and 6's minimum no longer reach 6's force-off, and from
+    that tick 5 leaves for 7 across the barrier (with 3 for 4). That tick is none of the coordinator's marks, laid out
+    with the config's clearances: the coordinated part in the rings reports it (before, the skipping twin ended 3 and
+    5 0.4 s late, at the next whole second)."""
+    raw = {"name": "3 and 5 coordinated", "timing": {"min_green": 1, "max_green": 1, "yellow": 3.0, "red_clear": 0.5},
+           "phases": {str(p): {} for p in range(1, 9)},
+           "structure": {"rings": [[1, 2, 3, 4], [5, 6, 7, 8]], "barriers": [[1, 2, 3, 5, 6], [4, 7, 8]],
+                         "sequence": [[1, 5], [4, 8]],
+                         "pairs": [[1, 5], [1, 6], [2, 5], [2, 6], [3, 5], [3, 6], [4, 7], [4, 8]]},
+           "middleware": {"backup_time": 0},
+           "coordination": {"pattern": 1, "patterns": [{"number": 1, "cycle": 42, "offset": 0, "coord_phases": [3, 5],
+                                                        "splits": {"1": 5, "2": 5, "3": 22, "4": 10, "5": 5, "6": 27,
+                                                                   "7": 5, "8": 5}}]}}
+    config = config_mod.from_dict(raw, "coordinated.toml")
+    every = (ControlColumn.VEH_CALL, frozenset(config.phases))
+    check_equal(config, [("ticks", 204), every, ("ticks", 7), ("retime", (5, "red_clear", 0)), ("ticks", 600)],
+                delayed=False)
