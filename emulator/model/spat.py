@@ -14,8 +14,9 @@ Rules of this file
   conflicting demand (it rests); a coordinated phase (it rests to its yield point and leaves it only in a
   permissive period); a ring whose next service is not known yet (it waits at the barrier for a ring that serves
   another phase first); a preempt called or served (its track and dwell phases stay green as its input says); a
-  transition to a new offset or pattern under way; the backup time passing with a control object set, or a
-  time-of-day change, before the bound; a red phase an overlap or an omit may hold back.
+  transition to a new offset or pattern under way; the backup time passing with a control object set, a
+  time-of-day change, or a detector's delay, extension or carryover running out, before the bound; a red phase an
+  overlap or an omit may hold back.
 - Where no bound can be known it is None, as SAE J2735's TimeMark has "unknown" (36001 on the wire).
 - A property test holds it to the truth: over random configs and inputs every change of a signal happens after
   every earliest announced since its last change, and by every latest announced since its last change and the
@@ -56,9 +57,10 @@ to end, :meth:`~emulator.model.sequencer.Sequencer.decide` where it goes):
   parent has ended and its trailing green has run, its yellow with its parents' yellows, and it turns green with
   its first parent; its latest is its one green parent's when its parents are all of one ring and that ring goes
   to a phase it does not include. Its own trailing yellow ends after its length; a delayed green starts its delay
-  later and ends with it; a transit bar's green (flashing through its phase's yellow) has no latest end. A
-  minus-green-yellow overlap's
-  modifiers and a flashing yellow arrow's permissive phase may change it at the next tick.
+  later and ends with it, and the delay's end is its latest only while an included phase is sure to be green still
+  then (released sooner, the overlap stays red); a transit bar's green (flashing through its phase's yellow) has no
+  latest end. A minus-green-yellow overlap's modifiers and a flashing yellow arrow's permissive phase may change it
+  at the next tick.
 
 The likely time is the latest where one is known: what the timers give when the demand stands (an actuated
 green maxes out, a forced green ends at its force-off point); a gap in traffic ends a green sooner. Where no latest
@@ -196,9 +198,14 @@ class _Bounds:
     def _horizon(self) -> int | None:
         """Ticks to the first thing the controller does by its own clock that may undo a latest: the backup time
         passing with a control object set (backup mode clears it: a call withdrawn lets a green rest), a
-        time-of-day change of the local plan."""
+        time-of-day change of the local plan, a detector's timer changing what it recognizes (a delay running out
+        places a call the standing demand lacks, an extension or carryover running out withdraws one)."""
         c = self.c
         ahead = []
+        if c.detectors.timers:
+            detectors = c.detectors.deadline(c.actuations, c.greens)
+            if detectors is not None:
+                ahead.append(detectors)
         backup = c.backup.deadline()
         if backup is not None and (any(c.control.values()) or c.coordinator.command):
             ahead.append(backup)
@@ -443,8 +450,12 @@ class _Bounds:
             elif show is Show.TRAIL_GREEN:
                 earliest = max(1, trail.trail_green - ticks)
             elif show is Show.DELAYED:
-                # red while its green's delay runs: green once it has run (or red on, released by its phases)
-                earliest = latest = max(1, trail.delay_green - ticks)
+                # red while its green's delay runs: green once it has run if an included phase still holds it then
+                # (one that cannot end its green before); released by its phases sooner, it stays red
+                earliest = max(1, trail.delay_green - ticks)
+                held = any(phases[q].indication is Indication.GREEN and phases[q].earliest > earliest
+                           for q in o.included)
+                latest = earliest if held else None
             elif shown is Indication.RED:
                 # from its trailing red it turns green only the tick after that has run (``_NEXT``)
                 lit = trail.trail_red - ticks + 1 if show is Show.TRAIL_RED else 1
