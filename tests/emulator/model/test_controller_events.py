@@ -4,7 +4,7 @@
 but counters. Here one controller steps every tick and its twin advances over the same stretches,
 for random configs (every phase option, start-up flash, backup time, the controller's delays) and
 random inputs (every control object, Max2, detectors with delays, extensions and carryovers, push buttons,
-retimed phases, backup time, patterns, preempts, power cycles):
+retimed phases (to what the phase table holds), backup time, patterns, preempts, power cycles):
 after every stretch the two must agree on everything a read can see and on their whole working
 memory, and their interval timelines must be the same, tick for tick.
 """
@@ -19,6 +19,7 @@ from hypothesis import strategies as st
 
 from emulator.model.controller import Change, Controller
 from emulator.model.delays import STATUS_ATTRIBUTES, DelayedController
+from emulator.model.ring import SETTABLE
 from hils.protocol import config as config_mod
 from hils.protocol.config import DetectorTiming, EmulatorParams, IntersectionConfig, Recall
 from hils.protocol.ntcip import ControlColumn, PhaseStartup
@@ -45,6 +46,13 @@ def units(draw: st.DrawFn, free: bool = False) -> IntersectionConfig:
                                 status_update_ticks=draw(st.integers(0, 3))))
 
 
+@st.composite
+def retimes(draw: st.DrawFn) -> tuple[int, str, int]:
+    """A SET of one phase's timing to a value its phase-table object holds, up to 8 s (a yellow of 3 s at least)."""
+    phase, name = draw(st.sampled_from(sorted(ALL_PHASES))), draw(st.sampled_from(TIMING_FIELDS))
+    return phase, name, draw(st.sampled_from([t for t in SETTABLE[name] if t <= 80]))
+
+
 inputs = st.one_of(
     st.tuples(st.just("ticks"), st.integers(1, 600)),
     st.tuples(st.just("ticks"), st.integers(1, 5)),
@@ -52,8 +60,7 @@ inputs = st.one_of(
     st.tuples(st.just("max2"), st.frozensets(st.sampled_from([1, 2]))),
     st.tuples(st.just("detectors"), phase_sets),
     st.tuples(st.just("push_buttons"), phase_sets),
-    st.tuples(st.just("retime"), st.tuples(st.sampled_from(sorted(ALL_PHASES)), st.sampled_from(TIMING_FIELDS),
-                                           st.integers(0, 80))),
+    st.tuples(st.just("retime"), retimes()),
     st.tuples(st.just("backup_time"), st.sampled_from([0, 1, 3, 30])),
     st.tuples(st.just("power_cycle"), st.none()),
     st.tuples(st.just("pattern"), st.sampled_from([0, 1, 2, 254, 255])),
