@@ -57,8 +57,8 @@ to end, :meth:`~emulator.model.sequencer.Sequencer.decide` where it goes):
   parent has ended and its trailing green has run, its yellow with its parents' yellows, and it turns green with
   its first parent; its latest is its one green parent's when its parents are all of one ring and that ring goes
   to a phase it does not include. Its own trailing yellow ends after its length; a delayed green starts its delay
-  later and ends with it, and the delay's end is its latest only while an included phase is sure to be green still
-  then (released sooner, the overlap stays red); a transit bar's green (flashing through its phase's yellow) has no
+  later and ends with it, and the delay's end is a latest only from an included phase whose green is sure to
+  outlast it (released sooner, the overlap stays red); a transit bar's green (flashing through its phase's yellow) has no
   latest end. A minus-green-yellow overlap's modifiers and a flashing yellow arrow's permissive phase may change it
   at the next tick.
 
@@ -461,16 +461,24 @@ class _Bounds:
                 lit = trail.trail_red - ticks + 1 if show is Show.TRAIL_RED else 1
                 parents = [phases[q] for q in followed]
                 red = [s for s in parents if s.indication is Indication.RED]
+                delay = trail.delay_green
                 if any(s.indication is Indication.GREEN for s in parents):
                     earliest = latest = lit
+                    # a delayed green: an included phase green still when its delay runs out holds it (else released)
+                    if delay and not any(s.indication is Indication.GREEN and s.earliest > lit + delay
+                                         for s in parents if s.number in o.included):
+                        latest = None
                 else:
                     earliest = max(lit, min((s.earliest for s in red), default=lit))
-                    starts = [s.latest for s in red if s.latest is not None]
+                    # a delayed green turns green by the delay's end after an included phase starts whose green
+                    # outlasts the delay (a shorter one releases it, red on)
+                    starts = [s.latest for s in red if s.latest is not None and (
+                        not delay or s.number not in o.included or c.timing[s.number].min_green > delay)]
                     latest = max(lit, min(starts)) if starts else None
-                if trail.delay_green:
+                if delay:
                     # an included phase's green starts its delay first; a flashing arrow's permissive phase does not
-                    earliest += 0 if o.kind is OverlapKind.FYA else trail.delay_green
-                    latest = None if latest is None else latest + trail.delay_green
+                    earliest += 0 if o.kind is OverlapKind.FYA else delay
+                    latest = None if latest is None else latest + delay
         # only its own trailing intervals are timed: when a display it follows from its parents began is not kept
         return SignalTiming("overlap", n, shown, earliest, latest, latest, ticks if show in TRAILING else None)
 

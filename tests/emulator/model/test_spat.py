@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 from emulator.model import spat
 from emulator.model.controller import Controller
 from emulator.model.spat import Indication, SignalTiming
-from hils.protocol.config import DetectorTiming, IntersectionConfig, load
+from hils.protocol.config import DetectorTiming, IntersectionConfig, load, parse
 from hils.protocol.ntcip import ControlColumn
 from hils.sim.network import data_path
 from tests.emulator.model.test_controller_events import apply, inputs, units
@@ -133,6 +133,20 @@ def test_a_delayed_overlap_released_by_its_phase_announces_no_latest() -> None:
     announced as one, and A turned green a cycle after it)."""
     config = city('A = { included = [2], delay_green = 3.0 }\n', 'recall = "ped"\nwalk = 2\nped_clear = 2')
     checked, bounded = check(config.with_middleware(backup_time=0), [("ticks", 1000)])
+    assert checked > 0 and bounded > 0
+
+
+def test_a_delayed_overlap_waits_for_a_parent_whose_green_outlasts_the_delay() -> None:
+    """The city four-leg, overlap A following 1 and 2 with a delayed green of 3 s, every phase on pedestrian recall
+    (walk 2 s, pedestrian clearance 2 s) but 1 (minimum recall, no walk: 3 s of green). 1's green starts A's delay and
+    ends with it, releasing A; 2's green, 4 s, then holds A through its delay. Announced while 1 is red, A's latest
+    is 2's start and the delay, not 1's (before, A turned green 8 s after the latest announced for it)."""
+    text = data_path("four_leg_city.toml").read_text()
+    text = text[:text.index("[overlaps]")] + "[overlaps]\nA = { included = [1, 2], delay_green = 3.0 }\n"
+    text = text.replace("[timing]", '[timing]\nrecall = "ped"\nwalk = 2\nped_clear = 2', 1)
+    text = text.replace('1 = { approach = "west", turn = "left" }',
+                        '1 = { approach = "west", turn = "left", recall = "min", walk = 0, ped_clear = 0 }')
+    checked, bounded = check(parse(text, "city.toml").with_middleware(backup_time=0), [("ticks", 1000)])
     assert checked > 0 and bounded > 0
 
 
