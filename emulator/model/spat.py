@@ -294,7 +294,9 @@ class _Bounds:
             if o.interval is GREEN:
                 t = self._ready(o)
                 if self.plan is None:
-                    within = q is not None and not seq._beyond(q)
+                    # a backing refused now may become conditional service once the green is ready to end
+                    within = q is not None and (not seq._beyond(q) or (
+                        c.config.phases[o.phase].conditional_service and seq._backing(o, q)))
                 else:
                     nxt = o.order[(o.order.index(o.phase) + 1) % len(o.order)]
                     coord = self.plan.coord[o.number]

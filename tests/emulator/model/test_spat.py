@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 from emulator.model import spat
 from emulator.model.controller import Controller
 from emulator.model.spat import Indication, SignalTiming
-from hils.protocol.config import DetectorTiming, IntersectionConfig, load, parse
+from hils.protocol.config import DetectorTiming, IntersectionConfig, from_dict, load, parse
 from hils.protocol.ntcip import ControlColumn
 from hils.sim.network import data_path
 from tests.emulator.model.test_controller_events import apply, inputs, units
@@ -147,6 +147,28 @@ def test_a_delayed_overlap_waits_for_a_parent_whose_green_outlasts_the_delay() -
     text = text.replace('1 = { approach = "west", turn = "left" }',
                         '1 = { approach = "west", turn = "left", recall = "min", walk = 0, ped_clear = 0 }')
     checked, bounded = check(parse(text, "city.toml").with_middleware(backup_time=0), [("ticks", 1000)])
+    assert checked > 0 and bounded > 0
+
+
+def test_a_green_waits_at_the_barrier_for_a_conditional_service_to_come() -> None:
+    """1 alone in its ring's first barrier group, 6 beside it with conditional service, 5 (before 6) on max recall,
+    4 across on min recall; 1 and 6 start green. At first 6 may not back into 5 (not ready to end), so the rings
+    would cross when 1 maxes out; once 6 is ready, conditional service takes it back into 5, and 1 waits at the
+    barrier for 5's maximum. While 6 can still back by conditional service no crossing time is announced (before, 1's
+    maximum was, and 1 ended 0.5 s after it)."""
+    plain = {"backup_prevent": False, "simultaneous_gap_disable": False}
+    phases = {str(p): dict(plain) for p in range(1, 9)}
+    phases["1"] |= {"min_green": 2, "max_green": 6, "startup": "green"}
+    phases["4"] |= {"max_green": 2, "passage": 0.1, "recall": "min"}
+    phases["5"] |= {"max_green": 2, "passage": 0.1, "recall": "max"}
+    phases["6"] |= {"startup": "green", "conditional_service": True}
+    raw = {"name": "conditional service", "timing": {"min_green": 1, "max_green": 1, "yellow": 3.0, "red_clear": 0.5},
+           "phases": phases,
+           "structure": {"rings": [[1, 2, 3, 4], [5, 6, 7, 8]], "barriers": [[1, 5, 6], [2, 3, 4, 7, 8]],
+                         "sequence": [[1, 5], [4, 8]],
+                         "pairs": [[1, 5], [1, 6], [2, 7], [2, 8], [3, 7], [3, 8], [4, 7], [4, 8]]},
+           "middleware": {"backup_time": 0}}
+    checked, bounded = check(from_dict(raw, "conditional.toml"), [("ticks", 65)])
     assert checked > 0 and bounded > 0
 
 
