@@ -13,8 +13,9 @@ Rules of this file
   announcement says so. It is None where nothing bounds the change as things stand: a green held; a green with no
   conflicting demand (it rests); a coordinated phase (it rests to its yield point and leaves it only in a
   permissive period); a ring whose next service is not known yet (it waits at the barrier for a ring that serves
-  another phase first); a preempt called or served (its track and dwell phases stay green as its input says); a
-  transition to a new offset or pattern under way; the backup time passing with a control object set, a
+  another phase first, or that may still back into an earlier phase by conditional service); a preempt called or
+  served (its track and dwell phases stay green as its input says); a transition to a new offset or pattern under
+  way; the backup time passing with a control object set, a
   time-of-day change, or a detector's delay, extension or carryover running out, before the bound; a red phase an
   overlap or an omit may hold back.
 - Where no bound can be known it is None, as SAE J2735's TimeMark has "unknown" (36001 on the wire).
@@ -58,9 +59,9 @@ to end, :meth:`~emulator.model.sequencer.Sequencer.decide` where it goes):
   its first parent; its latest is its one green parent's when its parents are all of one ring and that ring goes
   to a phase it does not include. Its own trailing yellow ends after its length; a delayed green starts its delay
   later and ends with it, and the delay's end is a latest only from an included phase whose green is sure to
-  outlast it (released sooner, the overlap stays red); a transit bar's green (flashing through its phase's yellow) has no
-  latest end. A minus-green-yellow overlap's modifiers and a flashing yellow arrow's permissive phase may change it
-  at the next tick.
+  outlast it (released sooner, the overlap stays red); a transit bar's green (flashing through its phase's yellow)
+  has no latest end. A minus-green-yellow overlap's modifiers and a flashing yellow arrow's permissive phase may
+  change it at the next tick.
 
 The likely time is the latest where one is known: what the timers give when the demand stands (an actuated
 green maxes out, a forced green ends at its force-off point); a gap in traffic ends a green sooner. Where no latest
