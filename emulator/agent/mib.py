@@ -44,6 +44,7 @@ from emulator.model.coordination import DAY
 from emulator.model.delays import DelayedController
 from emulator.model.overlaps import OverlapTiming
 from emulator.model.preemption import PreemptTiming
+from emulator.model.ring import TIMING_COLUMNS
 from hils.protocol.config import IntersectionConfig, Overlap, OverlapKind, Phase, Preempt, Recall, ScheduleEntry
 from hils.protocol.ntcip import (
     ASC_CURRENT_TICK,
@@ -163,22 +164,6 @@ from hils.protocol.ntcip import (
 )
 
 TICKS_PER_HOUR = 36_000  # ascCurrentTick: "a zero representing the top of the hour"
-
-# Writable phase timing columns: the Timing field each sets, and ticks per unit of the NTCIP value.
-_TIMING_COLUMNS: dict[PhaseColumn, tuple[str, int]] = {
-    PhaseColumn.WALK: ("walk", 10),
-    PhaseColumn.PEDESTRIAN_CLEAR: ("ped_clear", 10),
-    PhaseColumn.MINIMUM_GREEN: ("min_green", 10),
-    PhaseColumn.PASSAGE: ("passage", 1),
-    PhaseColumn.MAXIMUM1: ("max1", 10),
-    PhaseColumn.MAXIMUM2: ("max2", 10),
-    PhaseColumn.YELLOW_CHANGE: ("yellow", 1),
-    PhaseColumn.RED_CLEAR: ("red_clear", 1),
-    PhaseColumn.RED_REVERT: ("red_revert", 1),
-    PhaseColumn.TIME_BEFORE_REDUCTION: ("time_before_reduction", 10),
-    PhaseColumn.TIME_TO_REDUCE: ("time_to_reduce", 10),
-    PhaseColumn.MINIMUM_GAP: ("min_gap", 1),
-}
 
 _FROM_CONFIG = "taken from the intersection config, which is validated whole before the controller starts"
 _STRUCTURE = f"the ring-and-barrier structure: {_FROM_CONFIG} (rings, barriers, concurrency and sequence agree)"
@@ -372,7 +357,7 @@ class MibView:
                              *(_field_access(c, unprogrammed, name, unit) if unprogrammed
                                else red_revert.phase_access(p) if col is PhaseColumn.RED_REVERT
                                else _timing_access(c, p, name, unit)))
-                    for col, (name, unit) in _TIMING_COLUMNS.items()]
+                    for col, (name, unit) in TIMING_COLUMNS.items()]
         out.append(Instance(RING_CONTROL_MAX2.instance(1), RING_CONTROL_MAX2,
                             lambda: sum(1 << (r - 1) for r in c.max2_rings),
                             lambda v: c.set_max2(k + 1 for k in range(8) if v >> k & 1)))

@@ -80,6 +80,7 @@ from emulator.model.quiet import QuietTime
 from emulator.model.ring import (
     CLEARANCE,
     GREEN,
+    SETTABLE,
     STARTUP,
     Change,
     Event,
@@ -231,7 +232,12 @@ class Controller:
         self._system_set()
 
     def set_timing(self, phase: int, name: str, ticks: int) -> None:
-        """A SET of the phase table: one timing of ``phase``, acting from that phase's next interval on."""
+        """A SET of the phase table: one timing of ``phase``, acting from that phase's next interval on; a value its
+        object cannot hold (:data:`emulator.model.ring.SETTABLE`: a yellow under 3.0 s, say) is refused."""
+        allowed = SETTABLE[name]
+        if ticks not in allowed:
+            raise ValueError(f"phase {phase} {name} = {ticks} ticks; allowed: {allowed.start}..{allowed.stop - 1} "
+                             f"ticks in steps of {allowed.step} (its NTCIP 1202 phase-table object's range)")
         setattr(self.timing[phase], name, ticks)
         self.touch()  # a threshold may have moved (red revert acts at once)
 

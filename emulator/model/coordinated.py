@@ -158,6 +158,18 @@ class Coordinated:
     # --- quiet time (see emulator/model/quiet.py) -------------------------------------------------
 
     def thresholds(self, r: Ring) -> list[int]:
-        """Ticks from now to the floating limit of ``r``'s green, if it has one still ahead."""
+        """Ticks from now to the floating limit of ``r``'s green, if it has one still ahead, and to each point where a
+        phase stops fitting after the clearance of ``r``'s green (:meth:`fits`) as its phase's timing is now: a SET of
+        the phase table may have moved it off the clearances the plan was laid out with, which the coordinator's own
+        marks hold (:meth:`emulator.model.coordination.Plan.marks`)."""
+        if r.interval is not GREEN:
+            return []
         limit = self.limit[r.number]
-        return [limit - r.ticks] if r.interval is GREEN and r.ticks < limit else []
+        ahead = [limit - r.ticks] if r.ticks < limit else []
+        plan = self.coordinator.plan
+        if plan is not None:
+            timing = self.timing[r.phase]
+            clearance = timing.yellow + timing.red_clear
+            if clearance not in plan.clearance.values():
+                ahead.append(self.coordinator.until(plan.unfit(clearance)))
+        return ahead

@@ -51,7 +51,7 @@ at a schedule time. While a correction is under way every tick is a real step.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 
 from hils.protocol.config import FREE, Coordination, Correction, ForceOff, IntersectionConfig, OffsetReference, Pattern
@@ -167,12 +167,20 @@ class Plan:
                     out |= {(self.force_off[p] + self.min_green[c] + k) % self.cycle for k in (0, 1)}
                     out |= {(self.force_off[p] - self.min_green[p] - self.clearance[c] + k) % self.cycle
                             for k in (0, 1)}
+        for c in clearances:
+            out |= self.unfit(c)
+        return frozenset(out)
+
+    def unfit(self, clearance: int) -> set[int]:
+        """Cycle positions where a phase stops fitting (:meth:`fits`, with or without its walk) after
+        ``clearance`` ticks."""
+        out = set()
         for p in self.split:
             if p not in self.coord.values():
                 y = self.force_off[self.coord[self.ring_of[p]]]
-                out |= {(y + self.reach(p) - least - c + 1) % self.cycle for c in clearances
+                out |= {(y + self.reach(p) - least - clearance + 1) % self.cycle
                         for least in (self.min_green[p], self.walk_service[p])}
-        return frozenset(out)
+        return out
 
 
 def lay_out(number: int, row: PatternRow, splits: Mapping[int, SplitRow], config: IntersectionConfig,
@@ -387,9 +395,14 @@ class Coordinator:
             return 1
         ahead = self.until_schedule() if self.config.coordination.schedule else None
         if plan is not None:
-            mark = min((m - self.timer - 1) % plan.cycle + 1 for m in plan.marks())
+            mark = self.until(plan.marks())
             ahead = mark if ahead is None else min(ahead, mark)
         return ahead
+
+    def until(self, marks: Iterable[int]) -> int:
+        """Ticks until the local timer next reaches one of ``marks`` (cycle positions of the running plan)."""
+        cycle, timer = self.plan.cycle, self.timer
+        return min((m - timer - 1) % cycle + 1 for m in marks)
 
     def until_schedule(self) -> int:
         """Ticks until the next time-of-day change of the local plan (a schedule configured)."""

@@ -62,7 +62,7 @@ from dataclasses import dataclass, field
 from enum import StrEnum
 
 from hils.protocol.config import Phase
-from hils.protocol.ntcip import PhaseStartup
+from hils.protocol.ntcip import PHASE_TABLE, PhaseColumn, PhaseStartup
 
 
 class Interval(StrEnum):
@@ -163,6 +163,30 @@ class Timing:
                    tenths(ph.walk), tenths(ph.ped_clear), tenths(ph.yellow), tenths(ph.red_clear),
                    tenths(ph.red_revert), tenths(ph.time_before_reduction), tenths(ph.time_to_reduce),
                    tenths(ph.passage if ph.min_gap is None else ph.min_gap))
+
+
+#: The phase-table column (NTCIP 1202 phaseTable) that carries each timing, and the ticks one unit of its value is.
+TIMING_COLUMNS: dict[PhaseColumn, tuple[str, int]] = {
+    PhaseColumn.WALK: ("walk", 10),
+    PhaseColumn.PEDESTRIAN_CLEAR: ("ped_clear", 10),
+    PhaseColumn.MINIMUM_GREEN: ("min_green", 10),
+    PhaseColumn.PASSAGE: ("passage", 1),
+    PhaseColumn.MAXIMUM1: ("max1", 10),
+    PhaseColumn.MAXIMUM2: ("max2", 10),
+    PhaseColumn.YELLOW_CHANGE: ("yellow", 1),
+    PhaseColumn.RED_CLEAR: ("red_clear", 1),
+    PhaseColumn.RED_REVERT: ("red_revert", 1),
+    PhaseColumn.TIME_BEFORE_REDUCTION: ("time_before_reduction", 10),
+    PhaseColumn.TIME_TO_REDUCE: ("time_to_reduce", 10),
+    PhaseColumn.MINIMUM_GAP: ("min_gap", 1),
+}
+
+
+#: The ticks a SET of each timing may give: the values its phase-table object holds, in whole units of it.
+#: phaseYellowChange's starts at 3.0 s: its MIB SYNTAX is INTEGER (0..255), but its description gives "NEMA TS 2 range:
+#: 3-25.5 sec", and a controller may hold the narrower range (:data:`hils.protocol.ntcip.PHASE_TABLE` does).
+SETTABLE: dict[str, range] = {name: range(PHASE_TABLE[column].low * unit, PHASE_TABLE[column].high * unit + 1, unit)
+                              for column, (name, unit) in TIMING_COLUMNS.items()}
 
 
 def maximum_runs(conflict: bool, max_recall: bool) -> bool:

@@ -13,9 +13,11 @@ Rules of this file
   announcement says so. It is None where nothing bounds the change as things stand: a green held; a green with no
   conflicting demand (it rests); a coordinated phase (it rests to its yield point and leaves it only in a
   permissive period); a ring whose next service is not known yet (it waits at the barrier for a ring that serves
-  another phase first); a preempt called or served (its track and dwell phases stay green as its input says); a
-  transition to a new offset or pattern under way; the backup time passing with a control object set, or a
-  time-of-day change, before the bound; a red phase an overlap or an omit may hold back.
+  another phase first, or that may still back into an earlier phase by conditional service); a preempt called or
+  served (its track and dwell phases stay green as its input says); a transition to a new offset or pattern under
+  way; the backup time passing with a control object set, a
+  time-of-day change, or a detector's delay, extension or carryover running out, before the bound; a red phase an
+  overlap or an omit may hold back.
 - Where no bound can be known it is None, as SAE J2735's TimeMark has "unknown" (36001 on the wire).
 - A property test holds it to the truth: over random configs and inputs every change of a signal happens after
   every earliest announced since its last change, and by every latest announced since its last change and the
@@ -56,9 +58,10 @@ to end, :meth:`~emulator.model.sequencer.Sequencer.decide` where it goes):
   parent has ended and its trailing green has run, its yellow with its parents' yellows, and it turns green with
   its first parent; its latest is its one green parent's when its parents are all of one ring and that ring goes
   to a phase it does not include. Its own trailing yellow ends after its length; a delayed green starts its delay
-  later and ends with it; a transit bar's green (flashing through its phase's yellow) has no latest end. A
-  minus-green-yellow overlap's
-  modifiers and a flashing yellow arrow's permissive phase may change it at the next tick.
+  later and ends with it, and the delay's end is a latest only from an included phase whose green is sure to
+  outlast it (released sooner, the overlap stays red); a transit bar's green (flashing through its phase's yellow)
+  has no latest end. A minus-green-yellow overlap's modifiers and a flashing yellow arrow's permissive phase may
+  change it at the next tick.
 
 The likely time is the latest where one is known: what the timers give when the demand stands (an actuated
 green maxes out, a forced green ends at its force-off point); a gap in traffic ends a green sooner. Where no latest
@@ -196,9 +199,14 @@ class _Bounds:
     def _horizon(self) -> int | None:
         """Ticks to the first thing the controller does by its own clock that may undo a latest: the backup time
         passing with a control object set (backup mode clears it: a call withdrawn lets a green rest), a
-        time-of-day change of the local plan."""
+        time-of-day change of the local plan, a detector's timer changing what it recognizes (a delay running out
+        places a call the standing demand lacks, an extension or carryover running out withdraws one)."""
         c = self.c
         ahead = []
+        if c.detectors.timers:
+            detectors = c.detectors.deadline(c.actuations, c.greens)
+            if detectors is not None:
+                ahead.append(detectors)
         backup = c.backup.deadline()
         if backup is not None and (any(c.control.values()) or c.coordinator.command):
             ahead.append(backup)
@@ -287,7 +295,9 @@ class _Bounds:
             if o.interval is GREEN:
                 t = self._ready(o)
                 if self.plan is None:
-                    within = q is not None and not seq._beyond(q)
+                    # a backing refused now may become conditional service once the green is ready to end
+                    within = q is not None and (not seq._beyond(q) or (
+                        c.config.phases[o.phase].conditional_service and seq._backing(o, q)))
                 else:
                     nxt = o.order[(o.order.index(o.phase) + 1) % len(o.order)]
                     coord = self.plan.coord[o.number]
@@ -443,23 +453,35 @@ class _Bounds:
             elif show is Show.TRAIL_GREEN:
                 earliest = max(1, trail.trail_green - ticks)
             elif show is Show.DELAYED:
-                # red while its green's delay runs: green once it has run (or red on, released by its phases)
-                earliest = latest = max(1, trail.delay_green - ticks)
+                # red while its green's delay runs: green once it has run if an included phase still holds it then
+                # (one that cannot end its green before); released by its phases sooner, it stays red
+                earliest = max(1, trail.delay_green - ticks)
+                held = any(phases[q].indication is Indication.GREEN and phases[q].earliest > earliest
+                           for q in o.included)
+                latest = earliest if held else None
             elif shown is Indication.RED:
                 # from its trailing red it turns green only the tick after that has run (``_NEXT``)
                 lit = trail.trail_red - ticks + 1 if show is Show.TRAIL_RED else 1
                 parents = [phases[q] for q in followed]
                 red = [s for s in parents if s.indication is Indication.RED]
+                delay = trail.delay_green
                 if any(s.indication is Indication.GREEN for s in parents):
                     earliest = latest = lit
+                    # a delayed green: an included phase green still when its delay runs out holds it (else released)
+                    if delay and not any(s.indication is Indication.GREEN and s.earliest > lit + delay
+                                         for s in parents if s.number in o.included):
+                        latest = None
                 else:
                     earliest = max(lit, min((s.earliest for s in red), default=lit))
-                    starts = [s.latest for s in red if s.latest is not None]
+                    # a delayed green turns green by the delay's end after an included phase starts whose green
+                    # outlasts the delay (a shorter one releases it, red on)
+                    starts = [s.latest for s in red if s.latest is not None and (
+                        not delay or s.number not in o.included or c.timing[s.number].min_green > delay)]
                     latest = max(lit, min(starts)) if starts else None
-                if trail.delay_green:
+                if delay:
                     # an included phase's green starts its delay first; a flashing arrow's permissive phase does not
-                    earliest += 0 if o.kind is OverlapKind.FYA else trail.delay_green
-                    latest = None if latest is None else latest + trail.delay_green
+                    earliest += 0 if o.kind is OverlapKind.FYA else delay
+                    latest = None if latest is None else latest + delay
         # only its own trailing intervals are timed: when a display it follows from its parents began is not kept
         return SignalTiming("overlap", n, shown, earliest, latest, latest, ticks if show in TRAILING else None)
 

@@ -475,12 +475,12 @@ def test_a_flash_during_clearance_announces_no_next_phase(paper_toml: str) -> No
 
 @pytest.mark.parametrize("yellow", [0, 26, 27])
 def test_the_monitor_flashes_on_a_yellow_shorter_than_an_mmu_takes(controller: Controller, yellow: int) -> None:
-    # A phase table retimed past what NTCIP allows (its SET refuses under 3.0 s; the model takes any): 2 leaves
-    # its green with 0 or 2.6 s of yellow, which an MMU faults ("a Yellow must follow it and it must stay on for
-    # at least 2.7 seconds"); 2.7 s passes.
+    # A phase table corrupted past what a SET may write (set_timing refuses a yellow under 3.0 s, as the agent does):
+    # 2 leaves its green with 0 or 2.6 s of yellow, which an MMU faults ("a Yellow must follow it and it must stay on
+    # for at least 2.7 seconds"); 2.7 s passes.
     c = controller
     c.backup_time = 0
-    c.set_timing(2, "yellow", yellow)
+    c.timing[2].yellow = yellow
     serve(c, {2, 6})
     c.set_control(CALL, {3, 7})
     record(c, 100)
@@ -488,6 +488,20 @@ def test_the_monitor_flashes_on_a_yellow_shorter_than_an_mmu_takes(controller: C
         assert c.flash_status is UnitFlashStatus.MMU and c.reds == ALL_PHASES
     else:
         assert not c.flashing and 3 in c.greens
+
+
+@pytest.mark.parametrize(("name", "ticks"), [("yellow", 0), ("yellow", 29), ("min_green", 35), ("passage", 256),
+                                           ("max1", -10)])
+def test_a_timing_its_object_cannot_hold_is_refused(controller: Controller, name: str, ticks: int) -> None:
+    """NTCIP 1202 phaseYellowChange: "NEMA TS 2 range: 3-25.5 sec"; a phase's minimum green and maximum are whole
+    seconds, its passage at most 25.5 s: a SET of anything else is refused, naming the phase, the timing and what is
+    allowed, and the timing stays as it was (the agent refuses it with wrongValue before it comes here)."""
+    before = getattr(controller.timing[2], name)
+    with pytest.raises(ValueError, match=f"phase 2 {name} = {ticks} ticks; allowed: "):
+        controller.set_timing(2, name, ticks)
+    assert getattr(controller.timing[2], name) == before
+    controller.set_timing(2, "yellow", 30)
+    assert controller.timing[2].yellow == 30
 
 
 def test_status_sets_are_frozen(controller: Controller) -> None:

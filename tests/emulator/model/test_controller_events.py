@@ -4,7 +4,7 @@
 but counters. Here one controller steps every tick and its twin advances over the same stretches,
 for random configs (every phase option, start-up flash, backup time, the controller's delays) and
 random inputs (every control object, Max2, detectors with delays, extensions and carryovers, push buttons,
-retimed phases, backup time, patterns, preempts, power cycles):
+retimed phases (to what the phase table holds), backup time, patterns, preempts, power cycles):
 after every stretch the two must agree on everything a read can see and on their whole working
 memory, and their interval timelines must be the same, tick for tick.
 """
@@ -19,6 +19,7 @@ from hypothesis import strategies as st
 
 from emulator.model.controller import Change, Controller
 from emulator.model.delays import STATUS_ATTRIBUTES, DelayedController
+from emulator.model.ring import SETTABLE
 from hils.protocol import config as config_mod
 from hils.protocol.config import DetectorTiming, EmulatorParams, IntersectionConfig, Recall
 from hils.protocol.ntcip import ControlColumn, PhaseStartup
@@ -45,6 +46,13 @@ def units(draw: st.DrawFn, free: bool = False) -> IntersectionConfig:
                                 status_update_ticks=draw(st.integers(0, 3))))
 
 
+@st.composite
+def retimes(draw: st.DrawFn) -> tuple[int, str, int]:
+    """A SET of one phase's timing to a value its phase-table object holds, up to 8 s (a yellow of 3 s at least)."""
+    phase, name = draw(st.sampled_from(sorted(ALL_PHASES))), draw(st.sampled_from(TIMING_FIELDS))
+    return phase, name, draw(st.sampled_from([t for t in SETTABLE[name] if t <= 80]))
+
+
 inputs = st.one_of(
     st.tuples(st.just("ticks"), st.integers(1, 600)),
     st.tuples(st.just("ticks"), st.integers(1, 5)),
@@ -52,8 +60,7 @@ inputs = st.one_of(
     st.tuples(st.just("max2"), st.frozensets(st.sampled_from([1, 2]))),
     st.tuples(st.just("detectors"), phase_sets),
     st.tuples(st.just("push_buttons"), phase_sets),
-    st.tuples(st.just("retime"), st.tuples(st.sampled_from(sorted(ALL_PHASES)), st.sampled_from(TIMING_FIELDS),
-                                           st.integers(0, 80))),
+    st.tuples(st.just("retime"), retimes()),
     st.tuples(st.just("backup_time"), st.sampled_from([0, 1, 3, 30])),
     st.tuples(st.just("power_cycle"), st.none()),
     st.tuples(st.just("pattern"), st.sampled_from([0, 1, 2, 254, 255])),
@@ -296,3 +303,24 @@ def test_a_phase_cycling_in_a_preempts_dwell_registers_the_dwell_phase_waiting()
     assert c.greens == {2, 6} and c.preempted and not c.rings[1].conflict  # 6 starts in the dwell
     apply(c, "ticks", 1, ticked=True)
     assert c.greens == {2, 6} and c.rings[1].conflict  # 5, the dwell phase, waits for 6
+
+
+def test_a_retimed_clearance_moves_where_a_phase_stops_fitting() -> None:
+    """3 and 5 coordinated (cycle 42 s), every phase called. 5's red clearance retimed to 0 in its green: 6 fits
+    until 5's clearance (now 3.0 s, not the plan's 3.5 s) and 6's minimum no longer reach 6's force-off, and from
+    that tick 5 leaves for 7 across the barrier (with 3 for 4). That tick is none of the coordinator's marks, laid out
+    with the config's clearances: the coordinated part in the rings reports it (before, the skipping twin ended 3 and
+    5 0.4 s late, at the next whole second)."""
+    raw = {"name": "3 and 5 coordinated", "timing": {"min_green": 1, "max_green": 1, "yellow": 3.0, "red_clear": 0.5},
+           "phases": {str(p): {} for p in range(1, 9)},
+           "structure": {"rings": [[1, 2, 3, 4], [5, 6, 7, 8]], "barriers": [[1, 2, 3, 5, 6], [4, 7, 8]],
+                         "sequence": [[1, 5], [4, 8]],
+                         "pairs": [[1, 5], [1, 6], [2, 5], [2, 6], [3, 5], [3, 6], [4, 7], [4, 8]]},
+           "middleware": {"backup_time": 0},
+           "coordination": {"pattern": 1, "patterns": [{"number": 1, "cycle": 42, "offset": 0, "coord_phases": [3, 5],
+                                                        "splits": {"1": 5, "2": 5, "3": 22, "4": 10, "5": 5, "6": 27,
+                                                                   "7": 5, "8": 5}}]}}
+    config = config_mod.from_dict(raw, "coordinated.toml")
+    every = (ControlColumn.VEH_CALL, frozenset(config.phases))
+    check_equal(config, [("ticks", 204), every, ("ticks", 7), ("retime", (5, "red_clear", 0)), ("ticks", 600)],
+                delayed=False)

@@ -18,10 +18,11 @@ from hypothesis import strategies as st
 from emulator.model import spat
 from emulator.model.controller import Controller
 from emulator.model.spat import Indication, SignalTiming
-from hils.protocol.config import IntersectionConfig, load
+from hils.protocol.config import DetectorTiming, IntersectionConfig, from_dict, load, parse
 from hils.protocol.ntcip import ControlColumn
 from hils.sim.network import data_path
 from tests.emulator.model.test_controller_events import apply, inputs, units
+from tests.emulator.model.test_overlaps import city
 
 SETTINGS = settings(max_examples=100, deadline=None)
 
@@ -110,6 +111,65 @@ def test_the_four_leg_announces_its_minimum_its_yellow_and_the_red_behind_it() -
     assert check(load(data_path("four_leg.toml")), [(ControlColumn.VEH_CALL, {4, 8}), ("ticks", 300)])[0] == 6
     assert check(load(data_path("four_leg_city.toml")), [(ControlColumn.VEH_CALL, {1, 5}), ("ticks", 300),
                                                          ("preempt", {1}), ("ticks", 300)])[0] > 0
+
+
+def test_a_delayed_detector_call_is_a_horizon_of_the_latest() -> None:
+    """The shipped four-leg, 2+6 extended by calls standing (maximum 20 s), detectors 3 and 4 actuated at once, 3 with
+    a delay of 2 s. At first only 4 is demand: 4 would start by 2's maximum and clearance. The delay running out puts
+    3 (before 4 in ring 1's order) in the demand with no input, and 4 then waits for 3's green (to its maximum, its
+    detector standing) and clearance: the detector's timer bounds every latest announced before it, none may be
+    announced past it (before, 4 came 25 s after the latest announced for it)."""
+    config = dataclasses.replace(load(data_path("four_leg.toml")), detector_timing={3: DetectorTiming(delay=2.0)})
+    steps = [(ControlColumn.VEH_CALL, {2, 6}), ("ticks", 50), ("detectors", {3, 4}), ("ticks", 600)]
+    checked, bounded = check(config.with_middleware(backup_time=0), steps)
+    assert checked > 0 and bounded > 0
+
+
+def test_a_delayed_overlap_released_by_its_phase_announces_no_latest() -> None:
+    """The city four-leg, every phase on pedestrian recall (walk 2 s, pedestrian clearance 2 s), overlap A following 2
+    with a delayed green of 3 s. 2 starts green at power-up without a walk, A delaying, and ends at its minimum, 3 s
+    in, the tick A's delay would run out: released, A stays red. It turns green only when the ring comes back to 2,
+    whose green then serves its walk and outlasts the delay. Its first delay's end was no latest (before, it was
+    announced as one, and A turned green a cycle after it)."""
+    config = city('A = { included = [2], delay_green = 3.0 }\n', 'recall = "ped"\nwalk = 2\nped_clear = 2')
+    checked, bounded = check(config.with_middleware(backup_time=0), [("ticks", 1000)])
+    assert checked > 0 and bounded > 0
+
+
+def test_a_delayed_overlap_waits_for_a_parent_whose_green_outlasts_the_delay() -> None:
+    """The city four-leg, overlap A following 1 and 2 with a delayed green of 3 s, every phase on pedestrian recall
+    (walk 2 s, pedestrian clearance 2 s) but 1 (minimum recall, no walk: 3 s of green). 1's green starts A's delay and
+    ends with it, releasing A; 2's green, 4 s, then holds A through its delay. Announced while 1 is red, A's latest
+    is 2's start and the delay, not 1's (before, A turned green 8 s after the latest announced for it)."""
+    text = data_path("four_leg_city.toml").read_text()
+    text = text[:text.index("[overlaps]")] + "[overlaps]\nA = { included = [1, 2], delay_green = 3.0 }\n"
+    text = text.replace("[timing]", '[timing]\nrecall = "ped"\nwalk = 2\nped_clear = 2', 1)
+    text = text.replace('1 = { approach = "west", turn = "left" }',
+                        '1 = { approach = "west", turn = "left", recall = "min", walk = 0, ped_clear = 0 }')
+    checked, bounded = check(parse(text, "city.toml").with_middleware(backup_time=0), [("ticks", 1000)])
+    assert checked > 0 and bounded > 0
+
+
+def test_a_green_waits_at_the_barrier_for_a_conditional_service_to_come() -> None:
+    """1 alone in its ring's first barrier group, 6 beside it with conditional service, 5 (before 6) on max recall,
+    4 across on min recall; 1 and 6 start green. At first 6 may not back into 5 (not ready to end), so the rings
+    would cross when 1 maxes out; once 6 is ready, conditional service takes it back into 5, and 1 waits at the
+    barrier for 5's maximum. While 6 can still back by conditional service no crossing time is announced (before, 1's
+    maximum was, and 1 ended 0.5 s after it)."""
+    plain = {"backup_prevent": False, "simultaneous_gap_disable": False}
+    phases = {str(p): dict(plain) for p in range(1, 9)}
+    phases["1"] |= {"min_green": 2, "max_green": 6, "startup": "green"}
+    phases["4"] |= {"max_green": 2, "passage": 0.1, "recall": "min"}
+    phases["5"] |= {"max_green": 2, "passage": 0.1, "recall": "max"}
+    phases["6"] |= {"startup": "green", "conditional_service": True}
+    raw = {"name": "conditional service", "timing": {"min_green": 1, "max_green": 1, "yellow": 3.0, "red_clear": 0.5},
+           "phases": phases,
+           "structure": {"rings": [[1, 2, 3, 4], [5, 6, 7, 8]], "barriers": [[1, 5, 6], [2, 3, 4, 7, 8]],
+                         "sequence": [[1, 5], [4, 8]],
+                         "pairs": [[1, 5], [1, 6], [2, 7], [2, 8], [3, 7], [3, 8], [4, 7], [4, 8]]},
+           "middleware": {"backup_time": 0}}
+    checked, bounded = check(from_dict(raw, "conditional.toml"), [("ticks", 65)])
+    assert checked > 0 and bounded > 0
 
 
 @pytest.mark.parametrize("plant", ["latest one tick short", "earliest one tick late"])
