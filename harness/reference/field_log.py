@@ -280,7 +280,12 @@ def infer(rows: Sequence[Row], name: str = "field controller") -> Inferred:
     seen = shared if shared is not None and everyone[shared] >= PASSAGE_SEEN else None  # the intersection's passage
     # Of the detectors a delay leaves calling nothing, those that extend a recalled phase (its gaps counted then).
     yielding = {r.parameter for r in events if r.code == E.COORD_YIELD_POINT}  # coordinated: the plan holds them
-    extended = _extenders(rows, detectors, recalled - yielding, structure, seen, out)
+    # A recalled phase whose greens its plan mostly forces off (6) is held by the plan, not by a detector: what ends
+    # it now and then by gap-out says nothing of an extension (the atspm sample's coordinated 6: 94 force-offs, 2
+    # gap-outs, and no yield point logged).
+    ends = Counter((r.parameter, r.code) for r in events if r.code in (E.PHASE_GAP_OUT, E.PHASE_FORCE_OFF))
+    forced = {p for p in recalled if ends[p, E.PHASE_FORCE_OFF] > ends[p, E.PHASE_GAP_OUT]}
+    extended = _extenders(rows, detectors, recalled - yielding - forced, structure, seen, out)
     for p, (d, _) in extended.items():
         samples[p] = _gaps(rows, p, [d], held)
         gaps[p] = [g for _, g in samples[p]]
