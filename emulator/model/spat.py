@@ -137,6 +137,13 @@ def _followed(o: Overlap) -> tuple[int, ...]:
     return o.included + o.modifiers if o.kind is OverlapKind.FYA else o.included
 
 
+def _apart(c: Controller, included: tuple[int, ...], g: int) -> bool:
+    """No included phase but ``g`` may show green or yellow while ``g``'s ring ends and clears it: each is of ``g``'s
+    ring or of another barrier group (which starts only once every ring has cleared)."""
+    ring, seq = c.config.ring_of(g), c.sequencer
+    return all(q == g or c.config.ring_of(q) == ring or seq.barrier_of(q) != seq.barrier_of(g) for q in included)
+
+
 class _Bounds:
     """The bounds of one announcement: the least a preempt may cut each timer to (the earliest), and where the
     inputs standing as they are make the controller's own timers decide (the latest)."""
@@ -359,13 +366,6 @@ class _Bounds:
             clear.append(revert + timing[p].red_revert - c.tick)
         return self._within(max(1, *clear, *cleared))
 
-    def _apart(self, included: tuple[int, ...], g: int) -> bool:
-        """No included phase but ``g`` may show green or yellow while ``g``'s ring ends and clears it: each is of
-        ``g``'s ring or of another barrier group (which starts only once every ring has cleared)."""
-        c, seq = self.c, self.c.sequencer
-        ring = c.config.ring_of(g)
-        return all(q == g or c.config.ring_of(q) == ring or seq.barrier_of(q) != seq.barrier_of(g) for q in included)
-
     def _overlap_red(self, n: int, p: int) -> int | None:
         """Ticks from now by which overlap ``n`` shows red (0: it does and stays so while ``p`` waits for it), from
         its trailing intervals or the one phase it follows that is lit; None: not known."""
@@ -386,7 +386,7 @@ class _Bounds:
         if not lit:
             return 0 if show is Show.RED else None
         r = lit[0]
-        if len(lit) > 1 or not self._apart(followed, r.phase):
+        if len(lit) > 1 or not _apart(self.c, followed, r.phase):
             return None
         if r.interval is YELLOW:
             return r.length - r.ticks  # it clears with that yellow
@@ -434,12 +434,12 @@ class _Bounds:
                     earliest = max(s.earliest for s in green) + trail.trail_green
                 # a transit bar's green goes on, flashing, through its phase's yellow: its end is not the phase's
                 if (len(green) == 1 and not trail.trail_green and o.kind is not OverlapKind.TRANSIT
-                        and self._apart(o.included, green[0].number) and self._leaves(o.included, green[0].number)):
+                        and _apart(self.c, o.included, green[0].number) and self._leaves(o.included, green[0].number)):
                     latest = green[0].latest
             elif show is Show.FLASHING:
                 # a flashing arrow (yellow) shows while its permissive phase is green, and clears with its yellow
                 m = [phases[q] for q in o.modifiers if phases[q].indication is Indication.GREEN]
-                if len(m) == 1 and self._apart(followed, m[0].number):
+                if len(m) == 1 and _apart(self.c, followed, m[0].number):
                     yellow = c.timing[m[0].number].yellow
                     earliest = m[0].earliest + max(1, self._least(yellow, self.yellow))
                     latest = None if m[0].latest is None else m[0].latest + yellow
@@ -447,8 +447,8 @@ class _Bounds:
                 parents = [phases[q] for q in followed]
                 yellow = [s for s in parents if s.indication is Indication.YELLOW]
                 earliest = max((s.earliest for s in yellow), default=1)
-                if len(yellow) == 1 and all(s.indication is not Indication.GREEN for s in parents) and self._apart(
-                        followed, yellow[0].number):
+                if len(yellow) == 1 and all(s.indication is not Indication.GREEN for s in parents) and _apart(
+                        self.c, followed, yellow[0].number):
                     latest = yellow[0].latest
             elif show is Show.TRAIL_GREEN:
                 earliest = max(1, trail.trail_green - ticks)
