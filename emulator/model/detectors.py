@@ -61,6 +61,8 @@ class Detectors:
     """The vehicle detectors' timers of one controller, and the detectors it recognizes as actuated."""
 
     def __init__(self, config: IntersectionConfig) -> None:
+        #: Each wired detector's phase. A detector wired to none may still be given timers over NTCIP (its table row
+        #: exists up to maxVehicleDetectors): they time, and its recognized actuation calls nothing.
         self.phase = config.detectors
         #: The detectors that have a timer (the others are their input).
         self.timers = {d: DetectorTimers(round(t.delay * 10), round(t.extend * 10), round(t.carryover * 10), t.lock)
@@ -99,7 +101,7 @@ class Detectors:
         recognized = set(actuated - timers.keys())
         waited, held = self.waited, self.held
         for d, t in timers.items():
-            green = self.phase[d] in greens
+            green = self.phase.get(d) in greens
             if d in actuated:
                 held.pop(d, None)
                 if d in self.recognized or green or t.delay == 0:
@@ -118,9 +120,9 @@ class Detectors:
                     recognized.add(d)
                 else:
                     del held[d]
-        for d in [d for d in self.locked if self.phase[d] in greens]:
+        for d in [d for d in self.locked if self.phase.get(d) in greens]:
             self.locked.discard(d)
-        self.locked |= {d for d in recognized if timers.get(d, _NONE).lock and self.phase[d] not in greens}
+        self.locked |= {d for d in recognized if timers.get(d, _NONE).lock and self.phase.get(d) not in greens}
         recognized = frozenset(recognized | self.locked)
         changed = recognized != self.recognized
         self.recognized = recognized
@@ -134,9 +136,9 @@ class Detectors:
         changed during the start-up flash, which reads no input) is read by the next step."""
         if (actuated ^ self.recognized) - self.waited.keys() - self.held.keys() - self.locked:
             return 1
-        ahead = [1 if self.phase[d] in greens else self.timers[d].delay - w for d, w in self.waited.items()]
-        ahead += [1 for d in self.locked if self.phase[d] in greens]
-        ahead += [self.timers[d].hold(self.phase[d] in greens) - h for d, h in self.held.items()]
+        ahead = [1 if self.phase.get(d) in greens else self.timers[d].delay - w for d, w in self.waited.items()]
+        ahead += [1 for d in self.locked if self.phase.get(d) in greens]
+        ahead += [self.timers[d].hold(self.phase.get(d) in greens) - h for d, h in self.held.items()]
         return max(1, min(ahead)) if ahead else None
 
     def skip(self, n: int) -> None:

@@ -8,7 +8,7 @@ import pytest
 from emulator.agent.mib import MibView
 from emulator.model.controller import Controller
 from emulator.model.datalogger import DataLogger
-from hils.protocol.config import ConfigError, DetectorTiming, IntersectionConfig, parse
+from hils.protocol.config import ConfigError, DetectorTiming, IntersectionConfig, load, parse
 from hils.protocol.hires import EventCode as E
 from hils.protocol.ntcip import (
     VEHICLE_DETECTOR_DELAY,
@@ -18,6 +18,7 @@ from hils.protocol.ntcip import (
     ErrorStatus,
     SnmpError,
 )
+from hils.sim.network import data_path
 
 
 def with_detector(paper_toml: str, entry: str) -> IntersectionConfig:
@@ -190,3 +191,20 @@ def test_a_detector_retimed_over_ntcip_keeps_the_calls_its_inputs_place(paper_to
     assert 4 in c.calls
     mib.set_many([(VEHICLE_DETECTOR_EXTEND.instance(2), 20)])
     assert 4 in c.calls
+
+
+def test_a_detector_wired_to_no_phase_retimed_over_ntcip_calls_nothing_and_the_controller_runs_on() -> None:
+    """The shipped four-phase intersection wires detectors 2, 4, 6 and 8; detector 1's row exists (up to the highest)
+    but calls no phase. A SET of its delay and extension while it is actuated times them and calls nothing. Before,
+    the controller's next step raised KeyError and the served emulator died (net-snmp's next request got no
+    answer: the MIB conformance check's edge SETs, now and then)."""
+    c = Controller(load(data_path("four_phase.toml")))
+    mib = MibView(c)
+    c.set_actuations({1})
+    mib.set_many([(VEHICLE_DETECTOR_DELAY.instance(1), 255), (VEHICLE_DETECTOR_EXTEND.instance(1), 255)])
+    calls = set()
+    for _ in range(600):
+        c.step()
+        calls |= set(c.calls)
+    assert not calls
+    assert mib.get_many([VEHICLE_DETECTOR_DELAY.instance(1), VEHICLE_DETECTOR_EXTEND.instance(1)]) == (255, 255)
