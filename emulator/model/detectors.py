@@ -54,8 +54,6 @@ class DetectorTimers:
         return max(self.carryover, self.extend if green else 0)
 
 
-_NONE = DetectorTimers()
-
 
 class Detectors:
     """The vehicle detectors' timers of one controller, and the detectors it recognizes as actuated."""
@@ -67,6 +65,8 @@ class Detectors:
         #: The detectors that have a timer (the others are their input).
         self.timers = {d: DetectorTimers(round(t.delay * 10), round(t.extend * 10), round(t.carryover * 10), t.lock)
                        for d, t in config.detector_timing.items() if d in self.phase}
+        #: The locking detectors: from the config only (vehicleDetectorOptions is not writable here), so fixed.
+        self.locking = frozenset(d for d, t in self.timers.items() if t.lock)
         self.reset()
 
     def reset(self) -> None:
@@ -120,9 +120,8 @@ class Detectors:
                     recognized.add(d)
                 else:
                     del held[d]
-        for d in [d for d in self.locked if self.phase.get(d) in greens]:
-            self.locked.discard(d)
-        self.locked |= {d for d in recognized if timers.get(d, _NONE).lock and self.phase.get(d) not in greens}
+        if self.locking:  # held off its phase's green, let go as it shows green
+            self.locked = {d for d in self.locked | (recognized & self.locking) if self.phase.get(d) not in greens}
         recognized = frozenset(recognized | self.locked)
         changed = recognized != self.recognized
         self.recognized = recognized
