@@ -61,7 +61,7 @@ class PedCalls:
 
     def latch(self, greens: frozenset[int], inputs: Inputs) -> frozenset[int]:
         """This tick's calls latch (``greens``: the phases showing green); the demand they make with the inputs."""
-        calls = self._latch(greens, inputs)
+        calls = self.latched(greens, inputs)
         if calls != self.calls:
             self.calls = calls
         return self.demand(inputs)
@@ -84,13 +84,15 @@ class PedCalls:
         draws nearer (or starts again, at the step its conflicting demand goes); under a pattern, by the phase's
         force-off point, which only draws nearer until its ring's yield point passes (one of the coordinator's
         marks); during a preempt none recycles, and its end is the preemptor's step."""
-        return 1 if self._latch(greens, inputs) != self.calls else None
+        return 1 if self.latched(greens, inputs) != self.calls else None
 
     def walking(self) -> frozenset[int]:
         """The phases timing their walk now."""
         return frozenset(r.phase for r in self.rings if r.interval is GREEN and r.ticks < r.walk)
 
-    def _latch(self, greens: frozenset[int], inputs: Inputs) -> frozenset[int]:
+    def latched(self, greens: frozenset[int], inputs: Inputs) -> frozenset[int]:
+        """The calls the next latch leaves (``greens``: the phases showing green), changing nothing
+        (:func:`emulator.model.inputs.latched`, a push button latching nothing on a phase timing its walk)."""
         asked, answer = self._latched
         walking = self.walking() if inputs.pushed else frozenset()
         if asked[0] is not self.calls or asked[1] is not greens or asked[2] is not inputs or asked[3] != walking:

@@ -161,8 +161,8 @@ class _Bounds:
         self.plan = c.coordinator.plan
         inputs = c.inputs
         self.inputs = inputs
-        greens = {r.phase for r in c.rings if r.interval is GREEN}
-        self.demand = reading.demand(inputs, reading.latched(c.ped_calls, greens, inputs, c.peds.walking()))
+        greens = frozenset(r.phase for r in c.rings if r.interval is GREEN)
+        self.demand = reading.demand(inputs, c.peds.latched(greens, inputs))
         self.horizon = self._horizon()
         self.standing = self._standing()
         self.wish = {r.number: c.sequencer.wish(r, self.demand, inputs) for r in c.rings
